@@ -1,0 +1,33 @@
+# derive: two commands on a fresh machine, `make derive` and `make test`.
+# Each creates .venv and installs the pinned dependencies (constraints.txt) first.
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+PIP    := $(PY) -m pip --disable-pip-version-check -q
+
+.PHONY: derive test check bench clean venv venv-test
+
+derive: $(VENV)/.core
+	$(PY) -m derive generate
+
+test: $(VENV)/.test
+	$(PY) -m derive generate --check
+	$(PY) -m pytest -q
+
+bench: $(VENV)/.test
+	$(PY) -m derive bench
+
+$(VENV)/.core: pyproject.toml constraints.txt
+	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PIP) install -c constraints.txt -e .
+	touch $@
+
+$(VENV)/.test: $(VENV)/.core
+	$(PIP) install -c constraints.txt -e '.[test,pinocchio]'
+	touch $@
+
+venv: $(VENV)/.core
+venv-test: $(VENV)/.test
+
+clean:
+	rm -rf $(VENV) build *.egg-info

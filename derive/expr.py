@@ -1,0 +1,100 @@
+"""Parameter expressions in model values, without sympy.
+
+A numeric field of a model may hold a number, a parameter name (``m_r``) or an
+arithmetic expression of parameters (``"l/2"``, ``"-g"``, ``"sqrt(2)*L1"``).
+Expressions are parsed once with :mod:`ast` into a small whitelist of nodes and
+evaluated against any scalar algebra (floats, sympy symbols, CasADi SX) through
+a namespace of functions, so the model layer never imports a CAS.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+from typing import Any, Callable, Mapping
+
+Value = "float | str"
+
+FUNCTIONS = ("sin", "cos", "tan", "sqrt", "atan2")
+CONSTANTS = {"pi": math.pi}
+
+_BINOPS = {
+    ast.Add: lambda a, b: a + b,
+    ast.Sub: lambda a, b: a - b,
+    ast.Mult: lambda a, b: a * b,
+    ast.Div: lambda a, b: a / b,
+    ast.Pow: lambda a, b: a**b,
+}
+
+
+class ExpressionError(ValueError):
+    """An expression that is not arithmetic over known parameters."""
+
+
+def parse(text: str) -> ast.expr:
+    """Parse ``text`` and check it uses only numbers, names, + - * / ** and FUNCTIONS."""
+    try:
+        tree = ast.parse(text.strip(), mode="eval").body
+    except SyntaxError as exc:
+        raise ExpressionError(f"'{text}' is not an arithmetic expression") from exc
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Call):
+            if not (isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS) or node.keywords:
+                raise ExpressionError(f"'{text}' calls something other than {', '.join(FUNCTIONS)}")
+        elif isinstance(node, ast.Constant):
+            if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
+                raise ExpressionError(f"'{text}' contains the non-numeric constant {node.value!r}")
+        elif isinstance(node, ast.BinOp):
+            if type(node.op) not in _BINOPS:
+                raise ExpressionError(f"'{text}' uses an operator other than + - * / **")
+        elif isinstance(node, ast.UnaryOp):
+            if not isinstance(node.op, (ast.UAdd, ast.USub)):
+                raise ExpressionError(f"'{text}' uses a unary operator other than + -")
+        elif not isinstance(node, (ast.Name, ast.Load, ast.operator, ast.unaryop, ast.expr_context)):
+            raise ExpressionError(f"'{text}' is not plain arithmetic ({type(node).__name__})")
+    return tree
+
+
+def names(text: str) -> list[str]:
+    """Parameter names an expression refers to, in order of first appearance."""
+    seen: list[str] = []
+    for node in ast.walk(parse(text)):
+        if isinstance(node, ast.Name) and node.id not in FUNCTIONS and node.id not in CONSTANTS:
+            if node.id not in seen:
+                seen.append(node.id)
+    return seen
+
+
+def evaluate(value: Any, env: Mapping[str, Any], functions: Mapping[str, Callable] | None = None,
+             pi: Any = math.pi) -> Any:
+    """Evaluate a model value (number or expression string) in the algebra of ``env``.
+
+    Args:
+        value: a number, or a string expression over the names in ``env``.
+        env: parameter name -> scalar (float, sympy.Symbol, casadi.SX, ...).
+        functions: name -> callable for FUNCTIONS; defaults to :mod:`math`.
+        pi: the value of ``pi`` in this algebra (e.g. ``sympy.pi``).
+    """
+    if not isinstance(value, str):
+        return value
+    fns = functions or {name: getattr(math, name) for name in FUNCTIONS}
+
+    def ev(node: ast.expr) -> Any:
+        if isinstance(node, ast.Constant):
+            return node.value
+        if isinstance(node, ast.Name):
+            if node.id == "pi":
+                return pi
+            if node.id not in env:
+                raise ExpressionError(f"unknown parameter '{node.id}'")
+            return env[node.id]
+        if isinstance(node, ast.BinOp):
+            return _BINOPS[type(node.op)](ev(node.left), ev(node.right))
+        if isinstance(node, ast.UnaryOp):
+            operand = ev(node.operand)
+            return -operand if isinstance(node.op, ast.USub) else operand
+        if isinstance(node, ast.Call):
+            return fns[node.func.id](*[ev(arg) for arg in node.args])
+        raise ExpressionError(f"cannot evaluate {ast.dump(node)}")
+
+    return ev(parse(value))

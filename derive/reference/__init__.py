@@ -1,0 +1,5 @@
+"""Independent numeric reference (numpy only): kinematics, RNEA, CRBA, ABA, Christoffel C, energies."""
+
+from .rnea import NumericRobot
+
+__all__ = ["NumericRobot"]

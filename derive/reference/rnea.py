@@ -1,0 +1,372 @@
+"""Numeric rigid-body dynamics of a fixed-base tree, written from Featherstone's textbook.
+
+This is the independent reference the symbolic pipeline is checked against: it
+uses numpy only, and reads the model through :mod:`derive.model` and
+:mod:`derive.expr` (input parsing), nothing else of ``derive``.
+
+Conventions
+-----------
+- Spatial vectors inside the algorithms are Featherstone's ``[angular; linear]``,
+  expressed in the body frame at the body origin; the motion transform from
+  frame A to frame B, whose pose in A is ``(R, r)``, is
+  ``B_X_A = [[R^T, 0], [-R^T r^, R^T]]`` and forces transform with ``X^T``.
+- Bodies are the moving joints, in ``robot.moving_joints`` (= q) order; body i's
+  frame is the child link frame of joint i. Links hanging off a body through
+  fixed joints are merged rigidly into it (their frames keep their own poses);
+  links fixed to the root are part of the world and carry no dynamics.
+- Gravity enters as the base acceleration ``a_0 = -[0; gravity]``.
+- Outputs meant for comparison (Jacobians) use Pinocchio's ``[linear; angular]``.
+- Every q-dependent quantity is computed with numpy ufuncs and plain transposes
+  (no abs, no conjugation), so complex q works and complex-step derivatives
+  ``f'(q) e = Im f(q + i h e) / h`` are exact to machine precision.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from .. import expr
+from ..model import Origin, Robot
+
+COMPLEX_STEP = 1e-30
+
+
+# --------------------------------------------------------------------------- small algebra
+
+
+def skew(v: np.ndarray) -> np.ndarray:
+    """v^ such that v^ w = v x w."""
+    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]], dtype=np.result_type(v, float))
+
+
+def rpy_matrix(roll: float, pitch: float, yaw: float) -> np.ndarray:
+    """URDF's R = Rz(yaw) Ry(pitch) Rx(roll)."""
+    cr, sr, cp, sp, cy, sy = np.cos(roll), np.sin(roll), np.cos(pitch), np.sin(pitch), np.cos(yaw), np.sin(yaw)
+    rx = np.array([[1, 0, 0], [0, cr, -sr], [0, sr, cr]])
+    ry = np.array([[cp, 0, sp], [0, 1, 0], [-sp, 0, cp]])
+    rz = np.array([[cy, -sy, 0], [sy, cy, 0], [0, 0, 1]])
+    return rz @ ry @ rx
+
+
+def homogeneous(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
+    t = np.zeros((4, 4), dtype=np.result_type(rot, pos))
+    t[:3, :3], t[:3, 3], t[3, 3] = rot, pos, 1
+    return t
+
+
+def motion_transform(pose: np.ndarray) -> np.ndarray:
+    """B_X_A = [[E, 0], [-E r^, E]], E = R^T, for the pose (R, r) of frame B in frame A."""
+    e = pose[:3, :3].T
+    x = np.zeros((6, 6), dtype=pose.dtype)
+    x[:3, :3] = x[3:, 3:] = e
+    x[3:, :3] = -e @ skew(pose[:3, 3])
+    return x
+
+
+def crm(v: np.ndarray) -> np.ndarray:
+    """Motion cross product v x = [[w^, 0], [v^, w^]] for v = [w; v]."""
+    out = np.zeros((6, 6), dtype=v.dtype)
+    out[:3, :3] = out[3:, 3:] = skew(v[:3])
+    out[3:, :3] = skew(v[3:])
+    return out
+
+
+def crf(v: np.ndarray) -> np.ndarray:
+    """Force cross product v x* = -(v x)^T."""
+    return -crm(v).T
+
+
+def spatial_inertia(mass: float, com: np.ndarray, inertia_com: np.ndarray) -> np.ndarray:
+    """I_O = [[I_c + m c^ c^T, m c^], [m c^T, m 1]]: body inertia about the frame origin."""
+    c = skew(com)
+    return np.block([[inertia_com + mass * c @ c.T, mass * c], [mass * c.T, mass * np.eye(3)]])
+
+
+# --------------------------------------------------------------------------- the robot
+
+
+class NumericRobot:
+    """A :class:`~derive.model.Robot` evaluated at fixed parameters, with numpy kinematics and dynamics.
+
+    Args:
+        robot: the parsed model.
+        params: parameter name -> value, overriding ``robot.parameter_defaults``.
+    """
+
+    def __init__(self, robot: Robot, params: Mapping[str, float] | None = None):
+        env = dict(robot.parameter_defaults)
+        unknown = set(params or {}) - set(env)
+        if unknown:
+            raise ValueError(f"robot '{robot.name}' has no parameter(s) {', '.join(sorted(unknown))}")
+        env.update({k: float(v) for k, v in (params or {}).items()})
+        self.robot, self.params = robot, env
+
+        def num(value) -> float:
+            return float(expr.evaluate(value, env))
+
+        def vec(values) -> np.ndarray:
+            return np.array([num(v) for v in values], dtype=float)
+
+        def pose(origin: Origin) -> np.ndarray:
+            return homogeneous(rpy_matrix(*vec(origin.rpy)), vec(origin.xyz))
+
+        self.gravity_vector = vec(robot.gravity)
+        self.nq = self.nv = robot.nv
+        self.joint_names = tuple(j.name for j in robot.moving_joints)
+
+        # Walk the tree: each link sits on a body (-1 = world) at a constant pose in that body's frame.
+        self.parent: list[int] = []  # lambda(i)
+        self.tree_pose: list[np.ndarray] = []  # joint frame i (before motion) in body lambda(i)
+        self.axis: list[np.ndarray] = []
+        self.revolute: list[bool] = []
+        placed = {robot.root: (-1, np.eye(4))}
+        for joint in robot.joints:
+            body, at = placed[joint.parent]
+            joint_pose = at @ pose(joint.origin)
+            if joint.dof == 0:
+                placed[joint.child] = (body, joint_pose)
+                continue
+            self.parent.append(body)
+            self.tree_pose.append(joint_pose)
+            self.axis.append(np.array(joint.axis, dtype=float))
+            self.revolute.append(joint.type == "revolute")
+            placed[joint.child] = (len(self.parent) - 1, np.eye(4))
+        n = self.nv
+        self.motion_subspace = [np.concatenate([a, np.zeros(3)]) if rev else np.concatenate([np.zeros(3), a])
+                                for a, rev in zip(self.axis, self.revolute)]
+        self.tree_transform = [motion_transform(t) for t in self.tree_pose]
+        self.support = []  # bodies from the root down to i, inclusive
+        for i in range(n):
+            chain, k = [], i
+            while k >= 0:
+                chain.append(k)
+                k = self.parent[k]
+            self.support.append(chain[::-1])
+
+        # Inertias, merged per body; point masses kept per link for the potential energy.
+        self.inertia = [np.zeros((6, 6)) for _ in range(n)]
+        self.masses: list[tuple[int, float, np.ndarray]] = []  # (body, mass, com in body frame)
+        for link in robot.links:
+            if link.name == robot.root:
+                continue
+            body, at = placed[link.name]
+            mass = num(link.mass)
+            rot = at[:3, :3] @ rpy_matrix(*vec(link.inertia_rpy))
+            inertia_com = rot @ np.array([[num(x) for x in row] for row in link.inertia]) @ rot.T
+            com = at[:3, :3] @ vec(link.com) + at[:3, 3]
+            self.masses.append((body, mass, com))
+            if body >= 0:
+                self.inertia[body] = self.inertia[body] + spatial_inertia(mass, com, inertia_com)
+
+        # Every placeable frame: (body, constant pose in the body frame).
+        self.frames: dict[str, tuple[int, np.ndarray]] = {}
+        for name in [robot.root] + [j.child for j in robot.joints]:
+            self.frames[name] = placed[name]
+        for frame in robot.frames:
+            body, at = placed[frame.link]
+            self.frames[frame.name] = (body, at @ pose(frame.origin))
+
+    # ------------------------------------------------------------------ kinematics
+
+    def joint_pose(self, i: int, qi) -> np.ndarray:
+        """Pose of body i in body lambda(i): T_tree_i * T_J(q_i), T_J = Rot(axis, q_i) or Trans(axis q_i)."""
+        a = self.axis[i]
+        if self.revolute[i]:
+            k = skew(a)
+            motion = homogeneous(np.eye(3) + np.sin(qi) * k + (1 - np.cos(qi)) * (k @ k), np.zeros(3))
+        else:
+            motion = homogeneous(np.eye(3), a * qi)
+        return self.tree_pose[i] @ motion
+
+    def body_transforms(self, q) -> list[np.ndarray]:
+        """X_i = i_X_lambda(i)(q_i), the motion transform from the parent body to body i."""
+        return [motion_transform(self.joint_pose(i, q[i])) for i in range(self.nv)]
+
+    def body_poses(self, q) -> list[np.ndarray]:
+        """World pose of every body: T_i = T_lambda(i) * T_tree_i * T_J(q_i)."""
+        poses: list[np.ndarray] = []
+        for i in range(self.nv):
+            local = self.joint_pose(i, q[i])
+            poses.append(local if self.parent[i] < 0 else poses[self.parent[i]] @ local)
+        return poses
+
+    def fk(self, q) -> dict[str, np.ndarray]:
+        """World pose (4x4) of every name in ``robot.frame_names``: T = T_body(q) * T_body_frame."""
+        q = np.asarray(q)
+        poses = self.body_poses(q)
+        return {name: (at if body < 0 else poses[body] @ at) for name, (body, at) in self.frames.items()}
+
+    def frame_pose(self, q, name: str) -> np.ndarray:
+        """World pose (4x4) of one frame."""
+        body, at = self.frames[name]
+        return at if body < 0 else self.body_poses(np.asarray(q))[body] @ at
+
+    def jacobian(self, q, name: str) -> np.ndarray:
+        """Geometric Jacobian (6, nv), ``[v; w] = J qd``, LOCAL_WORLD_ALIGNED as in Pinocchio.
+
+        v is the velocity of the frame origin p, w the angular velocity, both in world
+        axes. Column j of a supporting joint with world axis a through the point o_j:
+        revolute ``[a x (p - o_j); a]``, prismatic ``[a; 0]``; other columns are zero.
+        """
+        q = np.asarray(q)
+        body, at = self.frames[name]
+        jac = np.zeros((6, self.nv), dtype=np.result_type(q, float))
+        if body < 0:
+            return jac
+        poses = self.body_poses(q)
+        p = (poses[body] @ at)[:3, 3]
+        for j in self.support[body]:
+            a = poses[j][:3, :3] @ self.axis[j]
+            if self.revolute[j]:
+                jac[:3, j] = np.cross(a, p - poses[j][:3, 3])
+                jac[3:, j] = a
+            else:
+                jac[:3, j] = a
+        return jac
+
+    # ------------------------------------------------------------------ dynamics
+
+    def _base_acceleration(self, dtype) -> np.ndarray:
+        return np.concatenate([np.zeros(3), -self.gravity_vector]).astype(dtype)
+
+    def rnea(self, q, qd, qdd) -> np.ndarray:
+        """Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q) (Featherstone, Table 5.1).
+
+        Forward: v_i = X_i v_lambda + S_i qd_i, a_i = X_i a_lambda + S_i qdd_i + v_i x S_i qd_i,
+        with v_0 = 0 and a_0 = -[0; gravity]. Backward: f_i = I_i a_i + v_i x* I_i v_i,
+        tau_i = S_i^T f_i, f_lambda += X_i^T f_i.
+        """
+        q, qd, qdd = np.asarray(q), np.asarray(qd), np.asarray(qdd)
+        dtype = np.result_type(q, qd, qdd, float)
+        xs = self.body_transforms(q)
+        v = [np.zeros(6, dtype)] * self.nv
+        a = [np.zeros(6, dtype)] * self.nv
+        f = [np.zeros(6, dtype)] * self.nv
+        a0 = self._base_acceleration(dtype)
+        for i in range(self.nv):
+            lam, s = self.parent[i], self.motion_subspace[i]
+            vj = s * qd[i]
+            v[i] = vj if lam < 0 else xs[i] @ v[lam] + vj
+            a[i] = xs[i] @ (a0 if lam < 0 else a[lam]) + s * qdd[i] + crm(v[i]) @ vj
+            f[i] = self.inertia[i] @ a[i] + crf(v[i]) @ (self.inertia[i] @ v[i])
+        tau = np.zeros(self.nv, dtype)
+        for i in reversed(range(self.nv)):
+            tau[i] = self.motion_subspace[i] @ f[i]
+            if self.parent[i] >= 0:
+                f[self.parent[i]] = f[self.parent[i]] + xs[i].T @ f[i]
+        return tau
+
+    def gravity(self, q) -> np.ndarray:
+        """Generalized gravity g(q) = rnea(q, 0, 0)."""
+        zero = np.zeros(self.nv)
+        return self.rnea(q, zero, zero)
+
+    def crba(self, q) -> np.ndarray:
+        """Joint-space inertia M(q) by the composite rigid body algorithm (Featherstone, Table 6.2).
+
+        I^c_i = I_i + sum over children j of X_j^T I^c_j X_j; M_ii = S_i^T I^c_i S_i and,
+        walking F = I^c_i S_i up the support (F <- X_j^T F), M_ij = M_ji = F^T S_j.
+        """
+        q = np.asarray(q)
+        dtype = np.result_type(q, float)
+        xs = self.body_transforms(q)
+        ic = [inertia.astype(dtype) for inertia in self.inertia]
+        for i in reversed(range(self.nv)):
+            if self.parent[i] >= 0:
+                ic[self.parent[i]] = ic[self.parent[i]] + xs[i].T @ ic[i] @ xs[i]
+        m = np.zeros((self.nv, self.nv), dtype)
+        for i in range(self.nv):
+            force = ic[i] @ self.motion_subspace[i]
+            m[i, i] = self.motion_subspace[i] @ force
+            j = i
+            while self.parent[j] >= 0:
+                force = xs[j].T @ force
+                j = self.parent[j]
+                m[i, j] = m[j, i] = force @ self.motion_subspace[j]
+        return m
+
+    mass_matrix = crba
+
+    def aba(self, q, qd, tau) -> np.ndarray:
+        """Forward dynamics qdd = M^-1 (tau - C qd - g) by the articulated body algorithm (Featherstone, Table 7.1).
+
+        Pass 1: v_i, c_i = v_i x S_i qd_i, I^A_i = I_i, p^A_i = v_i x* I_i v_i.
+        Pass 2 (leaves to root): U_i = I^A_i S_i, D_i = S_i^T U_i, u_i = tau_i - S_i^T p^A_i;
+        I^A_lambda += X_i^T (I^A_i - U_i U_i^T / D_i) X_i, p^A_lambda += X_i^T (p^A_i + I^a_i c_i + U_i u_i / D_i).
+        Pass 3: a'_i = X_i a_lambda + c_i, qdd_i = (u_i - U_i^T a'_i) / D_i, a_i = a'_i + S_i qdd_i, a_0 = -[0; gravity].
+        """
+        q, qd, tau = np.asarray(q), np.asarray(qd), np.asarray(tau)
+        dtype = np.result_type(q, qd, tau, float)
+        xs = self.body_transforms(q)
+        n = self.nv
+        v, c, ia, pa = [None] * n, [None] * n, [None] * n, [None] * n
+        for i in range(n):
+            lam, s = self.parent[i], self.motion_subspace[i]
+            vj = s * qd[i]
+            v[i] = vj.astype(dtype) if lam < 0 else xs[i] @ v[lam] + vj
+            c[i] = crm(v[i]) @ vj
+            ia[i] = self.inertia[i].astype(dtype)
+            pa[i] = crf(v[i]) @ (self.inertia[i] @ v[i])
+        u_vec, d, u = [None] * n, [None] * n, [None] * n
+        for i in reversed(range(n)):
+            s = self.motion_subspace[i]
+            u_vec[i] = ia[i] @ s
+            d[i] = s @ u_vec[i]
+            u[i] = tau[i] - s @ pa[i]
+            lam = self.parent[i]
+            if lam >= 0:
+                i_art = ia[i] - np.outer(u_vec[i], u_vec[i]) / d[i]
+                p_art = pa[i] + i_art @ c[i] + u_vec[i] * (u[i] / d[i])
+                ia[lam] = ia[lam] + xs[i].T @ i_art @ xs[i]
+                pa[lam] = pa[lam] + xs[i].T @ p_art
+        a = [None] * n
+        qdd = np.zeros(n, dtype)
+        a0 = self._base_acceleration(dtype)
+        for i in range(n):
+            lam = self.parent[i]
+            a_prime = xs[i] @ (a0 if lam < 0 else a[lam]) + c[i]
+            qdd[i] = (u[i] - u_vec[i] @ a_prime) / d[i]
+            a[i] = a_prime + self.motion_subspace[i] * qdd[i]
+        return qdd
+
+    def mass_matrix_partials(self, q) -> np.ndarray:
+        """dM/dq (nv, nv, nv), [k] = dM/dq_k = Im M(q + i h e_k) / h by complex step (h = 1e-30); q real."""
+        q = np.asarray(q, dtype=float)
+        return np.array([self.crba(q + 1j * COMPLEX_STEP * e).imag / COMPLEX_STEP for e in np.eye(self.nv)])
+
+    def coriolis_matrix(self, q, qd) -> np.ndarray:
+        """Christoffel C(q, qd): C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k.
+
+        With this choice C qd is the Coriolis and centrifugal torque and Mdot - 2C is skew.
+        dM/dq comes from :meth:`mass_matrix_partials` (complex step, exact to rounding).
+        """
+        dm = self.mass_matrix_partials(q)  # dm[k, i, j] = dM_ij / dq_k
+        qd = np.asarray(qd, dtype=float)
+        return 0.5 * (np.einsum("kij,k->ij", dm, qd) + np.einsum("jik,k->ij", dm, qd) - np.einsum("ijk,k->ij", dm, qd))
+
+    def kinetic_energy(self, q, qd):
+        """T = 1/2 sum_i v_i^T I_i v_i over the body spatial velocities (= 1/2 qd^T M qd)."""
+        q, qd = np.asarray(q), np.asarray(qd)
+        xs = self.body_transforms(q)
+        v: list[np.ndarray] = []
+        energy = 0
+        for i in range(self.nv):
+            vj = self.motion_subspace[i] * qd[i]
+            v.append(vj if self.parent[i] < 0 else xs[i] @ v[self.parent[i]] + vj)
+            energy = energy + 0.5 * v[i] @ self.inertia[i] @ v[i]
+        return energy
+
+    def potential_energy(self, q):
+        """U = -sum_links m_l gravity . p_com_l (world COM positions; zero when every COM is at the origin).
+
+        The sum runs over every link but the root, including links fixed to the root
+        (which add a constant).
+        """
+        poses = self.body_poses(np.asarray(q))
+        energy = 0
+        for body, mass, com in self.masses:
+            p = com if body < 0 else poses[body][:3, :3] @ com + poses[body][:3, 3]
+            energy = energy - mass * (self.gravity_vector @ p)
+        return energy
