@@ -1,2 +1,121 @@
-def main(argv=None):
+"""Command line: ``derive <command>`` (also ``python -m derive``).
+
+Bad input ends with one line on stderr naming the robot, the field and the
+problem, exit status 2, and no traceback; nothing is written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from .model import ModelError, load_models
+
+DEFAULT_OUT = Path(__file__).resolve().parent.parent / "generated"
+
+
+def _robots(args) -> dict:
+    robots = load_models(args.models)
+    if getattr(args, "robot", None):
+        missing = [r for r in args.robot if r not in robots]
+        if missing:
+            raise ModelError(missing[0], "robots", f"no such robot in {args.models or 'models.yaml'} (known: {', '.join(robots)})")
+    return robots
+
+
+def cmd_generate(args) -> int:
+    from .generate import check, generate
+
+    robots = _robots(args)
+    out = Path(args.out) if args.out else DEFAULT_OUT
+    if args.check:
+        problems = check({k: v for k, v in robots.items() if not args.robot or k in args.robot}, out)
+        if args.robot:
+            problems = [p for p in problems if any(f"/{r}/" in p or p.endswith(f"/{r}") for r in args.robot)]
+        if problems:
+            print(f"generated/ is stale; run `make derive`. {len(problems)} problem(s):", file=sys.stderr)
+            for p in problems:
+                print(f"  {p}", file=sys.stderr)
+            return 1
+        print(f"{out} is up to date with models.yaml ({len(robots)} robots)")
+        return 0
+    generate(robots, out, only=args.robot or None, use_cache=not args.no_cache,
+             log=lambda s: print(s, flush=True))
     return 0
+
+
+def cmd_import_urdf(args) -> int:
+    from .urdf import import_urdf_command
+
+    return import_urdf_command(args) or 0
+
+
+def cmd_info(args) -> int:
+    robots = _robots(args)
+    for name in args.robot or robots:
+        r = robots[name]
+        print(f"{r.name}: nq = {r.nq}, joints {', '.join(f'{j.name} ({j.type})' for j in r.moving_joints)}")
+        print(f"  frames: {', '.join(f.name for f in r.frames)}")
+        if r.parameters:
+            print(f"  parameters: {', '.join(f'{p.name} = {p.default:g}' for p in r.parameters)}")
+        if r.source:
+            print(f"  source: {r.source}")
+    return 0
+
+
+def cmd_eom(args) -> int:
+    import sympy as sp
+
+    from .api import load
+
+    m = load(args.robot_name, args.models)
+    print(f"M(q) =\n{sp.pretty(m.mass_matrix)}\n\nC(q, qd) =\n{sp.pretty(m.coriolis_matrix)}\n\n"
+          f"g(q) =\n{sp.pretty(m.gravity_vector)}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="derive", description=__doc__.splitlines()[0])
+    parser.add_argument("--models", help="models file (default: models.yaml of the project, or $DERIVE_MODELS)")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    g = sub.add_parser("generate", help="regenerate generated/ from models.yaml")
+    g.add_argument("--robot", action="append", help="only this robot (repeatable)")
+    g.add_argument("--out", help="output folder (default: generated/)")
+    g.add_argument("--check", action="store_true", help="exit 1 and name the stale files if generated/ is out of date")
+    g.add_argument("--no-cache", action="store_true", help="rederive every robot even if unchanged")
+    g.set_defaults(func=cmd_generate)
+
+    u = sub.add_parser("import-urdf", help="turn a URDF into a models.yaml entry")
+    u.add_argument("file")
+    u.add_argument("--tip", required=True, help="link that becomes the 'tcp' frame")
+    u.add_argument("--lock", help="joints to lock, comma-separated (JOINT or JOINT=VALUE)")
+    u.add_argument("--name", help="robot name (default: the URDF's, made a C identifier)")
+    u.add_argument("--out", help="append the entry to this models file instead of printing it")
+    u.set_defaults(func=cmd_import_urdf)
+
+    i = sub.add_parser("info", help="summarise robots of models.yaml")
+    i.add_argument("robot", nargs="*")
+    i.set_defaults(func=cmd_info)
+
+    e = sub.add_parser("eom", help="print M, C and g of a robot (sympy)")
+    e.add_argument("robot_name")
+    e.set_defaults(func=cmd_eom)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ModelError as exc:
+        print(f"derive: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print("derive: interrupted; generated/ left as it was", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

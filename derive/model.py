@@ -90,7 +90,7 @@ class Joint:
     parent: str
     child: str
     origin: Origin = Origin()
-    axis: tuple = (0.0, 0.0, 1.0)
+    axis: tuple = (1.0, 0.0, 0.0)  # URDF's default
     limits: Limits = Limits()
 
     @property
@@ -255,6 +255,11 @@ class _Parser:
         raise self.error(where, f"expected a number or parameter expression, got {type(raw).__name__}")
 
     def number(self, where: str, raw: Any) -> float:
+        if isinstance(raw, str):  # YAML 1.1 reads 1e-3 (no dot) as a string
+            try:
+                raw = float(raw)
+            except ValueError:
+                raise self.error(where, f"expected a finite number, got {raw!r}") from None
         if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
             raise self.error(where, f"expected a finite number, got {raw!r}")
         return float(raw)
@@ -328,7 +333,7 @@ class _Parser:
         jtype = raw["type"]
         if jtype not in JOINT_TYPES:
             raise self.error(f"{where}.type", f"unknown joint type '{jtype}' (known: {', '.join(JOINT_TYPES)})")
-        axis = raw.get("axis", [0.0, 0.0, 1.0])
+        axis = raw.get("axis", [1.0, 0.0, 0.0])
         if not isinstance(axis, (list, tuple)) or len(axis) != 3:
             raise self.error(f"{where}.axis", f"expected 3 numbers, got {axis!r}")
         axis = [self.number(f"{where}.axis[{i}]", a) for i, a in enumerate(axis)]
@@ -422,13 +427,14 @@ class _Parser:
         if len(roots) > 1:
             raise self.error("joints", f"links {', '.join(repr(r) for r in roots)} have no parent joint; exactly one root link is allowed")
         ordered: list[Joint] = []
-        frontier = [roots[0]]
-        while frontier:
-            link = frontier.pop(0)
-            for j in joints:  # file order among siblings
-                if j.parent == link:
+
+        def visit(link: str) -> None:  # depth-first, file order among siblings (Pinocchio's q order)
+            for j in joints:
+                if j.parent == link and j not in ordered:
                     ordered.append(j)
-                    frontier.append(j.child)
+                    visit(j.child)
+
+        visit(roots[0])
         if len(ordered) != len(joints):
             stuck = [j.name for j in joints if j not in ordered]
             raise self.error("joints", f"the joints {', '.join(stuck)} form a cycle detached from the root '{roots[0]}'")

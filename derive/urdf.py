@@ -32,6 +32,7 @@ from pathlib import Path
 from typing import Any, Iterable, Mapping
 
 import numpy as np
+import yaml
 
 from .model import C_KEYWORDS, ModelError, _identifier, parse_models, parse_robot
 
@@ -45,22 +46,11 @@ GRAVITY = [0.0, 0.0, -9.81]
 
 
 def example_robot_data_dir() -> Path | None:
-    """``.../cmeel.prefix/share/example-robot-data/robots`` of the installed package, or None."""
+    """``<site-packages>/cmeel.prefix/share/example-robot-data/robots`` of the installed package, or None."""
     for entry in sys.path:
-        if not entry:
-            continue
-        candidate = Path(entry) / "cmeel.prefix" / "share" / ERD / "robots"
+        candidate = Path(entry or ".") / "cmeel.prefix" / "share" / ERD / "robots"
         if candidate.is_dir():
             return candidate
-    try:  # the package's own files (e.g. a non-standard prefix)
-        for f in importlib.metadata.files(ERD) or ():
-            parts = Path(str(f)).parts
-            if "robots" in parts and ERD in parts:
-                root = Path(str(f.locate())).parents[len(parts) - parts.index("robots") - 2]
-                if root.is_dir():
-                    return root
-    except importlib.metadata.PackageNotFoundError:
-        pass
     return None
 
 
@@ -71,7 +61,7 @@ def example_robot_data_version() -> str | None:
         return None
 
 
-def resolve_urdf(file: str | Path) -> tuple[Path, str, str]:
+def resolve_urdf(file: str | Path, robot: str | None = None) -> tuple[Path, str, str]:
     """``file`` -> (path to read, portable spelling for commands, origin for ``source``).
 
     ``example-robot-data:<path under robots/>`` names a URDF of the installed
@@ -83,7 +73,8 @@ def resolve_urdf(file: str | Path) -> tuple[Path, str, str]:
     if text.startswith(ERD_PREFIX):
         rel = text[len(ERD_PREFIX):].lstrip("/")
         if erd is None:
-            raise ModelError(None, text, f"the {ERD} package is not installed (pip install {ERD})")
+            raise ModelError(robot or c_identifier(Path(text).stem), text,
+                             f"the {ERD} package is not installed (pip install {ERD})")
         path = erd / rel
     else:
         path = Path(text)
@@ -127,12 +118,16 @@ def rpy_matrix(rpy) -> np.ndarray:
 
 
 def matrix_rpy(m: np.ndarray) -> tuple[float, float, float]:
-    """R = Rz(yaw) Ry(pitch) Rx(roll) -> (roll, pitch, yaw), pitch in [-pi/2, pi/2]."""
-    cp = math.hypot(m[0, 0], m[1, 0])
-    pitch = math.atan2(-m[2, 0], cp)
-    if cp > 1e-12:
-        return math.atan2(m[2, 1], m[2, 2]), pitch, math.atan2(m[1, 0], m[0, 0])
-    return 0.0, pitch, math.atan2(-m[0, 1], m[1, 1])  # gimbal lock: put it all in yaw
+    """R = Rz(yaw) Ry(pitch) Rx(roll) -> (roll, pitch, yaw), pitch in [-pi/2, pi/2].
+
+    Yaw first, then roll and pitch from Rz(yaw)^T R, so the angles reproduce R to
+    rounding even at or near pitch = +-pi/2 (where roll and yaw are not unique).
+    """
+    yaw = math.atan2(m[1, 0], m[0, 0])
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    roll = math.atan2(sy * m[0, 2] - cy * m[1, 2], cy * m[1, 1] - sy * m[0, 1])
+    pitch = math.atan2(-m[2, 0], cy * m[0, 0] + sy * m[1, 0])
+    return roll, pitch, yaw
 
 
 def axis_angle(axis, angle: float) -> np.ndarray:
@@ -326,7 +321,7 @@ def _read(path: Path, robot: str | None) -> tuple[str, dict[str, _Inertial], lis
 # --------------------------------------------------------------------------- import
 
 
-def parse_lock(lock: str | Iterable[str] | Mapping[str, float] | None) -> dict[str, tuple[float, str]]:
+def parse_lock(lock: str | Iterable[str] | Mapping[str, float] | None, robot: str | None = None) -> dict[str, tuple[float, str]]:
     """``"a,b=0.3"`` or ``["a", "b=0.3"]`` or ``{"b": 0.3}`` -> {name: (value, spelling)}."""
     if lock is None:
         return {}
@@ -343,9 +338,9 @@ def parse_lock(lock: str | Iterable[str] | Mapping[str, float] | None) -> dict[s
         try:
             v = float(value) if eq else 0.0
         except ValueError:
-            raise ModelError(None, f"lock[{name}]", f"the value {value.strip()!r} is not a number") from None
+            raise ModelError(robot, f"lock[{name}]", f"the value {value.strip()!r} is not a number") from None
         if not math.isfinite(v):
-            raise ModelError(None, f"lock[{name}]", f"the value {value.strip()!r} is not finite")
+            raise ModelError(robot, f"lock[{name}]", f"the value {value.strip()!r} is not finite")
         out[name] = (v, f"{name}={value.strip()}" if eq else name)
     return out
 
@@ -357,10 +352,6 @@ def _command(spelling: str, tip: str, lock: dict, name: str | None) -> str:
     if name:
         cmd += f" --name {name}"
     return cmd
-
-
-def _num(x: float) -> float:
-    return float(x)
 
 
 def _inertia_dict(m: np.ndarray) -> dict:
@@ -403,9 +394,14 @@ def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = N
     (value in rad or m, default 0). ``name`` defaults to the URDF robot name made a
     C identifier. Raises :class:`derive.model.ModelError` on any problem.
     """
-    file, spelling, origin_text = resolve_urdf(path)
+    return import_urdf_named(path, tip, lock, name)[1]
+
+
+def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | None = None) -> tuple[str, dict]:
+    """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
     if name is not None:
         _identifier(name, "name", name)
+    file, spelling, origin_text = resolve_urdf(path, name)
     urdf_name, links, joints = _read(file, name)
     robot = name or c_identifier(urdf_name)
 
@@ -436,7 +432,7 @@ def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = N
 
     if tip not in links:
         raise error("tip", f"unknown link '{tip}' (links: {', '.join(links)})")
-    locks = parse_lock(lock)
+    locks = parse_lock(lock, robot)
     by_name = {j.name: j for j in joints}
     for jname, (value, _) in locks.items():
         j = by_name.get(jname)
@@ -464,13 +460,8 @@ def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = N
     def subtree_mass(link: str) -> float:
         return links[link].mass + sum(subtree_mass(j.child) for j in children[link])
 
-    def dropped_joints(j: _Joint) -> Iterable[str]:
-        yield j.name
-        for c in children[j.child]:
-            yield from dropped_joints(c)
-
-    dropped: set[str] = set()
     order: list[_Joint] = []  # kept joints, parents first, file order among siblings
+    off_path: list[tuple[_Joint, float]] = []  # moving joints of branches with mass that miss the tip
     frontier = [root]
     while frontier:
         link = frontier.pop(0)
@@ -478,19 +469,20 @@ def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = N
             if moves(j) and j.child not in on_path:
                 mass = subtree_mass(j.child)
                 if mass > 0:
-                    raise error(f"joints[{j.name}]", f"moves a branch with mass ({mass:g} kg) that does not lead to the tip "
-                                f"'{tip}'; --lock {j.name} (or choose another tip)")
-                dropped.update(dropped_joints(j))
-                continue
+                    off_path.append((j, mass))
+                continue  # a massless branch is dropped
             order.append(j)
             frontier.append(j.child)
-    for j in order:
+    for j in order + [j for j, _ in off_path]:
         if j.mimic is not None and j.name not in locks:
-            raise error(f"joints[{j.name}]", f"mimics joint '{j.mimic}'; mimic joints are not supported: "
-                        f"--lock {j.name} (and usually '{j.mimic}' too)")
-    for jname in locks:
-        if jname in dropped:
-            raise error(f"lock[{jname}]", "the joint is on a dropped massless branch off the path to the tip")
+            both = ",".join(dict.fromkeys(n for n in (*locks, j.mimic, j.name) if n in by_name))
+            raise error(f"joints[{j.name}]", f"mimics joint '{j.mimic}'; mimic joints are not supported: lock them "
+                        f"(--lock {both})")
+    if off_path:
+        j, mass = off_path[0]
+        all_locks = ",".join([*locks, *(x.name for x, _ in off_path)])
+        raise error(f"joints[{j.name}]", f"moves a branch with mass ({mass:g} kg) that does not lead to the tip "
+                    f"'{tip}'; lock it (--lock {all_locks}) or choose another tip")
 
     # ---- merge fixed joints: body (surviving link) and pose in the body frame of every link
     body: dict[str, str] = {root: root}
@@ -552,8 +544,8 @@ def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = N
             raise error("joints", f"'{j['name']}' and '{renamed_joints[new]}' both become the identifier '{new}'")
         j["name"], j["parent"], j["child"] = new, c_identifier(j["parent"]), c_identifier(j["child"])
 
-    locked = ", ".join(f"{n} at {v:g}" for n, (v, _) in locks.items())
-    description = f"{urdf_name} (URDF import, tip {tip}{'; locked: ' + locked if locked else ''})"
+    locked = ", ".join(f"{n} = {v:g}" for n, (v, _) in locks.items())
+    description = f"{urdf_name} imported from URDF (tip {tip}{'; locked ' + locked if locked else ''})"
     command = _command(spelling, tip, locks, name if name and name != c_identifier(urdf_name) else None)
     entry = {
         "description": description,
@@ -567,7 +559,7 @@ def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = N
         parse_robot(robot, entry)  # the entry must load as it is
     except ModelError as exc:
         raise ModelError(robot, exc.field, f"{exc.problem} (in the imported entry)") from None
-    return entry
+    return robot, entry
 
 
 # --------------------------------------------------------------------------- YAML text
@@ -607,7 +599,18 @@ def _flow(v: Any) -> str:
     return _scalar(v)
 
 
-def _item(d: Mapping, indent: str, width: int = 110) -> list[str]:
+def _block_scalar(v: Any) -> str:
+    """A scalar as a block-context mapping value: plain when YAML reads it back unchanged."""
+    if isinstance(v, str) and v == v.strip() and "\n" not in v and " #" not in v and not v.startswith(("\"", "'")):
+        try:
+            if yaml.safe_load(f"k: {v}") == {"k": v}:
+                return v
+        except yaml.YAMLError:
+            pass
+    return _flow(v)
+
+
+def _item(d: Mapping, indent: str, width: int = 120) -> list[str]:
     """One list item: a flow mapping if it fits on a line, else a block mapping of flow values."""
     line = f"{indent}- {_flow(d)}"
     if len(line) <= width:
@@ -622,9 +625,10 @@ def dump_entry(name: str, entry: Mapping, indent: str = "  ") -> str:
     """Deterministic YAML text of one robot entry, to sit under ``robots:`` of models.yaml."""
     source = str(entry.get("source", ""))
     command = source.split("`")[1] if source.count("`") >= 2 else None
-    lines = [f"{indent}# {name}: generated from {source.split(', imported by')[0] or 'a URDF'} by derive/urdf.py; do not edit by hand."]
+    origin = source.split(", imported by")[0] or "a URDF"
+    lines = [f"{indent}# {name}: generated by `derive import-urdf` from {origin}; do not edit by hand."]
     if command:
-        lines.append(f"{indent}# Regenerate: {command} (prints the entry; --out models.yaml appends it)")
+        lines.append(f"{indent}# Regenerate with: {command}")
     lines.append(f"{indent}{name}:")
     body = indent + "  "
     for key, value in entry.items():
@@ -633,7 +637,7 @@ def dump_entry(name: str, entry: Mapping, indent: str = "  ") -> str:
             for x in value:
                 lines.extend(_item(x, body + "  "))
         else:
-            lines.append(f"{body}{key}: {_flow(value)}")
+            lines.append(f"{body}{key}: {_block_scalar(value)}")
     return "\n".join(lines) + "\n"
 
 
@@ -659,12 +663,7 @@ def append_entry(models_path: str | Path, name: str, entry: Mapping) -> None:
 
 def import_urdf_command(args) -> int:
     """``derive import-urdf FILE --tip FRAME [--lock J,...] [--name NAME] [--out models.yaml]``."""
-    entry = import_urdf(args.file, args.tip, lock=args.lock, name=args.name)
-    _, _, _ = resolve_urdf(args.file)
-    if args.name:
-        name = args.name
-    else:
-        name = c_identifier(_read(resolve_urdf(args.file)[0], None)[0])
+    name, entry = import_urdf_named(args.file, args.tip, lock=args.lock, name=args.name)
     if getattr(args, "out", None):
         append_entry(args.out, name, entry)
         print(f"appended robot '{name}' to {args.out}", file=sys.stderr)

@@ -147,7 +147,7 @@ class NumericRobot:
 
         # Inertias, merged per body; point masses kept per link for the potential energy.
         self.inertia = [np.zeros((6, 6)) for _ in range(n)]
-        self.masses: list[tuple[int, float, np.ndarray]] = []  # (body, mass, com in body frame)
+        self.masses: list[tuple[int, float, np.ndarray]] = []  # (body, mass, COM in body frame) per moving link
         for link in robot.links:
             if link.name == robot.root:
                 continue
@@ -156,8 +156,8 @@ class NumericRobot:
             rot = at[:3, :3] @ rpy_matrix(*vec(link.inertia_rpy))
             inertia_com = rot @ np.array([[num(x) for x in row] for row in link.inertia]) @ rot.T
             com = at[:3, :3] @ vec(link.com) + at[:3, 3]
-            self.masses.append((body, mass, com))
-            if body >= 0:
+            if body >= 0:  # links fixed to the root are world, as in Pinocchio
+                self.masses.append((body, mass, com))
                 self.inertia[body] = self.inertia[body] + spatial_inertia(mass, com, inertia_com)
 
         # Every placeable frame: (body, constant pose in the body frame).
@@ -196,12 +196,12 @@ class NumericRobot:
         """World pose (4x4) of every name in ``robot.frame_names``: T = T_body(q) * T_body_frame."""
         q = np.asarray(q)
         poses = self.body_poses(q)
-        return {name: (at if body < 0 else poses[body] @ at) for name, (body, at) in self.frames.items()}
+        return {name: (at.copy() if body < 0 else poses[body] @ at) for name, (body, at) in self.frames.items()}
 
     def frame_pose(self, q, name: str) -> np.ndarray:
         """World pose (4x4) of one frame."""
         body, at = self.frames[name]
-        return at if body < 0 else self.body_poses(np.asarray(q))[body] @ at
+        return at.copy() if body < 0 else self.body_poses(np.asarray(q))[body] @ at
 
     def jacobian(self, q, name: str) -> np.ndarray:
         """Geometric Jacobian (6, nv), ``[v; w] = J qd``, LOCAL_WORLD_ALIGNED as in Pinocchio.
@@ -359,14 +359,14 @@ class NumericRobot:
         return energy
 
     def potential_energy(self, q):
-        """U = -sum_links m_l gravity . p_com_l (world COM positions; zero when every COM is at the origin).
+        """U = -sum_l m_l gravity . p_com_l over the links that move (world COM positions).
 
-        The sum runs over every link but the root, including links fixed to the root
-        (which add a constant).
+        Zero when every COM is at the world origin. The root link and links fixed to
+        it are world and do not count (as in Pinocchio's computePotentialEnergy).
         """
         poses = self.body_poses(np.asarray(q))
         energy = 0
         for body, mass, com in self.masses:
-            p = com if body < 0 else poses[body][:3, :3] @ com + poses[body][:3, 3]
+            p = poses[body][:3, :3] @ com + poses[body][:3, 3]
             energy = energy - mass * (self.gravity_vector @ p)
         return energy

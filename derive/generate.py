@@ -1,0 +1,183 @@
+"""`derive generate`: models.yaml -> generated/, deterministic and all-or-nothing.
+
+- Every robot is rendered into a temporary folder beside the target, which then
+  replaces the target in one rename: a failure part-way leaves generated/ as it was.
+- Unchanged robots are not rederived: generated/MANIFEST.json records, per robot,
+  a content hash of the model and of the generator (derive's sources, templates
+  and pinned tool versions) and the sha256 of every file; if both match and the
+  files are intact, they are carried over.
+- ``check`` compares those hashes and files without writing anything.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+from typing import Callable, Iterable
+
+from .model import Robot
+
+PACKAGE = Path(__file__).resolve().parent
+ROOT = PACKAGE.parent
+TOOLS = ("sympy", "casadi", "numpy", "jinja2")
+
+
+def tool_versions() -> dict[str, str]:
+    from importlib.metadata import version
+
+    return {"derive": version("derive"), **{t: version(t) for t in TOOLS}}
+
+
+def generator_hash() -> str:
+    """sha256 over derive's sources, the templates and the tool versions."""
+    h = hashlib.sha256()
+    for base in (PACKAGE, ROOT / "templates"):
+        for path in sorted(p for p in base.rglob("*") if p.is_file() and p.suffix in (".py", ".jinja")):
+            h.update(path.relative_to(ROOT).as_posix().encode())
+            h.update(path.read_bytes())
+    h.update(json.dumps(tool_versions(), sort_keys=True).encode())
+    return h.hexdigest()
+
+
+def model_hash(robot: Robot) -> str:
+    """sha256 of the validated model (not of its YAML text: comments do not count)."""
+    return hashlib.sha256(json.dumps(dataclasses.asdict(robot), sort_keys=True).encode()).hexdigest()
+
+
+def _sha(text: str | bytes) -> str:
+    return hashlib.sha256(text.encode() if isinstance(text, str) else text).hexdigest()
+
+
+def _read_manifest(out: Path) -> dict:
+    try:
+        return json.loads((out / "MANIFEST.json").read_text())
+    except (OSError, ValueError):
+        return {}
+
+
+def _intact(out: Path, name: str, entry: dict) -> bool:
+    for rel, digest in entry.get("files", {}).items():
+        path = out / name / rel
+        if not path.is_file() or _sha(path.read_bytes()) != digest:
+            return False
+    robot_dir = out / name
+    present = {p.relative_to(robot_dir).as_posix() for p in robot_dir.rglob("*") if p.is_file()} if robot_dir.is_dir() else set()
+    return present == set(entry.get("files", {}))
+
+
+def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, str]:
+    """Derive and render one robot; prints stage times."""
+    from .api import SXModel
+    from .emit.render import render_robot
+    from .spec import function_specs
+
+    t0 = time.perf_counter()
+    model = SXModel(robot)
+    specs = function_specs(model)
+    t1 = time.perf_counter()
+    total_ops = [0]
+
+    def count(spec, prog):
+        total_ops[0] += prog.ops()["total"]
+
+    files = render_robot(robot, specs, mhash[:16], progress=count)
+    t2 = time.perf_counter()
+    log(f"  {robot.name}: derive {t1 - t0:.2f} s, cse+print+render {t2 - t1:.2f} s "
+        f"({len(specs)} functions, {total_ops[0]} ops)")
+    return files
+
+
+def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = None, use_cache: bool = True,
+             log: Callable[[str], None] = print) -> dict:
+    """Regenerate ``out`` for ``robots`` (all, or the names in ``only``); returns the new MANIFEST."""
+    out = Path(out)
+    names = sorted(robots) if only is None else sorted(only)
+    ghash = generator_hash()
+    old = _read_manifest(out)
+    old_robots = old.get("robots", {})
+    new_robots = {k: v for k, v in old.get("robots", {}).items() if only is not None and k not in names and k in robots}
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    try:
+        start = time.perf_counter()
+        # carry over robots not being regenerated (``--robot``), untouched
+        for name in new_robots:
+            if (out / name).is_dir():
+                shutil.copytree(out / name, tmp / name)
+        for k, name in enumerate(names, 1):
+            robot = robots[name]
+            mhash = model_hash(robot)
+            prev = old_robots.get(name)
+            if (use_cache and prev and prev.get("model_hash") == mhash and prev.get("generator_hash") == ghash
+                    and _intact(out, name, prev)):
+                shutil.copytree(out / name, tmp / name)
+                new_robots[name] = prev
+                log(f"[{k}/{len(names)}] {name}: unchanged, kept")
+                continue
+            log(f"[{k}/{len(names)}] {name}: deriving")
+            files = render(robot, mhash, log)
+            for rel, text in files.items():
+                path = tmp / name / rel
+                path.parent.mkdir(parents=True, exist_ok=True)
+                path.write_text(text)
+            new_robots[name] = {"model_hash": mhash, "generator_hash": ghash, "files": {rel: _sha(text) for rel, text in sorted(files.items())}}
+        manifest = {"tools": tool_versions(),
+                    "robots": {k: new_robots[k] for k in sorted(new_robots)}}
+        (tmp / "MANIFEST.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
+        _swap(tmp, out)
+        log(f"generated {len(names)} robot(s) into {out} in {time.perf_counter() - start:.1f} s")
+        return manifest
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+
+def _swap(tmp: Path, out: Path) -> None:
+    """Replace ``out`` by ``tmp`` with renames only (no half-written state is ever visible)."""
+    backup = None
+    if out.exists():
+        backup = out.with_name(f".{out.name}.old-{os.getpid()}")
+        os.rename(out, backup)
+    os.rename(tmp, out)
+    if backup:
+        shutil.rmtree(backup, ignore_errors=True)
+
+
+def check(robots: dict[str, Robot], out: Path) -> list[str]:
+    """Stale or edited files under ``out``: empty when generated/ matches models.yaml and derive."""
+    out = Path(out)
+    manifest = _read_manifest(out)
+    if not manifest:
+        return [f"{out}/MANIFEST.json (missing or unreadable)"]
+    problems = []
+    ghash = generator_hash()
+    entries = manifest.get("robots", {})
+    for name in sorted(set(robots) | set(entries)):
+        entry = entries.get(name)
+        if name not in robots:
+            problems.append(f"{out}/{name}/ (robot no longer in models.yaml)")
+        elif entry is None:
+            problems.append(f"{out}/{name}/ (not generated)")
+        elif entry.get("model_hash") != model_hash(robots[name]):
+            problems.append(f"{out}/{name}/ (model changed in models.yaml)")
+        elif entry.get("generator_hash") != ghash:
+            problems.append(f"{out}/{name}/ (derive, its templates or tool versions changed since generation)")
+        else:
+            robot_dir = out / name
+            for rel, digest in entry.get("files", {}).items():
+                path = robot_dir / rel
+                if not path.is_file():
+                    problems.append(f"{path} (missing)")
+                elif _sha(path.read_bytes()) != digest:
+                    problems.append(f"{path} (edited by hand)")
+            if robot_dir.is_dir():
+                for path in sorted(robot_dir.rglob("*")):
+                    if path.is_file() and path.relative_to(robot_dir).as_posix() not in entry.get("files", {}):
+                        problems.append(f"{path} (not generated by derive)")
+    return problems
