@@ -10,6 +10,7 @@ import argparse
 import sys
 from pathlib import Path
 
+from .errors import DeriveError
 from .model import ModelError, load_models
 
 DEFAULT_OUT = Path(__file__).resolve().parent.parent / "generated"
@@ -102,14 +103,25 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("eom", help="print M, C and g of a robot (sympy)")
     e.add_argument("robot_name")
     e.set_defaults(func=cmd_eom)
+
+    # Feature modules register their own subcommands: each has add_parser(subparsers),
+    # which adds a parser with set_defaults(func=...). Imported lazily by name.
+    import importlib
+
+    for module in COMMAND_MODULES:
+        importlib.import_module(f"derive.{module}").add_parser(sub)
     return parser
+
+
+COMMAND_MODULES: list[str] = []
+"""Modules under derive/ that contribute subcommands through add_parser(subparsers)."""
 
 
 def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         return args.func(args)
-    except ModelError as exc:
+    except DeriveError as exc:
         print(f"derive: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

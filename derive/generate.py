@@ -75,7 +75,7 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, st
     """Derive and render one robot; prints stage times."""
     from .api import SXModel
     from .emit.render import render_robot
-    from .spec import function_specs
+    from .spec import function_specs, template_functions
 
     t0 = time.perf_counter()
     model = SXModel(robot)
@@ -86,7 +86,7 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, st
     def count(spec, prog):
         total_ops[0] += prog.ops()["total"]
 
-    files = render_robot(robot, specs, mhash[:16], progress=count)
+    files = render_robot(robot, specs, mhash[:16], progress=count, templates=template_functions(model))
     t2 = time.perf_counter()
     log(f"  {robot.name}: derive {t1 - t0:.2f} s, cse+print+render {t2 - t1:.2f} s "
         f"({len(specs)} functions, {total_ops[0]} ops)")

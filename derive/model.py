@@ -28,6 +28,7 @@ from typing import Any, Iterable, Mapping
 import yaml
 
 from . import expr
+from .errors import DeriveError
 
 JOINT_TYPES = {"revolute": 1, "prismatic": 1, "fixed": 0}
 """Joint type -> degrees of freedom."""
@@ -43,7 +44,7 @@ Value = Any  # float | str (parameter expression)
 Vec3 = tuple  # tuple[Value, Value, Value]
 
 
-class ModelError(ValueError):
+class ModelError(DeriveError):
     """Bad model input: one line naming the robot, the field and the problem."""
 
     def __init__(self, robot: str | None, field_path: str, problem: str):

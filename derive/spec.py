@@ -41,6 +41,51 @@ class FunctionSpec:
         return f"{self.robot}_{self.short_name}"
 
 
+@dataclass(frozen=True)
+class TemplateFunction:
+    """A generated function whose body is a template (loops, calls), not one expression graph.
+
+    ``c_template`` and ``py_template`` are jinja templates under templates/ rendered with
+    ``f`` (this function's plain-data context, ``context`` merged in) and the robot's
+    context; ``calls`` names the generated functions it uses (their headers are included).
+    """
+
+    robot: str
+    quantity: str
+    frame: str | None
+    inputs: tuple[tuple[str, tuple[int, int]], ...]
+    outputs: tuple[tuple[str, tuple[int, int]], ...]
+    doc: str
+    c_template: str
+    py_template: str
+    calls: tuple[str, ...] = ()
+    context: tuple[tuple[str, object], ...] = ()  # plain data, as pairs to stay hashable
+
+    @property
+    def short_name(self) -> str:
+        return self.quantity + (f"_{self.frame}" if self.frame else "")
+
+    @property
+    def name(self) -> str:
+        return f"{self.robot}_{self.short_name}"
+
+
+def template_functions(model: SXModel) -> list[TemplateFunction]:
+    """Functions built from templates on top of the expression functions, in a fixed order."""
+    robot = model.robot
+    n = 2 * robot.nv
+    extra = (("p", (model.sym.p.numel(), 1)),) if model.sym.p.numel() else ()
+    return [
+        TemplateFunction(
+            robot.name, "rk4_step", None,
+            (("x", (n, 1)), ("u", (robot.nv, 1)), ("dt", (1, 1))) + extra, (("x_next", (n, 1)),),
+            "One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: "
+            "x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.",
+            "c/rk4_step.c.jinja", "python/rk4_step.py.jinja", calls=(f"{robot.name}_ode_rhs",),
+            context=(("n", n), ("ode", f"{robot.name}_ode_rhs"))),
+    ]
+
+
 def function_specs(model: SXModel) -> list[FunctionSpec]:
     """Every function generated for a robot, in a fixed order."""
     robot: Robot = model.robot

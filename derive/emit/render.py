@@ -14,7 +14,7 @@ import jinja2
 
 from ..graph import Program, build_program
 from ..model import Robot
-from ..spec import FunctionSpec
+from ..spec import FunctionSpec, TemplateFunction
 from .printers import CPrinter, PythonPrinter, _float_literal
 
 TEMPLATES = Path(__file__).resolve().parent.parent.parent / "templates"
@@ -72,6 +72,7 @@ def function_context(spec: FunctionSpec, prog: Program) -> dict:
         "body": cp.body(prog),
         "stores": cp.stores(prog, out_names),
         "py_args": [n if n != "p" else "p=DEFAULT_P" for n in in_names],
+        "py_template": None,
         "py_inputs": [(n, x.shape[0]) for n, x in spec.inputs if x.shape[0] > 0],
         "py_body": pp.body(prog),
         "py_outputs": py_outputs,
@@ -82,7 +83,29 @@ def function_context(spec: FunctionSpec, prog: Program) -> dict:
     }
 
 
-def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None) -> dict[str, str]:
+def template_context(t: TemplateFunction) -> dict:
+    """Plain data for a template-bodied function (see spec.TemplateFunction)."""
+    in_names = [n for n, _ in t.inputs]
+    out_names = [n for n, _ in t.outputs]
+    io_lines = [f"in  {n} [{_shape_text(s)}]" for n, s in t.inputs] + [f"out {n} [{_shape_text(s)}]" for n, s in t.outputs]
+    return {
+        "name": t.name, "short_name": t.short_name, "quantity": t.quantity, "frame": t.frame,
+        "doc_lines": [t.doc], "io_lines": io_lines, "ops": None,
+        "ops_comment": f"cost: the arithmetic of {', '.join(t.calls)} per call, plus loops" if t.calls else "cost: loops",
+        "header": f"{t.name}.h", "source": f"{t.name}.c",
+        "args": [f"const DERIVE_REAL *{n}" for n in in_names] + [f"DERIVE_REAL *{n}" for n in out_names],
+        "call_headers": [f"{c}.h" for c in t.calls], "calls": list(t.calls),
+        "p_arg": ", p" if "p" in in_names else "",
+        "py_args": [n if n != "p" else "p=DEFAULT_P" for n in in_names],
+        "c_template": t.c_template, "py_template": t.py_template,
+        "inputs": [{"name": n, "shape": list(s)} for n, s in t.inputs],
+        "outputs": [{"name": n, "shape": list(s)} for n, s in t.outputs],
+        **dict(t.context),
+    }
+
+
+def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,
+                 templates: list[TemplateFunction] = ()) -> dict[str, str]:
     """All files of one robot, as {path relative to generated/<robot>/: text}."""
     env = environment()
     files: dict[str, str] = {}
@@ -92,6 +115,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         functions.append(function_context(spec, prog))
         if progress:
             progress(spec, prog)
+    functions += [template_context(t) for t in templates]
     joints = [j.name for j in robot.moving_joints]
     params = [(p.name, _float_literal(p.default)) for p in robot.parameters]
     base = {"robot": robot.name, "model_hash": model_hash, "joints": joints, "nq": robot.nq, "nv": robot.nv,
@@ -100,7 +124,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
     for f in functions:
         guard = f"{f['name'].upper()}_H"
         files[f"c/{f['header']}"] = env.get_template("c/function.h.jinja").render(base, f=f, guard=guard)
-        files[f"c/{f['source']}"] = env.get_template("c/function.c.jinja").render(base, f=f)
+        files[f"c/{f['source']}"] = env.get_template(f.get("c_template") or "c/function.c.jinja").render(base, f=f)
     files[f"c/{robot.name}.h"] = env.get_template("c/robot.h.jinja").render(
         base, guard=f"{robot.name.upper()}_DERIVE_H", headers=[f["header"] for f in functions])
     files[f"python/{robot.name}.py"] = env.get_template("python/module.py.jinja").render(base, functions=functions)
@@ -118,7 +142,8 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
             "inputs": f["inputs"], "outputs": f["outputs"],
             "c": {"header": f"c/{f['header']}", "source": f"c/{f['source']}"},
             "python": {"module": f"python/{robot.name}.py", "function": f["short_name"]},
-            "ops": {k: f["ops"][k] for k in ("total", "mul", "add", "div", "trig")},
+            "ops": {k: f["ops"][k] for k in ("total", "mul", "add", "div", "trig")} if f["ops"] else None,
+            "calls": f.get("calls", []),
         } for f in functions],
     }
     files["manifest.json"] = env.get_template("manifest/manifest.json.jinja").render(

@@ -20,5 +20,6 @@
 #include "cartpole_ode_rhs.h"
 #include "cartpole_ode_jac_x.h"
 #include "cartpole_ode_jac_u.h"
+#include "cartpole_rk4_step.h"
 
 #endif /* CARTPOLE_DERIVE_H */

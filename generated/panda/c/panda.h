@@ -28,5 +28,6 @@
 #include "panda_ode_rhs.h"
 #include "panda_ode_jac_x.h"
 #include "panda_ode_jac_u.h"
+#include "panda_rk4_step.h"
 
 #endif /* PANDA_DERIVE_H */

@@ -25853,3 +25853,21 @@ def ode_jac_u(x, u):
     B[96] = t1092
     B[97] = t1132
     return B.reshape(14, 7)
+
+
+def rk4_step(x, u, dt):
+    """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
+
+    in  x [14]
+    in  u [7]
+    in  dt [1]
+    out x_next [14]
+    cost: the arithmetic of panda_ode_rhs per call, plus loops
+    """
+    x = np.asarray(_vector(x, 14, "x"))
+    h = float(np.asarray(dt, dtype=float).reshape(-1)[0])
+    k1 = ode_rhs(x, u)
+    k2 = ode_rhs(x + 0.5 * h * k1, u)
+    k3 = ode_rhs(x + 0.5 * h * k2, u)
+    k4 = ode_rhs(x + h * k3, u)
+    return x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)

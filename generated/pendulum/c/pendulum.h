@@ -26,5 +26,6 @@
 #include "pendulum_ode_rhs.h"
 #include "pendulum_ode_jac_x.h"
 #include "pendulum_ode_jac_u.h"
+#include "pendulum_rk4_step.h"
 
 #endif /* PENDULUM_DERIVE_H */

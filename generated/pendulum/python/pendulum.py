@@ -313,3 +313,22 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     B[0] = 0.0
     B[1] = t8
     return B
+
+
+def rk4_step(x, u, dt, p=DEFAULT_P):
+    """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
+
+    in  x [2]
+    in  u [1]
+    in  dt [1]
+    in  p [6]
+    out x_next [2]
+    cost: the arithmetic of pendulum_ode_rhs per call, plus loops
+    """
+    x = np.asarray(_vector(x, 2, "x"))
+    h = float(np.asarray(dt, dtype=float).reshape(-1)[0])
+    k1 = ode_rhs(x, u, p)
+    k2 = ode_rhs(x + 0.5 * h * k1, u, p)
+    k3 = ode_rhs(x + 0.5 * h * k2, u, p)
+    k4 = ode_rhs(x + h * k3, u, p)
+    return x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)

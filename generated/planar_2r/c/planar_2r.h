@@ -25,5 +25,6 @@
 #include "planar_2r_ode_rhs.h"
 #include "planar_2r_ode_jac_x.h"
 #include "planar_2r_ode_jac_u.h"
+#include "planar_2r_rk4_step.h"
 
 #endif /* PLANAR_2R_DERIVE_H */

@@ -739,3 +739,22 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     B[6] = t34
     B[7] = t35
     return B.reshape(4, 2)
+
+
+def rk4_step(x, u, dt, p=DEFAULT_P):
+    """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
+
+    in  x [4]
+    in  u [2]
+    in  dt [1]
+    in  p [5]
+    out x_next [4]
+    cost: the arithmetic of planar_2r_ode_rhs per call, plus loops
+    """
+    x = np.asarray(_vector(x, 4, "x"))
+    h = float(np.asarray(dt, dtype=float).reshape(-1)[0])
+    k1 = ode_rhs(x, u, p)
+    k2 = ode_rhs(x + 0.5 * h * k1, u, p)
+    k3 = ode_rhs(x + 0.5 * h * k2, u, p)
+    k4 = ode_rhs(x + h * k3, u, p)
+    return x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)

@@ -23,5 +23,6 @@
 #include "rrprr_ode_rhs.h"
 #include "rrprr_ode_jac_x.h"
 #include "rrprr_ode_jac_u.h"
+#include "rrprr_rk4_step.h"
 
 #endif /* RRPRR_DERIVE_H */

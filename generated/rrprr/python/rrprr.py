@@ -5686,3 +5686,22 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     B[48] = t254
     B[49] = t293
     return B.reshape(10, 5)
+
+
+def rk4_step(x, u, dt, p=DEFAULT_P):
+    """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
+
+    in  x [10]
+    in  u [5]
+    in  dt [1]
+    in  p [3]
+    out x_next [10]
+    cost: the arithmetic of rrprr_ode_rhs per call, plus loops
+    """
+    x = np.asarray(_vector(x, 10, "x"))
+    h = float(np.asarray(dt, dtype=float).reshape(-1)[0])
+    k1 = ode_rhs(x, u, p)
+    k2 = ode_rhs(x + 0.5 * h * k1, u, p)
+    k3 = ode_rhs(x + 0.5 * h * k2, u, p)
+    k4 = ode_rhs(x + h * k3, u, p)
+    return x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)

@@ -26,5 +26,6 @@
 #include "ur5_ode_rhs.h"
 #include "ur5_ode_jac_x.h"
 #include "ur5_ode_jac_u.h"
+#include "ur5_rk4_step.h"
 
 #endif /* UR5_DERIVE_H */

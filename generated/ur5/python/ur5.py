@@ -13555,3 +13555,21 @@ def ode_jac_u(x, u):
     B[70] = t668
     B[71] = t727
     return B.reshape(12, 6)
+
+
+def rk4_step(x, u, dt):
+    """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
+
+    in  x [12]
+    in  u [6]
+    in  dt [1]
+    out x_next [12]
+    cost: the arithmetic of ur5_ode_rhs per call, plus loops
+    """
+    x = np.asarray(_vector(x, 12, "x"))
+    h = float(np.asarray(dt, dtype=float).reshape(-1)[0])
+    k1 = ode_rhs(x, u)
+    k2 = ode_rhs(x + 0.5 * h * k1, u)
+    k3 = ode_rhs(x + 0.5 * h * k2, u)
+    k4 = ode_rhs(x + h * k3, u)
+    return x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
