@@ -83,11 +83,18 @@ class SXModel:
 
 
 class SymbolicModel:
-    """A robot's model as sympy objects, for inspection and papers."""
+    """A robot's model as sympy objects, for inspection and papers.
 
-    def __init__(self, robot: Robot, simplify: bool | None = None):
+    ``method`` picks the route M, C, g and the inverse dynamics come from:
+    "lagrange" (Euler-Lagrange, the lecture's Example 5) or "newton-euler"
+    (recursive Newton-Euler and CRBA, Example 6); tests prove them identical.
+    """
+
+    def __init__(self, robot: Robot, simplify: bool | None = None, method: str = "lagrange"):
         self.robot = robot
         self.sx = SXModel(robot)
+        self.sx.route(method)  # validates the name
+        self.method = method
         self.simplify = robot.nv <= 2 if simplify is None else simplify
         s = self.sx.sym
         self.q = sp.Matrix([sp.Symbol(n) for n in s.joint_names])
@@ -136,22 +143,22 @@ class SymbolicModel:
     @cached_property
     def mass_matrix(self) -> sp.Matrix:
         """M(q) = d2T/dqd2."""
-        return self._sympy(self.sx.mass_matrix())
+        return self._sympy(self.sx.mass_matrix(self.method))
 
     @cached_property
     def coriolis_matrix(self) -> sp.Matrix:
         """C(q, qd) from Christoffel symbols."""
-        return self._sympy(self.sx.coriolis_matrix())
+        return self._sympy(self.sx.coriolis_matrix(self.method))
 
     @cached_property
     def gravity_vector(self) -> sp.Matrix:
         """g(q) = dU/dq."""
-        return self._sympy(self.sx.gravity_vector())
+        return self._sympy(self.sx.gravity_vector(self.method))
 
     @cached_property
     def inverse_dynamics(self) -> sp.Matrix:
         """tau = M qdd + C qd + g."""
-        return self._sympy(self.sx.inverse_dynamics())
+        return self._sympy(self.sx.inverse_dynamics(self.method))
 
     @cached_property
     def equations_of_motion(self) -> sp.Matrix:
@@ -159,10 +166,12 @@ class SymbolicModel:
         return self.inverse_dynamics - self.tau
 
     def forward_dynamics(self) -> sp.Matrix:
-        """qdd(q, qd, tau), LDL^T solve (unsimplified for nv > 2)."""
+        """qdd(q, qd, tau), LDL^T solve (unsimplified for nv > 2); always the recursive route, the leanest."""
         return self._sympy(self.sx.forward_dynamics())
 
 
-def load(name: str, models: str | Path | None = None, simplify: bool | None = None) -> SymbolicModel:
-    """Load robot ``name`` from models.yaml (default: the project's) and derive its model."""
-    return SymbolicModel(load_robot(name, models), simplify=simplify)
+def load(name: str, models: str | Path | None = None, simplify: bool | None = None,
+         method: str = "lagrange") -> SymbolicModel:
+    """Load robot ``name`` from models.yaml (default: the project's) and derive its model
+    by ``method`` ("lagrange" or "newton-euler")."""
+    return SymbolicModel(load_robot(name, models), simplify=simplify, method=method)

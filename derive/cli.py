@@ -56,7 +56,10 @@ def cmd_info(args) -> int:
     robots = _robots(args)
     for name in args.robot or robots:
         r = robots[name]
-        print(f"{r.name}: nq = {r.nq}, joints {', '.join(f'{j.name} ({j.type})' for j in r.moving_joints)}")
+        print(f"{r.name}: nq = {r.nq}, joints {', '.join(j.summary for j in r.moving_joints)}")
+        for j in r.moving_joints:
+            if j.gimbal_lock:
+                print(f"  gimbal lock: {j.gimbal_lock}")
         print(f"  frames: {', '.join(f.name for f in r.frames)}")
         if r.parameters:
             print(f"  parameters: {', '.join(f'{p.name} = {p.default:g}' for p in r.parameters)}")
@@ -113,7 +116,8 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-COMMAND_MODULES: list[str] = []
+COMMAND_MODULES: list[str] = ["bench", "grubler", "workspace", "latex", "simulate", "ik", "singularity",
+                              "manipulability", "planning", "trajopt_examples"]
 """Modules under derive/ that contribute subcommands through add_parser(subparsers)."""
 
 

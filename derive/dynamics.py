@@ -12,7 +12,10 @@ Two routes to the same equations (the lecture's section 3, Examples 5 and 6):
   the generated code is several times leaner than the expanded Lagrangian.
 
 Both take the same Symbols; tests check they agree. Rigidly attached links
-(fixed joints) are merged into their moving ancestor's body.
+(fixed joints) are merged into their moving ancestor's body. A joint of several
+DOF (cylindrical, universal, spherical) becomes a chain of 1-DOF elementary
+motions (:func:`derive.kinematics.joint_motions`) joined by massless bodies, so
+both recursions only ever see revolute, prismatic and helical bodies.
 """
 
 from __future__ import annotations
@@ -22,7 +25,7 @@ from functools import cached_property
 
 import casadi as ca
 
-from .kinematics import Kinematics
+from .kinematics import Kinematics, joint_motions
 from .model import Robot
 from .spatial import axis_angle, rpy, skew
 from .symbols import Symbols
@@ -111,21 +114,24 @@ class Body:
     """A moving body (links merged over fixed joints) in its own frame.
 
     The joint places the body in its parent body: constant rotation E and
-    offset p (parent coordinates), then the motion about/along ``axis``.
+    offset p (parent coordinates), then the motion about/along ``axis``
+    (a helical one slides ``pitch`` * q while it turns by q).
     Mass properties about the body origin: mass m, first moment h = m c,
-    inertia I_o.
+    inertia I_o. The bodies between the elementary motions of a multi-DOF joint
+    are massless, with E = 1 and p = 0.
     """
 
     name: str
     parent: int  # -1: the root (world)
-    joint: str
-    kind: str  # revolute | prismatic
+    joint: str  # the coordinate it moves by
+    kind: str  # revolute | prismatic | helical
     axis: tuple
     E: ca.SX
     p: ca.SX
     m: ca.SX
     h: ca.SX
     I_o: ca.SX
+    pitch: ca.SX | float | None = None
 
 
 def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
@@ -139,9 +145,14 @@ def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
         p_o = p_bl + R_bl @ _vec(sym, j.origin.xyz)
         if j.type == "fixed":
             where[j.child] = (b, R_o, p_o)
-        else:
-            bodies.append(dict(name=j.child, parent=b, joint=j.name, kind=j.type, axis=j.axis, E=R_o, p=p_o))
-            where[j.child] = (len(bodies) - 1, ca.SX.eye(3), ca.SX.zeros(3, 1))
+            continue
+        motions = joint_motions(j)
+        for k, mo in enumerate(motions):
+            name = j.child if k == len(motions) - 1 else f"{j.child}[{mo.coordinate}]"
+            body = dict(name=name, parent=b, joint=mo.coordinate, kind=mo.kind, axis=mo.axis, E=R_o, p=p_o)
+            bodies.append(body | ({"pitch": sym.value(mo.pitch)} if mo.kind == "helical" else {}))
+            b, R_o, p_o = len(bodies) - 1, ca.SX.eye(3), ca.SX.zeros(3, 1)
+        where[j.child] = (b, R_o, p_o)
     mass = {i: [ca.SX(0), ca.SX.zeros(3, 1), ca.SX.zeros(3, 3)] for i in range(-1, len(bodies))}
     for link in robot.links:
         b, R_bl, p_bl = where[link.name]
@@ -162,8 +173,9 @@ class NewtonEuler:
         self.robot, self.sym = robot, sym
         self.bodies, _ = build_bodies(robot, sym)
         self.gravity = _vec(sym, robot.gravity)
-        self._rot = [axis_angle(b.axis, sym.q[i]) if b.kind == "revolute" else None for i, b in enumerate(self.bodies)]
-        self._p = [b.p + (b.E @ ca.SX(ca.DM(list(b.axis)))) * sym.q[i] if b.kind == "prismatic" else b.p
+        self._rot = [axis_angle(b.axis, sym.q[i]) if b.kind != "prismatic" else None for i, b in enumerate(self.bodies)]
+        self._p = [b.p if b.kind == "revolute" else
+                   b.p + (b.E @ ca.SX(ca.DM(list(b.axis)))) * (sym.q[i] if b.kind == "prismatic" else b.pitch * sym.q[i])
                    for i, b in enumerate(self.bodies)]
 
     def to_child(self, i: int, v: ca.SX) -> ca.SX:
@@ -180,6 +192,8 @@ class NewtonEuler:
         b = self.bodies[i]
         s = ca.SX(ca.DM(list(b.axis)))
         zero = ca.SX.zeros(3, 1)
+        if b.kind == "helical":
+            return s, b.pitch * s
         return (s, zero) if b.kind == "revolute" else (zero, s)
 
     def rnea(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True) -> ca.SX:
@@ -226,7 +240,12 @@ class NewtonEuler:
             # rotate I into parent axes: R I R^T with R = E Rz(q)
             RI = ca.horzcat(*[self.to_parent(i, I[:, k]) for k in range(3)])
             I_rot = ca.horzcat(*[self.to_parent(i, RI[k, :].T) for k in range(3)])
-            I_p = I_rot - skew(p) @ skew(h_p) - skew(h_p) @ skew(p) - m * (skew(p) @ skew(p))
+            I_full = I_rot - skew(p) @ skew(h_p) - skew(h_p) @ skew(p) - m * (skew(p) @ skew(p))
+            # symmetric by construction: only the upper triangle is computed
+            I_p = ca.SX(3, 3)
+            for r in range(3):
+                for c in range(3):
+                    I_p[r, c] = I_full[min(r, c), max(r, c)]
             par = comp[b.parent]
             par[0] = par[0] + m
             par[1] = par[1] + h_p + m * p

@@ -21,7 +21,7 @@ import keyword
 import math
 import os
 import re
-from dataclasses import dataclass, field
+from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -30,8 +30,23 @@ import yaml
 from . import expr
 from .errors import DeriveError
 
-JOINT_TYPES = {"revolute": 1, "prismatic": 1, "fixed": 0}
-"""Joint type -> degrees of freedom."""
+JOINT_TYPES = {"revolute": 1, "prismatic": 1, "helical": 1, "cylindrical": 2, "universal": 2, "spherical": 3,
+               "fixed": 0}
+"""Joint type -> degrees of freedom (the lecture's Table 1; a rigid body has 6, so constraints = 6 - DOF).
+
+- revolute: angle q about ``axis``; prismatic: length q along ``axis``;
+- helical: angle q about ``axis`` and length ``pitch`` * q along it (pitch in m/rad,
+  negative for a left-handed screw);
+- cylindrical: angle ``<joint>_rot`` about ``axis``, then length ``<joint>_trans`` along it;
+- universal: angle ``<joint>_1`` about ``axis``, then ``<joint>_2`` about ``axis2``
+  (perpendicular to ``axis``, given in the joint frame, carried along by the first turn):
+  R = Rot(axis, q1) Rot(axis2, q2);
+- spherical: ZYX Euler angles of the joint frame, R = Rz(<joint>_z) Ry(<joint>_y) Rx(<joint>_x);
+  gimbal lock at cos(<joint>_y) = 0 (see :attr:`Joint.gimbal_lock`).
+"""
+
+COORDINATE_SUFFIXES = {"cylindrical": ("rot", "trans"), "universal": ("1", "2"), "spherical": ("z", "y", "x")}
+"""Multi-DOF joint type -> suffixes of its coordinates' names ``<joint>_<suffix>``, in q order."""
 
 C_KEYWORDS = frozenset(
     "auto break case char const continue default do double else enum extern float for goto if inline int "
@@ -85,18 +100,79 @@ class Limits:
 
 
 @dataclass(frozen=True)
+class Coordinate:
+    """One entry of q: ``name`` (a C identifier), its ``joint`` and that joint's ``type``.
+
+    ``unit`` is "rad" for angles (revolute, helical and the turns of multi-DOF
+    joints) and "m" for lengths (prismatic, the slide of a cylindrical joint).
+    """
+
+    name: str
+    joint: str
+    type: str
+    unit: str
+    limits: Limits = Limits()
+
+
+@dataclass(frozen=True)
 class Joint:
+    """A joint (see :data:`JOINT_TYPES`).
+
+    ``limits`` is one Limits for a joint of at most 1 DOF and a tuple, one per
+    coordinate, otherwise. A spherical joint ignores ``axis``: it turns about the
+    z, y, x axes of its joint frame.
+    """
+
     name: str
     type: str
     parent: str
     child: str
     origin: Origin = Origin()
     axis: tuple = (1.0, 0.0, 0.0)  # URDF's default
-    limits: Limits = Limits()
+    limits: Limits | tuple[Limits, ...] = Limits()
+    pitch: Value | None = None  # helical only: m of travel per rad
+    axis2: tuple | None = None  # universal only
 
     @property
     def dof(self) -> int:
         return JOINT_TYPES[self.type]
+
+    @property
+    def constraints(self) -> int:
+        """Constraints the joint puts on its child's 6 DOF (Table 1): 6 - dof."""
+        return 6 - self.dof
+
+    @property
+    def coordinates(self) -> tuple[Coordinate, ...]:
+        """The joint's entries of q, in order (none for a fixed joint)."""
+        if self.dof <= 1:
+            unit = "m" if self.type == "prismatic" else "rad"
+            return (Coordinate(self.name, self.name, self.type, unit, self.limits),) * self.dof
+        return tuple(Coordinate(f"{self.name}_{s}", self.name, self.type, "m" if s == "trans" else "rad", lim)
+                     for s, lim in zip(COORDINATE_SUFFIXES[self.type], self.limits))
+
+    @property
+    def summary(self) -> str:
+        """E.g. ``ball (spherical, 3 DOF, 3 constraints: ball_z, ball_y, ball_x)``, as Table 1 counts them."""
+        names = [c.name for c in self.coordinates]
+        coords = f": {', '.join(names)}" if names and names != [self.name] else ""
+        return f"{self.name} ({self.type}, {self.dof} DOF, {self.constraints} constraints{coords})"
+
+    @property
+    def gimbal_lock(self) -> str | None:
+        """Where the joint's coordinates are singular, as text; None if nowhere.
+
+        Only the spherical joint has such configurations: with ZYX Euler angles
+        (a, b, c) the angular velocity is w = E(b, c) [da; db; dc] with
+        det E = cos(b) (up to sign), so at b = +-pi/2 the first and last axes align: one
+        rotation of the joint is reached by no rate, the rates [da; db; dc] along
+        (1, 0, +-1) move nothing, and M (singular there) cannot be solved for qdd.
+        """
+        if self.type != "spherical":
+            return None
+        y = f"{self.name}_y"
+        return (f"cos({y}) = 0, i.e. {y} = pi/2 + k pi (+-pi/2 within [-pi, pi]): "
+                f"the z and x turns of '{self.name}' align")
 
 
 @dataclass(frozen=True)
@@ -132,6 +208,17 @@ class Robot:
         return tuple(j for j in self.joints if j.dof > 0)
 
     @property
+    def coordinates(self) -> tuple[Coordinate, ...]:
+        """The entries of q, one per DOF: a joint's coordinates are consecutive, joints in tree order."""
+        return tuple(c for j in self.joints for c in j.coordinates)
+
+    def gimbal_locked(self, q, tol: float = 1e-6) -> tuple[str, ...]:
+        """Names of the spherical joints in gimbal lock at ``q``: |cos(<joint>_y)| <= tol."""
+        index = {c.name: i for i, c in enumerate(self.coordinates)}
+        return tuple(j.name for j in self.joints
+                     if j.type == "spherical" and abs(math.cos(q[index[f"{j.name}_y"]])) <= tol)
+
+    @property
     def nq(self) -> int:
         return sum(j.dof for j in self.joints)
 
@@ -154,6 +241,20 @@ class Robot:
         """Every frame FK can place: links first (tree order), then named frames."""
         ordered = [self.root] + [j.child for j in self.joints]
         return tuple(ordered) + tuple(f.name for f in self.frames)
+
+
+def model_data(robot: Robot) -> dict:
+    """The validated model as plain data (what its content hash is taken of).
+
+    Joint fields only some types have (``pitch``, ``axis2``) appear only where set,
+    so models without such joints keep the hash they had before those types existed.
+    """
+    data = asdict(robot)
+    for joint in data["joints"]:
+        for key in ("pitch", "axis2"):
+            if joint[key] is None:
+                del joint[key]
+    return data
 
 
 # --------------------------------------------------------------------------- loading
@@ -326,30 +427,64 @@ class _Parser:
             inertia_rpy=self.vec3(where + ".inertia_rpy", raw.get("inertia_rpy")),
         )
 
+    def unit_vector(self, where: str, raw: Any) -> tuple:
+        """A nonzero 3-vector of numbers, normalised (kept as written when already unit)."""
+        if not isinstance(raw, (list, tuple)) or len(raw) != 3:
+            raise self.error(where, f"expected 3 numbers, got {raw!r}")
+        v = [self.number(f"{where}[{i}]", a) for i, a in enumerate(raw)]
+        norm = math.sqrt(sum(a * a for a in v))
+        if norm < 1e-12:
+            raise self.error(where, "must not be the zero vector")
+        return tuple(a / norm for a in v) if norm != 1.0 else tuple(v)
+
     def joint(self, where: str, raw: Any) -> Joint:
-        self._keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "limits"})
+        self._keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "axis2", "pitch", "limits"})
         for key in ("name", "type", "parent", "child"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
         jtype = raw["type"]
         if jtype not in JOINT_TYPES:
             raise self.error(f"{where}.type", f"unknown joint type '{jtype}' (known: {', '.join(JOINT_TYPES)})")
-        axis = raw.get("axis", [1.0, 0.0, 0.0])
-        if not isinstance(axis, (list, tuple)) or len(axis) != 3:
-            raise self.error(f"{where}.axis", f"expected 3 numbers, got {axis!r}")
-        axis = [self.number(f"{where}.axis[{i}]", a) for i, a in enumerate(axis)]
-        norm = math.sqrt(sum(a * a for a in axis))
-        if norm < 1e-12:
-            raise self.error(f"{where}.axis", "must not be the zero vector")
+        name = _identifier(self.name, where + ".name", raw["name"])
+        if jtype == "spherical" and "axis" in raw:
+            raise self.error(f"{where}.axis", "a spherical joint turns about z, y, x of its joint frame "
+                                              "(ZYX Euler angles); orient them with origin.rpy instead")
+        axis = self.unit_vector(f"{where}.axis", raw.get("axis", [1.0, 0.0, 0.0]))
+        for key, owner in (("pitch", "helical"), ("axis2", "universal")):
+            if key in raw and jtype != owner:
+                raise self.error(f"{where}.{key}", f"only a {owner} joint has '{key}' (this one is {jtype})")
+            if key not in raw and jtype == owner:
+                raise self.error(f"{where}.{key}", f"missing: a {owner} joint needs '{key}'")
+        pitch = self.value(f"{where}.pitch", raw["pitch"]) if jtype == "helical" else None
+        axis2 = None
+        if jtype == "universal":
+            axis2 = self.unit_vector(f"{where}.axis2", raw["axis2"])
+            cos = sum(a * b for a, b in zip(axis, axis2))
+            if abs(abs(cos) - 1) < 1e-9:
+                raise self.error(f"{where}.axis2", f"{list(axis2)} is parallel to axis {list(axis)}: that is one revolute joint")
+            if abs(cos) > 1e-9:
+                raise self.error(f"{where}.axis2", f"must be perpendicular to axis {list(axis)} (cos of the angle = {cos:.3g})")
         return Joint(
-            name=_identifier(self.name, where + ".name", raw["name"]),
+            name=name,
             type=jtype,
             parent=str(raw["parent"]),
             child=str(raw["child"]),
             origin=self.origin(where + ".origin", raw.get("origin")),
-            axis=tuple(a / norm for a in axis) if norm != 1.0 else tuple(axis),
-            limits=self.limits(where + ".limits", raw.get("limits")),
+            axis=axis,
+            limits=self.joint_limits(where + ".limits", raw.get("limits"), JOINT_TYPES[jtype]),
+            pitch=pitch,
+            axis2=axis2,
         )
+
+    def joint_limits(self, where: str, raw: Any, dof: int) -> Limits | tuple[Limits, ...]:
+        """One mapping for a 1-DOF joint; for a multi-DOF joint a list (one per coordinate) or one mapping for all."""
+        if dof <= 1:
+            return self.limits(where, raw)
+        if isinstance(raw, list):
+            if len(raw) != dof:
+                raise self.error(where, f"expected {dof} limits (one per coordinate), got {len(raw)}")
+            return tuple(self.limits(f"{where}[{i}]", r) for i, r in enumerate(raw))
+        return (self.limits(where, raw),) * dof
 
     def frame(self, where: str, raw: Any) -> Frame:
         self._keys(where + ".", raw, {"name", "link", "xyz", "rpy"})
@@ -456,6 +591,14 @@ class _Parser:
                 if n in seen:
                     raise self.error(group, f"name '{n}' is used by both {seen[n]} and {group}")
                 seen[n] = group
+        # q's entries name the symbols of q, qd, qdd, tau and the generated code's inputs
+        owner: dict[str, str] = {p.name: "a parameter" for p in robot.parameters}
+        for j in robot.joints:
+            for c in j.coordinates:
+                _identifier(self.name, f"joints ({j.name}) coordinate", c.name)
+                if c.name in owner:
+                    raise self.error(f"joints ({j.name})", f"coordinate name '{c.name}' is already {owner[c.name]}")
+                owner[c.name] = f"a coordinate of joint '{c.joint}'"
         for i, f in enumerate(robot.frames):
             if f.link not in {x.name for x in robot.links}:
                 raise self.error(f"frames[{i}].link", f"unknown link '{f.link}'")
@@ -495,6 +638,8 @@ class _Parser:
             for k in range(3):
                 num(f"joints ({j.name}).origin.xyz[{k}]", j.origin.xyz[k])
                 num(f"joints ({j.name}).origin.rpy[{k}]", j.origin.rpy[k])
+            if j.pitch is not None and num(f"joints ({j.name}).pitch", j.pitch) == 0:
+                raise self.error(f"joints ({j.name}).pitch", "must not be 0 (a helical joint of pitch 0 is a revolute joint)")
         for k in range(3):
             num(f"gravity[{k}]", robot.gravity[k])
         for f in robot.frames:

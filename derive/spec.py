@@ -18,7 +18,7 @@ import casadi as ca
 from .api import SXModel
 from .model import Robot
 
-QUANTITIES = ("fk", "jacobian", "mass_matrix", "coriolis_matrix", "gravity", "inverse_dynamics",
+QUANTITIES = ("fk", "jacobian", "fk_jacobian", "mass_matrix", "coriolis_matrix", "gravity", "inverse_dynamics",
               "forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u")
 
 
@@ -72,6 +72,9 @@ class TemplateFunction:
 
 def template_functions(model: SXModel) -> list[TemplateFunction]:
     """Functions built from templates on top of the expression functions, in a fixed order."""
+    from .ik import template_functions as ik_functions  # ik builds on this module
+    from .manipulability import template_function as manipulability_function  # so does manipulability
+
     robot = model.robot
     n = 2 * robot.nv
     extra = (("p", (model.sym.p.numel(), 1)),) if model.sym.p.numel() else ()
@@ -83,7 +86,7 @@ def template_functions(model: SXModel) -> list[TemplateFunction]:
             "x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.",
             "c/rk4_step.c.jinja", "python/rk4_step.py.jinja", calls=(f"{robot.name}_ode_rhs",),
             context=(("n", n), ("ode", f"{robot.name}_ode_rhs"))),
-    ]
+    ] + ik_functions(model) + [t for f in robot.frames if (t := manipulability_function(model, f.name))]
 
 
 def function_specs(model: SXModel) -> list[FunctionSpec]:
@@ -106,6 +109,10 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
         add("jacobian", f.name, [q], [("J", model.jacobian(f.name))],
             f"Geometric Jacobian of frame '{f.name}', 6x{n} row-major, rows [linear; angular], "
             "world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.")
+    if "tcp" in {f.name for f in robot.frames}:
+        add("fk_jacobian", "tcp", [q], [("T", model.fk("tcp")), ("J", model.jacobian("tcp"))],
+            "world_T_tcp (4x4) and its geometric Jacobian (6x{n}, [linear; angular], LOCAL_WORLD_ALIGNED) "
+            "in one pass, sharing the transforms: what IK and control loops need each step.".format(n=n))
     add("mass_matrix", None, [q], [("M", ne.mass_matrix)],
         f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.")
     add("coriolis_matrix", None, [q, qd], [("C", ne.coriolis_matrix)],

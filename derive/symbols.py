@@ -1,7 +1,9 @@
 """Robot -> the symbols of its model, in one fixed order.
 
-q, qd, qdd, tau are (nv, 1) CasADi SX column vectors named after the joints
-(``phi``, ``dphi``, ``ddphi``, ``tau_phi``); p holds the robot's parameters in
+q, qd, qdd, tau are (nv, 1) CasADi SX column vectors named after the
+coordinates of the joints (``phi``, ``dphi``, ``ddphi``, ``tau_phi``; a
+multi-DOF joint ``ball`` gives ``ball_z``, ``ball_y``, ``ball_x``, see
+:data:`derive.model.COORDINATE_SUFFIXES`); p holds the robot's parameters in
 file order. Every derivation takes its symbols from here, so the order of
 inputs in generated code is the order of joints and parameters in models.yaml.
 """
@@ -24,7 +26,7 @@ class Symbols:
     qdd: ca.SX
     tau: ca.SX
     p: ca.SX
-    joint_names: tuple[str, ...]
+    joint_names: tuple[str, ...]  # one per entry of q: Robot.coordinates' names
     parameter_names: tuple[str, ...]
 
     @property
@@ -46,7 +48,7 @@ class Symbols:
 
 
 def make_symbols(robot: Robot) -> Symbols:
-    names = tuple(j.name for j in robot.moving_joints)
+    names = tuple(c.name for c in robot.coordinates)
 
     def vec(fmt: str) -> ca.SX:
         return ca.vertcat(*[ca.SX.sym(fmt.format(n)) for n in names]) if names else ca.SX(0, 1)

@@ -49,25 +49,29 @@ class CFunctions:
         self.lib, self.manifest, self.ctype, self.np_type = ctypes.CDLL(str(lib)), manifest, ctype, (
             np.float64 if ctype is ctypes.c_double else np.float32)
 
-    def __call__(self, fn: dict, args: dict) -> np.ndarray:
+    def __call__(self, fn: dict, args: dict) -> list[np.ndarray]:
         ptr = ctypes.POINTER(self.ctype)
         ins = [np.ascontiguousarray(args[i["name"]], dtype=self.np_type) for i in fn["inputs"]]
-        (out_spec,) = fn["outputs"]
-        out = np.zeros(out_spec["shape"], dtype=self.np_type)
+        outs = [np.zeros(o["shape"], dtype=self.np_type) for o in fn["outputs"]]
         f = getattr(self.lib, fn["name"])
         f.restype = None
-        f(*[a.ctypes.data_as(ptr) for a in ins], out.ctypes.data_as(ptr))
-        return out.astype(float)
+        f(*[a.ctypes.data_as(ptr) for a in ins + outs])
+        return [o.astype(float) for o in outs]
 
 
 def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
     q, qd, qdd, tau = a["q"], a["qd"], a["qdd"], a["tau"]
     n = len(q)
     kind = fn["quantity"]
+    if kind == "fk_jacobian":
+        return [ref.frame_pose(q, fn["frame"]), ref.jacobian(q, fn["frame"])]
     if kind == "fk":
         return ref.frame_pose(q, fn["frame"])
     if kind == "jacobian":
         return ref.jacobian(q, fn["frame"])
+    if kind == "manipulability":  # eq. 30 from the singular values of the task rows (mu3 = sqrt det J J^T)
+        s = np.linalg.svd(ref.jacobian(q, fn["frame"])[fn["task_rows"]], compute_uv=False)
+        return np.array([s[0] / s[-1], (s[0] / s[-1]) ** 2, np.prod(s)])
     if kind == "mass_matrix":
         return ref.crba(q)
     if kind == "coriolis_matrix":
@@ -128,18 +132,26 @@ def test_generated_c_python_casadi_match_reference(robot, build_dir):
         a = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "x": np.concatenate([q, qd]), "u": tau, "p": p,
              "dt": np.array([0.01])}
         for fn in manifest["functions"]:
-            expected = reference(ref, fn, a)
-            shape = tuple(fn["outputs"][0]["shape"])
+            if fn["quantity"] == "ik":
+                continue   # a solver, not a formula: tests/test_ik.py
+            shapes = [tuple(o["shape"]) for o in fn["outputs"]]
             args = [a[i["name"]] for i in fn["inputs"]]
-            got_c = c_double(fn, a).reshape(shape)
-            got_py = np.asarray(getattr(py, fn["python"]["function"])(*args)).reshape(shape)
-            got_ca = np.array(casadi_fns[fn["name"]](*args)).reshape(shape) if fn["name"] in casadi_fns else got_c
-            expected = np.asarray(expected).reshape(shape)
-            what = f"{fn['name']} at q = {q}"
-            assert_close(got_c, expected, what="C " + what)
-            assert_close(got_py, got_c, rtol=1e-12, what="Python vs C " + what)
-            assert_close(got_ca, got_c, rtol=1e-12, what="CasADi vs C " + what)
-            assert_close(c_float(fn, a).reshape(shape), expected, rtol=1e-4, what="float C " + what)
+
+            def outputs(value) -> list[np.ndarray]:
+                value = value if isinstance(value, (list, tuple)) else [value]
+                return [np.asarray(v, dtype=float).reshape(shp) for v, shp in zip(value, shapes, strict=True)]
+
+            expected = outputs(reference(ref, fn, a))
+            got_c = outputs(c_double(fn, a))
+            got_py = outputs(getattr(py, fn["python"]["function"])(*args))
+            got_ca = outputs(casadi_fns[fn["name"]](*args)) if fn["name"] in casadi_fns else got_c
+            got_float = outputs(c_float(fn, a))
+            for k, o in enumerate(fn["outputs"]):
+                what = f"{fn['name']} output {o['name']} at q = {q}"
+                assert_close(got_c[k], expected[k], what="C " + what)
+                assert_close(got_py[k], got_c[k], rtol=1e-12, what="Python vs C " + what)
+                assert_close(got_ca[k], got_c[k], rtol=1e-12, what="CasADi vs C " + what)
+                assert_close(got_float[k], expected[k], rtol=1e-4, what="float C " + what)
 
 
 def test_python_functions_check_their_inputs():
@@ -169,7 +181,7 @@ def test_generated_c_runs_clean_under_sanitizers(tmp_path):
             out = len(fn["inputs"])
             size = int(np.prod(fn["outputs"][0]["shape"]))
             calls.append("{ int i; " + " ".join(decls) + f" {fn['name']}({', '.join(args)});"
-                         f" for (i = 0; i < {size}; ++i) sum += a{out}[i]; }}")
+                         f" for (i = 0; i < {size}; ++i) sum += a{out}[i]; }}")  # first output
     lines.append("int main(void) {\n    double sum = 0.0;\n    " + "\n    ".join(calls)
                  + '\n    printf("%g\\n", sum);\n    return 0;\n}')
     driver = tmp_path / "driver.c"

@@ -229,9 +229,43 @@ def random_q(robot, rng) -> np.ndarray:
     return np.array(q)
 
 
-def cross_check(robot, pin_side: PinSide) -> dict[str, float]:
-    """Worst relative errors of ours (NumericRobot) vs Pinocchio over N_SAMPLES random states."""
-    nr = NumericRobot(robot)
+class SymbolicSide:
+    """The derived symbolic model (CasADi SX, Newton-Euler route for dynamics, Lagrangian M),
+    with NumericRobot's interface."""
+
+    def __init__(self, robot):
+        import casadi as ca
+
+        from derive.api import SXModel
+
+        m = SXModel(robot)
+        s = m.sym
+        self.frames = {n: ca.Function("k", [s.q], [m.fk(n), m.jacobian(n)]) for n in robot.frame_names}
+        self.dyn = ca.Function("d", [s.q, s.qd, s.qdd], [m.mass_matrix("lagrange"), m.gravity_vector("lagrange"),
+                                                         m.inverse_dynamics("newton-euler")])
+
+    def fk(self, q):
+        return {n: np.array(f(q)[0]) for n, f in self.frames.items()}
+
+    def frame_pose(self, q, name):
+        return np.array(self.frames[name](q)[0])
+
+    def jacobian(self, q, name):
+        return np.array(self.frames[name](q)[1])
+
+    def crba(self, q):
+        return np.array(self.dyn(q, 0, 0)[0])
+
+    def gravity(self, q):
+        return np.array(self.dyn(q, 0, 0)[1]).ravel()
+
+    def rnea(self, q, qd, qdd):
+        return np.array(self.dyn(q, qd, qdd)[2]).ravel()
+
+
+def cross_check(robot, pin_side: PinSide, nr=None) -> dict[str, float]:
+    """Worst relative errors of ours (NumericRobot, or ``nr``) vs Pinocchio over N_SAMPLES random states."""
+    nr = nr or NumericRobot(robot)
     rng = np.random.default_rng(0)
     worst = dict.fromkeys(["pose", "jacobian", "crba", "gravity", "rnea"], 0.0)
     names = robot.frame_names
@@ -279,6 +313,16 @@ def test_shipped_import_against_pinocchio(pin, name):
     # masses: the total moving mass is Pinocchio's (root/world mass does not move)
     moving = sum(link.mass for link in robot.links if link.name != robot.root)
     assert moving == pytest.approx(sum(i.mass for i in side.model.inertias[1:]), rel=1e-15)
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_symbolic_model_against_pinocchio(pin, name):
+    """FK and Jacobian of every frame, M (kinetic energy), g (potential energy) and inverse
+    dynamics (recursive route) of the derived symbolic model against Pinocchio on the same URDF."""
+    args = SHIPPED[name]
+    robot = load_models()[name]
+    locks = {n: 0.0 for n in (args["lock"] or "").split(",") if n}
+    cross_check(robot, PinSide(pin, erd_path(args["path"]), robot, locks, args["tip"]), SymbolicSide(robot))
 
 
 def test_ur5_structure():

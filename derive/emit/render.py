@@ -116,14 +116,15 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         if progress:
             progress(spec, prog)
     functions += [template_context(t) for t in templates]
-    joints = [j.name for j in robot.moving_joints]
+    joints = [c.name for c in robot.coordinates]  # one per entry of q
     params = [(p.name, _float_literal(p.default)) for p in robot.parameters]
     base = {"robot": robot.name, "model_hash": model_hash, "joints": joints, "nq": robot.nq, "nv": robot.nv,
             "np": len(params), "parameters": params, "prefix": robot.name.upper()}
     files["c/derive_real.h"] = env.get_template("c/derive_real.h.jinja").render(functions=MATH_FUNCTIONS)
     for f in functions:
         guard = f"{f['name'].upper()}_H"
-        files[f"c/{f['header']}"] = env.get_template("c/function.h.jinja").render(base, f=f, guard=guard)
+        files[f"c/{f['header']}"] = env.get_template(f.get("h_template") or "c/function.h.jinja").render(
+            base, f=f, guard=guard)
         files[f"c/{f['source']}"] = env.get_template(f.get("c_template") or "c/function.c.jinja").render(base, f=f)
     files[f"c/{robot.name}.h"] = env.get_template("c/robot.h.jinja").render(
         base, guard=f"{robot.name.upper()}_DERIVE_H", headers=[f["header"] for f in functions])
@@ -134,7 +135,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         "nq": robot.nq,
         "nv": robot.nv,
         "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
-                    "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.moving_joints],
+                    "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
         "frames": [fr.name for fr in robot.frames],
         "parameters": [{"name": p.name, "default": p.default} for p in robot.parameters],
         "functions": [{
@@ -144,6 +145,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
             "python": {"module": f"python/{robot.name}.py", "function": f["short_name"]},
             "ops": {k: f["ops"][k] for k in ("total", "mul", "add", "div", "trig")} if f["ops"] else None,
             "calls": f.get("calls", []),
+            **dict(f.get("manifest", ())),  # a template function's own plain-data facts (e.g. task_rows)
         } for f in functions],
     }
     files["manifest.json"] = env.get_template("manifest/manifest.json.jinja").render(

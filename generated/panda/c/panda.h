@@ -20,6 +20,7 @@
 #include "panda_jacobian_panda_leftfinger.h"
 #include "panda_fk_panda_rightfinger.h"
 #include "panda_jacobian_panda_rightfinger.h"
+#include "panda_fk_jacobian_tcp.h"
 #include "panda_mass_matrix.h"
 #include "panda_coriolis_matrix.h"
 #include "panda_gravity.h"
@@ -29,5 +30,11 @@
 #include "panda_ode_jac_x.h"
 #include "panda_ode_jac_u.h"
 #include "panda_rk4_step.h"
+#include "panda_ik_tcp.h"
+#include "panda_manipulability_tcp.h"
+#include "panda_manipulability_panda_link8.h"
+#include "panda_manipulability_panda_hand.h"
+#include "panda_manipulability_panda_leftfinger.h"
+#include "panda_manipulability_panda_rightfinger.h"
 
 #endif /* PANDA_DERIVE_H */

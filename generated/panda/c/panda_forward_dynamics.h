@@ -14,7 +14,7 @@
  * in  qd [7]
  * in  tau [7]
  * out qdd [7]
- * Arrays are row-major. 1607 ops: 871 mul, 696 add, 28 div, 12 trig
+ * Arrays are row-major. 1534 ops: 831 mul, 663 add, 28 div, 12 trig
  */
 void panda_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
 

@@ -13,7 +13,7 @@
  * in  x [14]
  * in  u [7]
  * out xdot [14]
- * Arrays are row-major. 1607 ops: 871 mul, 696 add, 28 div, 12 trig
+ * Arrays are row-major. 1534 ops: 831 mul, 663 add, 28 div, 12 trig
  */
 void panda_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
 

@@ -18,6 +18,7 @@
 
 #include "pendulum_fk_tcp.h"
 #include "pendulum_jacobian_tcp.h"
+#include "pendulum_fk_jacobian_tcp.h"
 #include "pendulum_mass_matrix.h"
 #include "pendulum_coriolis_matrix.h"
 #include "pendulum_gravity.h"
@@ -27,5 +28,6 @@
 #include "pendulum_ode_jac_x.h"
 #include "pendulum_ode_jac_u.h"
 #include "pendulum_rk4_step.h"
+#include "pendulum_ik_tcp.h"
 
 #endif /* PENDULUM_DERIVE_H */

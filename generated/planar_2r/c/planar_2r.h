@@ -17,6 +17,7 @@
 
 #include "planar_2r_fk_tcp.h"
 #include "planar_2r_jacobian_tcp.h"
+#include "planar_2r_fk_jacobian_tcp.h"
 #include "planar_2r_mass_matrix.h"
 #include "planar_2r_coriolis_matrix.h"
 #include "planar_2r_gravity.h"
@@ -26,5 +27,7 @@
 #include "planar_2r_ode_jac_x.h"
 #include "planar_2r_ode_jac_u.h"
 #include "planar_2r_rk4_step.h"
+#include "planar_2r_ik_tcp.h"
+#include "planar_2r_manipulability_tcp.h"
 
 #endif /* PLANAR_2R_DERIVE_H */

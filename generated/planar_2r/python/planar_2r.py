@@ -116,6 +116,70 @@ def jacobian_tcp(q, p=DEFAULT_P):
     return J.reshape(6, 2)
 
 
+def fk_jacobian_tcp(q, p=DEFAULT_P):
+    """world_T_tcp (4x4) and its geometric Jacobian (6x2, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out T [4x4]
+    out J [6x2]
+    20 ops: 8 mul, 8 add, 0 div, 4 trig
+    """
+    q = _vector(q, 2, "q")
+    p = _vector(p, 5, "p")
+    t0 = math.cos(q[0])
+    t1 = math.cos(q[1])
+    t2 = t0 * t1
+    t3 = math.sin(q[0])
+    t4 = math.sin(q[1])
+    t5 = t3 * t4
+    t6 = t2 - t5
+    t7 = t3 * t1
+    t8 = t0 * t4
+    t9 = t7 + t8
+    t10 = t8 + t7
+    t11 = -t10
+    t12 = t0 * p[0]
+    t13 = t6 * p[1]
+    t14 = t12 + t13
+    t15 = t3 * p[0]
+    t16 = t9 * p[1]
+    t17 = t15 + t16
+    t18 = -t17
+    t19 = -t16
+    T = np.empty(16)
+    J = np.empty(12)
+    T[0] = t6
+    T[1] = t11
+    T[2] = 0.0
+    T[3] = t14
+    T[4] = t9
+    T[5] = t6
+    T[6] = 0.0
+    T[7] = t17
+    T[8] = 0.0
+    T[9] = 0.0
+    T[10] = 1.0
+    T[11] = 0.0
+    T[12] = 0.0
+    T[13] = 0.0
+    T[14] = 0.0
+    T[15] = 1.0
+    J[0] = t18
+    J[1] = t19
+    J[2] = t14
+    J[3] = t13
+    J[4] = 0.0
+    J[5] = 0.0
+    J[6] = 0.0
+    J[7] = 0.0
+    J[8] = 0.0
+    J[9] = 0.0
+    J[10] = 1.0
+    J[11] = 1.0
+    return T.reshape(4, 4), J.reshape(6, 2)
+
+
 def mass_matrix(q, p=DEFAULT_P):
     """Joint-space mass matrix M(q) (2x2, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (5): parameters L1, L2, m1, m2, g.
 
@@ -758,3 +822,112 @@ def rk4_step(x, u, dt, p=DEFAULT_P):
     k3 = ode_rhs(x + 0.5 * h * k2, u, p)
     k4 = ode_rhs(x + h * k3, u, p)
     return x + h / 6.0 * (k1 + 2.0 * (k2 + k3) + k4)
+
+
+def ik_tcp(T, q0=None, w=None, p=DEFAULT_P):
+    """Inverse kinematics of frame 'tcp': q within the joint limits with world_T_tcp(q) = T (4x4), Levenberg-Marquardt on e = [p_T - p; log(R_T R^T)] weighted by w (6; position only: 1 1 1 0 0 0) with seeded restarts, at most 5000 iterations. residual = [position error (m), rotation error (rad)] of the weighted rows; success when below 1e-05 m and 0.0001 rad.
+
+    in  T [4x4]
+    in  q0 [2]
+    in  w [6]
+    in  p [5]
+    out q [2]
+    out residual [2]
+    cost: the arithmetic of planar_2r_fk_jacobian_tcp per call, plus loops
+    """
+    lower = np.array([-3.14159, -3.14159])
+    upper = np.array([3.14159, 3.14159])
+    sample_lower = np.array([-3.14159, -3.14159])
+    sample_upper = np.array([3.14159, 3.14159])
+    mid = 0.5 * (sample_lower + sample_upper)
+    T = np.asarray(T, dtype=float).reshape(4, 4)
+    w = np.ones(6) if w is None else np.asarray(w, dtype=float).reshape(6)
+    qc = mid if q0 is None else np.clip(np.asarray(q0, dtype=float).reshape(2), lower, upper)
+    if not (np.isfinite(T).all() and np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0 and np.isfinite(qc).all()):
+        return mid, np.full(2, np.inf), 2
+
+    def error(Tq):
+        R = T[:3, :3] @ Tq[:3, :3].T
+        v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+        c = 0.5 * (np.trace(R) - 1.0)
+        s = math.sqrt(v @ v)
+        if s >= 1e-9:
+            rot = math.atan2(s, c) / s * v
+        elif c > 0.0:
+            rot = v
+        else:
+            k = int(np.argmax(np.diag(R)))
+            col = 0.5 * (R[:, k] + np.eye(3)[:, k])
+            rot = math.pi * col / math.sqrt(max(0.5 * (R[k, k] + 1.0), 1e-30))
+        e = np.concatenate([T[:3, 3] - Tq[:3, 3], rot])
+        return e, 0.5 * float(w @ (e * e))
+
+    def fk_jacobian(q):
+        Tq, J = fk_jacobian_tcp(q, p)
+        return Tq, np.reshape(J, (6, 2))
+
+    def norms(e):
+        return np.array([math.sqrt(float(np.sum(e[:3][w[:3] > 0] ** 2))), math.sqrt(float(np.sum(e[3:][w[3:] > 0] ** 2)))])
+
+    Tq, J = fk_jacobian(qc)
+    ec, E = error(Tq)
+    qbest, ebest, Ebest = qc, ec, E
+    lam, attempt, status, seed = 0.01, 0, 1, 2463534242
+    for _ in range(5000):
+        r = norms(ec)
+        if r[0] < 1e-05 and r[1] < 0.0001:
+            qbest, ebest, status = qc, ec, 0
+            break
+        if attempt >= 30 or lam > 100000.0:  # stalled: restart
+            qc = np.empty(2)
+            for i in range(2):
+                seed ^= (seed << 13) & 0xFFFFFFFF
+                seed ^= seed >> 17
+                seed ^= (seed << 5) & 0xFFFFFFFF
+                qc[i] = sample_lower[i] + (sample_upper[i] - sample_lower[i]) * (seed >> 8) * 5.9604644775390625e-08
+            Tq, J = fk_jacobian(qc)
+            ec, E = error(Tq)
+            lam, attempt = 0.01, 0
+            continue
+        attempt += 1
+        A0 = J.T @ (w[:, None] * J)
+        g = J.T @ (w * ec)
+        A = A0 + lam * np.eye(2)
+        try:
+            L = np.linalg.cholesky(A)
+            dq = np.linalg.solve(L.T, np.linalg.solve(L, g))
+            step = qc + dq
+            held = (step < lower) | (step > upper)  # joints pushed past a limit are held on it
+            if held.any():
+                d = np.where(held, np.clip(step, lower, upper) - qc, 0.0)
+                free = ~held
+                dq = d.copy()
+                dq[free] = np.linalg.solve(A[np.ix_(free, free)], (g - A @ d)[free]) if free.any() else dq[free]
+        except np.linalg.LinAlgError:  # not positive definite in this precision: damp more
+            lam *= 10.0
+            continue
+        qt = np.clip(qc + dq, lower, upper)
+        Tt, Jt = fk_jacobian(qt)
+        et, Et = error(Tt)
+        if Et < E:
+            qc, J, ec, E = qt, Jt, et, Et
+            lam = max(lam * 0.1, 1e-09)
+            if E < Ebest:
+                qbest, ebest, Ebest = qc, ec, E
+        else:
+            lam = min(lam * 10.0, 1e10)
+    return qbest, norms(ebest), status
+
+
+def manipulability_tcp(q, p=DEFAULT_P):
+    """Manipulability of frame 'tcp' (lecture eq. 30) for its position rows with motion (x,y): mu = [mu1, mu2, mu3], mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, mu3 = sqrt(det(J J^T)) (Yoshikawa; = sqrt(lmax lmin) for k = 2), l_i the eigenvalues of J J^T with J the 2x2 task rows of jacobian_tcp; mu1 = mu2 = inf at a singularity.
+
+    in  q [2]
+    in  p [5]
+    out mu [3]
+    cost: the arithmetic of planar_2r_jacobian_tcp per call, plus loops
+    """
+    J = np.asarray(jacobian_tcp(q, p))[[0, 1], :]
+    s = np.linalg.svd(J, compute_uv=False)
+    mu1 = s[0] / s[-1] if s[-1] > 0.0 else math.inf
+    return np.array([mu1, mu1 * mu1, float(np.prod(s))])

@@ -15,6 +15,7 @@
 
 #include "rrprr_fk_tcp.h"
 #include "rrprr_jacobian_tcp.h"
+#include "rrprr_fk_jacobian_tcp.h"
 #include "rrprr_mass_matrix.h"
 #include "rrprr_coriolis_matrix.h"
 #include "rrprr_gravity.h"
@@ -24,5 +25,7 @@
 #include "rrprr_ode_jac_x.h"
 #include "rrprr_ode_jac_u.h"
 #include "rrprr_rk4_step.h"
+#include "rrprr_ik_tcp.h"
+#include "rrprr_manipulability_tcp.h"
 
 #endif /* RRPRR_DERIVE_H */

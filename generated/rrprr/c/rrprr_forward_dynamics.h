@@ -15,7 +15,7 @@
  * in  tau [5]
  * in  p [3]
  * out qdd [5]
- * Arrays are row-major. 449 ops: 255 mul, 171 add, 15 div, 8 trig
+ * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
  */
 void rrprr_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
 

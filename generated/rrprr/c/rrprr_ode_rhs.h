@@ -14,7 +14,7 @@
  * in  u [5]
  * in  p [3]
  * out xdot [10]
- * Arrays are row-major. 449 ops: 255 mul, 171 add, 15 div, 8 trig
+ * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
  */
 void rrprr_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
 

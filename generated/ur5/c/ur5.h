@@ -18,6 +18,7 @@
 #include "ur5_jacobian_base.h"
 #include "ur5_fk_ee_link.h"
 #include "ur5_jacobian_ee_link.h"
+#include "ur5_fk_jacobian_tcp.h"
 #include "ur5_mass_matrix.h"
 #include "ur5_coriolis_matrix.h"
 #include "ur5_gravity.h"
@@ -27,5 +28,8 @@
 #include "ur5_ode_jac_x.h"
 #include "ur5_ode_jac_u.h"
 #include "ur5_rk4_step.h"
+#include "ur5_ik_tcp.h"
+#include "ur5_manipulability_tcp.h"
+#include "ur5_manipulability_ee_link.h"
 
 #endif /* UR5_DERIVE_H */

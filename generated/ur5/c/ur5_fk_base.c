@@ -9,10 +9,10 @@ void ur5_fk_base(const DERIVE_REAL *q, DERIVE_REAL *T)
     /* 0 ops: 0 mul, 0 add, 0 div, 0 trig */
     (void)q;
     T[0] = (-DERIVE_LIT(1.0));
-    T[1] = (-DERIVE_LIT(2.0682310711021444e-13));
+    T[1] = DERIVE_LIT(0.0);
     T[2] = DERIVE_LIT(0.0);
     T[3] = DERIVE_LIT(0.0);
-    T[4] = DERIVE_LIT(2.0682310711021444e-13);
+    T[4] = DERIVE_LIT(0.0);
     T[5] = (-DERIVE_LIT(1.0));
     T[6] = DERIVE_LIT(0.0);
     T[7] = DERIVE_LIT(0.0);

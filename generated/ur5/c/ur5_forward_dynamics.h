@@ -14,7 +14,7 @@
  * in  qd [6]
  * in  tau [6]
  * out qdd [6]
- * Arrays are row-major. 972 ops: 545 mul, 396 add, 21 div, 10 trig
+ * Arrays are row-major. 802 ops: 446 mul, 325 add, 21 div, 10 trig
  */
 void ur5_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
 

@@ -12,7 +12,7 @@
  *
  * in  q [6]
  * out g [6]
- * Arrays are row-major. 150 ops: 86 mul, 54 add, 0 div, 10 trig
+ * Arrays are row-major. 124 ops: 72 mul, 42 add, 0 div, 10 trig
  */
 void ur5_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
 

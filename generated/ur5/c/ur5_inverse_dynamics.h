@@ -14,7 +14,7 @@
  * in  qd [6]
  * in  qdd [6]
  * out tau [6]
- * Arrays are row-major. 470 ops: 270 mul, 190 add, 0 div, 10 trig
+ * Arrays are row-major. 427 ops: 247 mul, 170 add, 0 div, 10 trig
  */
 void ur5_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
 

@@ -12,7 +12,7 @@
  *
  * in  q [6]
  * out J [6x6]
- * Arrays are row-major. 169 ops: 89 mul, 70 add, 0 div, 10 trig
+ * Arrays are row-major. 148 ops: 75 mul, 63 add, 0 div, 10 trig
  */
 void ur5_jacobian_ee_link(const DERIVE_REAL *q, DERIVE_REAL *J);
 

@@ -13,7 +13,7 @@
  * in  x [12]
  * in  u [6]
  * out xdot [12]
- * Arrays are row-major. 972 ops: 545 mul, 396 add, 21 div, 10 trig
+ * Arrays are row-major. 802 ops: 446 mul, 325 add, 21 div, 10 trig
  */
 void ur5_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
 
