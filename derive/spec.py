@@ -17,6 +17,7 @@ import casadi as ca
 
 from .api import SXModel
 from .model import Robot
+from .ode import ode_jacobians
 
 QUANTITIES = ("fk", "jacobian", "fk_jacobian", "mass_matrix", "coriolis_matrix", "gravity", "inverse_dynamics",
               "forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u")
@@ -133,8 +134,9 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
 
     add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))],
         f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd].")
-    add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(ca.jacobian(f, s.x)))],
+    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(), s.q, s.qd, s.qdd, qdd_fd)
+    add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))],
         f"df/dx ({2 * n}x{2 * n}, row-major) of the ODE x' = f(x, u): the linearisation's A.")
-    add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(ca.jacobian(f, s.tau)))],
+    add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))],
         f"df/du ({2 * n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.")
     return specs

@@ -14,7 +14,7 @@
  * in  u [2]
  * in  p [5]
  * out A [4x4]
- * Arrays are row-major. 164 ops: 87 mul, 54 add, 19 div, 4 trig
+ * Arrays are row-major. 158 ops: 84 mul, 55 add, 15 div, 4 trig
  */
 void planar_2r_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
 

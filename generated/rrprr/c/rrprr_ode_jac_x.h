@@ -14,7 +14,7 @@
  * in  u [5]
  * in  p [3]
  * out A [10x10]
- * Arrays are row-major. 3148 ops: 1750 mul, 1274 add, 116 div, 8 trig
+ * Arrays are row-major. 2457 ops: 1348 mul, 1036 add, 65 div, 8 trig
  */
 void rrprr_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
 

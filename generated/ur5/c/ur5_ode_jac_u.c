@@ -283,14 +283,14 @@ void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
     const DERIVE_REAL t272 = t201 - t271;
     const DERIVE_REAL t273 = t263 / t272;
     const DERIVE_REAL t274 = t219 * t194;
-    const DERIVE_REAL t275 = t274 + t170;
+    const DERIVE_REAL t275 = t170 + t274;
     const DERIVE_REAL t276 = t239 * t194;
     const DERIVE_REAL t277 = t235 - t276;
     const DERIVE_REAL t278 = t259 * t277;
     const DERIVE_REAL t279 = t275 + t278;
     const DERIVE_REAL t280 = t273 * t279;
     const DERIVE_REAL t281 = t213 * t194;
-    const DERIVE_REAL t282 = t281 + t134;
+    const DERIVE_REAL t282 = t134 + t281;
     const DERIVE_REAL t283 = t252 * t277;
     const DERIVE_REAL t284 = t282 + t283;
     const DERIVE_REAL t285 = t280 - t284;
@@ -356,7 +356,7 @@ void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
     const DERIVE_REAL t345 = t344 / t297;
     const DERIVE_REAL t346 = t341 * t279;
     const DERIVE_REAL t347 = t318 * t194;
-    const DERIVE_REAL t348 = t347 + t311;
+    const DERIVE_REAL t348 = t311 + t347;
     const DERIVE_REAL t349 = t328 * t277;
     const DERIVE_REAL t350 = t348 + t349;
     const DERIVE_REAL t351 = t346 - t350;
