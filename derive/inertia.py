@@ -16,13 +16,13 @@ cases URDF allows). ``inertia_problem`` is the check model validation can call.
 from __future__ import annotations
 
 import numpy as np
-import sympy as sp
 
 from .errors import DeriveError
 
 
 def _is_sympy(*xs) -> bool:
-    return any(isinstance(x, (sp.Basic, sp.MatrixBase)) for x in xs)
+    # by module name, so that model validation can use this file without importing sympy
+    return any(type(x).__module__.startswith("sympy") for x in xs)
 
 
 def steiner(inertia, mass, d):
@@ -31,9 +31,11 @@ def steiner(inertia, mass, d):
     ``inertia`` 3x3 and ``d`` a 3-vector, or both scalars: I about a parallel axis at
     distance d, I_s + m d^2 (the lecture's eq. 8).
     """
-    if np.ndim(d) == 0 and not isinstance(d, sp.MatrixBase):
+    if np.ndim(d) == 0 and not (_is_sympy(d) and hasattr(d, "shape")):  # a scalar, not a sympy Matrix
         return inertia + mass * d**2
     if _is_sympy(inertia, mass, d) or isinstance(d, (list, tuple)) and _is_sympy(*d):
+        import sympy as sp
+
         d = sp.Matrix(3, 1, list(d))
         return sp.Matrix(inertia) + mass * (d.dot(d) * sp.eye(3) - d * d.T)
     d = np.asarray(d, dtype=float).reshape(3)
@@ -48,6 +50,8 @@ def inertia_about_com(inertia_o, mass, d):
 def rotate_inertia(R, inertia):
     """R I R^T: the tensor expressed in frame B re-expressed in frame A, R = A_R_B."""
     if _is_sympy(R, inertia):
+        import sympy as sp
+
         R = sp.Matrix(R)
         return R * sp.Matrix(inertia) * R.T
     R = np.asarray(R, dtype=float)

@@ -35,7 +35,7 @@ import sympy as sp
 from .errors import DeriveError
 from .model import Robot
 from .singularity import ROW_NAMES, TaskJacobian, _fmt, parse_q
-from .workspace import Arm, new_figure, sample_configurations, save_figure, workspace
+from .workspace import Arm, new_figure, save_figure, workspace
 
 
 def _singular_values(J: np.ndarray) -> np.ndarray:

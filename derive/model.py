@@ -29,6 +29,7 @@ import yaml
 
 from . import expr
 from .errors import DeriveError
+from .inertia import inertia_problem
 
 JOINT_TYPES = {"revolute": 1, "prismatic": 1, "helical": 1, "cylindrical": 2, "universal": 2, "spherical": 3,
                "fixed": 0}
@@ -629,11 +630,9 @@ class _Parser:
                 num(f"{where}.com[{k}]", link.com[k])
                 num(f"{where}.inertia_rpy[{k}]", link.inertia_rpy[k])
             inertia = [[num(f"{where}.inertia[{r}][{c}]", link.inertia[r][c]) for c in range(3)] for r in range(3)]
-            problem = inertia_problem(inertia)
+            problem = inertia_problem(inertia, mass)
             if problem:
                 raise self.error(where + ".inertia", problem)
-            if mass == 0 and any(abs(x) > 0 for row in inertia for x in row):
-                raise self.error(where + ".inertia", "a massless link must have zero inertia")
         for i, j in enumerate(robot.joints):
             for k in range(3):
                 num(f"joints ({j.name}).origin.xyz[{k}]", j.origin.xyz[k])
@@ -646,28 +645,6 @@ class _Parser:
             for k in range(3):
                 num(f"frames ({f.name}).xyz[{k}]", f.origin.xyz[k])
                 num(f"frames ({f.name}).rpy[{k}]", f.origin.rpy[k])
-
-
-def inertia_problem(inertia: list[list[float]], tol: float = 1e-12) -> str | None:
-    """Why a 3x3 inertia about the COM is not physical, or None.
-
-    Physical means symmetric positive semi-definite with principal moments that
-    satisfy the triangle inequality (I1 + I2 >= I3 for every ordering). Point
-    masses and thin rods (zero moments) are allowed, as URDF allows them.
-    """
-    import numpy as np  # numeric check only; numpy is a core dependency
-
-    m = np.array(inertia, dtype=float)
-    if not np.allclose(m, m.T, rtol=0, atol=tol * max(1.0, abs(m).max())):
-        return "not symmetric"
-    eig = np.linalg.eigvalsh(m)
-    scale = max(1.0, abs(eig).max()) * 1e-9
-    if eig.min() < -scale:
-        return f"not positive semi-definite (principal moments {', '.join(f'{e:.6g}' for e in eig)})"
-    a, b, c = sorted(eig)
-    if a + b < c - scale:
-        return f"breaks the triangle inequality: {a:.6g} + {b:.6g} < {c:.6g}"
-    return None
 
 
 def parse_robot(name: str, spec: Any) -> Robot:

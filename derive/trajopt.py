@@ -62,9 +62,10 @@ class Waypoint:
 class TrajoptResult:
     """An optimised trajectory at the N + 1 knots and how it was obtained and checked.
 
-    ``integration_error``: max over knots of |q_sim - q| (rad or m), q_sim from integrating the
-    generated forward dynamics open loop from the start state under ``torque(t)``;
-    ``velocity_error`` the same for qd. ``limit_violation``: largest excess over a limit at the
+    ``integration_error``: max over knots k of |q_sim - q_k| (rad or m), q_sim from integrating
+    the generated forward dynamics under ``torque(t)`` from knot k - 1 (the transcription's
+    defects); ``velocity_error`` the same for qd; ``drift`` the q error integrating open loop from
+    the start (grows near unstable states). ``limit_violation``: largest excess over a limit at the
     knots (0 when held). ``stats``: solver return status, iterations, solve_time (IPOPT's
     t_wall_total, s), build_time (s), cost.
     """
@@ -116,7 +117,8 @@ class TrajoptResult:
         np.savetxt(path, rows, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
 
     def plot(self, path: Path, limits: dict | None = None) -> None:
-        """Joint positions, velocities and torques over time (matplotlib, Agg) to ``path``."""
+        """Joint positions, velocities and torques over time (matplotlib, Agg) to ``path``;
+        ``limits`` maps joints to effort limits, drawn dotted."""
         import matplotlib
 
         matplotlib.use("Agg")
@@ -128,9 +130,10 @@ class TrajoptResult:
                 ax.plot(self.t, data[:, i], label=j)
             ax.set_ylabel(label)
             ax.grid(True, alpha=0.3)
-        for i, (j, eff) in enumerate((limits or {}).items()):
-            if eff is not None:
-                color = axes[2].lines[i].get_color()
+        colors = [line.get_color() for line in axes[2].lines]
+        for color, j in zip(colors, self.joints):
+            eff = (limits or {}).get(j)
+            if eff is not None and np.isfinite(eff):
                 for sign in (-1, 1):
                     axes[2].axhline(sign * eff, color=color, linestyle=":", linewidth=0.8)
         axes[0].legend(fontsize="small", ncol=min(len(self.joints), 4))
