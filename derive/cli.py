@@ -35,7 +35,8 @@ def cmd_generate(args) -> int:
         if args.robot:
             problems = [p for p in problems if any(f"/{r}/" in p or p.endswith(f"/{r}") for r in args.robot)]
         if problems:
-            print(f"generated/ is stale; run `make derive`. {len(problems)} problem(s):", file=sys.stderr)
+            print(f"{out} is stale; run `make derive` (or `derive generate`). {len(problems)} problem(s):",
+                  file=sys.stderr)
             for p in problems:
                 print(f"  {p}", file=sys.stderr)
             return 1
@@ -81,8 +82,14 @@ def cmd_eom(args) -> int:
 
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="derive", description=__doc__.splitlines()[0])
-    parser.add_argument("--models", help="models file (default: models.yaml of the project, or $DERIVE_MODELS)")
+    models_help = "models file (default: models.yaml of the project, or $DERIVE_MODELS)"
+    parser.add_argument("--models", help=models_help)
+    # --models is accepted after the subcommand too: every subparser inherits it
+    common = argparse.ArgumentParser(add_help=False)
+    common.add_argument("--models", default=argparse.SUPPRESS, help=models_help)
     sub = parser.add_subparsers(dest="command", required=True)
+    add_parser = sub.add_parser
+    sub.add_parser = lambda *a, **k: add_parser(*a, parents=[common, *k.pop("parents", [])], **k)
 
     g = sub.add_parser("generate", help="regenerate generated/ from models.yaml")
     g.add_argument("--robot", action="append", help="only this robot (repeatable)")

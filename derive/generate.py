@@ -20,6 +20,7 @@ import time
 from pathlib import Path
 from typing import Callable, Iterable
 
+from .errors import DeriveError
 from .model import Robot, model_data
 
 PACKAGE = Path(__file__).resolve().parent
@@ -30,27 +31,24 @@ TOOLS = ("sympy", "casadi", "numpy", "jinja2")
 def tool_versions() -> dict[str, str]:
     from importlib.metadata import version
 
-    return {"derive": version("derive"), **{t: version(t) for t in TOOLS}}
+    return {t: version(t) for t in TOOLS}
 
 
-GENERATOR_SOURCES = ("derive/model.py", "derive/expr.py", "derive/dh.py", "derive/symbols.py", "derive/spatial.py",
-                     "derive/kinematics.py", "derive/dynamics.py", "derive/ode.py", "derive/api.py",
-                     "derive/graph.py", "derive/spec.py", "derive/generate.py", "derive/emit", "templates/c",
-                     "templates/python", "templates/manifest")
-"""What generated/ depends on. A change elsewhere does not mark generated/ stale; the golden
-test (full regeneration compared byte for byte) still catches any omission here."""
+GENERATOR_SOURCES = ("derive", "templates")
+"""What generated/ depends on: all of derive's Python and every template. Broader than the
+modules generation imports (so editing the trajectory optimiser marks generated/ stale and
+`make derive` rewrites MANIFEST.json only), but never narrower, which would let `--check`
+pass on stale output."""
 
 
 def generator_hash() -> str:
-    """sha256 over the generating sources, the templates and the tool versions."""
+    """sha256 over derive's sources and templates (line endings normalised) and the tool versions."""
     h = hashlib.sha256()
-    paths = []
-    for rel in GENERATOR_SOURCES:
-        base = ROOT / rel
-        paths += [base] if base.is_file() else [p for p in base.rglob("*") if p.suffix in (".py", ".jinja")]
+    paths = [p for rel in GENERATOR_SOURCES for p in (ROOT / rel).rglob("*")
+             if p.suffix in (".py", ".jinja", ".c", ".h") and "__pycache__" not in p.parts]
     for path in sorted(paths):
         h.update(path.relative_to(ROOT).as_posix().encode())
-        h.update(path.read_bytes())
+        h.update(path.read_bytes().replace(b"\r\n", b"\n"))
     h.update(json.dumps(tool_versions(), sort_keys=True).encode())
     return h.hexdigest()
 
@@ -107,6 +105,11 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
              log: Callable[[str], None] = print) -> dict:
     """Regenerate ``out`` for ``robots`` (all, or the names in ``only``); returns the new MANIFEST."""
     out = Path(out)
+    if out.exists() and not out.is_dir():
+        raise DeriveError(f"output {out}: exists and is not a folder")
+    if out.is_dir() and any(out.iterdir()) and not (out / "MANIFEST.json").is_file():
+        raise DeriveError(f"output {out}: not empty and holds no MANIFEST.json, so it is not a derive output "
+                          "folder; refusing to replace it (choose an empty or new folder)")
     names = sorted(robots) if only is None else sorted(only)
     ghash = generator_hash()
     old = _read_manifest(out)
@@ -114,12 +117,20 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
     new_robots = {k: v for k, v in old.get("robots", {}).items() if only is not None and k not in names and k in robots}
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it 0700; the output folder is an ordinary one
     try:
         start = time.perf_counter()
         # carry over robots not being regenerated (``--robot``), untouched
         for name in new_robots:
             if (out / name).is_dir():
                 shutil.copytree(out / name, tmp / name)
+        # and anything else a user keeps in the folder that derive does not manage
+        managed = set(old_robots) | set(robots) | {"MANIFEST.json"}
+        for entry in sorted(out.iterdir()) if out.is_dir() else ():
+            if entry.name not in managed:
+                (shutil.copytree if entry.is_dir() else shutil.copy2)(entry, tmp / entry.name)
         for k, name in enumerate(names, 1):
             robot = robots[name]
             mhash = model_hash(robot)

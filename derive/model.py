@@ -290,6 +290,8 @@ def parse_models(text: str, source: str = "<string>") -> dict[str, Robot]:
     if not isinstance(data, Mapping) or not isinstance(data.get("robots"), Mapping):
         raise ModelError(None, f"{source} robots", "the file must hold a mapping 'robots: {name: {...}}'")
     _check_keys(None, "", data, {"robots"})
+    if not data["robots"]:
+        raise ModelError(None, f"{source} robots", "no robots in the file")
     return {name: parse_robot(str(name), spec) for name, spec in data["robots"].items()}
 
 
@@ -535,6 +537,8 @@ class _Parser:
             description=str(spec.get("description", "")).strip(),
             source=str(spec.get("source", "")).strip(),
         )
+        if robot.nv == 0:
+            raise self.error("joints", "no moving joint: a robot needs at least one degree of freedom")
         self.check_names(robot)
         self.check_values(robot)
         return robot

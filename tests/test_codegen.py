@@ -144,13 +144,15 @@ def test_generated_c_python_casadi_match_reference(robot, build_dir):
             expected = outputs(reference(ref, fn, a))
             got_c = outputs(c_double(fn, a))
             got_py = outputs(getattr(py, fn["python"]["function"])(*args))
-            got_ca = outputs(casadi_fns[fn["name"]](*args)) if fn["name"] in casadi_fns else got_c
+            # template-bodied functions (loops, calls) have no single expression graph to evaluate
+            got_ca = outputs(casadi_fns[fn["name"]](*args)) if fn["name"] in casadi_fns else None
             got_float = outputs(c_float(fn, a))
             for k, o in enumerate(fn["outputs"]):
                 what = f"{fn['name']} output {o['name']} at q = {q}"
                 assert_close(got_c[k], expected[k], what="C " + what)
                 assert_close(got_py[k], got_c[k], rtol=1e-12, what="Python vs C " + what)
-                assert_close(got_ca[k], got_c[k], rtol=1e-12, what="CasADi vs C " + what)
+                if got_ca is not None:
+                    assert_close(got_ca[k], got_c[k], rtol=1e-12, what="CasADi vs C " + what)
                 assert_close(got_float[k], expected[k], rtol=1e-4, what="float C " + what)
 
 
@@ -227,3 +229,22 @@ def test_unchanged_robots_are_not_rederived(tmp_path):
     generate(robots(), out, only=["pendulum", "cartpole"], log=logs.append)
     assert any("pendulum: unchanged, kept" in line for line in logs)
     assert check(robots(), out) == []
+
+
+def test_out_folder_of_other_files_is_refused_and_kept(tmp_path, capsys):
+    """`--out` never deletes a folder that is not derive's; a derive folder keeps foreign entries."""
+    from derive.cli import main
+
+    foreign = tmp_path / "mine"
+    foreign.mkdir()
+    (foreign / "important.txt").write_text("keep me")
+    assert main(["generate", "--robot", "pendulum", "--out", str(foreign)]) == 2
+    assert "not a derive output folder" in capsys.readouterr().err
+    assert sorted(p.name for p in foreign.iterdir()) == ["important.txt"]
+
+    out = tmp_path / "gen"
+    assert main(["generate", "--robot", "pendulum", "--out", str(out)]) == 0
+    (out / "NOTES.md").write_text("notes")
+    assert main(["generate", "--robot", "pendulum", "--out", str(out), "--no-cache"]) == 0
+    assert (out / "NOTES.md").read_text() == "notes"
+    assert oct(out.stat().st_mode & 0o777) != oct(0o700)

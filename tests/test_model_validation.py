@@ -73,6 +73,9 @@ CASES = {
                           ["robot 'arm'", "mass", "unknown parameter 'm_unknown'"]),
     "zero_axis": (robot_yaml(joints="[{name: j1, type: revolute, parent: base, child: l1, axis: [0, 0, 0]}]"),
                   ["robot 'arm'", "joints[0].axis", "zero vector"]),
+    "no_moving_joint": (robot_yaml(joints="[{name: j1, type: fixed, parent: base, child: l1}]"),
+                        ["robot 'arm'", "joints", "no moving joint"]),
+    "no_robots": ("robots: {}\n", ["models file", "robots", "no robots"]),
     "limits_reversed": (robot_yaml(joints="[{name: j1, type: revolute, parent: base, child: l1, "
                                           "limits: {lower: 1.0, upper: -1.0}}]"),
                         ["robot 'arm'", "limits", "above upper"]),

@@ -20,10 +20,11 @@ SYMBOLIC = ("pendulum", "planar_2r", "cartpole")
 
 
 def exact_zero(d: sp.Expr) -> bool:
-    """d simplifies to 0, up to rounding residue (|c| < 1e-15) of the model's float constants.
+    """d simplifies to 0, up to rounding residue (|c| < 1e-15) of float constants.
 
-    cartpole's pole inertia 0.00833333333333333 is not exactly 1/120, so 1/40 + I folds to a
-    different last bit on each route (4e-18); every other model is exact.
+    Numeric models fold products of their constants in floating point on each route
+    (cartpole: 0.1 * 9.81 * 0.5 differs in its last bit, leaving 4.7e-17 sin(theta) in tau);
+    models with symbolic parameters are exact.
     """
     r = sp.simplify(d)
     return sp.simplify(r.xreplace({f: 0 for f in r.atoms(sp.Float) if abs(f) < 1e-15})) == 0
