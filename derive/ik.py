@@ -352,10 +352,12 @@ LAMBDA_MIN_FLOAT = 1e-5
 
 
 def template_functions(model) -> list:
-    """The template-bodied IK functions of a robot (see templates/c/ik.c.jinja), in a fixed order.
+    """The template-bodied IK functions of a robot, in a fixed order.
 
     The same algorithm as method "lm" with a fixed iteration cap, a fixed restart sequence
-    (xorshift32) and the limits as constants; no allocation.
+    (xorshift32) and the limits as constants; no allocation. The algorithm is the fixed
+    templates/c/support/derive_ik.h and templates/python/support/ik.py; the templates
+    (c/ik.c.jinja, python/ik.py.jinja) only pass this robot's limits, caps and fk_jacobian.
     """
     from .emit.printers import _float_literal
     from .spec import TemplateFunction
@@ -375,7 +377,7 @@ def template_functions(model) -> list:
             "max_iterations": MAX_ITERATIONS_C, "attempt": ATTEMPT, "tol_position": _float_literal(TOL_POSITION),
             "tol_rotation": _float_literal(TOL_ROTATION), "lambda0": _float_literal(LAMBDA0),
             "lambda_min": _float_literal(LAMBDA_MIN), "lambda_min_float": _float_literal(LAMBDA_MIN_FLOAT),
-            "lambda_stall": _float_literal(LAMBDA_STALL), "stack_reals": 58 + 23 * n + 2 * n * n,  # ik.c.jinja's arrays
+            "lambda_stall": _float_literal(LAMBDA_STALL), "py_fkj": f"fk_jacobian_{frame}",
             "py_args": ("T", "q0=None", "w=None") + (("p=DEFAULT_P",) if np_ else ()),
         }
         for key, values in (("lower", lo), ("upper", hi), ("sample_lower", slo), ("sample_upper", shi)):
@@ -390,7 +392,8 @@ def template_functions(model) -> list:
             f"1 1 1 0 0 0) with seeded restarts, at most {MAX_ITERATIONS_C} iterations. residual = "
             f"[position error (m), rotation error (rad)] of the weighted rows; success when below "
             f"{TOL_POSITION:g} m and {TOL_ROTATION:g} rad.",
-            "c/ik.c.jinja", "python/ik.py.jinja", calls=(fkj,), context=tuple(context.items())))
+            "c/ik.c.jinja", "python/ik.py.jinja", calls=(fkj,), context=tuple(context.items()),
+            c_support=("derive_linalg.h", "derive_ik.h"), py_support=("ik.py",)))
     return out
 
 

@@ -21,7 +21,9 @@ Generated code: ``<robot>_manipulability_<frame>(q[, p], mu)``, mu = [mu1, mu2, 
 for the default position task, for every named frame whose task can be spanned
 (nv >= k). It calls ``<robot>_jacobian_<frame>`` and takes the singular values
 by one-sided Jacobi rotations of the k rows (C: no malloc, only math.h; high
-relative accuracy of small singular values), numpy's SVD in Python.
+relative accuracy of small singular values), numpy's SVD in Python. Both algorithms are
+the fixed support files templates/c/support/derive_manipulability.h (with derive_linalg.h)
+and templates/python/support/manipulability.py; the templates only pass the rows.
 """
 
 from __future__ import annotations
@@ -156,7 +158,9 @@ def template_function(model, frame: str):
         robot.name, "manipulability", frame, (("q", (robot.nq, 1)),) + extra, (("mu", (3, 1)),), doc,
         "c/manipulability.c.jinja", "python/manipulability.py.jinja", calls=(f"{robot.name}_jacobian_{frame}",),
         context=(("k", tj.k), ("nv", robot.nv), ("rows", tj.rows), ("jacobian", f"{robot.name}_jacobian_{frame}"),
-                 ("py_jacobian", f"jacobian_{frame}"), ("manifest", (("task_rows", tj.rows),))))
+                 ("jacobian_size", 6 * robot.nv), ("task_size", tj.k * robot.nv),   # C buffer sizes (reals)
+                 ("py_jacobian", f"jacobian_{frame}"), ("manifest", (("task_rows", tj.rows),))),
+        c_support=("derive_linalg.h", "derive_manipulability.h"), py_support=("manipulability.py",))
 
 
 # --------------------------------------------------------------------------- plot

@@ -49,6 +49,9 @@ class TemplateFunction:
     ``c_template`` and ``py_template`` are jinja templates under templates/ rendered with
     ``f`` (this function's plain-data context, ``context`` merged in) and the robot's
     context; ``calls`` names the generated functions it uses (their headers are included).
+    Algorithms (solvers, decompositions) live in fixed, robot-independent support files
+    (``c_support``, ``py_support``) that every robot's output gets verbatim; the templates only
+    lay out the call with this robot's sizes, limits and functions.
     """
 
     robot: str
@@ -61,6 +64,8 @@ class TemplateFunction:
     py_template: str
     calls: tuple[str, ...] = ()
     context: tuple[tuple[str, object], ...] = ()  # plain data, as pairs to stay hashable
+    c_support: tuple[str, ...] = ()   # files of templates/c/support/ the C source includes (copied verbatim)
+    py_support: tuple[str, ...] = ()  # files of templates/python/support/ the Python body calls (inserted verbatim)
 
     @property
     def short_name(self) -> str:

@@ -6,9 +6,10 @@
                 lower <= q <= upper,  |qd| <= velocity,  |u| <= effort      (the model's limits)
                 p_frame(q(s_i T)) = waypoint_i                (the derived FK)
 
-q, qd, qdd, tau are (nv,) in the joint order of models.yaml; u holds the torques (forces for
-prismatic joints) of the actuated joints and B (nv x na) selects them, so passive joints (the
-cart-pole's pole) get tau = 0. N uniform intervals h = T / N; every knot k = 0..N carries
+q, qd, qdd, tau are (nv,) in the order of Robot.coordinates (a multi-DOF joint has one entry,
+with its own limits, per coordinate); u holds the torques (forces for prismatic joints) of the
+actuated coordinates and B (nv x na) selects them, so passive joints (the cart-pole's pole) get
+tau = 0. N uniform intervals h = T / N; every knot k = 0..N carries
 (q, qd, qdd, u) and the dynamics hold at every knot. Transcriptions (``method``):
 
 - ``trapezoidal``: q_{k+1} - q_k = h/2 (qd_k + qd_{k+1}), the same for qd with qdd; u linear in t.
@@ -157,7 +158,7 @@ class TrajoptResult:
 
 def _failure(robot: Robot, method: str, reason: str) -> TrajoptResult:
     empty = np.zeros((0, robot.nv))
-    return TrajoptResult(False, reason, robot.name, tuple(j.name for j in robot.moving_joints), method,
+    return TrajoptResult(False, reason, robot.name, tuple(c.name for c in robot.coordinates), method,
                          np.zeros(0), empty, empty, empty, empty)
 
 
@@ -185,15 +186,26 @@ class TrajectoryOptimizer:
     # ---- model data ----
 
     def limits(self, torque_limit=None) -> dict[str, np.ndarray]:
-        """lower, upper, velocity, effort per joint (inf where the model has none)."""
-        js = self.robot.moving_joints
-        val = lambda v, d: d if v is None else v  # noqa: E731
-        effort = np.array([val(j.limits.effort, np.inf) for j in js])
+        """lower, upper, velocity, effort per coordinate of q (inf where the model has none).
+
+        A multi-DOF joint (spherical, universal, cylindrical) has one entry per coordinate, each
+        with its own limits; ``torque_limit`` (scalar or (nv,), >= 0) overrides the effort limits.
+        """
+        cs = self.robot.coordinates
+        val = lambda v, d: float(d if v is None else v)  # noqa: E731
+        effort = np.array([val(c.limits.effort, np.inf) for c in cs])
         if torque_limit is not None:
-            effort = np.broadcast_to(np.asarray(torque_limit, dtype=float), effort.shape).copy()
-        return {"lower": np.array([val(j.limits.lower, -np.inf) for j in js]),
-                "upper": np.array([val(j.limits.upper, np.inf) for j in js]),
-                "velocity": np.array([val(j.limits.velocity, np.inf) for j in js]), "effort": effort}
+            try:
+                tl = np.asarray(torque_limit, dtype=float)
+                effort = np.broadcast_to(tl, effort.shape).copy() if tl.ndim <= 1 else None
+            except (TypeError, ValueError):
+                effort = None
+            if effort is None or np.any(np.isnan(effort)) or np.any(effort < 0):
+                raise DeriveError(f"trajopt {self.robot.name}: torque_limit must be one value >= 0 or {len(cs)} "
+                                  f"({', '.join(self.joints)}), got {torque_limit!r}")
+        return {"lower": np.array([val(c.limits.lower, -np.inf) for c in cs]),
+                "upper": np.array([val(c.limits.upper, np.inf) for c in cs]),
+                "velocity": np.array([val(c.limits.velocity, np.inf) for c in cs]), "effort": effort}
 
     def gravity(self, q) -> np.ndarray:
         """g(q) = rnea(q, 0, 0)."""
@@ -227,37 +239,73 @@ class TrajectoryOptimizer:
         """Optimise a trajectory from ``start`` to ``goal`` (joint positions, (nv,)).
 
         Args:
-            intervals: N. method: one of METHODS. duration: T, or its initial guess if
+            start, goal: (nv,) in the order of ``robot.coordinates`` (``self.joints``): a multi-DOF
+                joint contributes one entry per coordinate (e.g. ``shoulder_z, shoulder_y, shoulder_x``).
+            intervals: N (>= 2). method: one of METHODS. duration: T > 0, or its initial guess if
                 ``free_time`` (then T in ``duration_bounds``, default (duration / 10, 10 duration)).
             time_weight, effort_weight: w_T, w_E of the cost (``time_weight`` needs ``free_time``).
             accel_weight: w_A of a regulariser w_A integral |qdd|^2 dt: smooths joints whose torque
                 costs almost nothing (the Panda's light wrist), so N = 50 resolves their motion.
             torque_limit: overrides the model's effort limits (scalar or (nv,)).
-            passive: joints without an actuator (tau = 0).
+            passive: coordinates without an actuator (tau = 0); a multi-DOF joint's name stands for
+                all its coordinates.
             start_qd, goal_qd: boundary velocities (default 0: at rest, and then held, qdd = 0).
             waypoints: TCP (or other frame) positions to pass through.
             guess: None (linear interpolation in joint space on a quintic time law), an (M, nv)
                 path (e.g. from a planner; resampled by arc length), or a previous TrajoptResult
                 with the same N (warm start).
-            substeps: RK4 steps per interval of the independent check.
+            substeps: RK4 steps per interval of the independent check (>= 1).
             tol: largest integration error (rad or m) of a successful result.
+
+        Raises DeriveError (one line) for malformed requests; requests that are well formed but
+        cannot be met give a result with ``success = False`` and a ``reason``.
         """
         r, nv = self.robot, self.robot.nv
         name = r.name
+
+        def bad(what: str) -> DeriveError:
+            return DeriveError(f"trajopt {name}: {what}")
+
         if method not in METHODS:
-            raise DeriveError(f"trajopt {name}: method must be one of {', '.join(METHODS)}, got {method!r}")
-        if intervals < 2:
-            raise DeriveError(f"trajopt {name}: intervals must be >= 2, got {intervals}")
+            raise bad(f"method must be one of {', '.join(METHODS)}, got {method!r}")
+        for what, n, least in (("intervals", intervals, 2), ("substeps", substeps, 1), ("max_iter", max_iter, 1)):
+            if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < least:
+                raise bad(f"{what} must be an integer >= {least}, got {n!r}")
+        for what, x in (("duration", duration), ("tol", tol)):
+            if not _real(x) or not x > 0 or not math.isfinite(x):
+                raise bad(f"{what} must be a finite number > 0, got {x!r}")
+        for what, x in (("time_weight", time_weight), ("effort_weight", effort_weight), ("accel_weight", accel_weight)):
+            if not _real(x) or not x >= 0 or not math.isfinite(x):
+                raise bad(f"{what} must be a finite number >= 0, got {x!r}")
+        if not (time_weight > 0 or effort_weight > 0):
+            raise bad("time_weight and effort_weight must not both be 0")
         if time_weight and not free_time:
-            raise DeriveError(f"trajopt {name}: a time cost needs free_time")
-        if not (time_weight > 0 or effort_weight > 0) or time_weight < 0 or effort_weight < 0:
-            raise DeriveError(f"trajopt {name}: weights must be >= 0 and not both 0")
-        unknown = [j for j in passive if j not in self.joints]
+            raise bad("a time cost (time_weight > 0) needs free_time")
+        if duration_bounds is not None:
+            try:
+                lo, hi = (float(x) for x in duration_bounds)
+            except (TypeError, ValueError):
+                lo = hi = math.nan
+            if not (0 < lo <= hi < math.inf):
+                raise bad(f"duration_bounds must be (lower, upper) with 0 < lower <= upper < inf, "
+                          f"got {duration_bounds!r}")
+            if free_time and not lo <= duration <= hi:
+                raise bad(f"duration {duration:g} (the first guess of T) is outside duration_bounds [{lo:g}, {hi:g}]")
+        else:
+            lo, hi = duration / 10, duration * 10
+        passive = (passive,) if isinstance(passive, str) else tuple(passive)
+        by_joint = {j.name: [c.name for c in j.coordinates] for j in r.moving_joints}
+        unknown = [j for j in passive if j not in self.joints and j not in by_joint]
         if unknown:
-            raise DeriveError(f"trajopt {name}: no joint {unknown[0]!r} to make passive (joints: {', '.join(self.joints)})")
+            raise bad(f"no joint {unknown[0]!r} to make passive (joints: {', '.join(self.joints)})")
+        passive = {c for j in passive for c in (by_joint.get(j) or [j])}
         for w in waypoints:
-            if not 0.0 <= w.s <= 1.0 or len(w.position) != 3:
-                raise DeriveError(f"trajopt {name}: a waypoint needs s in [0, 1] and 3 coordinates, got {w}")
+            try:
+                ok = 0.0 <= w.s <= 1.0 and len(w.position) == 3 and all(math.isfinite(float(x)) for x in w.position)
+            except (TypeError, ValueError):
+                ok = False
+            if not ok:
+                raise bad(f"a waypoint needs s in [0, 1] and 3 finite coordinates, got {w}")
             self.fk_position(w.frame)
         vec = lambda v, what: self._vector(v, what)  # noqa: E731
         start, goal = vec(start, "start"), vec(goal, "goal")
@@ -265,14 +313,20 @@ class TrajectoryOptimizer:
         goal_qd = np.zeros(nv) if goal_qd is None else vec(goal_qd, "goal_qd")
         lim = self.limits(torque_limit)
         active = [i for i, j in enumerate(self.joints) if j not in passive]
+        if not active:
+            raise bad("every joint is passive: nothing to actuate")
         B = np.eye(nv)[:, active]
+        if isinstance(guess, TrajoptResult):
+            if len(guess.t) != intervals + 1 or guess.method != method:
+                raise bad("a warm start needs the same N and method")
+        elif guess is not None:  # checked before the (possibly slow) transcription
+            guess = _path_guess(guess, self)
 
         reason = self._precheck(start, goal, start_qd, goal_qd, lim, active)
         if reason:
             return _failure(r, method, reason)
 
         t0 = time.perf_counter()
-        lo, hi = duration_bounds or (duration / 10, duration * 10)
         key = (method, intervals, (lo, hi) if free_time else None, time_weight, effort_weight, accel_weight,
                tuple(lim["effort"]), tuple(active), tuple((w.s, w.frame) for w in waypoints),
                not np.any(start_qd), not np.any(goal_qd), max_iter)
@@ -313,10 +367,16 @@ class TrajectoryOptimizer:
         return res
 
     def _vector(self, v, what: str) -> np.ndarray:
-        a = np.asarray(v, dtype=float).reshape(-1)
+        try:
+            a = np.asarray(v, dtype=float).reshape(-1)
+        except (TypeError, ValueError):
+            raise DeriveError(f"trajopt {self.robot.name}: {what} must be numbers, got {v!r}") from None
         if a.size != self.robot.nv:
             raise DeriveError(f"trajopt {self.robot.name}: {what} needs {self.robot.nv} values "
                               f"({', '.join(self.joints)}), got {a.size}")
+        if not np.all(np.isfinite(a)):
+            i = int(np.flatnonzero(~np.isfinite(a))[0])
+            raise DeriveError(f"trajopt {self.robot.name}: {what} {self.joints[i]} = {a[i]:g} is not a finite number")
         return a
 
     def _precheck(self, start, goal, start_qd, goal_qd, lim, active) -> str:
@@ -327,6 +387,11 @@ class TrajectoryOptimizer:
             for i, j in enumerate(self.joints):
                 if not lo[i] <= x[i] <= hi[i]:
                     return f"{what} {j} = {x[i]:g} is outside the limits [{lo[i]:g}, {hi[i]:g}]"
+        for what, q in (("start", start), ("goal", goal)):
+            locked = self.robot.gimbal_locked(q)
+            if locked:  # M is singular there: the generated forward dynamics cannot check the move
+                joint = next(j for j in self.robot.joints if j.name == locked[0])
+                return f"the {what} is in gimbal lock: {joint.gimbal_lock}"
         for what, q, qd in (("start", start, start_qd), ("goal", goal, goal_qd)):
             if np.any(qd):
                 continue
@@ -423,15 +488,13 @@ class TrajectoryOptimizer:
 
     def _set_guess(self, nlp: dict, start, goal, B, guess, duration) -> None:
         opti, N = nlp["opti"], nlp["N"]
-        if isinstance(guess, TrajoptResult):
-            if len(guess.t) != N + 1 or guess.method != nlp["method"]:
-                raise DeriveError(f"trajopt {self.robot.name}: a warm start needs the same N and method")
+        if isinstance(guess, TrajoptResult):  # same N and method: checked by solve
             T, q, qd, qdd, tau = guess.duration, guess.q, guess.qd, guess.qdd, guess.tau
         else:
             T = duration
             t = np.linspace(0.0, 1.0, N + 1)
             s = t**3 * (10 - 15 * t + 6 * t**2)  # quintic time law: starts and stops at rest
-            q = start + np.outer(s, goal - start) if guess is None else _resample(np.asarray(guess, float), s, self)
+            q = start + np.outer(s, goal - start) if guess is None else _resample(guess, s)
             qd = np.gradient(q, T / N, axis=0)
             qdd = np.gradient(qd, T / N, axis=0)
             tau = np.array(self.rnea.map(N + 1)(q.T, qd.T, qdd.T, self.p)).T
@@ -487,11 +550,27 @@ def solve(robot: Robot | str, start, goal, **options) -> TrajoptResult:
     return TrajectoryOptimizer(robot).solve(start, goal, **options)
 
 
-def _resample(path: np.ndarray, s: np.ndarray, opt: TrajectoryOptimizer) -> np.ndarray:
+def _real(x) -> bool:
+    return isinstance(x, (int, float, np.integer, np.floating)) and not isinstance(x, bool)
+
+
+def _path_guess(guess, opt: TrajectoryOptimizer) -> np.ndarray:
+    """A path guess as a finite (M >= 2, nv) float array, or a one-line DeriveError."""
+    name, nv = opt.robot.name, opt.robot.nv
+    try:
+        path = np.asarray(guess, dtype=float)
+    except (TypeError, ValueError):
+        raise DeriveError(f"trajopt {name}: a path guess must be an (M >= 2, {nv}) array of numbers") from None
+    if path.ndim != 2 or path.shape[1] != nv or len(path) < 2:
+        raise DeriveError(f"trajopt {name}: a path guess must be an (M >= 2, {nv}) array, got shape {path.shape}")
+    if not np.all(np.isfinite(path)):
+        row = int(np.argwhere(~np.isfinite(path))[0, 0])
+        raise DeriveError(f"trajopt {name}: a path guess must be finite, row {row} is not")
+    return path
+
+
+def _resample(path: np.ndarray, s: np.ndarray) -> np.ndarray:
     """An (M, nv) path at the path fractions s (by arc length in joint space)."""
-    if path.ndim != 2 or path.shape[1] != opt.robot.nv or len(path) < 2:
-        raise DeriveError(f"trajopt {opt.robot.name}: a path guess must be an (M >= 2, {opt.robot.nv}) array, "
-                          f"got shape {path.shape}")
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(path, axis=0), axis=1))])
     u = arc / arc[-1] if arc[-1] > 0 else np.linspace(0.0, 1.0, len(path))
     return np.column_stack([np.interp(s, u, path[:, i]) for i in range(path.shape[1])])

@@ -82,18 +82,31 @@ def _waypoint(text: str) -> Waypoint:
 
 
 def _path(file: str, joints: tuple[str, ...]) -> np.ndarray:
-    """An (M, nv) path from .npy or .csv; a CSV with q_<joint> columns (as written here) gives those."""
+    """An (M, nv) path from .npy or .csv; a CSV with q_<joint> columns (as written here) gives those.
+
+    Anything else (an unreadable file, text that is not comma-separated numbers under an optional
+    header, a pickled .npy) is a one-line DeriveError; the shape is checked by the optimiser.
+    """
     path = Path(file)
     if not path.is_file():
         raise DeriveError(f"trajopt: --guess {file}: no such file")
-    if path.suffix == ".npy":
-        return np.load(path)
-    head = path.read_text().splitlines()[0].split(",")
     try:
-        [float(x) for x in head]
-        return np.loadtxt(path, delimiter=",", ndmin=2)
-    except ValueError:
-        data = np.loadtxt(path, delimiter=",", skiprows=1, ndmin=2)
+        if path.suffix == ".npy":
+            return np.load(path, allow_pickle=False)
+        lines = [line for line in path.read_text().splitlines() if line.strip()]
+        if not lines:
+            raise ValueError("empty")
+        head = [x.strip() for x in lines[0].split(",")]
+        try:
+            [float(x) for x in head]
+            return np.loadtxt(lines, delimiter=",", ndmin=2)
+        except ValueError:
+            data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+            if not data.size:
+                raise ValueError("no rows") from None
+    except (OSError, ValueError, UnicodeDecodeError, EOFError):
+        raise DeriveError(f"trajopt: --guess {file}: not a .npy array or a CSV of numbers "
+                          f"(M rows of {len(joints)} joint positions, optionally under a header)") from None
     cols = [head.index(f"q_{j}") for j in joints if f"q_{j}" in head]
     return data[:, cols] if len(cols) == len(joints) else data
 
@@ -107,7 +120,7 @@ def run(args) -> int:
         "method": args.method, "intervals": args.intervals, "duration": args.duration,
         "time_weight": args.time_weight, "accel_weight": args.accel_weight, "substeps": args.substeps,
         "torque_limit": _floats(args.torque_limit, "--torque-limit") if args.torque_limit else None,
-        "passive": tuple(args.passive.split(",")) if args.passive else None,
+        "passive": tuple(x.strip() for x in args.passive.split(",") if x.strip()) if args.passive else None,
         "waypoints": tuple(_waypoint(w) for w in args.waypoint or ()) or None,
         "guess": _path(args.guess, opt.joints) if args.guess else None}.items() if v is not None}
     if args.free_time:
@@ -120,8 +133,9 @@ def run(args) -> int:
         if not (args.start and args.goal):
             raise DeriveError(f"trajopt {args.robot}: give --from Q0 --to Q1 (or --swing-up)")
         start, goal = _floats(args.start, "--from"), _floats(args.goal, "--to")
-        options.setdefault("duration", point_to_point_duration(opt, *(opt._vector(x, w) for x, w in
-                                                                        ((start, "--from"), (goal, "--to")))))
+        start, goal = opt._vector(start, "--from"), opt._vector(goal, "--to")
+        if "duration" not in options:
+            options["duration"] = point_to_point_duration(opt, start, goal)
         options.setdefault("accel_weight", 1.0)
         res = opt.solve(start, goal, **options)
     if not res.success:
@@ -141,7 +155,7 @@ def add_parser(sub) -> None:
                        description=__doc__.split("\n\n")[0])
     t.add_argument("robot")
     t.add_argument("--swing-up", action="store_true", help=f"the swing-up example ({', '.join(SWING_UPS)})")
-    t.add_argument("--from", dest="start", help="start joint positions, comma-separated (at rest)")
+    t.add_argument("--from", dest="start", help="start joint positions, one per coordinate of q, comma-separated (at rest)")
     t.add_argument("--to", dest="goal", help="goal joint positions, comma-separated (at rest)")
     t.add_argument("--method", choices=METHODS, help="transcription (default hermite-simpson)")
     t.add_argument("--intervals", type=int, help="N (default 100 for swing-ups, 50 otherwise)")
@@ -151,7 +165,7 @@ def add_parser(sub) -> None:
     t.add_argument("--accel-weight", type=float, help="w_A of the regulariser w_A integral |qdd|^2 "
                                                       "(default 1 for --from/--to, 0 for swing-ups)")
     t.add_argument("--torque-limit", help="override the model's effort limits: one value or one per joint")
-    t.add_argument("--passive", help="unactuated joints, comma-separated")
+    t.add_argument("--passive", help="unactuated joints (or single coordinates of multi-DOF joints), comma-separated")
     t.add_argument("--waypoint", action="append", help="S:X,Y,Z[@FRAME]: FRAME (default tcp) at X,Y,Z at time S*T")
     t.add_argument("--guess", help="initial path: .npy or .csv of joint positions (M x nq), e.g. a planner's")
     t.add_argument("--substeps", type=int, help="RK4 steps per interval of the independent check (default 20)")

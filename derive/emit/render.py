@@ -2,7 +2,10 @@
 
 Emitting is a pure function of the spec list: each spec becomes a Program
 (CasADi CSE, SSA temporaries), printers turn it into (lhs, rhs) pairs, and
-jinja2 templates lay them out. Nothing here knows mechanics.
+jinja2 templates lay them out. Nothing here knows mechanics. Algorithms that are not one
+expression graph (IK's solver, the singular values) are fixed support files under
+templates/c/support/ and templates/python/support/, copied verbatim into each robot's
+output (listed under "support" in its manifest.json); templates only lay out the calls.
 """
 
 from __future__ import annotations
@@ -18,6 +21,7 @@ from ..spec import FunctionSpec, TemplateFunction
 from .printers import CPrinter, PythonPrinter, _float_literal
 
 TEMPLATES = Path(__file__).resolve().parent.parent.parent / "templates"
+SUPPORT = {"c": "c/support", "python": "python/support"}  # fixed, robot-independent sources, copied verbatim
 MATH_FUNCTIONS = [("SIN", "sin"), ("COS", "cos"), ("TAN", "tan"), ("SQRT", "sqrt"), ("EXP", "exp"),
                   ("LOG", "log"), ("FABS", "fabs"), ("ASIN", "asin"), ("ACOS", "acos"), ("ATAN", "atan"),
                   ("TANH", "tanh"), ("POW", "pow"), ("ATAN2", "atan2"), ("FMIN", "fmin"), ("FMAX", "fmax")]
@@ -95,13 +99,19 @@ def template_context(t: TemplateFunction) -> dict:
         "header": f"{t.name}.h", "source": f"{t.name}.c",
         "args": [f"const DERIVE_REAL *{n}" for n in in_names] + [f"DERIVE_REAL *{n}" for n in out_names],
         "call_headers": [f"{c}.h" for c in t.calls], "calls": list(t.calls),
-        "p_arg": ", p" if "p" in in_names else "",
+        "p_arg": ", p" if "p" in in_names else "", "has_p": "p" in in_names,
+        "support_headers": list(t.c_support), "py_support": list(t.py_support),
         "py_args": [n if n != "p" else "p=DEFAULT_P" for n in in_names],
         "c_template": t.c_template, "py_template": t.py_template,
         "inputs": [{"name": n, "shape": list(s)} for n, s in t.inputs],
         "outputs": [{"name": n, "shape": list(s)} for n, s in t.outputs],
         **dict(t.context),
     }
+
+
+def _support_text(language: str, name: str) -> str:
+    """A support file's text, to be copied verbatim (its final newline is the template's)."""
+    return (TEMPLATES / SUPPORT[language] / name).read_text().rstrip("\n")
 
 
 def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,
@@ -121,6 +131,12 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
     base = {"robot": robot.name, "model_hash": model_hash, "joints": joints, "nq": robot.nq, "nv": robot.nv,
             "np": len(params), "parameters": params, "prefix": robot.name.upper()}
     files["c/derive_real.h"] = env.get_template("c/derive_real.h.jinja").render(functions=MATH_FUNCTIONS)
+    c_support = sorted({name for f in functions for name in f.get("support_headers", ())})
+    py_support = [{"source": f"templates/{SUPPORT['python']}/{name}", "text": _support_text("python", name)}
+                  for name in sorted({name for f in functions for name in f.get("py_support", ())})]
+    for name in c_support:
+        files[f"c/{name}"] = env.get_template("c/support.jinja").render(
+            source=f"templates/{SUPPORT['c']}/{name}", text=_support_text("c", name))
     for f in functions:
         guard = f"{f['name'].upper()}_H"
         files[f"c/{f['header']}"] = env.get_template(f.get("h_template") or "c/function.h.jinja").render(
@@ -128,7 +144,8 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         files[f"c/{f['source']}"] = env.get_template(f.get("c_template") or "c/function.c.jinja").render(base, f=f)
     files[f"c/{robot.name}.h"] = env.get_template("c/robot.h.jinja").render(
         base, guard=f"{robot.name.upper()}_DERIVE_H", headers=[f["header"] for f in functions])
-    files[f"python/{robot.name}.py"] = env.get_template("python/module.py.jinja").render(base, functions=functions)
+    files[f"python/{robot.name}.py"] = env.get_template("python/module.py.jinja").render(
+        base, functions=functions, support=py_support)
     manifest = {
         "robot": robot.name,
         "model_hash": model_hash,
@@ -138,6 +155,8 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
                     "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
         "frames": [fr.name for fr in robot.frames],
         "parameters": [{"name": p.name, "default": p.default} for p in robot.parameters],
+        "support": [{"file": f"c/{name}", "source": f"templates/{SUPPORT['c']}/{name}"} for name in c_support]
+        + [{"file": f"python/{robot.name}.py", "source": section["source"]} for section in py_support],
         "functions": [{
             "name": f["name"], "quantity": f["quantity"], "frame": f["frame"],
             "inputs": f["inputs"], "outputs": f["outputs"],

@@ -24,6 +24,112 @@ def _vector(value, n, name):
     return v.tolist()
 
 
+# ---- templates/python/support/ik.py: the same in every generated module ----
+# Levenberg-Marquardt inverse kinematics over n joints (as derive.ik, method "lm", and the C
+# derive_ik.h): the same in every generated module, which passes its limits, caps and
+# fk_jacobian. Copied verbatim after the module's imports (math, numpy as np).
+
+
+def _so3_log(R):
+    """w = log(R) (3): angle * axis, the angle from atan2 (exact near 0 and pi)."""
+    v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    c = 0.5 * (np.trace(R) - 1.0)
+    s = math.sqrt(v @ v)
+    if s >= 1e-9:
+        return math.atan2(s, c) / s * v
+    if c > 0.0:
+        return v
+    k = int(np.argmax(np.diag(R)))   # angle ~ pi: the axis from the largest column of (R + I) / 2
+    col = 0.5 * (R[:, k] + np.eye(3)[:, k])
+    return math.pi * col / math.sqrt(max(0.5 * (R[k, k] + 1.0), 1e-30))
+
+
+def _ik_lm(fk_jacobian, T, q0, w, *, lower, upper, sample_lower, sample_upper, max_iterations, attempt,
+           tol_position, tol_rotation, lambda0, lambda_min, lambda_stall):
+    """(q, residual, status) with fk_jacobian(q) = (world_T_frame (4x4), J) reaching T: status 0
+    solved, 1 not converged (q the best found), 2 bad input (q mid-range)."""
+    n = lower.size
+    mid = 0.5 * (sample_lower + sample_upper)
+    T = np.asarray(T, dtype=float).reshape(4, 4)
+    w = np.ones(6) if w is None else np.asarray(w, dtype=float).reshape(6)
+    qc = mid if q0 is None else np.clip(np.asarray(q0, dtype=float).reshape(n), lower, upper)
+    if not (np.isfinite(T).all() and np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0 and np.isfinite(qc).all()):
+        return mid, np.full(2, np.inf), 2
+
+    def error(Tq):
+        e = np.concatenate([T[:3, 3] - Tq[:3, 3], _so3_log(T[:3, :3] @ Tq[:3, :3].T)])
+        return e, 0.5 * float(w @ (e * e))
+
+    def fk_j(q):
+        Tq, J = fk_jacobian(q)
+        return Tq, np.reshape(J, (6, n))
+
+    def norms(e):
+        return np.array([math.sqrt(float(np.sum(e[:3][w[:3] > 0] ** 2))), math.sqrt(float(np.sum(e[3:][w[3:] > 0] ** 2)))])
+
+    Tq, J = fk_j(qc)
+    ec, E = error(Tq)
+    qbest, ebest, Ebest = qc, ec, E
+    lam, tries, status, seed = lambda0, 0, 1, 2463534242
+    for _ in range(max_iterations):
+        r = norms(ec)
+        if r[0] < tol_position and r[1] < tol_rotation:
+            qbest, ebest, status = qc, ec, 0
+            break
+        if tries >= attempt or lam > lambda_stall:  # stalled: restart
+            qc = np.empty(n)
+            for i in range(n):
+                seed ^= (seed << 13) & 0xFFFFFFFF
+                seed ^= seed >> 17
+                seed ^= (seed << 5) & 0xFFFFFFFF
+                qc[i] = sample_lower[i] + (sample_upper[i] - sample_lower[i]) * (seed >> 8) * 5.9604644775390625e-08
+            Tq, J = fk_j(qc)
+            ec, E = error(Tq)
+            lam, tries = lambda0, 0
+            continue
+        tries += 1
+        A0 = J.T @ (w[:, None] * J)
+        g = J.T @ (w * ec)
+        A = A0 + lam * np.eye(n)
+        try:
+            L = np.linalg.cholesky(A)
+            dq = np.linalg.solve(L.T, np.linalg.solve(L, g))
+            step = qc + dq
+            held = (step < lower) | (step > upper)  # joints pushed past a limit are held on it
+            if held.any():
+                d = np.where(held, np.clip(step, lower, upper) - qc, 0.0)
+                free = ~held
+                dq = d.copy()
+                dq[free] = np.linalg.solve(A[np.ix_(free, free)], (g - A @ d)[free]) if free.any() else dq[free]
+        except np.linalg.LinAlgError:  # not positive definite in this precision: damp more
+            lam *= 10.0
+            continue
+        qt = np.clip(qc + dq, lower, upper)
+        Tt, Jt = fk_j(qt)
+        et, Et = error(Tt)
+        if Et < E:
+            qc, J, ec, E = qt, Jt, et, Et
+            lam = max(lam * 0.1, lambda_min)
+            if E < Ebest:
+                qbest, ebest, Ebest = qc, ec, E
+        else:
+            lam = min(lam * 10.0, 1e10)
+    return qbest, norms(ebest), status
+
+
+# ---- templates/python/support/manipulability.py: the same in every generated module ----
+# Manipulability (lecture eq. 30) of task rows of a Jacobian: the same in every generated
+# module. Copied verbatim after the module's imports (math, numpy as np).
+
+
+def _manipulability(J):
+    """mu = [mu1, mu2, mu3] of the task rows J (k x nv) from its singular values s:
+    mu1 = smax / smin (inf at a singularity), mu2 = mu1^2, mu3 = prod s = sqrt(det(J J^T))."""
+    s = np.linalg.svd(J, compute_uv=False)
+    mu1 = s[0] / s[-1] if s[-1] > 0.0 else math.inf
+    return np.array([mu1, mu1 * mu1, float(np.prod(s))])
+
+
 def fk_tcp(q):
     """world_T_tcp: 4x4 homogeneous transform of frame 'tcp' in the world (root) frame, row-major.
 
@@ -474,88 +580,14 @@ def ik_tcp(T, q0=None, w=None):
     out residual [2]
     cost: the arithmetic of cartpole_fk_jacobian_tcp per call, plus loops
     """
-    lower = np.array([-2.0, -1e+30])
-    upper = np.array([2.0, 1e+30])
-    sample_lower = np.array([-2.0, -3.141592653589793])
-    sample_upper = np.array([2.0, 3.141592653589793])
-    mid = 0.5 * (sample_lower + sample_upper)
-    T = np.asarray(T, dtype=float).reshape(4, 4)
-    w = np.ones(6) if w is None else np.asarray(w, dtype=float).reshape(6)
-    qc = mid if q0 is None else np.clip(np.asarray(q0, dtype=float).reshape(2), lower, upper)
-    if not (np.isfinite(T).all() and np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0 and np.isfinite(qc).all()):
-        return mid, np.full(2, np.inf), 2
-
-    def error(Tq):
-        R = T[:3, :3] @ Tq[:3, :3].T
-        v = 0.5 * np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
-        c = 0.5 * (np.trace(R) - 1.0)
-        s = math.sqrt(v @ v)
-        if s >= 1e-9:
-            rot = math.atan2(s, c) / s * v
-        elif c > 0.0:
-            rot = v
-        else:
-            k = int(np.argmax(np.diag(R)))
-            col = 0.5 * (R[:, k] + np.eye(3)[:, k])
-            rot = math.pi * col / math.sqrt(max(0.5 * (R[k, k] + 1.0), 1e-30))
-        e = np.concatenate([T[:3, 3] - Tq[:3, 3], rot])
-        return e, 0.5 * float(w @ (e * e))
-
-    def fk_jacobian(q):
-        Tq, J = fk_jacobian_tcp(q)
-        return Tq, np.reshape(J, (6, 2))
-
-    def norms(e):
-        return np.array([math.sqrt(float(np.sum(e[:3][w[:3] > 0] ** 2))), math.sqrt(float(np.sum(e[3:][w[3:] > 0] ** 2)))])
-
-    Tq, J = fk_jacobian(qc)
-    ec, E = error(Tq)
-    qbest, ebest, Ebest = qc, ec, E
-    lam, attempt, status, seed = 0.01, 0, 1, 2463534242
-    for _ in range(5000):
-        r = norms(ec)
-        if r[0] < 1e-05 and r[1] < 0.0001:
-            qbest, ebest, status = qc, ec, 0
-            break
-        if attempt >= 30 or lam > 100000.0:  # stalled: restart
-            qc = np.empty(2)
-            for i in range(2):
-                seed ^= (seed << 13) & 0xFFFFFFFF
-                seed ^= seed >> 17
-                seed ^= (seed << 5) & 0xFFFFFFFF
-                qc[i] = sample_lower[i] + (sample_upper[i] - sample_lower[i]) * (seed >> 8) * 5.9604644775390625e-08
-            Tq, J = fk_jacobian(qc)
-            ec, E = error(Tq)
-            lam, attempt = 0.01, 0
-            continue
-        attempt += 1
-        A0 = J.T @ (w[:, None] * J)
-        g = J.T @ (w * ec)
-        A = A0 + lam * np.eye(2)
-        try:
-            L = np.linalg.cholesky(A)
-            dq = np.linalg.solve(L.T, np.linalg.solve(L, g))
-            step = qc + dq
-            held = (step < lower) | (step > upper)  # joints pushed past a limit are held on it
-            if held.any():
-                d = np.where(held, np.clip(step, lower, upper) - qc, 0.0)
-                free = ~held
-                dq = d.copy()
-                dq[free] = np.linalg.solve(A[np.ix_(free, free)], (g - A @ d)[free]) if free.any() else dq[free]
-        except np.linalg.LinAlgError:  # not positive definite in this precision: damp more
-            lam *= 10.0
-            continue
-        qt = np.clip(qc + dq, lower, upper)
-        Tt, Jt = fk_jacobian(qt)
-        et, Et = error(Tt)
-        if Et < E:
-            qc, J, ec, E = qt, Jt, et, Et
-            lam = max(lam * 0.1, 1e-09)
-            if E < Ebest:
-                qbest, ebest, Ebest = qc, ec, E
-        else:
-            lam = min(lam * 10.0, 1e10)
-    return qbest, norms(ebest), status
+    return _ik_lm(lambda q: fk_jacobian_tcp(q), T, q0, w,
+                  lower=np.array([-2.0, -1e+30]),
+                  upper=np.array([2.0, 1e+30]),
+                  sample_lower=np.array([-2.0, -3.141592653589793]),
+                  sample_upper=np.array([2.0, 3.141592653589793]),
+                  max_iterations=5000, attempt=30, tol_position=1e-05,
+                  tol_rotation=0.0001, lambda0=0.01, lambda_min=1e-09,
+                  lambda_stall=100000.0)
 
 
 def manipulability_tcp(q):
@@ -565,7 +597,4 @@ def manipulability_tcp(q):
     out mu [3]
     cost: the arithmetic of cartpole_jacobian_tcp per call, plus loops
     """
-    J = np.asarray(jacobian_tcp(q))[[0, 2], :]
-    s = np.linalg.svd(J, compute_uv=False)
-    mu1 = s[0] / s[-1] if s[-1] > 0.0 else math.inf
-    return np.array([mu1, mu1 * mu1, float(np.prod(s))])
+    return _manipulability(np.asarray(jacobian_tcp(q))[[0, 2], :])

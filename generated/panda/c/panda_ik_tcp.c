@@ -4,87 +4,21 @@
  */
 #include "panda_ik_tcp.h"
 #include "panda_fk_jacobian_tcp.h"
+#include "derive_linalg.h"
+#include "derive_ik.h"
+
+/* panda_fk_jacobian_tcp in the form derive_ik_lm calls (derive_ik.h). */
+static void panda_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+{
+    (void)p;
+    panda_fk_jacobian_tcp(q, T, J);
+}
 
 /*
  * Levenberg-Marquardt with joint limits and seeded random restarts (as derive.ik, method "lm"):
- * e = [p_target - p; log(R_target R^T)], E = 1/2 sum w_i e_i^2, step (J^T W J + lambda I) dq = J^T W e
- * by LDL^T; joints pushed past a limit are held on it and the rest re-solved; a step is taken if
- * E decreases (lambda / 10), else lambda * 10; an attempt that stalls restarts from q drawn
- * uniformly within the limits. Everything lives on the stack: 317 reals.
+ * derive_ik_lm of derive_ik.h on this robot's limits and panda_fk_jacobian_tcp. Everything lives on the
+ * stack: the limits, the work buffer and derive_ik_lm's locals.
  */
-
-/* e (6) of the pose T (4x4) against the target Tt; returns E. */
-static DERIVE_REAL panda_ik_tcp_error(const DERIVE_REAL *T, const DERIVE_REAL *Tt, const DERIVE_REAL *w,
-                                      DERIVE_REAL *e)
-{
-    DERIVE_REAL R[9], v[3], c, s, E = DERIVE_LIT(0.0);
-    int i, j, k;
-    for (i = 0; i < 3; ++i) {
-        for (j = 0; j < 3; ++j) { /* R = Rt R^T */
-            R[3 * i + j] = DERIVE_LIT(0.0);
-            for (k = 0; k < 3; ++k) R[3 * i + j] += Tt[4 * i + k] * T[4 * j + k];
-        }
-        e[i] = Tt[4 * i + 3] - T[4 * i + 3];
-    }
-    v[0] = DERIVE_LIT(0.5) * (R[7] - R[5]);
-    v[1] = DERIVE_LIT(0.5) * (R[2] - R[6]);
-    v[2] = DERIVE_LIT(0.5) * (R[3] - R[1]);
-    c = DERIVE_LIT(0.5) * (R[0] + R[4] + R[8] - DERIVE_LIT(1.0));
-    s = DERIVE_SQRT(v[0] * v[0] + v[1] * v[1] + v[2] * v[2]);
-    if (s >= DERIVE_LIT(1e-9)) { /* log map: angle / sin(angle) * v */
-        const DERIVE_REAL f = DERIVE_ATAN2(s, c) / s;
-        for (i = 0; i < 3; ++i) e[3 + i] = f * v[i];
-    } else if (c > DERIVE_LIT(0.0)) { /* angle ~ 0 */
-        for (i = 0; i < 3; ++i) e[3 + i] = v[i];
-    } else { /* angle ~ pi: axis from the largest column of (R + I) / 2 */
-        k = (R[0] >= R[4] && R[0] >= R[8]) ? 0 : (R[4] >= R[8] ? 1 : 2);
-        s = DERIVE_SQRT(DERIVE_FMAX(DERIVE_LIT(0.5) * (R[4 * k] + DERIVE_LIT(1.0)), DERIVE_LIT(1e-30)));
-        for (i = 0; i < 3; ++i) {
-            e[3 + i] = DERIVE_LIT(3.141592653589793) * DERIVE_LIT(0.5) * (R[3 * i + k] + (i == k ? DERIVE_LIT(1.0) : DERIVE_LIT(0.0))) / s;
-        }
-    }
-    for (i = 0; i < 6; ++i) E += DERIVE_LIT(0.5) * w[i] * e[i] * e[i];
-    return E;
-}
-
-/* position and rotation error: norms of the weighted rows of e */
-static void panda_ik_tcp_norms(const DERIVE_REAL *e, const DERIVE_REAL *w, DERIVE_REAL *residual)
-{
-    DERIVE_REAL a = DERIVE_LIT(0.0), b = DERIVE_LIT(0.0);
-    int i;
-    for (i = 0; i < 3; ++i) {
-        if (w[i] > DERIVE_LIT(0.0)) a += e[i] * e[i];
-        if (w[3 + i] > DERIVE_LIT(0.0)) b += e[3 + i] * e[3 + i];
-    }
-    residual[0] = DERIVE_SQRT(a);
-    residual[1] = DERIVE_SQRT(b);
-}
-
-/* A x = b for symmetric positive definite A (7x7) by LDL^T in place; 0 if a pivot is not positive. */
-static int panda_ik_tcp_solve(DERIVE_REAL *A, DERIVE_REAL *b)
-{
-    int i, j, k;
-    for (j = 0; j < 7; ++j) {
-        DERIVE_REAL d = A[7 * j + j];
-        for (k = 0; k < j; ++k) d -= A[7 * j + k] * A[7 * j + k] * A[7 * k + k];
-        if (!(d > DERIVE_LIT(0.0))) return 0;
-        A[7 * j + j] = d;
-        for (i = j + 1; i < 7; ++i) {
-            DERIVE_REAL s = A[7 * i + j];
-            for (k = 0; k < j; ++k) s -= A[7 * i + k] * A[7 * j + k] * A[7 * k + k];
-            A[7 * i + j] = s / d;
-        }
-    }
-    for (i = 0; i < 7; ++i) {
-        for (k = 0; k < i; ++k) b[i] -= A[7 * i + k] * b[k];
-    }
-    for (i = 0; i < 7; ++i) b[i] /= A[7 * i + i];
-    for (i = 7 - 1; i >= 0; --i) {
-        for (k = i + 1; k < 7; ++k) b[i] -= A[7 * k + i] * b[k];
-    }
-    return 1;
-}
-
 int panda_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
 {
     /* cost: the arithmetic of panda_fk_jacobian_tcp per call, plus loops */
@@ -92,121 +26,20 @@ int panda_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL 
     const DERIVE_REAL upper[7] = { DERIVE_LIT(2.8973), DERIVE_LIT(1.7628), DERIVE_LIT(2.8973), DERIVE_LIT(-0.0698), DERIVE_LIT(2.8973), DERIVE_LIT(3.7525), DERIVE_LIT(2.8973) };
     const DERIVE_REAL sample_lower[7] = { DERIVE_LIT(-2.8973), DERIVE_LIT(-1.7628), DERIVE_LIT(-2.8973), DERIVE_LIT(-3.0718), DERIVE_LIT(-2.8973), DERIVE_LIT(-0.0175), DERIVE_LIT(-2.8973) };
     const DERIVE_REAL sample_upper[7] = { DERIVE_LIT(2.8973), DERIVE_LIT(1.7628), DERIVE_LIT(2.8973), DERIVE_LIT(-0.0698), DERIVE_LIT(2.8973), DERIVE_LIT(3.7525), DERIVE_LIT(2.8973) };
-    DERIVE_REAL wt[6], qc[7], qt[7], qbest[7], dq[7], g[7], d[7];
-    DERIVE_REAL Tc[16], Tt[16], Jc[42], Jt[42], ec[6], et[6], ebest[6], r[2];
-    DERIVE_REAL A0[49], A[49], held[7];
-    DERIVE_REAL E, Et, Ebest, lambda = DERIVE_LIT(0.01);
-    unsigned long seed = 2463534242UL; /* xorshift32 state: restarts are the same at every call */
-    int i, j, k, it, attempt = 0, any_held, status = DERIVE_IK_NOT_CONVERGED;
-
-    for (i = 0; i < 6; ++i) wt[i] = w ? w[i] : DERIVE_LIT(1.0);
-    for (i = 0; i < 7; ++i) { /* start: q0 clipped into the limits, or mid-range */
-        qc[i] = q0 ? q0[i] : DERIVE_LIT(0.5) * (sample_lower[i] + sample_upper[i]);
-        qc[i] = DERIVE_FMIN(DERIVE_FMAX(qc[i], lower[i]), upper[i]);
-        q[i] = qc[i];
-    }
-    for (i = 0, k = 1; i < 16; ++i) k = k && T[i] - T[i] == DERIVE_LIT(0.0);
-    for (i = 0, E = DERIVE_LIT(0.0); i < 6; ++i) {
-        k = k && wt[i] >= DERIVE_LIT(0.0) && wt[i] - wt[i] == DERIVE_LIT(0.0);
-        E += wt[i];
-    }
-    k = k && E > DERIVE_LIT(0.0);
-    for (i = 0; i < 7; ++i) k = k && qc[i] - qc[i] == DERIVE_LIT(0.0);
-    if (!k) { /* NaN or infinity, a negative weight, or all weights zero */
-        for (i = 0; i < 7; ++i) q[i] = DERIVE_LIT(0.5) * (sample_lower[i] + sample_upper[i]);
-        residual[0] = residual[1] = (DERIVE_REAL)HUGE_VAL;
-        return DERIVE_IK_BAD_INPUT;
-    }
-    panda_fk_jacobian_tcp(qc, Tc, Jc);
-    E = panda_ik_tcp_error(Tc, T, wt, ec);
-    Ebest = E;
-    for (i = 0; i < 7; ++i) qbest[i] = qc[i];
-    for (i = 0; i < 6; ++i) ebest[i] = ec[i];
-
-    for (it = 0; it < PANDA_IK_TCP_MAX_ITERATIONS; ++it) {
-        panda_ik_tcp_norms(ec, wt, r);
-        if (r[0] < PANDA_IK_TCP_TOL_POSITION && r[1] < PANDA_IK_TCP_TOL_ROTATION) {
-            for (i = 0; i < 7; ++i) qbest[i] = qc[i];
-            for (i = 0; i < 6; ++i) ebest[i] = ec[i];
-            status = DERIVE_IK_SUCCESS;
-            break;
-        }
-        if (attempt >= 30 || lambda > DERIVE_LIT(100000.0)) { /* stalled: restart */
-            for (i = 0; i < 7; ++i) {
-                seed ^= (seed << 13) & 0xFFFFFFFFUL;
-                seed ^= seed >> 17;
-                seed ^= (seed << 5) & 0xFFFFFFFFUL;
-                qc[i] = sample_lower[i] + (sample_upper[i] - sample_lower[i])
-                        * (DERIVE_REAL)(seed >> 8) * DERIVE_LIT(5.9604644775390625e-08);
-            }
-            panda_fk_jacobian_tcp(qc, Tc, Jc);
-            E = panda_ik_tcp_error(Tc, T, wt, ec);
-            lambda = DERIVE_LIT(0.01);
-            attempt = 0;
-            continue;
-        }
-        ++attempt;
-        /* A0 = J^T W J, g = J^T W e */
-        for (i = 0; i < 7; ++i) {
-            g[i] = DERIVE_LIT(0.0);
-            for (k = 0; k < 6; ++k) g[i] += Jc[7 * k + i] * wt[k] * ec[k];
-            for (j = 0; j <= i; ++j) {
-                DERIVE_REAL s = DERIVE_LIT(0.0);
-                for (k = 0; k < 6; ++k) s += Jc[7 * k + i] * wt[k] * Jc[7 * k + j];
-                A0[7 * i + j] = s;
-                A0[7 * j + i] = s;
-            }
-        }
-        for (i = 0; i < 49; ++i) A[i] = A0[i];
-        for (i = 0; i < 7; ++i) {
-            A[7 * i + i] += lambda;
-            dq[i] = g[i];
-        }
-        k = panda_ik_tcp_solve(A, dq);
-        any_held = 0;
-        for (i = 0; k && i < 7; ++i) { /* joints the step pushes past a limit are held on it */
-            const DERIVE_REAL qi = qc[i] + dq[i];
-            held[i] = (qi < lower[i] || qi > upper[i]) ? DERIVE_LIT(1.0) : DERIVE_LIT(0.0);
-            d[i] = held[i] * (DERIVE_FMIN(DERIVE_FMAX(qi, lower[i]), upper[i]) - qc[i]);
-            any_held = any_held || held[i] > DERIVE_LIT(0.0);
-        }
-        if (k && any_held) { /* re-solve for the free joints */
-            for (i = 0; i < 7; ++i) {
-                dq[i] = g[i];
-                for (j = 0; j < 7; ++j) {
-                    dq[i] -= (A0[7 * i + j] + (i == j ? lambda : DERIVE_LIT(0.0))) * d[j];
-                    A[7 * i + j] = (held[i] > DERIVE_LIT(0.0) || held[j] > DERIVE_LIT(0.0))
-                        ? (i == j ? DERIVE_LIT(1.0) : DERIVE_LIT(0.0))
-                        : A0[7 * i + j] + (i == j ? lambda : DERIVE_LIT(0.0));
-                }
-                if (held[i] > DERIVE_LIT(0.0)) dq[i] = d[i];
-            }
-            k = panda_ik_tcp_solve(A, dq);
-        }
-        if (!k) { /* not positive definite in this precision: damp more */
-            lambda *= DERIVE_LIT(10.0);
-            continue;
-        }
-        for (i = 0; i < 7; ++i) qt[i] = DERIVE_FMIN(DERIVE_FMAX(qc[i] + dq[i], lower[i]), upper[i]);
-        panda_fk_jacobian_tcp(qt, Tt, Jt);
-        Et = panda_ik_tcp_error(Tt, T, wt, et);
-        if (Et < E) { /* accept */
-            E = Et;
-            for (i = 0; i < 7; ++i) qc[i] = qt[i];
-            for (i = 0; i < 16; ++i) Tc[i] = Tt[i];
-            for (i = 0; i < 42; ++i) Jc[i] = Jt[i];
-            for (i = 0; i < 6; ++i) ec[i] = et[i];
-            lambda = DERIVE_FMAX(lambda * DERIVE_LIT(0.1), PANDA_IK_TCP_LAMBDA_MIN);
-            if (E < Ebest) {
-                Ebest = E;
-                for (i = 0; i < 7; ++i) qbest[i] = qc[i];
-                for (i = 0; i < 6; ++i) ebest[i] = ec[i];
-            }
-        } else {
-            lambda = DERIVE_FMIN(lambda * DERIVE_LIT(10.0), DERIVE_LIT(1e10));
-        }
-    }
-    for (i = 0; i < 7; ++i) q[i] = qbest[i];
-    panda_ik_tcp_norms(ebest, wt, residual);
-    return status;
+    DERIVE_REAL work[DERIVE_IK_WORK_REALS(7)];
+    derive_ik_problem problem;
+    problem.max_iterations = PANDA_IK_TCP_MAX_ITERATIONS;
+    problem.max_attempt = 30;
+    problem.tol_position = PANDA_IK_TCP_TOL_POSITION;
+    problem.tol_rotation = PANDA_IK_TCP_TOL_ROTATION;
+    problem.lambda0 = DERIVE_LIT(0.01);
+    problem.lambda_min = PANDA_IK_TCP_LAMBDA_MIN;
+    problem.lambda_stall = DERIVE_LIT(100000.0);
+    problem.lower = lower;
+    problem.upper = upper;
+    problem.sample_lower = sample_lower;
+    problem.sample_upper = sample_upper;
+    problem.fk_jacobian = panda_ik_tcp_fk_jacobian;
+    problem.p = 0;
+    return derive_ik_lm(7, &problem, work, T, q0, w, q, residual);
 }

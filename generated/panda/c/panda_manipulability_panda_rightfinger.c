@@ -4,66 +4,15 @@
  */
 #include "panda_manipulability_panda_rightfinger.h"
 #include "panda_jacobian_panda_rightfinger.h"
+#include "derive_linalg.h"
+#include "derive_manipulability.h"
 
 void panda_manipulability_panda_rightfinger(const DERIVE_REAL *q, DERIVE_REAL *mu)
 {
     /* cost: the arithmetic of panda_jacobian_panda_rightfinger per call, plus loops */
-    /*
-     * Singular values s_i of the 3x7 task rows B of the Jacobian by one-sided Jacobi
-     * (Hestenes): rotate pairs of rows of B until all are orthogonal; the row norms are then
-     * the s_i = sqrt(l_i), l_i the eigenvalues of B B^T, with high relative accuracy.
-     */
-#ifdef DERIVE_FLOAT
-    const DERIVE_REAL tol = DERIVE_LIT(1e-7);
-#else
-    const DERIVE_REAL tol = DERIVE_LIT(1e-15);
-#endif
-    DERIVE_REAL J[42], B[3][7];
-    DERIVE_REAL smax = DERIVE_LIT(0.0), smin = DERIVE_LIT(0.0), prod = DERIVE_LIT(1.0);
-    int i, j, c, sweep, rotated;
+    /* mu from the singular values of the 3x7 task rows of the Jacobian (derive_manipulability.h) */
+    const int rows[3] = { 0, 1, 2 };
+    DERIVE_REAL J[42], B[21], s[3];
     panda_jacobian_panda_rightfinger(q, J);
-    for (c = 0; c < 7; ++c) {
-        B[0][c] = J[0 + c];
-        B[1][c] = J[7 + c];
-        B[2][c] = J[14 + c];
-    }
-    for (sweep = 0; sweep < 60; ++sweep) {
-        rotated = 0;
-        for (i = 0; i < 3 - 1; ++i) {
-            for (j = i + 1; j < 3; ++j) {
-                DERIVE_REAL a = DERIVE_LIT(0.0), b = DERIVE_LIT(0.0), g = DERIVE_LIT(0.0), zeta, t, cs, sn;
-                for (c = 0; c < 7; ++c) {
-                    a += B[i][c] * B[i][c];
-                    b += B[j][c] * B[j][c];
-                    g += B[i][c] * B[j][c];
-                }
-                if (DERIVE_FABS(g) <= tol * DERIVE_SQRT(a * b)) continue;
-                /* t = tan of the angle that makes rows i and j orthogonal, the smaller root */
-                zeta = (b - a) / (DERIVE_LIT(2.0) * g);
-                t = (zeta >= DERIVE_LIT(0.0) ? DERIVE_LIT(1.0) : DERIVE_LIT(-1.0))
-                    / (DERIVE_FABS(zeta) + DERIVE_SQRT(DERIVE_LIT(1.0) + zeta * zeta));
-                cs = DERIVE_LIT(1.0) / DERIVE_SQRT(DERIVE_LIT(1.0) + t * t);
-                sn = cs * t;
-                if (sn == DERIVE_LIT(0.0)) continue; /* below rounding: nothing left to rotate */
-                rotated = 1;
-                for (c = 0; c < 7; ++c) {
-                    const DERIVE_REAL x = B[i][c], y = B[j][c];
-                    B[i][c] = cs * x - sn * y;
-                    B[j][c] = sn * x + cs * y;
-                }
-            }
-        }
-        if (!rotated) break;
-    }
-    for (i = 0; i < 3; ++i) {
-        DERIVE_REAL s = DERIVE_LIT(0.0);
-        for (c = 0; c < 7; ++c) s += B[i][c] * B[i][c];
-        s = DERIVE_SQRT(s);
-        if (i == 0 || s > smax) smax = s;
-        if (i == 0 || s < smin) smin = s;
-        prod *= s;
-    }
-    mu[0] = smax / smin; /* +inf at a singularity (IEEE division) */
-    mu[1] = mu[0] * mu[0];
-    mu[2] = prod;
+    derive_manipulability(3, 7, rows, J, B, s, mu);
 }

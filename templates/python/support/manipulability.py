@@ -1,0 +1,10 @@
+# Manipulability (lecture eq. 30) of task rows of a Jacobian: the same in every generated
+# module. Copied verbatim after the module's imports (math, numpy as np).
+
+
+def _manipulability(J):
+    """mu = [mu1, mu2, mu3] of the task rows J (k x nv) from its singular values s:
+    mu1 = smax / smin (inf at a singularity), mu2 = mu1^2, mu3 = prod s = sqrt(det(J J^T))."""
+    s = np.linalg.svd(J, compute_uv=False)
+    mu1 = s[0] / s[-1] if s[-1] > 0.0 else math.inf
+    return np.array([mu1, mu1 * mu1, float(np.prod(s))])
