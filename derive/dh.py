@@ -14,7 +14,7 @@ therefore given in DH frame i.
 
 from __future__ import annotations
 
-from typing import Any, Mapping
+from typing import Any
 
 from .model import Joint, Limits, Link, Origin
 

@@ -79,13 +79,8 @@ def pose_error(T: ca.SX, T_target: ca.SX) -> ca.SX:
 def joint_ranges(robot: Robot) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(lower, upper) limits per entry of q (+-inf where missing) and the box restarts draw
     from: the limits, or [-pi, pi] rad / [-1, 1] m where one is missing."""
-    lo, hi, slo, shi = [], [], [], []
-    for c in robot.coordinates:
-        span = np.pi if c.unit == "rad" else 1.0
-        lo.append(-np.inf if c.limits.lower is None else c.limits.lower)
-        hi.append(np.inf if c.limits.upper is None else c.limits.upper)
-        slo.append(-span if c.limits.lower is None else c.limits.lower)
-        shi.append(span if c.limits.upper is None else c.limits.upper)
+    lo, hi = robot.joint_box(np.inf, np.inf)
+    slo, shi = robot.joint_box()
     return np.array(lo), np.array(hi), np.array(slo), np.array(shi)
 
 

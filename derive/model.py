@@ -21,7 +21,7 @@ import keyword
 import math
 import os
 import re
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
@@ -212,6 +212,14 @@ class Robot:
     def coordinates(self) -> tuple[Coordinate, ...]:
         """The entries of q, one per DOF: a joint's coordinates are consecutive, joints in tree order."""
         return tuple(c for j in self.joints for c in j.coordinates)
+
+    def joint_box(self, angle: float = math.pi, length: float = 1.0) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(lower, upper) of each entry of q: its limits, or +-``angle`` (rad) / +-``length`` (m)
+        where a limit is missing (``math.inf`` for an unbounded box)."""
+        coords = self.coordinates
+        lower = tuple(-(angle if c.unit == "rad" else length) if c.limits.lower is None else c.limits.lower for c in coords)
+        upper = tuple((angle if c.unit == "rad" else length) if c.limits.upper is None else c.limits.upper for c in coords)
+        return lower, upper
 
     def gimbal_locked(self, q, tol: float = 1e-6) -> tuple[str, ...]:
         """Names of the spherical joints in gimbal lock at ``q``: |cos(<joint>_y)| <= tol."""

@@ -23,14 +23,12 @@ QUANTITIES = ("fk", "jacobian", "fk_jacobian", "mass_matrix", "coriolis_matrix",
               "forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u")
 
 
-@dataclass(frozen=True)
-class FunctionSpec:
+class _Named:
+    """``<robot>_<quantity>[_<frame>]`` naming shared by every generated function."""
+
     robot: str
     quantity: str
     frame: str | None
-    inputs: tuple[tuple[str, ca.SX], ...]
-    outputs: tuple[tuple[str, ca.SX], ...]
-    doc: str
 
     @property
     def short_name(self) -> str:
@@ -43,7 +41,17 @@ class FunctionSpec:
 
 
 @dataclass(frozen=True)
-class TemplateFunction:
+class FunctionSpec(_Named):
+    robot: str
+    quantity: str
+    frame: str | None
+    inputs: tuple[tuple[str, ca.SX], ...]
+    outputs: tuple[tuple[str, ca.SX], ...]
+    doc: str
+
+
+@dataclass(frozen=True)
+class TemplateFunction(_Named):
     """A generated function whose body is a template (loops, calls), not one expression graph.
 
     ``c_template`` and ``py_template`` are jinja templates under templates/ rendered with
@@ -66,14 +74,6 @@ class TemplateFunction:
     context: tuple[tuple[str, object], ...] = ()  # plain data, as pairs to stay hashable
     c_support: tuple[str, ...] = ()   # files of templates/c/support/ the C source includes (copied verbatim)
     py_support: tuple[str, ...] = ()  # files of templates/python/support/ the Python body calls (inserted verbatim)
-
-    @property
-    def short_name(self) -> str:
-        return self.quantity + (f"_{self.frame}" if self.frame else "")
-
-    @property
-    def name(self) -> str:
-        return f"{self.robot}_{self.short_name}"
 
 
 def template_functions(model: SXModel) -> list[TemplateFunction]:

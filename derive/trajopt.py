@@ -340,7 +340,6 @@ class TrajectoryOptimizer:
             opti.set_value(nlp["T"], duration)
         self._set_guess(nlp, start, goal, B, guess, duration)
         self.log(f"{name}: {method}, N = {intervals}: solving")
-        t1 = time.perf_counter()
         try:
             sol = opti.solve()
         except RuntimeError as exc:  # IPOPT did not converge: judge its last iterate all the same

@@ -14,7 +14,6 @@ Plots are written with matplotlib's Agg canvas (no display needed).
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -29,12 +28,8 @@ AXIS_NAMES = "xyz"
 
 
 def joint_box(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
-    """(lower, upper) of q: the limits of each coordinate, else [-pi, pi] (angles) or [-1, 1] m (lengths)."""
-    lo, hi = [], []
-    for c in robot.coordinates:
-        span = 1.0 if c.unit == "m" else math.pi
-        lo.append(-span if c.limits.lower is None else c.limits.lower)
-        hi.append(span if c.limits.upper is None else c.limits.upper)
+    """(lower, upper) of q as arrays: the limits of each coordinate, else [-pi, pi] (angles) or [-1, 1] m."""
+    lo, hi = robot.joint_box()
     return np.array(lo), np.array(hi)
 
 

@@ -234,6 +234,9 @@ def test_generated_float_c_and_python_ik_and_parameters(generated, tmp_path):
         q_c, res_c, status_c = c_double(T)
         assert status_py == status_c == 0
         assert verified(r, q_py[None], T[None]).all()
+        # the same algorithm in the same order of operations: the same iterate
+        np.testing.assert_allclose(q_py, q_c, rtol=0, atol=1e-9)
+        np.testing.assert_allclose(res_py, res_c, rtol=0, atol=1e-12)
     # a robot with parameters (p last among the inputs): the pendulum's bob, position only
     pendulum = CIk(generated, "pendulum", tmp_path)
     T = np.eye(4)

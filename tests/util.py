@@ -30,13 +30,8 @@ def params(robot: Robot) -> np.ndarray:
 
 def random_q(robot: Robot, rng: np.random.Generator) -> np.ndarray:
     """q uniformly within the joint limits (or [-pi, pi] / [-1, 1] m where a limit is missing)."""
-    out = []
-    for c in robot.coordinates:
-        span = np.pi if c.unit == "rad" else 1.0
-        lo = c.limits.lower if c.limits.lower is not None else -span
-        hi = c.limits.upper if c.limits.upper is not None else span
-        out.append(rng.uniform(lo, hi))
-    return np.array(out)
+    lo, hi = robot.joint_box()
+    return rng.uniform(lo, hi)
 
 
 def states(robot: Robot, seed: int = 0, n: int = N_STATES):
