@@ -55,7 +55,7 @@ def bench_ops(args) -> str:
         o = fn["ops"]
         rows.append(f"| {label} | {o['total']} ({o['mul']}/{o['add']}/{o['div']}/{o['trig']}) | {casadi_ops} | "
                     f"{o['total'] / casadi_ops:.2f} | <= {target} | {'yes' if o['total'] <= target else 'NO'} |")
-    rows += ["", "CasADi-from-Pinocchio counts are TARGETS.md's published figures (pinocchio.casadi is not in",
+    rows += ["", "CasADi-from-Pinocchio counts are ../shared/TARGETS.md's published figures (pinocchio.casadi is not in",
              "the pin wheel here); ops count every +, -, *, /, sqrt and trig call as one."]
     return "\n".join(rows)
 
@@ -191,14 +191,14 @@ def _mechanics_lagrange(n: int) -> float:
 
 def bench_derive(args) -> str:
     rows = ["## Derivation time (whole set: FK, J, M, C, g, ID, FD, ODE and Jacobians, C + Python)", "",
-            "| robot | derive (s) | CSE + print + render (s) | functions | ops |", "|---|---|---|---|---|"]
+            "| robot | derive (s) | CSE + print + render (s) | functions | ops (expression functions) |", "|---|---|---|---|---|"]
     robots = load_models()
     for name in sorted(robots):
         log: list[str] = []
         render(robots[name], "0" * 64, log.append)
         # "  name: derive X s, cse+print+render Y s (N functions, M ops)"
         d, r, nf, ops = re.search(r"derive ([\d.]+) s, cse\+print\+render ([\d.]+) s \((\d+) functions, (\d+) ops",
-                                  log[0]).groups()
+                                  log[0]).groups()  # ops: of the expression functions
         rows.append(f"| {name} | {d} | {r} | {nf} | {ops} |")
     n = 3 if args.quick else 4
     t_me = _mechanics_lagrange(n)
@@ -210,7 +210,7 @@ def bench_derive(args) -> str:
     rows += ["", f"| {n}-link planar pendulum, M + forcing | derive (all functions, SX) | sympy.physics.mechanics Lagrange | ratio |",
              "|---|---|---|---|",
              f"| same run | {t_ours:.3f} s | {t_me:.2f} s | {t_ours / t_me:.4f} |",
-             "", "TARGETS.md: Panda whole set <= 10 s on 2 cores (sympy.physics.mechanics Kane: 27 s for M + forcing)."]
+             "", "../shared/TARGETS.md: Panda whole set <= 10 s on 2 cores (sympy.physics.mechanics Kane: 27 s for M + forcing)."]
     return "\n".join(rows)
 
 

@@ -179,7 +179,7 @@ def bench_ik(args) -> str:
                          f"C / reference {np.median(c_s) / np.median(ref_s):.5f}; the C's status agrees with "
                          f"the reference check on {100 * agree:.2f} % of targets.")
     rows += ["", *notes, "",
-             "Published, not measured here (TARGETS.md): TRAC-IK 1.4.6 99.70 %, 0.38 ms mean (Panda); "
+             "Published, not measured here (../shared/TARGETS.md): TRAC-IK 1.4.6 99.70 %, 0.38 ms mean (Panda); "
              "robotics-toolbox ik_LM (C++) 100 %, 0.088 ms median. Our targets: >= 99.9 %, median <= 1 ms "
              "from Python, <= 0.05 ms in generated C."]
     return "\n".join(rows)

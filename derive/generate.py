@@ -94,10 +94,11 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, st
     def count(spec, prog):
         total_ops[0] += prog.ops()["total"]
 
-    files = render_robot(robot, specs, mhash[:16], progress=count, templates=template_functions(model))
+    templates = template_functions(model)
+    files = render_robot(robot, specs, mhash[:16], progress=count, templates=templates)
     t2 = time.perf_counter()
     log(f"  {robot.name}: derive {t1 - t0:.2f} s, cse+print+render {t2 - t1:.2f} s "
-        f"({len(specs)} functions, {total_ops[0]} ops)")
+        f"({len(specs) + len(templates)} functions, {total_ops[0]} ops in the {len(specs)} expression functions)")
     return files
 
 
