@@ -74,14 +74,36 @@ def cmd_eom(args) -> int:
 
     from .api import load
 
-    m = load(args.robot_name, args.models)
-    print(f"M(q) =\n{sp.pretty(m.mass_matrix)}\n\nC(q, qd) =\n{sp.pretty(m.coriolis_matrix)}\n\n"
-          f"g(q) =\n{sp.pretty(m.gravity_vector)}")
+    m = load(args.robot_name, args.models, method="newton-euler")
+    quantities = {"M(q)": m.mass_matrix, "C(q, qd)": m.coriolis_matrix, "g(q)": m.gravity_vector}
+    if m.nv <= 2:
+        for label, value in quantities.items():
+            print(f"{label} =\n{sp.pretty(value)}\n")
+        return 0
+    # written out, 3+ joints run to megabytes: print with common subexpressions instead
+    subs, reduced = sp.cse(list(quantities.values()), symbols=sp.numbered_symbols("t"), optimizations="basic")
+    print(f"# {m.robot.name}: {len(subs)} common subexpressions t_k, then M, C, g (newton-euler route)")
+    for sym, value in subs:
+        print(f"{sym} = {value}")
+    for label, value in zip(quantities, reduced):
+        print(f"\n{label} =\n{value}")
     return 0
 
 
+class UsageError(DeriveError):
+    """A command line argparse rejects (unknown option, missing or malformed value)."""
+
+
+class ArgumentParser(argparse.ArgumentParser):
+    """argparse, but a bad command line is one line too (not usage + error): exit status 2."""
+
+    def error(self, message: str):
+        command = self.prog.partition(" ")[2]
+        raise UsageError(f"{command + ': ' if command else ''}{message} (see `{self.prog} --help`)")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="derive", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="derive", description=__doc__.splitlines()[0])
     models_help = "models file (default: models.yaml of the project, or $DERIVE_MODELS)"
     parser.add_argument("--models", help=models_help)
     # --models is accepted after the subcommand too: every subparser inherits it
@@ -129,8 +151,8 @@ COMMAND_MODULES: list[str] = ["bench", "grubler", "workspace", "latex", "simulat
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
     try:
+        args = build_parser().parse_args(argv)
         return args.func(args)
     except DeriveError as exc:
         print(f"derive: error: {exc}", file=sys.stderr)
@@ -138,6 +160,11 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("derive: interrupted; generated/ left as it was", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # output piped into `head` and friends: stop quietly
+        import os
+
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return 0
 
 
 if __name__ == "__main__":

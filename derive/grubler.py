@@ -160,15 +160,24 @@ def _check_connected(mech: Mechanism, error) -> None:
         raise error("links", f"link '{loose[0]}' is not connected to the ground '{mech.links[0]}' through the joints")
 
 
-def load_mechanism(path: str | Path) -> Mechanism:
-    path = Path(path)
+def _read_yaml(path: Path) -> Any:
+    """The YAML structure of a file; DeriveError (one line) if unreadable or malformed."""
     try:
-        data = yaml.safe_load(path.read_text())
+        return yaml.safe_load(path.read_text())
     except OSError as exc:
         raise DeriveError(f"mechanism {path}: cannot read ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise DeriveError(f"mechanism {path}: not a text (UTF-8) file") from None
     except yaml.YAMLError as exc:
-        raise DeriveError(f"mechanism {path}: malformed YAML ({str(exc).splitlines()[0]})") from None
-    return parse_mechanism(data, str(path))
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise DeriveError(f"mechanism {path}: malformed YAML{where}: {problem}") from None
+
+
+def load_mechanism(path: str | Path) -> Mechanism:
+    path = Path(path)
+    return parse_mechanism(_read_yaml(path), str(path))
 
 
 def mechanism_from_robot(robot) -> Mechanism:
@@ -212,14 +221,14 @@ def dof_command(args) -> int:
     if path.suffix in (".yaml", ".yml") or path.is_file():
         if not path.is_file():
             raise DeriveError(f"mechanism {target}: no such file")
-        data = yaml.safe_load(path.read_text())
+        data = _read_yaml(path)
         if isinstance(data, Mapping) and "robots" in data:  # a models file: every robot in it
             from .model import load_models
 
             for robot in load_models(path).values():
                 print(report(mechanism_from_robot(robot), robot.nv))
             return 0
-        print(report(load_mechanism(path)))
+        print(report(parse_mechanism(data, str(path))))
         return 0
     from .model import load_robot
 

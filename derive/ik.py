@@ -268,7 +268,7 @@ def solve_ik(model, target, q0=None, frame: str = "tcp", *, weights=None, method
     if method not in ("auto", "lm", "opti"):
         raise DeriveError(f"solve_ik: method must be 'auto', 'lm' or 'opti', got {method!r}")
     lo, hi = prob.lower, prob.upper
-    mid = np.where(np.isfinite(lo + hi), 0.5 * (lo + hi), np.clip(0.0, lo, hi))
+    mid = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (np.where(np.isfinite(lo), lo, 0.0) + np.where(np.isfinite(hi), hi, 0.0)), np.clip(0.0, lo, hi))
     q = mid if q0 is None else np.asarray(q0, dtype=float).reshape(-1)
     if q.shape != (n,) or not np.isfinite(q).all():
         raise DeriveError(f"robot '{robot.name}': q0 must be {n} finite numbers")
@@ -399,6 +399,7 @@ def cmd_ik(args) -> int:
     from .spatial import rpy
 
     robot = load_robot(args.robot_name, args.models)
+    if not (np.isfinite(args.timeout) and args.timeout > 0): raise DeriveError(f"robot '{robot.name}': --timeout must be a finite number of seconds > 0, got {args.timeout:g}")  # noqa: E701
     if args.rpy is None and args.weights is None:
         target, what = np.array(args.xyz), "position"
     else:

@@ -395,6 +395,9 @@ def compile_pdf(tex: str | Path) -> Path:
 
 # ---- command line ----
 
+MIN_WIDTH = 10
+"""Narrowest --width: below it every term would sit on a line of its own whatever the width."""
+
 def add_parser(sub) -> None:
     p = sub.add_parser("latex", help="write a robot's M, C, g (and FK/Jacobian) as a LaTeX document")
     p.add_argument("robot_name")
@@ -409,16 +412,26 @@ def add_parser(sub) -> None:
     p.add_argument("--fk", action="append", default=[], metavar="FRAME", help="add world_T_FRAME (repeatable)")
     p.add_argument("--jacobian", action="append", default=[], metavar="FRAME", help="add FRAME's Jacobian (repeatable)")
     p.add_argument("--energy", action="store_true", help="add the kinetic and potential energies")
-    p.add_argument("--width", type=int, default=64, help="visible characters per line (default 64)")
+    p.add_argument("--width", type=int, default=64, help=f"visible characters per line (>= {MIN_WIDTH}, default 64)")
     p.set_defaults(func=cmd_latex)
 
 
 def cmd_latex(args) -> int:
     from .api import load
 
+    from .model import load_robot
+
     if args.pdf and not args.out:
         raise DeriveError("latex: --pdf needs --out FILE.tex")
-    print(f"deriving {args.robot_name} ({args.method}) ...", file=sys.stderr, flush=True)
+    # every option is checked (cheaply, before the derivation) before anything is printed
+    robot = load_robot(args.robot_name, args.models)
+    if args.width < MIN_WIDTH:
+        raise DeriveError(f"robot '{robot.name}': --width must be at least {MIN_WIDTH} characters, got {args.width}")
+    frames = (robot.root,) + tuple(j.child for j in robot.joints) + tuple(f.name for f in robot.frames)
+    for frame in args.fk + args.jacobian:
+        if frame not in frames:
+            raise DeriveError(f"robot '{robot.name}': no frame '{frame}' (known: {', '.join(frames)})")
+    print(f"deriving {robot.name} ({args.method}) ...", file=sys.stderr, flush=True)
     m = load(args.robot_name, args.models, method=args.method)
     options = Options(short_trig=args.short_trig, cse=args.cse, width=args.width, fk=tuple(args.fk),
                       jacobian=tuple(args.jacobian), energy=args.energy)

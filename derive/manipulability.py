@@ -248,8 +248,10 @@ def manipulability_command(args) -> int:
     from .model import load_robot
 
     robot = load_robot(args.robot_name, args.models)
-    man = Manipulability(robot, args.frame, args.task)
+    if not args.q and args.poses < 1:
+        raise DeriveError(f"robot '{robot.name}': --poses must be at least 1, got {args.poses}")
     qs = [parse_q(robot, text) for text in args.q] if args.q else list(default_poses(robot, args.poses))
+    man = Manipulability(robot, args.frame, args.task)
     print(f"{robot.name}/{args.frame}: task rows {man.tj.row_names} (k = {man.tj.k}), nv = {robot.nv}; "
           "mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, mu3 = sqrt(det(J J^T))")
     for q in qs:
@@ -271,7 +273,7 @@ def add_parser(sub) -> None:
     p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y")
     p.add_argument("--q", action="append", nargs="+", help="configuration: values separated by commas or spaces "
                    "(repeatable; pi allowed)")
-    p.add_argument("--poses", type=int, default=6, help="without --q: this many poses across the joint box")
+    p.add_argument("--poses", type=int, default=6, help="without --q: this many poses across the joint box (>= 1, default 6)")
     p.add_argument("--png", help="write the ellipses and the mu3 map to this PNG")
     p.set_defaults(func=manipulability_command)
 

@@ -166,6 +166,8 @@ def parse_obstacle(text: str) -> Circle | Box:
         v = [eval_number(x) for x in rest.split(",")]
     except ValueError:
         v = []
+    if not all(math.isfinite(x) for x in v):
+        raise DeriveError(f"obstacle '{text}': every coordinate must be a finite number")
     if kind == "circle" and len(v) in (3, 4) and v[-1] > 0:
         return Circle(tuple(v[:-1]), v[-1])
     if kind == "box" and len(v) in (4, 6):
@@ -214,9 +216,13 @@ def plan(robot: Robot, start, goal, obstacles=(), frame: str = "tcp", resolution
     for name, q in (("start", start), ("goal", goal)):
         if q.shape != (n,):
             raise DeriveError(f"robot '{robot.name}': {name} must have {n} values, got {q.size}")
+        if not np.all(np.isfinite(q)):
+            raise DeriveError(f"robot '{robot.name}': {name} {q.tolist()} is not finite")
         if np.any(q < lo - 1e-12) or np.any(q > hi + 1e-12):
             raise DeriveError(f"robot '{robot.name}': {name} {q.tolist()} is outside the joint box {lo.tolist()} .. {hi.tolist()}")
-    per = resolution or max(3, round(40000 ** (1.0 / n)))
+    if not (math.isfinite(margin) and margin >= 0):
+        raise DeriveError(f"robot '{robot.name}': the margin must be a finite number >= 0, got {margin:g}")
+    per = resolution if resolution is not None else max(3, round(40000 ** (1.0 / n)))
     if per < 2 or per ** n > MAX_NODES:
         raise DeriveError(f"robot '{robot.name}': a grid of {per}^{n} nodes is not searchable (2 .. {MAX_NODES} nodes); "
                           "choose another --resolution")
@@ -312,6 +318,9 @@ def plan_command(args) -> int:
     robot = load_robot(args.robot_name, args.models)
     start, goal = parse_q(robot, args.start), parse_q(robot, args.goal)
     obstacles = [parse_obstacle(o) for o in args.obstacle or []]
+    if args.resolution is not None and args.resolution < 2:
+        raise DeriveError(f"robot '{robot.name}': --resolution must be at least 2 grid points per joint, "
+                          f"got {args.resolution}")
     arm = Arm(robot, args.frame)
     result = plan(robot, start, goal, obstacles, args.frame, args.resolution,
                   "axis" if args.connectivity == 4 else "full", args.margin, arm)
@@ -334,9 +343,9 @@ def add_parser(sub) -> None:
     p.add_argument("--goal", required=True, nargs="+", help="goal configuration")
     p.add_argument("--obstacle", action="append", help="circle:x,y,r | box:xmin,ymin,xmax,ymax (3-D forms too; repeatable)")
     p.add_argument("--frame", default="tcp", help="the chain to this frame is checked (default tcp)")
-    p.add_argument("--resolution", type=int, help="grid points per joint (default: about 40000 nodes)")
+    p.add_argument("--resolution", type=int, help="grid points per joint, >= 2 (default: about 40000 nodes)")
     p.add_argument("--connectivity", type=int, choices=(4, 8), default=8,
                    help="8: all neighbours incl. diagonals (default); 4: along the axes only")
-    p.add_argument("--margin", type=float, default=0.0, help="clearance added to every obstacle [m]")
+    p.add_argument("--margin", type=float, default=0.0, help="clearance added to every obstacle [m], >= 0")
     p.add_argument("--png", help="write the path in configuration space | workspace to this PNG")
     p.set_defaults(func=plan_command)

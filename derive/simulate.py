@@ -16,8 +16,10 @@ the check on the integration (and on the generated dynamics).
 from __future__ import annotations
 
 import csv
+import dataclasses
 import importlib.util
 import json
+import math
 import sys
 import time
 from dataclasses import dataclass
@@ -26,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from .errors import DeriveError
-from .model import Robot, load_robot
+from .model import ModelError, Parameter, Robot, load_robot
 
 GENERATED = Path(__file__).resolve().parent.parent / "generated"
 METHODS = ("rk4", "RK45", "DOP853", "LSODA", "Radau", "BDF")
@@ -96,7 +98,59 @@ def _vector(values, n: int, what: str, robot: str) -> np.ndarray:
     v = np.zeros(n) if values is None else np.asarray(values, dtype=float).reshape(-1)
     if v.shape != (n,):
         raise DeriveError(f"robot '{robot}': {what} needs {n} value{'s' * (n != 1)} (one per joint), got {v.size}")
+    if not np.all(np.isfinite(v)):
+        raise DeriveError(f"robot '{robot}': {what} must be finite numbers, got {v.tolist()}")
     return v
+
+
+MAX_STEPS = 10_000_000
+"""Most samples a run may produce (t / dt): the CSV of a longer run would not fit in memory."""
+
+
+def check_times(robot: str, t_end: float, dt: float, rtol: float = 1e-10, atol: float = 1e-12) -> int:
+    """The number of steps t_end / dt, after checking t, dt, rtol and atol; DeriveError naming the bad one."""
+    for name, v in (("t", t_end), ("dt", dt), ("rtol", rtol), ("atol", atol)):
+        if not (math.isfinite(v) and v > 0):
+            raise DeriveError(f"robot '{robot}': simulate --{name} must be positive and finite, got {v:g}")
+    if dt > t_end:
+        raise DeriveError(f"robot '{robot}': simulate --dt {dt:g} is longer than --t {t_end:g}: no step to take")
+    steps = int(round(t_end / dt))
+    if steps > MAX_STEPS:
+        raise DeriveError(f"robot '{robot}': simulate --t {t_end:g} / --dt {dt:g} = {steps:.3g} steps, "
+                          f"more than {MAX_STEPS:.0e}; shorten --t or lengthen --dt")
+    return steps
+
+
+def with_parameters(robot: Robot, params: dict[str, float] | None) -> Robot:
+    """``robot`` with its parameter defaults replaced by ``params``, re-validated like models.yaml.
+
+    Masses must stay >= 0, inertias physical and every value finite (the checks of
+    derive.model), and a parameter may not change the sign of a nonzero default: a length
+    or a mass that turns negative is not a robot (the model file can declare a signed one).
+    """
+    if not params:
+        return robot
+    known = {p.name: p.default for p in robot.parameters}
+    unknown = sorted(set(params) - set(known))
+    if unknown:
+        raise DeriveError(f"robot '{robot.name}' has no parameter(s) {', '.join(unknown)} "
+                          f"(parameters: {', '.join(known) or 'none'})")
+    for name, value in params.items():
+        if not math.isfinite(value):
+            raise DeriveError(f"robot '{robot.name}': --param {name}={value:g}: must be a finite number")
+        if known[name] * value < 0:
+            raise DeriveError(f"robot '{robot.name}': --param {name}={value:g}: changes the sign of the "
+                              f"model's value {known[name]:g}")
+    new = dataclasses.replace(robot, parameters=tuple(Parameter(p.name, float(params.get(p.name, p.default)))
+                                                      for p in robot.parameters))
+    from .model import _Parser  # the physical checks models.yaml passes through
+
+    try:
+        _Parser(robot.name, {}).check_values(new)
+    except ModelError as exc:
+        given = ", ".join(f"{k}={v:g}" for k, v in params.items())
+        raise DeriveError(f"{exc} (with --param {given})") from None
+    return new
 
 
 def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: float = 1e-3, method: str = "rk4",
@@ -115,23 +169,48 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
 
     if method not in METHODS:
         raise DeriveError(f"simulate: unknown method {method!r} (known: {', '.join(METHODS)})")
-    if not (dt > 0 and t_end > 0):
-        raise DeriveError(f"simulate: t ({t_end}) and dt ({dt}) must be positive")
+    steps = check_times(robot.name, t_end, dt, rtol, atol)
     mod = load_generated(robot.name, generated)
     if mod.NQ != mod.NV:
         raise DeriveError(f"robot '{robot.name}': simulate needs nq == nv, got nq = {mod.NQ}, nv = {mod.NV}")
     n = mod.NV
     q0, qd0, tau = (_vector(v, n, w, robot.name) for v, w in ((q0, "q0"), (qd0, "qd0"), (tau, "tau")))
+    with_parameters(robot, params)
     try:
         ref = NumericRobot(robot, params)
     except ValueError as exc:
         raise DeriveError(str(exc)) from None
     p = np.array([ref.params[par.name] for par in robot.parameters])
     extra = (p,) if p.size else ()
-    steps = int(round(t_end / dt))
     t = np.arange(steps + 1) * dt
     x0 = np.concatenate([q0, qd0])
+    M0 = ref.crba(q0)  # x' = f(x, u) solves M(q) qdd = ...: M must be invertible (a massless chain is not)
+    if not (np.all(np.isfinite(M0)) and np.linalg.eigvalsh(0.5 * (M0 + M0.T))[0] > 1e-12 * max(np.abs(M0).max(), 1e-300)):
+        raise DeriveError(f"robot '{robot.name}': the mass matrix at q0 is singular (massless links?)"
+                          + (f" with --param {', '.join(f'{k}={v:g}' for k, v in params.items())}" if params else ""))
     start = time.perf_counter()
+    try:
+        xs = _integrate(mod, method, x0, tau, t, dt, extra, rtol, atol, robot.name)
+    except DeriveError:
+        raise
+    except (ZeroDivisionError, OverflowError, FloatingPointError, ValueError) as exc:  # math.sin(inf), x / 0
+        raise DeriveError(f"robot '{robot.name}': the generated dynamics failed during the run ({method}, "
+                          f"dt = {dt:g}): {type(exc).__name__}: {exc}") from None
+    wall = time.perf_counter() - start
+    bad = ~np.all(np.isfinite(xs), axis=1)
+    if bad.any():
+        raise DeriveError(f"robot '{robot.name}': the state is no longer finite at t = {t[np.argmax(bad)]:g} s "
+                          f"({method}, dt = {dt:g}); nothing written")
+    q, qd = xs[:, :n], xs[:, n:]
+    kinetic = np.array([ref.kinetic_energy(a, b) for a, b in zip(q, qd)])
+    potential = np.array([ref.potential_energy(a) for a in q])
+    return Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall)
+
+
+def _integrate(mod, method: str, x0: np.ndarray, tau: np.ndarray, t: np.ndarray, dt: float, extra: tuple,
+               rtol: float, atol: float, robot: str) -> np.ndarray:
+    """States (len(t), 2 nv) from x0 by the generated rk4_step or scipy's solve_ivp on ode_rhs."""
+    n, steps = len(x0) // 2, len(t) - 1
     if method == "rk4":
         xs = np.empty((steps + 1, 2 * n))
         xs[0] = x = x0
@@ -144,13 +223,9 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
         sol = solve_ivp(lambda _, x: mod.ode_rhs(x, tau, *extra), (0.0, t[-1]), x0, method=method, t_eval=t,
                         rtol=rtol, atol=atol, **jac)
         if not sol.success:
-            raise DeriveError(f"robot '{robot.name}': {method} failed at t = {sol.t[-1]:g}: {sol.message}")
+            raise DeriveError(f"robot '{robot}': {method} failed at t = {sol.t[-1]:g}: {sol.message}")
         xs = sol.y.T
-    wall = time.perf_counter() - start
-    q, qd = xs[:, :n], xs[:, n:]
-    kinetic = np.array([ref.kinetic_energy(a, b) for a, b in zip(q, qd)])
-    potential = np.array([ref.potential_energy(a) for a in q])
-    return Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall)
+    return xs
 
 
 def write_csv(traj: Trajectory, path: str | Path) -> Path:
@@ -230,14 +305,25 @@ def _params(items: list[str]) -> dict[str, float]:
             out[name.strip()] = float(value)
         except ValueError:
             sep = ""
-        if not sep:
+        if not sep or not name.strip():
             raise DeriveError(f"simulate: --param expects NAME=VALUE, got {item!r}")
     return out
 
 
 def cmd_simulate(args) -> int:
     robot = load_robot(args.robot_name, args.models)
+    # every option is checked before anything is printed, run or written
+    check_times(robot.name, args.t, args.dt, args.rtol, args.atol)
+    for values, what in ((args.q0, "q0"), (args.qd0, "qd0"), (args.tau, "tau")):
+        _vector(values, robot.nv, what, robot.name)
+    with_parameters(robot, _params(args.param))
     generated = Path(args.generated) if args.generated else GENERATED
+    if not generated.is_dir():
+        raise DeriveError(f"robot '{robot.name}': --generated {generated}: no such folder "
+                          "(`derive generate --out FOLDER` writes one)")
+    code = generated / robot.name / "python" / f"{robot.name}.py"
+    if not code.is_file():  # say so now, not "generated from another version"
+        raise DeriveError(f"robot '{robot.name}': no generated code at {code} (run `make derive` or `derive generate`)")
     if _stale(robot, generated):
         print(f"warning: {generated / robot.name} was generated from another version of '{robot.name}' "
               "(run `make derive`)", file=sys.stderr)

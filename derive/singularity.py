@@ -93,6 +93,8 @@ class TaskJacobian:
         q = np.asarray(q, dtype=float).reshape(-1)
         if q.shape[0] != self.nv:
             raise DeriveError(f"robot '{self.robot.name}': q must have {self.nv} entries, got {q.shape[0]}")
+        if not np.all(np.isfinite(q)):
+            raise DeriveError(f"robot '{self.robot.name}': q must be finite, got {q.tolist()}")
         return np.array(self._f(q, self.p))
 
     @cached_property
@@ -243,6 +245,9 @@ def parse_q(robot: Robot, text) -> np.ndarray:
     if q.shape[0] != robot.nv:
         raise DeriveError(f"robot '{robot.name}': q '{text}': expected {robot.nv} values "
                           f"({', '.join(c.name for c in robot.coordinates)}), got {q.shape[0]}")
+    if not np.all(np.isfinite(q)):
+        bad = robot.coordinates[int(np.argmin(np.isfinite(q)))].name
+        raise DeriveError(f"robot '{robot.name}': q '{text}': {bad} = {q[np.argmin(np.isfinite(q))]:g} is not a finite number")
     return q
 
 
@@ -260,12 +265,14 @@ def singularities_command(args) -> int:
     from .model import load_robot
 
     robot = load_robot(args.robot_name, args.models)
+    q = parse_q(robot, args.q) if args.q else None  # every option is checked before anything is printed
+    if q is None and args.starts < 1:
+        raise DeriveError(f"robot '{robot.name}': --starts must be at least 1, got {args.starts}")
     tj = TaskJacobian(robot, args.frame, args.task)
     names = [c.name for c in robot.coordinates]
     print(f"{robot.name}/{args.frame}: task rows {tj.row_names} (k = {tj.k}), nv = {tj.nv}")
     print(redundancy(tj))
-    if args.q:
-        q = parse_q(robot, args.q)
+    if q is not None:
         info = analyse(tj(q), q)
         print(f"at q = {_fmt(q)}: rank {info.rank} of {len(info.singular_values)}"
               f"{' (SINGULAR)' if info.singular else ''}, singular values {_fmt(info.singular_values)}")
@@ -294,6 +301,6 @@ def add_parser(sub) -> None:
     p.add_argument("--frame", default="tcp")
     p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y,wz")
     p.add_argument("--q", nargs="+", help="configuration: values separated by commas or spaces (pi allowed: 0 pi/2)")
-    p.add_argument("--starts", type=int, default=24, help="random starts of the search (default 24)")
+    p.add_argument("--starts", type=int, default=24, help="random starts of the search (>= 1, default 24)")
     p.add_argument("--seed", type=int, default=0)
     p.set_defaults(func=singularities_command)

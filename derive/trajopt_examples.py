@@ -101,6 +101,8 @@ def _path(file: str, joints: tuple[str, ...]) -> np.ndarray:
             [float(x) for x in head]
             return np.loadtxt(lines, delimiter=",", ndmin=2)
         except ValueError:
+            if len(lines) < 2:  # a header alone (np.loadtxt would warn "input contained no data")
+                raise ValueError("no rows") from None
             data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
             if not data.size:
                 raise ValueError("no rows") from None

@@ -647,6 +647,10 @@ def dump_entry(name: str, entry: Mapping, indent: str = "  ") -> str:
 def append_entry(models_path: str | Path, name: str, entry: Mapping) -> None:
     """Append ``entry`` under ``robots:`` of a models file; refuses to replace an existing robot."""
     path = Path(models_path)
+    if not path.exists():  # a new models file
+        path.write_text("# derive robot models (see README.md, 'Writing a model')\nrobots:\n" + dump_entry(name, entry))
+        parse_models(path.read_text(), source=str(path))
+        return
     try:
         text = path.read_text()
     except OSError as exc:
