@@ -119,8 +119,11 @@ def log_so3(R) -> ca.SX:
     R = ca.SX(R)
     v = 0.5 * ca.vertcat(R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1])
     c = 0.5 * (R[0, 0] + R[1, 1] + R[2, 2] - 1)
-    s = ca.norm_2(v)
-    small = s < 1e-9
+    # |v| with a finite derivative at v = 0 (norm_2's is NaN there, and 0 * NaN poisons even a
+    # zero-weighted residual): the square root only ever sees 1 in the small branch
+    s2 = ca.dot(v, v)
+    small = s2 < 1e-18
+    s = ca.if_else(small, 0, ca.sqrt(ca.if_else(small, 1, s2)))
     a = ca.atan2(s, c)
     general = a / ca.if_else(small, 1, s) * v
     B = 0.5 * (R + ca.SX.eye(3))
