@@ -659,5 +659,11 @@ class _Parser:
                 num(f"frames ({f.name}).rpy[{k}]", f.origin.rpy[k])
 
 
+def check_values(robot: Robot) -> None:
+    """The physical checks of models.yaml (masses, inertias, finite values) on a Robot, e.g. one
+    whose parameter defaults were replaced; raises ModelError."""
+    _Parser(robot.name, {}).check_values(robot)
+
+
 def parse_robot(name: str, spec: Any) -> Robot:
     return _Parser(name, spec).robot()

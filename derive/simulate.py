@@ -143,10 +143,10 @@ def with_parameters(robot: Robot, params: dict[str, float] | None) -> Robot:
                               f"model's value {known[name]:g}")
     new = dataclasses.replace(robot, parameters=tuple(Parameter(p.name, float(params.get(p.name, p.default)))
                                                       for p in robot.parameters))
-    from .model import _Parser  # the physical checks models.yaml passes through
+    from .model import check_values  # the physical checks models.yaml passes through
 
     try:
-        _Parser(robot.name, {}).check_values(new)
+        check_values(new)
     except ModelError as exc:
         given = ", ".join(f"{k}={v:g}" for k, v in params.items())
         raise DeriveError(f"{exc} (with --param {given})") from None

@@ -180,11 +180,9 @@ def find_singularities(tj: TaskJacobian, starts: int = 24, seed: int = 0, rtol: 
     configurations equal up to wrapped angles (within 1e-3) are reported once.
     Returns (configurations sorted by q, the free coordinates).
     """
-    from scipy.optimize import minimize
+    from scipy.optimize import Bounds, minimize
 
     from .workspace import joint_box, sample_configurations
-
-    from scipy.optimize import Bounds
 
     lo, hi = joint_box(tj.robot)
     angle = np.array([c.unit == "rad" for c in tj.robot.coordinates])
