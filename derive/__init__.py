@@ -1,7 +1,9 @@
 """derive: symbolic derivation and code generation for robot manipulators."""
 
-from .api import SXModel, SymbolicModel, load
-from .model import ModelError, Robot, load_models, load_robot
+from derive.description.model import load_models, load_robot
+from derive.description.robot import ModelError, Robot
+from derive.inspect.sympy_model import SymbolicModel, load
+from derive.symbolic.model import SXModel
 
 __all__ = ["load", "SymbolicModel", "SXModel", "ModelError", "Robot", "load_models", "load_robot"]
 __version__ = "0.1.0"

@@ -23,9 +23,9 @@ import numpy as np
 import sympy as sp
 
 import derive
-from derive.latex import Options, document_context, render_png, render_tex
-from derive.ode import linearize
-from derive.simulate import GENERATED, plot, simulate, summary, write_csv
+from derive.inspect.latex import Options, document_context, render_png, render_tex
+from derive.inspect.linearize import linearize
+from derive.solvers.simulate import GENERATED, plot, simulate, summary, write_csv
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "pendulum_tour_out")
 out.mkdir(parents=True, exist_ok=True)

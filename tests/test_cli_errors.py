@@ -169,7 +169,7 @@ def test_eom_of_a_larger_robot_is_printed_with_common_subexpressions(capsys):
 
 def test_import_urdf_can_start_a_new_models_file(tmp_path):
     from derive.cli import main
-    from derive.model import load_models
+    from derive.description.model import load_models
 
     out = tmp_path / "mine.yaml"
     assert main(["import-urdf", "example-robot-data:ur_description/urdf/ur5_robot.urdf", "--tip", "tool0",

@@ -17,9 +17,9 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from derive.generate import check, generate
+from derive.codegen.generate import check, generate
 from derive.reference import NumericRobot
-from derive.spec import function_specs
+from derive.codegen.catalogue import function_specs
 from util import assert_close, params, robots, states, sx_model
 
 ROOT = Path(__file__).resolve().parent.parent

@@ -8,7 +8,7 @@ import pytest
 
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.grubler import grubler, load_mechanism, mechanism_from_robot, parse_mechanism
+from derive.analysis.grubler import grubler, load_mechanism, mechanism_from_robot, parse_mechanism
 from util import robots
 
 EXAMPLE2 = Path(__file__).resolve().parent.parent / "examples" / "grubler_example2.yaml"

@@ -1,4 +1,4 @@
-"""Inverse kinematics (derive.ik, generated <robot>_ik_tcp): targets reached within the joint
+"""Inverse kinematics (derive.solvers.ik, generated <robot>_ik_tcp): targets reached within the joint
 limits as checked with the independent numpy reference FK; unreachable targets fail honestly
 (finite residual, success False); singular configurations stay finite; the generated C and
 Python agree with the API's notion of success.
@@ -14,13 +14,14 @@ import casadi as ca
 import numpy as np
 import pytest
 
-from derive.bench_ik import ik_sources, pose_errors, targets, verified
+from derive.bench.ik import ik_sources, pose_errors, targets, verified
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.generate import generate
-from derive.ik import TOL_POSITION, TOL_ROTATION, joint_ranges, solve_ik
+from derive.codegen.generate import generate
+from derive.solvers.ik import solve_ik
+from derive.symbolic.ik import TOL_POSITION, TOL_ROTATION, joint_ranges
 from derive.reference import NumericRobot
-from derive.spatial import exp_so3, log_so3
+from derive.symbolic.spatial import exp_so3, log_so3
 from util import robots
 
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]

@@ -24,11 +24,12 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from derive import expr
-from derive.api import SXModel
+from derive.description import expr
+from derive.symbolic.model import SXModel
 from derive.cli import main
-from derive.generate import generate
-from derive.model import JOINT_TYPES, ModelError, load_models, parse_models
+from derive.codegen.generate import generate
+from derive.description.model import load_models, parse_models
+from derive.description.robot import JOINT_TYPES, ModelError
 from derive.reference import NumericRobot
 from derive.reference.rnea import rpy_matrix
 from util import assert_close

@@ -14,7 +14,7 @@ import pytest
 
 import derive
 from derive.cli import main
-from derive.latex import Options, compile_pdf, document_context, latex_document, name_latex, render_png, render_tex
+from derive.inspect.latex import Options, compile_pdf, document_context, latex_document, name_latex, render_png, render_tex
 
 
 @pytest.fixture(scope="module")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import sympy as sp
 
 import derive
-from derive.model import parse_models
+from derive.description.model import parse_models
 
 
 def test_pendulum_matches_lecture_eq18():

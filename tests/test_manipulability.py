@@ -9,9 +9,10 @@ import sympy as sp
 import derive
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.manipulability import Manipulability, ellipsoid, measures, plot_manipulability, symbolic, template_function
+from derive.analysis.manipulability import Manipulability, ellipsoid, measures, plot_manipulability, symbolic
+from derive.codegen.catalogue import manipulability_function as template_function
 from derive.reference import NumericRobot
-from derive.singularity import TaskJacobian, analyse, find_singularities, free_coordinates, redundancy
+from derive.analysis.singularity import TaskJacobian, analyse, find_singularities, free_coordinates, redundancy
 from util import robots, sx_model
 
 L1, L2 = 1.0, 0.7
@@ -108,7 +109,7 @@ def test_generated_manipulability_spec():
     """Generated for frames that can span their task; the C/Python values are checked against
     this reference in test_codegen (quantity 'manipulability')."""
     t = template_function(sx_model("planar_2r"), "tcp")
-    assert t.name == "planar_2r_manipulability_tcp" and t.calls == ("planar_2r_jacobian_tcp",)
+    assert t.name == "planar_2r_manipulability_tcp" and t.calls == (("jacobian", "jacobian_tcp"),)
     assert dict(t.context)["rows"] == (0, 1) and t.outputs == (("mu", (3, 1)),)
     assert template_function(sx_model("pendulum"), "tcp") is None  # nv = 1 < k = 2
     assert dict(template_function(sx_model("ur5"), "tcp").context)["rows"] == (0, 1, 2)

@@ -130,7 +130,7 @@ def test_cli_process_prints_no_traceback(tmp_path):
 
 def test_failure_during_generation_leaves_previous_output(tmp_path, out_dir, monkeypatch):
     """A crash part-way (after some robots were rendered) keeps the old generated/ intact."""
-    import derive.generate as gen
+    import derive.codegen.generate as gen
 
     out = tmp_path / "generated"
     import shutil
@@ -146,7 +146,7 @@ def test_failure_during_generation_leaves_previous_output(tmp_path, out_dir, mon
         return real(robot, mhash, log)
 
     monkeypatch.setattr(gen, "render", flaky)
-    from derive.model import load_models
+    from derive.description.model import load_models
 
     with pytest.raises(RuntimeError):
         gen.generate(load_models(), out, only=["cartpole", "planar_2r"], use_cache=False, log=lambda s: None)

@@ -8,7 +8,7 @@ import pytest
 import sympy as sp
 
 import derive
-from derive.ode import first_order, linearize, linearize_numeric
+from derive.inspect.linearize import first_order, linearize, linearize_numeric
 from util import assert_close, params, random_q, robots, sx_model
 
 

@@ -11,8 +11,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.planning import Box, Circle, astar, collisions, neighbour_offsets, parse_obstacle, plan, plot_plan
-from derive.workspace import Arm, joint_box
+from derive.analysis.planning import Box, Circle, astar, collisions, neighbour_offsets, parse_obstacle, plan, plot_plan
+from derive.analysis.workspace import Arm, joint_box
 from util import robots
 
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from derive import expr
-from derive.model import load_models, parse_models
+from derive.description import expr
+from derive.description.model import load_models, parse_models
 from derive.reference import NumericRobot
 
 # A branching tree that exercises what the shipped models leave at zero: joint and frame rpy,

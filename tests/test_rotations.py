@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from derive import rotations as rot
+from derive.analysis import rotations as rot
 from derive.errors import DeriveError
-from derive.inertia import check_inertia, inertia_about_com, inertia_problem, principal_moments, rotate_inertia, steiner
-from derive.model import inertia_problem as model_inertia_problem
+from derive.description.inertia import check_inertia, inertia_about_com, inertia_problem, principal_moments, rotate_inertia, steiner
+from derive.description.model import inertia_problem as model_inertia_problem
 
 RNG_SEED = 0
 

@@ -12,8 +12,8 @@ import pytest
 
 import derive
 from derive.cli import main
-from derive.ode import linearize
-from derive.simulate import simulate
+from derive.inspect.linearize import linearize
+from derive.solvers.simulate import simulate
 from util import robots
 
 ROOT = Path(__file__).resolve().parent.parent

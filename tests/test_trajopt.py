@@ -16,10 +16,10 @@ import pytest
 
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.generate import generate
-from derive.model import load_models, parse_models
-from derive.trajopt import LIMIT_TOL, TrajectoryOptimizer, Waypoint, _import, generated_forward_dynamics
-from derive.trajopt_examples import PANDA_GOAL, PANDA_READY, point_to_point_duration, swing_up, velocity_reversals
+from derive.codegen.generate import generate
+from derive.description.model import load_models, parse_models
+from derive.solvers.trajopt import LIMIT_TOL, TrajectoryOptimizer, Waypoint, _import, generated_forward_dynamics
+from derive.solvers.trajopt_examples import PANDA_GOAL, PANDA_READY, point_to_point_duration, swing_up, velocity_reversals
 from util import robots
 
 ROBOTS = ("cartpole", "pendulum", "planar_2r", "panda")

@@ -21,9 +21,10 @@ import numpy as np
 import pytest
 import yaml
 
-from derive.model import ModelError, default_models_path, load_models, parse_robot
+from derive.description.model import default_models_path, load_models, parse_robot
+from derive.description.robot import ModelError
 from derive.reference import NumericRobot
-from derive.urdf import (
+from derive.description.urdf import (
     c_identifier,
     dump_entry,
     example_robot_data_dir,
@@ -236,7 +237,7 @@ class SymbolicSide:
     def __init__(self, robot):
         import casadi as ca
 
-        from derive.api import SXModel
+        from derive.symbolic.model import SXModel
 
         m = SXModel(robot)
         s = m.sym

@@ -7,8 +7,9 @@ from functools import lru_cache
 import casadi as ca
 import numpy as np
 
-from derive.api import SXModel
-from derive.model import Robot, load_models
+from derive.symbolic.model import SXModel
+from derive.description.model import load_models
+from derive.description.robot import Robot
 
 N_STATES = 50
 RTOL = 1e-9

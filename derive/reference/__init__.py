@@ -1,5 +1,5 @@
 """Independent numeric reference (numpy only): kinematics, RNEA, CRBA, ABA, Christoffel C, energies."""
 
-from .rnea import NumericRobot
+from derive.reference.rnea import NumericRobot
 
 __all__ = ["NumericRobot"]

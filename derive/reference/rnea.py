@@ -1,8 +1,8 @@
 """Numeric rigid-body dynamics of a fixed-base tree, written from Featherstone's textbook.
 
 This is the independent reference the symbolic pipeline is checked against: it
-uses numpy only, and reads the model through :mod:`derive.model` and
-:mod:`derive.expr` (input parsing), nothing else of ``derive``.
+uses numpy only, and reads the model through :mod:`derive.description.model` and
+:mod:`derive.description.expr` (input parsing), nothing else of ``derive``.
 
 Conventions
 -----------
@@ -32,8 +32,8 @@ from typing import Mapping
 
 import numpy as np
 
-from .. import expr
-from ..model import Origin, Robot
+from derive.description import expr
+from derive.description.robot import Origin, Robot
 
 COMPLEX_STEP = 1e-30
 

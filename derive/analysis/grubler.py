@@ -1,0 +1,243 @@
+"""Degrees of freedom by Grübler's formula (lecture eq. 9), for robots and closed chains.
+
+    DOF = m (N - 1 - J) + sum_i f_i
+
+m = 3 for planar, 6 for spatial mechanisms; N links including the ground; J
+joints, where a joint joining k links counts as k - 1 joints; f_i the freedoms
+of joint i (Table 1: revolute, prismatic, helical 1; cylindrical, universal 2;
+spherical 3; fixed 0). The formula assumes independent constraints: it is a
+lower bound when constraints are redundant (e.g. parallel four-bar linkages).
+
+A mechanism file is YAML::
+
+    name: example2
+    space: planar                 # planar (m = 3) | spatial (m = 6)
+    links: [ground, a, b, c]      # names, the first is the ground; or a count N (0 = ground)
+    joints:
+      - {type: revolute, links: [ground, a]}
+      - {type: revolute, links: [a, b, c]}    # joins three links: counts as 2 joints
+
+A robot of models.yaml is a tree (m = 6, N = links, J = joints) and gets
+DOF = sum of its joint freedoms = nv.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Mapping
+
+import yaml
+
+from derive.errors import DeriveError
+from derive.description.robot import JOINT_TYPES
+
+JOINT_DOF = JOINT_TYPES  # the lecture's Table 1, as the model parser knows it
+"""The lecture's Table 1 (plus the rigid 'fixed' joint)."""
+PLANAR_JOINTS = ("revolute", "prismatic", "fixed")
+SPACES = {"planar": 3, "spatial": 6}
+
+
+@dataclass(frozen=True)
+class MechanismJoint:
+    type: str
+    links: tuple[str, ...]
+
+    @property
+    def count(self) -> int:
+        """How many two-link joints this joint stands for (k links -> k - 1)."""
+        return len(self.links) - 1
+
+    @property
+    def dof(self) -> int:
+        return JOINT_DOF[self.type]
+
+
+@dataclass(frozen=True)
+class Mechanism:
+    name: str
+    space: str
+    links: tuple[str, ...]  # links[0] is the ground
+    joints: tuple[MechanismJoint, ...]
+    description: str = ""
+
+    @property
+    def m(self) -> int:
+        return SPACES[self.space]
+
+    @property
+    def n_links(self) -> int:
+        return len(self.links)
+
+    @property
+    def n_joints(self) -> int:
+        return sum(j.count for j in self.joints)
+
+    @property
+    def freedoms(self) -> int:
+        return sum(j.dof * j.count for j in self.joints)
+
+    @property
+    def dof(self) -> int:
+        return grubler(self.m, self.n_links, [j.dof for j in self.joints for _ in range(j.count)])
+
+    @property
+    def loops(self) -> int:
+        """Independent closed loops, J - N + 1 (0 for a serial chain or tree)."""
+        return self.n_joints - self.n_links + 1
+
+
+def grubler(m: int, n_links: int, joint_dofs: list[int]) -> int:
+    """m (N - 1 - J) + sum f_i, eq. 9, with J = len(joint_dofs) two-link joints."""
+    return m * (n_links - 1 - len(joint_dofs)) + sum(joint_dofs)
+
+
+# --------------------------------------------------------------------------- input
+
+
+def parse_mechanism(data: Any, source: str = "<mechanism>") -> Mechanism:
+    """A validated Mechanism from the YAML structure described in the module docstring."""
+    def error(where: str, problem: str) -> DeriveError:
+        return DeriveError(f"mechanism {source}: {where}: {problem}")
+
+    if not isinstance(data, Mapping):
+        raise error("file", "expected a mapping with space, links and joints")
+    unknown = set(data) - {"name", "description", "space", "links", "joints"}
+    if unknown:
+        raise error(sorted(unknown)[0], "unknown field (expected name, description, space, links, joints)")
+    space = data.get("space", "spatial")
+    if space not in SPACES:
+        raise error("space", f"'{space}' is neither planar (m = 3) nor spatial (m = 6)")
+    raw_links = data.get("links")
+    if isinstance(raw_links, bool) or not isinstance(raw_links, (int, list)):
+        raise error("links", "expected a count N (ground included) or a list of names (ground first)")
+    links = tuple(str(i) for i in range(raw_links)) if isinstance(raw_links, int) else tuple(str(x) for x in raw_links)
+    if len(links) < 2:
+        raise error("links", f"need the ground and at least one more link, got {len(links)}")
+    if len(set(links)) != len(links):
+        raise error("links", f"duplicate link name '{next(x for x in links if links.count(x) > 1)}'")
+    raw_joints = data.get("joints")
+    if not isinstance(raw_joints, list) or not raw_joints:
+        raise error("joints", "missing or not a non-empty list")
+    joints = []
+    for i, raw in enumerate(raw_joints):
+        where = f"joints[{i}]"
+        if not isinstance(raw, Mapping) or set(raw) - {"type", "links", "name"} or "type" not in raw or "links" not in raw:
+            raise error(where, "expected {type: ..., links: [a, b, ...]} (optional name)")
+        jtype = raw["type"]
+        if jtype not in JOINT_DOF:
+            raise error(f"{where}.type", f"unknown joint type '{jtype}' (known: {', '.join(JOINT_DOF)})")
+        if space == "planar" and jtype not in PLANAR_JOINTS:
+            raise error(f"{where}.type", f"a {jtype} joint does not move in a plane (planar: {', '.join(PLANAR_JOINTS)})")
+        jl = raw["links"]
+        if not isinstance(jl, list) or len(jl) < 2:
+            raise error(f"{where}.links", "a joint joins at least two links")
+        jl = tuple(str(x) for x in jl)
+        for x in jl:
+            if x not in links:
+                raise error(f"{where}.links", f"unknown link '{x}' (links: {', '.join(links)})")
+        if len(set(jl)) != len(jl):
+            raise error(f"{where}.links", "lists a link twice")
+        joints.append(MechanismJoint(jtype, jl))
+    mech = Mechanism(str(data.get("name", Path(source).stem)), space, links, tuple(joints),
+                     str(data.get("description", "")).strip())
+    _check_connected(mech, error)
+    return mech
+
+
+def _check_connected(mech: Mechanism, error) -> None:
+    reached, frontier = {mech.links[0]}, [mech.links[0]]
+    while frontier:
+        link = frontier.pop()
+        for j in mech.joints:
+            if link in j.links:
+                for other in j.links:
+                    if other not in reached:
+                        reached.add(other)
+                        frontier.append(other)
+    loose = [x for x in mech.links if x not in reached]
+    if loose:
+        raise error("links", f"link '{loose[0]}' is not connected to the ground '{mech.links[0]}' through the joints")
+
+
+def _read_yaml(path: Path) -> Any:
+    """The YAML structure of a file; DeriveError (one line) if unreadable or malformed."""
+    try:
+        return yaml.safe_load(path.read_text())
+    except OSError as exc:
+        raise DeriveError(f"mechanism {path}: cannot read ({exc.strerror})") from None
+    except UnicodeDecodeError:
+        raise DeriveError(f"mechanism {path}: not a text (UTF-8) file") from None
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise DeriveError(f"mechanism {path}: malformed YAML{where}: {problem}") from None
+
+
+def load_mechanism(path: str | Path) -> Mechanism:
+    path = Path(path)
+    return parse_mechanism(_read_yaml(path), str(path))
+
+
+def mechanism_from_robot(robot) -> Mechanism:
+    """A models.yaml robot as a spatial mechanism: its links, one two-link joint per joint."""
+    links = (robot.root,) + tuple(x.name for x in robot.links if x.name != robot.root)
+    return Mechanism(robot.name, "spatial", links, tuple(MechanismJoint(j.type, (j.parent, j.child)) for j in robot.joints),
+                     robot.description)
+
+
+# --------------------------------------------------------------------------- report
+
+
+def report(mech: Mechanism, nv: int | None = None) -> str:
+    """The formula with the numbers put in, one joint type per line."""
+    counts = Counter()
+    for j in mech.joints:
+        counts[j.type] += j.count
+    multi = sum(1 for j in mech.joints if j.count > 1)
+    lines = [f"{mech.name}: {mech.space} (m = {mech.m}), N = {mech.n_links} links (ground '{mech.links[0]}' included), "
+             f"J = {mech.n_joints} joints" + (f" ({multi} joining more than two links, counted k - 1 times)" if multi else "")]
+    for jtype in JOINT_DOF:
+        if counts[jtype]:
+            lines.append(f"  {jtype:<12} x{counts[jtype]:<3} f = {JOINT_DOF[jtype]}")
+    lines.append(f"DOF = m (N - 1 - J) + sum f_i = {mech.m} ({mech.n_links} - 1 - {mech.n_joints}) + {mech.freedoms} = {mech.dof}")
+    if mech.loops:
+        lines.append(f"  {mech.loops} independent closed loop(s); the count assumes independent loop constraints")
+    if nv is not None:  # a tree has N - 1 = J: the formula reduces to the sum of the freedoms
+        lines.append(f"  tree (no loops): DOF = sum of joint freedoms = {mech.freedoms}; the model's nv = {nv}")
+    if mech.dof <= 0:
+        lines.append("  DOF <= 0: a structure (statically " + ("determinate" if mech.dof == 0 else "indeterminate") + "), "
+                     "unless some constraints are redundant")
+    return "\n".join(lines)
+
+
+def dof_command(args) -> int:
+    target = args.target
+    path = Path(target)
+    if path.suffix in (".yaml", ".yml") or path.is_file():
+        if not path.is_file():
+            raise DeriveError(f"mechanism {target}: no such file")
+        data = _read_yaml(path)
+        if isinstance(data, Mapping) and "robots" in data:  # a models file: every robot in it
+            from derive.description.model import load_models
+
+            for robot in load_models(path).values():
+                print(report(mechanism_from_robot(robot), robot.nv))
+            return 0
+        print(report(parse_mechanism(data, str(path))))
+        return 0
+    from derive.description.model import load_robot
+
+    robot = load_robot(target, args.models)
+    print(report(mechanism_from_robot(robot), robot.nv))
+    return 0
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("dof", help="degrees of freedom by Grübler's formula (robot or mechanism YAML)",
+                       description="DOF = m (N - 1 - J) + sum f_i for a robot of models.yaml or a mechanism file "
+                                   "(see examples/grubler_example2.yaml).")
+    p.add_argument("target", help="robot name in models.yaml, or a mechanism .yaml file")
+    p.set_defaults(func=dof_command)

@@ -1,0 +1,235 @@
+"""Configuration space and workspace (lecture section 2.4, figure 4).
+
+The configuration space is the box of joint values q (within the joint limits;
+revolute joints without limits span [-pi, pi], prismatic ones [-1, 1] m). The
+workspace is its image under forward kinematics, x = FK(q) (eq. 11, 23): the
+positions the frame reaches in at least one configuration. It is sampled on a
+grid or at random; FK is the derived CasADi expression, evaluated for all
+samples at once.
+
+The arm's skeleton, the origins of the link frames from the root to a frame,
+is evaluated the same way: drawings and the planner's collision checks use it.
+Plots are written with matplotlib's Agg canvas (no display needed).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from derive.errors import DeriveError
+from derive.description.robot import Robot
+
+AXIS_NAMES = "xyz"
+
+
+def joint_box(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) of q as arrays: the limits of each coordinate, else [-pi, pi] (angles) or [-1, 1] m."""
+    lo, hi = robot.joint_box()
+    return np.array(lo), np.array(hi)
+
+
+def sample_configurations(robot: Robot, n: int, method: str = "grid", seed: int = 0) -> np.ndarray:
+    """About ``n`` configurations (rows) in the joint box: a regular grid of round(n^(1/nv))
+    points per joint (limits included), or ``n`` uniform random samples."""
+    lo, hi = joint_box(robot)
+    if method == "random":
+        return np.random.default_rng(seed).uniform(lo, hi, size=(n, robot.nv))
+    if method != "grid":
+        raise DeriveError(f"sampling method '{method}': expected grid or random")
+    per = max(2, round(n ** (1.0 / robot.nv)))
+    axes = [np.linspace(a, b, per) for a, b in zip(lo, hi)]
+    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.nv)
+
+
+class Arm:
+    """Batched kinematics of one frame of a robot: the frame's position and the arm's skeleton.
+
+    ``skeleton(Q)`` returns, per configuration, the origins of the root, of every link
+    on the way to the frame and of the frame itself (points that coincide for every q,
+    such as a DH model's intermediate frames, are dropped): the arm drawn as line segments.
+    """
+
+    def __init__(self, robot: Robot, frame: str = "tcp"):
+        from derive.symbolic.kinematics import Kinematics
+        from derive.symbolic.symbols import make_symbols
+
+        self.robot, self.frame = robot, frame
+        sym = make_symbols(robot)
+        kin = Kinematics(robot, sym)
+        if frame not in kin.poses:
+            raise DeriveError(f"robot '{robot.name}': no frame '{frame}' (frames: {', '.join(kin.poses)})")
+        chain = [frame]
+        link = next((f.link for f in robot.frames if f.name == frame), frame)
+        if link != frame:
+            chain.append(link)
+        while (j := robot.parent_joint(chain[-1])) is not None:
+            chain.append(j.parent)
+        chain.reverse()
+        points = ca.horzcat(*[kin.poses[name].p for name in chain])  # 3 x len(chain)
+        self._p = np.array([p.default for p in robot.parameters])
+        f = ca.Function("skeleton", [sym.q, sym.p], [points])
+        self.nv = robot.nv
+        probes = [np.array(f(q, self._p)) for q in sample_configurations(robot, 3, "random", seed=12345)]
+        keep = [0]
+        for k in range(1, len(chain)):
+            if max(np.linalg.norm(P[:, k] - P[:, keep[-1]]) for P in probes) > 1e-12:
+                keep.append(k)
+            elif k == len(chain) - 1:  # the chain ends at the frame itself, not at a point equal to it
+                keep[-1 if len(keep) > 1 else len(keep):] = [k]
+        self.chain = [chain[k] for k in keep]
+        self._f = ca.Function("skeleton", [sym.q, sym.p], [points[:, keep]])
+
+    def skeleton(self, Q) -> np.ndarray:
+        """(N, m, 3) origins along the chain for N configurations (rows of Q)."""
+        Q = np.atleast_2d(np.asarray(Q, dtype=float))
+        if Q.shape[1] != self.nv:
+            raise DeriveError(f"robot '{self.robot.name}': q must have {self.nv} entries, got {Q.shape[1]}")
+        m = len(self.chain)
+        out = np.empty((Q.shape[0], m, 3))
+        for start in range(0, Q.shape[0], 20000):  # bounded memory for big samples
+            block = Q[start:start + 20000]
+            F = self._f.map(block.shape[0])
+            res = np.array(F(block.T, np.tile(self._p.reshape(-1, 1), (1, block.shape[0]))))  # 3 x (m * N)
+            out[start:start + block.shape[0]] = res.reshape(3, block.shape[0], m).transpose(1, 2, 0)
+        return out
+
+    def position(self, Q) -> np.ndarray:
+        """(N, 3) positions of the frame."""
+        return self.skeleton(Q)[:, -1, :]
+
+
+@dataclass
+class Workspace:
+    """Samples of the configuration space and their images: ``points[i] = FK(q[i])``."""
+
+    robot: Robot
+    frame: str
+    q: np.ndarray  # (N, nv)
+    points: np.ndarray  # (N, 3)
+    base: np.ndarray  # (3,), the root's origin
+
+    @cached_property
+    def plane(self) -> tuple[int, ...]:
+        """Axes along which the points move (all three unless the robot is planar)."""
+        extent = self.points.max(axis=0) - self.points.min(axis=0)
+        return tuple(i for i in range(3) if extent[i] > 1e-9 * max(extent.max(), 1e-300))
+
+    @property
+    def reach(self) -> np.ndarray:
+        """Distance of every sample from the base origin."""
+        return np.linalg.norm(self.points - self.base, axis=1)
+
+    def summary(self) -> str:
+        r = self.reach
+        lo, hi = self.points.min(axis=0), self.points.max(axis=0)
+        box = ", ".join(f"{AXIS_NAMES[i]} in [{lo[i]:.4g}, {hi[i]:.4g}]" for i in range(3))
+        kind = "planar in " + "".join(AXIS_NAMES[i] for i in self.plane) if len(self.plane) < 3 else "spatial"
+        return (f"{self.robot.name}/{self.frame}: {len(self.q)} configurations -> workspace ({kind})\n"
+                f"  {box}\n  distance from the base: {r.min():.4g} .. {r.max():.4g}")
+
+
+def workspace(robot: Robot, frame: str = "tcp", n: int = 40000, method: str = "grid", seed: int = 0,
+              arm: Arm | None = None) -> Workspace:
+    """Sample the configuration space and map the samples through FK."""
+    arm = arm or Arm(robot, frame)
+    Q = sample_configurations(robot, n, method, seed)
+    sk = arm.skeleton(Q)
+    return Workspace(robot, frame, Q, sk[:, -1, :], sk[0, 0, :])
+
+
+# --------------------------------------------------------------------------- plots
+
+
+def new_figure(ncols: int, height: float = 4.6):
+    """A matplotlib Figure on the Agg canvas (no pyplot, no display, no global backend change)."""
+    from matplotlib.figure import Figure
+
+    return Figure(figsize=(height * ncols * 1.02, height), layout="constrained")
+
+
+def save_figure(fig, path: str | Path) -> Path:
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    return path
+
+
+def joint_label(robot: Robot, i: int) -> str:
+    c = robot.coordinates[i]
+    return f"{c.name} [{c.unit}]"
+
+
+def plot_workspace(ws: Workspace, path: str | Path) -> Path:
+    """Configuration space (left) and workspace (right), as the lecture's figure 4.
+
+    Every sample is coloured by its distance from the base in both panels, so bands
+    in the configuration space can be followed into the workspace. Planar robots get
+    one workspace panel in their plane with the innermost and outermost reach drawn;
+    spatial ones get the xy, xz and yz projections of the point cloud.
+    """
+    robot = ws.robot
+    planes = [ws.plane] if len(ws.plane) == 2 else [(0, 1), (0, 2), (1, 2)]
+    fig = new_figure(1 + len(planes))
+    axes = fig.subplots(1, 1 + len(planes))
+    r = ws.reach
+    small = len(ws.q) <= 5000
+    size = 6 if small else 1.5
+    cs = axes[0]
+    if robot.nv == 1:
+        cs.scatter(ws.q[:, 0], np.zeros(len(ws.q)), c=r, s=size, cmap="viridis")
+        cs.set_yticks([])
+    else:
+        cs.scatter(ws.q[:, 0], ws.q[:, 1], c=r, s=size, cmap="viridis", rasterized=True)
+        cs.set_ylabel(joint_label(robot, 1))
+    cs.set_xlabel(joint_label(robot, 0))
+    extra = f" (projection on the first two of {robot.nv} joints)" if robot.nv > 2 else ""
+    cs.set_title(f"configuration space{extra}", fontsize=10)
+    for ax, (a, b) in zip(axes[1:], planes):
+        sc = ax.scatter(ws.points[:, a], ws.points[:, b], c=r, s=size, cmap="viridis", rasterized=True)
+        ax.set_aspect("equal", adjustable="datalim")
+        ax.set_xlabel(f"{AXIS_NAMES[a]} [m]")
+        ax.set_ylabel(f"{AXIS_NAMES[b]} [m]")
+        if len(planes) == 1:
+            t = np.linspace(0, 2 * np.pi, 400)
+            for rad, style in ((r.min(), "--"), (r.max(), "-")):
+                ax.plot(ws.base[a] + rad * np.cos(t), ws.base[b] + rad * np.sin(t), style, color="k", lw=0.8)
+            ax.set_title(f"workspace of '{ws.frame}': reach {r.min():.3g} .. {r.max():.3g} m", fontsize=10)
+        else:
+            ax.set_title(f"workspace of '{ws.frame}', {AXIS_NAMES[a]}{AXIS_NAMES[b]} projection", fontsize=10)
+    fig.colorbar(sc, ax=list(axes), shrink=0.8, label="distance from base [m]")
+    fig.suptitle(f"{robot.name}: {len(ws.q)} configurations through FK", fontsize=11)
+    return save_figure(fig, path)
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def workspace_command(args) -> int:
+    from derive.description.model import load_robot
+
+    robot = load_robot(args.robot_name, args.models)
+    if args.samples < 2:
+        raise DeriveError(f"--samples: need at least 2, got {args.samples}")
+    ws = workspace(robot, args.frame, args.samples, args.method, args.seed)
+    print(ws.summary())
+    if args.png:
+        print(f"wrote {plot_workspace(ws, args.png)}")
+    return 0
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser("workspace", help="sample the configuration space through FK; plot both spaces",
+                       description="Sample q in the joint box (grid or random), map through FK, print the "
+                                   "workspace's extent and optionally draw both spaces side by side.")
+    p.add_argument("robot_name")
+    p.add_argument("--frame", default="tcp", help="frame whose positions form the workspace (default tcp)")
+    p.add_argument("--samples", type=int, default=40000, help="number of configurations (default 40000)")
+    p.add_argument("--method", choices=("grid", "random"), default="grid")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random sampling")
+    p.add_argument("--png", help="write configuration space | workspace to this PNG")
+    p.set_defaults(func=workspace_command)

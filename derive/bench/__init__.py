@@ -1,0 +1,86 @@
+"""`derive bench` / `make bench`: benchmarks that write a results table.
+
+Speed targets live here, never in unit tests. Every figure is reported against
+a reference measured in the same run (ratios), because the machines are shared
+and noisy; generated C is compared by callgrind instruction counts where
+possible, which are repeatable.
+
+Feature modules contribute benchmarks: each module named in BENCH_MODULES has
+``benchmarks() -> dict[str, Callable[[argparse.Namespace], str]]`` returning
+markdown sections. Results go to bench/results.md (and stdout).
+"""
+
+from __future__ import annotations
+
+import importlib
+import time
+from pathlib import Path
+
+from derive.errors import DeriveError
+from derive.resources import CHECKOUT
+
+ROOT = CHECKOUT
+BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.solvers.trajopt_examples",
+                            "derive.solvers.simulate"]
+
+
+def registry() -> dict:
+    out = {}
+    for module in BENCH_MODULES:
+        out.update(importlib.import_module(module).benchmarks())
+    return out
+
+
+def run(args) -> int:
+    benches = registry()
+    names = args.names or list(benches)
+    unknown = [n for n in names if n not in benches]
+    if unknown:
+        raise DeriveError(f"bench: unknown benchmark {unknown[0]!r} (known: {', '.join(benches)})")
+    sections = []
+    for name in names:
+        print(f"[bench] {name} ...", flush=True)
+        start = time.perf_counter()
+        text = benches[name](args)
+        sections.append(text.rstrip() + "\n")
+        print(text, flush=True)
+        print(f"[bench] {name} done in {time.perf_counter() - start:.1f} s", flush=True)
+    out = Path(args.out) if args.out else ROOT / "bench" / "results.md"
+    out.parent.mkdir(parents=True, exist_ok=True)
+    header = "# derive benchmark results\n\nWritten by `make bench` (`derive bench`). Ratios are against references measured in the same run.\n\n"
+    if args.names and out.exists():  # keep other sections, replace the ones rerun
+        old = out.read_text()
+        sections = _merge(old, sections)
+        out.write_text(header + "\n".join(sections))
+    else:
+        out.write_text(header + "\n".join(sections))
+    print(f"[bench] results written to {out}")
+    return 0
+
+
+def _merge(old: str, new_sections: list[str]) -> list[str]:
+    def split(text: str) -> dict[str, str]:
+        parts, current, title = {}, [], None
+        for line in text.splitlines(keepends=True):
+            if line.startswith("## "):
+                if title:
+                    parts[title] = "".join(current)
+                title, current = line.strip(), [line]
+            elif title:
+                current.append(line)
+        if title:
+            parts[title] = "".join(current)
+        return parts
+
+    merged = split(old)
+    for sec in new_sections:
+        merged.update(split(sec))
+    return [v.rstrip() + "\n" for v in merged.values()]
+
+
+def add_parser(sub) -> None:
+    b = sub.add_parser("bench", help="run benchmarks and write bench/results.md")
+    b.add_argument("names", nargs="*", help="benchmarks to run (default: all)")
+    b.add_argument("--out", help="results file (default: bench/results.md)")
+    b.add_argument("--quick", action="store_true", help="smaller sample sizes, for a smoke run")
+    b.set_defaults(func=run)

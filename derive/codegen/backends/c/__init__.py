@@ -1,0 +1,88 @@
+"""The C99 backend: one ``.c`` and ``.h`` per function, ``derive_real.h``, an umbrella header.
+
+No malloc, no globals, only ``<math.h>``; ``DERIVE_REAL`` is double, or float with
+``-DDERIVE_FLOAT``. Functions are ``<robot>_<quantity>[_<frame>]`` taking inputs, then
+outputs, as row-major arrays. Templates and support headers: ``templates/c/``.
+"""
+
+from __future__ import annotations
+
+import jinja2
+
+from derive.codegen.backends.base import Backend, Function, RobotContext, float_literal
+from derive.codegen.backends.c.printer import CPrinter, literal
+
+MATH_FUNCTIONS = [("SIN", "sin"), ("COS", "cos"), ("TAN", "tan"), ("SQRT", "sqrt"), ("EXP", "exp"),
+                  ("LOG", "log"), ("FABS", "fabs"), ("ASIN", "asin"), ("ACOS", "acos"), ("ATAN", "atan"),
+                  ("TANH", "tanh"), ("POW", "pow"), ("ATAN2", "atan2"), ("FMIN", "fmin"), ("FMAX", "fmax")]
+SUPPORT = {"ik": ("derive_linalg.h", "derive_ik.h"), "manipulability": ("derive_linalg.h", "derive_manipulability.h")}
+"""Fixed algorithms -> the header-only support files (templates/c/support/) that implement them."""
+
+
+class CBackend(Backend):
+    name = "c"
+
+    def _signature(self, spec) -> list[str]:
+        return ([f"const DERIVE_REAL *{n}" for n, _ in spec.inputs] + [f"DERIVE_REAL *{n}" for n, _ in spec.outputs])
+
+    def _files(self, spec) -> dict:
+        return {"header": f"{spec.name}.h", "source": f"{spec.name}.c", "args": self._signature(spec)}
+
+    def function_context(self, fn: Function) -> dict:
+        spec, prog = fn.spec, fn.program
+        in_names = [n for n, _ in spec.inputs]
+        used = {a[1] for ins in prog.body for a in ins.args if a[0] == "in"}
+        used |= {a[1] for _, _, a in prog.results if a[0] == "in"}
+        printer = CPrinter(in_names)
+        return {**fn.common, **self._files(spec),
+                "unused": [n for i, n in enumerate(in_names) if i not in used],
+                "body": printer.body(prog), "stores": printer.stores(prog, [n for n, _ in spec.outputs])}
+
+    def template_context(self, fn: Function) -> dict:
+        t = fn.spec
+        context = {}
+        for key, value in t.context:
+            if isinstance(value, float):
+                value = float_literal(value)
+            elif isinstance(value, tuple) and value and all(isinstance(v, float) for v in value):
+                value = tuple(literal(v) for v in value)
+            context[key] = value
+        calls = {role: f"{t.robot}_{short}" for role, short in t.calls}
+        in_names = [n for n, _ in t.inputs]
+        header = f"{t.template}.h.jinja"
+        return {**fn.common, **self._files(t), **context, **calls,
+                "macro": t.name.upper(), "c_return": "int" if t.status else "void",
+                "c_template": self.template(f"{t.template}.c.jinja"),
+                "h_template": self.template(header) if self.has_template(header) else self.template("function.h.jinja"),
+                "call_headers": [f"{t.robot}_{short}.h" for short in t.callees],
+                "support_headers": [h for algorithm in t.support for h in SUPPORT[algorithm]],
+                "p_arg": ", p" if "p" in in_names else "", "has_p": "p" in in_names}
+
+    def render(self, env: jinja2.Environment, robot: RobotContext, functions: list[dict]) -> dict[str, str]:
+        base = {**robot.data(), "prefix": robot.robot.upper()}
+        files = {"c/derive_real.h": env.get_template(self.template("derive_real.h.jinja")).render(functions=MATH_FUNCTIONS)}
+        for name in self.support_files(functions):
+            files[f"c/{name}"] = env.get_template(self.template("support.jinja")).render(
+                source=self.support_source(name), text=self.support_text(name))
+        for f in functions:
+            guard = f"{f['name'].upper()}_H"
+            files[f"c/{f['header']}"] = env.get_template(f.get("h_template") or self.template("function.h.jinja")).render(
+                base, f=f, guard=guard)
+            files[f"c/{f['source']}"] = env.get_template(f.get("c_template") or self.template("function.c.jinja")).render(
+                base, f=f)
+        files[f"c/{robot.robot}.h"] = env.get_template(self.template("robot.h.jinja")).render(
+            base, guard=f"{robot.robot.upper()}_DERIVE_H", headers=[f["header"] for f in functions])
+        return files
+
+    @staticmethod
+    def support_files(functions: list[dict]) -> list[str]:
+        return sorted({name for f in functions for name in f.get("support_headers", ())})
+
+    def manifest_entry(self, robot: RobotContext, f: dict) -> dict:
+        return {"header": f"c/{f['header']}", "source": f"c/{f['source']}"}
+
+    def manifest_support(self, robot: RobotContext, functions: list[dict]) -> list[dict]:
+        return [{"file": f"c/{name}", "source": self.support_source(name)} for name in self.support_files(functions)]
+
+
+BACKEND = CBackend()

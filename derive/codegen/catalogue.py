@@ -1,0 +1,147 @@
+"""The catalogue: which functions every robot gets, as language-free specs in a fixed order.
+
+Generated functions are ``<robot>_<quantity>[_<frame>]``. Code uses the recursive
+forms (RNEA, CRBA, LDL^T), which the tests prove equal to the Lagrangian; they are
+several times leaner after CSE. A new quantity is one more ``add(...)`` in
+:func:`function_specs` (an expression) or one more entry of :func:`template_functions`
+(a loop or a call of a fixed algorithm).
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+
+from derive.description.robot import Robot
+from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
+from derive.symbolic.model import SXModel
+from derive.symbolic.ode import ode_jacobians
+from derive.codegen.spec import FunctionSpec, TemplateFunction
+
+QUANTITIES = ("fk", "jacobian", "fk_jacobian", "mass_matrix", "coriolis_matrix", "gravity", "inverse_dynamics",
+              "forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u")
+
+IK_FRAMES = ("tcp",)      # the frames that have a generated fk_jacobian
+IK_MAX_ITERATIONS = 5000  # the generated solver's iteration cap
+IK_LAMBDA_MIN_FLOAT = 1e-5  # smallest damping in single precision
+IK_LIMIT = 1e30           # a missing joint limit: finite in float too, and never reached
+POSITION_ROWS = (0, 1, 2)
+
+
+def function_specs(model: SXModel) -> list[FunctionSpec]:
+    """Every expression function generated for a robot, in a fixed order."""
+    robot: Robot = model.robot
+    s = model.sym
+    n = robot.nv
+    extra = (("p", s.p),) if s.p.numel() else ()
+    pdoc = f" p ({s.p.numel()}): parameters {', '.join(s.parameter_names)}." if extra else ""
+    q, qd, qdd, tau = ("q", s.q), ("qd", s.qd), ("qdd", s.qdd), ("tau", s.tau)
+    ne = model.newton_euler
+    specs: list[FunctionSpec] = []
+
+    def add(quantity, frame, inputs, outputs, doc):
+        specs.append(FunctionSpec(robot.name, quantity, frame, tuple(inputs) + extra, tuple(outputs), doc + pdoc))
+
+    for f in robot.frames:
+        add("fk", f.name, [q], [("T", model.fk(f.name))],
+            f"world_T_{f.name}: 4x4 homogeneous transform of frame '{f.name}' in the world (root) frame, row-major.")
+        add("jacobian", f.name, [q], [("J", model.jacobian(f.name))],
+            f"Geometric Jacobian of frame '{f.name}', 6x{n} row-major, rows [linear; angular], "
+            "world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.")
+    if "tcp" in {f.name for f in robot.frames}:
+        add("fk_jacobian", "tcp", [q], [("T", model.fk("tcp")), ("J", model.jacobian("tcp"))],
+            "world_T_tcp (4x4) and its geometric Jacobian (6x{n}, [linear; angular], LOCAL_WORLD_ALIGNED) "
+            "in one pass, sharing the transforms: what IK and control loops need each step.".format(n=n))
+    add("mass_matrix", None, [q], [("M", ne.mass_matrix)],
+        f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.")
+    add("coriolis_matrix", None, [q, qd], [("C", ne.coriolis_matrix)],
+        f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.")
+    add("gravity", None, [q], [("g", ne.gravity_vector)],
+        "Gravity torques g(q) = dU/dq = rnea(q, 0, 0).")
+    add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
+        "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.")
+    qdd_fd = model.forward_dynamics()
+    add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
+        "Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve.")
+    x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", n)
+    f = ca.vertcat(s.qd, qdd_fd)
+    sub_from, sub_to = ca.vertcat(s.q, s.qd, s.tau), ca.vertcat(x, u)
+
+    def in_xu(e: ca.SX) -> ca.SX:
+        return ca.substitute(e, sub_from, sub_to)
+
+    add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))],
+        f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd].")
+    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(), s.q, s.qd, s.qdd, qdd_fd)
+    add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))],
+        f"df/dx ({2 * n}x{2 * n}, row-major) of the ODE x' = f(x, u): the linearisation's A.")
+    add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))],
+        f"df/du ({2 * n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.")
+    return specs
+
+
+def template_functions(model: SXModel) -> list[TemplateFunction]:
+    """Functions built from templates on top of the expression functions, in a fixed order."""
+    robot = model.robot
+    n = 2 * robot.nv
+    extra = (("p", (model.sym.p.numel(), 1)),) if model.sym.p.numel() else ()
+    rk4 = TemplateFunction(
+        robot.name, "rk4_step", None,
+        (("x", (n, 1)), ("u", (robot.nv, 1)), ("dt", (1, 1))) + extra, (("x_next", (n, 1)),),
+        "One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: "
+        "x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.",
+        "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n),))
+    manipulability = [t for f in robot.frames if (t := manipulability_function(model, f.name))]
+    return [rk4] + ik_functions(model) + manipulability
+
+
+def ik_functions(model: SXModel) -> list[TemplateFunction]:
+    """``<robot>_ik_<frame>``: the same Levenberg-Marquardt as :mod:`derive.solvers.ik` (method "lm")
+    with a fixed iteration cap, a fixed restart sequence (xorshift32) and the limits as constants;
+    no allocation. The algorithm is each backend's fixed ``ik`` support file."""
+    robot = model.robot
+    lo, hi, slo, shi = joint_ranges(robot)
+    n, np_ = model.sym.nv, model.sym.p.numel()
+    extra = (("p", (np_, 1)),) if np_ else ()
+    out = []
+    for frame in IK_FRAMES:
+        if frame not in {f.name for f in robot.frames} or not model.kinematics.ancestors[frame]:
+            continue
+        context = {"n": n, "frame": frame, "max_iterations": IK_MAX_ITERATIONS, "attempt": ATTEMPT,
+                   "tol_position": TOL_POSITION, "tol_rotation": TOL_ROTATION, "lambda0": LAMBDA0,
+                   "lambda_min": LAMBDA_MIN, "lambda_min_float": IK_LAMBDA_MIN_FLOAT, "lambda_stall": LAMBDA_STALL}
+        for key, values in (("lower", lo), ("upper", hi), ("sample_lower", slo), ("sample_upper", shi)):
+            context[key] = tuple(float(np.clip(v, -IK_LIMIT, IK_LIMIT)) for v in values)
+        out.append(TemplateFunction(
+            robot.name, "ik", frame,
+            (("T", (4, 4)), ("q0", (n, 1)), ("w", (6, 1))) + extra, (("q", (n, 1)), ("residual", (2, 1))),
+            f"Inverse kinematics of frame '{frame}': q within the joint limits with world_T_{frame}(q) = T "
+            f"(4x4), Levenberg-Marquardt on e = [p_T - p; log(R_T R^T)] weighted by w (6; position only: "
+            f"1 1 1 0 0 0) with seeded restarts, at most {IK_MAX_ITERATIONS} iterations. residual = "
+            f"[position error (m), rotation error (rad)] of the weighted rows; success when below "
+            f"{TOL_POSITION:g} m and {TOL_ROTATION:g} rad.",
+            "ik", calls=(("fkj", f"fk_jacobian_{frame}"),), context=tuple(context.items()),
+            support=("ik",), optional=("q0", "w"), status=True))
+    return out
+
+
+def manipulability_function(model: SXModel, frame: str) -> TemplateFunction | None:
+    """The generated ``<robot>_manipulability_<frame>``, or None when the frame's position never
+    moves (a frame fixed to the base) or cannot span its task (nv < k)."""
+    robot = model.robot
+    rows = tuple(r for r in POSITION_ROWS if r in model.kinematics.moving_rows(frame))
+    if not rows or robot.nv < len(rows):
+        return None
+    k = len(rows)
+    row_names = ",".join("xyz"[r] for r in rows)
+    extra = (("p", (model.sym.p.numel(), 1)),) if model.sym.p.numel() else ()
+    doc = (f"Manipulability of frame '{frame}' (lecture eq. 30) for its position rows with motion "
+           f"({row_names}): mu = [mu1, mu2, mu3], mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, "
+           f"mu3 = sqrt(det(J J^T)) (Yoshikawa; = sqrt(lmax lmin) for k = 2), l_i the eigenvalues of J J^T "
+           f"with J the {k}x{robot.nv} task rows of jacobian_{frame}; mu1 = mu2 = inf at a singularity.")
+    return TemplateFunction(
+        robot.name, "manipulability", frame, (("q", (robot.nq, 1)),) + extra, (("mu", (3, 1)),), doc,
+        "manipulability", calls=(("jacobian", f"jacobian_{frame}"),),
+        context=(("k", k), ("nv", robot.nv), ("rows", rows),
+                 ("jacobian_size", 6 * robot.nv), ("task_size", k * robot.nv)),  # work buffers (reals)
+        support=("manipulability",), manifest=(("task_rows", rows),))

@@ -1,0 +1,111 @@
+"""Specs -> files: every backend's sources plus one language-free manifest.json per robot.
+
+Emitting is a pure function of the spec list and the backends: each expression spec
+becomes a Program (CasADi CSE, SSA temporaries), each backend's printer turns it into
+(lhs, rhs) pairs, and jinja2 templates lay them out. Nothing here knows mechanics or
+any one language. Algorithms that are not one expression graph (IK's solver, the
+singular values) are fixed support files of each backend, copied verbatim into each
+robot's output (listed under "support" in its manifest.json); templates only lay out
+the calls.
+"""
+
+from __future__ import annotations
+
+import json
+
+import jinja2
+
+from derive.codegen.backends import backends as registered_backends
+from derive.codegen.backends.base import Backend, Function, RobotContext, ops_comment, shape_text
+from derive.codegen.program import build_program
+from derive.codegen.spec import FunctionSpec, TemplateFunction
+from derive.description.robot import Robot
+from derive.resources import TEMPLATES
+
+SHARED_TEMPLATES = ("manifest", "latex")
+"""Language-free template folders of templates/: the manifest and the LaTeX document."""
+
+
+def environment(backends: list[Backend] | None = None) -> jinja2.Environment:
+    """The one jinja2 environment: templates are named ``<folder>/<file>`` (``c/function.c.jinja``)."""
+    loaders = {name: jinja2.FileSystemLoader(str(TEMPLATES / name)) for name in SHARED_TEMPLATES}
+    for b in registered_backends() if backends is None else backends:
+        loaders[b.name] = jinja2.FileSystemLoader(str(b.templates))
+    return jinja2.Environment(
+        loader=jinja2.PrefixLoader(loaders, delimiter="/"),
+        undefined=jinja2.StrictUndefined,
+        trim_blocks=True,
+        lstrip_blocks=True,
+        keep_trailing_newline=True,
+        autoescape=False,
+    )
+
+
+def _io_lines(inputs, outputs) -> list[str]:
+    return [f"in  {n} [{shape_text(s)}]" for n, s in inputs] + [f"out {n} [{shape_text(s)}]" for n, s in outputs]
+
+
+def expression_function(spec: FunctionSpec, progress=None) -> Function:
+    """An expression spec with its SSA program and language-free context."""
+    prog = build_program(list(spec.inputs), list(spec.outputs))
+    if progress:
+        progress(spec, prog)
+    ops = prog.ops()
+    inputs = [(n, x.shape) for n, x in spec.inputs]
+    outputs = [(n, e.shape) for n, e in spec.outputs]
+    return Function(spec, prog, {
+        "name": spec.name, "short_name": spec.short_name, "quantity": spec.quantity, "frame": spec.frame,
+        "doc_lines": [spec.doc], "io_lines": _io_lines(inputs, outputs), "ops": ops, "ops_comment": ops_comment(ops),
+        "calls": [], "manifest": (),
+        "inputs": [{"name": n, "shape": list(s)} for n, s in inputs],
+        "outputs": [{"name": n, "shape": list(s)} for n, s in outputs]})
+
+
+def template_function(t: TemplateFunction) -> Function:
+    """A template-bodied function with its language-free context."""
+    calls = [f"{t.robot}_{short}" for short in t.callees]
+    return Function(t, None, {
+        "name": t.name, "short_name": t.short_name, "quantity": t.quantity, "frame": t.frame,
+        "doc_lines": [t.doc], "io_lines": _io_lines(t.inputs, t.outputs), "ops": None,
+        "ops_comment": f"cost: the arithmetic of {', '.join(calls)} per call, plus loops" if calls else "cost: loops",
+        "calls": calls, "manifest": t.manifest,
+        "inputs": [{"name": n, "shape": list(s)} for n, s in t.inputs],
+        "outputs": [{"name": n, "shape": list(s)} for n, s in t.outputs]})
+
+
+def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,
+                 templates: list[TemplateFunction] = (), backends: list[Backend] | None = None) -> dict[str, str]:
+    """All files of one robot, as {path relative to generated/<robot>/: text}."""
+    backends = registered_backends() if backends is None else backends
+    env = environment(backends)
+    functions = [expression_function(s, progress) for s in specs] + [template_function(t) for t in templates]
+    ctx = RobotContext(robot.name, model_hash, [c.name for c in robot.coordinates], robot.nq, robot.nv,
+                       [(p.name, p.default) for p in robot.parameters])
+    files: dict[str, str] = {}
+    per_backend = {}
+    for b in backends:
+        contexts = [b.function_context(fn) if fn.program is not None else b.template_context(fn) for fn in functions]
+        per_backend[b.name] = contexts
+        files.update(b.render(env, ctx, contexts))
+    manifest = {
+        "robot": robot.name,
+        "model_hash": model_hash,
+        "nq": robot.nq,
+        "nv": robot.nv,
+        "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
+                    "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
+        "frames": [fr.name for fr in robot.frames],
+        "parameters": [{"name": p.name, "default": p.default} for p in robot.parameters],
+        "support": [entry for b in backends for entry in b.manifest_support(ctx, per_backend[b.name])],
+        "functions": [{
+            "name": fn.common["name"], "quantity": fn.common["quantity"], "frame": fn.common["frame"],
+            "inputs": fn.common["inputs"], "outputs": fn.common["outputs"],
+            **{b.name: b.manifest_entry(ctx, per_backend[b.name][k]) for b in backends},
+            "ops": {k: fn.common["ops"][k] for k in ("total", "mul", "add", "div", "trig")} if fn.common["ops"] else None,
+            "calls": fn.common["calls"],
+            **dict(fn.common["manifest"]),
+        } for k, fn in enumerate(functions)],
+    }
+    files["manifest.json"] = env.get_template("manifest/manifest.json.jinja").render(
+        manifest_json=json.dumps(manifest, indent=2))
+    return files

@@ -1,0 +1,416 @@
+"""models.yaml -> validated robots: loading, parsing and the checks every model passes.
+
+No CAS lives here. Numeric fields hold a float or a parameter expression string
+(see :mod:`derive.description.expr`); the symbolic side and the numeric reference each
+evaluate them in their own algebra. The dataclasses and conventions are in
+:mod:`derive.description.robot`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import yaml
+
+from derive.description import expr
+from derive.description.dh import dh_to_tree
+from derive.description.inertia import inertia_problem
+from derive.description.robot import (JOINT_TYPES, Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3, identifier)
+from derive.resources import EXAMPLE_MODELS
+
+
+# --------------------------------------------------------------------------- loading
+
+
+def default_models_path() -> Path:
+    """models.yaml: $DERIVE_MODELS, else the project root next to the package."""
+    env = os.environ.get("DERIVE_MODELS")
+    if env:
+        return Path(env)
+    return EXAMPLE_MODELS
+
+
+def load_models(path: str | Path | None = None) -> dict[str, Robot]:
+    """Read and validate every robot of a models file, in the file's order."""
+    path = Path(path) if path else default_models_path()
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ModelError(None, str(path), f"cannot read ({exc.strerror})") from None
+    return parse_models(text, source=str(path))
+
+
+def parse_models(text: str, source: str = "<string>") -> dict[str, Robot]:
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "?"
+        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
+        raise ModelError(None, f"{source} {where}", f"malformed YAML: {problem}") from None
+    if not isinstance(data, Mapping) or not isinstance(data.get("robots"), Mapping):
+        raise ModelError(None, f"{source} robots", "the file must hold a mapping 'robots: {name: {...}}'")
+    _check_keys(None, "", data, {"robots"})
+    if not data["robots"]:
+        raise ModelError(None, f"{source} robots", "no robots in the file")
+    return {name: parse_robot(str(name), spec) for name, spec in data["robots"].items()}
+
+
+def load_robot(name: str, path: str | Path | None = None) -> Robot:
+    models = load_models(path)
+    if name not in models:
+        raise ModelError(name, "robots", f"no such robot (known: {', '.join(models)})")
+    return models[name]
+
+
+# --------------------------------------------------------------------------- parsing
+
+
+def _check_keys(robot: str | None, where: str, data: Mapping, allowed: Iterable[str]) -> None:
+    allowed = set(allowed)
+    for key in data:
+        if key not in allowed:
+            raise ModelError(robot, f"{where}{key}", f"unknown field (expected one of: {', '.join(sorted(allowed))})")
+
+
+class _Parser:
+    """Parses one robot; collects inline parameters as it goes."""
+
+    def __init__(self, name: str, spec: Any):
+        self.name = identifier(name, "name", name)
+        if not isinstance(spec, Mapping):
+            raise ModelError(name, "", "a robot must be a mapping with links and joints (or dh)")
+        self.spec = spec
+        self.params: dict[str, float] = {}
+
+    def error(self, where: str, problem: str) -> ModelError:
+        return ModelError(self.name, where, problem)
+
+    # ---- values ----
+    def value(self, where: str, raw: Any) -> Value:
+        if isinstance(raw, Mapping):
+            self.check_keys(where + ".", raw, {"param", "default"})
+            if "param" not in raw or "default" not in raw:
+                raise self.error(where, "a parameter needs both 'param' and 'default'")
+            pname = identifier(self.name, where + ".param", raw["param"])
+            default = self.number(where + ".default", raw["default"])
+            if pname in self.params and self.params[pname] != default:
+                raise self.error(where, f"parameter '{pname}' declared twice with different defaults")
+            self.params[pname] = default
+            return pname
+        if isinstance(raw, bool) or raw is None:
+            raise self.error(where, f"expected a number or parameter expression, got {raw!r}")
+        if isinstance(raw, (int, float)):
+            if not math.isfinite(raw):
+                raise self.error(where, f"must be finite, got {raw}")
+            return float(raw)
+        if isinstance(raw, str):
+            try:
+                expr.parse(raw)
+            except expr.ExpressionError as exc:
+                raise self.error(where, str(exc)) from None
+            return raw.strip()
+        raise self.error(where, f"expected a number or parameter expression, got {type(raw).__name__}")
+
+    def number(self, where: str, raw: Any) -> float:
+        if isinstance(raw, str):  # YAML 1.1 reads 1e-3 (no dot) as a string
+            try:
+                raw = float(raw)
+            except ValueError:
+                raise self.error(where, f"expected a finite number, got {raw!r}") from None
+        if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
+            raise self.error(where, f"expected a finite number, got {raw!r}")
+        return float(raw)
+
+    def vec3(self, where: str, raw: Any, default: Vec3 = (0.0, 0.0, 0.0)) -> Vec3:
+        if raw is None:
+            return default
+        if not isinstance(raw, (list, tuple)) or len(raw) != 3:
+            raise self.error(where, f"expected a list of 3 values, got {raw!r}")
+        return tuple(self.value(f"{where}[{i}]", v) for i, v in enumerate(raw))
+
+    def check_keys(self, where: str, data: Any, allowed: Iterable[str]) -> None:
+        if not isinstance(data, Mapping):
+            raise self.error(where.rstrip("."), f"expected a mapping, got {data!r}")
+        _check_keys(self.name, where, data, allowed)
+
+    def origin(self, where: str, raw: Any) -> Origin:
+        if raw is None:
+            return Origin()
+        self.check_keys(where + ".", raw, {"xyz", "rpy"})
+        return Origin(self.vec3(where + ".xyz", raw.get("xyz")), self.vec3(where + ".rpy", raw.get("rpy")))
+
+    def inertia(self, where: str, raw: Any) -> tuple:
+        if raw is None:
+            return Link.__dataclass_fields__["inertia"].default
+        if isinstance(raw, Mapping):
+            self.check_keys(where + ".", raw, {"ixx", "iyy", "izz", "ixy", "ixz", "iyz"})
+            v = {k: self.value(f"{where}.{k}", raw.get(k, 0.0)) for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")}
+            return ((v["ixx"], v["ixy"], v["ixz"]), (v["ixy"], v["iyy"], v["iyz"]), (v["ixz"], v["iyz"], v["izz"]))
+        if isinstance(raw, (list, tuple)) and len(raw) == 3 and all(isinstance(r, (list, tuple)) and len(r) == 3 for r in raw):
+            rows = tuple(tuple(self.value(f"{where}[{i}][{k}]", v) for k, v in enumerate(r)) for i, r in enumerate(raw))
+            for i in range(3):
+                for k in range(i + 1, 3):
+                    if rows[i][k] != rows[k][i]:
+                        raise self.error(where, f"not symmetric: [{i}][{k}] = {rows[i][k]!r} but [{k}][{i}] = {rows[k][i]!r}")
+            return rows
+        if isinstance(raw, (list, tuple)) and len(raw) == 3:  # diagonal
+            d = [self.value(f"{where}[{i}]", v) for i, v in enumerate(raw)]
+            return ((d[0], 0.0, 0.0), (0.0, d[1], 0.0), (0.0, 0.0, d[2]))
+        raise self.error(where, "expected a 3x3 matrix, a diagonal [ixx, iyy, izz] or {ixx: .., ixy: .., ...}")
+
+    def limits(self, where: str, raw: Any) -> Limits:
+        if raw is None:
+            return Limits()
+        self.check_keys(where + ".", raw, {"lower", "upper", "velocity", "effort"})
+        vals = {k: (None if raw.get(k) is None else self.number(f"{where}.{k}", raw[k])) for k in ("lower", "upper", "velocity", "effort")}
+        if vals["lower"] is not None and vals["upper"] is not None and vals["lower"] > vals["upper"]:
+            raise self.error(where, f"lower ({vals['lower']}) is above upper ({vals['upper']})")
+        for k in ("velocity", "effort"):
+            if vals[k] is not None and vals[k] <= 0:
+                raise self.error(f"{where}.{k}", f"must be positive, got {vals[k]}")
+        return Limits(**vals)
+
+    def link(self, where: str, raw: Any) -> Link:
+        self.check_keys(where + ".", raw, {"name", "mass", "com", "inertia", "inertia_rpy"})
+        if "name" not in raw:
+            raise self.error(where + ".name", "missing")
+        return Link(
+            name=identifier(self.name, where + ".name", raw["name"]),
+            mass=self.value(where + ".mass", raw.get("mass", 0.0)),
+            com=self.vec3(where + ".com", raw.get("com")),
+            inertia=self.inertia(where + ".inertia", raw.get("inertia")),
+            inertia_rpy=self.vec3(where + ".inertia_rpy", raw.get("inertia_rpy")),
+        )
+
+    def unit_vector(self, where: str, raw: Any) -> tuple:
+        """A nonzero 3-vector of numbers, normalised (kept as written when already unit)."""
+        if not isinstance(raw, (list, tuple)) or len(raw) != 3:
+            raise self.error(where, f"expected 3 numbers, got {raw!r}")
+        v = [self.number(f"{where}[{i}]", a) for i, a in enumerate(raw)]
+        norm = math.sqrt(sum(a * a for a in v))
+        if norm < 1e-12:
+            raise self.error(where, "must not be the zero vector")
+        return tuple(a / norm for a in v) if norm != 1.0 else tuple(v)
+
+    def joint(self, where: str, raw: Any) -> Joint:
+        self.check_keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "axis2", "pitch", "limits"})
+        for key in ("name", "type", "parent", "child"):
+            if key not in raw:
+                raise self.error(f"{where}.{key}", "missing")
+        jtype = raw["type"]
+        if jtype not in JOINT_TYPES:
+            raise self.error(f"{where}.type", f"unknown joint type '{jtype}' (known: {', '.join(JOINT_TYPES)})")
+        name = identifier(self.name, where + ".name", raw["name"])
+        if jtype == "spherical" and "axis" in raw:
+            raise self.error(f"{where}.axis", "a spherical joint turns about z, y, x of its joint frame "
+                                              "(ZYX Euler angles); orient them with origin.rpy instead")
+        axis = self.unit_vector(f"{where}.axis", raw.get("axis", [1.0, 0.0, 0.0]))
+        for key, owner in (("pitch", "helical"), ("axis2", "universal")):
+            if key in raw and jtype != owner:
+                raise self.error(f"{where}.{key}", f"only a {owner} joint has '{key}' (this one is {jtype})")
+            if key not in raw and jtype == owner:
+                raise self.error(f"{where}.{key}", f"missing: a {owner} joint needs '{key}'")
+        pitch = self.value(f"{where}.pitch", raw["pitch"]) if jtype == "helical" else None
+        axis2 = None
+        if jtype == "universal":
+            axis2 = self.unit_vector(f"{where}.axis2", raw["axis2"])
+            cos = sum(a * b for a, b in zip(axis, axis2))
+            if abs(abs(cos) - 1) < 1e-9:
+                raise self.error(f"{where}.axis2", f"{list(axis2)} is parallel to axis {list(axis)}: that is one revolute joint")
+            if abs(cos) > 1e-9:
+                raise self.error(f"{where}.axis2", f"must be perpendicular to axis {list(axis)} (cos of the angle = {cos:.3g})")
+        return Joint(
+            name=name,
+            type=jtype,
+            parent=str(raw["parent"]),
+            child=str(raw["child"]),
+            origin=self.origin(where + ".origin", raw.get("origin")),
+            axis=axis,
+            limits=self.joint_limits(where + ".limits", raw.get("limits"), JOINT_TYPES[jtype]),
+            pitch=pitch,
+            axis2=axis2,
+        )
+
+    def joint_limits(self, where: str, raw: Any, dof: int) -> Limits | tuple[Limits, ...]:
+        """One mapping for a 1-DOF joint; for a multi-DOF joint a list (one per coordinate) or one mapping for all."""
+        if dof <= 1:
+            return self.limits(where, raw)
+        if isinstance(raw, list):
+            if len(raw) != dof:
+                raise self.error(where, f"expected {dof} limits (one per coordinate), got {len(raw)}")
+            return tuple(self.limits(f"{where}[{i}]", r) for i, r in enumerate(raw))
+        return (self.limits(where, raw),) * dof
+
+    def frame(self, where: str, raw: Any) -> Frame:
+        self.check_keys(where + ".", raw, {"name", "link", "xyz", "rpy"})
+        for key in ("name", "link"):
+            if key not in raw:
+                raise self.error(f"{where}.{key}", "missing")
+        return Frame(
+            name=identifier(self.name, where + ".name", raw["name"]),
+            link=str(raw["link"]),
+            origin=Origin(self.vec3(where + ".xyz", raw.get("xyz")), self.vec3(where + ".rpy", raw.get("rpy"))),
+        )
+
+    # ---- robot ----
+    def robot(self) -> Robot:
+        spec = self.spec
+        self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames"})
+        params = spec.get("parameters") or {}
+        if not isinstance(params, Mapping):
+            raise self.error("parameters", "expected a mapping name: default")
+        for pname, default in params.items():
+            identifier(self.name, f"parameters.{pname}", pname)
+            self.params[pname] = self.number(f"parameters.{pname}", default)
+        if "dh" in spec:
+            if "links" in spec or "joints" in spec:
+                raise self.error("dh", "give either a dh table or links and joints, not both")
+
+            links, joints = dh_to_tree(self, spec["dh"])
+        else:
+            for key in ("links", "joints"):
+                if not isinstance(spec.get(key), list):
+                    raise self.error(key, "missing or not a list")
+            links = [self.link(f"links[{i}]", raw) for i, raw in enumerate(spec["links"])]
+            joints = [self.joint(f"joints[{i}]", raw) for i, raw in enumerate(spec["joints"])]
+        frames_raw = spec.get("frames") or []
+        if not isinstance(frames_raw, list):
+            raise self.error("frames", "expected a list")
+        frames = [self.frame(f"frames[{i}]", raw) for i, raw in enumerate(frames_raw)]
+        gravity = self.vec3("gravity", spec.get("gravity"), default=(0.0, 0.0, -9.81))
+        robot = Robot(
+            name=self.name,
+            links=tuple(links),
+            joints=tuple(self.topological(links, joints)),
+            frames=tuple(frames),
+            gravity=gravity,
+            parameters=tuple(Parameter(k, v) for k, v in self.params.items()),
+            description=str(spec.get("description", "")).strip(),
+            source=str(spec.get("source", "")).strip(),
+        )
+        if robot.nv == 0:
+            raise self.error("joints", "no moving joint: a robot needs at least one degree of freedom")
+        self.check_names(robot)
+        self.check_values(robot)
+        return robot
+
+    def topological(self, links: list[Link], joints: list[Joint]) -> list[Joint]:
+        names = [link.name for link in links]
+        if not names:
+            raise self.error("links", "a robot needs at least one link")
+        parent_of: dict[str, Joint] = {}
+        for i, j in enumerate(joints):
+            if j.parent not in names:
+                raise self.error(f"joints[{i}].parent", f"unknown link '{j.parent}'")
+            if j.child not in names:
+                raise self.error(f"joints[{i}].child", f"unknown link '{j.child}'")
+            if j.child == j.parent:
+                raise self.error(f"joints[{i}]", f"joins link '{j.child}' to itself")
+            if j.child in parent_of:
+                raise self.error(
+                    f"joints[{i}].child",
+                    f"link '{j.child}' already has parent joint '{parent_of[j.child].name}' "
+                    "(closed chains are not supported here; see 'derive dof' for mechanisms)",
+                )
+            parent_of[j.child] = j
+        roots = [n for n in names if n not in parent_of]
+        if not roots:
+            raise self.error("joints", "the joints form a cycle: no link is left as the root")
+        if len(roots) > 1:
+            raise self.error("joints", f"links {', '.join(repr(r) for r in roots)} have no parent joint; exactly one root link is allowed")
+        ordered: list[Joint] = []
+
+        def visit(link: str) -> None:  # depth-first, file order among siblings (Pinocchio's q order)
+            for j in joints:
+                if j.parent == link and j not in ordered:
+                    ordered.append(j)
+                    visit(j.child)
+
+        visit(roots[0])
+        if len(ordered) != len(joints):
+            stuck = [j.name for j in joints if j not in ordered]
+            raise self.error("joints", f"the joints {', '.join(stuck)} form a cycle detached from the root '{roots[0]}'")
+        return ordered
+
+    def check_names(self, robot: Robot) -> None:
+        seen: dict[str, str] = {}
+        groups = [("links", [x.name for x in robot.links]), ("joints", [x.name for x in robot.joints]),
+                  ("frames", [x.name for x in robot.frames])]
+        for group, names in groups:
+            local: set[str] = set()
+            for n in names:
+                if n in local:
+                    raise self.error(group, f"duplicate name '{n}'")
+                local.add(n)
+        for group, names in (groups[0], groups[2]):  # links and frames share fk_<name>
+            for n in names:
+                if n in seen:
+                    raise self.error(group, f"name '{n}' is used by both {seen[n]} and {group}")
+                seen[n] = group
+        # q's entries name the symbols of q, qd, qdd, tau and the generated code's inputs
+        owner: dict[str, str] = {p.name: "a parameter" for p in robot.parameters}
+        for j in robot.joints:
+            for c in j.coordinates:
+                identifier(self.name, f"joints ({j.name}) coordinate", c.name)
+                if c.name in owner:
+                    raise self.error(f"joints ({j.name})", f"coordinate name '{c.name}' is already {owner[c.name]}")
+                owner[c.name] = f"a coordinate of joint '{c.joint}'"
+        for i, f in enumerate(robot.frames):
+            if f.link not in {x.name for x in robot.links}:
+                raise self.error(f"frames[{i}].link", f"unknown link '{f.link}'")
+        reserved = {"q", "qd", "qdd", "tau", "p", "x", "u"}
+        for p in robot.parameters:
+            if p.name in reserved:
+                raise self.error(f"parameters.{p.name}", f"'{p.name}' is reserved for the state and input vectors")
+
+    def check_values(self, robot: Robot) -> None:
+        """Evaluate every expression at the parameter defaults and check physics."""
+        env = robot.parameter_defaults
+
+        def num(where: str, v: Value) -> float:
+            try:
+                out = float(expr.evaluate(v, env))
+            except (expr.ExpressionError, ZeroDivisionError, ValueError, OverflowError) as exc:
+                raise self.error(where, f"{v!r}: {exc}") from None
+            if not math.isfinite(out):
+                raise self.error(where, f"{v!r} evaluates to {out}")
+            return out
+
+        for i, link in enumerate(robot.links):
+            where = f"links[{i}] ({link.name})"
+            mass = num(where + ".mass", link.mass)
+            if mass < 0:
+                raise self.error(where + ".mass", f"must be >= 0, got {mass}")
+            for k in range(3):
+                num(f"{where}.com[{k}]", link.com[k])
+                num(f"{where}.inertia_rpy[{k}]", link.inertia_rpy[k])
+            inertia = [[num(f"{where}.inertia[{r}][{c}]", link.inertia[r][c]) for c in range(3)] for r in range(3)]
+            problem = inertia_problem(inertia, mass)
+            if problem:
+                raise self.error(where + ".inertia", problem)
+        for i, j in enumerate(robot.joints):
+            for k in range(3):
+                num(f"joints ({j.name}).origin.xyz[{k}]", j.origin.xyz[k])
+                num(f"joints ({j.name}).origin.rpy[{k}]", j.origin.rpy[k])
+            if j.pitch is not None and num(f"joints ({j.name}).pitch", j.pitch) == 0:
+                raise self.error(f"joints ({j.name}).pitch", "must not be 0 (a helical joint of pitch 0 is a revolute joint)")
+        for k in range(3):
+            num(f"gravity[{k}]", robot.gravity[k])
+        for f in robot.frames:
+            for k in range(3):
+                num(f"frames ({f.name}).xyz[{k}]", f.origin.xyz[k])
+                num(f"frames ({f.name}).rpy[{k}]", f.origin.rpy[k])
+
+
+def check_values(robot: Robot) -> None:
+    """The physical checks of models.yaml (masses, inertias, finite values) on a Robot, e.g. one
+    whose parameter defaults were replaced; raises ModelError."""
+    _Parser(robot.name, {}).check_values(robot)
+
+
+def parse_robot(name: str, spec: Any) -> Robot:
+    return _Parser(name, spec).robot()

@@ -1,0 +1,268 @@
+"""The robot description: validated, frozen dataclasses (what models.yaml, DH tables and URDF become).
+
+No CAS lives here. Numeric fields hold a float or a parameter expression string
+(see :mod:`derive.description.expr`); the symbolic side and the numeric reference each
+evaluate them in their own algebra.
+
+Conventions (URDF's):
+- a joint's ``origin`` places the joint frame in the parent link frame as
+  ``Trans(xyz) * Rz(yaw) * Ry(pitch) * Rx(roll)``; the joint then moves along or
+  about ``axis`` given in the joint frame, and the child link frame is the moved
+  joint frame;
+- a link's inertia is about its centre of mass, expressed in the inertial frame,
+  which sits at ``com`` in the link frame rotated by ``inertia_rpy``;
+- the root link (the only link that is no joint's child) is the world frame;
+  gravity is a vector in that frame.
+"""
+
+from __future__ import annotations
+
+import keyword
+import math
+import re
+from dataclasses import asdict, dataclass
+from typing import Any
+
+from derive.errors import DeriveError
+
+JOINT_TYPES = {"revolute": 1, "prismatic": 1, "helical": 1, "cylindrical": 2, "universal": 2, "spherical": 3,
+               "fixed": 0}
+"""Joint type -> degrees of freedom (the lecture's Table 1; a rigid body has 6, so constraints = 6 - DOF).
+
+- revolute: angle q about ``axis``; prismatic: length q along ``axis``;
+- helical: angle q about ``axis`` and length ``pitch`` * q along it (pitch in m/rad,
+  negative for a left-handed screw);
+- cylindrical: angle ``<joint>_rot`` about ``axis``, then length ``<joint>_trans`` along it;
+- universal: angle ``<joint>_1`` about ``axis``, then ``<joint>_2`` about ``axis2``
+  (perpendicular to ``axis``, given in the joint frame, carried along by the first turn):
+  R = Rot(axis, q1) Rot(axis2, q2);
+- spherical: ZYX Euler angles of the joint frame, R = Rz(<joint>_z) Ry(<joint>_y) Rx(<joint>_x);
+  gimbal lock at cos(<joint>_y) = 0 (see :attr:`Joint.gimbal_lock`).
+"""
+
+COORDINATE_SUFFIXES = {"cylindrical": ("rot", "trans"), "universal": ("1", "2"), "spherical": ("z", "y", "x")}
+"""Multi-DOF joint type -> suffixes of its coordinates' names ``<joint>_<suffix>``, in q order."""
+
+C_KEYWORDS = frozenset(
+    "auto break case char const continue default do double else enum extern float for goto if inline int "
+    "long register restrict return short signed sizeof static struct switch typedef union unsigned void "
+    "volatile while _Bool _Complex _Imaginary real".split()
+)
+_IDENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+
+Value = Any  # float | str (parameter expression)
+Vec3 = tuple  # tuple[Value, Value, Value]
+
+
+class ModelError(DeriveError):
+    """Bad model input: one line naming the robot, the field and the problem."""
+
+    def __init__(self, robot: str | None, field_path: str, problem: str):
+        self.robot, self.field, self.problem = robot, field_path, problem
+        where = f"robot '{robot}'" if robot else "models file"
+        super().__init__(f"{where}: {field_path}: {problem}")
+
+
+@dataclass(frozen=True)
+class Parameter:
+    name: str
+    default: float
+
+
+@dataclass(frozen=True)
+class Origin:
+    """Pose of a child frame in its parent frame: Trans(xyz) * RPY(rpy)."""
+
+    xyz: Vec3 = (0.0, 0.0, 0.0)
+    rpy: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Link:
+    name: str
+    mass: Value = 0.0
+    com: Vec3 = (0.0, 0.0, 0.0)
+    inertia: tuple = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
+    inertia_rpy: Vec3 = (0.0, 0.0, 0.0)
+
+
+@dataclass(frozen=True)
+class Limits:
+    lower: float | None = None
+    upper: float | None = None
+    velocity: float | None = None
+    effort: float | None = None
+
+
+@dataclass(frozen=True)
+class Coordinate:
+    """One entry of q: ``name`` (a C identifier), its ``joint`` and that joint's ``type``.
+
+    ``unit`` is "rad" for angles (revolute, helical and the turns of multi-DOF
+    joints) and "m" for lengths (prismatic, the slide of a cylindrical joint).
+    """
+
+    name: str
+    joint: str
+    type: str
+    unit: str
+    limits: Limits = Limits()
+
+
+@dataclass(frozen=True)
+class Joint:
+    """A joint (see :data:`JOINT_TYPES`).
+
+    ``limits`` is one Limits for a joint of at most 1 DOF and a tuple, one per
+    coordinate, otherwise. A spherical joint ignores ``axis``: it turns about the
+    z, y, x axes of its joint frame.
+    """
+
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: Origin = Origin()
+    axis: tuple = (1.0, 0.0, 0.0)  # URDF's default
+    limits: Limits | tuple[Limits, ...] = Limits()
+    pitch: Value | None = None  # helical only: m of travel per rad
+    axis2: tuple | None = None  # universal only
+
+    @property
+    def dof(self) -> int:
+        return JOINT_TYPES[self.type]
+
+    @property
+    def constraints(self) -> int:
+        """Constraints the joint puts on its child's 6 DOF (Table 1): 6 - dof."""
+        return 6 - self.dof
+
+    @property
+    def coordinates(self) -> tuple[Coordinate, ...]:
+        """The joint's entries of q, in order (none for a fixed joint)."""
+        if self.dof <= 1:
+            unit = "m" if self.type == "prismatic" else "rad"
+            return (Coordinate(self.name, self.name, self.type, unit, self.limits),) * self.dof
+        return tuple(Coordinate(f"{self.name}_{s}", self.name, self.type, "m" if s == "trans" else "rad", lim)
+                     for s, lim in zip(COORDINATE_SUFFIXES[self.type], self.limits))
+
+    @property
+    def summary(self) -> str:
+        """E.g. ``ball (spherical, 3 DOF, 3 constraints: ball_z, ball_y, ball_x)``, as Table 1 counts them."""
+        names = [c.name for c in self.coordinates]
+        coords = f": {', '.join(names)}" if names and names != [self.name] else ""
+        return f"{self.name} ({self.type}, {self.dof} DOF, {self.constraints} constraints{coords})"
+
+    @property
+    def gimbal_lock(self) -> str | None:
+        """Where the joint's coordinates are singular, as text; None if nowhere.
+
+        Only the spherical joint has such configurations: with ZYX Euler angles
+        (a, b, c) the angular velocity is w = E(b, c) [da; db; dc] with
+        det E = cos(b) (up to sign), so at b = +-pi/2 the first and last axes align: one
+        rotation of the joint is reached by no rate, the rates [da; db; dc] along
+        (1, 0, +-1) move nothing, and M (singular there) cannot be solved for qdd.
+        """
+        if self.type != "spherical":
+            return None
+        y = f"{self.name}_y"
+        return (f"cos({y}) = 0, i.e. {y} = pi/2 + k pi (+-pi/2 within [-pi, pi]): "
+                f"the z and x turns of '{self.name}' align")
+
+
+@dataclass(frozen=True)
+class Frame:
+    """A named frame rigidly attached to a link, e.g. the tool centre point."""
+
+    name: str
+    link: str
+    origin: Origin = Origin()
+
+
+@dataclass(frozen=True)
+class Robot:
+    """A fixed-base kinematic tree. ``joints`` are in topological order (parents first)."""
+
+    name: str
+    links: tuple[Link, ...]
+    joints: tuple[Joint, ...]
+    frames: tuple[Frame, ...] = ()
+    gravity: Vec3 = (0.0, 0.0, -9.81)
+    parameters: tuple[Parameter, ...] = ()
+    description: str = ""
+    source: str = ""
+
+    @property
+    def root(self) -> str:
+        children = {j.child for j in self.joints}
+        return next(link.name for link in self.links if link.name not in children)
+
+    @property
+    def moving_joints(self) -> tuple[Joint, ...]:
+        """Joints with degrees of freedom, in the order of q."""
+        return tuple(j for j in self.joints if j.dof > 0)
+
+    @property
+    def coordinates(self) -> tuple[Coordinate, ...]:
+        """The entries of q, one per DOF: a joint's coordinates are consecutive, joints in tree order."""
+        return tuple(c for j in self.joints for c in j.coordinates)
+
+    def joint_box(self, angle: float = math.pi, length: float = 1.0) -> tuple[tuple[float, ...], tuple[float, ...]]:
+        """(lower, upper) of each entry of q: its limits, or +-``angle`` (rad) / +-``length`` (m)
+        where a limit is missing (``math.inf`` for an unbounded box)."""
+        coords = self.coordinates
+        lower = tuple(-(angle if c.unit == "rad" else length) if c.limits.lower is None else c.limits.lower for c in coords)
+        upper = tuple((angle if c.unit == "rad" else length) if c.limits.upper is None else c.limits.upper for c in coords)
+        return lower, upper
+
+    def gimbal_locked(self, q, tol: float = 1e-6) -> tuple[str, ...]:
+        """Names of the spherical joints in gimbal lock at ``q``: |cos(<joint>_y)| <= tol."""
+        index = {c.name: i for i, c in enumerate(self.coordinates)}
+        return tuple(j.name for j in self.joints
+                     if j.type == "spherical" and abs(math.cos(q[index[f"{j.name}_y"]])) <= tol)
+
+    @property
+    def nq(self) -> int:
+        return sum(j.dof for j in self.joints)
+
+    @property
+    def nv(self) -> int:
+        return self.nq
+
+    @property
+    def parameter_defaults(self) -> dict[str, float]:
+        return {p.name: p.default for p in self.parameters}
+
+    def link(self, name: str) -> Link:
+        return next(link for link in self.links if link.name == name)
+
+    def parent_joint(self, link_name: str) -> Joint | None:
+        return next((j for j in self.joints if j.child == link_name), None)
+
+    @property
+    def frame_names(self) -> tuple[str, ...]:
+        """Every frame FK can place: links first (tree order), then named frames."""
+        ordered = [self.root] + [j.child for j in self.joints]
+        return tuple(ordered) + tuple(f.name for f in self.frames)
+
+
+def model_data(robot: Robot) -> dict:
+    """The validated model as plain data (what its content hash is taken of).
+
+    Joint fields only some types have (``pitch``, ``axis2``) appear only where set,
+    so models without such joints keep the hash they had before those types existed.
+    """
+    data = asdict(robot)
+    for joint in data["joints"]:
+        for key in ("pitch", "axis2"):
+            if joint[key] is None:
+                del joint[key]
+    return data
+
+
+def identifier(robot: str | None, where: str, name: Any) -> str:
+    if not isinstance(name, str) or not _IDENT.match(name):
+        raise ModelError(robot, where, f"'{name}' is not a C identifier (letters, digits, _; not starting with a digit)")
+    if name in C_KEYWORDS or keyword.iskeyword(name):
+        raise ModelError(robot, where, f"'{name}' is a reserved word in C or Python")
+    return name

@@ -1,0 +1,691 @@
+"""URDF -> a models.yaml robot entry (``derive import-urdf``).
+
+Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
+:func:`derive.description.model.parse_robot` accepts:
+
+- ``revolute``/``prismatic``/``fixed`` joints are kept; ``continuous`` becomes a
+  revolute joint without position limits; ``floating``/``planar`` are refused;
+- ``lock`` turns joints into fixed ones at a given position (default 0); the
+  lock motion is folded into the fixed transform. ``mimic`` joints must be locked;
+- fixed joints are merged: the child's mass properties are added to the parent
+  (parallel-axis theorem) and the child survives as a named frame on its moving
+  ancestor. The URDF root link always stays (it is the world frame);
+- the ``tip`` link becomes the named frame ``tcp``;
+- moving branches off the root-to-tip path are dropped if they carry no mass
+  and refused otherwise (lock them);
+- inertias are re-expressed in the link frame (no ``inertia_rpy``).
+
+Numbers that come straight from the URDF are copied exactly (``float(text)``);
+only composed or merged values are computed, with |x| < 1e-15 snapped to 0.
+"""
+
+from __future__ import annotations
+
+import importlib.metadata
+import keyword
+import math
+import re
+import sys
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Iterable, Mapping
+
+import numpy as np
+import yaml
+
+from derive.description.model import parse_models, parse_robot
+from derive.description.robot import C_KEYWORDS, ModelError, identifier
+
+ERD = "example-robot-data"
+ERD_PREFIX = ERD + ":"
+SNAP = 1e-15
+GRAVITY = [0.0, 0.0, -9.81]
+
+
+# --------------------------------------------------------------------------- locating files
+
+
+def example_robot_data_dir() -> Path | None:
+    """``<site-packages>/cmeel.prefix/share/example-robot-data/robots`` of the installed package, or None."""
+    for entry in sys.path:
+        candidate = Path(entry or ".") / "cmeel.prefix" / "share" / ERD / "robots"
+        if candidate.is_dir():
+            return candidate
+    return None
+
+
+def example_robot_data_version() -> str | None:
+    try:
+        return importlib.metadata.version(ERD)
+    except importlib.metadata.PackageNotFoundError:
+        return None
+
+
+def resolve_urdf(file: str | Path, robot: str | None = None) -> tuple[Path, str, str]:
+    """``file`` -> (path to read, portable spelling for commands, origin for ``source``).
+
+    ``example-robot-data:<path under robots/>`` names a URDF of the installed
+    example-robot-data package; a plain path inside that package is spelled the
+    same way, so the generated entry does not depend on where the venv lives.
+    """
+    text = str(file)
+    erd = example_robot_data_dir()
+    if text.startswith(ERD_PREFIX):
+        rel = text[len(ERD_PREFIX):].lstrip("/")
+        if erd is None:
+            raise ModelError(robot or c_identifier(Path(text).stem), text,
+                             f"the {ERD} package is not installed (pip install {ERD})")
+        path = erd / rel
+    else:
+        path = Path(text)
+        rel = None
+        if erd is not None:
+            try:
+                rel = path.resolve().relative_to(erd.resolve()).as_posix()
+            except (ValueError, OSError):
+                rel = None
+    if rel is None:
+        return path, text, path.name
+    version = example_robot_data_version()
+    origin = f"{ERD} {version} {rel}" if version else f"{ERD} {rel}"
+    return path, ERD_PREFIX + rel, origin
+
+
+# --------------------------------------------------------------------------- names
+
+
+def c_identifier(name: str) -> str:
+    """A URDF name made a C identifier: other characters -> '_', no leading digit, no keyword."""
+    out = re.sub(r"[^A-Za-z0-9_]", "_", name) or "_"
+    if out[0].isdigit():
+        out = "_" + out
+    if out in C_KEYWORDS or keyword.iskeyword(out):
+        out += "_"
+    return out
+
+
+# --------------------------------------------------------------------------- transforms
+
+
+def rpy_matrix(rpy) -> np.ndarray:
+    r, p, y = rpy
+    cr, sr, cp, sp, cy, sy = math.cos(r), math.sin(r), math.cos(p), math.sin(p), math.cos(y), math.sin(y)
+    return np.array([
+        [cy * cp, cy * sp * sr - sy * cr, cy * sp * cr + sy * sr],
+        [sy * cp, sy * sp * sr + cy * cr, sy * sp * cr - cy * sr],
+        [-sp, cp * sr, cp * cr],
+    ])
+
+
+def matrix_rpy(m: np.ndarray) -> tuple[float, float, float]:
+    """R = Rz(yaw) Ry(pitch) Rx(roll) -> (roll, pitch, yaw), pitch in [-pi/2, pi/2].
+
+    Yaw first, then roll and pitch from Rz(yaw)^T R, so the angles reproduce R to
+    rounding even at or near pitch = +-pi/2 (where roll and yaw are not unique).
+    """
+    yaw = math.atan2(m[1, 0], m[0, 0])
+    cy, sy = math.cos(yaw), math.sin(yaw)
+    roll = math.atan2(sy * m[0, 2] - cy * m[1, 2], cy * m[1, 1] - sy * m[0, 1])
+    pitch = math.atan2(-m[2, 0], cy * m[0, 0] + sy * m[1, 0])
+    return roll, pitch, yaw
+
+
+def axis_angle(axis, angle: float) -> np.ndarray:
+    k = np.asarray(axis, dtype=float)
+    k = k / np.linalg.norm(k)
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * kx @ kx
+
+
+def _snap(x: float) -> float:
+    x = float(x)
+    return 0.0 if abs(x) < SNAP else x
+
+
+@dataclass(frozen=True)
+class Pose:
+    """A rigid transform that remembers the URDF numbers it was read from.
+
+    ``xyz``/``rpy`` are exact copies while the pose is a single URDF origin (or
+    the identity); composing two non-identity poses computes them.
+    """
+
+    xyz: tuple = (0.0, 0.0, 0.0)
+    rpy: tuple = (0.0, 0.0, 0.0)
+    rot: Any = field(default=None, compare=False)  # 3x3, when known more exactly than rpy
+
+    @property
+    def is_identity(self) -> bool:
+        return all(v == 0 for v in self.xyz) and all(v == 0 for v in self.rpy) and (
+            self.rot is None or np.array_equal(self.rot, np.eye(3)))
+
+    @property
+    def R(self) -> np.ndarray:
+        return self.rot if self.rot is not None else rpy_matrix(self.rpy)
+
+    @property
+    def p(self) -> np.ndarray:
+        return np.array(self.xyz, dtype=float)
+
+    def __mul__(self, other: "Pose") -> "Pose":
+        if other.is_identity:
+            return self
+        if self.is_identity:
+            return other
+        R = self.R @ other.R
+        p = self.p + self.R @ other.p
+        return Pose.from_matrix(R, p)
+
+    @staticmethod
+    def from_matrix(R: np.ndarray, p) -> "Pose":
+        return Pose(tuple(_snap(v) for v in p), tuple(_snap(v) for v in matrix_rpy(R)), R)
+
+
+# --------------------------------------------------------------------------- URDF reading
+
+
+@dataclass
+class _Inertial:
+    mass: float = 0.0
+    com: tuple = (0.0, 0.0, 0.0)
+    rpy: tuple = (0.0, 0.0, 0.0)
+    inertia: dict = field(default_factory=lambda: {k: 0.0 for k in ("ixx", "ixy", "ixz", "iyy", "iyz", "izz")})
+
+    def matrix(self) -> np.ndarray:
+        i = self.inertia
+        return np.array([[i["ixx"], i["ixy"], i["ixz"]], [i["ixy"], i["iyy"], i["iyz"]], [i["ixz"], i["iyz"], i["izz"]]])
+
+
+@dataclass
+class _Joint:
+    name: str
+    type: str
+    parent: str
+    child: str
+    origin: Pose
+    axis: tuple
+    limits: dict
+    mimic: str | None
+
+
+class _Reader:
+    def __init__(self, robot: str, path: Path):
+        self.robot, self.path = robot, path
+
+    def error(self, where: str, problem: str) -> ModelError:
+        return ModelError(self.robot, where, problem)
+
+    def floats(self, where: str, text: str | None, n: int, default: tuple) -> tuple:
+        if text is None:
+            return default
+        parts = text.split()
+        try:
+            vals = tuple(float(t) for t in parts)
+        except ValueError:
+            raise self.error(where, f"expected {n} numbers, got {text!r}") from None
+        if len(vals) != n or not all(math.isfinite(v) for v in vals):
+            raise self.error(where, f"expected {n} finite numbers, got {text!r}")
+        return vals
+
+    def number(self, where: str, text: str | None, default: float | None = None) -> float | None:
+        if text is None:
+            return default
+        return self.floats(where, text, 1, (default,))[0]
+
+    def origin(self, where: str, el: ET.Element | None) -> Pose:
+        if el is None:
+            return Pose()
+        return Pose(self.floats(where + ".xyz", el.get("xyz"), 3, (0.0, 0.0, 0.0)),
+                    self.floats(where + ".rpy", el.get("rpy"), 3, (0.0, 0.0, 0.0)))
+
+    def inertial(self, name: str, el: ET.Element | None) -> _Inertial:
+        out = _Inertial()
+        if el is None:
+            return out
+        where = f"links[{name}].inertial"
+        mass = el.find("mass")
+        out.mass = self.number(where + ".mass", None if mass is None else mass.get("value"), 0.0)
+        if out.mass < 0:
+            raise self.error(where + ".mass", f"must be >= 0, got {out.mass}")
+        origin = self.origin(where + ".origin", el.find("origin"))
+        out.com, out.rpy = origin.xyz, origin.rpy
+        inertia = el.find("inertia")
+        if inertia is not None:
+            out.inertia = {k: self.number(f"{where}.inertia.{k}", inertia.get(k), 0.0) for k in out.inertia}
+        return out
+
+    def joint(self, el: ET.Element) -> _Joint:
+        name = el.get("name")
+        if not name:
+            raise self.error("joints", "a <joint> has no name")
+        where = f"joints[{name}]"
+        jtype = el.get("type")
+        if jtype in ("floating", "planar"):
+            raise self.error(where, f"{jtype} joints are not supported (fixed-base manipulators only)")
+        if jtype not in ("revolute", "continuous", "prismatic", "fixed"):
+            raise self.error(where + ".type", f"unknown joint type {jtype!r} (known: revolute, continuous, prismatic, fixed)")
+        ends = {}
+        for key in ("parent", "child"):
+            sub = el.find(key)
+            if sub is None or not sub.get("link"):
+                raise self.error(f"{where}.{key}", "missing")
+            ends[key] = sub.get("link")
+        axis_el = el.find("axis")
+        axis = self.floats(where + ".axis", None if axis_el is None else axis_el.get("xyz"), 3, (1.0, 0.0, 0.0))
+        if jtype != "fixed" and math.sqrt(sum(a * a for a in axis)) < 1e-12:
+            raise self.error(where + ".axis", "must not be the zero vector")
+        limits: dict = {}
+        lim = el.find("limit")
+        if lim is not None and jtype != "fixed":
+            for key in ("lower", "upper", "velocity", "effort"):
+                if key in ("lower", "upper") and jtype == "continuous":
+                    continue  # continuous: no position limits
+                v = self.number(f"{where}.limit.{key}", lim.get(key))
+                if v is not None:
+                    limits[key] = v
+        mimic = el.find("mimic")
+        return _Joint(name, "revolute" if jtype == "continuous" else jtype, ends["parent"], ends["child"],
+                      self.origin(where + ".origin", el.find("origin")), axis, limits,
+                      None if mimic is None else (mimic.get("joint") or "?"))
+
+
+def _read(path: Path, robot: str | None) -> tuple[str, dict[str, _Inertial], list[_Joint]]:
+    """(URDF robot name, links in file order, joints in file order)."""
+    who = robot or c_identifier(path.stem)
+    try:
+        text = path.read_bytes()
+    except OSError as exc:
+        raise ModelError(who, str(path), f"cannot read URDF ({exc.strerror})") from None
+    try:
+        root = ET.fromstring(text)
+    except ET.ParseError as exc:
+        line, col = exc.position
+        msg = str(exc).split(":")[0]
+        raise ModelError(who, f"{path} line {line}, column {col + 1}", f"malformed XML: {msg}") from None
+    if root.tag != "robot":
+        raise ModelError(who, str(path), f"not a URDF: the root element is <{root.tag}>, not <robot>")
+    urdf_name = root.get("name") or path.stem
+    reader = _Reader(robot or c_identifier(urdf_name), path)
+    links: dict[str, _Inertial] = {}
+    for el in root.findall("link"):
+        name = el.get("name")
+        if not name:
+            raise reader.error("links", "a <link> has no name")
+        if name in links:
+            raise reader.error(f"links[{name}]", "duplicate link name")
+        links[name] = reader.inertial(name, el.find("inertial"))
+    joints = [reader.joint(el) for el in root.findall("joint")]
+    return urdf_name, links, joints
+
+
+# --------------------------------------------------------------------------- import
+
+
+def parse_lock(lock: str | Iterable[str] | Mapping[str, float] | None, robot: str | None = None) -> dict[str, tuple[float, str]]:
+    """``"a,b=0.3"`` or ``["a", "b=0.3"]`` or ``{"b": 0.3}`` -> {name: (value, spelling)}."""
+    if lock is None:
+        return {}
+    if isinstance(lock, Mapping):
+        return {str(k): (float(v), f"{k}={v}") for k, v in lock.items()}
+    items = lock.split(",") if isinstance(lock, str) else list(lock)
+    out: dict[str, tuple[float, str]] = {}
+    for item in items:
+        item = str(item).strip()
+        if not item:
+            continue
+        name, eq, value = item.partition("=")
+        name = name.strip()
+        try:
+            v = float(value) if eq else 0.0
+        except ValueError:
+            raise ModelError(robot, f"lock[{name}]", f"the value {value.strip()!r} is not a number") from None
+        if not math.isfinite(v):
+            raise ModelError(robot, f"lock[{name}]", f"the value {value.strip()!r} is not finite")
+        out[name] = (v, f"{name}={value.strip()}" if eq else name)
+    return out
+
+
+def _command(spelling: str, tip: str, lock: dict, name: str | None) -> str:
+    cmd = f"derive import-urdf {spelling} --tip {tip}"
+    if lock:
+        cmd += " --lock " + ",".join(s for _, s in lock.values())
+    if name:
+        cmd += f" --name {name}"
+    return cmd
+
+
+def _inertia_dict(m: np.ndarray) -> dict:
+    m = (m + m.T) / 2.0
+    return {"ixx": _snap(m[0, 0]), "ixy": _snap(m[0, 1]), "ixz": _snap(m[0, 2]),
+            "iyy": _snap(m[1, 1]), "iyz": _snap(m[1, 2]), "izz": _snap(m[2, 2])}
+
+
+def _merge_mass(robot: str, body: str, parts: list[tuple[Pose, _Inertial]]) -> dict:
+    """Mass properties of a body made of ``parts`` (pose of each part's link in the body frame)."""
+    parts = [(pose, inr) for pose, inr in parts if inr.mass > 0 or any(v != 0 for v in inr.inertia.values())]
+    for pose, inr in parts:
+        if inr.mass == 0:
+            raise ModelError(robot, f"links[{body}].inertia", "a massless link must have zero inertia")
+    if not parts:
+        return {}
+    if len(parts) == 1:
+        pose, inr = parts[0]
+        if pose.is_identity and all(v == 0 for v in inr.rpy):  # exact copy
+            return {"mass": inr.mass, "com": list(inr.com), "inertia": dict(inr.inertia)}
+    masses = [inr.mass for _, inr in parts]
+    coms = [pose.p + pose.R @ np.array(inr.com) for pose, inr in parts]
+    inertias = [(pose.R @ rpy_matrix(inr.rpy)) @ inr.matrix() @ (pose.R @ rpy_matrix(inr.rpy)).T for pose, inr in parts]
+    if len(parts) == 1:
+        return {"mass": masses[0], "com": [_snap(v) for v in coms[0]], "inertia": _inertia_dict(inertias[0])}
+    total = math.fsum(masses)
+    com = sum(m * c for m, c in zip(masses, coms)) / total
+    inertia = np.zeros((3, 3))
+    for m, c, I in zip(masses, coms, inertias):
+        d = c - com
+        inertia += I + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
+    return {"mass": total, "com": [_snap(v) for v in com], "inertia": _inertia_dict(inertia)}
+
+
+def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = None) -> dict:
+    """Read a URDF and return one models.yaml robot entry (a plain dict).
+
+    ``path`` may be ``example-robot-data:<path under robots/>``. ``lock`` names
+    joints to make fixed, as ``"a,b=0.3"``, ``["a", "b=0.3"]`` or ``{"b": 0.3}``
+    (value in rad or m, default 0). ``name`` defaults to the URDF robot name made a
+    C identifier. Raises :class:`derive.description.model.ModelError` on any problem.
+    """
+    return import_urdf_named(path, tip, lock, name)[1]
+
+
+def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | None = None) -> tuple[str, dict]:
+    """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
+    if name is not None:
+        identifier(name, "name", name)
+    file, spelling, origin_text = resolve_urdf(path, name)
+    urdf_name, links, joints = _read(file, name)
+    robot = name or c_identifier(urdf_name)
+
+    def error(where: str, problem: str) -> ModelError:
+        return ModelError(robot, where, problem)
+
+    # ---- tree structure
+    parent_joint: dict[str, _Joint] = {}
+    seen_joints: set[str] = set()
+    for j in joints:
+        if j.name in seen_joints:
+            raise error(f"joints[{j.name}]", "duplicate joint name")
+        seen_joints.add(j.name)
+        for key, link in (("parent", j.parent), ("child", j.child)):
+            if link not in links:
+                raise error(f"joints[{j.name}].{key}", f"unknown link '{link}'")
+        if j.child in parent_joint:
+            raise error(f"joints[{j.name}].child", f"link '{j.child}' already has parent joint '{parent_joint[j.child].name}'")
+        parent_joint[j.child] = j
+    roots = [n for n in links if n not in parent_joint]
+    if len(roots) != 1:
+        raise error("links", "no root link (the joints form a cycle)" if not roots else
+                    f"links {', '.join(repr(r) for r in roots)} have no parent joint; exactly one root link is allowed")
+    root = roots[0]
+    children: dict[str, list[_Joint]] = {n: [] for n in links}
+    for j in joints:
+        children[j.parent].append(j)
+
+    if tip not in links:
+        raise error("tip", f"unknown link '{tip}' (links: {', '.join(links)})")
+    locks = parse_lock(lock, robot)
+    by_name = {j.name: j for j in joints}
+    for jname, (value, _) in locks.items():
+        j = by_name.get(jname)
+        if j is None:
+            moving = [x.name for x in joints if x.type != "fixed"]
+            raise error(f"lock[{jname}]", f"unknown joint (moving joints: {', '.join(moving)})")
+        if j.type == "fixed":
+            raise error(f"lock[{jname}]", "the joint is fixed already")
+        lo, hi = j.limits.get("lower"), j.limits.get("upper")
+        if (lo is not None and value < lo) or (hi is not None and value > hi):
+            raise error(f"lock[{jname}]", f"{value} is outside the joint limits [{lo}, {hi}]")
+
+    def moves(j: _Joint) -> bool:
+        return j.type != "fixed" and j.name not in locks
+
+    # ---- prune moving branches off the root-to-tip path
+    on_path = set()
+    link = tip
+    while True:
+        on_path.add(link)
+        if link == root:
+            break
+        link = parent_joint[link].parent
+
+    def subtree_mass(link: str) -> float:
+        return links[link].mass + sum(subtree_mass(j.child) for j in children[link])
+
+    order: list[_Joint] = []  # kept joints, parents first, file order among siblings
+    off_path: list[tuple[_Joint, float]] = []  # moving joints of branches with mass that miss the tip
+    frontier = [root]
+    while frontier:
+        link = frontier.pop(0)
+        for j in children[link]:
+            if moves(j) and j.child not in on_path:
+                mass = subtree_mass(j.child)
+                if mass > 0:
+                    off_path.append((j, mass))
+                continue  # a massless branch is dropped
+            order.append(j)
+            frontier.append(j.child)
+    for j in order + [j for j, _ in off_path]:
+        if j.mimic is not None and j.name not in locks:
+            both = ",".join(dict.fromkeys(n for n in (*locks, j.mimic, j.name) if n in by_name))
+            raise error(f"joints[{j.name}]", f"mimics joint '{j.mimic}'; mimic joints are not supported: lock them "
+                        f"(--lock {both})")
+    if off_path:
+        j, mass = off_path[0]
+        all_locks = ",".join([*locks, *(x.name for x, _ in off_path)])
+        raise error(f"joints[{j.name}]", f"moves a branch with mass ({mass:g} kg) that does not lead to the tip "
+                    f"'{tip}'; lock it (--lock {all_locks}) or choose another tip")
+
+    # ---- merge fixed joints: body (surviving link) and pose in the body frame of every link
+    body: dict[str, str] = {root: root}
+    pose: dict[str, Pose] = {root: Pose()}
+    out_joints: list[dict] = []
+    for j in order:
+        origin = j.origin
+        if j.name in locks:
+            value = locks[j.name][0]
+            if value != 0:
+                if j.type == "revolute":
+                    motion = Pose.from_matrix(axis_angle(j.axis, value), (0.0, 0.0, 0.0))
+                else:
+                    a = np.array(j.axis, dtype=float)
+                    motion = Pose(tuple(_snap(v) for v in a / np.linalg.norm(a) * value))
+                origin = origin * motion
+        placed = pose[j.parent] * origin
+        if moves(j):
+            body[j.child], pose[j.child] = j.child, Pose()
+            entry = {"name": j.name, "type": j.type, "parent": body[j.parent], "child": j.child,
+                     "origin": {"xyz": list(placed.xyz), "rpy": list(placed.rpy)}, "axis": list(j.axis)}
+            if j.limits:
+                entry["limits"] = dict(j.limits)
+            out_joints.append(entry)
+        else:
+            body[j.child], pose[j.child] = body[j.parent], placed
+
+    survivors = [root] + [j.child for j in order if moves(j)]
+    out_links = []
+    for s in survivors:
+        parts = [(pose[n], links[n]) for n in body if body[n] == s]
+        out_links.append({"name": s, **_merge_mass(robot, s, parts)})
+
+    frames = [{"name": "tcp", "link": body[tip], "xyz": list(pose[tip].xyz), "rpy": list(pose[tip].rpy)}]
+    for n in body:
+        if body[n] != n and n != tip:
+            frames.append({"name": n, "link": body[n], "xyz": list(pose[n].xyz), "rpy": list(pose[n].rpy)})
+
+    # ---- names -> C identifiers
+    renamed: dict[str, str] = {}
+
+    def ident(kind: str, n: str) -> str:
+        new = c_identifier(n)
+        if renamed.setdefault(new, n) != n:
+            raise error(kind, f"'{n}' and '{renamed[new]}' both become the identifier '{new}'")
+        return new
+
+    for link in out_links:
+        link["name"] = ident("links", link["name"])
+    for f in frames:
+        f["name"] = ident("frames", f["name"]) if f["name"] != "tcp" else "tcp"
+        f["link"] = c_identifier(f["link"])
+    if "tcp" in renamed:
+        raise error("tip", f"the URDF already has a link called '{renamed['tcp']}'; it would clash with the frame 'tcp'")
+    renamed_joints: dict[str, str] = {}
+    for j in out_joints:
+        new = c_identifier(j["name"])
+        if renamed_joints.setdefault(new, j["name"]) != j["name"]:
+            raise error("joints", f"'{j['name']}' and '{renamed_joints[new]}' both become the identifier '{new}'")
+        j["name"], j["parent"], j["child"] = new, c_identifier(j["parent"]), c_identifier(j["child"])
+
+    locked = ", ".join(f"{n} = {v:g}" for n, (v, _) in locks.items())
+    description = f"{urdf_name} imported from URDF (tip {tip}{'; locked ' + locked if locked else ''})"
+    command = _command(spelling, tip, locks, name if name and name != c_identifier(urdf_name) else None)
+    entry = {
+        "description": description,
+        "source": f"{origin_text}, imported by `{command}`",
+        "gravity": list(GRAVITY),
+        "links": out_links,
+        "joints": out_joints,
+        "frames": frames,
+    }
+    try:
+        parse_robot(robot, entry)  # the entry must load as it is
+    except ModelError as exc:
+        raise ModelError(robot, exc.field, f"{exc.problem} (in the imported entry)") from None
+    return robot, entry
+
+
+# --------------------------------------------------------------------------- YAML text
+
+
+_PLAIN = re.compile(r"^[A-Za-z_][A-Za-z0-9_.\-]*$")
+_YAML_WORDS = {"y", "n", "yes", "no", "on", "off", "true", "false", "null", "~"}
+
+
+def _scalar(v: Any) -> str:
+    if isinstance(v, bool) or v is None:
+        raise TypeError(f"unexpected value {v!r}")
+    if isinstance(v, (int, float)):
+        v = float(v)
+        if not math.isfinite(v):
+            raise ValueError(f"not finite: {v}")
+        text = repr(v)
+        if "e" in text and "." not in text:  # YAML 1.1 floats need a dot: 1e-05 -> 1.0e-05
+            mant, exp = text.split("e")
+            text = f"{mant}.0e{exp}"
+        if "e" in text and text.split("e")[1][0] not in "+-":
+            text = text.replace("e", "e+")
+        return text
+    s = str(v)
+    if _PLAIN.match(s) and s.lower() not in _YAML_WORDS:
+        return s
+    import json
+
+    return json.dumps(s)
+
+
+def _flow(v: Any) -> str:
+    if isinstance(v, Mapping):
+        return "{" + ", ".join(f"{k}: {_flow(x)}" for k, x in v.items()) + "}"
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_flow(x) for x in v) + "]"
+    return _scalar(v)
+
+
+def _block_scalar(v: Any) -> str:
+    """A scalar as a block-context mapping value: plain when YAML reads it back unchanged."""
+    if isinstance(v, str) and v == v.strip() and "\n" not in v and " #" not in v and not v.startswith(("\"", "'")):
+        try:
+            if yaml.safe_load(f"k: {v}") == {"k": v}:
+                return v
+        except yaml.YAMLError:
+            pass
+    return _flow(v)
+
+
+def _item(d: Mapping, indent: str, width: int = 120) -> list[str]:
+    """One list item: a flow mapping if it fits on a line, else a block mapping of flow values."""
+    line = f"{indent}- {_flow(d)}"
+    if len(line) <= width:
+        return [line]
+    out = []
+    for i, (k, v) in enumerate(d.items()):
+        out.append(f"{indent}{'- ' if i == 0 else '  '}{k}: {_flow(v)}")
+    return out
+
+
+def dump_entry(name: str, entry: Mapping, indent: str = "  ") -> str:
+    """Deterministic YAML text of one robot entry, to sit under ``robots:`` of models.yaml."""
+    source = str(entry.get("source", ""))
+    command = source.split("`")[1] if source.count("`") >= 2 else None
+    origin = source.split(", imported by")[0] or "a URDF"
+    lines = [f"{indent}# {name}: generated by `derive import-urdf` from {origin}; do not edit by hand."]
+    if command:
+        lines.append(f"{indent}# Regenerate with: {command}")
+    lines.append(f"{indent}{name}:")
+    body = indent + "  "
+    for key, value in entry.items():
+        if isinstance(value, list) and value and all(isinstance(x, Mapping) for x in value):
+            lines.append(f"{body}{key}:")
+            for x in value:
+                lines.extend(_item(x, body + "  "))
+        else:
+            lines.append(f"{body}{key}: {_block_scalar(value)}")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- command
+
+
+def append_entry(models_path: str | Path, name: str, entry: Mapping) -> None:
+    """Append ``entry`` under ``robots:`` of a models file; refuses to replace an existing robot."""
+    path = Path(models_path)
+    if not path.exists():  # a new models file
+        path.write_text("# derive robot models (see README.md, 'Writing a model')\nrobots:\n" + dump_entry(name, entry))
+        parse_models(path.read_text(), source=str(path))
+        return
+    try:
+        text = path.read_text()
+    except OSError as exc:
+        raise ModelError(name, str(path), f"cannot read ({exc.strerror})") from None
+    existing = parse_models(text, source=str(path))
+    if name in existing:
+        raise ModelError(name, f"{path} robots", "already exists; remove it first or pick another --name")
+    new_text = text + ("" if text.endswith("\n") else "\n") + "\n" + dump_entry(name, entry)
+    robots = parse_models(new_text, source=str(path))
+    if name not in robots or list(robots)[:-1] != list(existing):
+        raise ModelError(name, str(path), "'robots:' is not the last top-level key; cannot append safely")
+    path.write_text(new_text)
+
+
+def import_urdf_command(args) -> int:
+    """``derive import-urdf FILE --tip FRAME [--lock J,...] [--name NAME] [--out models.yaml]``."""
+    name, entry = import_urdf_named(args.file, args.tip, lock=args.lock, name=args.name)
+    if getattr(args, "out", None):
+        append_entry(args.out, name, entry)
+        print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
+    else:
+        sys.stdout.write(dump_entry(name, entry))
+    return 0
+
+
+def add_parser(subparsers) -> Any:
+    """Add ``import-urdf`` to an argparse subparsers object (sets ``func``)."""
+    p = subparsers.add_parser("import-urdf", help="URDF -> a models.yaml robot entry",
+                              description="Convert a URDF into a models.yaml robot entry (printed, or appended with --out). "
+                                          f"FILE may be '{ERD_PREFIX}<path under robots/>'.")
+    p.add_argument("file", metavar="FILE")
+    p.add_argument("--tip", required=True, metavar="FRAME", help="URDF link that becomes the frame 'tcp'")
+    p.add_argument("--lock", metavar="JOINT[=VALUE],...", help="joints to make fixed (default value 0)")
+    p.add_argument("--name", help="robot name (default: the URDF robot name made a C identifier)")
+    p.add_argument("--out", metavar="MODELS", help="append to this models file instead of printing")
+    p.set_defaults(func=import_urdf_command)
+    return p

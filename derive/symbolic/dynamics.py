@@ -1,0 +1,286 @@
+"""Equations of motion M(q) qdd + C(q, qd) qd + g(q) = tau, in CasADi SX.
+
+Two routes to the same equations (the lecture's section 3, Examples 5 and 6):
+
+- ``Lagrangian``: T(q, qd) and U(q) from the link poses; M = d2T/dqd2,
+  g = dU/dq, C from the Christoffel symbols of M so that Mdot - 2C is
+  skew-symmetric. This is the model researchers inspect.
+- ``NewtonEuler``: recursive Newton-Euler (forward recursion of velocities and
+  accelerations, backward recursion of forces; the lecture's section 4) and the
+  composite-rigid-body algorithm for M, in body frames. The expression graphs
+  share link velocities and composite inertias, so CSE keeps that sharing and
+  the generated code is several times leaner than the expanded Lagrangian.
+
+Both take the same Symbols; tests check they agree. Rigidly attached links
+(fixed joints) are merged into their moving ancestor's body. A joint of several
+DOF (cylindrical, universal, spherical) becomes a chain of 1-DOF elementary
+motions (:func:`derive.symbolic.kinematics.joint_motions`) joined by massless bodies, so
+both recursions only ever see revolute, prismatic and helical bodies.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import casadi as ca
+
+from derive.symbolic.kinematics import Kinematics, joint_motions
+from derive.description.robot import Robot
+from derive.symbolic.spatial import axis_angle, rpy, skew
+from derive.symbolic.symbols import Symbols
+
+
+def _vec(sym: Symbols, values) -> ca.SX:
+    return ca.vertcat(*(sym.value(v) for v in values))
+
+
+def link_mass_properties(robot: Robot, sym: Symbols, link_name: str):
+    """(m, com, I_c) of a link in its own frame: inertia about the COM in link axes."""
+    link = robot.link(link_name)
+    R_in = rpy(*(sym.value(v) for v in link.inertia_rpy))
+    I = ca.SX(3, 3)
+    for r in range(3):
+        for c in range(3):
+            I[r, c] = sym.value(link.inertia[r][c])
+    return sym.value(link.mass), _vec(sym, link.com), R_in @ I @ R_in.T
+
+
+def christoffel_coriolis(M: ca.SX, q: ca.SX, qd: ca.SX) -> ca.SX:
+    """C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k (Christoffel symbols of the first kind)."""
+    n = q.numel()
+    dM = [ca.jacobian(M[:, k], q) for k in range(n)]  # dM[k][i, l] = dM_ik / dq_l
+    C = ca.SX(n, n)
+    for i in range(n):
+        for j in range(n):
+            C[i, j] = sum(0.5 * (dM[j][i, k] + dM[k][i, j] - dM[k][j, i]) * qd[k] for k in range(n))
+    return C
+
+
+class Lagrangian:
+    """Euler-Lagrange route: L = T - U, d/dt dL/dqd - dL/dq = tau."""
+
+    def __init__(self, robot: Robot, sym: Symbols, kin: Kinematics | None = None):
+        self.robot, self.sym = robot, sym
+        self.kin = kin or Kinematics(robot, sym)
+
+    @cached_property
+    def kinetic_energy(self) -> ca.SX:
+        """T = sum_i 1/2 m_i v_ci . v_ci + 1/2 w_i . (R_i I_i R_i^T) w_i, world frame."""
+        T = ca.SX(0)
+        for link in self.robot.links:
+            m, com, I_c = link_mass_properties(self.robot, self.sym, link.name)
+            pose = self.kin.pose(link.name)
+            p_c = pose.p + pose.R @ com
+            v_c = ca.jtimes(p_c, self.sym.q, self.sym.qd)
+            w = self.kin.jacobian(link.name)[3:6, :] @ self.sym.qd
+            T += 0.5 * m * ca.dot(v_c, v_c) + 0.5 * ca.dot(w, pose.R @ I_c @ pose.R.T @ w)
+        return T
+
+    @cached_property
+    def potential_energy(self) -> ca.SX:
+        """U = -sum_i m_i g . p_ci (zero with every COM at the world origin)."""
+        g = _vec(self.sym, self.robot.gravity)
+        U = ca.SX(0)
+        for link in self.robot.links:
+            m, com, _ = link_mass_properties(self.robot, self.sym, link.name)
+            pose = self.kin.pose(link.name)
+            U -= m * ca.dot(g, pose.p + pose.R @ com)
+        return U
+
+    @cached_property
+    def mass_matrix(self) -> ca.SX:
+        """M(q) = d2T/dqd2, symmetric positive definite (nv x nv)."""
+        return ca.hessian(self.kinetic_energy, self.sym.qd)[0]
+
+    @cached_property
+    def gravity_vector(self) -> ca.SX:
+        """g(q) = dU/dq (nv x 1); equals rnea(q, 0, 0)."""
+        return ca.gradient(self.potential_energy, self.sym.q)
+
+    @cached_property
+    def coriolis_matrix(self) -> ca.SX:
+        """C(q, qd) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric."""
+        return christoffel_coriolis(self.mass_matrix, self.sym.q, self.sym.qd)
+
+    def inverse_dynamics(self, qdd: ca.SX | None = None) -> ca.SX:
+        """tau = M(q) qdd + C(q, qd) qd + g(q)."""
+        qdd = self.sym.qdd if qdd is None else qdd
+        return self.mass_matrix @ qdd + self.coriolis_matrix @ self.sym.qd + self.gravity_vector
+
+
+@dataclass(frozen=True)
+class Body:
+    """A moving body (links merged over fixed joints) in its own frame.
+
+    The joint places the body in its parent body: constant rotation E and
+    offset p (parent coordinates), then the motion about/along ``axis``
+    (a helical one slides ``pitch`` * q while it turns by q).
+    Mass properties about the body origin: mass m, first moment h = m c,
+    inertia I_o. The bodies between the elementary motions of a multi-DOF joint
+    are massless, with E = 1 and p = 0.
+    """
+
+    name: str
+    parent: int  # -1: the root (world)
+    joint: str  # the coordinate it moves by
+    kind: str  # revolute | prismatic | helical
+    axis: tuple
+    E: ca.SX
+    p: ca.SX
+    m: ca.SX
+    h: ca.SX
+    I_o: ca.SX
+    pitch: ca.SX | float | None = None
+
+
+def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
+    """Merge fixed joints; returns the moving bodies (in q order) and the root's mass properties."""
+    # link -> (body index, rotation and offset of the link in that body's frame)
+    where: dict[str, tuple[int, ca.SX, ca.SX]] = {robot.root: (-1, ca.SX.eye(3), ca.SX.zeros(3, 1))}
+    bodies: list[dict] = []
+    for j in robot.joints:
+        b, R_bl, p_bl = where[j.parent]
+        R_o = R_bl @ rpy(*(sym.value(v) for v in j.origin.rpy))
+        p_o = p_bl + R_bl @ _vec(sym, j.origin.xyz)
+        if j.type == "fixed":
+            where[j.child] = (b, R_o, p_o)
+            continue
+        motions = joint_motions(j)
+        for k, mo in enumerate(motions):
+            name = j.child if k == len(motions) - 1 else f"{j.child}[{mo.coordinate}]"
+            body = dict(name=name, parent=b, joint=mo.coordinate, kind=mo.kind, axis=mo.axis, E=R_o, p=p_o)
+            bodies.append(body | ({"pitch": sym.value(mo.pitch)} if mo.kind == "helical" else {}))
+            b, R_o, p_o = len(bodies) - 1, ca.SX.eye(3), ca.SX.zeros(3, 1)
+        where[j.child] = (b, R_o, p_o)
+    mass = {i: [ca.SX(0), ca.SX.zeros(3, 1), ca.SX.zeros(3, 3)] for i in range(-1, len(bodies))}
+    for link in robot.links:
+        b, R_bl, p_bl = where[link.name]
+        m, com, I_c = link_mass_properties(robot, sym, link.name)
+        c = p_bl + R_bl @ com
+        acc = mass[b]
+        acc[0] += m
+        acc[1] += m * c
+        acc[2] += R_bl @ I_c @ R_bl.T - m * (skew(c) @ skew(c))
+    out = [Body(**d, m=mass[i][0], h=mass[i][1], I_o=mass[i][2]) for i, d in enumerate(bodies)]
+    return out, tuple(mass[-1])
+
+
+class NewtonEuler:
+    """Recursive route: RNEA for inverse dynamics, CRBA for M, in body frames."""
+
+    def __init__(self, robot: Robot, sym: Symbols):
+        self.robot, self.sym = robot, sym
+        self.bodies, _ = build_bodies(robot, sym)
+        self.gravity = _vec(sym, robot.gravity)
+        self._rot = [axis_angle(b.axis, sym.q[i]) if b.kind != "prismatic" else None for i, b in enumerate(self.bodies)]
+        self._p = [b.p if b.kind == "revolute" else
+                   b.p + (b.E @ ca.SX(ca.DM(list(b.axis)))) * (sym.q[i] if b.kind == "prismatic" else b.pitch * sym.q[i])
+                   for i, b in enumerate(self.bodies)]
+
+    def to_child(self, i: int, v: ca.SX) -> ca.SX:
+        """Parent-body coordinates -> body i coordinates (rotation only)."""
+        v = self.bodies[i].E.T @ v
+        return self._rot[i].T @ v if self._rot[i] is not None else v
+
+    def to_parent(self, i: int, v: ca.SX) -> ca.SX:
+        v = self._rot[i] @ v if self._rot[i] is not None else v
+        return self.bodies[i].E @ v
+
+    def _motion_axes(self, i: int) -> tuple[ca.SX, ca.SX]:
+        """(s_w, s_v): joint motion subspace as angular and linear parts, body coordinates."""
+        b = self.bodies[i]
+        s = ca.SX(ca.DM(list(b.axis)))
+        zero = ca.SX.zeros(3, 1)
+        if b.kind == "helical":
+            return s, b.pitch * s
+        return (s, zero) if b.kind == "revolute" else (zero, s)
+
+    def rnea(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True) -> ca.SX:
+        """tau = RNEA(q, qd, qdd): M qdd + C qd + g (g only if ``gravity``)."""
+        n = len(self.bodies)
+        w, dw, a = [None] * n, [None] * n, [None] * n
+        zero = ca.SX.zeros(3, 1)
+        a_root = -self.gravity if gravity else zero
+        f, t = [None] * n, [None] * n
+        for i, b in enumerate(self.bodies):
+            s_w, s_v = self._motion_axes(i)
+            w_p, dw_p, a_p = (zero, zero, a_root) if b.parent < 0 else (w[b.parent], dw[b.parent], a[b.parent])
+            p = self._p[i]
+            w_in = self.to_child(i, w_p)
+            w[i] = w_in + s_w * qd[i]
+            dw[i] = self.to_child(i, dw_p) + s_w * qdd[i] + ca.cross(w_in, s_w * qd[i])
+            a_lin = a_p + ca.cross(dw_p, p) + ca.cross(w_p, ca.cross(w_p, p))
+            a[i] = self.to_child(i, a_lin) + s_v * qdd[i] + 2 * ca.cross(w[i], s_v * qd[i])
+            f[i] = b.m * a[i] + ca.cross(dw[i], b.h) + ca.cross(w[i], ca.cross(w[i], b.h))
+            t[i] = b.I_o @ dw[i] + ca.cross(w[i], b.I_o @ w[i]) + ca.cross(b.h, a[i])
+        tau = ca.SX.zeros(n, 1)
+        for i in reversed(range(n)):
+            b = self.bodies[i]
+            s_w, s_v = self._motion_axes(i)
+            tau[i] = ca.dot(s_w, t[i]) + ca.dot(s_v, f[i])
+            if b.parent >= 0:
+                f_p = self.to_parent(i, f[i])
+                f[b.parent] = f[b.parent] + f_p
+                t[b.parent] = t[b.parent] + self.to_parent(i, t[i]) + ca.cross(self._p[i], f_p)
+        return tau
+
+    @cached_property
+    def mass_matrix(self) -> ca.SX:
+        """M(q) by the composite-rigid-body algorithm (Featherstone, Table 6.2)."""
+        n = len(self.bodies)
+        comp = [[b.m, b.h, b.I_o] for b in self.bodies]
+        for i in reversed(range(n)):
+            b = self.bodies[i]
+            if b.parent < 0:
+                continue
+            m, h, I = comp[i]
+            p = self._p[i]
+            h_p = self.to_parent(i, h)
+            # rotate I into parent axes: R I R^T with R = E Rz(q)
+            RI = ca.horzcat(*[self.to_parent(i, I[:, k]) for k in range(3)])
+            I_rot = ca.horzcat(*[self.to_parent(i, RI[k, :].T) for k in range(3)])
+            I_full = I_rot - skew(p) @ skew(h_p) - skew(h_p) @ skew(p) - m * (skew(p) @ skew(p))
+            # symmetric by construction: only the upper triangle is computed
+            I_p = ca.SX(3, 3)
+            for r in range(3):
+                for c in range(3):
+                    I_p[r, c] = I_full[min(r, c), max(r, c)]
+            par = comp[b.parent]
+            par[0] = par[0] + m
+            par[1] = par[1] + h_p + m * p
+            par[2] = par[2] + I_p
+        M = ca.SX(n, n)
+        for i in range(n):
+            m, h, I = comp[i]
+            s_w, s_v = self._motion_axes(i)
+            # spatial momentum of composite i for a unit rate of joint i, about its origin
+            f = ca.cross(s_w, h) + m * s_v
+            t = I @ s_w + ca.cross(h, s_v)
+            M[i, i] = ca.dot(s_w, t) + ca.dot(s_v, f)
+            j = i
+            while self.bodies[j].parent >= 0:
+                f_p = self.to_parent(j, f)
+                t = self.to_parent(j, t) + ca.cross(self._p[j], f_p)
+                f = f_p
+                j = self.bodies[j].parent
+                sj_w, sj_v = self._motion_axes(j)
+                M[i, j] = M[j, i] = ca.dot(sj_w, t) + ca.dot(sj_v, f)
+        return M
+
+    @cached_property
+    def gravity_vector(self) -> ca.SX:
+        zeros = ca.SX.zeros(len(self.bodies), 1)
+        return self.rnea(zeros, zeros)
+
+    @cached_property
+    def coriolis_matrix(self) -> ca.SX:
+        return christoffel_coriolis(self.mass_matrix, self.sym.q, self.sym.qd)
+
+    def inverse_dynamics(self, qdd: ca.SX | None = None) -> ca.SX:
+        return self.rnea(self.sym.qd, self.sym.qdd if qdd is None else qdd)
+
+    @cached_property
+    def bias(self) -> ca.SX:
+        """C(q, qd) qd + g(q) = rnea(q, qd, 0)."""
+        return self.rnea(self.sym.qd, ca.SX.zeros(len(self.bodies), 1))

@@ -1,0 +1,148 @@
+"""Forward kinematics and Jacobians of every frame, as CasADi SX expressions.
+
+FK composes, along the tree, each joint's constant origin with its motion
+(the lecture's eq. 11: H = H_1 H_2 ... H_n). A joint of several DOF moves as
+a chain of 1-DOF elementary motions, one per coordinate (:func:`joint_motions`:
+cylindrical = turn, slide; universal = turn, turn; spherical ZYX = turns about
+z, y, x), as if massless bodies sat between them. Geometric Jacobians use the
+lecture's eq. 26-27 per coordinate instead of differentiating FK:
+    revolute j:  [a_j x (p - o_j); a_j],   prismatic j: [a_j; 0],
+    helical j (pitch h_j):  [a_j x (p - o_j) + h_j a_j; a_j],
+with a_j the motion's axis and o_j its origin in world coordinates, and p
+the frame origin: Pinocchio's LOCAL_WORLD_ALIGNED Jacobian ([linear; angular]).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import cached_property
+
+import casadi as ca
+
+from derive.description.robot import Joint, Robot, Value
+from derive.symbolic.spatial import axis_angle, homogeneous, rpy
+from derive.symbolic.symbols import Symbols
+
+
+@dataclass(frozen=True)
+class Motion:
+    """One elementary 1-DOF motion, for coordinate ``coordinate``, of the frame it starts from.
+
+    revolute: turn by q about ``axis``; prismatic: slide by q along it; helical:
+    both, the slide being ``pitch`` * q. ``axis`` is a unit vector of the starting
+    frame (which a turn about it leaves unchanged).
+    """
+
+    coordinate: str
+    kind: str  # revolute | prismatic | helical
+    axis: tuple
+    pitch: Value | None = None
+
+
+_X, _Y, _Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
+
+
+def joint_motions(joint: Joint) -> tuple[Motion, ...]:
+    """The joint's motion as elementary motions in q order: the joint transform is their product.
+
+    cylindrical: Rot(axis, q_rot) Trans(axis q_trans); universal: Rot(axis, q_1) Rot(axis2, q_2);
+    spherical: Rz(q_z) Ry(q_y) Rx(q_x) (ZYX Euler angles); fixed: none.
+    """
+    names = [c.name for c in joint.coordinates]
+    if joint.type in ("revolute", "prismatic", "helical"):
+        return (Motion(names[0], joint.type, joint.axis, joint.pitch),)
+    kinds = {"cylindrical": (("revolute", joint.axis), ("prismatic", joint.axis)),
+             "universal": (("revolute", joint.axis), ("revolute", joint.axis2)),
+             "spherical": (("revolute", _Z), ("revolute", _Y), ("revolute", _X))}.get(joint.type, ())
+    return tuple(Motion(n, kind, axis) for n, (kind, axis) in zip(names, kinds))
+
+
+@dataclass(frozen=True)
+class Pose:
+    """World pose of a frame: rotation R (3x3) and origin p (3x1)."""
+
+    R: ca.SX
+    p: ca.SX
+
+    @property
+    def matrix(self) -> ca.SX:
+        return homogeneous(self.R, self.p)
+
+
+class Kinematics:
+    """world_T_<frame> and Jacobians for every link and named frame of a robot."""
+
+    def __init__(self, robot: Robot, sym: Symbols):
+        self.robot, self.sym = robot, sym
+        index = {c.name: i for i, c in enumerate(robot.coordinates)}
+        poses: dict[str, Pose] = {robot.root: Pose(ca.SX.eye(3), ca.SX.zeros(3, 1))}
+        ancestors: dict[str, tuple[str, ...]] = {robot.root: ()}  # coordinates moving a link
+        self.motions: dict[str, Motion] = {}
+        self.joint_axis: dict[str, ca.SX] = {}  # per coordinate: world axis a_j and origin o_j
+        self.joint_origin: dict[str, ca.SX] = {}
+        for j in robot.joints:
+            parent = poses[j.parent]
+            R_o = rpy(*(sym.value(v) for v in j.origin.rpy))
+            p_o = ca.vertcat(*(sym.value(v) for v in j.origin.xyz))
+            R_j = parent.R @ R_o
+            p_j = parent.p + parent.R @ p_o
+            for m in joint_motions(j):
+                qi = sym.q[index[m.coordinate]]
+                a = self.joint_axis[m.coordinate] = R_j @ ca.SX(ca.DM(list(m.axis)))
+                self.joint_origin[m.coordinate] = p_j
+                self.motions[m.coordinate] = m
+                if m.kind == "prismatic":
+                    p_j = p_j + a * qi
+                else:
+                    R_j = R_j @ axis_angle(m.axis, qi)
+                if m.kind == "helical":
+                    p_j = p_j + a * (sym.value(m.pitch) * qi)
+            poses[j.child] = Pose(R_j, p_j)
+            ancestors[j.child] = ancestors[j.parent] + tuple(c.name for c in j.coordinates)
+        for f in robot.frames:
+            link = poses[f.link]
+            R_o = rpy(*(sym.value(v) for v in f.origin.rpy))
+            p_o = ca.vertcat(*(sym.value(v) for v in f.origin.xyz))
+            poses[f.name] = Pose(link.R @ R_o, link.p + link.R @ p_o)
+            ancestors[f.name] = ancestors[f.link]
+        self.poses = poses
+        self.ancestors = ancestors
+        self.index = index
+
+    def pose(self, frame: str) -> Pose:
+        if frame not in self.poses:
+            raise KeyError(f"robot '{self.robot.name}' has no frame '{frame}' (frames: {', '.join(self.poses)})")
+        return self.poses[frame]
+
+    def fk(self, frame: str) -> ca.SX:
+        """world_T_frame, the 4x4 homogeneous transform of ``frame`` (eq. 4, 11)."""
+        return self.pose(frame).matrix
+
+    def jacobian(self, frame: str) -> ca.SX:
+        """6 x nv geometric Jacobian [linear; angular] of ``frame``, LOCAL_WORLD_ALIGNED (eq. 26-27)."""
+        pose = self.pose(frame)
+        J = ca.SX.zeros(6, self.sym.nv)
+        for name in self.ancestors[frame]:
+            i, a, m = self.index[name], self.joint_axis[name], self.motions[name]
+            if m.kind == "prismatic":
+                J[0:3, i] = a
+                continue
+            J[0:3, i] = ca.cross(a, pose.p - self.joint_origin[name])
+            if m.kind == "helical":
+                J[0:3, i] += self.sym.value(m.pitch) * a
+            J[3:6, i] = a
+        return J
+
+    def moving_rows(self, frame: str) -> tuple[int, ...]:
+        """Rows of ``frame``'s Jacobian that are not identically zero for every q (structurally, in SX):
+        a planar arm's z and roll/pitch rows are dropped."""
+        J = self.jacobian(frame)
+        return tuple(i for i in range(6) if not all(ca.SX(J[i, c]).is_zero() for c in range(J.shape[1])))
+
+    def analytic_jacobian(self, frame: str) -> ca.SX:
+        """3 x nv d(position of frame)/dq, the lecture's eq. 22-24."""
+        return ca.jacobian(self.pose(frame).p, self.sym.q)
+
+    @cached_property
+    def frames(self) -> tuple[str, ...]:
+        return tuple(self.poses)

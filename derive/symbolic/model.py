@@ -1,0 +1,74 @@
+"""The derived model in CasADi SX: every quantity of the product card, by either route.
+
+``SXModel(robot)`` holds the symbols, the kinematics and both dynamics routes
+(Lagrangian and recursive Newton-Euler); code generation, the solvers and the sympy
+view all start from it.
+"""
+
+from __future__ import annotations
+
+import casadi as ca
+
+from derive.description.robot import Robot
+from derive.symbolic.dynamics import Lagrangian, NewtonEuler
+from derive.symbolic.kinematics import Kinematics
+from derive.symbolic.ode import forward_dynamics
+from derive.symbolic.symbols import make_symbols
+
+
+class SXModel:
+    """The derived model in CasADi SX: every quantity of the product card."""
+
+    def __init__(self, robot: Robot):
+        self.robot = robot
+        self.sym = make_symbols(robot)
+        self.kinematics = Kinematics(robot, self.sym)
+        self.lagrangian = Lagrangian(robot, self.sym, self.kinematics)
+        self.newton_euler = NewtonEuler(robot, self.sym)
+
+    def route(self, method: str):
+        if method == "lagrange":
+            return self.lagrangian
+        if method == "newton-euler":
+            return self.newton_euler
+        raise ValueError(f"method must be 'lagrange' or 'newton-euler', got {method!r}")
+
+    def fk(self, frame: str) -> ca.SX:
+        return self.kinematics.fk(frame)
+
+    def jacobian(self, frame: str) -> ca.SX:
+        return self.kinematics.jacobian(frame)
+
+    def analytic_jacobian(self, frame: str) -> ca.SX:
+        return self.kinematics.analytic_jacobian(frame)
+
+    def mass_matrix(self, method: str = "lagrange") -> ca.SX:
+        return self.route(method).mass_matrix
+
+    def coriolis_matrix(self, method: str = "lagrange") -> ca.SX:
+        return self.route(method).coriolis_matrix
+
+    def gravity_vector(self, method: str = "lagrange") -> ca.SX:
+        return self.route(method).gravity_vector
+
+    def inverse_dynamics(self, method: str = "lagrange") -> ca.SX:
+        return self.route(method).inverse_dynamics()
+
+    def forward_dynamics(self, method: str = "newton-euler") -> ca.SX:
+        """qdd(q, qd, tau) by LDL^T of M; never a symbolic inverse."""
+        if method == "newton-euler":
+            bias = self.newton_euler.bias
+        else:
+            r = self.lagrangian
+            bias = r.coriolis_matrix @ self.sym.qd + r.gravity_vector
+        return forward_dynamics(self.mass_matrix(method), bias, self.sym.tau)
+
+    def ode_rhs(self, method: str = "newton-euler") -> ca.SX:
+        """f(x, u) = [qd; qdd] with x = [q; qd], u = tau."""
+        return ca.vertcat(self.sym.qd, self.forward_dynamics(method))
+
+    def ode_jac_x(self, method: str = "newton-euler") -> ca.SX:
+        return ca.jacobian(self.ode_rhs(method), self.sym.x)
+
+    def ode_jac_u(self, method: str = "newton-euler") -> ca.SX:
+        return ca.jacobian(self.ode_rhs(method), self.sym.tau)
