@@ -22,10 +22,14 @@ from typing import Callable, Iterable
 
 from derive.errors import DeriveError
 from derive.description.robot import Robot, model_data
-from derive.resources import CHECKOUT
+from derive.resources import PACKAGE, TEMPLATES
 
-ROOT = CHECKOUT
 TOOLS = ("sympy", "casadi", "numpy", "jinja2")
+
+
+def default_output() -> Path:
+    """Where generated code is written and looked for when no folder is given: ./generated."""
+    return Path.cwd() / "generated"
 
 
 def tool_versions() -> dict[str, str]:
@@ -34,21 +38,25 @@ def tool_versions() -> dict[str, str]:
     return {t: version(t) for t in TOOLS}
 
 
-GENERATOR_SOURCES = ("derive", "templates")
-"""What generated/ depends on: all of derive's Python and every template. Broader than the
-modules generation imports (so editing the trajectory optimiser marks generated/ stale and
-`make derive` rewrites MANIFEST.json only), but never narrower, which would let `--check`
-pass on stale output."""
+GENERATOR_SOURCES = ("errors.py", "resources.py", "description", "symbolic", "codegen")
+"""What generated/ depends on, under derive/: the description, the symbolic derivation and code
+generation (with every backend), plus the templates. The solvers, analysis, inspection and the
+command line are left out: editing them does not make generated/ stale."""
 
 
 def generator_hash() -> str:
-    """sha256 over derive's sources and templates (line endings normalised) and the tool versions."""
+    """sha256 over the generator's sources and templates (line endings normalised) and the tool versions."""
     h = hashlib.sha256()
-    paths = [p for rel in GENERATOR_SOURCES for p in (ROOT / rel).rglob("*")
-             if p.suffix in (".py", ".jinja", ".c", ".h") and "__pycache__" not in p.parts]
-    for path in sorted(paths):
-        h.update(path.relative_to(ROOT).as_posix().encode())
-        h.update(path.read_bytes().replace(b"\r\n", b"\n"))
+    files = []
+    for rel in GENERATOR_SOURCES:
+        path = PACKAGE / rel
+        files += [path] if path.is_file() else [p for p in path.rglob("*")]
+    labelled = [(f"derive/{p.relative_to(PACKAGE).as_posix()}", p) for p in files]
+    labelled += [(f"templates/{p.relative_to(TEMPLATES).as_posix()}", p) for p in TEMPLATES.rglob("*")]
+    for label, path in sorted(labelled):
+        if path.is_file() and path.suffix in (".py", ".jinja", ".c", ".h") and "__pycache__" not in path.parts:
+            h.update(label.encode())
+            h.update(path.read_bytes().replace(b"\r\n", b"\n"))
     h.update(json.dumps(tool_versions(), sort_keys=True).encode())
     return h.hexdigest()
 
