@@ -8,10 +8,10 @@ PIP    := $(PY) -m pip --disable-pip-version-check -q
 .PHONY: derive test check bench clean venv venv-test
 
 derive: $(VENV)/.core
-	$(PY) -m derive generate
+	$(PY) -m derive generate --prune
 
 test: $(VENV)/.test
-	$(PY) -m derive generate --check
+	$(PY) -m derive generate --check --prune
 	$(PY) -m pytest -q
 
 bench: $(VENV)/.test
@@ -19,6 +19,7 @@ bench: $(VENV)/.test
 
 $(VENV)/.core: pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	-$(PIP) uninstall -y derive 2>/dev/null  # the distribution's name before it became derive-robotics
 	$(PIP) install -c constraints.txt -e .
 	touch $@
 
@@ -30,4 +31,4 @@ venv: $(VENV)/.core
 venv-test: $(VENV)/.test
 
 clean:
-	rm -rf $(VENV) build *.egg-info
+	rm -rf $(VENV) build dist *.egg-info

@@ -10,6 +10,9 @@ Run from the project root (or anywhere; outputs go to ./pendulum_tour_out/):
 4. Ten seconds of RK4 with the generated code, a plot, a CSV and the energy drift.
 5. The generated C (generated/pendulum/c/): compiled with a small main() calling
    pendulum_rk4_step if a C compiler is installed, and checked against step 4.
+
+The generated code is read from ./generated (what `derive generate` writes) when it holds
+the pendulum, else from the project's generated/ beside this example.
 """
 
 from __future__ import annotations
@@ -23,12 +26,18 @@ import numpy as np
 import sympy as sp
 
 import derive
-from derive.inspect.latex import Options, document_context, render_png, render_tex
+from derive.codegen.generate import default_output
+from derive.inspect.latex import Options, document_context, render_tex
 from derive.inspect.linearize import linearize
-from derive.solvers.simulate import GENERATED, plot, simulate, summary, write_csv
+from derive.plot.latex import render_png
+from derive.plot.simulate import plot_simulation
+from derive.solvers.simulate import simulate, summary, write_csv
 
 out = Path(sys.argv[1] if len(sys.argv) > 1 else "pendulum_tour_out")
 out.mkdir(parents=True, exist_ok=True)
+generated = default_output()
+if not (generated / "pendulum").is_dir():
+    generated = Path(__file__).resolve().parents[1] / "generated"
 
 # ---- 1. the model ----
 m = derive.load("pendulum")
@@ -54,14 +63,14 @@ print("   b =", b)
 print("   z' =", list(lin.A * sp.Matrix([z0, z1])))
 
 # ---- 4. simulation ----
-traj = simulate(m.robot, q0=[1.0], t_end=10.0, dt=1e-3)
+traj = simulate(m.robot, q0=[1.0], t_end=10.0, dt=1e-3, generated=generated)
 write_csv(traj, out / "pendulum.csv")
-plot(traj, out / "pendulum_simulation.png")
+plot_simulation(traj, out / "pendulum_simulation.png")
 print("\n4.", summary(traj).replace("\n", "\n   "))
 print(f"   wrote {out / 'pendulum.csv'} and {out / 'pendulum_simulation.png'}")
 
 # ---- 5. the generated C ----
-c_dir = GENERATED / "pendulum" / "c"
+c_dir = generated / "pendulum" / "c"
 print(f"\n5. generated C: {c_dir / 'pendulum_rk4_step.c'} (and {len(list(c_dir.glob('*.c'))) - 1} other .c files)")
 cc = shutil.which("cc") or shutil.which("gcc")
 if cc is None:

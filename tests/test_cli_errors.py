@@ -12,8 +12,10 @@ import os
 import pytest
 
 from derive.cli import main
+from derive.resources import EXAMPLE_MODELS
 
 OUT = "{tmp}/out"  # replaced by a path inside the test's empty folder
+SHIPPED = str(EXAMPLE_MODELS)
 
 # (id, argv, fragment of the error line)
 CASES = [
@@ -28,7 +30,12 @@ CASES = [
     ("info-empty-models", ["info", "--models", "{tmp}/empty.yaml"], "must hold a mapping"),
     ("info-malformed-models", ["info", "--models", "{tmp}/bad.yaml"], "malformed YAML"),
     ("eom-unknown-robot", ["eom", "nosuch"], "no such robot"),
-    ("generate-unknown-robot", ["generate", "--robot", "nosuch", "--out", OUT], "no such robot"),
+    ("generate-unknown-robot", ["generate", "--models", SHIPPED, "--robot", "nosuch", "--out", OUT], "no such robot"),
+    ("generate-no-models-file", ["generate"], "no models.yaml in"),
+    ("generate-prune-with-robot", ["generate", "--models", SHIPPED, "--robot", "pendulum", "--prune", "--out", OUT],
+     "cannot be combined with --robot"),
+    ("init-exists", ["init", "--out", "{tmp}/bad.yaml"], "exists already"),
+    ("init-unknown-robot", ["init", "--robot", "nosuch"], "no shipped robot 'nosuch'"),
     ("generate-malformed-models", ["generate", "--models", "{tmp}/bad.yaml", "--out", OUT], "malformed YAML"),
     # import-urdf
     ("urdf-missing", ["import-urdf", "{tmp}/nosuch.urdf", "--tip", "b"], "cannot read URDF"),
@@ -142,6 +149,7 @@ def test_bad_input_is_one_line(argv, fragment, tmp_path, monkeypatch, capsys):
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
+    monkeypatch.delenv("DERIVE_MODELS", raising=False)
     fill = {"tmp": str(inputs)}
     argv = [a.replace(OUT, str(work / "out")).format(**fill) for a in argv]
     fragment = fragment.format(**fill)

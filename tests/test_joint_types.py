@@ -29,7 +29,8 @@ from derive.symbolic.model import SXModel
 from derive.cli import main
 from derive.codegen.generate import generate
 from derive.description.model import load_models, parse_models
-from derive.description.robot import JOINT_TYPES, ModelError
+from derive.description.joints import JOINT_TYPES
+from derive.description.robot import ModelError
 from derive.reference import NumericRobot
 from derive.reference.rnea import rpy_matrix
 from util import assert_close

@@ -14,7 +14,8 @@ import pytest
 
 import derive
 from derive.cli import main
-from derive.inspect.latex import Options, compile_pdf, document_context, latex_document, name_latex, render_png, render_tex
+from derive.inspect.latex import Options, compile_pdf, document_context, latex_document, name_latex, render_tex
+from derive.plot.latex import render_png
 
 
 @pytest.fixture(scope="module")

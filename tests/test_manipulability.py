@@ -9,10 +9,11 @@ import sympy as sp
 import derive
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.analysis.manipulability import Manipulability, ellipsoid, measures, plot_manipulability, symbolic
+from derive.analysis.manipulability import Manipulability, ellipsoid, measures, symbolic
 from derive.codegen.catalogue import manipulability_function as template_function
 from derive.reference import NumericRobot
 from derive.analysis.singularity import TaskJacobian, analyse, find_singularities, free_coordinates, redundancy
+from derive.plot.manipulability import plot_manipulability
 from util import robots, sx_model
 
 L1, L2 = 1.0, 0.7

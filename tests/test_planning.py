@@ -11,8 +11,9 @@ from scipy.sparse.csgraph import dijkstra
 
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.analysis.planning import Box, Circle, astar, collisions, neighbour_offsets, parse_obstacle, plan, plot_plan
+from derive.analysis.planning import Box, Circle, astar, collisions, neighbour_offsets, parse_obstacle, plan
 from derive.analysis.workspace import Arm, joint_box
+from derive.plot.planning import plot_plan
 from util import robots
 
 

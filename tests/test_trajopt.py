@@ -18,7 +18,8 @@ from derive.cli import main
 from derive.errors import DeriveError
 from derive.codegen.generate import generate
 from derive.description.model import load_models, parse_models
-from derive.solvers.trajopt import LIMIT_TOL, TrajectoryOptimizer, Waypoint, _import, generated_forward_dynamics
+from derive.solvers.simulate import load_generated
+from derive.solvers.trajopt import LIMIT_TOL, TrajectoryOptimizer, Waypoint, generated_forward_dynamics
 from derive.solvers.trajopt_examples import PANDA_GOAL, PANDA_READY, point_to_point_duration, swing_up, velocity_reversals
 from util import robots
 
@@ -137,7 +138,7 @@ def test_solver_infeasible_swing_up_fails_with_reason(opt):
 
 def test_waypoint_goes_through_the_derived_fk(opt, gen):
     o = opt("planar_2r")
-    module = _import(gen / "planar_2r" / "python" / "planar_2r.py", "planar_2r")
+    module = load_generated("planar_2r", gen)
     via = module.fk_tcp([0.3, 1.2])[:3, 3]  # reachable, computed by the generated FK
     r = o.solve([0.0, 0.0], [1.0, 0.5], intervals=40, duration=2.0, waypoints=[Waypoint(0.5, tuple(via))])
     assert r.success, r.reason

@@ -22,6 +22,7 @@ import pytest
 import yaml
 
 from derive.description.model import default_models_path, load_models, parse_robot
+from derive.cli.models import cmd_import_urdf as import_urdf_command
 from derive.description.robot import ModelError
 from derive.reference import NumericRobot
 from derive.description.urdf import (
@@ -29,7 +30,6 @@ from derive.description.urdf import (
     dump_entry,
     example_robot_data_dir,
     import_urdf,
-    import_urdf_command,
     import_urdf_named,
     matrix_rpy,
     rpy_matrix,

@@ -8,7 +8,8 @@ import pytest
 from derive.cli import main
 from derive.errors import DeriveError
 from derive.reference import NumericRobot
-from derive.analysis.workspace import Arm, joint_box, plot_workspace, sample_configurations, workspace
+from derive.analysis.workspace import Arm, joint_box, sample_configurations, workspace
+from derive.plot.workspace import plot_workspace
 from util import robots
 
 L1, L2 = 1.0, 0.7  # planar_2r's parameter defaults

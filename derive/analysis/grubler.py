@@ -30,8 +30,8 @@ from typing import Any, Mapping
 
 import yaml
 
+from derive.description.joints import JOINT_TYPES
 from derive.errors import DeriveError
-from derive.description.robot import JOINT_TYPES
 
 JOINT_DOF = JOINT_TYPES  # the lecture's Table 1, as the model parser knows it
 """The lecture's Table 1 (plus the rigid 'fixed' joint)."""
@@ -161,7 +161,7 @@ def _check_connected(mech: Mechanism, error) -> None:
         raise error("links", f"link '{loose[0]}' is not connected to the ground '{mech.links[0]}' through the joints")
 
 
-def _read_yaml(path: Path) -> Any:
+def read_yaml(path: Path) -> Any:
     """The YAML structure of a file; DeriveError (one line) if unreadable or malformed."""
     try:
         return yaml.safe_load(path.read_text())
@@ -178,7 +178,7 @@ def _read_yaml(path: Path) -> Any:
 
 def load_mechanism(path: str | Path) -> Mechanism:
     path = Path(path)
-    return parse_mechanism(_read_yaml(path), str(path))
+    return parse_mechanism(read_yaml(path), str(path))
 
 
 def mechanism_from_robot(robot) -> Mechanism:
@@ -211,33 +211,3 @@ def report(mech: Mechanism, nv: int | None = None) -> str:
         lines.append("  DOF <= 0: a structure (statically " + ("determinate" if mech.dof == 0 else "indeterminate") + "), "
                      "unless some constraints are redundant")
     return "\n".join(lines)
-
-
-def dof_command(args) -> int:
-    target = args.target
-    path = Path(target)
-    if path.suffix in (".yaml", ".yml") or path.is_file():
-        if not path.is_file():
-            raise DeriveError(f"mechanism {target}: no such file")
-        data = _read_yaml(path)
-        if isinstance(data, Mapping) and "robots" in data:  # a models file: every robot in it
-            from derive.description.model import load_models
-
-            for robot in load_models(path).values():
-                print(report(mechanism_from_robot(robot), robot.nv))
-            return 0
-        print(report(parse_mechanism(data, str(path))))
-        return 0
-    from derive.description.model import load_robot
-
-    robot = load_robot(target, args.models)
-    print(report(mechanism_from_robot(robot), robot.nv))
-    return 0
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("dof", help="degrees of freedom by Grübler's formula (robot or mechanism YAML)",
-                       description="DOF = m (N - 1 - J) + sum f_i for a robot of models.yaml or a mechanism file "
-                                   "(see examples/grubler_example2.yaml).")
-    p.add_argument("target", help="robot name in models.yaml, or a mechanism .yaml file")
-    p.set_defaults(func=dof_command)

@@ -24,20 +24,23 @@ by one-sided Jacobi rotations of the k rows (C: no malloc, only math.h; high
 relative accuracy of small singular values), numpy's SVD in Python. Both algorithms are
 the fixed support files templates/c/support/derive_manipulability.h (with derive_linalg.h)
 and templates/python/support/manipulability.py; the templates only pass the rows.
+
+The figure of ellipses and mu3 is :func:`derive.plot.manipulability.plot_manipulability`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
+from itertools import combinations
 
+import casadi as ca
 import numpy as np
 import sympy as sp
 
-from derive.errors import DeriveError
+from derive.analysis.singularity import TaskJacobian
+from derive.analysis.workspace import joint_box
 from derive.description.robot import Robot
-from derive.analysis.singularity import ROW_NAMES, TaskJacobian, _fmt, parse_q
-from derive.analysis.workspace import Arm, new_figure, save_figure, workspace
+from derive.errors import DeriveError
 
 
 def _singular_values(J: np.ndarray) -> np.ndarray:
@@ -102,8 +105,6 @@ class Manipulability:
 
     def batch(self, Q) -> np.ndarray:
         """(N, 3) measures for the rows of Q."""
-        import casadi as ca
-
         Q = np.atleast_2d(Q)
         F = ca.Function("J", [self.tj.sym.q, self.tj.sym.p], [self.tj.J_sx]).map(Q.shape[0])
         flat = np.array(F(Q.T, np.tile(self.tj.p.reshape(-1, 1), (1, Q.shape[0]))))  # k x (nv N)
@@ -115,8 +116,6 @@ def symbolic(model, frame: str = "tcp", task: str = "position") -> dict[str, sp.
     """Closed forms from a :class:`derive.inspect.sympy_model.SymbolicModel`: {"J", "JJt", "mu3", and for k <= 2
     "eigenvalues", "mu1", "mu2"} in the robot's symbols (eigenvalues of a 3 x 3 JJ^T are left to
     numerics: their closed form is the casus irreducibilis of the cubic)."""
-    from itertools import combinations
-
     tj = TaskJacobian(model.robot, frame, task)
     J = model.jacobian(frame)[list(tj.rows), :]
     A = (J * J.T).applyfunc(sp.simplify)
@@ -137,117 +136,12 @@ def symbolic(model, frame: str = "tcp", task: str = "position") -> dict[str, sp.
     return out
 
 
-# --------------------------------------------------------------------------- plot
+# --------------------------------------------------------------------------- poses
 
 
 def default_poses(robot: Robot, n: int = 6) -> np.ndarray:
     """n configurations from the middle of the joint box towards 80 % of its upper corner:
     for the 2R arm from stretched (singular) to folded, as figure 9 compares."""
-    from derive.analysis.workspace import joint_box
-
     lo, hi = joint_box(robot)
     mid = (lo + hi) / 2
     return mid + np.linspace(0, 1, n)[:, None] * 0.8 * (hi - mid)
-
-
-def _ellipse(S: np.ndarray, n: int = 100) -> np.ndarray:
-    """2 x n boundary of {x : x^T S^+ x <= 1} for a 2 x 2 PSD S (a segment when S is singular)."""
-    w, V = np.linalg.eigh(S)
-    t = np.linspace(0, 2 * np.pi, n)
-    return V @ (np.sqrt(np.clip(w, 0, None))[:, None] * np.vstack([np.cos(t), np.sin(t)]))
-
-
-def plot_manipulability(man: Manipulability, path: str | Path, poses=None, samples: int = 40000) -> Path:
-    """Ellipsoids along the arm (left, as figure 9) and mu3 over the workspace (right).
-
-    Position tasks only (ellipses in metres). A 2-D task is drawn in its plane; a 3-D one
-    as the ellipsoids' projections on the x-z plane (side view), P (J J^T) P^T.
-    """
-    tj, robot = man.tj, man.robot
-    if any(r > 2 for r in tj.rows):
-        raise DeriveError(f"robot '{robot.name}': plots need a position task, got rows {tj.row_names}")
-    plane = tj.rows if tj.k == 2 else ((0, 2) if tj.k == 3 else None)
-    if plane is None:
-        raise DeriveError(f"robot '{robot.name}': a 1-D task ({tj.row_names}) has no ellipses to draw")
-    sel = [tj.rows.index(r) for r in plane]
-    poses = default_poses(robot) if poses is None else np.atleast_2d(poses)
-    arm = Arm(robot, man.frame)
-    skel = arm.skeleton(poses)
-    fig = new_figure(2, height=5.0)
-    ax, ax2 = fig.subplots(1, 2)
-    reach = np.abs(skel[..., list(plane)]).max()
-    infos = [man.at(q) for q in poses]
-    smax = max(i.semi_axes[0] for i in infos)
-    scale = 0.25 * reach / smax if smax > 0 else 1.0
-    colors = [plt_color(i / max(len(poses) - 1, 1)) for i in range(len(poses))]
-    for info, sk, color in zip(infos, skel, colors):
-        A = tj(info.q) @ tj(info.q).T
-        S = A[np.ix_(sel, sel)]
-        tip = sk[-1, list(plane)]
-        ax.plot(sk[:, plane[0]], sk[:, plane[1]], "-o", color=color, lw=2, ms=3)
-        e = tip[:, None] + scale * _ellipse(S)
-        ax.fill(e[0], e[1], color=color, alpha=0.25)
-        ax.plot(e[0], e[1], color=color, lw=1)
-        mu1 = "inf" if not np.isfinite(info.mu[0]) else f"{info.mu[0]:.3g}"
-        ax.annotate(f"mu1 {mu1}\nmu3 {info.mu[2]:.3g}", tip, textcoords="offset points", xytext=(6, 6),
-                    fontsize=7, color=color)
-    ax.set_aspect("equal", adjustable="datalim")
-    ax.set_xlabel(f"{ROW_NAMES[plane[0]]} [m]")
-    ax.set_ylabel(f"{ROW_NAMES[plane[1]]} [m]")
-    proj = "" if tj.k == 2 else ", x-z projection"
-    ax.set_title(f"manipulability ellipses of '{man.frame}' (x{scale:.2g}{proj})", fontsize=10)
-    ws = workspace(robot, man.frame, samples, "random", 0, arm=arm)
-    mu3 = man.batch(ws.q)[:, 2]
-    sc = ax2.scatter(ws.points[:, plane[0]], ws.points[:, plane[1]], c=mu3, s=1.5, cmap="magma", rasterized=True)
-    ax2.set_aspect("equal", adjustable="datalim")
-    ax2.set_xlabel(f"{ROW_NAMES[plane[0]]} [m]")
-    ax2.set_ylabel(f"{ROW_NAMES[plane[1]]} [m]")
-    ax2.set_title("mu3 = sqrt(det(J J^T)) over the workspace" + (" (max over overlaps hidden)" if tj.k == 3 else ""),
-                  fontsize=10)
-    fig.colorbar(sc, ax=ax2, shrink=0.8, label="mu3")
-    fig.suptitle(f"{robot.name}: task rows {tj.row_names}", fontsize=11)
-    return save_figure(fig, path)
-
-
-def plt_color(t: float):
-    from matplotlib import colormaps
-
-    return colormaps["viridis"](0.1 + 0.8 * t)
-
-
-# --------------------------------------------------------------------------- CLI
-
-
-def manipulability_command(args) -> int:
-    from derive.description.model import load_robot
-
-    robot = load_robot(args.robot_name, args.models)
-    if not args.q and args.poses < 1:
-        raise DeriveError(f"robot '{robot.name}': --poses must be at least 1, got {args.poses}")
-    qs = [parse_q(robot, text) for text in args.q] if args.q else list(default_poses(robot, args.poses))
-    man = Manipulability(robot, args.frame, args.task)
-    print(f"{robot.name}/{args.frame}: task rows {man.tj.row_names} (k = {man.tj.k}), nv = {robot.nv}; "
-          "mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, mu3 = sqrt(det(J J^T))")
-    for q in qs:
-        info = man.at(q)
-        print(f"q = {_fmt(q)}: mu1 = {info.mu[0]:.6g}, mu2 = {info.mu[1]:.6g}, mu3 = {info.mu[2]:.6g}")
-        for name, (rows, semi, axes) in info.parts.items():
-            print(f"  {name} ellipsoid ({rows}): semi-axes {_fmt(semi)} along {', '.join(_fmt(a) for a in axes.T)}")
-    if args.png:
-        print(f"wrote {plot_manipulability(man, args.png, np.array(qs))}")
-    return 0
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("manipulability", help="manipulability ellipsoids and measures mu1, mu2, mu3 (eq. 30)",
-                       description="Print the measures and ellipsoids at configurations; draw ellipses along "
-                                   "the arm and mu3 over the workspace (lecture figure 9).")
-    p.add_argument("robot_name")
-    p.add_argument("--frame", default="tcp")
-    p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y")
-    p.add_argument("--q", action="append", nargs="+", help="configuration: values separated by commas or spaces "
-                   "(repeatable; pi allowed)")
-    p.add_argument("--poses", type=int, default=6, help="without --q: this many poses across the joint box (>= 1, default 6)")
-    p.add_argument("--png", help="write the ellipses and the mu3 map to this PNG")
-    p.set_defaults(func=manipulability_command)
-

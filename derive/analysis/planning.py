@@ -16,6 +16,8 @@ thickness: inflate obstacles with ``margin`` for that), meets an obstacle, teste
 exactly (segment-circle distance, slab test for boxes). Grid nodes are tested;
 an edge between two free neighbours is taken as free, so obstacles thinner than
 a grid step can be jumped: refine the grid for them.
+
+The figure of a plan is :func:`derive.plot.planning.plot_plan`.
 """
 
 from __future__ import annotations
@@ -24,13 +26,13 @@ import heapq
 import itertools
 import math
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 
-from derive.errors import DeriveError
+from derive.analysis.singularity import eval_number
+from derive.analysis.workspace import Arm, joint_box
 from derive.description.robot import Robot
-from derive.analysis.workspace import Arm, joint_box, joint_label, new_figure, save_figure
+from derive.errors import DeriveError
 
 MAX_NODES = 2_000_000
 
@@ -159,8 +161,6 @@ class Box:
 
 def parse_obstacle(text: str) -> Circle | Box:
     """'circle:x,y,r', 'circle:x,y,z,r' (sphere), 'box:xmin,ymin,xmax,ymax' or 'box:xmin,ymin,zmin,xmax,ymax,zmax'."""
-    from derive.analysis.singularity import eval_number
-
     kind, _, rest = text.partition(":")
     try:
         v = [eval_number(x) for x in rest.split(",")]
@@ -248,104 +248,3 @@ def plan(robot: Robot, start, goal, obstacles=(), frame: str = "tcp", resolution
     length = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
     return PlanResult(True, f"path of {len(path)} waypoints, joint-space length {length:.4f} "
                             f"({res.expanded} nodes expanded of {free.size})", path, length, res.expanded, axes, free)
-
-
-def plot_plan(robot: Robot, result: PlanResult, start, goal, obstacles, path: str | Path, frame: str = "tcp",
-              arm: Arm | None = None) -> Path:
-    """The path in the configuration space (left; obstacle nodes dark) and in the workspace (right)."""
-    from matplotlib.patches import Circle as CirclePatch
-    from matplotlib.patches import Rectangle
-
-    arm = arm or Arm(robot, frame)
-    fig = new_figure(2, height=5.0)
-    cs, ws = fig.subplots(1, 2)
-    if robot.nv >= 2 and result.free is not None:
-        occ = result.free if robot.nv == 2 else result.free.all(axis=tuple(range(2, robot.nv)))
-        a0, a1 = result.axes[0], result.axes[1]
-        cs.imshow(~occ.T, origin="lower", extent=(a0[0], a0[-1], a1[0], a1[-1]), cmap="Greys", alpha=0.6,
-                  aspect="auto", interpolation="nearest")
-        cs.set_ylabel(joint_label(robot, 1))
-        if robot.nv > 2:
-            cs.set_title("configuration space (dark: blocked for every other joint value)", fontsize=10)
-    cs.set_xlabel(joint_label(robot, 0))
-    if result.success:
-        cs.plot(result.path[:, 0], result.path[:, 1] if robot.nv > 1 else 0 * result.path[:, 0], "-", color="C0", lw=2)
-    cs.plot(start[0], start[1] if robot.nv > 1 else 0, "o", color="C2", label="start")
-    cs.plot(goal[0], goal[1] if robot.nv > 1 else 0, "*", color="C3", ms=12, label="goal")
-    cs.legend(loc="upper right", fontsize=8)
-    if robot.nv == 2:
-        cs.set_title("configuration space (dark: collision)", fontsize=10)
-    for i, ob in enumerate(obstacles):
-        if isinstance(ob, Circle):
-            ws.add_patch(CirclePatch(ob.center[:2], ob.radius, color="0.4", alpha=0.7))
-        else:
-            ws.add_patch(Rectangle(ob.lower[:2], ob.upper[0] - ob.lower[0], ob.upper[1] - ob.lower[1], color="0.4", alpha=0.7))
-    shown = result.path if result.success else np.vstack([start, goal])
-    pick = np.unique(np.linspace(0, len(shown) - 1, min(len(shown), 8)).round().astype(int))
-    sk = arm.skeleton(shown)
-    for k, i in enumerate(pick):
-        ws.plot(sk[i, :, 0], sk[i, :, 1], "-o", color=plt_cmap(k / max(len(pick) - 1, 1)), lw=2, ms=3, alpha=0.9)
-    if result.success:
-        tcp = arm.skeleton(_densify(result.path))[:, -1, :]
-        ws.plot(tcp[:, 0], tcp[:, 1], "--", color="C0", lw=1, label=f"path of '{frame}'")
-        ws.legend(loc="upper right", fontsize=8)
-    ws.set_aspect("equal", adjustable="datalim")
-    ws.set_xlabel("x [m]")
-    ws.set_ylabel("y [m]")
-    ws.set_title("workspace (x-y), arm at waypoints" if result.success else "workspace: NO PATH", fontsize=10)
-    fig.suptitle(f"{robot.name}: A* in configuration space, {result.message}", fontsize=10)
-    return save_figure(fig, path)
-
-
-def _densify(path: np.ndarray, per_step: int = 8) -> np.ndarray:
-    t = np.linspace(0, 1, per_step, endpoint=False)
-    return np.vstack([a + t[:, None] * (b - a) for a, b in zip(path[:-1], path[1:])] + [path[-1:]])
-
-
-def plt_cmap(t: float):
-    from matplotlib import colormaps
-
-    return colormaps["viridis"](0.1 + 0.8 * t)
-
-
-# --------------------------------------------------------------------------- CLI
-
-
-def plan_command(args) -> int:
-    from derive.description.model import load_robot
-    from derive.analysis.singularity import parse_q
-
-    robot = load_robot(args.robot_name, args.models)
-    start, goal = parse_q(robot, args.start), parse_q(robot, args.goal)
-    obstacles = [parse_obstacle(o) for o in args.obstacle or []]
-    if args.resolution is not None and args.resolution < 2:
-        raise DeriveError(f"robot '{robot.name}': --resolution must be at least 2 grid points per joint, "
-                          f"got {args.resolution}")
-    arm = Arm(robot, args.frame)
-    result = plan(robot, start, goal, obstacles, args.frame, args.resolution,
-                  "axis" if args.connectivity == 4 else "full", args.margin, arm)
-    print(f"{robot.name}: {result.message}")
-    if result.success:
-        print(f"path length: {result.length:.6g} (joint space)")
-    if args.png:
-        print(f"wrote {plot_plan(robot, result, start, goal, obstacles, args.png, args.frame, arm)}")
-    return 0 if result.success else 1
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("plan", help="A* over a configuration-space grid around workspace obstacles",
-                       description="Collision-free joint path by A* (Euclidean cost and heuristic) on a grid over "
-                                   "the joint box; obstacles are circles/boxes in the workspace checked against "
-                                   "the links. Exit status 1 when there is no path.")
-    p.add_argument("robot_name")
-    p.add_argument("--start", required=True, nargs="+", help="start configuration: values separated by commas or "
-                   "spaces (pi allowed)")
-    p.add_argument("--goal", required=True, nargs="+", help="goal configuration")
-    p.add_argument("--obstacle", action="append", help="circle:x,y,r | box:xmin,ymin,xmax,ymax (3-D forms too; repeatable)")
-    p.add_argument("--frame", default="tcp", help="the chain to this frame is checked (default tcp)")
-    p.add_argument("--resolution", type=int, help="grid points per joint, >= 2 (default: about 40000 nodes)")
-    p.add_argument("--connectivity", type=int, choices=(4, 8), default=8,
-                   help="8: all neighbours incl. diagonals (default); 4: along the axes only")
-    p.add_argument("--margin", type=float, default=0.0, help="clearance added to every obstacle [m], >= 0")
-    p.add_argument("--png", help="write the path in configuration space | workspace to this PNG")
-    p.set_defaults(func=plan_command)

@@ -35,8 +35,12 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
-from derive.errors import DeriveError
+from derive.analysis.workspace import joint_box, sample_configurations
+from derive.description import expr
 from derive.description.robot import Robot
+from derive.errors import DeriveError
+from derive.symbolic.kinematics import Kinematics
+from derive.symbolic.symbols import make_symbols
 
 ROW_NAMES = ("x", "y", "z", "wx", "wy", "wz")
 TASKS = {"position": (0, 1, 2), "orientation": (3, 4, 5), "full": (0, 1, 2, 3, 4, 5)}
@@ -58,9 +62,6 @@ class TaskJacobian:
     """J_t(q): the task rows of the geometric Jacobian of ``frame``, numeric and symbolic (SX)."""
 
     def __init__(self, robot: Robot, frame: str = "tcp", task: str = "position", kinematics=None):
-        from derive.symbolic.kinematics import Kinematics
-        from derive.symbolic.symbols import make_symbols
-
         self.robot, self.frame, self.task = robot, frame, task
         kin = kinematics or Kinematics(robot, make_symbols(robot))  # reuse an SXModel's when given
         self.sym = kin.sym
@@ -154,8 +155,6 @@ class SingularConfiguration:
 def free_coordinates(tj: TaskJacobian, samples: int = 4, seed: int = 0) -> tuple[int, ...]:
     """Coordinates the singular values do not depend on (e.g. a base joint about the gravity-free
     vertical axis): changing them alone never makes or breaks a singularity."""
-    from derive.analysis.workspace import sample_configurations
-
     rng = np.random.default_rng(seed)
     Q = sample_configurations(tj.robot, samples, "random", seed)
     free = []
@@ -181,8 +180,6 @@ def find_singularities(tj: TaskJacobian, starts: int = 24, seed: int = 0, rtol: 
     Returns (configurations sorted by q, the free coordinates).
     """
     from scipy.optimize import Bounds, minimize
-
-    from derive.analysis.workspace import joint_box, sample_configurations
 
     lo, hi = joint_box(tj.robot)
     angle = np.array([c.unit == "rad" for c in tj.robot.coordinates])
@@ -225,80 +222,12 @@ def _same(a: np.ndarray, b: np.ndarray, angle: np.ndarray, tol: float = 1e-3) ->
     return bool(np.abs(d).max() < tol)
 
 
-# --------------------------------------------------------------------------- CLI
-
-
-def _fmt(v) -> str:
-    return "[" + ", ".join(f"{x:.6g}" for x in np.asarray(v).reshape(-1)) + "]"
-
-
-def parse_q(robot: Robot, text) -> np.ndarray:
-    """q from "0.1,pi/2" or from a list of such pieces (the CLI's space-separated values)."""
-    if not isinstance(text, str):
-        text = ",".join(text)
-    try:
-        q = np.array([float(eval_number(x)) for x in text.split(",")])
-    except ValueError:
-        raise DeriveError(f"robot '{robot.name}': q '{text}': expected {robot.nv} numbers separated by commas") from None
-    if q.shape[0] != robot.nv:
-        raise DeriveError(f"robot '{robot.name}': q '{text}': expected {robot.nv} values "
-                          f"({', '.join(c.name for c in robot.coordinates)}), got {q.shape[0]}")
-    if not np.all(np.isfinite(q)):
-        bad = robot.coordinates[int(np.argmin(np.isfinite(q)))].name
-        raise DeriveError(f"robot '{robot.name}': q '{text}': {bad} = {q[np.argmin(np.isfinite(q))]:g} is not a finite number")
-    return q
+# --------------------------------------------------------------------------- input
 
 
 def eval_number(text: str) -> float:
     """A number, allowing 'pi' and simple fractions of it ('pi/2', '-3*pi/4')."""
-    from derive.description import expr
-
     try:
         return float(expr.evaluate(text.strip(), {}, pi=math.pi))
     except Exception:  # noqa: BLE001  (any parse error means: not a number)
         raise ValueError(text) from None
-
-
-def singularities_command(args) -> int:
-    from derive.description.model import load_robot
-
-    robot = load_robot(args.robot_name, args.models)
-    q = parse_q(robot, args.q) if args.q else None  # every option is checked before anything is printed
-    if q is None and args.starts < 1:
-        raise DeriveError(f"robot '{robot.name}': --starts must be at least 1, got {args.starts}")
-    tj = TaskJacobian(robot, args.frame, args.task)
-    names = [c.name for c in robot.coordinates]
-    print(f"{robot.name}/{args.frame}: task rows {tj.row_names} (k = {tj.k}), nv = {tj.nv}")
-    print(redundancy(tj))
-    if q is not None:
-        info = analyse(tj(q), q)
-        print(f"at q = {_fmt(q)}: rank {info.rank} of {len(info.singular_values)}"
-              f"{' (SINGULAR)' if info.singular else ''}, singular values {_fmt(info.singular_values)}")
-        for k in range(info.null_space.shape[1]):
-            print(f"  null space: qd = {_fmt(info.null_space[:, k])}  ({', '.join(names)})")
-        for k in range(info.lost_directions.shape[1]):
-            print(f"  cannot move along: {_fmt(info.lost_directions[:, k])}  ({tj.row_names})")
-        return 0
-    print(f"searching singular configurations from {args.starts} random starts ...", flush=True)
-    found, free = find_singularities(tj, args.starts, args.seed)
-    if free:
-        print(f"  the singular values do not depend on {', '.join(names[i] for i in free)} (set to 0 below)")
-    if not found:
-        print("no singular configuration found")
-    for c in found:
-        where = "" if c.within_limits else "  (outside the joint limits)"
-        print(f"  singular at q = {_fmt(c.q)}: singular values {_fmt(c.singular_values)}{where}")
-    return 0
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("singularities", help="rank, singular values and null space of J; search for singularities",
-                       description="With --q: rank, singular values, null space of the task Jacobian at q. "
-                                   "Without: redundancy and a search for singular configurations.")
-    p.add_argument("robot_name")
-    p.add_argument("--frame", default="tcp")
-    p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y,wz")
-    p.add_argument("--q", nargs="+", help="configuration: values separated by commas or spaces (pi allowed: 0 pi/2)")
-    p.add_argument("--starts", type=int, default=24, help="random starts of the search (>= 1, default 24)")
-    p.add_argument("--seed", type=int, default=0)
-    p.set_defaults(func=singularities_command)

@@ -9,20 +9,21 @@ samples at once.
 
 The arm's skeleton, the origins of the link frames from the root to a frame,
 is evaluated the same way: drawings and the planner's collision checks use it.
-Plots are written with matplotlib's Agg canvas (no display needed).
+The figure of both spaces is :func:`derive.plot.workspace.plot_workspace`.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
-from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
-from derive.errors import DeriveError
 from derive.description.robot import Robot
+from derive.errors import DeriveError
+from derive.symbolic.kinematics import Kinematics
+from derive.symbolic.symbols import make_symbols
 
 AXIS_NAMES = "xyz"
 
@@ -55,9 +56,6 @@ class Arm:
     """
 
     def __init__(self, robot: Robot, frame: str = "tcp"):
-        from derive.symbolic.kinematics import Kinematics
-        from derive.symbolic.symbols import make_symbols
-
         self.robot, self.frame = robot, frame
         sym = make_symbols(robot)
         kin = Kinematics(robot, sym)
@@ -140,96 +138,3 @@ def workspace(robot: Robot, frame: str = "tcp", n: int = 40000, method: str = "g
     Q = sample_configurations(robot, n, method, seed)
     sk = arm.skeleton(Q)
     return Workspace(robot, frame, Q, sk[:, -1, :], sk[0, 0, :])
-
-
-# --------------------------------------------------------------------------- plots
-
-
-def new_figure(ncols: int, height: float = 4.6):
-    """A matplotlib Figure on the Agg canvas (no pyplot, no display, no global backend change)."""
-    from matplotlib.figure import Figure
-
-    return Figure(figsize=(height * ncols * 1.02, height), layout="constrained")
-
-
-def save_figure(fig, path: str | Path) -> Path:
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(path, dpi=110)
-    return path
-
-
-def joint_label(robot: Robot, i: int) -> str:
-    c = robot.coordinates[i]
-    return f"{c.name} [{c.unit}]"
-
-
-def plot_workspace(ws: Workspace, path: str | Path) -> Path:
-    """Configuration space (left) and workspace (right), as the lecture's figure 4.
-
-    Every sample is coloured by its distance from the base in both panels, so bands
-    in the configuration space can be followed into the workspace. Planar robots get
-    one workspace panel in their plane with the innermost and outermost reach drawn;
-    spatial ones get the xy, xz and yz projections of the point cloud.
-    """
-    robot = ws.robot
-    planes = [ws.plane] if len(ws.plane) == 2 else [(0, 1), (0, 2), (1, 2)]
-    fig = new_figure(1 + len(planes))
-    axes = fig.subplots(1, 1 + len(planes))
-    r = ws.reach
-    small = len(ws.q) <= 5000
-    size = 6 if small else 1.5
-    cs = axes[0]
-    if robot.nv == 1:
-        cs.scatter(ws.q[:, 0], np.zeros(len(ws.q)), c=r, s=size, cmap="viridis")
-        cs.set_yticks([])
-    else:
-        cs.scatter(ws.q[:, 0], ws.q[:, 1], c=r, s=size, cmap="viridis", rasterized=True)
-        cs.set_ylabel(joint_label(robot, 1))
-    cs.set_xlabel(joint_label(robot, 0))
-    extra = f" (projection on the first two of {robot.nv} joints)" if robot.nv > 2 else ""
-    cs.set_title(f"configuration space{extra}", fontsize=10)
-    for ax, (a, b) in zip(axes[1:], planes):
-        sc = ax.scatter(ws.points[:, a], ws.points[:, b], c=r, s=size, cmap="viridis", rasterized=True)
-        ax.set_aspect("equal", adjustable="datalim")
-        ax.set_xlabel(f"{AXIS_NAMES[a]} [m]")
-        ax.set_ylabel(f"{AXIS_NAMES[b]} [m]")
-        if len(planes) == 1:
-            t = np.linspace(0, 2 * np.pi, 400)
-            for rad, style in ((r.min(), "--"), (r.max(), "-")):
-                ax.plot(ws.base[a] + rad * np.cos(t), ws.base[b] + rad * np.sin(t), style, color="k", lw=0.8)
-            ax.set_title(f"workspace of '{ws.frame}': reach {r.min():.3g} .. {r.max():.3g} m", fontsize=10)
-        else:
-            ax.set_title(f"workspace of '{ws.frame}', {AXIS_NAMES[a]}{AXIS_NAMES[b]} projection", fontsize=10)
-    fig.colorbar(sc, ax=list(axes), shrink=0.8, label="distance from base [m]")
-    fig.suptitle(f"{robot.name}: {len(ws.q)} configurations through FK", fontsize=11)
-    return save_figure(fig, path)
-
-
-# --------------------------------------------------------------------------- CLI
-
-
-def workspace_command(args) -> int:
-    from derive.description.model import load_robot
-
-    robot = load_robot(args.robot_name, args.models)
-    if args.samples < 2:
-        raise DeriveError(f"--samples: need at least 2, got {args.samples}")
-    ws = workspace(robot, args.frame, args.samples, args.method, args.seed)
-    print(ws.summary())
-    if args.png:
-        print(f"wrote {plot_workspace(ws, args.png)}")
-    return 0
-
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("workspace", help="sample the configuration space through FK; plot both spaces",
-                       description="Sample q in the joint box (grid or random), map through FK, print the "
-                                   "workspace's extent and optionally draw both spaces side by side.")
-    p.add_argument("robot_name")
-    p.add_argument("--frame", default="tcp", help="frame whose positions form the workspace (default tcp)")
-    p.add_argument("--samples", type=int, default=40000, help="number of configurations (default 40000)")
-    p.add_argument("--method", choices=("grid", "random"), default="grid")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random sampling")
-    p.add_argument("--png", help="write configuration space | workspace to this PNG")
-    p.set_defaults(func=workspace_command)

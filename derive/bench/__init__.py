@@ -7,7 +7,8 @@ possible, which are repeatable.
 
 Feature modules contribute benchmarks: each module named in BENCH_MODULES has
 ``benchmarks() -> dict[str, Callable[[argparse.Namespace], str]]`` returning
-markdown sections. Results go to bench/results.md (and stdout).
+markdown sections. Results go to bench/results.md (and stdout). ``derive bench``
+(:mod:`derive.cli.bench`) calls :func:`run`.
 """
 
 from __future__ import annotations
@@ -20,8 +21,8 @@ from derive.errors import DeriveError
 from derive.resources import CHECKOUT
 
 ROOT = CHECKOUT
-BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.solvers.trajopt_examples",
-                            "derive.solvers.simulate"]
+BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.bench.trajopt", "derive.bench.simulate"]
+"""The modules contributing benchmarks, in the order they run and appear in the results."""
 
 
 def registry() -> dict:
@@ -32,6 +33,14 @@ def registry() -> dict:
 
 
 def run(args) -> int:
+    """Run the benchmarks ``args.names`` (default: all) and write their sections to ``args.out``.
+
+    ``args.quick`` asks for smaller sample sizes. Rerunning some benchmarks into an existing
+    results file replaces their sections and keeps the others.
+    """
+    if not (ROOT / "generated").is_dir() or not (ROOT / "models.yaml").is_file():
+        raise DeriveError(f"bench: measures the project's own models.yaml and generated/, which {ROOT} does not "
+                          "hold: run it in a source checkout (`make bench`)")
     benches = registry()
     names = args.names or list(benches)
     unknown = [n for n in names if n not in benches]
@@ -77,10 +86,3 @@ def _merge(old: str, new_sections: list[str]) -> list[str]:
         merged.update(split(sec))
     return [v.rstrip() + "\n" for v in merged.values()]
 
-
-def add_parser(sub) -> None:
-    b = sub.add_parser("bench", help="run benchmarks and write bench/results.md")
-    b.add_argument("names", nargs="*", help="benchmarks to run (default: all)")
-    b.add_argument("--out", help="results file (default: bench/results.md)")
-    b.add_argument("--quick", action="store_true", help="smaller sample sizes, for a smoke run")
-    b.set_defaults(func=run)

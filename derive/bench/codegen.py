@@ -23,12 +23,14 @@ from pathlib import Path
 
 import casadi as ca
 import numpy as np
+import sympy as sp
+from sympy.physics import mechanics as me
 
-from derive.resources import CHECKOUT
-from derive.symbolic.model import SXModel
+from derive.codegen.catalogue import function_specs
 from derive.codegen.generate import render
 from derive.description.model import load_models, parse_models
-from derive.codegen.catalogue import function_specs
+from derive.resources import CHECKOUT
+from derive.symbolic.model import SXModel
 
 ROOT = CHECKOUT
 
@@ -162,9 +164,6 @@ def _n_pendulum(n: int) -> str:
 
 def _mechanics_lagrange(n: int) -> float:
     """sympy.physics.mechanics LagrangesMethod on an n-link planar pendulum of point masses."""
-    import sympy as sp
-    from sympy.physics import mechanics as me
-
     t0 = time.perf_counter()
     q = me.dynamicsymbols(f"q1:{n + 1}")
     qd = [sp.diff(x, me.dynamicsymbols._t) for x in q]

@@ -23,10 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from derive.codegen.generate import generate
+from derive.description.model import load_models
+from derive.reference import NumericRobot
 from derive.resources import CHECKOUT
 from derive.solvers.ik import problem, solve_ik
 from derive.symbolic.ik import TOL_POSITION, TOL_ROTATION, joint_ranges
-from derive.description.model import load_models
 
 ROOT = CHECKOUT
 ROBOTS = ("panda", "ur5")
@@ -67,8 +69,6 @@ int main(int argc, char **argv) {
 
 def targets(robot, count: int, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(q (count, nv) uniform within the limits, world_T_tcp(q) (count, 4, 4)) by the numpy reference."""
-    from derive.reference import NumericRobot
-
     _, _, lo, hi = joint_ranges(robot)
     qs = np.random.default_rng(seed).uniform(lo, hi, size=(count, lo.size))
     ref = NumericRobot(robot)
@@ -85,8 +85,6 @@ def pose_errors(ref, q: np.ndarray, T: np.ndarray) -> tuple[float, float]:
 
 def verified(robot, qs: np.ndarray, Ts: np.ndarray) -> np.ndarray:
     """Per solve: within the limits and within the tolerances, checked with the reference FK."""
-    from derive.reference import NumericRobot
-
     ref = NumericRobot(robot)
     lo, hi, _, _ = joint_ranges(robot)
     ok = []
@@ -124,8 +122,6 @@ def _generated(work: Path) -> Path:
     """generated/ if it holds the IK sources, else a fresh generation into ``work`` (uncommitted changes)."""
     if all((ROOT / "generated" / r / "c" / f"{r}_ik_{FRAME}.c").is_file() for r in ROBOTS):
         return ROOT / "generated"
-    from derive.codegen.generate import generate
-
     models = load_models()
     generate(models, work / "generated", only=list(ROBOTS), use_cache=False, log=lambda s: None)
     return work / "generated"

@@ -34,7 +34,7 @@ class ArgumentParser(argparse.ArgumentParser):
 
 def build_parser() -> argparse.ArgumentParser:
     parser = ArgumentParser(prog="derive", description=__doc__.splitlines()[0])
-    models_help = "models file (default: models.yaml of the project, or $DERIVE_MODELS)"
+    models_help = "models file (default: $DERIVE_MODELS, else ./models.yaml, else the shipped example robots)"
     parser.add_argument("--models", help=models_help)
     # --models is accepted after the subcommand too: every subparser inherits it
     common = argparse.ArgumentParser(add_help=False)

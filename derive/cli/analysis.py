@@ -1,10 +1,218 @@
-"""Commands of the kinematic toolkit: dof, workspace, singularities, manipulability, plan."""
+"""Commands of the kinematic toolkit: dof, workspace, singularities, manipulability, plan.
+
+Each command reads its robot (or mechanism file), calls :mod:`derive.analysis` for the
+numbers and :mod:`derive.plot` for the figures (``--png``), and prints the results.
+"""
 
 from __future__ import annotations
 
-from derive.analysis import grubler, manipulability, planning, singularity, workspace
+from pathlib import Path
+from typing import Mapping
+
+import numpy as np
+
+from derive.analysis.grubler import mechanism_from_robot, parse_mechanism, read_yaml, report
+from derive.analysis.manipulability import Manipulability, default_poses
+from derive.analysis.planning import parse_obstacle, plan
+from derive.analysis.singularity import TaskJacobian, analyse, eval_number, find_singularities, redundancy
+from derive.analysis.workspace import Arm, workspace
+from derive.description.model import load_models, load_robot
+from derive.description.robot import Robot
+from derive.errors import DeriveError
+from derive.plot.manipulability import plot_manipulability
+from derive.plot.planning import plot_plan
+from derive.plot.workspace import plot_workspace
+
+
+def fmt(v) -> str:
+    """A vector as ``[a, b, ...]`` with 6 significant digits per entry."""
+    return "[" + ", ".join(f"{x:.6g}" for x in np.asarray(v).reshape(-1)) + "]"
+
+
+def parse_q(robot: Robot, text) -> np.ndarray:
+    """q from "0.1,pi/2" or from a list of such pieces (the CLI's space-separated values)."""
+    if not isinstance(text, str):
+        text = ",".join(text)
+    try:
+        q = np.array([float(eval_number(x)) for x in text.split(",")])
+    except ValueError:
+        raise DeriveError(f"robot '{robot.name}': q '{text}': expected {robot.nv} numbers separated by commas") from None
+    if q.shape[0] != robot.nv:
+        raise DeriveError(f"robot '{robot.name}': q '{text}': expected {robot.nv} values "
+                          f"({', '.join(c.name for c in robot.coordinates)}), got {q.shape[0]}")
+    if not np.all(np.isfinite(q)):
+        bad = robot.coordinates[int(np.argmin(np.isfinite(q)))].name
+        raise DeriveError(f"robot '{robot.name}': q '{text}': {bad} = {q[np.argmin(np.isfinite(q))]:g} is not a finite number")
+    return q
+
+
+# --------------------------------------------------------------------------- dof
+
+
+def dof_command(args) -> int:
+    target = args.target
+    path = Path(target)
+    if path.suffix in (".yaml", ".yml") or path.is_file():
+        if not path.is_file():
+            raise DeriveError(f"mechanism {target}: no such file")
+        data = read_yaml(path)
+        if isinstance(data, Mapping) and "robots" in data:  # a models file: every robot in it
+            for robot in load_models(path).values():
+                print(report(mechanism_from_robot(robot), robot.nv))
+            return 0
+        print(report(parse_mechanism(data, str(path))))
+        return 0
+    robot = load_robot(target, args.models)
+    print(report(mechanism_from_robot(robot), robot.nv))
+    return 0
+
+
+# --------------------------------------------------------------------------- workspace
+
+
+def workspace_command(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    if args.samples < 2:
+        raise DeriveError(f"--samples: need at least 2, got {args.samples}")
+    ws = workspace(robot, args.frame, args.samples, args.method, args.seed)
+    print(ws.summary())
+    if args.png:
+        print(f"wrote {plot_workspace(ws, args.png)}")
+    return 0
+
+
+# --------------------------------------------------------------------------- singularities
+
+
+def singularities_command(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    q = parse_q(robot, args.q) if args.q else None  # every option is checked before anything is printed
+    if q is None and args.starts < 1:
+        raise DeriveError(f"robot '{robot.name}': --starts must be at least 1, got {args.starts}")
+    tj = TaskJacobian(robot, args.frame, args.task)
+    names = [c.name for c in robot.coordinates]
+    print(f"{robot.name}/{args.frame}: task rows {tj.row_names} (k = {tj.k}), nv = {tj.nv}")
+    print(redundancy(tj))
+    if q is not None:
+        info = analyse(tj(q), q)
+        print(f"at q = {fmt(q)}: rank {info.rank} of {len(info.singular_values)}"
+              f"{' (SINGULAR)' if info.singular else ''}, singular values {fmt(info.singular_values)}")
+        for k in range(info.null_space.shape[1]):
+            print(f"  null space: qd = {fmt(info.null_space[:, k])}  ({', '.join(names)})")
+        for k in range(info.lost_directions.shape[1]):
+            print(f"  cannot move along: {fmt(info.lost_directions[:, k])}  ({tj.row_names})")
+        return 0
+    print(f"searching singular configurations from {args.starts} random starts ...", flush=True)
+    found, free = find_singularities(tj, args.starts, args.seed)
+    if free:
+        print(f"  the singular values do not depend on {', '.join(names[i] for i in free)} (set to 0 below)")
+    if not found:
+        print("no singular configuration found")
+    for c in found:
+        where = "" if c.within_limits else "  (outside the joint limits)"
+        print(f"  singular at q = {fmt(c.q)}: singular values {fmt(c.singular_values)}{where}")
+    return 0
+
+
+# --------------------------------------------------------------------------- manipulability
+
+
+def manipulability_command(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    if not args.q and args.poses < 1:
+        raise DeriveError(f"robot '{robot.name}': --poses must be at least 1, got {args.poses}")
+    qs = [parse_q(robot, text) for text in args.q] if args.q else list(default_poses(robot, args.poses))
+    man = Manipulability(robot, args.frame, args.task)
+    print(f"{robot.name}/{args.frame}: task rows {man.tj.row_names} (k = {man.tj.k}), nv = {robot.nv}; "
+          "mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, mu3 = sqrt(det(J J^T))")
+    for q in qs:
+        info = man.at(q)
+        print(f"q = {fmt(q)}: mu1 = {info.mu[0]:.6g}, mu2 = {info.mu[1]:.6g}, mu3 = {info.mu[2]:.6g}")
+        for name, (rows, semi, axes) in info.parts.items():
+            print(f"  {name} ellipsoid ({rows}): semi-axes {fmt(semi)} along {', '.join(fmt(a) for a in axes.T)}")
+    if args.png:
+        print(f"wrote {plot_manipulability(man, args.png, np.array(qs))}")
+    return 0
+
+
+# --------------------------------------------------------------------------- plan
+
+
+def plan_command(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    start, goal = parse_q(robot, args.start), parse_q(robot, args.goal)
+    obstacles = [parse_obstacle(o) for o in args.obstacle or []]
+    if args.resolution is not None and args.resolution < 2:
+        raise DeriveError(f"robot '{robot.name}': --resolution must be at least 2 grid points per joint, "
+                          f"got {args.resolution}")
+    arm = Arm(robot, args.frame)
+    result = plan(robot, start, goal, obstacles, args.frame, args.resolution,
+                  "axis" if args.connectivity == 4 else "full", args.margin, arm)
+    print(f"{robot.name}: {result.message}")
+    if result.success:
+        print(f"path length: {result.length:.6g} (joint space)")
+    if args.png:
+        print(f"wrote {plot_plan(robot, result, start, goal, obstacles, args.png, args.frame, arm)}")
+    return 0 if result.success else 1
+
+
+# --------------------------------------------------------------------------- parsers
 
 
 def add_parser(sub) -> None:
-    for module in (grubler, workspace, singularity, manipulability, planning):  # moving here
-        module.add_parser(sub)
+    p = sub.add_parser("dof", help="degrees of freedom by Grübler's formula (robot or mechanism YAML)",
+                       description="DOF = m (N - 1 - J) + sum f_i for a robot of models.yaml or a mechanism file "
+                                   "(see examples/grubler_example2.yaml).")
+    p.add_argument("target", help="robot name in models.yaml, or a mechanism .yaml file")
+    p.set_defaults(func=dof_command)
+
+    p = sub.add_parser("workspace", help="sample the configuration space through FK; plot both spaces",
+                       description="Sample q in the joint box (grid or random), map through FK, print the "
+                                   "workspace's extent and optionally draw both spaces side by side.")
+    p.add_argument("robot_name")
+    p.add_argument("--frame", default="tcp", help="frame whose positions form the workspace (default tcp)")
+    p.add_argument("--samples", type=int, default=40000, help="number of configurations (default 40000)")
+    p.add_argument("--method", choices=("grid", "random"), default="grid")
+    p.add_argument("--seed", type=int, default=0, help="seed of the random sampling")
+    p.add_argument("--png", help="write configuration space | workspace to this PNG")
+    p.set_defaults(func=workspace_command)
+
+    p = sub.add_parser("singularities", help="rank, singular values and null space of J; search for singularities",
+                       description="With --q: rank, singular values, null space of the task Jacobian at q. "
+                                   "Without: redundancy and a search for singular configurations.")
+    p.add_argument("robot_name")
+    p.add_argument("--frame", default="tcp")
+    p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y,wz")
+    p.add_argument("--q", nargs="+", help="configuration: values separated by commas or spaces (pi allowed: 0 pi/2)")
+    p.add_argument("--starts", type=int, default=24, help="random starts of the search (>= 1, default 24)")
+    p.add_argument("--seed", type=int, default=0)
+    p.set_defaults(func=singularities_command)
+
+    p = sub.add_parser("manipulability", help="manipulability ellipsoids and measures mu1, mu2, mu3 (eq. 30)",
+                       description="Print the measures and ellipsoids at configurations; draw ellipses along "
+                                   "the arm and mu3 over the workspace (lecture figure 9).")
+    p.add_argument("robot_name")
+    p.add_argument("--frame", default="tcp")
+    p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y")
+    p.add_argument("--q", action="append", nargs="+", help="configuration: values separated by commas or spaces "
+                   "(repeatable; pi allowed)")
+    p.add_argument("--poses", type=int, default=6, help="without --q: this many poses across the joint box (>= 1, default 6)")
+    p.add_argument("--png", help="write the ellipses and the mu3 map to this PNG")
+    p.set_defaults(func=manipulability_command)
+
+    p = sub.add_parser("plan", help="A* over a configuration-space grid around workspace obstacles",
+                       description="Collision-free joint path by A* (Euclidean cost and heuristic) on a grid over "
+                                   "the joint box; obstacles are circles/boxes in the workspace checked against "
+                                   "the links. Exit status 1 when there is no path.")
+    p.add_argument("robot_name")
+    p.add_argument("--start", required=True, nargs="+", help="start configuration: values separated by commas or "
+                   "spaces (pi allowed)")
+    p.add_argument("--goal", required=True, nargs="+", help="goal configuration")
+    p.add_argument("--obstacle", action="append", help="circle:x,y,r | box:xmin,ymin,xmax,ymax (3-D forms too; repeatable)")
+    p.add_argument("--frame", default="tcp", help="the chain to this frame is checked (default tcp)")
+    p.add_argument("--resolution", type=int, help="grid points per joint, >= 2 (default: about 40000 nodes)")
+    p.add_argument("--connectivity", type=int, choices=(4, 8), default=8,
+                   help="8: all neighbours incl. diagonals (default); 4: along the axes only")
+    p.add_argument("--margin", type=float, default=0.0, help="clearance added to every obstacle [m], >= 0")
+    p.add_argument("--png", help="write the path in configuration space | workspace to this PNG")
+    p.set_defaults(func=plan_command)

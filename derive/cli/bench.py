@@ -1,4 +1,4 @@
-"""``derive bench``: run the benchmarks and write bench/results.md."""
+"""``derive bench``: run the benchmarks and write bench/results.md (the runner is :mod:`derive.bench`)."""
 
 from __future__ import annotations
 
@@ -6,4 +6,8 @@ from derive import bench
 
 
 def add_parser(sub) -> None:
-    bench.add_parser(sub)  # moving here
+    b = sub.add_parser("bench", help="run benchmarks and write bench/results.md")
+    b.add_argument("names", nargs="*", help="benchmarks to run (default: all)")
+    b.add_argument("--out", help="results file (default: bench/results.md)")
+    b.add_argument("--quick", action="store_true", help="smaller sample sizes, for a smoke run")
+    b.set_defaults(func=bench.run)

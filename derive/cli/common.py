@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from derive.description.model import load_models
+from derive.description.model import default_models_path, load_models
 from derive.description.robot import ModelError
 
 
@@ -12,5 +12,6 @@ def robots_of(args) -> dict:
     if getattr(args, "robot", None):
         missing = [r for r in args.robot if r not in robots]
         if missing:
-            raise ModelError(missing[0], "robots", f"no such robot in {args.models or 'models.yaml'} (known: {', '.join(robots)})")
+            source = args.models or default_models_path()
+            raise ModelError(missing[0], "robots", f"no such robot in {source} (known: {', '.join(robots)})")
     return robots

@@ -2,10 +2,20 @@
 
 from __future__ import annotations
 
+import argparse
+import sys
+from pathlib import Path
+
 import sympy as sp
 
-from derive.inspect import latex
+from derive.description.model import load_robot
+from derive.errors import DeriveError
+from derive.inspect.latex import Options, compile_pdf, document_context, render_tex
 from derive.inspect.sympy_model import load
+from derive.plot.latex import render_png
+
+MIN_WIDTH = 10
+"""Narrowest ``latex --width``: below it every term would sit on a line of its own whatever the width."""
 
 
 def cmd_eom(args) -> int:
@@ -25,9 +35,55 @@ def cmd_eom(args) -> int:
     return 0
 
 
+def cmd_latex(args) -> int:
+    """Write (or print) the LaTeX document; --png draws it with mathtext, --pdf runs pdflatex on --out."""
+    if args.pdf and not args.out:
+        raise DeriveError("latex: --pdf needs --out FILE.tex")
+    # every option is checked (cheaply, before the derivation) before anything is printed
+    robot = load_robot(args.robot_name, args.models)
+    if args.width < MIN_WIDTH:
+        raise DeriveError(f"robot '{robot.name}': --width must be at least {MIN_WIDTH} characters, got {args.width}")
+    frames = (robot.root,) + tuple(j.child for j in robot.joints) + tuple(f.name for f in robot.frames)
+    for frame in args.fk + args.jacobian:
+        if frame not in frames:
+            raise DeriveError(f"robot '{robot.name}': no frame '{frame}' (known: {', '.join(frames)})")
+    print(f"deriving {robot.name} ({args.method}) ...", file=sys.stderr, flush=True)
+    m = load(args.robot_name, args.models, method=args.method)
+    options = Options(short_trig=args.short_trig, cse=args.cse, width=args.width, fk=tuple(args.fk),
+                      jacobian=tuple(args.jacobian), energy=args.energy)
+    context = document_context(m, options)
+    text = render_tex(context)
+    if args.out:
+        out = Path(args.out)
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text)
+        print(f"wrote {out}", file=sys.stderr)
+        if args.pdf:
+            print(f"wrote {compile_pdf(out)}", file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    if args.png:
+        print(f"wrote {render_png(context, args.png)}", file=sys.stderr)
+    return 0
+
 
 def add_parser(sub) -> None:
     e = sub.add_parser("eom", help="print M, C and g of a robot (sympy)")
     e.add_argument("robot_name")
     e.set_defaults(func=cmd_eom)
-    latex.add_parser(sub)  # moves here with the latex command
+
+    p = sub.add_parser("latex", help="write a robot's M, C, g (and FK/Jacobian) as a LaTeX document")
+    p.add_argument("robot_name")
+    p.add_argument("--out", help="write the .tex here (default: print it)")
+    p.add_argument("--png", help="also draw the equations to this PNG (matplotlib mathtext)")
+    p.add_argument("--pdf", action="store_true", help="also run pdflatex on --out (needs a LaTeX install)")
+    p.add_argument("--method", choices=("lagrange", "newton-euler"), default="newton-euler",
+                   help="derivation route (identical equations; default newton-euler, shorter before simplification)")
+    p.add_argument("--short-trig", action="store_true", help="write sin(theta1 + theta2) as s_{12}, with a legend")
+    p.add_argument("--cse", action=argparse.BooleanOptionalAction, default=None,
+                   help="common subexpressions t_k (default: for models with more than two joints)")
+    p.add_argument("--fk", action="append", default=[], metavar="FRAME", help="add world_T_FRAME (repeatable)")
+    p.add_argument("--jacobian", action="append", default=[], metavar="FRAME", help="add FRAME's Jacobian (repeatable)")
+    p.add_argument("--energy", action="store_true", help="add the kinetic and potential energies")
+    p.add_argument("--width", type=int, default=64, help=f"visible characters per line (>= {MIN_WIDTH}, default 64)")
+    p.set_defaults(func=cmd_latex)

@@ -2,12 +2,21 @@
 
 from __future__ import annotations
 
+import sys
+
 from derive.cli.common import robots_of
-from derive.description.urdf import import_urdf_command
+from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import_urdf_named
 
 
 def cmd_import_urdf(args) -> int:
-    return import_urdf_command(args) or 0
+    """``derive import-urdf FILE --tip FRAME [--lock J,...] [--name NAME] [--out models.yaml]``."""
+    name, entry = import_urdf_named(args.file, args.tip, lock=args.lock, name=args.name)
+    if args.out:
+        append_entry(args.out, name, entry)
+        print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
+    else:
+        sys.stdout.write(dump_entry(name, entry))
+    return 0
 
 
 def cmd_info(args) -> int:
@@ -28,12 +37,15 @@ def cmd_info(args) -> int:
 
 
 def add_parser(sub) -> None:
-    u = sub.add_parser("import-urdf", help="turn a URDF into a models.yaml entry")
-    u.add_argument("file")
-    u.add_argument("--tip", required=True, help="link that becomes the 'tcp' frame")
-    u.add_argument("--lock", help="joints to lock, comma-separated (JOINT or JOINT=VALUE)")
-    u.add_argument("--name", help="robot name (default: the URDF's, made a C identifier)")
-    u.add_argument("--out", help="append the entry to this models file instead of printing it")
+    u = sub.add_parser("import-urdf", help="turn a URDF into a models.yaml entry",
+                       description="Convert a URDF into a models.yaml robot entry (printed, or appended with --out). "
+                                   f"FILE may be '{ERD_PREFIX}<path under robots/>' for the installed "
+                                   "example-robot-data URDFs.")
+    u.add_argument("file", metavar="FILE")
+    u.add_argument("--tip", required=True, metavar="FRAME", help="URDF link that becomes the frame 'tcp'")
+    u.add_argument("--lock", metavar="JOINT[=VALUE],...", help="joints to make fixed (default value 0)")
+    u.add_argument("--name", help="robot name (default: the URDF robot name made a C identifier)")
+    u.add_argument("--out", metavar="MODELS", help="append to this models file instead of printing (created if missing)")
     u.set_defaults(func=cmd_import_urdf)
 
     i = sub.add_parser("info", help="summarise robots of models.yaml")

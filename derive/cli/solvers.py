@@ -1,10 +1,290 @@
-"""Commands that solve: ik, simulate, trajopt."""
+"""Commands that solve: ``derive simulate``, ``derive ik`` and ``derive trajopt``.
+
+    derive simulate ROBOT --q0 ...          integrate the generated dynamics: CSV, PNG, energy drift
+    derive ik ROBOT --xyz X Y Z [--rpy ...] one IK target: print q and the residuals (exit 1 if unsolved)
+    derive trajopt pendulum --swing-up      torque limit 0.25 m g l: several pumps, free final time
+    derive trajopt cartpole --swing-up      pole from down (theta = 0) to up (pi), cart back to 0
+    derive trajopt panda --from Q0 --to Q1  rest to rest, full dynamics, the model's limits
+
+simulate writes <out>/<robot>.csv and <out>/<robot>.png (<out> defaults to ./simulate_out/<robot>/);
+trajopt writes <out>/trajectory.csv (t, q_<joint>..., qd_..., qdd_..., tau_...) and
+<out>/trajectory.png (q, qd, tau over time), <out> defaulting to ./trajopt_out/<robot>/.
+"""
 
 from __future__ import annotations
 
-from derive.solvers import ik, simulate, trajopt_examples
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from derive.codegen.generate import default_output, generate
+from derive.description.model import load_models, load_robot
+from derive.errors import DeriveError
+from derive.plot.simulate import plot_simulation
+from derive.plot.trajopt import plot_trajopt
+from derive.solvers.ik import problem, solve_ik
+from derive.solvers.simulate import METHODS as SIMULATE_METHODS
+from derive.solvers.simulate import (check_times, check_vector, is_stale, numeric_reference, simulate, summary,
+                                     with_parameters, write_csv)
+from derive.solvers.trajopt import METHODS as TRAJOPT_METHODS
+from derive.solvers.trajopt import TrajectoryOptimizer, Waypoint
+from derive.solvers.trajopt_examples import SWING_UPS, point_to_point_duration, swing_up, velocity_reversals
+from derive.symbolic.ik import TOL_POSITION, TOL_ROTATION
+from derive.symbolic.spatial import rpy
+
+TRAJOPT_DESCRIPTION = "Optimise a trajectory on the derived dynamics (CasADi Opti + IPOPT): swing-ups and point-to-point moves."
 
 
 def add_parser(sub) -> None:
-    for module in (simulate, ik, trajopt_examples):  # moving here
-        module.add_parser(sub)
+    add_simulate(sub)
+    add_ik(sub)
+    add_trajopt(sub)
+
+
+# ---- derive simulate ROBOT --q0 ... ----
+
+def add_simulate(sub) -> None:
+    p = sub.add_parser("simulate", help="integrate a robot's generated forward dynamics; CSV, plot, energy drift")
+    p.add_argument("robot_name")
+    p.add_argument("--q0", type=float, nargs="+", required=True, help="initial joint positions (one per joint)")
+    p.add_argument("--qd0", type=float, nargs="+", help="initial joint velocities (default 0)")
+    p.add_argument("--tau", type=float, nargs="+", help="constant joint torques/forces (default 0)")
+    p.add_argument("--t", type=float, default=10.0, help="duration in s (default 10)")
+    p.add_argument("--dt", type=float, default=1e-3, help="RK4 step and sample interval in s (default 1e-3)")
+    p.add_argument("--method", choices=SIMULATE_METHODS, default="rk4", help="integrator (default rk4)")
+    p.add_argument("--rtol", type=float, default=1e-10, help="adaptive integrators' rtol (default 1e-10)")
+    p.add_argument("--atol", type=float, default=1e-12, help="adaptive integrators' atol (default 1e-12)")
+    p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="override a parameter")
+    p.add_argument("--out", help="output folder (default: simulate_out/<robot>/)")
+    p.add_argument("--generated", help="folder holding <robot>/python/ (default: ./generated; where it lacks the current model, the code is generated afresh into a temporary folder)")
+    p.set_defaults(func=cmd_simulate)
+
+
+def parse_params(items: list[str]) -> dict[str, float]:
+    """``--param NAME=VALUE`` items as {name: value}; a one-line DeriveError for a malformed one."""
+    out = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        try:
+            out[name.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name.strip():
+            raise DeriveError(f"simulate: --param expects NAME=VALUE, got {item!r}")
+    return out
+
+
+def _generated_for(robot, folder: str | None, scratch: Path) -> Path:
+    """The folder holding the robot's generated Python: ``--generated`` as given (stale code is used
+    with a warning), else ./generated when it holds this very model, else a fresh generation into
+    ``scratch`` (so a simulation never runs code of another version of the model)."""
+    if folder:
+        generated = Path(folder)
+        if not generated.is_dir():
+            raise DeriveError(f"robot '{robot.name}': --generated {generated}: no such folder "
+                              "(`derive generate --out FOLDER` writes one)")
+        code = generated / robot.name / "python" / f"{robot.name}.py"
+        if not code.is_file():  # say so now, not "generated from another version"
+            raise DeriveError(f"robot '{robot.name}': no generated code at {code} (run `derive generate`)")
+        if is_stale(robot, generated):
+            print(f"warning: {generated / robot.name} was generated from another version of '{robot.name}' "
+                  "(run `derive generate`)", file=sys.stderr)
+        return generated
+    generated = default_output()
+    if (generated / robot.name / "python" / f"{robot.name}.py").is_file() and not is_stale(robot, generated):
+        return generated
+    print(f"note: {generated / robot.name} is missing or from another version of '{robot.name}': generating it "
+          "into a temporary folder (`derive generate` writes it to ./generated)", file=sys.stderr)
+    generate({robot.name: robot}, scratch, log=lambda s: None)
+    return scratch
+
+
+def cmd_simulate(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    # every option is checked before anything is printed, run or written
+    check_times(robot.name, args.t, args.dt, args.rtol, args.atol)
+    for values, what in ((args.q0, "q0"), (args.qd0, "qd0"), (args.tau, "tau")):
+        check_vector(values, robot.nv, what, robot.name)
+    params = parse_params(args.param)
+    with_parameters(robot, params)
+    numeric_reference(robot, check_vector(args.q0, robot.nv, "q0", robot.name), params)
+    with tempfile.TemporaryDirectory() as scratch:
+        generated = _generated_for(robot, args.generated, Path(scratch))
+        print(f"simulating {robot.name} for {args.t:g} s ({args.method}) ...", flush=True)
+        traj = simulate(robot, args.q0, args.qd0, args.tau, t_end=args.t, dt=args.dt, method=args.method,
+                        params=params, generated=generated, rtol=args.rtol, atol=args.atol)
+    out = Path(args.out) if args.out else Path("simulate_out") / robot.name
+    csv_path = write_csv(traj, out / f"{robot.name}.csv")
+    png_path = plot_simulation(traj, out / f"{robot.name}.png")
+    print(summary(traj))
+    print(f"wrote {csv_path} and {png_path}")
+    return 0
+
+
+# ---- derive ik ROBOT --xyz X Y Z [--rpy R P Y] [--q0 ...] ----
+
+def add_ik(sub) -> None:
+    k = sub.add_parser("ik", help="inverse kinematics of one target: print q and the residuals",
+                       description="Solve world_T_frame(q) = target within the joint limits. "
+                                   "--xyz alone is a position-only target; with --rpy (URDF roll-pitch-yaw, "
+                                   "R = Rz(Y) Ry(P) Rx(R)) a full pose. Exit 0 if solved, 1 if not.")
+    k.add_argument("robot_name", metavar="ROBOT")
+    k.add_argument("--xyz", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="position (m)")
+    k.add_argument("--rpy", nargs=3, type=float, metavar=("R", "P", "Y"), help="orientation (rad)")
+    k.add_argument("--q0", nargs="+", type=float, help="start (default: mid-range)")
+    k.add_argument("--frame", default="tcp", help="frame to place (default: tcp)")
+    k.add_argument("--weights", nargs=6, type=float, metavar="W", help="row weights of [dp; dtheta]")
+    k.add_argument("--method", choices=("auto", "lm", "opti"), default="auto")
+    k.add_argument("--rest", nargs="+", type=float, help="rest posture to stay near (redundant arms)")
+    k.add_argument("--timeout", type=float, default=0.1, help="wall-time cap in s (default 0.1)")
+    k.add_argument("--seed", type=int, default=0, help="seed of the restarts")
+    k.set_defaults(func=cmd_ik)
+
+
+def cmd_ik(args) -> int:
+    """Solve one target and print q (per joint) and the residuals; exit 1 when the solve fails."""
+    robot = load_robot(args.robot_name, args.models)
+    if not (np.isfinite(args.timeout) and args.timeout > 0):
+        raise DeriveError(f"robot '{robot.name}': --timeout must be a finite number of seconds > 0, got {args.timeout:g}")
+    if args.rpy is None and args.weights is None:
+        target, what = np.array(args.xyz), "position"
+    else:
+        target = np.eye(4)
+        target[:3, :3] = np.array(ca.DM(rpy(*args.rpy))) if args.rpy else np.eye(3)
+        target[:3, 3] = args.xyz
+        what = "pose"
+    if args.rpy is None and args.weights is not None:
+        what = "position (orientation identity, weighted)"
+    problem(robot, args.frame)   # built once per process: not part of the solve time
+    t0 = time.perf_counter()
+    result = solve_ik(robot, target, q0=args.q0, frame=args.frame, weights=args.weights, method=args.method,
+                      rest=args.rest, timeout=args.timeout, seed=args.seed)
+    elapsed = time.perf_counter() - t0
+    names = [c.name for c in robot.coordinates]
+    width = max(map(len, names))
+    print(f"{robot.name}: {what} target for frame '{args.frame}': "
+          f"{'solved' if result.success else 'NOT solved (best q found)'}")
+    for name, value in zip(names, result.q):
+        print(f"  {name:<{width}} = {value: .9f}")
+    print(f"position error {result.position_error:.3e} m, rotation error {result.rotation_error:.3e} rad "
+          f"(tolerances {TOL_POSITION:g} m, {TOL_ROTATION:g} rad)")
+    print(f"{result.iterations} iterations, {result.restarts} restarts, {1e3 * elapsed:.2f} ms")
+    return 0 if result.success else 1
+
+
+# ---- derive trajopt ROBOT (--swing-up | --from Q0 --to Q1) ----
+
+def add_trajopt(sub) -> None:
+    t = sub.add_parser("trajopt", help="optimise a trajectory on the derived dynamics (CasADi + IPOPT)",
+                       description=TRAJOPT_DESCRIPTION)
+    t.add_argument("robot")
+    t.add_argument("--swing-up", action="store_true", help=f"the swing-up example ({', '.join(SWING_UPS)})")
+    t.add_argument("--from", dest="start", help="start joint positions, one per coordinate of q, comma-separated (at rest)")
+    t.add_argument("--to", dest="goal", help="goal joint positions, comma-separated (at rest)")
+    t.add_argument("--method", choices=TRAJOPT_METHODS, help="transcription (default hermite-simpson)")
+    t.add_argument("--intervals", type=int, help="N (default 100 for swing-ups, 50 otherwise)")
+    t.add_argument("--duration", type=float, help="final time T, or its first guess with --free-time")
+    t.add_argument("--free-time", action="store_true", help="optimise T too")
+    t.add_argument("--time-weight", type=float, help="w_T of the cost w_T T + integral |tau|^2 (needs --free-time)")
+    t.add_argument("--accel-weight", type=float, help="w_A of the regulariser w_A integral |qdd|^2 "
+                                                      "(default 1 for --from/--to, 0 for swing-ups)")
+    t.add_argument("--torque-limit", help="override the model's effort limits: one value or one per joint")
+    t.add_argument("--passive", help="unactuated joints (or single coordinates of multi-DOF joints), comma-separated")
+    t.add_argument("--waypoint", action="append", help="S:X,Y,Z[@FRAME]: FRAME (default tcp) at X,Y,Z at time S*T")
+    t.add_argument("--guess", help="initial path: .npy or .csv of joint positions (M x nq), e.g. a planner's")
+    t.add_argument("--substeps", type=int, help="RK4 steps per interval of the independent check (default 20)")
+    t.add_argument("--out", help="output folder (default ./trajopt_out/<robot>/)")
+    t.set_defaults(func=cmd_trajopt)
+
+
+def parse_floats(text: str, what: str) -> list[float]:
+    """Comma- (or space-) separated numbers; a one-line DeriveError naming ``what`` otherwise."""
+    try:
+        return [float(x) for x in text.replace(",", " ").split()]
+    except ValueError:
+        raise DeriveError(f"trajopt: {what} must be comma-separated numbers, got {text!r}") from None
+
+
+def parse_waypoint(text: str) -> Waypoint:
+    """S:X,Y,Z[@FRAME]."""
+    body, _, frame = text.partition("@")
+    s, sep, xyz = body.partition(":")
+    pos = parse_floats(xyz, "--waypoint X,Y,Z")
+    if not sep or len(pos) != 3:
+        raise DeriveError(f"trajopt: --waypoint must be S:X,Y,Z[@FRAME], got {text!r}")
+    return Waypoint(parse_floats(s, "--waypoint S")[0], tuple(pos), frame or "tcp")
+
+
+def read_path(file: str, joints: tuple[str, ...]) -> np.ndarray:
+    """An (M, nv) path from .npy or .csv; a CSV with q_<joint> columns (as trajopt writes) gives those.
+
+    Anything else (an unreadable file, text that is not comma-separated numbers under an optional
+    header, a pickled .npy) is a one-line DeriveError; the shape is checked by the optimiser.
+    """
+    path = Path(file)
+    if not path.is_file():
+        raise DeriveError(f"trajopt: --guess {file}: no such file")
+    try:
+        if path.suffix == ".npy":
+            return np.load(path, allow_pickle=False)
+        lines = [line for line in path.read_text().splitlines() if line.strip()]
+        if not lines:
+            raise ValueError("empty")
+        head = [x.strip() for x in lines[0].split(",")]
+        try:
+            [float(x) for x in head]
+            return np.loadtxt(lines, delimiter=",", ndmin=2)
+        except ValueError:
+            if len(lines) < 2:  # a header alone (np.loadtxt would warn "input contained no data")
+                raise ValueError("no rows") from None
+            data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
+            if not data.size:
+                raise ValueError("no rows") from None
+    except (OSError, ValueError, UnicodeDecodeError, EOFError):
+        raise DeriveError(f"trajopt: --guess {file}: not a .npy array or a CSV of numbers "
+                          f"(M rows of {len(joints)} joint positions, optionally under a header)") from None
+    cols = [head.index(f"q_{j}") for j in joints if f"q_{j}" in head]
+    return data[:, cols] if len(cols) == len(joints) else data
+
+
+def cmd_trajopt(args) -> int:
+    robots = load_models(args.models)
+    if args.robot not in robots:
+        raise DeriveError(f"trajopt: no robot {args.robot!r} (known: {', '.join(robots)})")
+    opt = TrajectoryOptimizer(robots[args.robot], log=lambda s: print(s, flush=True))
+    options = {k: v for k, v in {
+        "method": args.method, "intervals": args.intervals, "duration": args.duration,
+        "time_weight": args.time_weight, "accel_weight": args.accel_weight, "substeps": args.substeps,
+        "torque_limit": parse_floats(args.torque_limit, "--torque-limit") if args.torque_limit else None,
+        "passive": tuple(x.strip() for x in args.passive.split(",") if x.strip()) if args.passive else None,
+        "waypoints": tuple(parse_waypoint(w) for w in args.waypoint or ()) or None,
+        "guess": read_path(args.guess, opt.joints) if args.guess else None}.items() if v is not None}
+    if args.free_time:
+        options["free_time"] = True
+    if args.swing_up:
+        if args.start or args.goal:
+            raise DeriveError("trajopt: give either --swing-up or --from/--to")
+        res = swing_up(opt, **options)
+    else:
+        if not (args.start and args.goal):
+            raise DeriveError(f"trajopt {args.robot}: give --from Q0 --to Q1 (or --swing-up)")
+        start, goal = parse_floats(args.start, "--from"), parse_floats(args.goal, "--to")
+        start, goal = opt.vector(start, "--from"), opt.vector(goal, "--to")
+        if "duration" not in options:
+            options["duration"] = point_to_point_duration(opt, start, goal)
+        options.setdefault("accel_weight", 1.0)
+        res = opt.solve(start, goal, **options)
+    if not res.success:
+        raise DeriveError(f"trajopt {args.robot}: {res.reason}")
+    out = Path(args.out) if args.out else Path("trajopt_out") / args.robot
+    out.mkdir(parents=True, exist_ok=True)
+    res.write_csv(out / "trajectory.csv")
+    plot_trajopt(res, out / "trajectory.png", dict(zip(opt.joints, opt.limits(options.get("torque_limit"))["effort"])))
+    if args.swing_up:
+        print(f"velocity reversals (pumps): {', '.join(f'{j} {velocity_reversals(res.qd[:, i])}' for i, j in enumerate(opt.joints))}")
+    print(f"wrote {out / 'trajectory.csv'} and {out / 'trajectory.png'}")
+    return 0

@@ -1,0 +1,1 @@
+"""Stage 3, code generation: the language-free catalogue of functions each robot gets (``catalogue``, ``spec``), the SSA program (``program``), one folder per output language (``backends/``), and ``generate`` (cache, atomic swap, ``--check``)."""

@@ -1,9 +1,11 @@
 """`derive generate`: models.yaml -> generated/, deterministic and all-or-nothing.
 
-- Every robot is rendered into a temporary folder beside the target, which then
-  replaces the target in one rename: a failure part-way leaves generated/ as it was.
+- Only the robots asked for are written; other robots in the folder stay (``prune`` removes
+  those no longer in the models file). The new tree is built in a temporary folder beside the
+  target, which then replaces the target in one rename: a failure part-way leaves the folder
+  as it was.
 - Unchanged robots are not rederived: generated/MANIFEST.json records, per robot,
-  a content hash of the model and of the generator (derive's sources, templates
+  a content hash of the model and of the generator (description, symbolic, codegen, templates
   and pinned tool versions) and the sha256 of every file; if both match and the
   files are intact, they are carried over.
 - ``check`` compares those hashes and files without writing anything.
@@ -17,12 +19,16 @@ import os
 import shutil
 import tempfile
 import time
+from importlib.metadata import version
 from pathlib import Path
 from typing import Callable, Iterable
 
+from derive.codegen.catalogue import function_specs, template_functions
+from derive.codegen.render import render_robot
 from derive.errors import DeriveError
 from derive.description.robot import Robot, model_data
 from derive.resources import PACKAGE, TEMPLATES
+from derive.symbolic.model import SXModel
 
 TOOLS = ("sympy", "casadi", "numpy", "jinja2")
 
@@ -33,8 +39,6 @@ def default_output() -> Path:
 
 
 def tool_versions() -> dict[str, str]:
-    from importlib.metadata import version
-
     return {t: version(t) for t in TOOLS}
 
 
@@ -89,10 +93,6 @@ def _intact(out: Path, name: str, entry: dict) -> bool:
 
 def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, str]:
     """Derive and render one robot; prints stage times."""
-    from derive.symbolic.model import SXModel
-    from derive.codegen.render import render_robot
-    from derive.codegen.catalogue import function_specs, template_functions
-
     t0 = time.perf_counter()
     model = SXModel(robot)
     specs = function_specs(model)
@@ -111,8 +111,13 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, st
 
 
 def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = None, use_cache: bool = True,
-             log: Callable[[str], None] = print) -> dict:
-    """Regenerate ``out`` for ``robots`` (all, or the names in ``only``); returns the new MANIFEST."""
+             log: Callable[[str], None] = print, prune: bool = False) -> dict:
+    """Write the robots of ``robots`` (all, or the names in ``only``) into ``out``; returns the new MANIFEST.
+
+    Only those robots' folders are written or replaced: other robots already in ``out``
+    (from another models file, say) and files derive does not manage stay as they are.
+    With ``prune``, robots that ``out`` holds but ``robots`` does not are removed (and logged).
+    """
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise DeriveError(f"output {out}: exists and is not a folder")
@@ -123,7 +128,9 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
     ghash = generator_hash()
     old = _read_manifest(out)
     old_robots = old.get("robots", {})
-    new_robots = {k: v for k, v in old.get("robots", {}).items() if only is not None and k not in names and k in robots}
+    pruned = sorted(k for k in old_robots if k not in robots) if prune else []
+    kept = {k: v for k, v in old_robots.items() if k not in names and k not in pruned}
+    new_robots = dict(kept)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
     umask = os.umask(0)
@@ -131,12 +138,12 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it 0700; the output folder is an ordinary one
     try:
         start = time.perf_counter()
-        # carry over robots not being regenerated (``--robot``), untouched
-        for name in new_robots:
+        # carry over the robots not being regenerated, untouched
+        for name in kept:
             if (out / name).is_dir():
                 shutil.copytree(out / name, tmp / name)
         # and anything else a user keeps in the folder that derive does not manage
-        managed = set(old_robots) | set(robots) | {"MANIFEST.json"}
+        managed = set(old_robots) | set(names) | {"MANIFEST.json"}
         for entry in sorted(out.iterdir()) if out.is_dir() else ():
             if entry.name not in managed:
                 (shutil.copytree if entry.is_dir() else shutil.copy2)(entry, tmp / entry.name)
@@ -161,7 +168,10 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
                     "robots": {k: new_robots[k] for k in sorted(new_robots)}}
         (tmp / "MANIFEST.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
         _swap(tmp, out)
-        log(f"generated {len(names)} robot(s) into {out} in {time.perf_counter() - start:.1f} s")
+        for name in pruned:
+            log(f"pruned {out / name}/ (robot not in the models file)")
+        others = f"; {len(kept)} other robot(s) left as they were" if kept else ""
+        log(f"generated {len(names)} robot(s) into {out} in {time.perf_counter() - start:.1f} s{others}")
         return manifest
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
@@ -179,8 +189,12 @@ def _swap(tmp: Path, out: Path) -> None:
         shutil.rmtree(backup, ignore_errors=True)
 
 
-def check(robots: dict[str, Robot], out: Path) -> list[str]:
-    """Stale or edited files under ``out``: empty when generated/ matches models.yaml and derive."""
+def check(robots: dict[str, Robot], out: Path, prune: bool = False) -> list[str]:
+    """Stale or edited files of ``robots`` under ``out``: empty when they match the models and derive.
+
+    Other robots in ``out`` are not judged, unless ``prune``: then each is a problem
+    (``generate --prune`` would remove it).
+    """
     out = Path(out)
     manifest = _read_manifest(out)
     if not manifest:
@@ -188,14 +202,14 @@ def check(robots: dict[str, Robot], out: Path) -> list[str]:
     problems = []
     ghash = generator_hash()
     entries = manifest.get("robots", {})
-    for name in sorted(set(robots) | set(entries)):
+    for name in sorted(set(robots) | (set(entries) if prune else set())):
         entry = entries.get(name)
         if name not in robots:
-            problems.append(f"{out}/{name}/ (robot no longer in models.yaml)")
+            problems.append(f"{out}/{name}/ (robot not in the models file; --prune removes it)")
         elif entry is None:
             problems.append(f"{out}/{name}/ (not generated)")
         elif entry.get("model_hash") != model_hash(robots[name]):
-            problems.append(f"{out}/{name}/ (model changed in models.yaml)")
+            problems.append(f"{out}/{name}/ (model changed in the models file)")
         elif entry.get("generator_hash") != ghash:
             problems.append(f"{out}/{name}/ (derive, its templates or tool versions changed since generation)")
         else:

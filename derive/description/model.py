@@ -18,19 +18,30 @@ import yaml
 from derive.description import expr
 from derive.description.dh import dh_to_tree
 from derive.description.inertia import inertia_problem
-from derive.description.robot import (JOINT_TYPES, Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3, identifier)
+from derive.description.joints import JOINT_TYPES
+from derive.description.robot import (Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3, identifier)
 from derive.resources import EXAMPLE_MODELS
 
 
 # --------------------------------------------------------------------------- loading
 
 
-def default_models_path() -> Path:
-    """models.yaml: $DERIVE_MODELS, else the project root next to the package."""
+MODELS_FILE = "models.yaml"
+
+
+def local_models_path() -> Path | None:
+    """The models file the user named without ``--models``: $DERIVE_MODELS, else ./models.yaml; None if neither."""
     env = os.environ.get("DERIVE_MODELS")
     if env:
         return Path(env)
-    return EXAMPLE_MODELS
+    local = Path.cwd() / MODELS_FILE
+    return local if local.is_file() else None
+
+
+def default_models_path() -> Path:
+    """The models file read when none is given: $DERIVE_MODELS, else ./models.yaml, else the shipped
+    example robots (pendulum, planar_2r, rrprr, cartpole, ur5, panda)."""
+    return local_models_path() or EXAMPLE_MODELS
 
 
 def load_models(path: str | Path | None = None) -> dict[str, Robot]:
@@ -62,7 +73,8 @@ def parse_models(text: str, source: str = "<string>") -> dict[str, Robot]:
 def load_robot(name: str, path: str | Path | None = None) -> Robot:
     models = load_models(path)
     if name not in models:
-        raise ModelError(name, "robots", f"no such robot (known: {', '.join(models)})")
+        source = Path(path) if path else default_models_path()
+        raise ModelError(name, "robots", f"no such robot in {source} (known: {', '.join(models)})")
     return models[name]
 
 

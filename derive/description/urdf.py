@@ -22,6 +22,7 @@ only composed or merged values are computed, with |x| < 1e-15 snapped to 0.
 from __future__ import annotations
 
 import importlib.metadata
+import json
 import keyword
 import math
 import re
@@ -587,7 +588,6 @@ def _scalar(v: Any) -> str:
     s = str(v)
     if _PLAIN.match(s) and s.lower() not in _YAML_WORDS:
         return s
-    import json
 
     return json.dumps(s)
 
@@ -664,28 +664,3 @@ def append_entry(models_path: str | Path, name: str, entry: Mapping) -> None:
     if name not in robots or list(robots)[:-1] != list(existing):
         raise ModelError(name, str(path), "'robots:' is not the last top-level key; cannot append safely")
     path.write_text(new_text)
-
-
-def import_urdf_command(args) -> int:
-    """``derive import-urdf FILE --tip FRAME [--lock J,...] [--name NAME] [--out models.yaml]``."""
-    name, entry = import_urdf_named(args.file, args.tip, lock=args.lock, name=args.name)
-    if getattr(args, "out", None):
-        append_entry(args.out, name, entry)
-        print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
-    else:
-        sys.stdout.write(dump_entry(name, entry))
-    return 0
-
-
-def add_parser(subparsers) -> Any:
-    """Add ``import-urdf`` to an argparse subparsers object (sets ``func``)."""
-    p = subparsers.add_parser("import-urdf", help="URDF -> a models.yaml robot entry",
-                              description="Convert a URDF into a models.yaml robot entry (printed, or appended with --out). "
-                                          f"FILE may be '{ERD_PREFIX}<path under robots/>'.")
-    p.add_argument("file", metavar="FILE")
-    p.add_argument("--tip", required=True, metavar="FRAME", help="URDF link that becomes the frame 'tcp'")
-    p.add_argument("--lock", metavar="JOINT[=VALUE],...", help="joints to make fixed (default value 0)")
-    p.add_argument("--name", help="robot name (default: the URDF robot name made a C identifier)")
-    p.add_argument("--out", metavar="MODELS", help="append to this models file instead of printing")
-    p.set_defaults(func=import_urdf_command)
-    return p

@@ -1,4 +1,4 @@
-"""LaTeX of a robot's equations of motion, for papers: ``derive latex ROBOT``.
+"""LaTeX of a robot's equations of motion, for papers (``derive latex ROBOT`` on the command line).
 
 M(q) qdd + C(q, qd) qd + g(q) = tau, written in the lecture's notation: joint
 coordinates by name (phi -> \\varphi, theta1 -> \\theta_{1}; other names q_{i}),
@@ -11,23 +11,24 @@ it is symmetric). Models with more than two joints come as common
 subexpressions t_{k} ("where ..."), as their expanded entries run to pages.
 
 The document is rendered from templates/latex/document.tex.jinja with plain
-data prepared here. :func:`render_png` draws the same lines with matplotlib's
-mathtext (no LaTeX install needed: every line is checked by its parser);
-:func:`compile_pdf` runs pdflatex where one is installed.
+data prepared here (:func:`document_context`); :func:`compile_pdf` runs pdflatex
+where one is installed. :func:`derive.plot.latex.render_png` draws the same lines
+with matplotlib's mathtext (no LaTeX install needed: every line is checked by its
+parser).
 """
 
 from __future__ import annotations
 
-import argparse
 import re
 import shutil
 import subprocess
-import sys
 from dataclasses import dataclass
 from pathlib import Path
 
 import sympy as sp
 
+from derive.codegen.generate import model_hash
+from derive.codegen.render import environment
 from derive.errors import DeriveError
 
 GREEK = {"alpha", "beta", "gamma", "delta", "epsilon", "zeta", "eta", "theta", "iota", "kappa", "lambda",
@@ -35,7 +36,6 @@ GREEK = {"alpha", "beta", "gamma", "delta", "epsilon", "zeta", "eta", "theta", "
          "Gamma", "Delta", "Theta", "Lambda", "Xi", "Pi", "Sigma", "Upsilon", "Phi", "Psi", "Omega"}
 VARIANTS = {"phi": r"\varphi", "epsilon": r"\varepsilon"}  # the lecture's glyphs
 DIGITS = 6  # significant digits of floating-point constants in print
-PNG_MAX_LINES = 400  # beyond this the PNG is cut (the .tex holds everything)
 
 
 @dataclass(frozen=True)
@@ -231,8 +231,6 @@ def _block(title: str, symbol: str, mat: sp.Matrix, pr: Printer, symmetric: bool
 
 def document_context(m, options: Options = Options()) -> dict:
     """Everything the template needs, as plain data (strings, lists, booleans)."""
-    from derive.codegen.generate import model_hash
-
     robot = m.robot
     for frame in options.fk + options.jacobian:
         if frame not in m.frames:
@@ -315,69 +313,8 @@ def latex_document(m, options: Options = Options()) -> str:
 
 
 def render_tex(context: dict) -> str:
-    from derive.codegen.render import environment
-
+    """The .tex text of a :func:`document_context` (templates/latex/document.tex.jinja)."""
     return environment().get_template("latex/document.tex.jinja").render(context)
-
-
-def mathtext_lines(context: dict) -> list[tuple[str, str]]:
-    """The document as (kind, text) lines for mathtext: 'head', 'text' or 'math' (without $)."""
-    out: list[tuple[str, str]] = [("head", f"{context['robot']}: equations of motion ({context['method']})"),
-                                  ("math", r"M(q)\,\ddot{q} + C(q, \dot{q})\,\dot{q} + g(q) = \tau"),
-                                  ("math", context["coordinates"])]
-
-    def entry(lhs: str, lines: list[str]) -> None:
-        out.append(("math", f"{lhs} = {lines[0]}" if lhs else lines[0]))
-        out.extend(("math", rf"\qquad {line}") for line in lines[1:])
-
-    for row in context["eom"]:
-        entry("", row["lines"])
-    for b in context["blocks"]:
-        out.append(("head", b["title"]))
-        for e in b["entries"] or [{"lhs": b["symbol"], "lines": ["0"]}]:
-            entry(e["lhs"], e["lines"])
-    if context["legend"]:
-        out.append(("head", "where"))
-        out.extend(("math", f"{line['lhs']} = {line['rhs']}") for line in context["legend"])
-    if context["temporaries"]:
-        out.append(("head", "with the common subexpressions"))
-        for t in context["temporaries"]:
-            entry(t["lhs"], t["lines"])
-    return out
-
-
-def render_png(context: dict, path: str | Path, dpi: int = 110) -> Path:
-    """Draw the document's lines with matplotlib's mathtext (no LaTeX install needed).
-
-    mathtext has no environments, so matrices come entry by entry. At most
-    PNG_MAX_LINES lines are drawn; the .tex holds the rest.
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    lines = mathtext_lines(context)
-    cut = len(lines) > PNG_MAX_LINES
-    lines = lines[:PNG_MAX_LINES] + ([("text", f"... {len(mathtext_lines(context)) - PNG_MAX_LINES} more lines "
-                                               "in the .tex")] if cut else [])
-    step = 0.42  # inches per line: room for \frac
-    fig = plt.figure(figsize=(11, step * (len(lines) + 1)))
-    for k, (kind, text) in enumerate(lines):
-        y = 1 - (k + 0.8) / (len(lines) + 1)
-        if kind == "math":
-            fig.text(0.03, y, f"${text}$", fontsize=12, va="center")
-        else:
-            fig.text(0.01, y, text, fontsize=12, va="center", weight="bold" if kind == "head" else "normal")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    try:
-        fig.savefig(path, dpi=dpi)
-    except ValueError as exc:  # mathtext parse errors surface at draw time
-        raise DeriveError(f"robot '{context['robot']}': mathtext cannot render the equations: {exc}") from None
-    finally:
-        plt.close(fig)
-    return path
 
 
 def compile_pdf(tex: str | Path) -> Path:
@@ -391,61 +328,3 @@ def compile_pdf(tex: str | Path) -> Path:
     if run.returncode != 0:
         raise DeriveError(f"pdflatex failed on {tex} (see {tex.with_suffix('.log')})")
     return tex.with_suffix(".pdf")
-
-
-# ---- command line ----
-
-MIN_WIDTH = 10
-"""Narrowest --width: below it every term would sit on a line of its own whatever the width."""
-
-def add_parser(sub) -> None:
-    p = sub.add_parser("latex", help="write a robot's M, C, g (and FK/Jacobian) as a LaTeX document")
-    p.add_argument("robot_name")
-    p.add_argument("--out", help="write the .tex here (default: print it)")
-    p.add_argument("--png", help="also draw the equations to this PNG (matplotlib mathtext)")
-    p.add_argument("--pdf", action="store_true", help="also run pdflatex on --out (needs a LaTeX install)")
-    p.add_argument("--method", choices=("lagrange", "newton-euler"), default="newton-euler",
-                   help="derivation route (identical equations; default newton-euler, shorter before simplification)")
-    p.add_argument("--short-trig", action="store_true", help="write sin(theta1 + theta2) as s_{12}, with a legend")
-    p.add_argument("--cse", action=argparse.BooleanOptionalAction, default=None,
-                   help="common subexpressions t_k (default: for models with more than two joints)")
-    p.add_argument("--fk", action="append", default=[], metavar="FRAME", help="add world_T_FRAME (repeatable)")
-    p.add_argument("--jacobian", action="append", default=[], metavar="FRAME", help="add FRAME's Jacobian (repeatable)")
-    p.add_argument("--energy", action="store_true", help="add the kinetic and potential energies")
-    p.add_argument("--width", type=int, default=64, help=f"visible characters per line (>= {MIN_WIDTH}, default 64)")
-    p.set_defaults(func=cmd_latex)
-
-
-def cmd_latex(args) -> int:
-    from derive.inspect.sympy_model import load
-
-    from derive.description.model import load_robot
-
-    if args.pdf and not args.out:
-        raise DeriveError("latex: --pdf needs --out FILE.tex")
-    # every option is checked (cheaply, before the derivation) before anything is printed
-    robot = load_robot(args.robot_name, args.models)
-    if args.width < MIN_WIDTH:
-        raise DeriveError(f"robot '{robot.name}': --width must be at least {MIN_WIDTH} characters, got {args.width}")
-    frames = (robot.root,) + tuple(j.child for j in robot.joints) + tuple(f.name for f in robot.frames)
-    for frame in args.fk + args.jacobian:
-        if frame not in frames:
-            raise DeriveError(f"robot '{robot.name}': no frame '{frame}' (known: {', '.join(frames)})")
-    print(f"deriving {robot.name} ({args.method}) ...", file=sys.stderr, flush=True)
-    m = load(args.robot_name, args.models, method=args.method)
-    options = Options(short_trig=args.short_trig, cse=args.cse, width=args.width, fk=tuple(args.fk),
-                      jacobian=tuple(args.jacobian), energy=args.energy)
-    context = document_context(m, options)
-    text = render_tex(context)
-    if args.out:
-        out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text)
-        print(f"wrote {out}", file=sys.stderr)
-        if args.pdf:
-            print(f"wrote {compile_pdf(out)}", file=sys.stderr)
-    else:
-        sys.stdout.write(text)
-    if args.png:
-        print(f"wrote {render_png(context, args.png)}", file=sys.stderr)
-    return 0

@@ -1,0 +1,1 @@
+"""Stage 2, the derivation in CasADi SX: symbols, spatial algebra, kinematics, both dynamics routes (Lagrangian, recursive Newton-Euler), LDL^T forward dynamics and the ODE. Start at :class:`~derive.symbolic.model.SXModel`."""

@@ -154,6 +154,18 @@ class Backend:
         """How generated files name a support file's origin."""
         return f"templates/{self.name}/support/{file}"
 
+    def literals(self, context, scalar, element) -> dict:
+        """A template function's plain-data context with its floats spelled for this language:
+        ``scalar(x)`` for a float, ``element(x)`` for each entry of a tuple of floats."""
+        out = {}
+        for key, value in context:
+            if isinstance(value, float):
+                value = scalar(value)
+            elif isinstance(value, tuple) and value and all(isinstance(v, float) for v in value):
+                value = tuple(element(v) for v in value)
+            out[key] = value
+        return out
+
     def function_context(self, fn: Function) -> dict:
         raise NotImplementedError
 

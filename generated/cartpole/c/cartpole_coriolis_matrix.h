@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_coriolis_matrix: Coriolis matrix C(q, qd) (2x2, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 4 ops: 2 mul, 1 add, 0 div, 1 trig
  */
 void cartpole_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_CORIOLIS_MATRIX_H */

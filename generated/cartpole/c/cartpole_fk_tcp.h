@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_fk_tcp: world_T_tcp: 4x4 homogeneous transform of frame 'tcp' in the world (root) frame, row-major.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 5 ops: 0 mul, 3 add, 0 div, 2 trig
  */
 void cartpole_fk_tcp(const DERIVE_REAL *q, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_FK_TCP_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_gravity: Gravity torques g(q) = dU/dq = rnea(q, 0, 0).
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 9 ops: 5 mul, 2 add, 0 div, 2 trig
  */
 void cartpole_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_GRAVITY_H */

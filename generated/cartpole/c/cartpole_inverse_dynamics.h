@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_inverse_dynamics: Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 22 ops: 13 mul, 7 add, 0 div, 2 trig
  */
 void cartpole_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_INVERSE_DYNAMICS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_jacobian_tcp: Geometric Jacobian of frame 'tcp', 6x2 row-major, rows [linear; angular], world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 6 ops: 0 mul, 4 add, 0 div, 2 trig
  */
 void cartpole_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_JACOBIAN_TCP_H */

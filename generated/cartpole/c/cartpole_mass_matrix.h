@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_mass_matrix: Joint-space mass matrix M(q) (2x2, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 2 ops: 1 mul, 0 add, 0 div, 1 trig
  */
 void cartpole_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_MASS_MATRIX_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_ode_jac_u: df/du (4x2, row-major) of the ODE x' = f(x, u): the linearisation's B.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 10 ops: 4 mul, 3 add, 2 div, 1 trig
  */
 void cartpole_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_ODE_JAC_U_H */

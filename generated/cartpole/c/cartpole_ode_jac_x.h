@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_ode_jac_x: df/dx (4x4, row-major) of the ODE x' = f(x, u): the linearisation's A.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 63 ops: 34 mul, 21 add, 6 div, 2 trig
  */
 void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_ODE_JAC_X_H */

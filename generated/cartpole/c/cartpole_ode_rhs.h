@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * cartpole_ode_rhs: First-order ODE x' = f(x, u) with x = [q; qd] (4), u = tau (2): f = [qd; qdd].
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 23 ops: 12 mul, 7 add, 2 div, 2 trig
  */
 void cartpole_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* CARTPOLE_ODE_RHS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_coriolis_matrix: Coriolis matrix C(q, qd) (7x7, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 2560 ops: 1440 mul, 1108 add, 0 div, 12 trig
  */
 void panda_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_CORIOLIS_MATRIX_H */

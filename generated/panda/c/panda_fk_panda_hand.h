@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_fk_panda_hand: world_T_panda_hand: 4x4 homogeneous transform of frame 'panda_hand' in the world (root) frame, row-major.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 159 ops: 92 mul, 53 add, 0 div, 14 trig
  */
 void panda_fk_panda_hand(const DERIVE_REAL *q, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_FK_PANDA_HAND_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_fk_panda_link8: world_T_panda_link8: 4x4 homogeneous transform of frame 'panda_link8' in the world (root) frame, row-major.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 143 ops: 80 mul, 49 add, 0 div, 14 trig
  */
 void panda_fk_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_FK_PANDA_LINK8_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_forward_dynamics: Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 1534 ops: 831 mul, 663 add, 28 div, 12 trig
  */
 void panda_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_FORWARD_DYNAMICS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_gravity: Gravity torques g(q) = dU/dq = rnea(q, 0, 0).
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 214 ops: 120 mul, 82 add, 0 div, 12 trig
  */
 void panda_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_GRAVITY_H */

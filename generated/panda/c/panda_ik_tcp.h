@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 #ifndef DERIVE_IK_SUCCESS
 #define DERIVE_IK_SUCCESS 0       /* residual within the tolerances, q within the limits */
 #define DERIVE_IK_NOT_CONVERGED 1 /* iteration cap reached: q is the best found (unreachable target?) */
@@ -44,5 +48,9 @@
  * Arrays are row-major. cost: the arithmetic of panda_fk_jacobian_tcp per call, plus loops
  */
 int panda_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_IK_TCP_H */

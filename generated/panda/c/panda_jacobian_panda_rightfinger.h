@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_jacobian_panda_rightfinger: Geometric Jacobian of frame 'panda_rightfinger', 6x7 row-major, rows [linear; angular], world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 193 ops: 102 mul, 79 add, 0 div, 12 trig
  */
 void panda_jacobian_panda_rightfinger(const DERIVE_REAL *q, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_JACOBIAN_PANDA_RIGHTFINGER_H */

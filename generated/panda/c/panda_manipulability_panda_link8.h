@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_manipulability_panda_link8: Manipulability of frame 'panda_link8' (lecture eq. 30) for its position rows with motion (x,y,z): mu = [mu1, mu2, mu3], mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, mu3 = sqrt(det(J J^T)) (Yoshikawa; = sqrt(lmax lmin) for k = 2), l_i the eigenvalues of J J^T with J the 3x7 task rows of jacobian_panda_link8; mu1 = mu2 = inf at a singularity.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. cost: the arithmetic of panda_jacobian_panda_link8 per call, plus loops
  */
 void panda_manipulability_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *mu);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_MANIPULABILITY_PANDA_LINK8_H */

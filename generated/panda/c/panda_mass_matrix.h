@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_mass_matrix: Joint-space mass matrix M(q) (7x7, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 478 ops: 239 mul, 227 add, 0 div, 12 trig
  */
 void panda_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_MASS_MATRIX_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_ode_jac_u: df/du (14x7, row-major) of the ODE x' = f(x, u): the linearisation's B.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 1066 ops: 527 mul, 473 add, 54 div, 12 trig
  */
 void panda_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_ODE_JAC_U_H */

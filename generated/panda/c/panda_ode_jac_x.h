@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_ode_jac_x: df/dx (14x14, row-major) of the ODE x' = f(x, u): the linearisation's A.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 10305 ops: 5522 mul, 4652 add, 119 div, 12 trig
  */
 void panda_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_ODE_JAC_X_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * panda_ode_rhs: First-order ODE x' = f(x, u) with x = [q; qd] (14), u = tau (7): f = [qd; qdd].
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 1534 ops: 831 mul, 663 add, 28 div, 12 trig
  */
 void panda_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PANDA_ODE_RHS_H */

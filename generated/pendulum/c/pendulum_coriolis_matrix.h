@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_coriolis_matrix: Coriolis matrix C(q, qd) (1x1, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 0 ops: 0 mul, 0 add, 0 div, 0 trig
  */
 void pendulum_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_CORIOLIS_MATRIX_H */

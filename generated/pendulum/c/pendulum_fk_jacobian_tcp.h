@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_fk_jacobian_tcp: world_T_tcp (4x4) and its geometric Jacobian (6x1, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 7 ops: 2 mul, 3 add, 0 div, 2 trig
  */
 void pendulum_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_FK_JACOBIAN_TCP_H */

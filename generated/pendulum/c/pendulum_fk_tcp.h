@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_fk_tcp: world_T_tcp: 4x4 homogeneous transform of frame 'tcp' in the world (root) frame, row-major. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 7 ops: 2 mul, 3 add, 0 div, 2 trig
  */
 void pendulum_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_FK_TCP_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_forward_dynamics: Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -18,5 +22,9 @@
  * Arrays are row-major. 16 ops: 8 mul, 5 add, 2 div, 1 trig
  */
 void pendulum_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_FORWARD_DYNAMICS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_gravity: Gravity torques g(q) = dU/dq = rnea(q, 0, 0). p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 7 ops: 4 mul, 1 add, 1 div, 1 trig
  */
 void pendulum_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_GRAVITY_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_inverse_dynamics: Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -18,5 +22,9 @@
  * Arrays are row-major. 16 ops: 9 mul, 5 add, 1 div, 1 trig
  */
 void pendulum_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_INVERSE_DYNAMICS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_jacobian_tcp: Geometric Jacobian of frame 'tcp', 6x1 row-major, rows [linear; angular], world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 5 ops: 2 mul, 1 add, 0 div, 2 trig
  */
 void pendulum_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_JACOBIAN_TCP_H */

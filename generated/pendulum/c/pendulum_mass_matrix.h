@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_mass_matrix: Joint-space mass matrix M(q) (1x1, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 8 ops: 4 mul, 3 add, 1 div, 0 trig
  */
 void pendulum_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_MASS_MATRIX_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_ode_jac_u: df/du (2x1, row-major) of the ODE x' = f(x, u): the linearisation's B. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 9 ops: 4 mul, 3 add, 2 div, 0 trig
  */
 void pendulum_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_ODE_JAC_U_H */

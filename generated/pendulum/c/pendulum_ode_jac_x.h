@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_ode_jac_x: df/dx (2x2, row-major) of the ODE x' = f(x, u): the linearisation's A. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 16 ops: 8 mul, 5 add, 2 div, 1 trig
  */
 void pendulum_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_ODE_JAC_X_H */

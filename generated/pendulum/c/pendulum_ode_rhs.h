@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * pendulum_ode_rhs: First-order ODE x' = f(x, u) with x = [q; qd] (2), u = tau (1): f = [qd; qdd]. p (6): parameters m_r, m_s, I_r, I_s, l, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 16 ops: 8 mul, 5 add, 2 div, 1 trig
  */
 void pendulum_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PENDULUM_ODE_RHS_H */

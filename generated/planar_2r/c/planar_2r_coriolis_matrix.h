@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_coriolis_matrix: Coriolis matrix C(q, qd) (2x2, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 11 ops: 5 mul, 4 add, 1 div, 1 trig
  */
 void planar_2r_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_CORIOLIS_MATRIX_H */

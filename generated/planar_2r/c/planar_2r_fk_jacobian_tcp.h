@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_fk_jacobian_tcp: world_T_tcp (4x4) and its geometric Jacobian (6x2, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 20 ops: 8 mul, 8 add, 0 div, 4 trig
  */
 void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_FK_JACOBIAN_TCP_H */

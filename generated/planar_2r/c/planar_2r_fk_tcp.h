@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_fk_tcp: world_T_tcp: 4x4 homogeneous transform of frame 'tcp' in the world (root) frame, row-major. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 18 ops: 8 mul, 6 add, 0 div, 4 trig
  */
 void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_FK_TCP_H */

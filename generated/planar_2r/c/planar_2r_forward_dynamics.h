@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_forward_dynamics: Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -18,5 +22,9 @@
  * Arrays are row-major. 67 ops: 35 mul, 21 add, 7 div, 4 trig
  */
 void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_FORWARD_DYNAMICS_H */

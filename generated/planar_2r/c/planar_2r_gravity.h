@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_gravity: Gravity torques g(q) = dU/dq = rnea(q, 0, 0). p (5): parameters L1, L2, m1, m2, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 28 ops: 15 mul, 7 add, 2 div, 4 trig
  */
 void planar_2r_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_GRAVITY_H */

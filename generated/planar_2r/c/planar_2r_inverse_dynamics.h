@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_inverse_dynamics: Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -18,5 +22,9 @@
  * Arrays are row-major. 56 ops: 31 mul, 17 add, 4 div, 4 trig
  */
 void planar_2r_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_INVERSE_DYNAMICS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_jacobian_tcp: Geometric Jacobian of frame 'tcp', 6x2 row-major, rows [linear; angular], world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 18 ops: 8 mul, 6 add, 0 div, 4 trig
  */
 void planar_2r_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_JACOBIAN_TCP_H */

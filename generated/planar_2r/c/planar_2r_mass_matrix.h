@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_mass_matrix: Joint-space mass matrix M(q) (2x2, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 26 ops: 13 mul, 8 add, 4 div, 1 trig
  */
 void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_MASS_MATRIX_H */

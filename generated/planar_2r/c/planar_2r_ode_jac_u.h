@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_ode_jac_u: df/du (4x2, row-major) of the ODE x' = f(x, u): the linearisation's B. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 36 ops: 16 mul, 11 add, 8 div, 1 trig
  */
 void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_ODE_JAC_U_H */

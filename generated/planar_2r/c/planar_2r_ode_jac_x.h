@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_ode_jac_x: df/dx (4x4, row-major) of the ODE x' = f(x, u): the linearisation's A. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 158 ops: 84 mul, 55 add, 15 div, 4 trig
  */
 void planar_2r_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_ODE_JAC_X_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * planar_2r_ode_rhs: First-order ODE x' = f(x, u) with x = [q; qd] (4), u = tau (2): f = [qd; qdd]. p (5): parameters L1, L2, m1, m2, g.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 67 ops: 35 mul, 21 add, 7 div, 4 trig
  */
 void planar_2r_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* PLANAR_2R_ODE_RHS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_coriolis_matrix: Coriolis matrix C(q, qd) (5x5, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric. p (3): parameters L1, L2, L_tcp.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 298 ops: 176 mul, 116 add, 0 div, 6 trig
  */
 void rrprr_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_CORIOLIS_MATRIX_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_fk_jacobian_tcp: world_T_tcp (4x4) and its geometric Jacobian (6x5, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (3): parameters L1, L2, L_tcp.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 91 ops: 52 mul, 31 add, 0 div, 8 trig
  */
 void rrprr_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_FK_JACOBIAN_TCP_H */

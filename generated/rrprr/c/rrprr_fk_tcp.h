@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_fk_tcp: world_T_tcp: 4x4 homogeneous transform of frame 'tcp' in the world (root) frame, row-major. p (3): parameters L1, L2, L_tcp.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 62 ops: 36 mul, 18 add, 0 div, 8 trig
  */
 void rrprr_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_FK_TCP_H */

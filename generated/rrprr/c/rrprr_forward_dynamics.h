@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_forward_dynamics: Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (3): parameters L1, L2, L_tcp.
  *
@@ -18,5 +22,9 @@
  * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
  */
 void rrprr_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_FORWARD_DYNAMICS_H */

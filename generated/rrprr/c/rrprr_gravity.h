@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_gravity: Gravity torques g(q) = dU/dq = rnea(q, 0, 0). p (3): parameters L1, L2, L_tcp.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 91 ops: 52 mul, 31 add, 0 div, 8 trig
  */
 void rrprr_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_GRAVITY_H */

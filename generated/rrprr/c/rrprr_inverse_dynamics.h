@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_inverse_dynamics: Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler. p (3): parameters L1, L2, L_tcp.
  *
@@ -18,5 +22,9 @@
  * Arrays are row-major. 274 ops: 157 mul, 109 add, 0 div, 8 trig
  */
 void rrprr_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_INVERSE_DYNAMICS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_jacobian_tcp: Geometric Jacobian of frame 'tcp', 6x5 row-major, rows [linear; angular], world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd. p (3): parameters L1, L2, L_tcp.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 63 ops: 35 mul, 22 add, 0 div, 6 trig
  */
 void rrprr_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_JACOBIAN_TCP_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_manipulability_tcp: Manipulability of frame 'tcp' (lecture eq. 30) for its position rows with motion (x,y,z): mu = [mu1, mu2, mu3], mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, mu3 = sqrt(det(J J^T)) (Yoshikawa; = sqrt(lmax lmin) for k = 2), l_i the eigenvalues of J J^T with J the 3x5 task rows of jacobian_tcp; mu1 = mu2 = inf at a singularity.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. cost: the arithmetic of rrprr_jacobian_tcp per call, plus loops
  */
 void rrprr_manipulability_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *mu);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_MANIPULABILITY_TCP_H */

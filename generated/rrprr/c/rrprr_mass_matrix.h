@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_mass_matrix: Joint-space mass matrix M(q) (5x5, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (3): parameters L1, L2, L_tcp.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 88 ops: 46 mul, 36 add, 0 div, 6 trig
  */
 void rrprr_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_MASS_MATRIX_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_ode_jac_u: df/du (10x5, row-major) of the ODE x' = f(x, u): the linearisation's B. p (3): parameters L1, L2, L_tcp.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 291 ops: 142 mul, 115 add, 28 div, 6 trig
  */
 void rrprr_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_ODE_JAC_U_H */

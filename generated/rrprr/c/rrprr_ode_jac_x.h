@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_ode_jac_x: df/dx (10x10, row-major) of the ODE x' = f(x, u): the linearisation's A. p (3): parameters L1, L2, L_tcp.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 2457 ops: 1348 mul, 1036 add, 65 div, 8 trig
  */
 void rrprr_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_ODE_JAC_X_H */

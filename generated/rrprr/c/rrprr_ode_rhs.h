@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * rrprr_ode_rhs: First-order ODE x' = f(x, u) with x = [q; qd] (10), u = tau (5): f = [qd; qdd]. p (3): parameters L1, L2, L_tcp.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
  */
 void rrprr_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* RRPRR_ODE_RHS_H */

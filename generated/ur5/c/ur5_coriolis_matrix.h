@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_coriolis_matrix: Coriolis matrix C(q, qd) (6x6, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 1007 ops: 551 mul, 446 add, 0 div, 10 trig
  */
 void ur5_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_CORIOLIS_MATRIX_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_fk_base_link: world_T_base_link: 4x4 homogeneous transform of frame 'base_link' in the world (root) frame, row-major.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 0 ops: 0 mul, 0 add, 0 div, 0 trig
  */
 void ur5_fk_base_link(const DERIVE_REAL *q, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_FK_BASE_LINK_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_fk_ee_link: world_T_ee_link: 4x4 homogeneous transform of frame 'ee_link' in the world (root) frame, row-major.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 123 ops: 68 mul, 43 add, 0 div, 12 trig
  */
 void ur5_fk_ee_link(const DERIVE_REAL *q, DERIVE_REAL *T);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_FK_EE_LINK_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_fk_jacobian_tcp: world_T_tcp (4x4) and its geometric Jacobian (6x6, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 178 ops: 92 mul, 74 add, 0 div, 12 trig
  */
 void ur5_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_FK_JACOBIAN_TCP_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_forward_dynamics: Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 802 ops: 446 mul, 325 add, 21 div, 10 trig
  */
 void ur5_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_FORWARD_DYNAMICS_H */

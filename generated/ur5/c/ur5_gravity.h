@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_gravity: Gravity torques g(q) = dU/dq = rnea(q, 0, 0).
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 124 ops: 72 mul, 42 add, 0 div, 10 trig
  */
 void ur5_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_GRAVITY_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_inverse_dynamics: Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. 427 ops: 247 mul, 170 add, 0 div, 10 trig
  */
 void ur5_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_INVERSE_DYNAMICS_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_jacobian_base: Geometric Jacobian of frame 'base', 6x6 row-major, rows [linear; angular], world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 0 ops: 0 mul, 0 add, 0 div, 0 trig
  */
 void ur5_jacobian_base(const DERIVE_REAL *q, DERIVE_REAL *J);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_JACOBIAN_BASE_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_mass_matrix: Joint-space mass matrix M(q) (6x6, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
  *
@@ -15,5 +19,9 @@
  * Arrays are row-major. 231 ops: 115 mul, 106 add, 0 div, 10 trig
  */
 void ur5_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_MASS_MATRIX_H */

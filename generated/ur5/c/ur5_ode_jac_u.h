@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_ode_jac_u: df/du (12x6, row-major) of the ODE x' = f(x, u): the linearisation's B.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 597 ops: 290 mul, 257 add, 40 div, 10 trig
  */
 void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_ODE_JAC_U_H */

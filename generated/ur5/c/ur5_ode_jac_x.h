@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_ode_jac_x: df/dx (12x12, row-major) of the ODE x' = f(x, u): the linearisation's A.
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 4266 ops: 2324 mul, 1845 add, 87 div, 10 trig
  */
 void ur5_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_ODE_JAC_X_H */

@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_ode_rhs: First-order ODE x' = f(x, u) with x = [q; qd] (12), u = tau (6): f = [qd; qdd].
  *
@@ -16,5 +20,9 @@
  * Arrays are row-major. 802 ops: 446 mul, 325 add, 21 div, 10 trig
  */
 void ur5_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_ODE_RHS_H */

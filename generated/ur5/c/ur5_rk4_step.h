@@ -7,6 +7,10 @@
 
 #include "derive_real.h"
 
+#ifdef __cplusplus
+extern "C" {
+#endif
+
 /*
  * ur5_rk4_step: One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
  *
@@ -17,5 +21,9 @@
  * Arrays are row-major. cost: the arithmetic of ur5_ode_rhs per call, plus loops
  */
 void ur5_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next);
+
+#ifdef __cplusplus
+}
+#endif
 
 #endif /* UR5_RK4_STEP_H */

@@ -40,13 +40,7 @@ class CBackend(Backend):
 
     def template_context(self, fn: Function) -> dict:
         t = fn.spec
-        context = {}
-        for key, value in t.context:
-            if isinstance(value, float):
-                value = float_literal(value)
-            elif isinstance(value, tuple) and value and all(isinstance(v, float) for v in value):
-                value = tuple(literal(v) for v in value)
-            context[key] = value
+        context = self.literals(t.context, float_literal, literal)
         calls = {role: f"{t.robot}_{short}" for role, short in t.calls}
         in_names = [n for n, _ in t.inputs]
         header = f"{t.template}.h.jinja"

@@ -35,13 +35,7 @@ class PythonBackend(Backend):
 
     def template_context(self, fn: Function) -> dict:
         t = fn.spec
-        context = {}
-        for key, value in t.context:
-            if isinstance(value, float):
-                value = float_literal(value)
-            elif isinstance(value, tuple) and value and all(isinstance(v, float) for v in value):
-                value = tuple(float_literal(v) for v in value)
-            context[key] = value
+        context = self.literals(t.context, float_literal, float_literal)
         return {**fn.common, **context, **dict(t.calls), "py_args": _args(t, t.optional),
                 "py_template": self.template(f"{t.template}.py.jinja"),
                 "py_support": [s for algorithm in t.support for s in SUPPORT[algorithm]],

@@ -1,0 +1,107 @@
+"""The installed tool: the wheel, in a fresh virtual environment, used from a folder of the user's own.
+
+Builds the wheel (pip wheel, hatchling), installs it with the pinned dependencies into a new
+venv, and runs `derive` there from a temporary folder on a models file that is none of the
+shipped ones: init, generate (other robots untouched), latex, simulate, ik. The generated C
+compiles clean, the generated Python imports and matches the numeric reference.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import importlib.util
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from derive.description.model import parse_models
+from derive.reference import NumericRobot
+
+from test_generate import MY_MODELS
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="module")
+def installed(tmp_path_factory):
+    """(path of the venv's `derive` command, its python) with the wheel installed."""
+    base = tmp_path_factory.mktemp("installed")
+    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
+    subprocess.run(pip + ["wheel", "--no-deps", "-w", str(base / "dist"), str(ROOT)], check=True)
+    (wheel,) = (base / "dist").glob("derive_robotics-*.whl")
+    subprocess.run([sys.executable, "-m", "venv", str(base / "venv")], check=True)
+    python = base / "venv" / "bin" / "python"
+    subprocess.run([str(python), "-m", "pip", "--disable-pip-version-check", "-q", "install",
+                    "-c", str(ROOT / "constraints.txt"), str(wheel)], check=True)
+    return base / "venv" / "bin" / "derive", python
+
+
+def run(installed, folder: Path, *argv: str, status: int = 0) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k not in ("DERIVE_MODELS", "PYTHONPATH")}
+    res = subprocess.run([str(installed[0]), *argv], cwd=folder, env=env, capture_output=True, text=True, timeout=300)
+    assert res.returncode == status, f"derive {' '.join(argv)}: exit {res.returncode}\n{res.stdout}\n{res.stderr}"
+    assert "Traceback" not in res.stderr
+    return res
+
+
+def digests(folder: Path) -> dict[str, str]:
+    return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+def test_the_wheel_carries_templates_and_models_and_not_the_checkout(installed, tmp_path):
+    code = "import derive, derive.resources as r; print(derive.__file__); print(r.TEMPLATES); print(r.EXAMPLE_MODELS)"
+    out = subprocess.run([str(installed[1]), "-c", code], cwd=tmp_path, capture_output=True, text=True,
+                         check=True).stdout.split()
+    venv = installed[1].parent.parent
+    assert all(Path(p).is_relative_to(venv) for p in out), out
+    assert (Path(out[1]) / "c" / "support" / "derive_ik.h").is_file()
+
+
+def test_own_robot_from_any_folder(installed, tmp_path):
+    user = tmp_path / "my_project"
+    user.mkdir()
+    # start from a shipped robot, generate it; then generate the user's own robot beside it
+    run(installed, user, "init", "--robot", "pendulum")
+    run(installed, user, "generate")
+    pendulum = digests(user / "generated" / "pendulum")
+    (user / "my.yaml").write_text(MY_MODELS)
+    out = run(installed, user, "--models", "my.yaml", "generate").stdout
+    assert "1 other robot(s) left as they were" in out
+    assert digests(user / "generated" / "pendulum") == pendulum
+    run(installed, user, "generate", "--models", "my.yaml", "--check")
+
+    # the C compiles clean, the Python imports and matches the reference
+    c_dir = user / "generated" / "my_arm" / "c"
+    cc = shutil.which("cc") or shutil.which("gcc")
+    for c in sorted(c_dir.glob("*.c")):
+        subprocess.run([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{c_dir}", "-c", str(c),
+                        "-o", str(tmp_path / (c.stem + ".o"))], check=True)
+    spec = importlib.util.spec_from_file_location("my_arm", user / "generated" / "my_arm" / "python" / "my_arm.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    ref = NumericRobot(parse_models(MY_MODELS)["my_arm"])
+    rng = np.random.default_rng(0)
+    for _ in range(10):
+        q, qd, qdd = rng.uniform(-2, 2, 2), rng.normal(size=2), rng.normal(size=2)
+        np.testing.assert_allclose(mod.inverse_dynamics(q, qd, qdd), ref.rnea(q, qd, qdd), rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(mod.mass_matrix(q), ref.crba(q), rtol=1e-9, atol=1e-12)
+
+    # the other commands work on the user's robot in the user's folder
+    run(installed, user, "--models", "my.yaml", "latex", "my_arm", "--out", "my_arm.tex")
+    assert "\\begin{document}" in (user / "my_arm.tex").read_text()
+    sim = run(installed, user, "--models", "my.yaml", "simulate", "my_arm", "--q0", "0.1", "0.2", "--t", "0.5").stdout
+    assert "my_arm" in sim and (user / "simulate_out").is_dir()
+    ik = run(installed, user, "--models", "my.yaml", "ik", "my_arm", "--xyz", "0.5", "0", "0.2").stdout
+    assert "solved" in ik and "NOT solved" not in ik
+    # without a models file in the folder, the shipped examples answer (generate alone refuses)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    assert "panda" in run(installed, empty, "info").stdout
+    assert "no models.yaml in" in run(installed, empty, "generate", status=2).stderr
+    assert sorted(os.listdir(empty)) == []
