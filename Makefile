@@ -24,7 +24,7 @@ $(VENV)/.core: pyproject.toml constraints.txt
 	touch $@
 
 $(VENV)/.test: $(VENV)/.core
-	$(PIP) install -c constraints.txt -e '.[test,pinocchio]'
+	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda]'
 	touch $@
 
 venv: $(VENV)/.core

@@ -25,10 +25,12 @@ ALLOWED = {
     "inspect": BASE | {"description", "symbolic", "codegen"},
     "analysis": BASE | {"description", "symbolic"},
     "solvers": BASE | {"description", "symbolic", "codegen", "reference"},
+    "runtime": BASE | {"description", "codegen"},
     "plot": BASE | {"description", "symbolic", "inspect", "analysis", "solvers"},
-    "bench": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers"},
-    "cli": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers", "plot", "bench"},
-    "__init__": BASE | {"description", "symbolic", "inspect"},
+    "bench": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers", "runtime"},
+    "cli": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers", "plot", "bench",
+                   "runtime"},
+    "__init__": BASE | {"description", "symbolic", "inspect", "runtime"},
     "__main__": {"cli"},
 }
 DEFERRED_OK = {"matplotlib", "scipy"}  # heavy optional dependencies, imported where used on purpose

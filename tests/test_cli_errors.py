@@ -44,7 +44,7 @@ CASES = [
     ("urdf-lock-nan", ["import-urdf", "{tmp}/ok.urdf", "--tip", "b", "--lock", "j=nan"], "not finite"),
     ("urdf-lock-out-of-limits", ["import-urdf", "{tmp}/ok.urdf", "--tip", "b", "--lock", "j=5"], "outside the joint limits"),
     # dof
-    ("dof-malformed-yaml", ["dof", "{tmp}/bad.yaml"], "malformed YAML at line 2"),
+    ("dof-malformed-yaml", ["dof", "{tmp}/bad.yaml"], "line 2, column 1: malformed YAML"),
     ("dof-empty-file", ["dof", "{tmp}/empty.yaml"], "expected a mapping"),
     ("dof-missing-file", ["dof", "{tmp}/nosuch.yaml"], "no such file"),
     ("dof-unknown-robot", ["dof", "nosuch"], "no such robot"),

@@ -156,6 +156,43 @@ def test_generated_c_python_casadi_match_reference(robot, build_dir):
                 assert_close(got_float[k], expected[k], rtol=1e-4, what="float C " + what)
 
 
+@pytest.mark.parametrize("robot", ROBOTS)
+def test_python_returns_what_the_manifest_declares(robot):
+    """Every generated Python function of every robot returns exactly manifest["functions"][k]["python"]
+    ["returns"]: one entry, the value itself; more, a tuple in that order; shape [] an int (a status),
+    else a float ndarray of exactly that shape. The C entry's writes match the language-free outputs."""
+    manifest = json.loads((GENERATED / robot / "manifest.json").read_text())
+    py = load_python(robot)
+    r = robots()[robot]
+    rng = np.random.default_rng(2)
+    q = rng.uniform(*r.joint_box())
+    a = {"q": q, "qd": rng.normal(size=r.nv), "qdd": rng.normal(size=r.nv), "tau": rng.normal(size=r.nv),
+         "x": np.concatenate([q, rng.normal(size=r.nv)]), "u": rng.normal(size=r.nv), "p": params(r),
+         "dt": np.array([0.01]), "q0": None, "w": None}
+    assert manifest["functions"]
+    for fn in manifest["functions"]:
+        if fn["quantity"] == "ik":
+            a["T"] = getattr(py, f"fk_{fn['frame']}")(q)
+        returns = fn["python"]["returns"]
+        value = getattr(py, fn["python"]["function"])(*[a[i["name"]] for i in fn["inputs"]])
+        values = value if len(returns) > 1 else (value,)
+        assert isinstance(values, tuple) and len(values) == len(returns), fn["name"]
+        for v, declared in zip(values, returns):
+            what = f"{fn['name']} -> {declared['name']}"
+            if declared["shape"] == []:
+                assert declared["type"] == "int" and isinstance(v, int), what
+            else:
+                assert isinstance(v, np.ndarray) and v.dtype == np.float64, what
+                assert list(v.shape) == declared["shape"], f"{what}: {v.shape} != {declared['shape']}"
+        # the language-free outputs (row x col) and the C arrays name the same things
+        arrays = [o for o in returns if o["shape"]]
+        assert [o["name"] for o in arrays] == [o["name"] for o in fn["outputs"]], fn["name"]
+        assert [int(np.prod(o["shape"])) for o in fn["outputs"]] == [w["length"] for w in fn["c"]["writes"]]
+        assert [int(np.prod(o["shape"])) for o in arrays] == [w["length"] for w in fn["c"]["writes"]]
+        assert [i["name"] for i in fn["inputs"]] == [x["name"] for x in fn["c"]["reads"]]
+        assert fn["c"]["returns"] == ("int" if fn["quantity"] == "ik" else "void")
+
+
 def test_python_functions_check_their_inputs():
     py = load_python("planar_2r")
     with pytest.raises(ValueError, match="q must have 2 elements"):

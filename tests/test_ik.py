@@ -246,3 +246,65 @@ def test_generated_float_c_and_python_ik_and_parameters(generated, tmp_path):
     assert status == 0 and q[0] == pytest.approx(0.4, abs=1e-6)
     q, residual, status = python_module(generated, "pendulum").ik_tcp(T, w=[1, 1, 1, 0, 0, 0])
     assert status == 0 and q[0] == pytest.approx(0.4, abs=1e-6)
+
+
+# ---- the generated IK's input contract: BAD_INPUT (2), q mid-range, never a NaN residual ----
+
+def bad_inputs(T: np.ndarray, nv: int) -> dict[str, dict]:
+    """Calls that must return DERIVE_IK_BAD_INPUT, by name: non-finite q0, T or w, T not a rigid transform."""
+    scaled, reflected, last_row, skewed = 2 * T, T.copy(), T.copy(), T.copy()
+    scaled[3, 3] = 1.0                       # the rotation block scaled by 2 (and the position)
+    reflected[:3, 0] *= -1                   # orthonormal, det -1
+    last_row[3, 0] = 0.5
+    skewed[0, 1] += 1e-3                     # R R^T = I off by 1e-3
+    cases = {f"q0 {v}": {"T": T, "q0": np.where(np.arange(nv) == 2, v, 0.0)} for v in (np.nan, np.inf, -np.inf)}
+    cases.update({"T NaN": {"T": T * np.nan}, "T one inf": {"T": np.where(np.arange(16).reshape(4, 4) == 3, np.inf, T)},
+                  "w NaN": {"T": T, "w": [1, 1, np.nan, 1, 1, 1]}, "w inf": {"T": T, "w": [np.inf, 1, 1, 1, 1, 1]},
+                  "T scaled by 2": {"T": scaled}, "T a reflection": {"T": reflected},
+                  "last row not 0 0 0 1": {"T": last_row}, "R not orthonormal": {"T": skewed}})
+    return cases
+
+
+def assert_bad_input(result, mid, what: str) -> None:
+    q, residual, status = result
+    assert status == 2, what
+    np.testing.assert_allclose(q, mid, rtol=0, atol=1e-6, err_msg=what)
+    assert not np.isnan(residual).any() and (np.asarray(residual) > 1e20).all(), what
+
+
+@pytest.mark.parametrize("robot", ["panda", "ur5"])
+def test_generated_c_and_python_ik_reject_bad_input(robot, generated, tmp_path):
+    r = robots()[robot]
+    _, _, slo, shi = joint_ranges(r)
+    mid = 0.5 * (slo + shi)
+    _, Ts = targets(r, 1, seed=4)
+    T = Ts[0]
+    solvers = {"C": CIk(generated, robot, tmp_path), "C float": CIk(generated, robot, tmp_path, extra=("-DDERIVE_FLOAT",)),
+               "Python": python_module(generated, robot).ik_tcp}
+    for name, solve in solvers.items():
+        for what, call in bad_inputs(T, r.nv).items():
+            assert_bad_input(solve(**call), mid, f"{name}: {what}")
+        # the same target, its rotation off by far less than the tolerance: accepted and solved
+        noisy = T.copy()
+        noisy[:3, :3] += (1e-9 if name != "C float" else 1e-6) * np.random.default_rng(0).normal(size=(3, 3))
+        solved = (0,) if name != "C float" else (0, 1)   # single precision may stall at ~1e-5
+        assert solve(T=noisy)[2] in solved, name
+        assert solve(T=T, q0=np.full(r.nv, 1e3))[2] in solved, name   # finite q0 far outside: clipped, not rejected
+
+
+@pytest.mark.parametrize("flags", [("-ffast-math",), ("-Ofast",), ("-ffast-math", "-DDERIVE_FLOAT")])
+def test_generated_c_ik_under_fast_math_never_reports_success_for_non_finite_input(flags, generated, tmp_path):
+    """-ffast-math lets the compiler delete isfinite() and compare NaN below any tolerance: the
+    checks read the bits instead, so a NaN target is still BAD_INPUT and a solve still solves."""
+    r = robots()["panda"]
+    _, _, slo, shi = joint_ranges(r)
+    c_ik = CIk(generated, "panda", tmp_path, extra=flags)
+    _, Ts = targets(r, 10, seed=5)
+    for what, call in bad_inputs(Ts[0], r.nv).items():
+        q, residual, status = c_ik(**call)
+        assert status == 2 and np.isfinite(q).all() and not np.isnan(residual).any(), what
+    q, residual, status = c_ik(np.full((4, 4), np.nan), q0=np.full(r.nv, np.nan), w=np.full(6, np.nan))
+    assert status == 2 and not np.isnan(residual).any()
+    solved = [c_ik(T) for T in Ts]
+    assert sum(status == 0 for _, _, status in solved) >= 9
+    assert all(np.isfinite(res).all() and np.isfinite(q).all() for q, res, status in solved if status == 0)

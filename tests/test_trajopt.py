@@ -192,11 +192,13 @@ def test_cli_writes_csv_and_png(tmp_path, capsys):
     assert image.ndim == 3 and image.shape[0] > 100 and image.std() > 0
 
 
-def test_cli_failure_is_one_line(tmp_path, capsys):
+def test_cli_infeasible_request_exits_1_with_one_line(tmp_path, capsys):
+    """Well formed but infeasible: exit 1 (ran, no solution), not 2 (bad input); one line on stderr, nothing written."""
     rc = main(["trajopt", "panda", "--from", ",".join(map(str, PANDA_READY)), "--to", ",".join(map(str, PANDA_GOAL)),
                "--torque-limit", "5", "--out", str(tmp_path)])
     err = capsys.readouterr().err
-    assert rc == 2 and err.count("\n") == 1 and "against gravity" in err
+    assert rc == 1 and err.count("\n") == 1 and "against gravity" in err
+    assert err.startswith("derive: trajopt panda: no solution: ") and not err.startswith("derive: error")
     assert not any(tmp_path.iterdir())
 
 

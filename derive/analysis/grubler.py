@@ -28,8 +28,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Mapping
 
-import yaml
 
+from derive.description.files import load_yaml, read_text
 from derive.description.joints import JOINT_TYPES
 from derive.errors import DeriveError
 
@@ -162,18 +162,11 @@ def _check_connected(mech: Mechanism, error) -> None:
 
 
 def read_yaml(path: Path) -> Any:
-    """The YAML structure of a file; DeriveError (one line) if unreadable or malformed."""
-    try:
-        return yaml.safe_load(path.read_text())
-    except OSError as exc:
-        raise DeriveError(f"mechanism {path}: cannot read ({exc.strerror})") from None
-    except UnicodeDecodeError:
-        raise DeriveError(f"mechanism {path}: not a text (UTF-8) file") from None
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f" at line {mark.line + 1}, column {mark.column + 1}" if mark else ""
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise DeriveError(f"mechanism {path}: malformed YAML{where}: {problem}") from None
+    """The YAML structure of a mechanism file; DeriveError (one line) if unreadable or malformed
+    (size, text, duplicate keys, alias expansion and nesting are limited as for models files)."""
+    if not path.exists():
+        raise DeriveError(f"mechanism {path}: no such file")
+    return load_yaml(read_text(path, "mechanism file"), f"mechanism {path}")
 
 
 def load_mechanism(path: str | Path) -> Mechanism:

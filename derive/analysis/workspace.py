@@ -9,6 +9,8 @@ samples at once.
 
 The arm's skeleton, the origins of the link frames from the root to a frame,
 is evaluated the same way: drawings and the planner's collision checks use it.
+:attr:`Arm.speed_bounds` bounds how fast each skeleton point moves per unit of each
+joint coordinate, anywhere in the joint box (the planner's edge checks use it).
 The figure of both spaces is :func:`derive.plot.workspace.plot_workspace`.
 """
 
@@ -20,9 +22,10 @@ from functools import cached_property
 import casadi as ca
 import numpy as np
 
+from derive.description import expr
 from derive.description.robot import Robot
 from derive.errors import DeriveError
-from derive.symbolic.kinematics import Kinematics
+from derive.symbolic.kinematics import Kinematics, joint_motions
 from derive.symbolic.symbols import make_symbols
 
 AXIS_NAMES = "xyz"
@@ -55,8 +58,11 @@ class Arm:
     such as a DH model's intermediate frames, are dropped): the arm drawn as line segments.
     """
 
+    BLOCK = 4096  # configurations per CasADi call
+
     def __init__(self, robot: Robot, frame: str = "tcp"):
         self.robot, self.frame = robot, frame
+        self._maps: dict[int, ca.Function] = {}
         sym = make_symbols(robot)
         kin = Kinematics(robot, sym)
         if frame not in kin.poses:
@@ -81,6 +87,14 @@ class Arm:
                 keep[-1 if len(keep) > 1 else len(keep):] = [k]
         self.chain = [chain[k] for k in keep]
         self._f = ca.Function("skeleton", [sym.q, sym.p], [points[:, keep]])
+        self.speed_bounds = _speed_bounds(robot, chain)[:, keep]
+
+    def displacement_bound(self, dQ) -> np.ndarray:
+        """(N,) upper bound on how far any skeleton point (hence any point of the segments
+        between them) moves along the straight joint-space line q -> q + dq, for each row dq
+        of dQ, with both ends in the joint box: max over points j of sum_k B[k, j] |dq_k|."""
+        dQ = np.atleast_2d(np.asarray(dQ, dtype=float))
+        return (np.abs(dQ) @ self.speed_bounds).max(axis=1)
 
     def skeleton(self, Q) -> np.ndarray:
         """(N, m, 3) origins along the chain for N configurations (rows of Q)."""
@@ -89,16 +103,72 @@ class Arm:
             raise DeriveError(f"robot '{self.robot.name}': q must have {self.nv} entries, got {Q.shape[1]}")
         m = len(self.chain)
         out = np.empty((Q.shape[0], m, 3))
-        for start in range(0, Q.shape[0], 20000):  # bounded memory for big samples
-            block = Q[start:start + 20000]
-            F = self._f.map(block.shape[0])
-            res = np.array(F(block.T, np.tile(self._p.reshape(-1, 1), (1, block.shape[0]))))  # 3 x (m * N)
-            out[start:start + block.shape[0]] = res.reshape(3, block.shape[0], m).transpose(1, 2, 0)
+        for start in range(0, Q.shape[0], self.BLOCK):  # bounded memory for big samples
+            block = Q[start:start + self.BLOCK]
+            n = block.shape[0]
+            size = max(64, 1 << (n - 1).bit_length())  # maps of a few sizes, built once (building one costs)
+            if size not in self._maps:
+                self._maps[size] = self._f.map(size)
+            if size > n:
+                block = np.vstack([block, np.zeros((size - n, self.nv))])
+            res = self._maps[size](block.T, self._p).full()  # 3 x (m * size); the parameters are broadcast
+            out[start:start + n] = res.reshape(3, size, m)[:, :n].transpose(1, 2, 0)
         return out
 
     def position(self, Q) -> np.ndarray:
         """(N, 3) positions of the frame."""
         return self.skeleton(Q)[:, -1, :]
+
+
+def _speed_bounds(robot: Robot, chain: list[str]) -> np.ndarray:
+    """(nv, len(chain)) B with |d p_j / d q_k| <= B[k, j] for every q in the joint box, where p_j
+    is the origin of ``chain[j]`` (links from the root, possibly ending at a named frame).
+
+    A turn q_k (revolute, or one turn of a universal/spherical joint; each is a rotation about a
+    unit axis through the joint frame's origin o_k) moves p_j at |a_k x (p_j - o_k)| <= |p_j - o_k|;
+    a slide at 1; a helical joint at |p_j - o_k| + |pitch|. |p_j - o_k| is at most the sum of the
+    lengths of the translations met from o_k to p_j (triangle inequality; rotations keep
+    lengths): the joint origins' |xyz|, a frame's |xyz| and max |q| over the box of every slide.
+    Coordinates off the chain, or after p_j on it, do not move p_j (B = 0).
+    """
+    env = {p.name: float(p.default) for p in robot.parameters}
+
+    def length(xyz) -> float:
+        return float(np.linalg.norm([float(expr.evaluate(v, env)) for v in xyz]))
+
+    lo, hi = robot.joint_box()
+    index = {c.name: i for i, c in enumerate(robot.coordinates)}
+    links = {link.name for link in robot.links}
+    pieces: list[tuple] = [("point", 0)]  # ("len", metres) | ("coord", k, kind, |pitch|) | ("point", j)
+    for j, name in enumerate(chain[1:], start=1):
+        joint = robot.parent_joint(name) if name in links else None
+        if joint is None:  # a named frame on its link
+            frame = next(f for f in robot.frames if f.name == name)
+            pieces.append(("len", length(frame.origin.xyz)))
+        else:
+            pieces.append(("len", length(joint.origin.xyz)))
+            for m in joint_motions(joint):
+                k = index[m.coordinate]
+                travel = max(abs(lo[k]), abs(hi[k]))
+                pitch = abs(float(expr.evaluate(m.pitch, env))) if m.kind == "helical" else 0.0
+                pieces.append(("coord", k, m.kind, pitch))
+                if m.kind == "prismatic":
+                    pieces.append(("len", travel))
+                elif m.kind == "helical":
+                    pieces.append(("len", pitch * travel))
+        pieces.append(("point", j))
+    B = np.zeros((robot.nv, len(chain)))
+    for s, piece in enumerate(pieces):
+        if piece[0] != "coord":
+            continue
+        _, k, kind, pitch = piece
+        reach = 0.0
+        for later in pieces[s + 1:]:
+            if later[0] == "len":
+                reach += later[1]
+            elif later[0] == "point":
+                B[k, later[1]] = 1.0 if kind == "prismatic" else reach + pitch
+    return B
 
 
 @dataclass

@@ -21,7 +21,8 @@ from derive.errors import DeriveError
 from derive.resources import CHECKOUT
 
 ROOT = CHECKOUT
-BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.bench.trajopt", "derive.bench.simulate"]
+BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.bench.trajopt", "derive.bench.simulate",
+                            "derive.bench.python"]
 """The modules contributing benchmarks, in the order they run and appear in the results."""
 
 

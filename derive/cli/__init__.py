@@ -11,7 +11,9 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import signal
 import sys
+import threading
 
 from derive.errors import DeriveError
 
@@ -47,7 +49,16 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def _terminate(signum, frame):
+    """SIGTERM unwinds like an exception, so that temporary folders are removed on the way out."""
+    raise SystemExit(128 + signum)
+
+
 def main(argv: list[str] | None = None) -> int:
+    """Run one command. Exit status: 0 done, 1 ran but found no solution (or stale output for
+    ``generate --check``), 2 bad input (one line on stderr), 3 a fault
+    of derive itself (one line; DERIVE_DEBUG=1 shows the traceback), 130 interrupted."""
+    previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
@@ -55,11 +66,28 @@ def main(argv: list[str] | None = None) -> int:
         print(f"derive: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:
-        print("derive: interrupted; generated/ left as it was", file=sys.stderr)
+        print("derive: interrupted; the output folder is left as it was", file=sys.stderr)
         return 130
     except BrokenPipeError:  # output piped into `head` and friends: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
+    except OSError as exc:  # a file the command writes or reads: name it
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"derive: error: {where}{exc.strerror or exc}", file=sys.stderr)
+        return 2
+    except (RecursionError, MemoryError) as exc:
+        print(f"derive: error: the input is too large or too deeply nested ({type(exc).__name__})", file=sys.stderr)
+        return 2
+    except Exception as exc:  # noqa: BLE001 (the promise is one line, never a traceback)
+        if os.environ.get("DERIVE_DEBUG"):
+            raise
+        text = " ".join(str(exc).split())[:300]
+        print(f"derive: internal error: {type(exc).__name__}: {text} (a bug in derive: please report it with the "
+              "command; DERIVE_DEBUG=1 shows the traceback)", file=sys.stderr)
+        return 3
+    finally:
+        if previous is not None:
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -145,10 +145,13 @@ def plan_command(args) -> int:
     if args.resolution is not None and args.resolution < 2:
         raise DeriveError(f"robot '{robot.name}': --resolution must be at least 2 grid points per joint, "
                           f"got {args.resolution}")
+    if args.check_step is not None and not (np.isfinite(args.check_step) and args.check_step > 0):
+        raise DeriveError(f"robot '{robot.name}': --check-step must be a finite length > 0 m, got {args.check_step:g}")
     arm = Arm(robot, args.frame)
     result = plan(robot, start, goal, obstacles, args.frame, args.resolution,
-                  "axis" if args.connectivity == 4 else "full", args.margin, arm)
+                  "axis" if args.connectivity == 4 else "full", args.margin, arm, args.check_step)
     print(f"{robot.name}: {result.message}")
+    print(f"collision checks: {result.resolution}")
     if result.success:
         print(f"path length: {result.length:.6g} (joint space)")
     if args.png:
@@ -203,7 +206,9 @@ def add_parser(sub) -> None:
     p = sub.add_parser("plan", help="A* over a configuration-space grid around workspace obstacles",
                        description="Collision-free joint path by A* (Euclidean cost and heuristic) on a grid over "
                                    "the joint box; obstacles are circles/boxes in the workspace checked against "
-                                   "the links. Exit status 1 when there is no path.")
+                                   "the links, at the grid nodes and along the edges (no point of the arm moves "
+                                   "more than --check-step between checks). Exit status 1 when there is no path "
+                                   "or it cannot be certified.")
     p.add_argument("robot_name")
     p.add_argument("--start", required=True, nargs="+", help="start configuration: values separated by commas or "
                    "spaces (pi allowed)")
@@ -214,5 +219,7 @@ def add_parser(sub) -> None:
     p.add_argument("--connectivity", type=int, choices=(4, 8), default=8,
                    help="8: all neighbours incl. diagonals (default); 4: along the axes only")
     p.add_argument("--margin", type=float, default=0.0, help="clearance added to every obstacle [m], >= 0")
+    p.add_argument("--check-step", type=float, help="largest motion of any point of the arm between two collision "
+                   "checks along an edge [m], > 0 (default 0.01, or half the smallest obstacle if smaller)")
     p.add_argument("--png", help="write the path in configuration space | workspace to this PNG")
     p.set_defaults(func=plan_command)

@@ -18,7 +18,7 @@ ROBOT_KEY = re.compile(r"^  ([A-Za-z_][A-Za-z0-9_]*):\s*$")
 
 def _models_named(args) -> None:
     """generate works on the user's own models: refuse to fall back to the shipped examples silently."""
-    if not args.models and local_models_path() is None:
+    if args.models is None and local_models_path() is None:
         raise DeriveError(f"no {MODELS_FILE} in {Path.cwd()}: write one (`derive init` starts one from the "
                           "shipped robots), pass --models FILE, or set DERIVE_MODELS")
 

@@ -278,8 +278,9 @@ def cmd_trajopt(args) -> int:
             options["duration"] = point_to_point_duration(opt, start, goal)
         options.setdefault("accel_weight", 1.0)
         res = opt.solve(start, goal, **options)
-    if not res.success:
-        raise DeriveError(f"trajopt {args.robot}: {res.reason}")
+    if not res.success:  # well formed but not met (infeasible, not converged): exit 1, nothing written
+        print(f"derive: trajopt {args.robot}: no solution: {res.reason}", file=sys.stderr)
+        return 1
     out = Path(args.out) if args.out else Path("trajopt_out") / args.robot
     out.mkdir(parents=True, exist_ok=True)
     res.write_csv(out / "trajectory.csv")

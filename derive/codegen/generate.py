@@ -13,15 +13,22 @@
 
 from __future__ import annotations
 
+import ctypes
+import errno
 import hashlib
 import json
+import math
 import os
+import re
 import shutil
 import tempfile
 import time
 from importlib.metadata import version
 from pathlib import Path
 from typing import Callable, Iterable
+
+import casadi as ca
+import numpy as np
 
 from derive.codegen.catalogue import function_specs, template_functions
 from derive.codegen.render import render_robot
@@ -91,15 +98,51 @@ def _intact(out: Path, name: str, entry: dict) -> bool:
     return present == set(entry.get("files", {}))
 
 
+def check_mass_matrix(model: SXModel, samples: int = 3) -> None:
+    """Refuse a robot whose M(q) is singular at every q, where forward dynamics and the ODE do not
+    exist (their code would divide by zero): a coordinate that moves no mass or inertia."""
+    robot = model.robot
+    s = model.sym
+    f = ca.Function("M", [s.q, s.p], [model.newton_euler.mass_matrix])
+    lo, hi = robot.joint_box()
+    rng = np.random.default_rng(0)
+    p = np.array([par.default for par in robot.parameters], dtype=float)
+    diag = np.min([np.diag(np.array(f(rng.uniform(lo, hi), p))) for _ in range(samples)], axis=0)
+    scale = max(float(np.max(np.abs(diag), initial=0.0)), 1e-300)
+    for c, d in zip(robot.coordinates, diag):
+        if not np.isfinite(d):
+            raise DeriveError(f"robot '{robot.name}': joints ({c.joint}): M(q) is not finite at the default "
+                              "parameters (overflowing masses, inertias or lengths?)")
+        if d <= 1e-12 * scale:
+            raise DeriveError(f"robot '{robot.name}': joints ({c.joint}): coordinate '{c.name}' moves no mass or "
+                              "inertia, so M(q) is singular and forward dynamics do not exist; give the links it "
+                              "moves a mass (links[i].mass) or inertia about its axis")
+
+
+def check_constants(robot: Robot, spec, prog) -> None:
+    """Refuse code with a non-finite constant (it would print DERIVE_LIT(inf) in C, a bare inf in Python)."""
+    for ins in prog.body:
+        for a in ins.args:
+            if a[0] == "c" and not math.isfinite(a[1]):
+                raise DeriveError(f"robot '{robot.name}': {spec.name}: a constant of the derived expression is "
+                                  f"{a[1]} (overflowing or degenerate numbers in the model)")
+    for _, _, a in prog.results:
+        if a[0] == "c" and not math.isfinite(a[1]):
+            raise DeriveError(f"robot '{robot.name}': {spec.name}: an output is the constant {a[1]} "
+                              "(overflowing or degenerate numbers in the model)")
+
+
 def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, str]:
     """Derive and render one robot; prints stage times."""
     t0 = time.perf_counter()
     model = SXModel(robot)
+    check_mass_matrix(model)
     specs = function_specs(model)
     t1 = time.perf_counter()
     total_ops = [0]
 
     def count(spec, prog):
+        check_constants(robot, spec, prog)
         total_ops[0] += prog.ops()["total"]
 
     templates = template_functions(model)
@@ -118,12 +161,30 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
     (from another models file, say) and files derive does not manage stay as they are.
     With ``prune``, robots that ``out`` holds but ``robots`` does not are removed (and logged).
     """
+    shown = Path(out)
+    out = output_folder(shown)
+    try:
+        return _generate(robots, out, shown, only, use_cache, log, prune)
+    except OSError as exc:
+        raise DeriveError(f"{exc.filename or out}: cannot write the generated code ({exc.strerror or exc})") from None
+
+
+def output_folder(out: Path) -> Path:
+    """The real folder behind ``out``: a symbolic link is written through (its target is replaced,
+    the link stays). Refuses a file, or a folder that is not a derive output."""
     out = Path(out)
+    if out.is_symlink():
+        out = out.resolve()
     if out.exists() and not out.is_dir():
         raise DeriveError(f"output {out}: exists and is not a folder")
     if out.is_dir() and any(out.iterdir()) and not (out / "MANIFEST.json").is_file():
         raise DeriveError(f"output {out}: not empty and holds no MANIFEST.json, so it is not a derive output "
                           "folder; refusing to replace it (choose an empty or new folder)")
+    return out
+
+
+def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune) -> dict:
+    _recover(out, log)
     names = sorted(robots) if only is None else sorted(only)
     ghash = generator_hash()
     old = _read_manifest(out)
@@ -132,7 +193,7 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
     kept = {k: v for k, v in old_robots.items() if k not in names and k not in pruned}
     new_robots = dict(kept)
     out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-", dir=out.parent))
+    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it 0700; the output folder is an ordinary one
@@ -169,24 +230,74 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
         (tmp / "MANIFEST.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
         _swap(tmp, out)
         for name in pruned:
-            log(f"pruned {out / name}/ (robot not in the models file)")
+            log(f"pruned {shown / name}/ (robot not in the models file)")
         others = f"; {len(kept)} other robot(s) left as they were" if kept else ""
-        log(f"generated {len(names)} robot(s) into {out} in {time.perf_counter() - start:.1f} s{others}")
+        log(f"generated {len(names)} robot(s) into {shown} in {time.perf_counter() - start:.1f} s{others}")
         return manifest
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
 
 
+STALE = re.compile(r"^\.(?P<name>.+)\.(?:tmp|old)-(?P<pid>\d+)(?:-.*)?$")
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # exists, but another user's
+        return True
+    return True
+
+
+def _recover(out: Path, log: Callable[[str], None]) -> None:
+    """Undo what a killed run left beside ``out``: restore ``out`` from its backup if a kill fell
+    between the two renames of the fallback swap, and remove temporary folders of dead runs."""
+    if not out.parent.is_dir():
+        return
+    for entry in sorted(out.parent.iterdir()):
+        m = STALE.match(entry.name)
+        if not m or m["name"] != out.name or not entry.is_dir() or _alive(int(m["pid"])):
+            continue
+        if ".old-" in entry.name and not out.exists():
+            os.rename(entry, out)
+            log(f"restored {out} from {entry.name}, left by an interrupted run")
+            continue
+        shutil.rmtree(entry, ignore_errors=True)
+        log(f"removed {entry}, left by an interrupted run")
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap two existing folders in one atomic step (Linux renameat2 RENAME_EXCHANGE); False where
+    the system has no such call."""
+    fn = getattr(ctypes.CDLL(None, use_errno=True), "renameat2", None)
+    if fn is None:
+        return False
+    at_fdcwd, rename_exchange = -100, 2
+    if fn(at_fdcwd, os.fsencode(str(a)), at_fdcwd, os.fsencode(str(b)), rename_exchange) == 0:
+        return True
+    err = ctypes.get_errno()
+    if err in (errno.ENOSYS, errno.EINVAL, errno.EOPNOTSUPP):
+        return False
+    raise OSError(err, os.strerror(err), str(b))
+
+
 def _swap(tmp: Path, out: Path) -> None:
-    """Replace ``out`` by ``tmp`` with renames only (no half-written state is ever visible)."""
-    backup = None
-    if out.exists():
-        backup = out.with_name(f".{out.name}.old-{os.getpid()}")
-        os.rename(out, backup)
+    """Replace ``out`` by ``tmp`` so that one of them is in place at every instant: an atomic
+    exchange where the system has one; else two renames, with :func:`_recover` restoring the
+    backup on the next run if a kill falls between them."""
+    if not out.exists():
+        os.rename(tmp, out)
+        return
+    if _exchange(tmp, out):
+        shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the old tree
+        return
+    backup = out.with_name(f".{out.name}.old-{os.getpid()}")
+    os.rename(out, backup)
     os.rename(tmp, out)
-    if backup:
-        shutil.rmtree(backup, ignore_errors=True)
+    shutil.rmtree(backup, ignore_errors=True)
 
 
 def check(robots: dict[str, Robot], out: Path, prune: bool = False) -> list[str]:

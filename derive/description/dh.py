@@ -16,7 +16,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from derive.description.robot import Joint, Limits, Link, Origin
+from derive.description.robot import Joint, Limits, Link, Origin, identifier
 
 ROW_KEYS = {"joint", "type", "a", "alpha", "d", "theta", "link", "mass", "com", "inertia", "inertia_rpy", "limits"}
 Z = (0.0, 0.0, 1.0)
@@ -31,7 +31,7 @@ def dh_to_tree(p: Any, raw: Any) -> tuple[list[Link], list[Joint]]:
     rows = raw.get("rows")
     if not isinstance(rows, list) or not rows:
         raise p.error("dh.rows", "missing or empty")
-    base = raw.get("base", "base")
+    base = identifier(p.name, "dh.base", raw.get("base", "base"))
     links = [Link(name=base)]
     joints: list[Joint] = []
     parent = base
@@ -42,13 +42,13 @@ def dh_to_tree(p: Any, raw: Any) -> tuple[list[Link], list[Joint]]:
             if key not in row:
                 raise p.error(f"{where}.{key}", "missing")
         jtype = row["type"]
-        if jtype not in ("revolute", "prismatic"):
+        if not isinstance(jtype, str) or jtype not in ("revolute", "prismatic"):
             raise p.error(f"{where}.type", f"a DH row is 'revolute' or 'prismatic', got {jtype!r}")
         a, alpha, d, theta = (p.value(f"{where}.{k}", row.get(k, 0.0)) for k in ("a", "alpha", "d", "theta"))
         link = p.link(where, {k: row[k] for k in ("mass", "com", "inertia", "inertia_rpy") if k in row} | {"name": row["link"]})
         helper = Link(name=f"{link.name}_dh")
         limits = p.limits(where + ".limits", row.get("limits"))
-        jname = row["joint"]
+        jname = identifier(p.name, f"{where}.joint", row["joint"])
 
         def joint(name: str, kind: str, par: str, child: str, xyz=(0.0, 0.0, 0.0), rpy=(0.0, 0.0, 0.0),
                   lim: Limits = Limits()) -> Joint:

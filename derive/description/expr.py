@@ -16,7 +16,13 @@ from typing import Any, Callable, Mapping
 Value = "float | str"
 
 FUNCTIONS = ("sin", "cos", "tan", "sqrt", "atan2")
+ARITY = {"sin": 1, "cos": 1, "tan": 1, "sqrt": 1, "atan2": 2}
 CONSTANTS = {"pi": math.pi}
+
+MAX_LENGTH = 500      # characters of one expression
+MAX_NODES = 400       # syntax-tree nodes of one expression
+MAX_DEPTH = 100       # nesting of operations and calls (a sum of n terms nests n deep)
+MAX_EXPONENT = 64     # |e| of x**e; e must be a number, so no 9**9**9 can be written
 
 _BINOPS = {
     ast.Add: lambda a, b: a + b,
@@ -31,22 +37,73 @@ class ExpressionError(ValueError):
     """An expression that is not arithmetic over known parameters."""
 
 
+def shown(text: str, width: int = 40) -> str:
+    """``text`` for an error message: at most ``width`` characters."""
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
+def _depth(node: ast.AST, limit: int) -> int:
+    """Nesting depth of ``node``, counting no further than ``limit`` + 1 (no recursion)."""
+    deepest, stack = 0, [(node, 1)]
+    while stack:
+        n, d = stack.pop()
+        deepest = max(deepest, d)
+        if deepest > limit:
+            break
+        stack.extend((c, d + 1) for c in ast.iter_child_nodes(n))
+    return deepest
+
+
+def _exponent(node: ast.expr) -> float | None:
+    """The value of a numeric literal (possibly signed), else None."""
+    sign = 1.0
+    while isinstance(node, ast.UnaryOp) and isinstance(node.op, (ast.UAdd, ast.USub)):
+        sign = -sign if isinstance(node.op, ast.USub) else sign
+        node = node.operand
+    if isinstance(node, ast.Constant) and isinstance(node.value, (int, float)) and not isinstance(node.value, bool):
+        return sign * float(node.value)
+    return None
+
+
 def parse(text: str) -> ast.expr:
-    """Parse ``text`` and check it uses only numbers, names, + - * / ** and FUNCTIONS."""
+    """Parse ``text`` and check it uses only numbers, names, + - * / ** and FUNCTIONS.
+
+    Limits, checked before anything is evaluated: MAX_LENGTH characters, MAX_NODES nodes,
+    MAX_DEPTH levels, and exponents that are numbers of magnitude at most MAX_EXPONENT.
+    """
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"'{shown(text)}' is longer than {MAX_LENGTH} characters")
     try:
         tree = ast.parse(text.strip(), mode="eval").body
-    except SyntaxError as exc:
-        raise ExpressionError(f"'{text}' is not an arithmetic expression") from exc
-    for node in ast.walk(tree):
+    except (SyntaxError, ValueError) as exc:
+        raise ExpressionError(f"'{shown(text)}' is not an arithmetic expression") from exc
+    except (RecursionError, MemoryError):
+        raise ExpressionError(f"'{shown(text)}' is nested too deeply") from None
+    if _depth(tree, MAX_DEPTH) > MAX_DEPTH:
+        raise ExpressionError(f"'{shown(text)}' is nested deeper than {MAX_DEPTH} levels")
+    nodes = list(ast.walk(tree))
+    if len(nodes) > MAX_NODES:
+        raise ExpressionError(f"'{shown(text)}' has more than {MAX_NODES} terms and operations")
+    text = shown(text)
+    for node in nodes:
         if isinstance(node, ast.Call):
             if not (isinstance(node.func, ast.Name) and node.func.id in FUNCTIONS) or node.keywords:
                 raise ExpressionError(f"'{text}' calls something other than {', '.join(FUNCTIONS)}")
+            if len(node.args) != ARITY[node.func.id] or any(isinstance(a, ast.Starred) for a in node.args):
+                n = ARITY[node.func.id]
+                raise ExpressionError(f"'{text}': {node.func.id} takes {n} argument{'s' if n > 1 else ''}, "
+                                      f"got {len(node.args)}")
         elif isinstance(node, ast.Constant):
             if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
                 raise ExpressionError(f"'{text}' contains the non-numeric constant {node.value!r}")
         elif isinstance(node, ast.BinOp):
             if type(node.op) not in _BINOPS:
                 raise ExpressionError(f"'{text}' uses an operator other than + - * / **")
+            if isinstance(node.op, ast.Pow):
+                e = _exponent(node.right)
+                if e is None or not abs(e) <= MAX_EXPONENT:
+                    raise ExpressionError(f"'{text}': an exponent must be a number between -{MAX_EXPONENT} "
+                                          f"and {MAX_EXPONENT}")
         elif isinstance(node, ast.UnaryOp):
             if not isinstance(node.op, (ast.UAdd, ast.USub)):
                 raise ExpressionError(f"'{text}' uses a unary operator other than + -")
@@ -81,7 +138,7 @@ def evaluate(value: Any, env: Mapping[str, Any], functions: Mapping[str, Callabl
 
     def ev(node: ast.expr) -> Any:
         if isinstance(node, ast.Constant):
-            return node.value
+            return float(node.value)  # never Python's unbounded integers
         if isinstance(node, ast.Name):
             if node.id == "pi":
                 return pi

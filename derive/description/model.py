@@ -13,13 +13,12 @@ import os
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
-import yaml
-
 from derive.description import expr
 from derive.description.dh import dh_to_tree
+from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
-from derive.description.robot import (Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3, identifier)
+from derive.description.robot import (robot_name, Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3, identifier)
 from derive.resources import EXAMPLE_MODELS
 
 
@@ -27,6 +26,8 @@ from derive.resources import EXAMPLE_MODELS
 
 
 MODELS_FILE = "models.yaml"
+MAX_MAGNITUDE = 1e12
+"""Largest magnitude of a model's number (mass, length, inertia, gravity) in SI units."""
 
 
 def local_models_path() -> Path | None:
@@ -45,29 +46,40 @@ def default_models_path() -> Path:
 
 
 def load_models(path: str | Path | None = None) -> dict[str, Robot]:
-    """Read and validate every robot of a models file, in the file's order."""
-    path = Path(path) if path else default_models_path()
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ModelError(None, str(path), f"cannot read ({exc.strerror})") from None
+    """Read and validate every robot of a models file, in the file's order.
+
+    ``path`` None means :func:`default_models_path`; an empty path is an error, never the default.
+    """
+    path = Path(path) if path is not None and str(path) != "" else (default_models_path() if path is None else path)
+    text = read_text(path, "models file")
     return parse_models(text, source=str(path))
 
 
-def parse_models(text: str, source: str = "<string>") -> dict[str, Robot]:
-    try:
-        data = yaml.safe_load(text)
-    except yaml.YAMLError as exc:
-        mark = getattr(exc, "problem_mark", None)
-        where = f"line {mark.line + 1}, column {mark.column + 1}" if mark else "?"
-        problem = getattr(exc, "problem", None) or str(exc).splitlines()[0]
-        raise ModelError(None, f"{source} {where}", f"malformed YAML: {problem}") from None
+def parse_models(text: str, source: str | None = None) -> dict[str, Robot]:
+    """Validate every robot of a models file's text; a ModelError names ``source``, the robot and the field."""
+    data = load_yaml(text, f"models file {source}" if source else "models text")
     if not isinstance(data, Mapping) or not isinstance(data.get("robots"), Mapping):
-        raise ModelError(None, f"{source} robots", "the file must hold a mapping 'robots: {name: {...}}'")
-    _check_keys(None, "", data, {"robots"})
+        raise ModelError(None, "robots", "the file must hold a mapping 'robots: {name: {...}}'", source)
+    try:
+        _check_keys(None, "", data, {"robots"})
+    except ModelError as exc:
+        raise exc.in_file(source) from None
     if not data["robots"]:
-        raise ModelError(None, f"{source} robots", "no robots in the file")
-    return {name: parse_robot(str(name), spec) for name, spec in data["robots"].items()}
+        raise ModelError(None, "robots", "no robots in the file", source)
+    robots: dict[str, Robot] = {}
+    folded: dict[str, str] = {}
+    for name, spec in data["robots"].items():
+        try:
+            robot = parse_robot(str(name), spec)
+        except ModelError as exc:
+            raise exc.in_file(source) from None
+        other = folded.get(robot.name.lower())
+        if other is not None:
+            raise ModelError(robot.name, "name", f"differs from robot '{other}' only by case: their files and "
+                             "macros would clash on case-insensitive file systems", source)
+        folded[robot.name.lower()] = robot.name
+        robots[robot.name] = robot
+    return robots
 
 
 def load_robot(name: str, path: str | Path | None = None) -> Robot:
@@ -92,7 +104,7 @@ class _Parser:
     """Parses one robot; collects inline parameters as it goes."""
 
     def __init__(self, name: str, spec: Any):
-        self.name = identifier(name, "name", name)
+        self.name = robot_name(name)
         if not isinstance(spec, Mapping):
             raise ModelError(name, "", "a robot must be a mapping with links and joints (or dh)")
         self.spec = spec
@@ -214,7 +226,7 @@ class _Parser:
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
         jtype = raw["type"]
-        if jtype not in JOINT_TYPES:
+        if not isinstance(jtype, str) or jtype not in JOINT_TYPES:
             raise self.error(f"{where}.type", f"unknown joint type '{jtype}' (known: {', '.join(JOINT_TYPES)})")
         name = identifier(self.name, where + ".name", raw["name"])
         if jtype == "spherical" and "axis" in raw:
@@ -378,6 +390,27 @@ class _Parser:
         for p in robot.parameters:
             if p.name in reserved:
                 raise self.error(f"parameters.{p.name}", f"'{p.name}' is reserved for the state and input vectors")
+            if p.name in expr.CONSTANTS or p.name in expr.FUNCTIONS:
+                raise self.error(f"parameters.{p.name}", f"'{p.name}' is reserved in expressions (a constant or function)")
+        # the symbols of the sympy view and the LaTeX: a coordinate c gives c, dc, ddc and tau_c
+        symbols: dict[str, str] = {p.name: f"parameter '{p.name}'" for p in robot.parameters}
+        for c in robot.coordinates:
+            for sym, what in ((c.name, "coordinate"), (f"d{c.name}", "velocity"), (f"dd{c.name}", "acceleration"),
+                              (f"tau_{c.name}", "torque")):
+                if sym in symbols and symbols[sym] != f"coordinate '{c.name}'":
+                    raise self.error(f"joints ({c.joint})", f"the {what} symbol '{sym}' of coordinate '{c.name}' is "
+                                     f"already the symbol of {symbols[sym]}: rename one")
+                symbols[sym] = f"coordinate '{c.name}'" if what == "coordinate" else f"the {what} of '{c.name}'"
+        # frame and link names become file and function names: they must differ beyond case
+        folded: dict[str, str] = {}
+        for group, names in groups:
+            if group == "joints":
+                continue
+            for n in names:
+                if n.lower() in folded and folded[n.lower()] != n:
+                    raise self.error(group, f"'{n}' differs from '{folded[n.lower()]}' only by case: their generated "
+                                     "files would clash on case-insensitive file systems")
+                folded[n.lower()] = n
 
     def check_values(self, robot: Robot) -> None:
         """Evaluate every expression at the parameter defaults and check physics."""
@@ -390,6 +423,9 @@ class _Parser:
                 raise self.error(where, f"{v!r}: {exc}") from None
             if not math.isfinite(out):
                 raise self.error(where, f"{v!r} evaluates to {out}")
+            if abs(out) > MAX_MAGNITUDE:
+                raise self.error(where, f"{v!r} = {out:g} is larger than {MAX_MAGNITUDE:g} in magnitude: products of "
+                                 "such numbers overflow in the dynamics")
             return out
 
         for i, link in enumerate(robot.links):

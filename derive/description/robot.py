@@ -41,10 +41,16 @@ Vec3 = tuple  # tuple[Value, Value, Value]
 class ModelError(DeriveError):
     """Bad model input: one line naming the robot, the field and the problem."""
 
-    def __init__(self, robot: str | None, field_path: str, problem: str):
-        self.robot, self.field, self.problem = robot, field_path, problem
+    def __init__(self, robot: str | None, field_path: str, problem: str, source: str | None = None):
+        self.robot, self.field, self.problem, self.source = robot, field_path, problem, source
         where = f"robot '{robot}'" if robot else "models file"
-        super().__init__(f"{where}: {field_path}: {problem}")
+        if source:
+            where = f"{source}: {where}" if robot else f"models file {source}"
+        super().__init__(f"{where}: {field_path}: {problem}" if field_path else f"{where}: {problem}")
+
+    def in_file(self, source: str | None) -> "ModelError":
+        """The same error, naming the file it came from (if known)."""
+        return self if self.source or not source else ModelError(self.robot, self.field, self.problem, source)
 
 
 @dataclass(frozen=True)
@@ -244,9 +250,47 @@ def model_data(robot: Robot) -> dict:
     return data
 
 
+MAX_NAME = 64
+"""Longest name of a robot, joint, link, frame or parameter: C99 guarantees 63 significant
+characters of an identifier, and generated file names join several names."""
+
+RESERVED_ROBOT_NAMES = {
+    # Python modules the generated module imports or that users import beside it
+    **{m: f"the Python module '{m}'" for m in ("numpy", "math", "derive", "jax", "casadi", "sympy", "scipy")},
+    # C standard headers: generated/<robot>/c/<robot>.h would shadow them (and math.h wins over math.py)
+    **{h: f"<{h}.h> of the C standard library" for h in (
+        "assert", "complex", "ctype", "errno", "fenv", "float", "inttypes", "iso646", "limits", "locale", "math",
+        "setjmp", "signal", "stdalign", "stdarg", "stdatomic", "stdbool", "stddef", "stdint", "stdio", "stdlib",
+        "stdnoreturn", "string", "tgmath", "threads", "time", "uchar", "wchar", "wctype")},
+}
+"""Robot names (compared case-insensitively) whose generated header or module would shadow another."""
+RESERVED_PREFIX = "derive_"  # the support files: derive_real.h, derive_ik.h, derive_linalg.h, ...
+
+
+def shown(name: Any, width: int = 40) -> str:
+    """A name for an error message: at most ``width`` characters."""
+    text = str(name)
+    return text if len(text) <= width else text[: width - 3] + "..."
+
+
 def identifier(robot: str | None, where: str, name: Any) -> str:
+    """``name`` if it is a C and Python identifier of at most MAX_NAME characters and no reserved word."""
     if not isinstance(name, str) or not _IDENT.match(name):
-        raise ModelError(robot, where, f"'{name}' is not a C identifier (letters, digits, _; not starting with a digit)")
+        raise ModelError(robot and shown(robot), where, f"'{shown(name)}' is not a C identifier (letters, digits, _; not "
+                         "starting with a digit)")
+    if len(name) > MAX_NAME:
+        raise ModelError(robot and shown(robot), where, f"'{shown(name)}' is longer than {MAX_NAME} characters")
     if name in C_KEYWORDS or keyword.iskeyword(name):
         raise ModelError(robot, where, f"'{name}' is a reserved word in C or Python")
+    return name
+
+
+def robot_name(name: Any) -> str:
+    """A robot's name: an identifier that names no C header or Python module it would shadow."""
+    name = identifier(shown(name) if isinstance(name, str) else None, "name", name)
+    shadowed = RESERVED_ROBOT_NAMES.get(name.lower())
+    if shadowed:
+        raise ModelError(name, "name", f"'{name}' is reserved: the generated {name}.h / {name}.py would shadow {shadowed}")
+    if name.lower().startswith(RESERVED_PREFIX):
+        raise ModelError(name, "name", f"names starting with '{RESERVED_PREFIX}' are reserved for derive's support files")
     return name

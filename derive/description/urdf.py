@@ -6,7 +6,8 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
 - ``revolute``/``prismatic``/``fixed`` joints are kept; ``continuous`` becomes a
   revolute joint without position limits; ``floating``/``planar`` are refused;
 - ``lock`` turns joints into fixed ones at a given position (default 0); the
-  lock motion is folded into the fixed transform. ``mimic`` joints must be locked;
+  lock motion is folded into the fixed transform. Moving ``mimic`` joints must be
+  locked (``mimic`` on a fixed joint is ignored);
 - fixed joints are merged: the child's mass properties are added to the parent
   (parallel-axis theorem) and the child survives as a named frame on its moving
   ancestor. The URDF root link always stays (it is the world frame);
@@ -16,7 +17,19 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
 - inertias are re-expressed in the link frame (no ``inertia_rpy``).
 
 Numbers that come straight from the URDF are copied exactly (``float(text)``);
-only composed or merged values are computed, with |x| < 1e-15 snapped to 0.
+only composed or merged values are computed. Of those, only what is the rounding
+of an exact angle is snapped: an angle within a few ulps of a multiple of pi/2
+becomes that multiple, a vector component within a few ulps of the vector's
+length (e.g. 0.1 * cos(pi/2) = 6e-18) becomes 0. Nothing else moves, so the
+imported model reproduces the URDF to rounding (1e-15 relative).
+
+What exporters write that carries no information is read as absent, with a
+one-line warning on stderr: ``<limit>`` attributes that are all zero (or a zero
+velocity or effort) and ``<mimic>`` on a fixed joint (ignored, as Pinocchio does).
+Inertias are also judged against the robot's scale: a tensor that is itself
+rounding noise (e.g. -2e-22 kg m^2 where the largest link has 0.1 kg m^2) is
+clamped to the nearest physical one; real errors are still refused. The joints
+must form a tree: a cycle is a one-line error naming the file and the cycle.
 """
 
 from __future__ import annotations
@@ -35,12 +48,15 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 import yaml
 
+from derive.description.files import InputFileError, read_bytes, read_text
+from derive.description.inertia import inertia_problem
 from derive.description.model import parse_models, parse_robot
 from derive.description.robot import C_KEYWORDS, ModelError, identifier
 
 ERD = "example-robot-data"
 ERD_PREFIX = ERD + ":"
-SNAP = 1e-15
+SNAP_ULPS = 4  # composed values within this many ulps of an exact value (0, k pi/2) are snapped to it
+NOISE = 1e-12  # inertia noise floor, relative to the robot's largest inertia (see _clamp_inertia_noise)
 GRAVITY = [0.0, 0.0, -9.81]
 
 
@@ -139,9 +155,27 @@ def axis_angle(axis, angle: float) -> np.ndarray:
     return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * kx @ kx
 
 
-def _snap(x: float) -> float:
-    x = float(x)
-    return 0.0 if abs(x) < SNAP else x
+_EPS = float(np.finfo(float).eps)
+_HALF_PI = math.pi / 2
+
+
+def _snap_angle(a: float) -> float:
+    """A computed angle within a few ulps of k pi/2 -> exactly k pi/2 (0.0 for k = 0); others unchanged.
+
+    Only the rounding of an exact angle is removed: 1e-9 or even 1e-12 rad off a
+    multiple of pi/2 is a real angle (or the URDF's own spelling) and stays.
+    """
+    a = float(a)
+    k = round(a / _HALF_PI)
+    exact = k * _HALF_PI if k else 0.0
+    return exact if abs(a - exact) <= SNAP_ULPS * _EPS * max(1.0, abs(exact)) else a
+
+
+def _snap_vector(v) -> list[float]:
+    """Components within a few ulps of the vector's length -> 0 (rounding of an exact rotation)."""
+    v = [float(x) for x in v]
+    tiny = SNAP_ULPS * _EPS * math.sqrt(math.fsum(x * x for x in v))
+    return [0.0 if abs(x) <= tiny else x for x in v]
 
 
 @dataclass(frozen=True)
@@ -180,7 +214,7 @@ class Pose:
 
     @staticmethod
     def from_matrix(R: np.ndarray, p) -> "Pose":
-        return Pose(tuple(_snap(v) for v in p), tuple(_snap(v) for v in matrix_rpy(R)), R)
+        return Pose(tuple(_snap_vector(p)), tuple(_snap_angle(v) for v in matrix_rpy(R)), R)
 
 
 # --------------------------------------------------------------------------- URDF reading
@@ -211,7 +245,7 @@ class _Joint:
 
 
 class _Reader:
-    def __init__(self, robot: str, path: Path):
+    def __init__(self, robot: str, path: str):
         self.robot, self.path = robot, path
 
     def error(self, where: str, problem: str) -> ModelError:
@@ -276,30 +310,53 @@ class _Reader:
         axis = self.floats(where + ".axis", None if axis_el is None else axis_el.get("xyz"), 3, (1.0, 0.0, 0.0))
         if jtype != "fixed" and math.sqrt(sum(a * a for a in axis)) < 1e-12:
             raise self.error(where + ".axis", "must not be the zero vector")
-        limits: dict = {}
-        lim = el.find("limit")
-        if lim is not None and jtype != "fixed":
-            for key in ("lower", "upper", "velocity", "effort"):
-                if key in ("lower", "upper") and jtype == "continuous":
-                    continue  # continuous: no position limits
-                v = self.number(f"{where}.limit.{key}", lim.get(key))
-                if v is not None:
-                    limits[key] = v
-        mimic = el.find("mimic")
+        limits = self.limits(where + ".limit", el.find("limit"), jtype) if jtype != "fixed" else {}
+        # <mimic> on a fixed joint couples nothing: ignored, as Pinocchio and urdfdom do (talos' grippers)
+        mimic = el.find("mimic") if jtype != "fixed" else None
         return _Joint(name, "revolute" if jtype == "continuous" else jtype, ends["parent"], ends["child"],
                       self.origin(where + ".origin", el.find("origin")), axis, limits,
                       None if mimic is None else (mimic.get("joint") or "?"))
 
+    def limits(self, where: str, lim: ET.Element | None, jtype: str) -> dict:
+        """The numbers of a moving joint's <limit>, without the exporters' placeholders.
 
-def _read(path: Path, robot: str | None) -> tuple[str, dict[str, _Inertial], list[_Joint]]:
-    """(URDF robot name, links in file order, joints in file order)."""
+        URDF exporters (SolidWorks' sw_urdf_exporter, for one) write
+        ``<limit lower="0" upper="0" effort="0" velocity="0"/>`` for "not given". All
+        written values zero (lower = upper = 0 and no effort or velocity) is read as no
+        limits; a zero velocity or effort next to real position limits is dropped (a
+        joint that may not move or push is no joint). Each drop prints one warning line.
+        Negative velocities or efforts stay, for the model's validation to refuse.
+        """
+        if lim is None:
+            return {}
+        keys = ("velocity", "effort") if jtype == "continuous" else ("lower", "upper", "velocity", "effort")  # continuous: no position limits
+        raw = {key: self.number(f"{where}.{key}", lim.get(key)) for key in keys}
+        limits = {k: v for k, v in raw.items() if v is not None}
+        if limits and all(v == 0 for v in limits.values()):
+            self.warn(where, f"{' = '.join(limits)} = 0 is an exporter's placeholder: imported without limits")
+            return {}
+        zero = [k for k in ("velocity", "effort") if limits.get(k) == 0]
+        if zero:
+            self.warn(where, f"{' = '.join(zero)} = 0 is an exporter's placeholder: imported without {' and '.join(zero)} limit")
+            for k in zero:
+                del limits[k]
+        return limits
+
+    def warn(self, where: str, problem: str) -> None:
+        print(f"warning: {self.path}: {where}: {problem}", file=sys.stderr)
+
+
+def _read(path: Path, robot: str | None, shown: str | None = None) -> tuple[str, dict[str, _Inertial], list[_Joint]]:
+    """(URDF robot name, links in file order, joints in file order); warnings name the file as ``shown``."""
     who = robot or c_identifier(path.stem)
     try:
-        text = path.read_bytes()
-    except OSError as exc:
-        raise ModelError(who, str(path), f"cannot read URDF ({exc.strerror})") from None
+        text = read_bytes(path, "URDF")
+    except InputFileError as exc:
+        raise ModelError(who, "", str(exc)) from None
     try:
         root = ET.fromstring(text)
+    except (RecursionError, MemoryError):
+        raise ModelError(who, str(path), "XML nested too deeply") from None
     except ET.ParseError as exc:
         line, col = exc.position
         msg = str(exc).split(":")[0]
@@ -307,7 +364,7 @@ def _read(path: Path, robot: str | None) -> tuple[str, dict[str, _Inertial], lis
     if root.tag != "robot":
         raise ModelError(who, str(path), f"not a URDF: the root element is <{root.tag}>, not <robot>")
     urdf_name = root.get("name") or path.stem
-    reader = _Reader(robot or c_identifier(urdf_name), path)
+    reader = _Reader(robot or c_identifier(urdf_name), shown or str(path))
     links: dict[str, _Inertial] = {}
     for el in root.findall("link"):
         name = el.get("name")
@@ -347,6 +404,38 @@ def parse_lock(lock: str | Iterable[str] | Mapping[str, float] | None, robot: st
     return out
 
 
+def _find_cycle(links: Mapping[str, Any], parent_joint: Mapping[str, _Joint]) -> list[_Joint]:
+    """The joints of a cycle of the parent relation (each the parent joint of the next's parent link), or [].
+
+    Walks up from every link once (linear time): a walk that reaches a root or an
+    earlier walk's link is fine; one that comes back onto itself has found a cycle.
+    """
+    done: set[str] = set()
+    for start in links:
+        walk: dict[str, None] = {}
+        link: str | None = start
+        while link is not None and link not in done and link not in walk:
+            walk[link] = None
+            j = parent_joint.get(link)
+            link = None if j is None else j.parent
+        if link is not None and link in walk:
+            cycle = list(walk)[list(walk).index(link):]  # child to parent
+            return [parent_joint[n] for n in reversed(cycle)]
+        done.update(walk)
+    return []
+
+
+def _lock_spelling(j: _Joint) -> str:
+    """``name`` (lock at 0) or ``name=value`` with the limit nearest 0 when 0 is outside the joint's limits."""
+    lo, hi = j.limits.get("lower"), j.limits.get("upper")
+    value = 0.0
+    if lo is not None and lo > 0:
+        value = lo
+    elif hi is not None and hi < 0:
+        value = hi
+    return j.name if value == 0 else f"{j.name}={value!r}"
+
+
 def _command(spelling: str, tip: str, lock: dict, name: str | None) -> str:
     cmd = f"derive import-urdf {spelling} --tip {tip}"
     if lock:
@@ -358,16 +447,26 @@ def _command(spelling: str, tip: str, lock: dict, name: str | None) -> str:
 
 def _inertia_dict(m: np.ndarray) -> dict:
     m = (m + m.T) / 2.0
-    return {"ixx": _snap(m[0, 0]), "ixy": _snap(m[0, 1]), "ixz": _snap(m[0, 2]),
-            "iyy": _snap(m[1, 1]), "iyz": _snap(m[1, 2]), "izz": _snap(m[2, 2])}
+    tiny = SNAP_ULPS * _EPS * float(np.abs(m).max())  # rounding residue of rotating an exact zero
+    m = np.where(np.abs(m) <= tiny, 0.0, m)
+    return {"ixx": float(m[0, 0]), "ixy": float(m[0, 1]), "ixz": float(m[0, 2]),
+            "iyy": float(m[1, 1]), "iyz": float(m[1, 2]), "izz": float(m[2, 2])}
 
 
-def _merge_mass(robot: str, body: str, parts: list[tuple[Pose, _Inertial]]) -> dict:
-    """Mass properties of a body made of ``parts`` (pose of each part's link in the body frame)."""
-    parts = [(pose, inr) for pose, inr in parts if inr.mass > 0 or any(v != 0 for v in inr.inertia.values())]
-    for pose, inr in parts:
+def _merge_mass(robot: str, body: str, parts: list[tuple[str, Pose, _Inertial]], noise: float = 0.0) -> dict:
+    """Mass properties of a body made of ``parts`` (URDF link, its pose in the body frame, its inertial).
+
+    A massless part's inertia must be zero; entries up to ``noise`` (kg m^2) are rounding noise and ignored.
+    """
+    kept = []
+    for name, pose, inr in parts:
         if inr.mass == 0:
-            raise ModelError(robot, f"links[{body}].inertia", "a massless link must have zero inertia")
+            if any(abs(v) > noise for v in inr.inertia.values()):
+                where = f"links[{body}].inertia" if name == body else f"links[{name}].inertia (merged into '{body}')"
+                raise ModelError(robot, where, "a massless link must have zero inertia")
+            continue
+        kept.append((pose, inr))
+    parts = kept
     if not parts:
         return {}
     if len(parts) == 1:
@@ -378,14 +477,55 @@ def _merge_mass(robot: str, body: str, parts: list[tuple[Pose, _Inertial]]) -> d
     coms = [pose.p + pose.R @ np.array(inr.com) for pose, inr in parts]
     inertias = [(pose.R @ rpy_matrix(inr.rpy)) @ inr.matrix() @ (pose.R @ rpy_matrix(inr.rpy)).T for pose, inr in parts]
     if len(parts) == 1:
-        return {"mass": masses[0], "com": [_snap(v) for v in coms[0]], "inertia": _inertia_dict(inertias[0])}
+        return {"mass": masses[0], "com": _snap_vector(coms[0]), "inertia": _inertia_dict(inertias[0])}
     total = math.fsum(masses)
     com = sum(m * c for m, c in zip(masses, coms)) / total
     inertia = np.zeros((3, 3))
     for m, c, I in zip(masses, coms, inertias):
         d = c - com
         inertia += I + m * (float(d @ d) * np.eye(3) - np.outer(d, d))
-    return {"mass": total, "com": [_snap(v) for v in com], "inertia": _inertia_dict(inertia)}
+    return {"mass": total, "com": _snap_vector(com), "inertia": _inertia_dict(inertia)}
+
+
+def _clamp_inertia_noise(inertia: dict, mass: float, floor: float) -> dict:
+    """``inertia`` unchanged if it is physical; the nearest physical tensor if it misses by at most ``floor``.
+
+    Model validation (:func:`derive.description.inertia.inertia_problem`) judges a
+    tensor against its own trace (rtol 1e-9), so rounding noise is accepted on any
+    link with a real inertia. It fails only where the tensor itself is noise-sized,
+    e.g. -2e-22 kg m^2 entries (icub's legs) on a link whose true inertia is zero:
+    nothing is left to be relative to. The importer judges such a link against an
+    absolute floor, NOISE (1e-12) times the robot's largest inertia, and then, so
+    that the entry validates as written, clamps it: negative principal moments -> 0,
+    the largest lowered to the triangle inequality's bound. The change is below the
+    floor, i.e. below 1e-12 of the robot's inertia scale, so dynamics still match the
+    URDF (and Pinocchio) to 1e-12. Anything that misses by more (a clearly negative
+    moment, a clear triangle violation, a massless link with inertia) is left as
+    written for the validation to refuse. Physical tensors are never touched: a
+    value copied from the URDF stays exactly that value.
+    """
+    m = np.array([[inertia["ixx"], inertia["ixy"], inertia["ixz"]],
+                  [inertia["ixy"], inertia["iyy"], inertia["iyz"]],
+                  [inertia["ixz"], inertia["iyz"], inertia["izz"]]], dtype=float)
+    if inertia_problem(m, mass) is None:
+        return inertia
+    if mass == 0:
+        miss = float(np.abs(m).max())
+    else:
+        eig, axes = np.linalg.eigh(m)
+        miss = max(-eig[0], eig[2] - eig[0] - eig[1], 0.0)
+    if not math.isfinite(miss) or miss > floor:
+        return inertia  # a real error: the model validation says what is wrong
+    if mass == 0:
+        clamped = np.zeros((3, 3))
+    else:
+        e = np.maximum(eig, 0.0)
+        e[2] = min(e[2], e[0] + e[1])
+        clamped = axes @ np.diag(e) @ axes.T
+    out = _inertia_dict(clamped)
+    m = np.array([[out["ixx"], out["ixy"], out["ixz"]], [out["ixy"], out["iyy"], out["iyz"]],
+                  [out["ixz"], out["iyz"], out["izz"]]])
+    return out if inertia_problem(m, mass) is None else inertia
 
 
 def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = None) -> dict:
@@ -404,7 +544,7 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
     if name is not None:
         identifier(name, "name", name)
     file, spelling, origin_text = resolve_urdf(path, name)
-    urdf_name, links, joints = _read(file, name)
+    urdf_name, links, joints = _read(file, name, spelling)
     robot = name or c_identifier(urdf_name)
 
     def error(where: str, problem: str) -> ModelError:
@@ -424,13 +564,23 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
             raise error(f"joints[{j.name}].child", f"link '{j.child}' already has parent joint '{parent_joint[j.child].name}'")
         parent_joint[j.child] = j
     roots = [n for n in links if n not in parent_joint]
+    cycle = _find_cycle(links, parent_joint)
+    if cycle:
+        where = f" detached from the root link '{roots[0]}'" if len(roots) == 1 else "" if roots else ", so no link is the root"
+        raise error(f"{spelling} joints", f"the joints {', '.join(repr(j.name) for j in cycle)} form a cycle through the links "
+                    f"{', '.join(repr(j.child) for j in cycle)}{where}; a URDF must be a tree")
     if len(roots) != 1:
-        raise error("links", "no root link (the joints form a cycle)" if not roots else
-                    f"links {', '.join(repr(r) for r in roots)} have no parent joint; exactly one root link is allowed")
+        raise error("links", f"links {', '.join(repr(r) for r in roots)} have no parent joint; exactly one root link is allowed")
     root = roots[0]
     children: dict[str, list[_Joint]] = {n: [] for n in links}
     for j in joints:
         children[j.parent].append(j)
+    tree = [root]  # every link, parents first (no cycle, one root: all links hang off the root)
+    for link in tree:
+        tree.extend(j.child for j in children[link])
+    behind: dict[str, float] = {}  # mass of a link and everything below it
+    for link in reversed(tree):
+        behind[link] = links[link].mass + math.fsum(behind[j.child] for j in children[link])
 
     if tip not in links:
         raise error("tip", f"unknown link '{tip}' (links: {', '.join(links)})")
@@ -445,10 +595,19 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
             raise error(f"lock[{jname}]", "the joint is fixed already")
         lo, hi = j.limits.get("lower"), j.limits.get("upper")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
-            raise error(f"lock[{jname}]", f"{value} is outside the joint limits [{lo}, {hi}]")
+            raise error(f"lock[{jname}]", f"{value} is outside the joint limits [{lo}, {hi}] "
+                        f"(e.g. --lock {_lock_spelling(j)})")
 
     def moves(j: _Joint) -> bool:
         return j.type != "fixed" and j.name not in locks
+
+    def lock_list(names: Iterable[str]) -> str:
+        """``--lock`` text that keeps the user's locks and adds ``names`` (moving joints) at usable values."""
+        out = {n: s for n, (_, s) in locks.items()}
+        for n in names:
+            if n not in out and n in by_name and by_name[n].type != "fixed":
+                out[n] = _lock_spelling(by_name[n])
+        return ",".join(out.values())
 
     # ---- prune moving branches off the root-to-tip path
     on_path = set()
@@ -459,32 +618,34 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
             break
         link = parent_joint[link].parent
 
-    def subtree_mass(link: str) -> float:
-        return links[link].mass + sum(subtree_mass(j.child) for j in children[link])
-
     order: list[_Joint] = []  # kept joints, parents first, file order among siblings
     off_path: list[tuple[_Joint, float]] = []  # moving joints of branches with mass that miss the tip
     frontier = [root]
-    while frontier:
-        link = frontier.pop(0)
+    for link in frontier:
         for j in children[link]:
             if moves(j) and j.child not in on_path:
-                mass = subtree_mass(j.child)
-                if mass > 0:
-                    off_path.append((j, mass))
+                if behind[j.child] > 0:
+                    off_path.append((j, behind[j.child]))
                 continue  # a massless branch is dropped
             order.append(j)
             frontier.append(j.child)
     for j in order + [j for j, _ in off_path]:
         if j.mimic is not None and j.name not in locks:
-            both = ",".join(dict.fromkeys(n for n in (*locks, j.mimic, j.name) if n in by_name))
             raise error(f"joints[{j.name}]", f"mimics joint '{j.mimic}'; mimic joints are not supported: lock them "
-                        f"(--lock {both})")
+                        f"(--lock {lock_list([j.mimic, j.name])})")
     if off_path:
+        # every joint that would still move mass off the path once the branch tops are locked, so that
+        # the suggested command works as given
+        to_lock = []
+        for top, _ in off_path:
+            below = [top]
+            for x in below:
+                if x is top or (moves(x) and behind[x.child] > 0):
+                    to_lock.append(x.name)
+                below.extend(children[x.child])
         j, mass = off_path[0]
-        all_locks = ",".join([*locks, *(x.name for x, _ in off_path)])
         raise error(f"joints[{j.name}]", f"moves a branch with mass ({mass:g} kg) that does not lead to the tip "
-                    f"'{tip}'; lock it (--lock {all_locks}) or choose another tip")
+                    f"'{tip}'; lock it (--lock {lock_list(to_lock)}) or choose another tip")
 
     # ---- merge fixed joints: body (surviving link) and pose in the body frame of every link
     body: dict[str, str] = {root: root}
@@ -499,7 +660,7 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
                     motion = Pose.from_matrix(axis_angle(j.axis, value), (0.0, 0.0, 0.0))
                 else:
                     a = np.array(j.axis, dtype=float)
-                    motion = Pose(tuple(_snap(v) for v in a / np.linalg.norm(a) * value))
+                    motion = Pose(tuple(_snap_vector(a / np.linalg.norm(a) * value)))
                 origin = origin * motion
         placed = pose[j.parent] * origin
         if moves(j):
@@ -514,9 +675,18 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
 
     survivors = [root] + [j.child for j in order if moves(j)]
     out_links = []
+    # inertia noise floor: NOISE times the largest inertia of the robot, as written and as merged
+    largest = max((abs(float(np.trace(inr.matrix()))) for inr in links.values()), default=0.0)
     for s in survivors:
-        parts = [(pose[n], links[n]) for n in body if body[n] == s]
-        out_links.append({"name": s, **_merge_mass(robot, s, parts)})
+        parts = [(n, pose[n], links[n]) for n in body if body[n] == s]
+        out_links.append({"name": s, **_merge_mass(robot, s, parts, NOISE * largest)})
+    for link in out_links:
+        if "inertia" in link:
+            i = link["inertia"]
+            largest = max(largest, abs(i["ixx"] + i["iyy"] + i["izz"]))
+    for link in out_links:
+        if "inertia" in link:
+            link["inertia"] = _clamp_inertia_noise(link["inertia"], link["mass"], NOISE * largest)
 
     frames = [{"name": "tcp", "link": body[tip], "xyz": list(pose[tip].xyz), "rpy": list(pose[tip].rpy)}]
     for n in body:
@@ -652,10 +822,7 @@ def append_entry(models_path: str | Path, name: str, entry: Mapping) -> None:
         path.write_text("# derive robot models (see README.md, 'Writing a model')\nrobots:\n" + dump_entry(name, entry))
         parse_models(path.read_text(), source=str(path))
         return
-    try:
-        text = path.read_text()
-    except OSError as exc:
-        raise ModelError(name, str(path), f"cannot read ({exc.strerror})") from None
+    text = read_text(path, "models file")
     existing = parse_models(text, source=str(path))
     if name in existing:
         raise ModelError(name, f"{path} robots", "already exists; remove it first or pick another --name")

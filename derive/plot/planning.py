@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -55,7 +56,7 @@ def plot_plan(robot: Robot, result: PlanResult, start, goal, obstacles, path: st
     ws.set_xlabel("x [m]")
     ws.set_ylabel("y [m]")
     ws.set_title("workspace (x-y), arm at waypoints" if result.success else "workspace: NO PATH", fontsize=10)
-    fig.suptitle(f"{robot.name}: A* in configuration space, {result.message}", fontsize=10)
+    fig.suptitle(textwrap.fill(f"{robot.name}: A* in configuration space, {result.message}", 140), fontsize=10)
     return save_figure(fig, path)
 
 

@@ -1,13 +1,13 @@
 """Rotations and homogeneous transforms in CasADi SX (symbolic) with exact constants.
 
-Constant rotations (numeric rpy) are evaluated in floating point and entries
-within SNAP = 1e-9 of 0 or +-1 are snapped to them. URDFs write pi/2 as
-1.5707963267948966 (cos = 6e-17) or as 1.57079632679 (ur5: cos = 4.9e-12);
-either way the intended rotation is exact, and keeping the residue would cost
-arithmetic in every generated function (ur5's mass matrix: 359 -> 268 ops)
-while changing results by less than 1e-11 relative, far below the 1e-9 to which
-everything is checked against the reference and Pinocchio, which keep the
-URDF's numbers as written.
+Constant angles within SNAP = 1e-11 of a multiple of pi/2 are taken as that multiple, so
+their cosine and sine are exactly 0 and +-1. URDFs write pi/2 as 1.5707963267948966 (cos =
+6e-17) or as 1.57079632679 (ur5: pi/2 - 4.9e-12); either way the intended rotation is exact,
+and keeping the residue would cost arithmetic in every generated function (ur5's mass matrix:
+359 -> 268 ops). The decision is taken on the angle, never on the value of its cosine: a
+real angle of 1e-5 rad keeps its cosine 0.99999999995 (snapping that to 1 moved some frames
+of g1 and romeo by 1e-9 relative against Pinocchio). Truncated constants inside the 1e-11
+window still move results by up to ~5e-12 relative (ur5, talos' 4.71238898038).
 """
 
 from __future__ import annotations
@@ -16,19 +16,17 @@ import math
 
 import casadi as ca
 
-SNAP = 1e-9
-
-
-def _snap(x: float) -> float:
-    for target in (0.0, 1.0, -1.0):
-        if abs(x - target) < SNAP:
-            return target
-    return x
+SNAP = 1e-11
+_QUARTERS = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))  # (cos, sin) of k pi/2, k mod 4
 
 
 def _cs(angle):
+    """(cos, sin) of an angle: exact for a numeric multiple of pi/2 (within SNAP), SX otherwise."""
     if isinstance(angle, (int, float)):
-        return _snap(math.cos(angle)), _snap(math.sin(angle))
+        k = round(angle / (math.pi / 2))
+        if abs(angle - k * (math.pi / 2)) <= SNAP:
+            return _QUARTERS[k % 4]
+        return math.cos(angle), math.sin(angle)
     return ca.cos(angle), ca.sin(angle)
 
 
@@ -51,10 +49,10 @@ def rot_z(a) -> ca.SX:
 
 
 def rpy(r, p, y) -> ca.SX:
-    """URDF roll-pitch-yaw: R = Rz(y) Ry(p) Rx(r). Numeric angles give snapped constants."""
+    """URDF roll-pitch-yaw: R = Rz(y) Ry(p) Rx(r). Numeric angles give constants (exact for multiples of pi/2)."""
     if all(isinstance(v, (int, float)) for v in (r, p, y)):
         m = rot_z(y) @ rot_y(p) @ rot_x(r)
-        return ca.SX(ca.DM([[_snap(float(ca.DM(m[i, k]))) for k in range(3)] for i in range(3)]))
+        return ca.SX(ca.DM([[float(ca.DM(m[i, k])) for k in range(3)] for i in range(3)]))
     return rot_z(y) @ rot_y(p) @ rot_x(r)
 
 

@@ -11,6 +11,7 @@ from derive.codegen.backends.base import Backend
 REGISTRY: dict[str, str] = {
     "c": "derive.codegen.backends.c",
     "python": "derive.codegen.backends.python",
+    "jax": "derive.codegen.backends.jax",
 }
 """Backend name -> the module whose ``BACKEND`` implements it."""
 

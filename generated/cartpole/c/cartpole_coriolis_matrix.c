@@ -4,7 +4,7 @@
  */
 #include "cartpole_coriolis_matrix.h"
 
-void cartpole_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C)
+DERIVE_FN void cartpole_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C)
 {
     /* 4 ops: 2 mul, 1 add, 0 div, 1 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[1]);

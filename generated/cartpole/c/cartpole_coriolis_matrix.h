@@ -19,7 +19,7 @@ extern "C" {
  * out C [2x2]
  * Arrays are row-major. 4 ops: 2 mul, 1 add, 0 div, 1 trig
  */
-void cartpole_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
+DERIVE_FN void cartpole_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
 
 #ifdef __cplusplus
 }

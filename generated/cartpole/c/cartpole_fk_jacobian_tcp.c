@@ -4,7 +4,7 @@
  */
 #include "cartpole_fk_jacobian_tcp.h"
 
-void cartpole_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J)
+DERIVE_FN void cartpole_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     /* 7 ops: 0 mul, 5 add, 0 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

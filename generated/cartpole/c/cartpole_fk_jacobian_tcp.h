@@ -19,7 +19,7 @@ extern "C" {
  * out J [6x2]
  * Arrays are row-major. 7 ops: 0 mul, 5 add, 0 div, 2 trig
  */
-void cartpole_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J);
+DERIVE_FN void cartpole_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

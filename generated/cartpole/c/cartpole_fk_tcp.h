@@ -18,7 +18,7 @@ extern "C" {
  * out T [4x4]
  * Arrays are row-major. 5 ops: 0 mul, 3 add, 0 div, 2 trig
  */
-void cartpole_fk_tcp(const DERIVE_REAL *q, DERIVE_REAL *T);
+DERIVE_FN void cartpole_fk_tcp(const DERIVE_REAL *q, DERIVE_REAL *T);
 
 #ifdef __cplusplus
 }

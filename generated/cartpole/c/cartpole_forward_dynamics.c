@@ -4,7 +4,7 @@
  */
 #include "cartpole_forward_dynamics.h"
 
-void cartpole_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd)
+DERIVE_FN void cartpole_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd)
 {
     /* 23 ops: 12 mul, 7 add, 2 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[1]);

@@ -20,7 +20,7 @@ extern "C" {
  * out qdd [2]
  * Arrays are row-major. 23 ops: 12 mul, 7 add, 2 div, 2 trig
  */
-void cartpole_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
+DERIVE_FN void cartpole_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "cartpole_gravity.h"
 
-void cartpole_gravity(const DERIVE_REAL *q, DERIVE_REAL *g)
+DERIVE_FN void cartpole_gravity(const DERIVE_REAL *q, DERIVE_REAL *g)
 {
     /* 9 ops: 5 mul, 2 add, 0 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[1]);

@@ -18,7 +18,7 @@ extern "C" {
  * out g [2]
  * Arrays are row-major. 9 ops: 5 mul, 2 add, 0 div, 2 trig
  */
-void cartpole_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
+DERIVE_FN void cartpole_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
 
 #ifdef __cplusplus
 }

@@ -8,7 +8,7 @@
 #include "derive_ik.h"
 
 /* cartpole_fk_jacobian_tcp in the form derive_ik_lm calls (derive_ik.h). */
-static void cartpole_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+static DERIVE_FN void cartpole_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     (void)p;
     cartpole_fk_jacobian_tcp(q, T, J);
@@ -19,7 +19,7 @@ static void cartpole_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL 
  * derive_ik_lm of derive_ik.h on this robot's limits and cartpole_fk_jacobian_tcp. Everything lives on the
  * stack: the limits, the work buffer and derive_ik_lm's locals.
  */
-int cartpole_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
+DERIVE_FN int cartpole_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
 {
     /* cost: the arithmetic of cartpole_fk_jacobian_tcp per call, plus loops */
     const DERIVE_REAL lower[2] = { DERIVE_LIT(-2.0), DERIVE_LIT(-1e+30) };

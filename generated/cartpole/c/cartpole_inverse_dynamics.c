@@ -4,7 +4,7 @@
  */
 #include "cartpole_inverse_dynamics.h"
 
-void cartpole_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau)
+DERIVE_FN void cartpole_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau)
 {
     /* 22 ops: 13 mul, 7 add, 0 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

@@ -20,7 +20,7 @@ extern "C" {
  * out tau [2]
  * Arrays are row-major. 22 ops: 13 mul, 7 add, 0 div, 2 trig
  */
-void cartpole_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
+DERIVE_FN void cartpole_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "cartpole_jacobian_tcp.h"
 
-void cartpole_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J)
+DERIVE_FN void cartpole_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J)
 {
     /* 6 ops: 0 mul, 4 add, 0 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

@@ -18,7 +18,7 @@ extern "C" {
  * out J [6x2]
  * Arrays are row-major. 6 ops: 0 mul, 4 add, 0 div, 2 trig
  */
-void cartpole_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J);
+DERIVE_FN void cartpole_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

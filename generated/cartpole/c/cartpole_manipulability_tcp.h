@@ -18,7 +18,7 @@ extern "C" {
  * out mu [3]
  * Arrays are row-major. cost: the arithmetic of cartpole_jacobian_tcp per call, plus loops
  */
-void cartpole_manipulability_tcp(const DERIVE_REAL *q, DERIVE_REAL *mu);
+DERIVE_FN void cartpole_manipulability_tcp(const DERIVE_REAL *q, DERIVE_REAL *mu);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "cartpole_mass_matrix.h"
 
-void cartpole_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M)
+DERIVE_FN void cartpole_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M)
 {
     /* 2 ops: 1 mul, 0 add, 0 div, 1 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

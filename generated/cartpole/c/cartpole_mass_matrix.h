@@ -18,7 +18,7 @@ extern "C" {
  * out M [2x2]
  * Arrays are row-major. 2 ops: 1 mul, 0 add, 0 div, 1 trig
  */
-void cartpole_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
+DERIVE_FN void cartpole_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
 
 #ifdef __cplusplus
 }

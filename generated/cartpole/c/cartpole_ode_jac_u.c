@@ -4,7 +4,7 @@
  */
 #include "cartpole_ode_jac_u.h"
 
-void cartpole_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
+DERIVE_FN void cartpole_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
 {
     /* 10 ops: 4 mul, 3 add, 2 div, 1 trig */
     (void)u;

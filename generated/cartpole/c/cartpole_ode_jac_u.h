@@ -19,7 +19,7 @@ extern "C" {
  * out B [4x2]
  * Arrays are row-major. 10 ops: 4 mul, 3 add, 2 div, 1 trig
  */
-void cartpole_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
+DERIVE_FN void cartpole_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "cartpole_ode_jac_x.h"
 
-void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A)
+DERIVE_FN void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A)
 {
     /* 63 ops: 34 mul, 21 add, 6 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(x[1]);

@@ -19,7 +19,7 @@ extern "C" {
  * out A [4x4]
  * Arrays are row-major. 63 ops: 34 mul, 21 add, 6 div, 2 trig
  */
-void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
+DERIVE_FN void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "cartpole_ode_rhs.h"
 
-void cartpole_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot)
+DERIVE_FN void cartpole_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot)
 {
     /* 23 ops: 12 mul, 7 add, 2 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(x[1]);

@@ -19,7 +19,7 @@ extern "C" {
  * out xdot [4]
  * Arrays are row-major. 23 ops: 12 mul, 7 add, 2 div, 2 trig
  */
-void cartpole_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
+DERIVE_FN void cartpole_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
 
 #ifdef __cplusplus
 }

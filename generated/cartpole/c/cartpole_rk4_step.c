@@ -5,7 +5,7 @@
 #include "cartpole_rk4_step.h"
 #include "cartpole_ode_rhs.h"
 
-void cartpole_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next)
+DERIVE_FN void cartpole_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next)
 {
     /* cost: the arithmetic of cartpole_ode_rhs per call, plus loops */
     DERIVE_REAL k1[4], k2[4], k3[4], k4[4], xt[4];

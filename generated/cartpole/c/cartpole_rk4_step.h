@@ -20,7 +20,7 @@ extern "C" {
  * out x_next [4]
  * Arrays are row-major. cost: the arithmetic of cartpole_ode_rhs per call, plus loops
  */
-void cartpole_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next);
+DERIVE_FN void cartpole_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next);
 
 #ifdef __cplusplus
 }

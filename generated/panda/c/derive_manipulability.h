@@ -18,7 +18,7 @@
  * = sqrt(det(B B^T)); mu1 = mu2 = +inf at a singularity (IEEE division).
  * Work: B (k * n reals) and s (k reals), owned by the caller.
  */
-static inline void derive_manipulability(int k, int n, const int *rows, const DERIVE_REAL *J,
+static inline DERIVE_FN void derive_manipulability(int k, int n, const int *rows, const DERIVE_REAL *J,
                                          DERIVE_REAL *B, DERIVE_REAL *s, DERIVE_REAL *mu)
 {
     DERIVE_REAL smax = DERIVE_LIT(0.0), smin = DERIVE_LIT(0.0), prod = DERIVE_LIT(1.0);

@@ -4,7 +4,7 @@
  */
 #include "panda_coriolis_matrix.h"
 
-void panda_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C)
+DERIVE_FN void panda_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C)
 {
     /* 2560 ops: 1440 mul, 1108 add, 0 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[1]);

@@ -19,7 +19,7 @@ extern "C" {
  * out C [7x7]
  * Arrays are row-major. 2560 ops: 1440 mul, 1108 add, 0 div, 12 trig
  */
-void panda_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
+DERIVE_FN void panda_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
 
 #ifdef __cplusplus
 }

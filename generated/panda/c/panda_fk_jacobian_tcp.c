@@ -4,7 +4,7 @@
  */
 #include "panda_fk_jacobian_tcp.h"
 
-void panda_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J)
+DERIVE_FN void panda_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     /* 231 ops: 126 mul, 91 add, 0 div, 14 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

@@ -19,7 +19,7 @@ extern "C" {
  * out J [6x7]
  * Arrays are row-major. 231 ops: 126 mul, 91 add, 0 div, 14 trig
  */
-void panda_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J);
+DERIVE_FN void panda_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "panda_fk_panda_hand.h"
 
-void panda_fk_panda_hand(const DERIVE_REAL *q, DERIVE_REAL *T)
+DERIVE_FN void panda_fk_panda_hand(const DERIVE_REAL *q, DERIVE_REAL *T)
 {
     /* 159 ops: 92 mul, 53 add, 0 div, 14 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

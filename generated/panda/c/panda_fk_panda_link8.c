@@ -4,7 +4,7 @@
  */
 #include "panda_fk_panda_link8.h"
 
-void panda_fk_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *T)
+DERIVE_FN void panda_fk_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *T)
 {
     /* 143 ops: 80 mul, 49 add, 0 div, 14 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

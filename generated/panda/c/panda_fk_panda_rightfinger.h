@@ -18,7 +18,7 @@ extern "C" {
  * out T [4x4]
  * Arrays are row-major. 159 ops: 92 mul, 53 add, 0 div, 14 trig
  */
-void panda_fk_panda_rightfinger(const DERIVE_REAL *q, DERIVE_REAL *T);
+DERIVE_FN void panda_fk_panda_rightfinger(const DERIVE_REAL *q, DERIVE_REAL *T);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "panda_forward_dynamics.h"
 
-void panda_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd)
+DERIVE_FN void panda_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd)
 {
     /* 1534 ops: 831 mul, 663 add, 28 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[1]);

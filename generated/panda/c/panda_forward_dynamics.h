@@ -20,7 +20,7 @@ extern "C" {
  * out qdd [7]
  * Arrays are row-major. 1534 ops: 831 mul, 663 add, 28 div, 12 trig
  */
-void panda_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
+DERIVE_FN void panda_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "panda_gravity.h"
 
-void panda_gravity(const DERIVE_REAL *q, DERIVE_REAL *g)
+DERIVE_FN void panda_gravity(const DERIVE_REAL *q, DERIVE_REAL *g)
 {
     /* 214 ops: 120 mul, 82 add, 0 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[1]);

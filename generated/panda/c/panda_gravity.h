@@ -18,7 +18,7 @@ extern "C" {
  * out g [7]
  * Arrays are row-major. 214 ops: 120 mul, 82 add, 0 div, 12 trig
  */
-void panda_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
+DERIVE_FN void panda_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
 
 #ifdef __cplusplus
 }

@@ -8,7 +8,7 @@
 #include "derive_ik.h"
 
 /* panda_fk_jacobian_tcp in the form derive_ik_lm calls (derive_ik.h). */
-static void panda_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+static DERIVE_FN void panda_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     (void)p;
     panda_fk_jacobian_tcp(q, T, J);
@@ -19,7 +19,7 @@ static void panda_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p,
  * derive_ik_lm of derive_ik.h on this robot's limits and panda_fk_jacobian_tcp. Everything lives on the
  * stack: the limits, the work buffer and derive_ik_lm's locals.
  */
-int panda_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
+DERIVE_FN int panda_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
 {
     /* cost: the arithmetic of panda_fk_jacobian_tcp per call, plus loops */
     const DERIVE_REAL lower[7] = { DERIVE_LIT(-2.8973), DERIVE_LIT(-1.7628), DERIVE_LIT(-2.8973), DERIVE_LIT(-3.0718), DERIVE_LIT(-2.8973), DERIVE_LIT(-0.0175), DERIVE_LIT(-2.8973) };

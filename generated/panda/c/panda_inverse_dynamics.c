@@ -4,7 +4,7 @@
  */
 #include "panda_inverse_dynamics.h"
 
-void panda_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau)
+DERIVE_FN void panda_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau)
 {
     /* 810 ops: 447 mul, 351 add, 0 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_LIT(0.009213163777211224) * qdd[0];

@@ -20,7 +20,7 @@ extern "C" {
  * out tau [7]
  * Arrays are row-major. 810 ops: 447 mul, 351 add, 0 div, 12 trig
  */
-void panda_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
+DERIVE_FN void panda_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
 
 #ifdef __cplusplus
 }

@@ -18,7 +18,7 @@ extern "C" {
  * out J [6x7]
  * Arrays are row-major. 193 ops: 102 mul, 79 add, 0 div, 12 trig
  */
-void panda_jacobian_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *J);
+DERIVE_FN void panda_jacobian_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

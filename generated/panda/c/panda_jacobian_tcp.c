@@ -4,7 +4,7 @@
  */
 #include "panda_jacobian_tcp.h"
 
-void panda_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J)
+DERIVE_FN void panda_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J)
 {
     /* 193 ops: 102 mul, 79 add, 0 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[0]);

@@ -18,7 +18,7 @@ extern "C" {
  * out mu [3]
  * Arrays are row-major. cost: the arithmetic of panda_jacobian_panda_link8 per call, plus loops
  */
-void panda_manipulability_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *mu);
+DERIVE_FN void panda_manipulability_panda_link8(const DERIVE_REAL *q, DERIVE_REAL *mu);
 
 #ifdef __cplusplus
 }

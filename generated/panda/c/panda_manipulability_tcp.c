@@ -7,7 +7,7 @@
 #include "derive_linalg.h"
 #include "derive_manipulability.h"
 
-void panda_manipulability_tcp(const DERIVE_REAL *q, DERIVE_REAL *mu)
+DERIVE_FN void panda_manipulability_tcp(const DERIVE_REAL *q, DERIVE_REAL *mu)
 {
     /* cost: the arithmetic of panda_jacobian_tcp per call, plus loops */
     /* mu from the singular values of the 3x7 task rows of the Jacobian (derive_manipulability.h) */

@@ -4,7 +4,7 @@
  */
 #include "panda_mass_matrix.h"
 
-void panda_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M)
+DERIVE_FN void panda_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M)
 {
     /* 478 ops: 239 mul, 227 add, 0 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[1]);

@@ -18,7 +18,7 @@ extern "C" {
  * out M [7x7]
  * Arrays are row-major. 478 ops: 239 mul, 227 add, 0 div, 12 trig
  */
-void panda_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
+DERIVE_FN void panda_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
 
 #ifdef __cplusplus
 }

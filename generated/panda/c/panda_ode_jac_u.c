@@ -4,7 +4,7 @@
  */
 #include "panda_ode_jac_u.h"
 
-void panda_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
+DERIVE_FN void panda_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
 {
     /* 1066 ops: 527 mul, 473 add, 54 div, 12 trig */
     (void)u;

@@ -19,7 +19,7 @@ extern "C" {
  * out B [14x7]
  * Arrays are row-major. 1066 ops: 527 mul, 473 add, 54 div, 12 trig
  */
-void panda_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
+DERIVE_FN void panda_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
 
 #ifdef __cplusplus
 }

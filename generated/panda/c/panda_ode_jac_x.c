@@ -4,7 +4,7 @@
  */
 #include "panda_ode_jac_x.h"
 
-void panda_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A)
+DERIVE_FN void panda_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A)
 {
     /* 10305 ops: 5522 mul, 4652 add, 119 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(x[1]);

@@ -19,7 +19,7 @@ extern "C" {
  * out A [14x14]
  * Arrays are row-major. 10305 ops: 5522 mul, 4652 add, 119 div, 12 trig
  */
-void panda_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
+DERIVE_FN void panda_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "panda_ode_rhs.h"
 
-void panda_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot)
+DERIVE_FN void panda_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot)
 {
     /* 1534 ops: 831 mul, 663 add, 28 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(x[1]);

@@ -19,7 +19,7 @@ extern "C" {
  * out xdot [14]
  * Arrays are row-major. 1534 ops: 831 mul, 663 add, 28 div, 12 trig
  */
-void panda_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
+DERIVE_FN void panda_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
 
 #ifdef __cplusplus
 }

@@ -5,7 +5,7 @@
 #include "panda_rk4_step.h"
 #include "panda_ode_rhs.h"
 
-void panda_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next)
+DERIVE_FN void panda_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next)
 {
     /* cost: the arithmetic of panda_ode_rhs per call, plus loops */
     DERIVE_REAL k1[14], k2[14], k3[14], k4[14], xt[14];

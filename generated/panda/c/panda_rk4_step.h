@@ -20,7 +20,7 @@ extern "C" {
  * out x_next [14]
  * Arrays are row-major. cost: the arithmetic of panda_ode_rhs per call, plus loops
  */
-void panda_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next);
+DERIVE_FN void panda_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next);
 
 #ifdef __cplusplus
 }

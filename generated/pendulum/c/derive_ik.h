@@ -15,6 +15,18 @@
  * and the rest re-solved; a step is taken if E decreases (lambda / 10), else lambda * 10; an
  * attempt that stalls restarts from q drawn uniformly within the sampling box (xorshift32 with
  * a fixed seed: the restarts are the same at every call).
+ *
+ * Inputs are checked before anything else (DERIVE_IK_BAD_INPUT, q mid-range, residual not NaN):
+ * every entry of T, q0 and w finite; T a rigid transform, its rotation block R with R R^T = I
+ * entry by entry within DERIVE_IK_TOL_TARGET (1e-6; 1e-4 with DERIVE_FLOAT) and det R > 0 (so
+ * det R = +1 to within a few times that), its last row [0 0 0 1] within the same; w >= 0, not all 0.
+ *
+ * -ffast-math / -Ofast / -ffinite-math-only: supported. Those let the compiler assume that no
+ * value is NaN or infinite and delete isfinite(), isnan(), x != x and x - x == 0 (and compare
+ * a NaN as "less than" anything), which used to turn an all-NaN target into a "success". Here
+ * finiteness is read from the bits (derive_ik_finite: integer operations on the IEEE 754
+ * exponent, through a union, well defined in C99), which no floating-point option may remove,
+ * and a SUCCESS is only returned with a q and residual whose bits are finite.
  */
 #ifndef DERIVE_IK_H
 #define DERIVE_IK_H
@@ -24,7 +36,24 @@
 #ifndef DERIVE_IK_SUCCESS
 #define DERIVE_IK_SUCCESS 0       /* residual within the tolerances, q within the limits */
 #define DERIVE_IK_NOT_CONVERGED 1 /* iteration cap reached: q is the best found (unreachable target?) */
-#define DERIVE_IK_BAD_INPUT 2     /* a non-finite input, a negative weight or all weights 0: q is mid-range */
+#define DERIVE_IK_BAD_INPUT 2     /* a non-finite input, T not a rigid transform, a negative weight or all weights 0: q is mid-range */
+#endif
+
+/* Tolerance of the check that T is a rigid transform (R R^T = I, det R > 0, last row [0 0 0 1]). */
+#ifndef DERIVE_IK_TOL_TARGET
+#ifdef DERIVE_FLOAT
+#define DERIVE_IK_TOL_TARGET DERIVE_LIT(1e-4)
+#else
+#define DERIVE_IK_TOL_TARGET DERIVE_LIT(1e-6)
+#endif
+#endif
+
+/* The residual reported with DERIVE_IK_BAD_INPUT: +infinity, or under -ffinite-math-only (where
+ * infinity is off limits) a huge finite value. */
+#if defined(__FINITE_MATH_ONLY__) && __FINITE_MATH_ONLY__
+#define DERIVE_IK_NO_RESIDUAL DERIVE_LIT(1e30)
+#else
+#define DERIVE_IK_NO_RESIDUAL ((DERIVE_REAL)HUGE_VAL)
 #endif
 
 /* Reals of work derive_ik_lm needs for n joints: qc, qt, qbest, dq, g, d, held (7 n), Jc, Jt (2 x 6 n),
@@ -50,8 +79,60 @@ typedef struct {
     const DERIVE_REAL *p;              /* passed to fk_jacobian (NULL for a robot without parameters) */
 } derive_ik_problem;
 
+/*
+ * 1 if x is finite (neither NaN nor +-infinity), else 0, from its bits: an IEEE 754 binary32 or
+ * binary64 value (float, double) is not finite exactly when its exponent bits are all ones. The
+ * test is integer arithmetic on the bytes of x (read through a union of x and unsigned char[],
+ * well defined in C99), so -ffast-math and -ffinite-math-only cannot remove it as they remove
+ * isfinite() or x - x == 0. The byte order of floats is taken to be that of integers. A
+ * DERIVE_REAL of another size (long double) falls back to x - x == 0, which fast-math may remove.
+ */
+static inline DERIVE_FN int derive_ik_finite(DERIVE_REAL x)
+{
+    union { DERIVE_REAL x; unsigned char b[sizeof(DERIVE_REAL)]; } u;
+    union { unsigned short s; unsigned char b[sizeof(unsigned short)]; } order;
+    const int size = (int)sizeof(DERIVE_REAL);
+    unsigned int top;
+    if ((size != 4 && size != 8) || (unsigned char)-1 != 255U) return x - x == DERIVE_LIT(0.0);
+    u.x = x;
+    order.s = 1U;
+    /* the 16 most significant bits of x: sign, exponent, leading bits of the significand */
+    top = order.b[0] ? ((unsigned int)u.b[size - 1] << 8) | u.b[size - 2] : ((unsigned int)u.b[0] << 8) | u.b[1];
+    return size == 4 ? (top & 0x7F80U) != 0x7F80U : (top & 0x7FF0U) != 0x7FF0U;
+}
+
+/* 1 if every entry of T (4x4) is finite and T is a rigid transform within DERIVE_IK_TOL_TARGET: its
+ * rotation block R with R R^T = I entry by entry and det R > 0, its last row [0 0 0 1]. */
+static inline DERIVE_FN int derive_ik_target_ok(const DERIVE_REAL *T)
+{
+    const DERIVE_REAL tol = DERIVE_IK_TOL_TARGET;
+    DERIVE_REAL d;
+    int i, j, k;
+    for (i = 0; i < 16; ++i) {
+        if (!derive_ik_finite(T[i])) return 0;
+    }
+    for (i = 0; i < 4; ++i) {
+        if (!(DERIVE_FABS(T[12 + i] - (i == 3 ? DERIVE_LIT(1.0) : DERIVE_LIT(0.0))) <= tol)) return 0;
+    }
+    for (i = 0; i < 3; ++i) { /* |R_ij| <= 1 first: no product below can overflow */
+        for (j = 0; j < 3; ++j) {
+            if (!(DERIVE_FABS(T[4 * i + j]) <= DERIVE_LIT(1.0) + tol)) return 0;
+        }
+    }
+    for (i = 0; i < 3; ++i) { /* R R^T = I */
+        for (j = 0; j <= i; ++j) {
+            d = i == j ? DERIVE_LIT(-1.0) : DERIVE_LIT(0.0);
+            for (k = 0; k < 3; ++k) d += T[4 * i + k] * T[4 * j + k];
+            if (!(DERIVE_FABS(d) <= tol)) return 0;
+        }
+    }
+    d = T[0] * (T[5] * T[10] - T[6] * T[9]) - T[1] * (T[4] * T[10] - T[6] * T[8])
+        + T[2] * (T[4] * T[9] - T[5] * T[8]);
+    return d > DERIVE_LIT(0.0);
+}
+
 /* e (6) of the pose T (4x4) against the target Tt; returns E = 1/2 sum w_i e_i^2. */
-static inline DERIVE_REAL derive_ik_error(const DERIVE_REAL *T, const DERIVE_REAL *Tt, const DERIVE_REAL *w,
+static inline DERIVE_FN DERIVE_REAL derive_ik_error(const DERIVE_REAL *T, const DERIVE_REAL *Tt, const DERIVE_REAL *w,
                                           DERIVE_REAL *e)
 {
     DERIVE_REAL R[9], E = DERIVE_LIT(0.0);
@@ -69,7 +150,7 @@ static inline DERIVE_REAL derive_ik_error(const DERIVE_REAL *T, const DERIVE_REA
 }
 
 /* position and rotation error: norms of the weighted rows of e */
-static inline void derive_ik_norms(const DERIVE_REAL *e, const DERIVE_REAL *w, DERIVE_REAL *residual)
+static inline DERIVE_FN void derive_ik_norms(const DERIVE_REAL *e, const DERIVE_REAL *w, DERIVE_REAL *residual)
 {
     DERIVE_REAL a = DERIVE_LIT(0.0), b = DERIVE_LIT(0.0);
     int i;
@@ -88,7 +169,7 @@ static inline void derive_ik_norms(const DERIVE_REAL *e, const DERIVE_REAL *w, D
  * rotation error] of the weighted rows at the returned q, the best found.
  * Returns DERIVE_IK_SUCCESS, DERIVE_IK_NOT_CONVERGED or DERIVE_IK_BAD_INPUT.
  */
-static inline int derive_ik_lm(const int n, const derive_ik_problem *prob, DERIVE_REAL *work, const DERIVE_REAL *T,
+static inline DERIVE_FN int derive_ik_lm(const int n, const derive_ik_problem *prob, DERIVE_REAL *work, const DERIVE_REAL *T,
                                const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
 {
     const DERIVE_REAL *lower = prob->lower, *upper = prob->upper;
@@ -100,23 +181,22 @@ static inline int derive_ik_lm(const int n, const derive_ik_problem *prob, DERIV
     unsigned long seed = 2463534242UL; /* xorshift32 state: restarts are the same at every call */
     int i, j, k, it, attempt = 0, any_held, status = DERIVE_IK_NOT_CONVERGED;
 
+    /* inputs first, q0 before it is clipped (fmin and fmax drop a NaN, a limit clips an infinity) */
     for (i = 0; i < 6; ++i) wt[i] = w ? w[i] : DERIVE_LIT(1.0);
+    k = derive_ik_target_ok(T);
+    for (i = 0; i < 6; ++i) k = k && derive_ik_finite(wt[i]) && wt[i] >= DERIVE_LIT(0.0);
+    k = k && (wt[0] > DERIVE_LIT(0.0) || wt[1] > DERIVE_LIT(0.0) || wt[2] > DERIVE_LIT(0.0)
+              || wt[3] > DERIVE_LIT(0.0) || wt[4] > DERIVE_LIT(0.0) || wt[5] > DERIVE_LIT(0.0));
+    for (i = 0; k && q0 && i < n; ++i) k = derive_ik_finite(q0[i]);
+    if (!k) { /* NaN or infinity, T not a rigid transform, a negative weight, or all weights zero */
+        for (i = 0; i < n; ++i) q[i] = DERIVE_LIT(0.5) * (sample_lower[i] + sample_upper[i]);
+        residual[0] = residual[1] = DERIVE_IK_NO_RESIDUAL;
+        return DERIVE_IK_BAD_INPUT;
+    }
     for (i = 0; i < n; ++i) { /* start: q0 clipped into the limits, or mid-range */
         qc[i] = q0 ? q0[i] : DERIVE_LIT(0.5) * (sample_lower[i] + sample_upper[i]);
         qc[i] = DERIVE_FMIN(DERIVE_FMAX(qc[i], lower[i]), upper[i]);
         q[i] = qc[i];
-    }
-    for (i = 0, k = 1; i < 16; ++i) k = k && T[i] - T[i] == DERIVE_LIT(0.0);
-    for (i = 0, E = DERIVE_LIT(0.0); i < 6; ++i) {
-        k = k && wt[i] >= DERIVE_LIT(0.0) && wt[i] - wt[i] == DERIVE_LIT(0.0);
-        E += wt[i];
-    }
-    k = k && E > DERIVE_LIT(0.0);
-    for (i = 0; i < n; ++i) k = k && qc[i] - qc[i] == DERIVE_LIT(0.0);
-    if (!k) { /* NaN or infinity, a negative weight, or all weights zero */
-        for (i = 0; i < n; ++i) q[i] = DERIVE_LIT(0.5) * (sample_lower[i] + sample_upper[i]);
-        residual[0] = residual[1] = (DERIVE_REAL)HUGE_VAL;
-        return DERIVE_IK_BAD_INPUT;
     }
     prob->fk_jacobian(qc, prob->p, Tc, Jc);
     E = derive_ik_error(Tc, T, wt, ec);
@@ -209,6 +289,11 @@ static inline int derive_ik_lm(const int n, const derive_ik_problem *prob, DERIV
     }
     for (i = 0; i < n; ++i) q[i] = qbest[i];
     derive_ik_norms(ebest, wt, residual);
+    /* never a success with a NaN or infinite q or residual (compiled with -ffast-math, a NaN
+     * compares below any tolerance) */
+    k = derive_ik_finite(residual[0]) && derive_ik_finite(residual[1]);
+    for (i = 0; i < n; ++i) k = k && derive_ik_finite(q[i]);
+    if (!k) status = DERIVE_IK_NOT_CONVERGED;
     return status;
 }
 

@@ -4,7 +4,7 @@
  */
 #include "pendulum_coriolis_matrix.h"
 
-void pendulum_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C)
+DERIVE_FN void pendulum_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C)
 {
     /* 0 ops: 0 mul, 0 add, 0 div, 0 trig */
     (void)q;

@@ -4,7 +4,7 @@
  */
 #include "pendulum_fk_jacobian_tcp.h"
 
-void pendulum_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+DERIVE_FN void pendulum_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     /* 7 ops: 2 mul, 3 add, 0 div, 2 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

@@ -20,7 +20,7 @@ extern "C" {
  * out J [6]
  * Arrays are row-major. 7 ops: 2 mul, 3 add, 0 div, 2 trig
  */
-void pendulum_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
+DERIVE_FN void pendulum_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

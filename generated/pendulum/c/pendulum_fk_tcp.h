@@ -19,7 +19,7 @@ extern "C" {
  * out T [4x4]
  * Arrays are row-major. 7 ops: 2 mul, 3 add, 0 div, 2 trig
  */
-void pendulum_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
+DERIVE_FN void pendulum_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
 
 #ifdef __cplusplus
 }

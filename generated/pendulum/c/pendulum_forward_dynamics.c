@@ -4,7 +4,7 @@
  */
 #include "pendulum_forward_dynamics.h"
 
-void pendulum_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd)
+DERIVE_FN void pendulum_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd)
 {
     /* 16 ops: 8 mul, 5 add, 2 div, 1 trig */
     (void)qd;

@@ -4,7 +4,7 @@
  */
 #include "pendulum_gravity.h"
 
-void pendulum_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g)
+DERIVE_FN void pendulum_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g)
 {
     /* 7 ops: 4 mul, 1 add, 1 div, 1 trig */
     const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);

@@ -19,7 +19,7 @@ extern "C" {
  * out g [1]
  * Arrays are row-major. 7 ops: 4 mul, 1 add, 1 div, 1 trig
  */
-void pendulum_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
+DERIVE_FN void pendulum_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
 
 #ifdef __cplusplus
 }

@@ -14,7 +14,7 @@ extern "C" {
 #ifndef DERIVE_IK_SUCCESS
 #define DERIVE_IK_SUCCESS 0       /* residual within the tolerances, q within the limits */
 #define DERIVE_IK_NOT_CONVERGED 1 /* iteration cap reached: q is the best found (unreachable target?) */
-#define DERIVE_IK_BAD_INPUT 2     /* a non-finite input, a negative weight or all weights 0: q is mid-range */
+#define DERIVE_IK_BAD_INPUT 2     /* a non-finite input, T not a rigid transform, a negative weight or all weights 0: q is mid-range */
 #endif
 
 /* Caps and tolerances; define before compiling pendulum_ik_tcp.c to change them. */
@@ -46,9 +46,16 @@ extern "C" {
  * out residual [2]
  * q0 may be NULL (start mid-range), w may be NULL (all weights 1).
  * Returns DERIVE_IK_SUCCESS, DERIVE_IK_NOT_CONVERGED or DERIVE_IK_BAD_INPUT.
+ * DERIVE_IK_BAD_INPUT (q mid-range, residual +inf; 1e30 under -ffinite-math-only) when an
+ * entry of T, q0 or w is NaN or infinite, when T is not a rigid transform (R R^T = I entry by
+ * entry within DERIVE_IK_TOL_TARGET, 1e-6, or 1e-4 with DERIVE_FLOAT; det R > 0; last row
+ * [0 0 0 1] within the same), when a weight is negative or all are 0.
+ * -ffast-math / -Ofast: supported. The finiteness checks read the bits of each value
+ * (derive_ik.h), which no floating-point option removes, and SUCCESS never comes with a NaN
+ * or infinite q or residual.
  * Arrays are row-major. cost: the arithmetic of pendulum_fk_jacobian_tcp per call, plus loops
  */
-int pendulum_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, const DERIVE_REAL *p, DERIVE_REAL *q, DERIVE_REAL *residual);
+DERIVE_FN int pendulum_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, const DERIVE_REAL *p, DERIVE_REAL *q, DERIVE_REAL *residual);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "pendulum_inverse_dynamics.h"
 
-void pendulum_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau)
+DERIVE_FN void pendulum_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau)
 {
     /* 16 ops: 9 mul, 5 add, 1 div, 1 trig */
     (void)qd;

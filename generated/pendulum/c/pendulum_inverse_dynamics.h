@@ -21,7 +21,7 @@ extern "C" {
  * out tau [1]
  * Arrays are row-major. 16 ops: 9 mul, 5 add, 1 div, 1 trig
  */
-void pendulum_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
+DERIVE_FN void pendulum_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
 
 #ifdef __cplusplus
 }

@@ -19,7 +19,7 @@ extern "C" {
  * out J [6]
  * Arrays are row-major. 5 ops: 2 mul, 1 add, 0 div, 2 trig
  */
-void pendulum_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J);
+DERIVE_FN void pendulum_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "pendulum_mass_matrix.h"
 
-void pendulum_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M)
+DERIVE_FN void pendulum_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M)
 {
     /* 8 ops: 4 mul, 3 add, 1 div, 0 trig */
     (void)q;

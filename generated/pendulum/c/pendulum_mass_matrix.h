@@ -19,7 +19,7 @@ extern "C" {
  * out M [1]
  * Arrays are row-major. 8 ops: 4 mul, 3 add, 1 div, 0 trig
  */
-void pendulum_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
+DERIVE_FN void pendulum_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
 
 #ifdef __cplusplus
 }

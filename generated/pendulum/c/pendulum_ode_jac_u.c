@@ -4,7 +4,7 @@
  */
 #include "pendulum_ode_jac_u.h"
 
-void pendulum_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B)
+DERIVE_FN void pendulum_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B)
 {
     /* 9 ops: 4 mul, 3 add, 2 div, 0 trig */
     (void)x;

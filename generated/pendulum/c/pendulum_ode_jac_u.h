@@ -20,7 +20,7 @@ extern "C" {
  * out B [2]
  * Arrays are row-major. 9 ops: 4 mul, 3 add, 2 div, 0 trig
  */
-void pendulum_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
+DERIVE_FN void pendulum_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
 
 #ifdef __cplusplus
 }

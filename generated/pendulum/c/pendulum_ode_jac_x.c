@@ -4,7 +4,7 @@
  */
 #include "pendulum_ode_jac_x.h"
 
-void pendulum_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A)
+DERIVE_FN void pendulum_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A)
 {
     /* 16 ops: 8 mul, 5 add, 2 div, 1 trig */
     (void)u;

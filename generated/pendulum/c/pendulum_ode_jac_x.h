@@ -20,7 +20,7 @@ extern "C" {
  * out A [2x2]
  * Arrays are row-major. 16 ops: 8 mul, 5 add, 2 div, 1 trig
  */
-void pendulum_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
+DERIVE_FN void pendulum_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "pendulum_ode_rhs.h"
 
-void pendulum_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot)
+DERIVE_FN void pendulum_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot)
 {
     /* 16 ops: 8 mul, 5 add, 2 div, 1 trig */
     const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);

@@ -20,7 +20,7 @@ extern "C" {
  * out xdot [2]
  * Arrays are row-major. 16 ops: 8 mul, 5 add, 2 div, 1 trig
  */
-void pendulum_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
+DERIVE_FN void pendulum_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
 
 #ifdef __cplusplus
 }

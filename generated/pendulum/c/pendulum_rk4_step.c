@@ -5,7 +5,7 @@
 #include "pendulum_rk4_step.h"
 #include "pendulum_ode_rhs.h"
 
-void pendulum_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, const DERIVE_REAL *p, DERIVE_REAL *x_next)
+DERIVE_FN void pendulum_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, const DERIVE_REAL *p, DERIVE_REAL *x_next)
 {
     /* cost: the arithmetic of pendulum_ode_rhs per call, plus loops */
     DERIVE_REAL k1[2], k2[2], k3[2], k4[2], xt[2];

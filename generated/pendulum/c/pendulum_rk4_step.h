@@ -21,7 +21,7 @@ extern "C" {
  * out x_next [2]
  * Arrays are row-major. cost: the arithmetic of pendulum_ode_rhs per call, plus loops
  */
-void pendulum_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, const DERIVE_REAL *p, DERIVE_REAL *x_next);
+DERIVE_FN void pendulum_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, const DERIVE_REAL *p, DERIVE_REAL *x_next);
 
 #ifdef __cplusplus
 }

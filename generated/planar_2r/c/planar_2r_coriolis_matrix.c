@@ -4,7 +4,7 @@
  */
 #include "planar_2r_coriolis_matrix.h"
 
-void planar_2r_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C)
+DERIVE_FN void planar_2r_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C)
 {
     /* 11 ops: 5 mul, 4 add, 1 div, 1 trig */
     const DERIVE_REAL t0 = p[1] / DERIVE_LIT(2.0);

@@ -20,7 +20,7 @@ extern "C" {
  * out C [2x2]
  * Arrays are row-major. 11 ops: 5 mul, 4 add, 1 div, 1 trig
  */
-void planar_2r_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
+DERIVE_FN void planar_2r_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
 
 #ifdef __cplusplus
 }

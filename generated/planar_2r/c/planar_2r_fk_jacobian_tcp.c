@@ -4,7 +4,7 @@
  */
 #include "planar_2r_fk_jacobian_tcp.h"
 
-void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+DERIVE_FN void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     /* 20 ops: 8 mul, 8 add, 0 div, 4 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

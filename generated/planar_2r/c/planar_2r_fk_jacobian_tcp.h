@@ -20,7 +20,7 @@ extern "C" {
  * out J [6x2]
  * Arrays are row-major. 20 ops: 8 mul, 8 add, 0 div, 4 trig
  */
-void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
+DERIVE_FN void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "planar_2r_fk_tcp.h"
 
-void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T)
+DERIVE_FN void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T)
 {
     /* 18 ops: 8 mul, 6 add, 0 div, 4 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

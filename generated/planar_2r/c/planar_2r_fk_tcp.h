@@ -19,7 +19,7 @@ extern "C" {
  * out T [4x4]
  * Arrays are row-major. 18 ops: 8 mul, 6 add, 0 div, 4 trig
  */
-void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
+DERIVE_FN void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
 
 #ifdef __cplusplus
 }

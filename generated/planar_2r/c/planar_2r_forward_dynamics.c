@@ -4,7 +4,7 @@
  */
 #include "planar_2r_forward_dynamics.h"
 
-void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd)
+DERIVE_FN void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd)
 {
     /* 67 ops: 35 mul, 21 add, 7 div, 4 trig */
     const DERIVE_REAL t0 = p[0] / DERIVE_LIT(2.0);

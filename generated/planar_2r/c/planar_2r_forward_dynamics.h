@@ -21,7 +21,7 @@ extern "C" {
  * out qdd [2]
  * Arrays are row-major. 67 ops: 35 mul, 21 add, 7 div, 4 trig
  */
-void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
+DERIVE_FN void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "planar_2r_gravity.h"
 
-void planar_2r_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g)
+DERIVE_FN void planar_2r_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g)
 {
     /* 28 ops: 15 mul, 7 add, 2 div, 4 trig */
     const DERIVE_REAL t0 = p[0] / DERIVE_LIT(2.0);

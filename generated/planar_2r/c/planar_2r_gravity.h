@@ -19,7 +19,7 @@ extern "C" {
  * out g [2]
  * Arrays are row-major. 28 ops: 15 mul, 7 add, 2 div, 4 trig
  */
-void planar_2r_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
+DERIVE_FN void planar_2r_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
 
 #ifdef __cplusplus
 }

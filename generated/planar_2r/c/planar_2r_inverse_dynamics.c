@@ -4,7 +4,7 @@
  */
 #include "planar_2r_inverse_dynamics.h"
 
-void planar_2r_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau)
+DERIVE_FN void planar_2r_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau)
 {
     /* 56 ops: 31 mul, 17 add, 4 div, 4 trig */
     const DERIVE_REAL t0 = p[0] * p[0];

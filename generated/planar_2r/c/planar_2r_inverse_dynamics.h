@@ -21,7 +21,7 @@ extern "C" {
  * out tau [2]
  * Arrays are row-major. 56 ops: 31 mul, 17 add, 4 div, 4 trig
  */
-void planar_2r_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
+DERIVE_FN void planar_2r_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "planar_2r_jacobian_tcp.h"
 
-void planar_2r_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J)
+DERIVE_FN void planar_2r_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J)
 {
     /* 18 ops: 8 mul, 6 add, 0 div, 4 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[0]);

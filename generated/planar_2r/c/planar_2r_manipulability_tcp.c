@@ -7,7 +7,7 @@
 #include "derive_linalg.h"
 #include "derive_manipulability.h"
 
-void planar_2r_manipulability_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *mu)
+DERIVE_FN void planar_2r_manipulability_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *mu)
 {
     /* cost: the arithmetic of planar_2r_jacobian_tcp per call, plus loops */
     /* mu from the singular values of the 2x2 task rows of the Jacobian (derive_manipulability.h) */

@@ -4,7 +4,7 @@
  */
 #include "planar_2r_mass_matrix.h"
 
-void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M)
+DERIVE_FN void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M)
 {
     /* 26 ops: 13 mul, 8 add, 4 div, 1 trig */
     const DERIVE_REAL t0 = p[0] * p[0];

@@ -19,7 +19,7 @@ extern "C" {
  * out M [2x2]
  * Arrays are row-major. 26 ops: 13 mul, 8 add, 4 div, 1 trig
  */
-void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
+DERIVE_FN void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "planar_2r_ode_jac_u.h"
 
-void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B)
+DERIVE_FN void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B)
 {
     /* 36 ops: 16 mul, 11 add, 8 div, 1 trig */
     (void)u;

@@ -20,7 +20,7 @@ extern "C" {
  * out B [4x2]
  * Arrays are row-major. 36 ops: 16 mul, 11 add, 8 div, 1 trig
  */
-void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
+DERIVE_FN void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "planar_2r_ode_jac_x.h"
 
-void planar_2r_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A)
+DERIVE_FN void planar_2r_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A)
 {
     /* 158 ops: 84 mul, 55 add, 15 div, 4 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(x[1]);

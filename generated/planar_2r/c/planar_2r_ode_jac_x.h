@@ -20,7 +20,7 @@ extern "C" {
  * out A [4x4]
  * Arrays are row-major. 158 ops: 84 mul, 55 add, 15 div, 4 trig
  */
-void planar_2r_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
+DERIVE_FN void planar_2r_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
 
 #ifdef __cplusplus
 }

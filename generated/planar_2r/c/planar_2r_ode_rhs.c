@@ -4,7 +4,7 @@
  */
 #include "planar_2r_ode_rhs.h"
 
-void planar_2r_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot)
+DERIVE_FN void planar_2r_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot)
 {
     /* 67 ops: 35 mul, 21 add, 7 div, 4 trig */
     const DERIVE_REAL t0 = p[0] / DERIVE_LIT(2.0);

@@ -20,7 +20,7 @@ extern "C" {
  * out xdot [4]
  * Arrays are row-major. 67 ops: 35 mul, 21 add, 7 div, 4 trig
  */
-void planar_2r_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
+DERIVE_FN void planar_2r_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
 
 #ifdef __cplusplus
 }

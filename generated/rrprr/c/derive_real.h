@@ -10,6 +10,19 @@
 
 #include <math.h>
 
+/*
+ * DERIVE_FN qualifies every generated function: empty in C; __host__ __device__ under nvcc, so
+ * the same files compile into CUDA kernels (nvcc -x cu -rdc=true, see examples/cuda/). Define
+ * it before including to override.
+ */
+#ifndef DERIVE_FN
+#ifdef __CUDACC__
+#define DERIVE_FN __host__ __device__
+#else
+#define DERIVE_FN
+#endif
+#endif
+
 #ifdef DERIVE_FLOAT
 #define DERIVE_REAL float
 #define DERIVE_LIT(x) x##f

@@ -4,7 +4,7 @@
  */
 #include "rrprr_coriolis_matrix.h"
 
-void rrprr_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C)
+DERIVE_FN void rrprr_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C)
 {
     /* 298 ops: 176 mul, 116 add, 0 div, 6 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[3]);

@@ -20,7 +20,7 @@ extern "C" {
  * out C [5x5]
  * Arrays are row-major. 298 ops: 176 mul, 116 add, 0 div, 6 trig
  */
-void rrprr_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
+DERIVE_FN void rrprr_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "rrprr_fk_jacobian_tcp.h"
 
-void rrprr_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+DERIVE_FN void rrprr_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     /* 91 ops: 52 mul, 31 add, 0 div, 8 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[2]);

@@ -20,7 +20,7 @@ extern "C" {
  * out J [6x5]
  * Arrays are row-major. 91 ops: 52 mul, 31 add, 0 div, 8 trig
  */
-void rrprr_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
+DERIVE_FN void rrprr_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

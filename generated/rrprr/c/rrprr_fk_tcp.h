@@ -19,7 +19,7 @@ extern "C" {
  * out T [4x4]
  * Arrays are row-major. 62 ops: 36 mul, 18 add, 0 div, 8 trig
  */
-void rrprr_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
+DERIVE_FN void rrprr_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "rrprr_forward_dynamics.h"
 
-void rrprr_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd)
+DERIVE_FN void rrprr_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd)
 {
     /* 446 ops: 253 mul, 170 add, 15 div, 8 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

@@ -21,7 +21,7 @@ extern "C" {
  * out qdd [5]
  * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
  */
-void rrprr_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
+DERIVE_FN void rrprr_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "rrprr_gravity.h"
 
-void rrprr_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g)
+DERIVE_FN void rrprr_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g)
 {
     /* 91 ops: 52 mul, 31 add, 0 div, 8 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

@@ -19,7 +19,7 @@ extern "C" {
  * out g [5]
  * Arrays are row-major. 91 ops: 52 mul, 31 add, 0 div, 8 trig
  */
-void rrprr_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
+DERIVE_FN void rrprr_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g);
 
 #ifdef __cplusplus
 }

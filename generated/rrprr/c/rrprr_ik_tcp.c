@@ -8,7 +8,7 @@
 #include "derive_ik.h"
 
 /* rrprr_fk_jacobian_tcp in the form derive_ik_lm calls (derive_ik.h). */
-static void rrprr_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+static DERIVE_FN void rrprr_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     rrprr_fk_jacobian_tcp(q, p, T, J);
 }
@@ -18,7 +18,7 @@ static void rrprr_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p,
  * derive_ik_lm of derive_ik.h on this robot's limits and rrprr_fk_jacobian_tcp. Everything lives on the
  * stack: the limits, the work buffer and derive_ik_lm's locals.
  */
-int rrprr_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, const DERIVE_REAL *p, DERIVE_REAL *q, DERIVE_REAL *residual)
+DERIVE_FN int rrprr_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, const DERIVE_REAL *p, DERIVE_REAL *q, DERIVE_REAL *residual)
 {
     /* cost: the arithmetic of rrprr_fk_jacobian_tcp per call, plus loops */
     const DERIVE_REAL lower[5] = { DERIVE_LIT(-3.14), DERIVE_LIT(0.0), DERIVE_LIT(-3.14), DERIVE_LIT(-3.14), DERIVE_LIT(-3.14) };

@@ -4,7 +4,7 @@
  */
 #include "rrprr_inverse_dynamics.h"
 
-void rrprr_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau)
+DERIVE_FN void rrprr_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau)
 {
     /* 274 ops: 157 mul, 109 add, 0 div, 8 trig */
     const DERIVE_REAL t0 = DERIVE_LIT(0.020000000000000004) * qdd[0];

@@ -21,7 +21,7 @@ extern "C" {
  * out tau [5]
  * Arrays are row-major. 274 ops: 157 mul, 109 add, 0 div, 8 trig
  */
-void rrprr_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
+DERIVE_FN void rrprr_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *tau);
 
 #ifdef __cplusplus
 }

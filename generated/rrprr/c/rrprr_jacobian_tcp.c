@@ -4,7 +4,7 @@
  */
 #include "rrprr_jacobian_tcp.h"
 
-void rrprr_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J)
+DERIVE_FN void rrprr_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J)
 {
     /* 63 ops: 35 mul, 22 add, 0 div, 6 trig */
     const DERIVE_REAL t0 = DERIVE_SIN(q[0]);

@@ -19,7 +19,7 @@ extern "C" {
  * out J [6x5]
  * Arrays are row-major. 63 ops: 35 mul, 22 add, 0 div, 6 trig
  */
-void rrprr_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J);
+DERIVE_FN void rrprr_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

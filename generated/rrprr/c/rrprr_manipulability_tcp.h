@@ -19,7 +19,7 @@ extern "C" {
  * out mu [3]
  * Arrays are row-major. cost: the arithmetic of rrprr_jacobian_tcp per call, plus loops
  */
-void rrprr_manipulability_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *mu);
+DERIVE_FN void rrprr_manipulability_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *mu);
 
 #ifdef __cplusplus
 }

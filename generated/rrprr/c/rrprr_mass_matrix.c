@@ -4,7 +4,7 @@
  */
 #include "rrprr_mass_matrix.h"
 
-void rrprr_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M)
+DERIVE_FN void rrprr_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M)
 {
     /* 88 ops: 46 mul, 36 add, 0 div, 6 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[2]);

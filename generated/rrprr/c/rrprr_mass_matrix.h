@@ -19,7 +19,7 @@ extern "C" {
  * out M [5x5]
  * Arrays are row-major. 88 ops: 46 mul, 36 add, 0 div, 6 trig
  */
-void rrprr_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
+DERIVE_FN void rrprr_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
 
 #ifdef __cplusplus
 }

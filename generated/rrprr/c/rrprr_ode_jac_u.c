@@ -4,7 +4,7 @@
  */
 #include "rrprr_ode_jac_u.h"
 
-void rrprr_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B)
+DERIVE_FN void rrprr_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B)
 {
     /* 291 ops: 142 mul, 115 add, 28 div, 6 trig */
     (void)u;

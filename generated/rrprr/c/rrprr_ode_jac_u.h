@@ -20,7 +20,7 @@ extern "C" {
  * out B [10x5]
  * Arrays are row-major. 291 ops: 142 mul, 115 add, 28 div, 6 trig
  */
-void rrprr_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
+DERIVE_FN void rrprr_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "rrprr_ode_jac_x.h"
 
-void rrprr_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A)
+DERIVE_FN void rrprr_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A)
 {
     /* 2457 ops: 1348 mul, 1036 add, 65 div, 8 trig */
     const DERIVE_REAL t0 = DERIVE_COS(x[2]);

@@ -20,7 +20,7 @@ extern "C" {
  * out A [10x10]
  * Arrays are row-major. 2457 ops: 1348 mul, 1036 add, 65 div, 8 trig
  */
-void rrprr_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
+DERIVE_FN void rrprr_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
 
 #ifdef __cplusplus
 }

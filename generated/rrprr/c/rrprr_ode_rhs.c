@@ -4,7 +4,7 @@
  */
 #include "rrprr_ode_rhs.h"
 
-void rrprr_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot)
+DERIVE_FN void rrprr_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot)
 {
     /* 446 ops: 253 mul, 170 add, 15 div, 8 trig */
     const DERIVE_REAL t0 = DERIVE_COS(x[0]);

@@ -20,7 +20,7 @@ extern "C" {
  * out xdot [10]
  * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
  */
-void rrprr_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
+DERIVE_FN void rrprr_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
 
 #ifdef __cplusplus
 }

@@ -5,7 +5,7 @@
 #include "rrprr_rk4_step.h"
 #include "rrprr_ode_rhs.h"
 
-void rrprr_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, const DERIVE_REAL *p, DERIVE_REAL *x_next)
+DERIVE_FN void rrprr_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, const DERIVE_REAL *p, DERIVE_REAL *x_next)
 {
     /* cost: the arithmetic of rrprr_ode_rhs per call, plus loops */
     DERIVE_REAL k1[10], k2[10], k3[10], k4[10], xt[10];

@@ -4,7 +4,7 @@
  */
 #include "ur5_coriolis_matrix.h"
 
-void ur5_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C)
+DERIVE_FN void ur5_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C)
 {
     /* 1007 ops: 551 mul, 446 add, 0 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

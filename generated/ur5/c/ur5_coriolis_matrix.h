@@ -19,7 +19,7 @@ extern "C" {
  * out C [6x6]
  * Arrays are row-major. 1007 ops: 551 mul, 446 add, 0 div, 10 trig
  */
-void ur5_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
+DERIVE_FN void ur5_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C);
 
 #ifdef __cplusplus
 }

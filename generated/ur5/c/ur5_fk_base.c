@@ -4,7 +4,7 @@
  */
 #include "ur5_fk_base.h"
 
-void ur5_fk_base(const DERIVE_REAL *q, DERIVE_REAL *T)
+DERIVE_FN void ur5_fk_base(const DERIVE_REAL *q, DERIVE_REAL *T)
 {
     /* 0 ops: 0 mul, 0 add, 0 div, 0 trig */
     (void)q;

@@ -18,7 +18,7 @@ extern "C" {
  * out T [4x4]
  * Arrays are row-major. 0 ops: 0 mul, 0 add, 0 div, 0 trig
  */
-void ur5_fk_base_link(const DERIVE_REAL *q, DERIVE_REAL *T);
+DERIVE_FN void ur5_fk_base_link(const DERIVE_REAL *q, DERIVE_REAL *T);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "ur5_fk_ee_link.h"
 
-void ur5_fk_ee_link(const DERIVE_REAL *q, DERIVE_REAL *T)
+DERIVE_FN void ur5_fk_ee_link(const DERIVE_REAL *q, DERIVE_REAL *T)
 {
     /* 123 ops: 68 mul, 43 add, 0 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

@@ -18,7 +18,7 @@ extern "C" {
  * out T [4x4]
  * Arrays are row-major. 123 ops: 68 mul, 43 add, 0 div, 12 trig
  */
-void ur5_fk_ee_link(const DERIVE_REAL *q, DERIVE_REAL *T);
+DERIVE_FN void ur5_fk_ee_link(const DERIVE_REAL *q, DERIVE_REAL *T);
 
 #ifdef __cplusplus
 }

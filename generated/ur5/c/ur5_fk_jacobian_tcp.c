@@ -4,7 +4,7 @@
  */
 #include "ur5_fk_jacobian_tcp.h"
 
-void ur5_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J)
+DERIVE_FN void ur5_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     /* 178 ops: 92 mul, 74 add, 0 div, 12 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

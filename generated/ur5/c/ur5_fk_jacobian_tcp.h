@@ -19,7 +19,7 @@ extern "C" {
  * out J [6x6]
  * Arrays are row-major. 178 ops: 92 mul, 74 add, 0 div, 12 trig
  */
-void ur5_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J);
+DERIVE_FN void ur5_fk_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *T, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

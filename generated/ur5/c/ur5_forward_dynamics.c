@@ -4,7 +4,7 @@
  */
 #include "ur5_forward_dynamics.h"
 
-void ur5_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd)
+DERIVE_FN void ur5_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd)
 {
     /* 802 ops: 446 mul, 325 add, 21 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

@@ -20,7 +20,7 @@ extern "C" {
  * out qdd [6]
  * Arrays are row-major. 802 ops: 446 mul, 325 add, 21 div, 10 trig
  */
-void ur5_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
+DERIVE_FN void ur5_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "ur5_gravity.h"
 
-void ur5_gravity(const DERIVE_REAL *q, DERIVE_REAL *g)
+DERIVE_FN void ur5_gravity(const DERIVE_REAL *q, DERIVE_REAL *g)
 {
     /* 124 ops: 72 mul, 42 add, 0 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

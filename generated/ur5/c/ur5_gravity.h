@@ -18,7 +18,7 @@ extern "C" {
  * out g [6]
  * Arrays are row-major. 124 ops: 72 mul, 42 add, 0 div, 10 trig
  */
-void ur5_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
+DERIVE_FN void ur5_gravity(const DERIVE_REAL *q, DERIVE_REAL *g);
 
 #ifdef __cplusplus
 }

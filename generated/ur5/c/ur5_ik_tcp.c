@@ -8,7 +8,7 @@
 #include "derive_ik.h"
 
 /* ur5_fk_jacobian_tcp in the form derive_ik_lm calls (derive_ik.h). */
-static void ur5_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
+static DERIVE_FN void ur5_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
     (void)p;
     ur5_fk_jacobian_tcp(q, T, J);
@@ -19,7 +19,7 @@ static void ur5_ik_tcp_fk_jacobian(const DERIVE_REAL *q, const DERIVE_REAL *p, D
  * derive_ik_lm of derive_ik.h on this robot's limits and ur5_fk_jacobian_tcp. Everything lives on the
  * stack: the limits, the work buffer and derive_ik_lm's locals.
  */
-int ur5_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
+DERIVE_FN int ur5_ik_tcp(const DERIVE_REAL *T, const DERIVE_REAL *q0, const DERIVE_REAL *w, DERIVE_REAL *q, DERIVE_REAL *residual)
 {
     /* cost: the arithmetic of ur5_fk_jacobian_tcp per call, plus loops */
     const DERIVE_REAL lower[6] = { DERIVE_LIT(-6.28318530718), DERIVE_LIT(-6.28318530718), DERIVE_LIT(-3.14159265359), DERIVE_LIT(-6.28318530718), DERIVE_LIT(-6.28318530718), DERIVE_LIT(-6.28318530718) };

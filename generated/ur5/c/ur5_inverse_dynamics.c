@@ -4,7 +4,7 @@
  */
 #include "ur5_inverse_dynamics.h"
 
-void ur5_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau)
+DERIVE_FN void ur5_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau)
 {
     /* 427 ops: 247 mul, 170 add, 0 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_LIT(0.00666) * qdd[0];

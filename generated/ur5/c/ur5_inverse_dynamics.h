@@ -20,7 +20,7 @@ extern "C" {
  * out tau [6]
  * Arrays are row-major. 427 ops: 247 mul, 170 add, 0 div, 10 trig
  */
-void ur5_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
+DERIVE_FN void ur5_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau);
 
 #ifdef __cplusplus
 }

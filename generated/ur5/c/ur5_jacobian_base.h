@@ -18,7 +18,7 @@ extern "C" {
  * out J [6x6]
  * Arrays are row-major. 0 ops: 0 mul, 0 add, 0 div, 0 trig
  */
-void ur5_jacobian_base(const DERIVE_REAL *q, DERIVE_REAL *J);
+DERIVE_FN void ur5_jacobian_base(const DERIVE_REAL *q, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "ur5_jacobian_base_link.h"
 
-void ur5_jacobian_base_link(const DERIVE_REAL *q, DERIVE_REAL *J)
+DERIVE_FN void ur5_jacobian_base_link(const DERIVE_REAL *q, DERIVE_REAL *J)
 {
     /* 0 ops: 0 mul, 0 add, 0 div, 0 trig */
     (void)q;

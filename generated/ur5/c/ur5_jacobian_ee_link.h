@@ -18,7 +18,7 @@ extern "C" {
  * out J [6x6]
  * Arrays are row-major. 148 ops: 75 mul, 63 add, 0 div, 10 trig
  */
-void ur5_jacobian_ee_link(const DERIVE_REAL *q, DERIVE_REAL *J);
+DERIVE_FN void ur5_jacobian_ee_link(const DERIVE_REAL *q, DERIVE_REAL *J);
 
 #ifdef __cplusplus
 }

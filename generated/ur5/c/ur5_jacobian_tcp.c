@@ -4,7 +4,7 @@
  */
 #include "ur5_jacobian_tcp.h"
 
-void ur5_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J)
+DERIVE_FN void ur5_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J)
 {
     /* 148 ops: 75 mul, 63 add, 0 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[0]);

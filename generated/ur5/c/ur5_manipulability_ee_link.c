@@ -7,7 +7,7 @@
 #include "derive_linalg.h"
 #include "derive_manipulability.h"
 
-void ur5_manipulability_ee_link(const DERIVE_REAL *q, DERIVE_REAL *mu)
+DERIVE_FN void ur5_manipulability_ee_link(const DERIVE_REAL *q, DERIVE_REAL *mu)
 {
     /* cost: the arithmetic of ur5_jacobian_ee_link per call, plus loops */
     /* mu from the singular values of the 3x6 task rows of the Jacobian (derive_manipulability.h) */

@@ -18,7 +18,7 @@ extern "C" {
  * out mu [3]
  * Arrays are row-major. cost: the arithmetic of ur5_jacobian_ee_link per call, plus loops
  */
-void ur5_manipulability_ee_link(const DERIVE_REAL *q, DERIVE_REAL *mu);
+DERIVE_FN void ur5_manipulability_ee_link(const DERIVE_REAL *q, DERIVE_REAL *mu);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "ur5_mass_matrix.h"
 
-void ur5_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M)
+DERIVE_FN void ur5_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M)
 {
     /* 231 ops: 115 mul, 106 add, 0 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_COS(q[1]);

@@ -18,7 +18,7 @@ extern "C" {
  * out M [6x6]
  * Arrays are row-major. 231 ops: 115 mul, 106 add, 0 div, 10 trig
  */
-void ur5_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
+DERIVE_FN void ur5_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
 
 #ifdef __cplusplus
 }

@@ -4,7 +4,7 @@
  */
 #include "ur5_ode_jac_u.h"
 
-void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
+DERIVE_FN void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B)
 {
     /* 597 ops: 290 mul, 257 add, 40 div, 10 trig */
     (void)u;

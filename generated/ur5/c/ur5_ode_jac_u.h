@@ -19,7 +19,7 @@ extern "C" {
  * out B [12x6]
  * Arrays are row-major. 597 ops: 290 mul, 257 add, 40 div, 10 trig
  */
-void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
+DERIVE_FN void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
 
 #ifdef __cplusplus
 }

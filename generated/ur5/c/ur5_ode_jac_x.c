@@ -4,7 +4,7 @@
  */
 #include "ur5_ode_jac_x.h"
 
-void ur5_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A)
+DERIVE_FN void ur5_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A)
 {
     /* 4266 ops: 2324 mul, 1845 add, 87 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_COS(x[1]);

@@ -19,7 +19,7 @@ extern "C" {
  * out A [12x12]
  * Arrays are row-major. 4266 ops: 2324 mul, 1845 add, 87 div, 10 trig
  */
-void ur5_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
+DERIVE_FN void ur5_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A);
 
 #ifdef __cplusplus
 }

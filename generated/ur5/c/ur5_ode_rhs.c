@@ -4,7 +4,7 @@
  */
 #include "ur5_ode_rhs.h"
 
-void ur5_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot)
+DERIVE_FN void ur5_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot)
 {
     /* 802 ops: 446 mul, 325 add, 21 div, 10 trig */
     const DERIVE_REAL t0 = DERIVE_COS(x[1]);

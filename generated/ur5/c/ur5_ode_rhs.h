@@ -19,7 +19,7 @@ extern "C" {
  * out xdot [12]
  * Arrays are row-major. 802 ops: 446 mul, 325 add, 21 div, 10 trig
  */
-void ur5_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
+DERIVE_FN void ur5_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot);
 
 #ifdef __cplusplus
 }

@@ -5,7 +5,7 @@
 #include "ur5_rk4_step.h"
 #include "ur5_ode_rhs.h"
 
-void ur5_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next)
+DERIVE_FN void ur5_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next)
 {
     /* cost: the arithmetic of ur5_ode_rhs per call, plus loops */
     DERIVE_REAL k1[12], k2[12], k3[12], k4[12], xt[12];

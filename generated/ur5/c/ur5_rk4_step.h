@@ -20,7 +20,7 @@ extern "C" {
  * out x_next [12]
  * Arrays are row-major. cost: the arithmetic of ur5_ode_rhs per call, plus loops
  */
-void ur5_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next);
+DERIVE_FN void ur5_rk4_step(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *dt, DERIVE_REAL *x_next);
 
 #ifdef __cplusplus
 }

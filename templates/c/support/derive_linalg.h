@@ -16,7 +16,7 @@
  * triangle becomes L (unit diagonal implied) and its diagonal D; b becomes x.
  * Returns 0 (A and b partly overwritten) if a pivot is not positive, else 1.
  */
-static inline int derive_ldlt_solve(int n, DERIVE_REAL *A, DERIVE_REAL *b)
+static inline DERIVE_FN int derive_ldlt_solve(int n, DERIVE_REAL *A, DERIVE_REAL *b)
 {
     int i, j, k;
     for (j = 0; j < n; ++j) {
@@ -45,7 +45,7 @@ static inline int derive_ldlt_solve(int n, DERIVE_REAL *A, DERIVE_REAL *b)
  * the angle from atan2(sin, cos) (exact near 0 and pi); near pi the axis comes from the
  * largest column of (R + I) / 2.
  */
-static inline void derive_so3_log(const DERIVE_REAL *R, DERIVE_REAL *w)
+static inline DERIVE_FN void derive_so3_log(const DERIVE_REAL *R, DERIVE_REAL *w)
 {
     DERIVE_REAL v[3], c, s;
     int i, k;
@@ -73,7 +73,7 @@ static inline void derive_so3_log(const DERIVE_REAL *R, DERIVE_REAL *w)
  * (Hestenes): rotate pairs of rows of B (overwritten) until all are orthogonal; the row norms
  * are then the s_i = sqrt(l_i), l_i the eigenvalues of B B^T, with high relative accuracy.
  */
-static inline void derive_singular_values(int k, int n, DERIVE_REAL *B, DERIVE_REAL *s)
+static inline DERIVE_FN void derive_singular_values(int k, int n, DERIVE_REAL *B, DERIVE_REAL *s)
 {
 #ifdef DERIVE_FLOAT
     const DERIVE_REAL tol = DERIVE_LIT(1e-7);

@@ -1,6 +1,7 @@
 # Levenberg-Marquardt inverse kinematics over n joints (as derive.ik, method "lm", and the C
 # derive_ik.h): the same in every generated module, which passes its limits, caps and
-# fk_jacobian. Copied verbatim after the module's imports (math, numpy as np).
+# fk_jacobian. Copied verbatim after the module's imports (math, numpy as np). The one generated
+# function that loops over a batch in Python (_ik_batch): the solver iterates per state.
 
 
 def _so3_log(R):
@@ -17,17 +18,34 @@ def _so3_log(R):
     return math.pi * col / math.sqrt(max(0.5 * (R[k, k] + 1.0), 1e-30))
 
 
+_IK_TOL_TARGET = 1e-6
+"""T is a rigid transform: R R^T = I entry by entry and its last row [0 0 0 1] within this, det R > 0."""
+
+
+def _ik_target_ok(T):
+    """T (4x4) finite and a rigid transform within _IK_TOL_TARGET (as derive_ik_target_ok in C)."""
+    if not np.isfinite(T).all():
+        return False
+    R = T[:3, :3]
+    return bool(np.abs(T[3] - [0.0, 0.0, 0.0, 1.0]).max() <= _IK_TOL_TARGET and np.abs(R).max() <= 1.0 + _IK_TOL_TARGET
+                and np.abs(R @ R.T - np.eye(3)).max() <= _IK_TOL_TARGET and np.linalg.det(R) > 0.0)
+
+
 def _ik_lm(fk_jacobian, T, q0, w, *, lower, upper, sample_lower, sample_upper, max_iterations, attempt,
            tol_position, tol_rotation, lambda0, lambda_min, lambda_stall):
     """(q, residual, status) with fk_jacobian(q) = (world_T_frame (4x4), J) reaching T: status 0
-    solved, 1 not converged (q the best found), 2 bad input (q mid-range)."""
+    solved, 1 not converged (q the best found), 2 bad input (q mid-range, residual inf): an entry
+    of T, q0 or w not finite, T not a rigid transform (_ik_target_ok), a weight < 0 or all 0."""
     n = lower.size
     mid = 0.5 * (sample_lower + sample_upper)
     T = np.asarray(T, dtype=float).reshape(4, 4)
     w = np.ones(6) if w is None else np.asarray(w, dtype=float).reshape(6)
-    qc = mid if q0 is None else np.clip(np.asarray(q0, dtype=float).reshape(n), lower, upper)
-    if not (np.isfinite(T).all() and np.isfinite(w).all() and (w >= 0).all() and w.sum() > 0 and np.isfinite(qc).all()):
+    q0 = None if q0 is None else np.asarray(q0, dtype=float).reshape(n)
+    # q0 checked before it is clipped: a limit would clip an infinity to a finite value
+    if not (_ik_target_ok(T) and np.isfinite(w).all() and (w >= 0).all() and (w > 0).any()
+            and (q0 is None or np.isfinite(q0).all())):
         return mid, np.full(2, np.inf), 2
+    qc = mid if q0 is None else np.clip(q0, lower, upper)
 
     def error(Tq):
         e = np.concatenate([T[:3, 3] - Tq[:3, 3], _so3_log(T[:3, :3] @ Tq[:3, :3].T)])
@@ -88,3 +106,24 @@ def _ik_lm(fk_jacobian, T, q0, w, *, lower, upper, sample_lower, sample_upper, m
         else:
             lam = min(lam * 10.0, 1e10)
     return qbest, norms(ebest), status
+
+
+def _ik_batch(solve, n, T, *vectors):
+    """A batch of IK problems solved one state after the other by solve(T, *vectors) (the one
+    generated function that loops over a batch in Python: the solver iterates per state), or None
+    when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
+    (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
+    (...) an int array, each state's entries those solve gives for it alone."""
+    T = np.asarray(T, dtype=float)
+    vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
+    if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
+        return None
+    if T.shape[-2:] != (4, 4):
+        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
+    shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
+    T = np.broadcast_to(T, shape + (4, 4))
+    vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]
+    q, residual, status = np.empty(shape + (n,)), np.empty(shape + (2,)), np.empty(shape, dtype=int)
+    for i in np.ndindex(shape):
+        q[i], residual[i], status[i] = solve(T[i], *(None if v is None else v[i] for v in vectors))
+    return q, residual, status

@@ -28,6 +28,16 @@ class CBackend(Backend):
     def _files(self, spec) -> dict:
         return {"header": f"{spec.name}.h", "source": f"{spec.name}.c", "args": self._signature(spec)}
 
+    @staticmethod
+    def _arrays(items, nullable=()) -> list[dict]:
+        """The arrays of a signature in order: name, length in reals, row-major; NULL-able inputs say so."""
+        return [{"name": n, "length": r * c, "layout": "row-major", **({"nullable": True} if n in nullable else {})}
+                for n, (r, c) in items]
+
+    def _contract(self, inputs, outputs, status: bool = False, nullable=()) -> dict:
+        return {"c_returns": "int" if status else "void", "c_reads": self._arrays(inputs, nullable),
+                "c_writes": self._arrays(outputs)}
+
     def function_context(self, fn: Function) -> dict:
         spec, prog = fn.spec, fn.program
         in_names = [n for n, _ in spec.inputs]
@@ -35,6 +45,7 @@ class CBackend(Backend):
         used |= {a[1] for _, _, a in prog.results if a[0] == "in"}
         printer = CPrinter(in_names)
         return {**fn.common, **self._files(spec),
+                **self._contract([(n, x.shape) for n, x in spec.inputs], [(n, e.shape) for n, e in spec.outputs]),
                 "unused": [n for i, n in enumerate(in_names) if i not in used],
                 "body": printer.body(prog), "stores": printer.stores(prog, [n for n, _ in spec.outputs])}
 
@@ -45,6 +56,7 @@ class CBackend(Backend):
         in_names = [n for n, _ in t.inputs]
         header = f"{t.template}.h.jinja"
         return {**fn.common, **self._files(t), **context, **calls,
+                **self._contract(t.inputs, t.outputs, t.status, t.optional),
                 "macro": t.name.upper(), "c_return": "int" if t.status else "void",
                 "c_template": self.template(f"{t.template}.c.jinja"),
                 "h_template": self.template(header) if self.has_template(header) else self.template("function.h.jinja"),
@@ -73,7 +85,11 @@ class CBackend(Backend):
         return sorted({name for f in functions for name in f.get("support_headers", ())})
 
     def manifest_entry(self, robot: RobotContext, f: dict) -> dict:
-        return {"header": f"c/{f['header']}", "source": f"c/{f['source']}"}
+        """Header, source and the call's contract: ``returns`` ("void", or "int" for a status code),
+        ``reads`` (the inputs) and ``writes`` (the outputs), each array in signature order with its
+        length in DERIVE_REALs, row-major (``nullable``: the caller may pass NULL)."""
+        return {"header": f"c/{f['header']}", "source": f"c/{f['source']}", "returns": f["c_returns"],
+                "reads": f["c_reads"], "writes": f["c_writes"]}
 
     def manifest_support(self, robot: RobotContext, functions: list[dict]) -> list[dict]:
         return [{"file": f"c/{name}", "source": self.support_source(name)} for name in self.support_files(functions)]

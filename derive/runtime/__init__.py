@@ -1,0 +1,10 @@
+"""On top: running the generated code from Python (the compiled C behind a Python API).
+
+``derive.compiled(robot)`` (:mod:`derive.runtime.loader`) builds a robot's generated C into a
+cached shared library (:mod:`derive.runtime.build`) and calls it through ctypes, one state or a
+whole batch per call.
+"""
+
+from derive.runtime.loader import compiled
+
+__all__ = ["compiled"]
