@@ -170,14 +170,20 @@ def test_a_killed_generation_leaves_the_old_folder_and_is_cleaned_up(tmp_path):
     out = tmp_path / "generated"
     assert main(["--models", str(tmp_path / "m.yaml"), "generate", "--out", str(out)]) == 0
     before = files_of(out)
-    (tmp_path / "big.yaml").write_text((ROOT / "models.yaml").read_text())  # panda: about a second to be killed in
+    # a 9-link chain takes several seconds to generate: ample time to be signalled before the swap
+    links = ["      - {name: l0}"] + [f"      - {{name: l{i}, mass: 1.0, com: [0.1, 0, 0], inertia: [0.01, 0.02, 0.03]}}"
+                                      for i in range(1, 10)]
+    joints = [f"      - {{name: j{i}, type: revolute, parent: l{i - 1}, child: l{i}, axis: {['[0, 0, 1]', '[0, 1, 0]', '[1, 0, 0]'][i % 3]}, "
+              f"origin: {{xyz: [0.2, 0.05, 0.1]}}}}" for i in range(1, 10)]
+    (tmp_path / "big.yaml").write_text("robots:\n  chain9:\n    links:\n" + "\n".join(links) + "\n    joints:\n"
+                                       + "\n".join(joints) + "\n    frames:\n      - {name: tcp, link: l9}\n")
 
     def leftovers():
         return [p.name for p in tmp_path.iterdir() if p.name.startswith(".generated.")]
 
     def start_and_signal(sig):
         proc = subprocess.Popen([sys.executable, "-m", "derive", "--models", str(tmp_path / "big.yaml"), "generate",
-                                 "--out", str(out), "--robot", "panda", "--no-cache"], cwd=tmp_path,
+                                 "--out", str(out), "--no-cache"], cwd=tmp_path,
                                 stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
         mine = f".generated.tmp-{proc.pid}-"
         deadline = time.time() + 60

@@ -15,6 +15,7 @@ import signal
 import sys
 import threading
 
+from derive.codegen.generate import remove_temporaries
 from derive.errors import DeriveError
 
 COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.inspect", "derive.cli.analysis",
@@ -50,8 +51,12 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def _terminate(signum, frame):
-    """SIGTERM unwinds like an exception, so that temporary folders are removed on the way out."""
-    raise SystemExit(128 + signum)
+    """SIGTERM: remove the temporary folders of a generation under way and exit 128 + signum at
+    once. Raising an exception instead is not enough: a signal handled inside a CasADi call can
+    be swallowed there, and the generation would run on to completion."""
+    remove_temporaries()
+    os.write(2, b"derive: terminated; the output folder is left as it was\n")
+    os._exit(128 + signum)
 
 
 def main(argv: list[str] | None = None) -> int:

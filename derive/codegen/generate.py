@@ -40,6 +40,18 @@ from derive.symbolic.model import SXModel
 TOOLS = ("sympy", "casadi", "numpy", "jinja2")
 
 
+ACTIVE_TEMPORARIES: set[Path] = set()
+"""Temporary folders of generations under way in this process: a SIGTERM handler removes them
+(see :func:`remove_temporaries`) even where the signal cannot unwind the Python stack."""
+
+
+def remove_temporaries() -> None:
+    """Remove the temporary folders of generations under way (for signal handlers)."""
+    for path in list(ACTIVE_TEMPORARIES):
+        shutil.rmtree(path, ignore_errors=True)
+        ACTIVE_TEMPORARIES.discard(path)
+
+
 def default_output() -> Path:
     """Where generated code is written and looked for when no folder is given: ./generated."""
     return Path.cwd() / "generated"
@@ -194,6 +206,7 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune) -> di
     new_robots = dict(kept)
     out.parent.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
+    ACTIVE_TEMPORARIES.add(tmp)
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it 0700; the output folder is an ordinary one
@@ -237,6 +250,8 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune) -> di
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
+    finally:
+        ACTIVE_TEMPORARIES.discard(tmp)
 
 
 STALE = re.compile(r"^\.(?P<name>.+)\.(?:tmp|old)-(?P<pid>\d+)(?:-.*)?$")
