@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import importlib
 import importlib.util
-import json
 import subprocess
 import tempfile
 import time
@@ -20,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+from derive.description.model import load_robot
 from derive.description.urdf import example_robot_data_dir
 from derive.errors import DeriveError
 from derive.resources import CHECKOUT
@@ -115,7 +115,7 @@ def bench_python(args) -> str:
     repeats = 3 if args.quick else 7
     rng = np.random.default_rng(0)
     py = load_generated(ROBOT, generated)
-    lo, hi = np.array([j["lower"] for j in _manifest_joints(generated)]), np.array([j["upper"] for j in _manifest_joints(generated)])
+    lo, hi = load_robot(ROBOT, CHECKOUT / "models.yaml").joint_box()
     Q = rng.uniform(lo, hi, (n, 7))
     V, A = rng.normal(size=(n, 7)), rng.normal(size=(n, 7))
     X = np.concatenate([Q, V], axis=1)
@@ -164,10 +164,6 @@ def bench_python(args) -> str:
         "| function | NumPy vectorised | compiled | JAX jit (CPU) | JAX vs NumPy (max rel.) | Python loop over Pinocchio | "
         "C own ns/call (plain C loop) | compiled / C own | Pinocchio loop / NumPy batch |",
         "|---|---|---|---|---|---|---|---|---|", *batch])
-
-
-def _manifest_joints(generated: Path) -> list[dict]:
-    return json.loads((generated / ROBOT / "manifest.json").read_text())["joints"]
 
 
 def benchmarks() -> dict:

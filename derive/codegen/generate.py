@@ -257,7 +257,8 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune) -> di
 STALE = re.compile(r"^\.(?P<name>.+)\.(?:tmp|old)-(?P<pid>\d+)(?:-.*)?$")
 
 
-def _alive(pid: int) -> bool:
+def process_alive(pid: int) -> bool:
+    """Whether process ``pid`` exists (a temporary folder named after it may still be in use)."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -274,7 +275,7 @@ def _recover(out: Path, log: Callable[[str], None]) -> None:
         return
     for entry in sorted(out.parent.iterdir()):
         m = STALE.match(entry.name)
-        if not m or m["name"] != out.name or not entry.is_dir() or _alive(int(m["pid"])):
+        if not m or m["name"] != out.name or not entry.is_dir() or process_alive(int(m["pid"])):
             continue
         if ".old-" in entry.name and not out.exists():
             os.rename(entry, out)

@@ -32,6 +32,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
 
+from derive.codegen.generate import process_alive
 from derive.errors import DeriveError
 
 BUILDS = 0
@@ -293,12 +294,8 @@ def _remove_stale(root: Path) -> None:
         m = _STALE.match(entry.name)
         if not m or not entry.is_dir():
             continue
-        try:
-            os.kill(int(m["pid"]), 0)
-        except ProcessLookupError:
+        if not process_alive(int(m["pid"])):
             shutil.rmtree(entry, ignore_errors=True)
-        except OSError:
-            pass
 
 
 def library(robot: str, cdir: Path, sigs: list[Signature]) -> Path:

@@ -31,7 +31,6 @@ the figure of a result is :func:`derive.plot.trajopt.plot_trajopt`.
 
 from __future__ import annotations
 
-import json
 import math
 import tempfile
 import time
@@ -42,10 +41,10 @@ from typing import Callable, Sequence
 import casadi as ca
 import numpy as np
 
-from derive.codegen.generate import default_output, generate, model_hash
+from derive.codegen.generate import default_output, generate
 from derive.description.model import Robot, load_robot
 from derive.errors import DeriveError
-from derive.solvers.simulate import load_generated
+from derive.solvers.simulate import is_stale, load_generated
 from derive.symbolic.model import SXModel
 
 METHODS = ("trapezoidal", "hermite-simpson", "rk4")
@@ -586,19 +585,15 @@ def generated_forward_dynamics(robot: Robot, p: np.ndarray, log: Callable[[str],
                                root: str | Path | None = None) -> Callable:
     """forward_dynamics(q, qd, tau) of the robot's generated Python module.
 
-    <root>/<robot>/python/<robot>.py when <root>/MANIFEST.json says it was generated from this
+    <root>/<robot>/python/<robot>.py when its manifest.json says it was generated from this
     very model; otherwise (a model not in <root>, or edited since) the Python is generated
     into a temporary folder first. ``root`` defaults to ./generated
     (:func:`derive.codegen.generate.default_output`).
     """
     root = Path(root) if root is not None else default_output()
     name = robot.name
-    try:
-        current = json.loads((root / "MANIFEST.json").read_text())["robots"][name]["model_hash"] == model_hash(robot)
-    except (OSError, ValueError, KeyError):
-        current = False
     path = root / name / "python" / f"{name}.py"
-    if current and path.is_file():
+    if not is_stale(robot, root) and path.is_file():
         module = load_generated(name, root)
     else:
         log(f"{name}: {root / name} is missing or stale: generating it into a temporary folder for the check")
