@@ -18,7 +18,8 @@ from derive.description.dh import dh_to_tree
 from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
-from derive.description.robot import (robot_name, Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3, identifier)
+from derive.description.robot import (BASES, robot_name, Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3,
+                                      identifier, shown)
 from derive.resources import EXAMPLE_MODELS
 
 
@@ -283,7 +284,11 @@ class _Parser:
     # ---- robot ----
     def robot(self) -> Robot:
         spec = self.spec
-        self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames"})
+        self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
+                                   "base"})
+        base = spec.get("base", "fixed")
+        if base not in BASES:
+            raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
         params = spec.get("parameters") or {}
         if not isinstance(params, Mapping):
             raise self.error("parameters", "expected a mapping name: default")
@@ -315,6 +320,7 @@ class _Parser:
             parameters=tuple(Parameter(k, v) for k, v in self.params.items()),
             description=str(spec.get("description", "")).strip(),
             source=str(spec.get("source", "")).strip(),
+            base=base,
         )
         if robot.nv == 0:
             raise self.error("joints", "no moving joint: a robot needs at least one degree of freedom")
@@ -346,15 +352,15 @@ class _Parser:
             raise self.error("joints", "the joints form a cycle: no link is left as the root")
         if len(roots) > 1:
             raise self.error("joints", f"links {', '.join(repr(r) for r in roots)} have no parent joint; exactly one root link is allowed")
+        children: dict[str, list[Joint]] = {n: [] for n in names}
+        for j in joints:
+            children[j.parent].append(j)
         ordered: list[Joint] = []
-
-        def visit(link: str) -> None:  # depth-first, file order among siblings (Pinocchio's q order)
-            for j in joints:
-                if j.parent == link and j not in ordered:
-                    ordered.append(j)
-                    visit(j.child)
-
-        visit(roots[0])
+        stack = list(reversed(children[roots[0]]))  # depth-first, file order among siblings (Pinocchio's q order)
+        while stack:
+            j = stack.pop()
+            ordered.append(j)
+            stack.extend(reversed(children[j.child]))
         if len(ordered) != len(joints):
             stuck = [j.name for j in joints if j not in ordered]
             raise self.error("joints", f"the joints {', '.join(stuck)} form a cycle detached from the root '{roots[0]}'")
@@ -377,6 +383,8 @@ class _Parser:
                 seen[n] = group
         # q's entries name the symbols of q, qd, qdd, tau and the generated code's inputs
         owner: dict[str, str] = {p.name: "a parameter" for p in robot.parameters}
+        owner.update({n: "a coordinate of the floating base" for n in robot.velocity_names[:6] + tuple(
+            c.name for c in robot.base_coordinates)} if robot.floating else {})
         for j in robot.joints:
             for c in j.coordinates:
                 identifier(self.name, f"joints ({j.name}) coordinate", c.name)
@@ -394,13 +402,17 @@ class _Parser:
                 raise self.error(f"parameters.{p.name}", f"'{p.name}' is reserved in expressions (a constant or function)")
         # the symbols of the sympy view and the LaTeX: a coordinate c gives c, dc, ddc and tau_c
         symbols: dict[str, str] = {p.name: f"parameter '{p.name}'" for p in robot.parameters}
-        for c in robot.coordinates:
-            for sym, what in ((c.name, "coordinate"), (f"d{c.name}", "velocity"), (f"dd{c.name}", "acceleration"),
-                              (f"tau_{c.name}", "torque")):
-                if sym in symbols and symbols[sym] != f"coordinate '{c.name}'":
-                    raise self.error(f"joints ({c.joint})", f"the {what} symbol '{sym}' of coordinate '{c.name}' is "
-                                     f"already the symbol of {symbols[sym]}: rename one")
-                symbols[sym] = f"coordinate '{c.name}'" if what == "coordinate" else f"the {what} of '{c.name}'"
+        base = {n: "root_joint" for n in robot.velocity_names[:6]} if robot.floating else {}
+        joint_of = {c.name: c.joint for c in robot.coordinates} | base
+        spelled = [(c.name, c.joint, c.name, "coordinate") for c in robot.base_coordinates]
+        for v in robot.velocity_names:
+            spelled += [(v, joint_of[v], v, "coordinate")] * (v not in base) + [(sym, joint_of[v], v, what) for sym, what in (
+                (f"d{v}", "velocity"), (f"dd{v}", "acceleration"), (f"tau_{v}", "torque"))]
+        for sym, joint, name, what in spelled:
+            if sym in symbols and symbols[sym] != f"coordinate '{name}'":
+                raise self.error(f"joints ({joint})", f"the {what} symbol '{sym}' of coordinate '{name}' is "
+                                 f"already the symbol of {symbols[sym]}: rename one")
+            symbols[sym] = f"coordinate '{name}'" if what == "coordinate" else f"the {what} of '{name}'"
         # frame and link names become file and function names: they must differ beyond case
         folded: dict[str, str] = {}
         for group, names in groups:

@@ -169,9 +169,25 @@ class Frame:
     origin: Origin = Origin()
 
 
+FREE_FLYER = "root_joint"
+"""Name of the free-flyer joint a floating base adds above the root link (Pinocchio's name)."""
+BASE_POSITION = ("base_x", "base_y", "base_z", "base_qx", "base_qy", "base_qz", "base_qw")
+"""A floating base's 7 entries of q: the root link's origin in the world (m), then its orientation
+as a unit quaternion (x, y, z, w) (Pinocchio's ``JointModelFreeFlyer``)."""
+BASE_VELOCITY = ("base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz")
+"""A floating base's 6 entries of v (= qd): the linear velocity of the root link's origin and its
+angular velocity, both in the root link's frame (Pinocchio's LOCAL convention)."""
+BASES = ("fixed", "floating")
+
+
 @dataclass(frozen=True)
 class Robot:
-    """A fixed-base kinematic tree. ``joints`` are in topological order (parents first)."""
+    """A kinematic tree. ``joints`` are in topological order (parents first).
+
+    ``base`` "fixed": the root link is the world. "floating": a free-flyer joint
+    (:data:`FREE_FLYER`) places the root link in the world, with q = [BASE_POSITION, joints]
+    (nq = nv + 1) and v = [BASE_VELOCITY, joints].
+    """
 
     name: str
     links: tuple[Link, ...]
@@ -181,6 +197,11 @@ class Robot:
     parameters: tuple[Parameter, ...] = ()
     description: str = ""
     source: str = ""
+    base: str = "fixed"
+
+    @property
+    def floating(self) -> bool:
+        return self.base == "floating"
 
     @property
     def root(self) -> str:
@@ -193,9 +214,27 @@ class Robot:
         return tuple(j for j in self.joints if j.dof > 0)
 
     @property
-    def coordinates(self) -> tuple[Coordinate, ...]:
-        """The entries of q, one per DOF: a joint's coordinates are consecutive, joints in tree order."""
+    def joint_coordinates(self) -> tuple[Coordinate, ...]:
+        """The joints' entries of q (and of v), one per DOF: a joint's coordinates are consecutive,
+        joints in tree order; a floating base's entries come before them in q and v."""
         return tuple(c for j in self.joints for c in j.coordinates)
+
+    @property
+    def base_coordinates(self) -> tuple[Coordinate, ...]:
+        """A floating base's 7 entries of q (none for a fixed base)."""
+        if not self.floating:
+            return ()
+        return tuple(Coordinate(n, FREE_FLYER, "freeflyer", "m" if i < 3 else "1") for i, n in enumerate(BASE_POSITION))
+
+    @property
+    def coordinates(self) -> tuple[Coordinate, ...]:
+        """The entries of q: the floating base's 7 (if any), then the joints' coordinates."""
+        return self.base_coordinates + self.joint_coordinates
+
+    @property
+    def velocity_names(self) -> tuple[str, ...]:
+        """The entries of v (qd, qdd and tau): the floating base's 6 (if any), then the joints' coordinates."""
+        return (BASE_VELOCITY if self.floating else ()) + tuple(c.name for c in self.joint_coordinates)
 
     def joint_box(self, angle: float = math.pi, length: float = 1.0) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """(lower, upper) of each entry of q: its limits, or +-``angle`` (rad) / +-``length`` (m)
@@ -213,11 +252,18 @@ class Robot:
 
     @property
     def nq(self) -> int:
-        return sum(j.dof for j in self.joints)
+        """Entries of q: nv, plus 1 for a floating base's quaternion."""
+        return self.nv + (1 if self.floating else 0)
 
     @property
     def nv(self) -> int:
-        return self.nq
+        """Entries of v = qd, of qdd and of tau: the joints' DOF, plus 6 for a floating base."""
+        return sum(j.dof for j in self.joints) + (6 if self.floating else 0)
+
+    def require_fixed_base(self, what: str) -> None:
+        """Raise a one-line error if the robot has a floating base, which ``what`` does not handle."""
+        if self.floating:
+            raise ModelError(self.name, "base", f"{what} handles fixed-base robots only; this one has a floating base")
 
     @property
     def parameter_defaults(self) -> dict[str, float]:
@@ -243,6 +289,8 @@ def model_data(robot: Robot) -> dict:
     so models without such joints keep the hash they had before those types existed.
     """
     data = asdict(robot)
+    if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
+        del data["base"]
     for joint in data["joints"]:
         for key in ("pitch", "axis2"):
             if joint[key] is None:
