@@ -1,4 +1,5 @@
-"""Independent numeric reference (numpy only): kinematics, RNEA, CRBA, ABA, Christoffel C, energies."""
+"""Independent numeric reference (numpy only), fixed or floating base: kinematics, frame accelerations,
+RNEA and ABA (with external wrenches), CRBA, Coriolis matrices, energies, COM and centroidal map."""
 
 from derive.reference.rnea import NumericRobot
 

@@ -1,4 +1,4 @@
-"""Numeric rigid-body dynamics of a fixed-base tree, written from Featherstone's textbook.
+"""Numeric rigid-body dynamics of a fixed- or floating-base tree, written from Featherstone's textbook.
 
 This is the independent reference the symbolic pipeline is checked against: it
 uses numpy only, and reads the model through :mod:`derive.description.model` and
@@ -11,19 +11,30 @@ Conventions
   frame A to frame B, whose pose in A is ``(R, r)``, is
   ``B_X_A = [[R^T, 0], [-R^T r^, R^T]]`` and forces transform with ``X^T``.
 - Bodies are the moving joints, in ``robot.moving_joints`` order; body i's
-  frame is the child link frame of joint i, and its coordinates are the
-  consecutive slice ``dofs[i]`` of q. Links hanging off a body through
-  fixed joints are merged rigidly into it (their frames keep their own poses);
-  links fixed to the root are part of the world and carry no dynamics.
+  frame is the child link frame of joint i, and its entries are the
+  consecutive slices ``qdofs[i]`` of q and ``dofs[i]`` of v (= qd), qdd and tau.
+  Links hanging off a body through fixed joints are merged rigidly into it (their
+  frames keep their own poses). With a fixed base the root link and the links
+  fixed to it are the world and carry no dynamics.
+- A floating base (``robot.floating``) is body 0, the root link (and the links fixed
+  to it), moved by a free-flyer joint with Pinocchio's ``JointModelFreeFlyer``
+  conventions: q[0:3] is the root origin in the world, q[3:7] the quaternion
+  (x, y, z, w) turned into R by :func:`quaternion_matrix` as is (no normalisation);
+  v[0:6] = [linear velocity of the root origin; angular velocity], both in the root
+  frame; qdd[0:6] = dv/dt (the root's spatial acceleration, root frame) and
+  tau[0:6] = [force; torque] on the root at its origin, root frame. The joints
+  follow, with q index = v index + 1.
 - Every joint type is one :class:`JointModel` (Featherstone, section 4.4): the
   joint transform X_J(q), the motion subspace S(q) (6 x DOF, child frame) and
   the bias c_J = Sdot qd. Multi-DOF joints are single bodies with a 6 x 2 or
   6 x 3 S here, not chains of massless bodies as on the symbolic side.
 - Gravity enters as the base acceleration ``a_0 = -[0; gravity]``.
-- Outputs meant for comparison (Jacobians) use Pinocchio's ``[linear; angular]``.
+- Outputs meant for comparison (Jacobians, frame accelerations, wrenches, the
+  centroidal map) use Pinocchio's ``[linear; angular]``.
 - Every q-dependent quantity is computed with numpy ufuncs and plain transposes
   (no abs, no conjugation), so complex q works and complex-step derivatives
-  ``f'(q) e = Im f(q + i h e) / h`` are exact to machine precision.
+  ``f'(q) e = Im f(q + i h e) / h`` are exact to machine precision (along q_dot(q, e)
+  for a floating base, whose q has a quaternion).
 """
 
 from __future__ import annotations
@@ -61,6 +72,16 @@ def rotation(axis: np.ndarray, angle) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * k + (1 - np.cos(angle)) * (k @ k)
 
 
+def quaternion_matrix(quat) -> np.ndarray:
+    """R of the quaternion (x, y, z, w), Pinocchio's expression, used as is off the unit sphere too:
+    [[1-2(y²+z²), 2(xy-zw), 2(xz+yw)], [2(xy+zw), 1-2(x²+z²), 2(yz-xw)], [2(xz-yw), 2(yz+xw), 1-2(x²+y²)]]."""
+    x, y, z, w = quat[0], quat[1], quat[2], quat[3]
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]],
+                    dtype=np.result_type(x, y, z, w, float))
+
+
 def homogeneous(rot: np.ndarray, pos: np.ndarray) -> np.ndarray:
     t = np.zeros((4, 4), dtype=np.result_type(rot, pos))
     t[:3, :3], t[:3, 3], t[3, 3] = rot, pos, 1
@@ -76,6 +97,12 @@ def motion_transform(pose: np.ndarray) -> np.ndarray:
     return x
 
 
+def to_world(pose: np.ndarray, motion: np.ndarray) -> np.ndarray:
+    """A_X_B m for the pose (R, r) of B in A: [R w; R v + r x (R w)] (m = [w; v], one per column)."""
+    w = pose[:3, :3] @ motion[:3]
+    return np.concatenate([w, pose[:3, :3] @ motion[3:] + np.cross(pose[:3, 3], w.T).T])
+
+
 def crm(v: np.ndarray) -> np.ndarray:
     """Motion cross product v x = [[w^, 0], [v^, w^]] for v = [w; v]."""
     out = np.zeros((6, 6), dtype=v.dtype)
@@ -89,6 +116,14 @@ def crf(v: np.ndarray) -> np.ndarray:
     return -crm(v).T
 
 
+def crf_bar(f: np.ndarray) -> np.ndarray:
+    """f x-bar*: the matrix with (f x-bar*) v = v x* f, i.e. [[-n^, -f^], [-f^, 0]] for f = [n; f] (skew)."""
+    out = np.zeros((6, 6), dtype=f.dtype)
+    out[:3, :3] = -skew(f[:3])
+    out[:3, 3:] = out[3:, :3] = -skew(f[3:])
+    return out
+
+
 def spatial_inertia(mass: float, com: np.ndarray, inertia_com: np.ndarray) -> np.ndarray:
     """I_O = [[I_c + m c^ c^T, m c^], [m c^T, m 1]]: body inertia about the frame origin."""
     c = skew(com)
@@ -96,6 +131,9 @@ def spatial_inertia(mass: float, com: np.ndarray, inertia_com: np.ndarray) -> np
 
 
 # --------------------------------------------------------------------------- joint models
+
+FREE_FLYER_SUBSPACE = np.block([[np.zeros((3, 3)), np.eye(3)], [np.eye(3), np.zeros((3, 3))]])
+"""S of the free flyer: v = [linear; angular] (Pinocchio's order) to Featherstone's [angular; linear]."""
 
 
 class JointModel:
@@ -113,6 +151,8 @@ class JointModel:
     - spherical, ZYX Euler (a, b, c): T = Rz(a) Ry(b) Rx(c); the body rates
       w = [[-sb, 0, 1], [cb sc, cc, 0], [cb cc, -sc, 0]] [da; db; dc] (s = sin, c = cos),
       singular where cb = 0.
+    - freeflyer (a floating base): q = [p; quaternion (x, y, z, w)], T = (R(quaternion), p);
+      qd = v = [linear; angular] in the child frame, S = [[0, 1]; [1, 0]] (constant).
     """
 
     def __init__(self, kind: str, axis: np.ndarray, axis2: np.ndarray | None = None, pitch: float = 0.0):
@@ -130,6 +170,8 @@ class JointModel:
             return homogeneous(rotation(a, q[0]), a * q[1])
         if self.kind == "universal":
             return homogeneous(rotation(a, q[0]) @ rotation(self.axis2, q[1]), np.zeros(3))
+        if self.kind == "freeflyer":
+            return homogeneous(quaternion_matrix(q[3:7]), q[:3])
         ex, ey, ez = np.eye(3)
         return homogeneous(rotation(ez, q[0]) @ rotation(ey, q[1]) @ rotation(ex, q[2]), np.zeros(3))
 
@@ -145,22 +187,31 @@ class JointModel:
             cols = [np.concatenate([a, z]), np.concatenate([z, a])]
         elif self.kind == "universal":
             cols = [np.concatenate([rotation(self.axis2, q[1]).T @ a, z]), np.concatenate([self.axis2, z])]
+        elif self.kind == "freeflyer":
+            return FREE_FLYER_SUBSPACE.copy()
         else:
             sb, cb, sc, cc = np.sin(q[1]), np.cos(q[1]), np.sin(q[2]), np.cos(q[2])
             w = np.array([[-sb, 0.0, 1.0], [cb * sc, cc, 0.0], [cb * cc, -sc, 0.0]])
             return np.vstack([w, np.zeros((3, 3))])
         return np.column_stack(cols)
 
-    def bias(self, q, qd) -> np.ndarray:
+    def subspace_rate(self, q, qd) -> np.ndarray:
+        """Sdot = dS/dt along qd (6 x DOF, child frame); zero where S is constant."""
+        out = np.zeros((6, len(qd)), dtype=np.result_type(q, qd, float))
         if self.kind == "universal":
             s1 = rotation(self.axis2, q[1]).T @ self.axis
-            return np.concatenate([qd[0] * qd[1] * np.cross(s1, self.axis2), np.zeros(3)])
-        if self.kind == "spherical":
+            out[:3, 0] = qd[1] * np.cross(s1, self.axis2)
+        elif self.kind == "spherical":
             sb, cb, sc, cc = np.sin(q[1]), np.cos(q[1]), np.sin(q[2]), np.cos(q[2])
-            da, db, dc = qd
-            dcol0 = np.array([-cb * db, -sb * sc * db + cb * cc * dc, -sb * cc * db - cb * sc * dc])
-            dcol1 = np.array([0.0, -sc * dc, -cc * dc])
-            return np.concatenate([dcol0 * da + dcol1 * db, np.zeros(3)])
+            db, dc = qd[1], qd[2]
+            out[:3, 0] = [-cb * db, -sb * sc * db + cb * cc * dc, -sb * cc * db - cb * sc * dc]
+            out[:3, 1] = [0.0, -sc * dc, -cc * dc]
+        return out
+
+    def bias(self, q, qd) -> np.ndarray:
+        """c_J = Sdot qd."""
+        if self.kind in ("universal", "spherical"):
+            return self.subspace_rate(q, qd) @ qd
         return np.zeros(6, dtype=np.result_type(q, qd, float))
 
 
@@ -169,6 +220,9 @@ class JointModel:
 
 class NumericRobot:
     """A :class:`~derive.model.Robot` evaluated at fixed parameters, with numpy kinematics and dynamics.
+
+    q has ``nq`` entries and v (= qd), qdd and tau ``nv`` (nq = nv + 1 with a floating base;
+    see the module docstring for the free-flyer conventions).
 
     Args:
         robot: the parsed model.
@@ -193,15 +247,26 @@ class NumericRobot:
             return homogeneous(rpy_matrix(*vec(origin.rpy)), vec(origin.xyz))
 
         self.gravity_vector = vec(robot.gravity)
-        self.nq = self.nv = robot.nv
+        self.floating = robot.floating
+        self.nq, self.nv = robot.nq, robot.nv
         self.joint_names = tuple(c.name for c in robot.coordinates)  # one per entry of q
+        self.velocity_names = tuple(robot.velocity_names)  # one per entry of v, qdd and tau
 
         # Walk the tree: each link sits on a body (-1 = world) at a constant pose in that body's frame.
         self.parent: list[int] = []  # lambda(i)
         self.tree_pose: list[np.ndarray] = []  # joint frame i (before motion) in body lambda(i)
         self.joint_model: list[JointModel] = []
-        self.dofs: list[slice] = []  # body i's entries of q
+        self.dofs: list[slice] = []  # body i's entries of v, qdd and tau
+        self.qdofs: list[slice] = []  # body i's entries of q
         placed = {robot.root: (-1, np.eye(4))}
+        if robot.floating:  # body 0: the root link, moved by the free flyer
+            self.parent.append(-1)
+            self.tree_pose.append(np.eye(4))
+            self.joint_model.append(JointModel("freeflyer", np.zeros(3)))
+            self.dofs.append(slice(0, 6))
+            self.qdofs.append(slice(0, 7))
+            placed[robot.root] = (0, np.eye(4))
+        shift = self.nq - self.nv
         for joint in robot.joints:
             body, at = placed[joint.parent]
             joint_pose = at @ pose(joint.origin)
@@ -216,6 +281,7 @@ class NumericRobot:
                 0.0 if joint.pitch is None else num(joint.pitch)))
             start = self.dofs[-1].stop if self.dofs else 0
             self.dofs.append(slice(start, start + joint.dof))
+            self.qdofs.append(slice(start + shift, start + shift + joint.dof))
             placed[joint.child] = (len(self.parent) - 1, np.eye(4))
         n = self.nb = len(self.parent)
         self.support = []  # bodies from the root down to i, inclusive
@@ -226,20 +292,20 @@ class NumericRobot:
                 k = self.parent[k]
             self.support.append(chain[::-1])
 
-        # Inertias, merged per body; point masses kept per link for the potential energy.
+        # Inertias, merged per body; point masses kept per link for the potential energy and the COM.
         self.inertia = [np.zeros((6, 6)) for _ in range(n)]
         self.masses: list[tuple[int, float, np.ndarray]] = []  # (body, mass, COM in body frame) per moving link
         for link in robot.links:
-            if link.name == robot.root:
-                continue
             body, at = placed[link.name]
+            if body < 0:  # the root and links fixed to it are world with a fixed base, as in Pinocchio
+                continue
             mass = num(link.mass)
             rot = at[:3, :3] @ rpy_matrix(*vec(link.inertia_rpy))
             inertia_com = rot @ np.array([[num(x) for x in row] for row in link.inertia]) @ rot.T
             com = at[:3, :3] @ vec(link.com) + at[:3, 3]
-            if body >= 0:  # links fixed to the root are world, as in Pinocchio
-                self.masses.append((body, mass, com))
-                self.inertia[body] = self.inertia[body] + spatial_inertia(mass, com, inertia_com)
+            self.masses.append((body, mass, com))
+            self.inertia[body] = self.inertia[body] + spatial_inertia(mass, com, inertia_com)
+        self.total_mass = sum(mass for _, mass, _ in self.masses)  # what moves (floating: the root too)
 
         # Every placeable frame: (body, constant pose in the body frame).
         self.frames: dict[str, tuple[int, np.ndarray]] = {}
@@ -249,38 +315,106 @@ class NumericRobot:
             body, at = placed[frame.link]
             self.frames[frame.name] = (body, at @ pose(frame.origin))
 
+    # ------------------------------------------------------------------ inputs
+
+    def _q(self, q) -> np.ndarray:
+        q = np.asarray(q)
+        if q.shape != (self.nq,):
+            raise ValueError(f"robot '{self.robot.name}': q must have nq = {self.nq} entries, got shape {q.shape}")
+        return q
+
+    def _v(self, v, what: str = "v") -> np.ndarray:
+        v = np.asarray(v)
+        if v.shape != (self.nv,):
+            raise ValueError(f"robot '{self.robot.name}': {what} must have nv = {self.nv} entries, got shape {v.shape}")
+        return v
+
+    def _frame(self, name: str) -> tuple[int, np.ndarray]:
+        try:
+            return self.frames[name]
+        except KeyError:
+            raise ValueError(f"robot '{self.robot.name}' has no frame '{name}' (frames: {', '.join(self.frames)})") from None
+
+    # ------------------------------------------------------------------ configurations
+
+    def q_dot(self, q, v) -> np.ndarray:
+        """dq/dt (nq) for the velocity v (nv): v itself for a fixed base.
+
+        Floating base: the root position moves at R v_lin, the quaternion at
+        0.5 quat (x) (w, 0), i.e. vector part 0.5 (q_w w + q_v x w) and scalar part -0.5 q_v . w;
+        the joints at their v.
+        """
+        q, v = self._q(q), self._v(v)
+        if not self.floating:
+            return v.astype(np.result_type(q, v, float))
+        out = np.zeros(self.nq, dtype=np.result_type(q, v, float))
+        qv, qw, w = q[3:6], q[6], v[3:6]
+        out[:3] = quaternion_matrix(q[3:7]) @ v[:3]
+        out[3:6] = 0.5 * (qw * w + np.cross(qv, w))
+        out[6] = -0.5 * (qv @ w)
+        out[7:] = v[6:]
+        return out
+
+    def random_configuration(self, rng: np.random.Generator, angle: float = np.pi, length: float = 1.0) -> np.ndarray:
+        """A random q: joints uniform in ``robot.joint_box(angle, length)``; a floating base uniform in
+        [-length, length]^3 with a uniformly random unit quaternion."""
+        lo, hi = self.robot.joint_box(angle, length)
+        q = rng.uniform(lo, hi)
+        if self.floating:
+            quat = rng.normal(size=4)
+            q[3:7] = quat / np.linalg.norm(quat)
+        return q
+
+    def neutral(self) -> np.ndarray:
+        """q = 0 for the joints; the identity quaternion (0, 0, 0, 1) for a floating base."""
+        q = np.zeros(self.nq)
+        if self.floating:
+            q[6] = 1.0
+        return q
+
     # ------------------------------------------------------------------ kinematics
 
     def joint_pose(self, i: int, qi) -> np.ndarray:
-        """Pose of body i in body lambda(i): T_tree_i * T_J(q_i), q_i = q[dofs[i]] (see :class:`JointModel`)."""
+        """Pose of body i in body lambda(i): T_tree_i * T_J(q_i), q_i = q[qdofs[i]] (see :class:`JointModel`)."""
         return self.tree_pose[i] @ self.joint_model[i].transform(qi)
 
     def subspace(self, i: int, q) -> np.ndarray:
         """S_i(q_i), 6 x DOF_i, body i's frame."""
-        return self.joint_model[i].subspace(q[self.dofs[i]])
+        return self.joint_model[i].subspace(q[self.qdofs[i]])
 
     def body_transforms(self, q) -> list[np.ndarray]:
         """X_i = i_X_lambda(i)(q_i), the motion transform from the parent body to body i."""
-        return [motion_transform(self.joint_pose(i, q[self.dofs[i]])) for i in range(self.nb)]
+        return [motion_transform(self.joint_pose(i, q[self.qdofs[i]])) for i in range(self.nb)]
 
     def body_poses(self, q) -> list[np.ndarray]:
         """World pose of every body: T_i = T_lambda(i) * T_tree_i * T_J(q_i)."""
         poses: list[np.ndarray] = []
         for i in range(self.nb):
-            local = self.joint_pose(i, q[self.dofs[i]])
+            local = self.joint_pose(i, q[self.qdofs[i]])
             poses.append(local if self.parent[i] < 0 else poses[self.parent[i]] @ local)
         return poses
 
     def fk(self, q) -> dict[str, np.ndarray]:
         """World pose (4x4) of every name in ``robot.frame_names``: T = T_body(q) * T_body_frame."""
-        q = np.asarray(q)
-        poses = self.body_poses(q)
+        poses = self.body_poses(self._q(q))
         return {name: (at.copy() if body < 0 else poses[body] @ at) for name, (body, at) in self.frames.items()}
 
     def frame_pose(self, q, name: str) -> np.ndarray:
         """World pose (4x4) of one frame."""
-        body, at = self.frames[name]
-        return at.copy() if body < 0 else self.body_poses(np.asarray(q))[body] @ at
+        body, at = self._frame(name)
+        return at.copy() if body < 0 else self.body_poses(self._q(q))[body] @ at
+
+    def _point_jacobian(self, q, poses, body: int, p) -> np.ndarray:
+        """(6, nv) [v; w] of the point p (world) fixed to ``body``, world axes (see :meth:`jacobian`)."""
+        jac = np.zeros((6, self.nv), dtype=np.result_type(q, p, float))
+        if body < 0:
+            return jac
+        for j in self.support[body]:
+            rot, s = poses[j][:3, :3], self.subspace(j, q)
+            w = rot @ s[:3]
+            jac[3:, self.dofs[j]] = w
+            jac[:3, self.dofs[j]] = rot @ s[3:] + np.cross(w.T, p - poses[j][:3, 3]).T
+        return jac
 
     def jacobian(self, q, name: str) -> np.ndarray:
         """Geometric Jacobian (6, nv), ``[v; w] = J qd``, LOCAL_WORLD_ALIGNED as in Pinocchio.
@@ -289,26 +423,21 @@ class NumericRobot:
         axes. The columns of a supporting body j (origin o_j, rotation R_j) are its
         S_j = [s_w; s_v] turned to world axes and moved to p:
         ``[R_j s_v + (R_j s_w) x (p - o_j); R_j s_w]`` (revolute: ``[a x (p - o_j); a]``,
-        prismatic: ``[a; 0]``); other columns are zero.
+        prismatic: ``[a; 0]``, free flyer: ``[[R, -R (p - o)^]; [0, R]]``, as v is in the root frame);
+        other columns are zero.
         """
-        q = np.asarray(q)
-        body, at = self.frames[name]
-        jac = np.zeros((6, self.nv), dtype=np.result_type(q, float))
+        q = self._q(q)
+        body, at = self._frame(name)
         if body < 0:
-            return jac
+            return np.zeros((6, self.nv), dtype=np.result_type(q, float))
         poses = self.body_poses(q)
-        p = (poses[body] @ at)[:3, 3]
-        for j in self.support[body]:
-            rot, s = poses[j][:3, :3], self.subspace(j, q)
-            w = rot @ s[:3]
-            jac[3:, self.dofs[j]] = w
-            jac[:3, self.dofs[j]] = rot @ s[3:] + np.cross(w.T, p - poses[j][:3, 3]).T
-        return jac
+        return self._point_jacobian(q, poses, body, (poses[body] @ at)[:3, 3])
 
     # ------------------------------------------------------------------ dynamics
 
-    def _base_acceleration(self, dtype) -> np.ndarray:
-        return np.concatenate([np.zeros(3), -self.gravity_vector]).astype(dtype)
+    def _base_acceleration(self, dtype, gravity: bool = True) -> np.ndarray:
+        a0 = np.concatenate([np.zeros(3), -self.gravity_vector]) if gravity else np.zeros(6)
+        return a0.astype(dtype)
 
     def _velocities(self, q, qd, xs) -> tuple[list, list, list]:
         """Body velocities v_i = X_i v_lambda + v_J, joint velocities v_J = S_i qd_i and the S_i."""
@@ -319,25 +448,64 @@ class NumericRobot:
             v.append(vj[i] if self.parent[i] < 0 else xs[i] @ v[self.parent[i]] + vj[i])
         return v, vj, ss
 
-    def rnea(self, q, qd, qdd) -> np.ndarray:
-        """Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q) (Featherstone, Table 5.1).
+    def _accelerations(self, q, qd, qdd, xs, v, vj, ss, a0) -> list:
+        """Body accelerations a_i = X_i a_lambda + S_i qdd_i + c_J + v_i x S_i qd_i (a_-1 = a0)."""
+        a = []
+        for i in range(self.nb):
+            lam, dof, qdof = self.parent[i], self.dofs[i], self.qdofs[i]
+            c_j = self.joint_model[i].bias(q[qdof], qd[dof])
+            a.append(xs[i] @ (a0 if lam < 0 else a[lam]) + ss[i] @ qdd[dof] + c_j + crm(v[i]) @ vj[i])
+        return a
+
+    def external_forces(self, q, wrenches: Mapping[str, np.ndarray] | None, poses=None) -> list[np.ndarray]:
+        """The body-frame spatial forces [n; f] (at each body origin) of frame wrenches.
+
+        ``wrenches`` maps a frame name (link or named frame) to [force; torque] (6) acting AT
+        THE FRAME ORIGIN p, in world axes. On body i (pose R_i, o_i): f = R_i^T force,
+        n = R_i^T (torque + (p - o_i) x force). A wrench on a frame fixed to the world
+        (fixed base) moves nothing and is dropped.
+        """
+        q = self._q(q)
+        dtype = np.result_type(q, float, *[np.asarray(w) for w in (wrenches or {}).values()])
+        out = [np.zeros(6, dtype) for _ in range(self.nb)]
+        if not wrenches:
+            return out
+        poses = self.body_poses(q) if poses is None else poses
+        for name, wrench in wrenches.items():
+            body, at = self._frame(name)
+            wrench = np.asarray(wrench)
+            if wrench.shape != (6,):
+                raise ValueError(f"robot '{self.robot.name}': the wrench on '{name}' must have 6 entries, got shape {wrench.shape}")
+            if body < 0:
+                continue
+            rot = poses[body][:3, :3]
+            arm = rot @ at[:3, 3]  # p - o_i
+            force = wrench[:3]
+            out[body] = out[body] + np.concatenate([rot.T @ (wrench[3:] + np.cross(arm, force)), rot.T @ force])
+        return out
+
+    def rnea(self, q, qd, qdd, wrenches: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q) - sum_f J_f^T w_f (Featherstone, Table 5.1).
 
         Forward: v_i = X_i v_lambda + S_i qd_i, a_i = X_i a_lambda + S_i qdd_i + c_J + v_i x S_i qd_i,
-        with v_0 = 0 and a_0 = -[0; gravity]. Backward: f_i = I_i a_i + v_i x* I_i v_i,
+        with v_0 = 0 and a_0 = -[0; gravity]. Backward: f_i = I_i a_i + v_i x* I_i v_i - f^ext_i,
         tau_i = S_i^T f_i, f_lambda += X_i^T f_i.
+
+        ``wrenches`` (frame name -> [force; torque] at the frame origin, world axes; see
+        :meth:`external_forces`) act on the robot; J_f is the LOCAL_WORLD_ALIGNED :meth:`jacobian`.
         """
-        q, qd, qdd = np.asarray(q), np.asarray(qd), np.asarray(qdd)
+        q, qd, qdd = self._q(q), self._v(qd, "qd"), self._v(qdd, "qdd")
         dtype = np.result_type(q, qd, qdd, float)
         xs = self.body_transforms(q)
         v, vj, ss = self._velocities(q, qd, xs)
-        a, f = [], []
-        a0 = self._base_acceleration(dtype)
+        a = self._accelerations(q, qd, qdd, xs, v, vj, ss, self._base_acceleration(dtype))
+        fext = self.external_forces(q, wrenches) if wrenches else None
+        f = []
         for i in range(self.nb):
-            lam, dof = self.parent[i], self.dofs[i]
-            c_j = self.joint_model[i].bias(q[dof], qd[dof])
-            a.append(xs[i] @ (a0 if lam < 0 else a[lam]) + ss[i] @ qdd[dof] + c_j + crm(v[i]) @ vj[i])
             f.append(self.inertia[i] @ a[i] + crf(v[i]) @ (self.inertia[i] @ v[i]))
-        tau = np.zeros(self.nv, dtype)
+            if fext is not None:
+                f[i] = f[i] - fext[i]
+        tau = np.zeros(self.nv, np.result_type(dtype, *(fext or [])))
         for i in reversed(range(self.nb)):
             tau[self.dofs[i]] = ss[i].T @ f[i]
             if self.parent[i] >= 0:
@@ -356,7 +524,7 @@ class NumericRobot:
         walking F = I^c_i S_i up the support (F <- X_j^T F), M_ij = M_ji^T = F^T S_j (blocks
         of DOF_i x DOF_j).
         """
-        q = np.asarray(q)
+        q = self._q(q)
         dtype = np.result_type(q, float)
         xs = self.body_transforms(q)
         ss = [self.subspace(i, q) for i in range(self.nb)]
@@ -379,27 +547,31 @@ class NumericRobot:
 
     mass_matrix = crba
 
-    def aba(self, q, qd, tau) -> np.ndarray:
-        """Forward dynamics qdd = M^-1 (tau - C qd - g) by the articulated body algorithm (Featherstone, Table 7.1).
+    def aba(self, q, qd, tau, wrenches: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+        """Forward dynamics qdd = M^-1 (tau - C qd - g + sum_f J_f^T w_f) by the articulated body algorithm
+        (Featherstone, Table 7.1); the inverse of :meth:`rnea` with the same ``wrenches``.
 
-        Pass 1: v_i, c_i = c_J + v_i x S_i qd_i, I^A_i = I_i, p^A_i = v_i x* I_i v_i.
+        Pass 1: v_i, c_i = c_J + v_i x S_i qd_i, I^A_i = I_i, p^A_i = v_i x* I_i v_i - f^ext_i.
         Pass 2 (leaves to root): U_i = I^A_i S_i, D_i = S_i^T U_i, u_i = tau_i - S_i^T p^A_i;
         I^a_i = I^A_i - U_i D_i^-1 U_i^T, I^A_lambda += X_i^T I^a_i X_i,
         p^A_lambda += X_i^T (p^A_i + I^a_i c_i + U_i D_i^-1 u_i).
         Pass 3: a'_i = X_i a_lambda + c_i, qdd_i = D_i^-1 (u_i - U_i^T a'_i), a_i = a'_i + S_i qdd_i,
         a_0 = -[0; gravity].
         """
-        q, qd, tau = np.asarray(q), np.asarray(qd), np.asarray(tau)
-        dtype = np.result_type(q, qd, tau, float)
+        q, qd, tau = self._q(q), self._v(qd, "qd"), self._v(tau, "tau")
         xs = self.body_transforms(q)
         n = self.nb
+        fext = self.external_forces(q, wrenches) if wrenches else None
+        dtype = np.result_type(q, qd, tau, float, *(fext or []))
         v, vj, ss = self._velocities(q, qd, xs)
         c, ia, pa = [None] * n, [None] * n, [None] * n
         for i in range(n):
             dof = self.dofs[i]
-            c[i] = self.joint_model[i].bias(q[dof], qd[dof]) + crm(v[i]) @ vj[i]
+            c[i] = self.joint_model[i].bias(q[self.qdofs[i]], qd[dof]) + crm(v[i]) @ vj[i]
             ia[i] = self.inertia[i].astype(dtype)
             pa[i] = crf(v[i]) @ (self.inertia[i] @ v[i])
+            if fext is not None:
+                pa[i] = pa[i] - fext[i]
         u_mat, d, u = [None] * n, [None] * n, [None] * n
         for i in reversed(range(n)):
             u_mat[i] = ia[i] @ ss[i]
@@ -422,34 +594,153 @@ class NumericRobot:
             a[i] = a_prime + ss[i] @ qdd[self.dofs[i]]
         return qdd
 
+    # ------------------------------------------------------------------ frame accelerations
+
+    def frame_acceleration(self, q, qd, qdd, name: str) -> np.ndarray:
+        """[classical linear acceleration of the frame origin; angular acceleration] (6), world axes,
+        without gravity (Pinocchio's getFrameClassicalAcceleration(..., LOCAL_WORLD_ALIGNED)).
+
+        From the body's spatial velocity [w; v_o] and acceleration [dw; a_o] (body frame, a_0 = 0) and
+        the frame origin r in the body frame: a_p = a_o + dw x r + w x (v_o + w x r), turned to world axes.
+        """
+        q, qd, qdd = self._q(q), self._v(qd, "qd"), self._v(qdd, "qdd")
+        body, at = self._frame(name)
+        dtype = np.result_type(q, qd, qdd, float)
+        if body < 0:
+            return np.zeros(6, dtype)
+        xs = self.body_transforms(q)
+        v, vj, ss = self._velocities(q, qd, xs)
+        a = self._accelerations(q, qd, qdd, xs, v, vj, ss, self._base_acceleration(dtype, gravity=False))
+        rot = self.body_poses(q)[body][:3, :3]
+        r = at[:3, 3]
+        w, v_o = v[body][:3], v[body][3:]
+        dw, a_o = a[body][:3], a[body][3:]
+        linear = a_o + np.cross(dw, r) + np.cross(w, v_o + np.cross(w, r))
+        return np.concatenate([rot @ linear, rot @ dw])
+
+    def jdot_v(self, q, qd, name: str) -> np.ndarray:
+        """The bias Jdot qd of a frame: :meth:`frame_acceleration` at qdd = 0 (6, world axes)."""
+        return self.frame_acceleration(q, qd, np.zeros(self.nv), name)
+
+    # ------------------------------------------------------------------ centre of mass and centroidal momentum
+
+    def com(self, q) -> np.ndarray:
+        """Centre of mass (3, world) of the links that move: with a fixed base the root link and the
+        links fixed to it are world and left out (Pinocchio's data.com[0] excludes the universe); with a
+        floating base the root body counts. Mass total: :attr:`total_mass`."""
+        if not self.total_mass > 0:
+            raise ValueError(f"robot '{self.robot.name}': no moving mass, so no centre of mass")
+        poses = self.body_poses(self._q(q))
+        weighted = sum(mass * (poses[body][:3, :3] @ com + poses[body][:3, 3]) for body, mass, com in self.masses)
+        return weighted / self.total_mass
+
+    def centroidal_map(self, q) -> np.ndarray:
+        """A_G (6, nv): h_G = A_G v = [linear momentum; angular momentum about the COM], world axes
+        (Pinocchio's computeCentroidalMap; the same bodies as :meth:`com`).
+
+        With world-frame body inertias I0_i = X_i^T I_i X_i (X_i = i_X_0), their composites
+        I0c_j over the subtree of j and the world-frame subspaces S0_j = 0_X_j S_j, the momentum
+        about the world origin is sum_j I0c_j S0_j v_j; it is then moved to the COM G:
+        n_G = n_0 - G x p.
+        """
+        q = self._q(q)
+        poses = self.body_poses(q)
+        dtype = np.result_type(q, float)
+        ic = []
+        for i in range(self.nb):
+            x = motion_transform(poses[i])
+            ic.append(x.T @ self.inertia[i] @ x)
+        for i in reversed(range(self.nb)):
+            if self.parent[i] >= 0:
+                ic[self.parent[i]] = ic[self.parent[i]] + ic[i]
+        momentum = np.zeros((6, self.nv), dtype)
+        for j in range(self.nb):
+            momentum[:, self.dofs[j]] = ic[j] @ to_world(poses[j], self.subspace(j, q))
+        g = self.com(q)
+        angular = momentum[:3] - np.cross(g, momentum[3:].T).T
+        return np.concatenate([momentum[3:], angular])
+
+    def centroidal_momentum(self, q, qd) -> np.ndarray:
+        """h_G = A_G(q) qd (6): [linear momentum; angular momentum about the COM], world axes."""
+        return self.centroidal_map(q) @ self._v(qd, "qd")
+
+    def com_jacobian(self, q) -> np.ndarray:
+        """d com / dt = J_com v (3, nv): the linear rows of :meth:`centroidal_map` over the total mass
+        (Pinocchio's jacobianCenterOfMass)."""
+        return self.centroidal_map(q)[:3] / self.total_mass
+
+    # ------------------------------------------------------------------ Coriolis and energies
+
     def mass_matrix_partials(self, q) -> np.ndarray:
-        """dM/dq (nv, nv, nv), [k] = dM/dq_k = Im M(q + i h e_k) / h by complex step (h = 1e-30); q real."""
-        q = np.asarray(q, dtype=float)
-        return np.array([self.crba(q + 1j * COMPLEX_STEP * e).imag / COMPLEX_STEP for e in np.eye(self.nv)])
+        """dM/dq (nv, nv, nv), [k] = the derivative of M along the k-th velocity direction,
+        Im M(q + i h q_dot(q, e_k)) / h by complex step (h = 1e-30); q real. For a fixed base that is
+        dM/dq_k; a floating base's M does not depend on the base pose (its 6 slices are zero)."""
+        q = np.asarray(self._q(q), dtype=float)
+        return np.array([self.crba(q + 1j * COMPLEX_STEP * self.q_dot(q, e)).imag / COMPLEX_STEP for e in np.eye(self.nv)])
 
     def coriolis_matrix(self, q, qd) -> np.ndarray:
-        """Christoffel C(q, qd): C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k.
+        """C(q, qd) with C qd the Coriolis and centrifugal torque and Mdot - 2C skew.
 
-        With this choice C qd is the Coriolis and centrifugal torque and Mdot - 2C is skew.
-        dM/dq comes from :meth:`mass_matrix_partials` (complex step, exact to rounding).
+        Fixed base: Christoffel, C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k,
+        dM/dq from :meth:`mass_matrix_partials` (complex step, exact to rounding).
+        Floating base (v is no time derivative of q, so Christoffel symbols of q do not apply):
+        :meth:`coriolis_factorization`.
         """
+        if self.floating:
+            return self.coriolis_factorization(q, qd)
         dm = self.mass_matrix_partials(q)  # dm[k, i, j] = dM_ij / dq_k
-        qd = np.asarray(qd, dtype=float)
+        qd = np.asarray(self._v(qd, "qd"), dtype=float)
         return 0.5 * (np.einsum("kij,k->ij", dm, qd) + np.einsum("jik,k->ij", dm, qd) - np.einsum("ijk,k->ij", dm, qd))
+
+    def coriolis_factorization(self, q, qd) -> np.ndarray:
+        """C = sum_i J_i^T (I0_i Jdot_i + B_i J_i) in world-frame spatial terms (Echeandia and Wensing, 2021;
+        what Pinocchio's computeCoriolisMatrix computes), for a fixed or floating base.
+
+        J_i (6, nv): body i's world-frame Jacobian, columns S0_j = 0_X_j S_j of its support;
+        Jdot_i: columns v0_j x S0_j + 0_X_j Sdot_j; I0_i: world-frame inertia; v0_i = J_i qd;
+        B_i = 1/2 (v0_i x* I0_i - I0_i v0_i x + (I0_i v0_i) x-bar*). Then C qd = rnea(q, qd, 0) - g
+        and Mdot - 2C is skew.
+        """
+        q, qd = self._q(q), self._v(qd, "qd")
+        dtype = np.result_type(q, qd, float)
+        poses = self.body_poses(q)
+        cols = np.zeros((6, self.nv), dtype)  # S0_j, all bodies
+        dcols = np.zeros((6, self.nv), dtype)  # d/dt S0_j
+        vel: list[np.ndarray] = []
+        for j in range(self.nb):
+            s = to_world(poses[j], self.subspace(j, q))
+            v0 = s @ qd[self.dofs[j]] + (vel[self.parent[j]] if self.parent[j] >= 0 else 0)
+            vel.append(v0)
+            cols[:, self.dofs[j]] = s
+            sdot = to_world(poses[j], self.joint_model[j].subspace_rate(q[self.qdofs[j]], qd[self.dofs[j]]))
+            dcols[:, self.dofs[j]] = crm(v0) @ s + sdot
+        c = np.zeros((self.nv, self.nv), dtype)
+        for i in range(self.nb):
+            x = motion_transform(poses[i])
+            inertia = x.T @ self.inertia[i] @ x
+            mask = np.zeros(self.nv, bool)
+            for j in self.support[i]:
+                mask[self.dofs[j]] = True
+            jac, jdot = cols * mask, dcols * mask
+            v0 = vel[i]
+            b = 0.5 * (crf(v0) @ inertia - inertia @ crm(v0) + crf_bar(inertia @ v0))
+            c = c + jac.T @ (inertia @ jdot + b @ jac)
+        return c
 
     def kinetic_energy(self, q, qd):
         """T = 1/2 sum_i v_i^T I_i v_i over the body spatial velocities (= 1/2 qd^T M qd)."""
-        q, qd = np.asarray(q), np.asarray(qd)
+        q, qd = self._q(q), self._v(qd, "qd")
         v, _, _ = self._velocities(q, qd, self.body_transforms(q))
         return sum(0.5 * v[i] @ self.inertia[i] @ v[i] for i in range(self.nb))
 
     def potential_energy(self, q):
         """U = -sum_l m_l gravity . p_com_l over the links that move (world COM positions).
 
-        Zero when every COM is at the world origin. The root link and links fixed to
-        it are world and do not count (as in Pinocchio's computePotentialEnergy).
+        Zero when every COM is at the world origin. With a fixed base the root link and links
+        fixed to it are world and do not count (as in Pinocchio's computePotentialEnergy);
+        a floating base's root counts.
         """
-        poses = self.body_poses(np.asarray(q))
+        poses = self.body_poses(self._q(q))
         energy = 0
         for body, mass, com in self.masses:
             p = poses[body][:3, :3] @ com + poses[body][:3, 3]

@@ -1,0 +1,199 @@
+"""A Pinocchio model built directly from a derive Robot (no URDF), and a NumericRobot-like wrapper.
+
+- Floating base: a ``JointModelFreeFlyer`` named ``root_joint`` (Pinocchio's q = [p, quaternion
+  x y z w], v = [linear, angular] in the root frame), the root link's mass on it.
+- revolute / prismatic: RX/RY/RZ, PX/PY/PZ about a coordinate axis, else the Unaligned models;
+  helical: ``JointModelHelicalUnaligned``; spherical: ``JointModelSphericalZYX``; universal:
+  ``JointModelUniversal``; cylindrical (no Pinocchio model): a revolute then a prismatic joint
+  about the same axis, with a massless body between them (the same motion, Rot(a, q1) Trans(a q2)).
+- Links through fixed joints are merged into the joint they hang from (``appendBodyToJoint`` with
+  their placement), as Pinocchio's URDF parser does; with a fixed base the root link and the links
+  fixed to it are the universe, whose inertia no algorithm uses (nothing is appended to it).
+- Every link becomes a BODY frame and every named frame an OP_FRAME, so all of
+  ``robot.frame_names`` can be queried by name.
+- Parameter expressions are evaluated at the defaults (or ``params``) by derive.description.expr.
+
+Joints are added in ``robot.joints`` order, so Pinocchio's q and v are ours entry for entry.
+"""
+
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+import pinocchio as pin
+
+from derive.description import expr
+from derive.description.robot import FREE_FLYER, Robot
+
+
+def _rpy(r: float, p: float, y: float) -> np.ndarray:
+    return pin.rpy.rpyToMatrix(r, p, y)
+
+
+def _axis_model(kind: str, axis: np.ndarray):
+    """RX/RY/RZ or PX/PY/PZ where the axis is a (positive) coordinate axis, else the Unaligned model."""
+    for k, unit in enumerate(np.eye(3)):
+        if np.array_equal(axis, unit):
+            return getattr(pin, f"JointModel{'R' if kind == 'revolute' else 'P'}{'XYZ'[k]}")()
+    return pin.JointModelRevoluteUnaligned(axis) if kind == "revolute" else pin.JointModelPrismaticUnaligned(axis)
+
+
+def build_model(robot: Robot, params: Mapping[str, float] | None = None) -> pin.Model:
+    env = dict(robot.parameter_defaults) | {k: float(v) for k, v in (params or {}).items()}
+
+    def num(value) -> float:
+        return float(expr.evaluate(value, env))
+
+    def vec(values) -> np.ndarray:
+        return np.array([num(v) for v in values], dtype=float)
+
+    def se3(origin) -> pin.SE3:
+        return pin.SE3(_rpy(*vec(origin.rpy)), vec(origin.xyz))
+
+    model = pin.Model()
+    model.name = robot.name
+    model.gravity = pin.Motion(np.concatenate([vec(robot.gravity), np.zeros(3)]))
+    placed: dict[str, tuple[int, pin.SE3]] = {robot.root: (0, pin.SE3.Identity())}
+    if robot.floating:
+        root = model.addJoint(0, pin.JointModelFreeFlyer(), pin.SE3.Identity(), FREE_FLYER)
+        placed[robot.root] = (root, pin.SE3.Identity())
+    for joint in robot.joints:
+        parent, at = placed[joint.parent]
+        placement = at * se3(joint.origin)
+        if joint.dof == 0:
+            placed[joint.child] = (parent, placement)
+            continue
+        axis = np.array(joint.axis, dtype=float)
+        if joint.type in ("revolute", "prismatic"):
+            chain = [_axis_model(joint.type, axis)]
+        elif joint.type == "helical":
+            chain = [pin.JointModelHelicalUnaligned(axis, num(joint.pitch))]
+        elif joint.type == "spherical":
+            chain = [pin.JointModelSphericalZYX()]
+        elif joint.type == "universal":
+            chain = [pin.JointModelUniversal(axis, np.array(joint.axis2, dtype=float))]
+        elif joint.type == "cylindrical":
+            chain = [pin.JointModelRevoluteUnaligned(axis), pin.JointModelPrismaticUnaligned(axis)]
+        else:
+            raise ValueError(f"pin_model: joint type {joint.type!r} not handled")
+        jid = parent
+        for k, jmodel in enumerate(chain):
+            name = joint.name if k == 0 else f"{joint.name}__{k}"
+            jid = model.addJoint(jid, jmodel, placement if k == 0 else pin.SE3.Identity(), name)
+        placed[joint.child] = (jid, pin.SE3.Identity())
+
+    for link in robot.links:
+        jid, at = placed[link.name]
+        if jid == 0:
+            continue
+        rot = _rpy(*vec(link.inertia_rpy))
+        inertia = rot @ np.array([[num(x) for x in row] for row in link.inertia]) @ rot.T
+        model.appendBodyToJoint(jid, pin.Inertia(num(link.mass), vec(link.com), inertia), at)
+
+    for name in [robot.root] + [j.child for j in robot.joints]:
+        jid, at = placed[name]
+        model.addFrame(pin.Frame(name, jid, at, pin.FrameType.BODY), False)
+    for frame in robot.frames:
+        jid, at = placed[frame.link]
+        model.addFrame(pin.Frame(frame.name, jid, at * se3(frame.origin), pin.FrameType.OP_FRAME), False)
+    return model
+
+
+class PinRobot:
+    """Pinocchio on a derive Robot, with NumericRobot's interface and conventions (q, v in our order,
+    Jacobians and frame accelerations LOCAL_WORLD_ALIGNED [linear; angular], wrenches per frame)."""
+
+    def __init__(self, robot: Robot, params: Mapping[str, float] | None = None):
+        self.robot = robot
+        self.model = build_model(robot, params)
+        self.data = self.model.createData()
+        assert (self.model.nq, self.model.nv) == (robot.nq, robot.nv), (self.model.nq, self.model.nv)
+        # q and v entry for entry: Pinocchio's joints in our order, each at the next free index
+        names = ([FREE_FLYER] if robot.floating else []) + [j.name for j in robot.moving_joints]
+        ours = [n for n in self.model.names[1:] if "__" not in n]
+        assert ours == names, (ours, names)
+        nq = nv = 0
+        for jmodel in self.model.joints[1:]:
+            assert (jmodel.idx_q, jmodel.idx_v) == (nq, nv)
+            nq, nv = nq + jmodel.nq, nv + jmodel.nv
+        self.frame_ids = {name: self.model.getFrameId(name) for name in robot.frame_names}
+        assert len(set(self.frame_ids.values())) == len(self.frame_ids)
+
+    def frame_id(self, name: str) -> int:
+        return self.frame_ids[name]
+
+    def _kinematics(self, q, v=None, a=None) -> None:
+        if v is None:
+            pin.forwardKinematics(self.model, self.data, q)
+        else:
+            pin.forwardKinematics(self.model, self.data, q, v, np.zeros(self.model.nv) if a is None else a)
+        pin.updateFramePlacements(self.model, self.data)
+
+    def pose(self, q, name: str) -> np.ndarray:
+        self._kinematics(q)
+        return self.data.oMf[self.frame_id(name)].homogeneous.copy()
+
+    frame_pose = pose
+
+    def jacobian(self, q, name: str) -> np.ndarray:
+        return pin.computeFrameJacobian(self.model, self.data, q, self.frame_id(name), pin.LOCAL_WORLD_ALIGNED).copy()
+
+    def crba(self, q) -> np.ndarray:
+        m = np.array(pin.crba(self.model, self.data, q))
+        return np.triu(m) + np.triu(m, 1).T
+
+    def gravity(self, q) -> np.ndarray:
+        return np.array(pin.computeGeneralizedGravity(self.model, self.data, q))
+
+    def fext(self, q, wrenches: Mapping[str, np.ndarray]):
+        """Frame wrenches [force; torque] at the frame origin, world axes -> per-joint forces, joint frame."""
+        self._kinematics(q)
+        out = [pin.Force.Zero() for _ in range(self.model.njoints)]
+        for name, wrench in wrenches.items():
+            fid = self.frame_id(name)
+            jid = self.model.frames[fid].parentJoint
+            p = self.data.oMf[fid].translation
+            force, torque = np.asarray(wrench[:3], float), np.asarray(wrench[3:], float)
+            at_world_origin = pin.Force(force, torque + np.cross(p, force))
+            out[jid] = out[jid] + self.data.oMi[jid].actInv(at_world_origin)
+        vec = pin.StdVec_Force()
+        for f in out:
+            vec.append(f)
+        return vec
+
+    def rnea(self, q, v, a, wrenches=None) -> np.ndarray:
+        if wrenches:
+            return np.array(pin.rnea(self.model, self.data, q, v, a, self.fext(q, wrenches)))
+        return np.array(pin.rnea(self.model, self.data, q, v, a))
+
+    def aba(self, q, v, tau, wrenches=None) -> np.ndarray:
+        if wrenches:
+            return np.array(pin.aba(self.model, self.data, q, v, tau, self.fext(q, wrenches)))
+        return np.array(pin.aba(self.model, self.data, q, v, tau))
+
+    def frame_acceleration(self, q, v, a, name: str) -> np.ndarray:
+        self._kinematics(q, v, a)
+        acc = pin.getFrameClassicalAcceleration(self.model, self.data, self.frame_id(name), pin.LOCAL_WORLD_ALIGNED)
+        return np.concatenate([acc.linear, acc.angular])
+
+    def jdot_v(self, q, v, name: str) -> np.ndarray:
+        return self.frame_acceleration(q, v, np.zeros(self.model.nv), name)
+
+    def com(self, q) -> np.ndarray:
+        return np.array(pin.centerOfMass(self.model, self.data, q))
+
+    def com_jacobian(self, q) -> np.ndarray:
+        return np.array(pin.jacobianCenterOfMass(self.model, self.data, q))
+
+    def centroidal_map(self, q) -> np.ndarray:
+        return np.array(pin.computeCentroidalMap(self.model, self.data, q))
+
+    def coriolis_matrix(self, q, v) -> np.ndarray:
+        return np.array(pin.computeCoriolisMatrix(self.model, self.data, q, v))
+
+    def kinetic_energy(self, q, v) -> float:
+        return float(pin.computeKineticEnergy(self.model, self.data, q, v))
+
+    def potential_energy(self, q) -> float:
+        return float(pin.computePotentialEnergy(self.model, self.data, q))
