@@ -20,7 +20,7 @@ import pytest
 from derive.codegen.generate import check, generate
 from derive.reference import NumericRobot
 from derive.codegen.catalogue import function_specs
-from util import assert_close, params, robots, states, sx_model
+from util import assert_close, params, random_q, robots, states, sx_model
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
@@ -61,8 +61,27 @@ class CFunctions:
 
 def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
     q, qd, qdd, tau = a["q"], a["qd"], a["qdd"], a["tau"]
-    n = len(q)
+    nq, nv = len(q), len(qd)
     kind = fn["quantity"]
+    wrenches = {f: a["w"][6 * k:6 * k + 6] for k, f in enumerate(a["wrench_frames"])}
+
+    def f(x, u):  # the ODE x' = [dq/dt; qdd]
+        return np.concatenate([ref.q_dot(x[:nq], x[nq:]), ref.aba(x[:nq], x[nq:], u)])
+
+    if kind == "jdot_qd":
+        return ref.jdot_v(q, qd, fn["frame"])
+    if kind == "frame_acceleration":
+        return ref.frame_acceleration(q, qd, qdd, fn["frame"])
+    if kind == "com":
+        return ref.com(q)
+    if kind == "com_jacobian":
+        return ref.com_jacobian(q)
+    if kind == "centroidal_map":
+        return ref.centroidal_map(q)
+    if kind == "inverse_dynamics_fext":
+        return ref.rnea(q, qd, qdd, wrenches)
+    if kind == "forward_dynamics_fext":
+        return ref.aba(q, qd, tau, wrenches)
     if kind == "fk_jacobian":
         return [ref.frame_pose(q, fn["frame"]), ref.jacobian(q, fn["frame"])]
     if kind == "fk":
@@ -83,27 +102,23 @@ def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
     if kind == "forward_dynamics":
         return ref.aba(q, qd, tau)
     if kind == "ode_rhs":
-        return np.concatenate([qd, ref.aba(q, qd, tau)])
+        return f(np.concatenate([q, qd]), tau)
     if kind == "rk4_step":
         h, x = a["dt"][0], np.concatenate([q, qd])
-
-        def f(x):
-            return np.concatenate([x[n:], ref.aba(x[:n], x[n:], tau)])
-
-        k1 = f(x)
-        k2 = f(x + h / 2 * k1)
-        k3 = f(x + h / 2 * k2)
-        k4 = f(x + h * k3)
-        return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        k1 = f(x, tau)
+        k2 = f(x + h / 2 * k1, tau)
+        k3 = f(x + h / 2 * k2, tau)
+        k4 = f(x + h * k3, tau)
+        x = x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+        if ref.floating:  # rk4_step projects the base quaternion back onto the unit sphere
+            x[3:7] /= np.linalg.norm(x[3:7])
+        return x
     if kind == "ode_jac_u":
-        return np.vstack([np.zeros((n, n)), np.linalg.inv(ref.crba(q))])
+        return np.vstack([np.zeros((nq, nv)), np.linalg.inv(ref.crba(q))])
     if kind == "ode_jac_x":  # complex step through the reference ABA
         h, x = 1e-30, np.concatenate([q, qd])
-        cols = []
-        for k in range(2 * n):
-            xc = x + 1j * h * np.eye(2 * n)[k]
-            cols.append(np.concatenate([xc[n:], ref.aba(xc[:n], xc[n:], tau.astype(complex))]).imag / h)
-        return np.array(cols).T
+        eye = np.eye(nq + nv)
+        return np.array([f(x + 1j * h * eye[k], tau.astype(complex)).imag / h for k in range(nq + nv)]).T
     raise AssertionError(kind)
 
 
@@ -130,7 +145,8 @@ def test_generated_c_python_casadi_match_reference(robot, build_dir):
     for q, qd, qdd in states(r):
         tau = rng.normal(size=r.nv) * 5
         a = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "x": np.concatenate([q, qd]), "u": tau, "p": p,
-             "dt": np.array([0.01])}
+             "dt": np.array([0.01]), "w": rng.normal(size=6 * len(r.wrench_frames)) * 5,
+             "wrench_frames": manifest["wrench_frames"]}
         for fn in manifest["functions"]:
             if fn["quantity"] == "ik":
                 continue   # a solver, not a formula: tests/test_ik.py
@@ -165,12 +181,13 @@ def test_python_returns_what_the_manifest_declares(robot):
     py = load_python(robot)
     r = robots()[robot]
     rng = np.random.default_rng(2)
-    q = rng.uniform(*r.joint_box())
+    q = random_q(r, rng)
     a = {"q": q, "qd": rng.normal(size=r.nv), "qdd": rng.normal(size=r.nv), "tau": rng.normal(size=r.nv),
          "x": np.concatenate([q, rng.normal(size=r.nv)]), "u": rng.normal(size=r.nv), "p": params(r),
-         "dt": np.array([0.01]), "q0": None, "w": None}
+         "dt": np.array([0.01]), "q0": None}
     assert manifest["functions"]
     for fn in manifest["functions"]:
+        a["w"] = rng.normal(size=6 * len(r.wrench_frames)) if fn["quantity"].endswith("_fext") else None
         if fn["quantity"] == "ik":
             a["T"] = getattr(py, f"fk_{fn['frame']}")(q)
         returns = fn["python"]["returns"]

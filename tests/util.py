@@ -32,7 +32,11 @@ def params(robot: Robot) -> np.ndarray:
 def random_q(robot: Robot, rng: np.random.Generator) -> np.ndarray:
     """q uniformly within the joint limits (or [-pi, pi] / [-1, 1] m where a limit is missing)."""
     lo, hi = robot.joint_box()
-    return rng.uniform(lo, hi)
+    q = rng.uniform(lo, hi)
+    if robot.floating:  # a random unit quaternion for the base
+        quat = rng.normal(size=4)
+        q[3:7] = quat / np.linalg.norm(quat)
+    return q
 
 
 def states(robot: Robot, seed: int = 0, n: int = N_STATES):

@@ -176,6 +176,7 @@ def load_mechanism(path: str | Path) -> Mechanism:
 
 def mechanism_from_robot(robot) -> Mechanism:
     """A models.yaml robot as a spatial mechanism: its links, one two-link joint per joint."""
+    robot.require_fixed_base("the Gruebler count")
     links = (robot.root,) + tuple(x.name for x in robot.links if x.name != robot.root)
     return Mechanism(robot.name, "spatial", links, tuple(MechanismJoint(j.type, (j.parent, j.child)) for j in robot.joints),
                      robot.description)

@@ -62,6 +62,7 @@ class TaskJacobian:
     """J_t(q): the task rows of the geometric Jacobian of ``frame``, numeric and symbolic (SX)."""
 
     def __init__(self, robot: Robot, frame: str = "tcp", task: str = "position", kinematics=None):
+        robot.require_fixed_base("the singularity and manipulability analysis")
         self.robot, self.frame, self.task = robot, frame, task
         kin = kinematics or Kinematics(robot, make_symbols(robot))  # reuse an SXModel's when given
         self.sym = kin.sym

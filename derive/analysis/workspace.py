@@ -61,6 +61,7 @@ class Arm:
     BLOCK = 4096  # configurations per CasADi call
 
     def __init__(self, robot: Robot, frame: str = "tcp"):
+        robot.require_fixed_base("the workspace and planning tools")
         self.robot, self.frame = robot, frame
         self._maps: dict[int, ca.Function] = {}
         sym = make_symbols(robot)

@@ -18,8 +18,9 @@ from derive.symbolic.model import SXModel
 from derive.symbolic.ode import ode_jacobians
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 
-QUANTITIES = ("fk", "jacobian", "fk_jacobian", "mass_matrix", "coriolis_matrix", "gravity", "inverse_dynamics",
-              "forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u")
+QUANTITIES = ("fk", "jacobian", "fk_jacobian", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
+              "gravity", "inverse_dynamics", "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext",
+              "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u")
 
 IK_FRAMES = ("tcp",)      # the frames that have a generated fk_jacobian
 IK_MAX_ITERATIONS = 5000  # the generated solver's iteration cap
@@ -32,7 +33,8 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     """Every expression function generated for a robot, in a fixed order."""
     robot: Robot = model.robot
     s = model.sym
-    n = robot.nv
+    n, nq = robot.nv, robot.nq
+    wb = model.whole_body
     extra = (("p", s.p),) if s.p.numel() else ()
     pdoc = f" p ({s.p.numel()}): parameters {', '.join(s.parameter_names)}." if extra else ""
     q, qd, qdd, tau = ("q", s.q), ("qd", s.qd), ("qdd", s.qdd), ("tau", s.tau)
@@ -48,14 +50,22 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
         add("jacobian", f.name, [q], [("J", model.jacobian(f.name))],
             f"Geometric Jacobian of frame '{f.name}', 6x{n} row-major, rows [linear; angular], "
             "world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.")
+        add("jdot_qd", f.name, [q, qd], [("a", wb.jdot_qd(f.name))],
+            f"J'(q, qd) qd of frame '{f.name}' (6): its classical acceleration [linear; angular] at qdd = 0, "
+            "world-aligned, without gravity: the bias of task-space control.")
+        add("frame_acceleration", f.name, [q, qd, qdd], [("a", wb.frame_acceleration(f.name))],
+            f"Classical acceleration of frame '{f.name}' (6): [d/dt of its origin's world velocity; angular "
+            "acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's "
+            "getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED).")
     if "tcp" in {f.name for f in robot.frames}:
         add("fk_jacobian", "tcp", [q], [("T", model.fk("tcp")), ("J", model.jacobian("tcp"))],
             "world_T_tcp (4x4) and its geometric Jacobian (6x{n}, [linear; angular], LOCAL_WORLD_ALIGNED) "
             "in one pass, sharing the transforms: what IK and control loops need each step.".format(n=n))
     add("mass_matrix", None, [q], [("M", ne.mass_matrix)],
         f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.")
-    add("coriolis_matrix", None, [q, qd], [("C", ne.coriolis_matrix)],
-        f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.")
+    if not robot.floating:
+        add("coriolis_matrix", None, [q, qd], [("C", ne.coriolis_matrix)],
+            f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.")
     add("gravity", None, [q], [("g", ne.gravity_vector)],
         "Gravity torques g(q) = dU/dq = rnea(q, 0, 0).")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
@@ -63,34 +73,62 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     qdd_fd = model.forward_dynamics()
     add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
         "Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve.")
-    x, u = ca.SX.sym("x", 2 * n), ca.SX.sym("u", n)
-    f = ca.vertcat(s.qd, qdd_fd)
+    frames = robot.wrench_frames
+    if frames:
+        k = len(frames)
+        w = ca.SX.sym("w", 6 * k)
+        wrench_doc = (f"w ({6 * k}): the external wrenches [force; torque] acting at the origins of the frames "
+                      f"{', '.join(frames)} (6 each, in that order), in world-aligned axes")
+        jtw = wb.wrench_torques(w)
+        add("inverse_dynamics_fext", None, [q, qd, qdd, ("w", w)], [("tau", ne.inverse_dynamics() - jtw)],
+            f"Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; {wrench_doc}.")
+        add("forward_dynamics_fext", None, [q, qd, tau, ("w", w)],
+            [("qdd", model.forward_dynamics(extra_torque=jtw))],
+            f"Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); {wrench_doc}.")
+    com_doc = ("the moving bodies (the floating base included)" if robot.floating else
+               "the moving bodies (the root link is the world and does not count, as in Pinocchio)")
+    add("com", None, [q], [("c", wb.com)], f"Centre of mass of {com_doc}, world coordinates (3).")
+    add("com_jacobian", None, [q], [("J", wb.com_jacobian)],
+        f"Jacobian of the centre of mass (3x{n}, row-major): its world velocity is J qd.")
+    add("centroidal_map", None, [q], [("A", wb.centroidal_map)],
+        f"Centroidal momentum matrix A_G (6x{n}, row-major): A_G qd = [linear; angular] momentum about the centre "
+        "of mass, world axes (Pinocchio's computeCentroidalMap).")
+    x, u = ca.SX.sym("x", nq + n), ca.SX.sym("u", n)
+    f = ca.vertcat(model.configuration_rate, qdd_fd)
     sub_from, sub_to = ca.vertcat(s.q, s.qd, s.tau), ca.vertcat(x, u)
 
     def in_xu(e: ca.SX) -> ca.SX:
         return ca.substitute(e, sub_from, sub_to)
 
-    add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))],
-        f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd].")
-    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(), s.q, s.qd, s.qdd, qdd_fd)
+    if robot.floating:
+        ode_doc = (f"First-order ODE x' = f(x, u) with x = [q; qd] ({nq + n}), u = tau ({n}): f = [dq/dt; qdd], "
+                   "dq/dt = [R(quat) v; 1/2 quat (x) (w, 0); joint rates] for the base velocity [v; w] (base frame); "
+                   "the quaternion's norm is not kept by f itself (rk4_step renormalises it).")
+    else:
+        ode_doc = f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd]."
+    add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))], ode_doc)
+    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(), s.q, s.qd, s.qdd, qdd_fd,
+                         model.configuration_rate if robot.floating else None)
     add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))],
-        f"df/dx ({2 * n}x{2 * n}, row-major) of the ODE x' = f(x, u): the linearisation's A.")
+        f"df/dx ({nq + n}x{nq + n}, row-major) of the ODE x' = f(x, u): the linearisation's A.")
     add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))],
-        f"df/du ({2 * n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.")
+        f"df/du ({nq + n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.")
     return specs
 
 
 def template_functions(model: SXModel) -> list[TemplateFunction]:
     """Functions built from templates on top of the expression functions, in a fixed order."""
     robot = model.robot
-    n = 2 * robot.nv
+    n = robot.nq + robot.nv
     extra = (("p", (model.sym.p.numel(), 1)),) if model.sym.p.numel() else ()
     rk4 = TemplateFunction(
         robot.name, "rk4_step", None,
         (("x", (n, 1)), ("u", (robot.nv, 1)), ("dt", (1, 1))) + extra, (("x_next", (n, 1)),),
         "One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: "
-        "x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.",
-        "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n),))
+        "x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs" + (
+            "; then the base quaternion x_next[3:7] is divided by its norm (projected back onto the unit sphere)."
+            if robot.floating else "."),
+        "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n), ("quaternion", 3 if robot.floating else -1)))
     manipulability = [t for f in robot.frames if (t := manipulability_function(model, f.name))]
     return [rk4] + ik_functions(model) + manipulability
 
@@ -104,7 +142,7 @@ def ik_functions(model: SXModel) -> list[TemplateFunction]:
     n, np_ = model.sym.nv, model.sym.p.numel()
     extra = (("p", (np_, 1)),) if np_ else ()
     out = []
-    for frame in IK_FRAMES:
+    for frame in IK_FRAMES if not robot.floating else ():  # IK moves joints; a floating base has no limits to keep
         if frame not in {f.name for f in robot.frames} or not model.kinematics.ancestors[frame]:
             continue
         context = {"n": n, "frame": frame, "max_iterations": IK_MAX_ITERATIONS, "attempt": ATTEMPT,

@@ -73,6 +73,22 @@ def template_function(t: TemplateFunction) -> Function:
         "outputs": [{"name": n, "shape": list(s)} for n, s in t.outputs]})
 
 
+CONVENTIONS = {
+    "jacobian": "6 x nv, rows [linear; angular], world-aligned at the frame origin (Pinocchio LOCAL_WORLD_ALIGNED)",
+    "frame_acceleration": "[classical linear; angular] acceleration of the frame origin, world-aligned, without "
+                          "gravity (Pinocchio getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED); jdot_qd at qdd = 0",
+    "wrenches": "w = [force; torque] at each wrench frame's origin, world-aligned, 6 per frame in wrench_frames "
+                "order; tau = ID - sum J_f^T w_f",
+    "com": "centre of mass of the moving bodies (a fixed base's root link is the world and does not count); "
+           "centroidal_map A_G: A_G qd = [linear; angular] momentum about the CoM, world axes",
+    "matrices": "row-major",
+}
+FLOATING_CONVENTION = ("q = [base position (3, world); base orientation quaternion (x, y, z, w); joints], "
+                       "qd = [base linear velocity (3); base angular velocity (3); joint rates], both in the base "
+                       "frame; tau[0:6] = [force; torque] on the base at its origin, base frame (Pinocchio "
+                       "JointModelFreeFlyer); rk4_step renormalises the quaternion after each step")
+
+
 def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,
                  templates: list[TemplateFunction] = (), backends: list[Backend] | None = None) -> dict[str, str]:
     """All files of one robot, as {path relative to generated/<robot>/: text}."""
@@ -92,6 +108,10 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         "model_hash": model_hash,
         "nq": robot.nq,
         "nv": robot.nv,
+        "base": robot.base,
+        "velocities": list(robot.velocity_names),
+        "wrench_frames": list(robot.wrench_frames),
+        "conventions": CONVENTIONS | ({"floating_base": FLOATING_CONVENTION} if robot.floating else {}),
         "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
                     "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
         "frames": [fr.name for fr in robot.frames],

@@ -18,7 +18,7 @@ from derive.description.dh import dh_to_tree
 from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
-from derive.description.robot import (BASES, robot_name, Frame, Joint, Limits, Link, ModelError, Origin, Parameter, Robot, Value, Vec3,
+from derive.description.robot import (BASES, robot_name, Frame, Joint, Limits, Link, Mimic, ModelError, Origin, Parameter, Robot, Value, Vec3,
                                       identifier, shown)
 from derive.resources import EXAMPLE_MODELS
 
@@ -222,7 +222,8 @@ class _Parser:
         return tuple(a / norm for a in v) if norm != 1.0 else tuple(v)
 
     def joint(self, where: str, raw: Any) -> Joint:
-        self.check_keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "axis2", "pitch", "limits"})
+        self.check_keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "axis2", "pitch", "limits",
+                                           "mimic"})
         for key in ("name", "type", "parent", "child"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
@@ -258,7 +259,20 @@ class _Parser:
             limits=self.joint_limits(where + ".limits", raw.get("limits"), JOINT_TYPES[jtype]),
             pitch=pitch,
             axis2=axis2,
+            mimic=self.mimic(f"{where}.mimic", raw["mimic"], jtype) if "mimic" in raw else None,
         )
+
+    def mimic(self, where: str, raw: Any, jtype: str) -> Mimic:
+        if JOINT_TYPES[jtype] != 1:
+            raise self.error(where, f"only a 1-DOF joint can mimic another (this one is {jtype})")
+        if not isinstance(raw, Mapping):
+            raise self.error(where, "expected a mapping {joint: NAME, multiplier: A, offset: B}")
+        self.check_keys(where + ".", raw, {"joint", "multiplier", "offset"})
+        if "joint" not in raw:
+            raise self.error(f"{where}.joint", "missing")
+        return Mimic(identifier(self.name, f"{where}.joint", raw["joint"]),
+                     self.number(f"{where}.multiplier", raw.get("multiplier", 1.0)),
+                     self.number(f"{where}.offset", raw.get("offset", 0.0)))
 
     def joint_limits(self, where: str, raw: Any, dof: int) -> Limits | tuple[Limits, ...]:
         """One mapping for a 1-DOF joint; for a multi-DOF joint a list (one per coordinate) or one mapping for all."""
@@ -285,7 +299,7 @@ class _Parser:
     def robot(self) -> Robot:
         spec = self.spec
         self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
-                                   "base"})
+                                   "base", "wrenches"})
         base = spec.get("base", "fixed")
         if base not in BASES:
             raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
@@ -321,12 +335,39 @@ class _Parser:
             description=str(spec.get("description", "")).strip(),
             source=str(spec.get("source", "")).strip(),
             base=base,
+            wrenches=self.wrenches(spec),
         )
         if robot.nv == 0:
             raise self.error("joints", "no moving joint: a robot needs at least one degree of freedom")
         self.check_names(robot)
         self.check_values(robot)
+        joints = {j.name: j for j in robot.joints}
+        for j in robot.joints:
+            if j.mimic is None:
+                continue
+            target = joints.get(j.mimic.joint)
+            where = f"joints ({j.name}).mimic.joint"
+            if target is None:
+                raise self.error(where, f"unknown joint '{shown(j.mimic.joint)}'")
+            if target is j or target.mimic is not None or target.dof != 1:
+                what = ("itself" if target is j else f"'{target.name}', which mimics another joint" if target.mimic
+                        else f"'{target.name}', a {target.type} joint")
+                raise self.error(where, f"a joint can only mimic a 1-DOF joint with its own coordinate, not {what}")
+        known = robot.frame_names
+        for i, frame in enumerate(robot.wrench_frames):
+            if frame not in known:
+                raise self.error(f"wrenches[{i}]", f"unknown frame '{shown(frame)}' (links and frames: {', '.join(known)})")
         return robot
+
+    def wrenches(self, spec: Mapping) -> tuple[str, ...] | None:
+        raw = spec.get("wrenches")
+        if raw is None:
+            return None
+        if not isinstance(raw, list):
+            raise self.error("wrenches", "expected a list of frame names")
+        if len(set(map(str, raw))) != len(raw):
+            raise self.error("wrenches", "a frame is listed twice")
+        return tuple(identifier(self.name, f"wrenches[{i}]", f) for i, f in enumerate(raw))
 
     def topological(self, links: list[Link], joints: list[Joint]) -> list[Joint]:
         names = [link.name for link in links]

@@ -100,6 +100,17 @@ class Coordinate:
 
 
 @dataclass(frozen=True)
+class Mimic:
+    """A joint that follows another: q_this = multiplier * q_joint + offset (URDF's ``<mimic>``).
+    The mimic joint has no entry in q; its motion and inertia enter the dynamics through the
+    chain rule (M = G^T M_full G, tau = G^T tau_full with G = d q_full / d q)."""
+
+    joint: str
+    multiplier: float = 1.0
+    offset: float = 0.0
+
+
+@dataclass(frozen=True)
 class Joint:
     """A joint (see :data:`JOINT_TYPES`).
 
@@ -117,6 +128,7 @@ class Joint:
     limits: Limits | tuple[Limits, ...] = Limits()
     pitch: Value | None = None  # helical only: m of travel per rad
     axis2: tuple | None = None  # universal only
+    mimic: Mimic | None = None  # a 1-DOF joint driven by another one's coordinate
 
     @property
     def dof(self) -> int:
@@ -129,7 +141,9 @@ class Joint:
 
     @property
     def coordinates(self) -> tuple[Coordinate, ...]:
-        """The joint's entries of q, in order (none for a fixed joint)."""
+        """The joint's entries of q, in order (none for a fixed or a mimic joint)."""
+        if self.mimic is not None:
+            return ()
         if self.dof <= 1:
             unit = "m" if self.type == "prismatic" else "rad"
             return (Coordinate(self.name, self.name, self.type, unit, self.limits),) * self.dof
@@ -198,10 +212,19 @@ class Robot:
     description: str = ""
     source: str = ""
     base: str = "fixed"
+    wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
 
     @property
     def floating(self) -> bool:
         return self.base == "floating"
+
+    @property
+    def wrench_frames(self) -> tuple[str, ...]:
+        """The frames (links or named frames) at which the generated ``*_fext`` dynamics take
+        external wrenches: the model's ``wrenches`` list, by default the ``tcp`` frame if any."""
+        if self.wrenches is not None:
+            return self.wrenches
+        return ("tcp",) if any(f.name == "tcp" for f in self.frames) else ()
 
     @property
     def root(self) -> str:
@@ -258,7 +281,7 @@ class Robot:
     @property
     def nv(self) -> int:
         """Entries of v = qd, of qdd and of tau: the joints' DOF, plus 6 for a floating base."""
-        return sum(j.dof for j in self.joints) + (6 if self.floating else 0)
+        return len(self.joint_coordinates) + (6 if self.floating else 0)
 
     def require_fixed_base(self, what: str) -> None:
         """Raise a one-line error if the robot has a floating base, which ``what`` does not handle."""
@@ -291,8 +314,10 @@ def model_data(robot: Robot) -> dict:
     data = asdict(robot)
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
+    if data["wrenches"] is None:
+        del data["wrenches"]
     for joint in data["joints"]:
-        for key in ("pitch", "axis2"):
+        for key in ("pitch", "axis2", "mimic"):
             if joint[key] is None:
                 del joint[key]
     return data

@@ -30,6 +30,7 @@ class SymbolicModel:
     """
 
     def __init__(self, robot: Robot, simplify: bool | None = None, method: str = "lagrange"):
+        robot.require_fixed_base("the sympy model")
         self.robot = robot
         self.sx = SXModel(robot)
         self.sx.route(method)  # validates the name

@@ -178,6 +178,7 @@ class IkProblem:
 @lru_cache(maxsize=32)
 def problem(robot: Robot, frame: str = "tcp") -> IkProblem:
     """The IK functions of ``robot``'s ``frame``, built once per process."""
+    robot.require_fixed_base("inverse kinematics")
     return IkProblem(robot, frame)
 
 

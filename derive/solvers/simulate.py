@@ -188,6 +188,7 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
         params: parameter overrides, name -> value (the rest keep their defaults).
         generated: folder holding <robot>/ (default: ./generated, :func:`derive.codegen.generate.default_output`).
     """
+    robot.require_fixed_base("derive simulate")
     if method not in METHODS:
         raise DeriveError(f"simulate: unknown method {method!r} (known: {', '.join(METHODS)})")
     steps = check_times(robot.name, t_end, dt, rtol, atol)

@@ -143,6 +143,7 @@ class TrajectoryOptimizer:
 
     def __init__(self, robot: Robot | str, p: Sequence[float] | None = None,
                  forward_dynamics: Callable | None = None, log: Callable[[str], None] = lambda s: None):
+        robot.require_fixed_base("trajectory optimisation")
         self.robot = load_robot(robot) if isinstance(robot, str) else robot
         self.log = log
         self.model = SXModel(self.robot)

@@ -25,7 +25,7 @@ from functools import cached_property
 
 import casadi as ca
 
-from derive.symbolic.kinematics import Kinematics, joint_motions
+from derive.symbolic.kinematics import Kinematics, Motion, joint_motions, quaternion_matrix
 from derive.description.robot import Robot
 from derive.symbolic.spatial import axis_angle, rpy, skew
 from derive.symbolic.symbols import Symbols
@@ -61,6 +61,7 @@ class Lagrangian:
     """Euler-Lagrange route: L = T - U, d/dt dL/dqd - dL/dq = tau."""
 
     def __init__(self, robot: Robot, sym: Symbols, kin: Kinematics | None = None):
+        robot.require_fixed_base("the Lagrangian route (T and U as functions of q and dq/dt)")
         self.robot, self.sym = robot, sym
         self.kin = kin or Kinematics(robot, sym)
 
@@ -132,6 +133,7 @@ class Body:
     h: ca.SX
     I_o: ca.SX
     pitch: ca.SX | float | None = None
+    motion: Motion | None = None  # its elementary motion: a mimic joint's moves by scale * q[joint] + offset
 
 
 def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
@@ -149,7 +151,7 @@ def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
         motions = joint_motions(j)
         for k, mo in enumerate(motions):
             name = j.child if k == len(motions) - 1 else f"{j.child}[{mo.coordinate}]"
-            body = dict(name=name, parent=b, joint=mo.coordinate, kind=mo.kind, axis=mo.axis, E=R_o, p=p_o)
+            body = dict(name=name, parent=b, joint=mo.coordinate, kind=mo.kind, axis=mo.axis, E=R_o, p=p_o, motion=mo)
             bodies.append(body | ({"pitch": sym.value(mo.pitch)} if mo.kind == "helical" else {}))
             b, R_o, p_o = len(bodies) - 1, ca.SX.eye(3), ca.SX.zeros(3, 1)
         where[j.child] = (b, R_o, p_o)
@@ -167,16 +169,36 @@ def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
 
 
 class NewtonEuler:
-    """Recursive route: RNEA for inverse dynamics, CRBA for M, in body frames."""
+    """Recursive route: RNEA for inverse dynamics, CRBA for M, in body frames.
+
+    With a floating base the root link is one more body, moved by the free flyer: its
+    velocity [v; w] (root frame) is qd[0:6], its acceleration d[v; w]/dt is qdd[0:6] (so
+    the classical acceleration of its origin is dv/dt + w x v), and tau[0:6] is the wrench
+    [force; torque] on it at its origin, in its frame. Gravity enters as the root's
+    acceleration -g, in root coordinates R^T g for a floating base.
+    """
 
     def __init__(self, robot: Robot, sym: Symbols):
         self.robot, self.sym = robot, sym
-        self.bodies, _ = build_bodies(robot, sym)
+        self.bodies, root = build_bodies(robot, sym)
+        self.floating = robot.floating
+        self.root_mass = root  # (m, h, I_o) of the root link: a body only with a floating base
+        self.nb = 6 if robot.floating else 0  # entries of v before the joints'
+        qj = sym.q[7:] if robot.floating else sym.q  # the joints' entries of q
+        # body -> its coordinate's entry among the joints' (a mimic body shares its joint's entry)
+        column = {c.name: i for i, c in enumerate(robot.joint_coordinates)}
+        self.index = [column[b.joint] for b in self.bodies]
+        self.scale = [b.motion.scale for b in self.bodies]
+        self.mimic = any(b.motion.mimic for b in self.bodies)
+        angle = [b.motion.value(qj[k]) for b, k in zip(self.bodies, self.index)]
         self.gravity = _vec(sym, robot.gravity)
-        self._rot = [axis_angle(b.axis, sym.q[i]) if b.kind != "prismatic" else None for i, b in enumerate(self.bodies)]
+        self._rot = [axis_angle(b.axis, angle[i]) if b.kind != "prismatic" else None for i, b in enumerate(self.bodies)]
         self._p = [b.p if b.kind == "revolute" else
-                   b.p + (b.E @ ca.SX(ca.DM(list(b.axis)))) * (sym.q[i] if b.kind == "prismatic" else b.pitch * sym.q[i])
+                   b.p + (b.E @ ca.SX(ca.DM(list(b.axis)))) * (angle[i] if b.kind == "prismatic" else b.pitch * angle[i])
                    for i, b in enumerate(self.bodies)]
+        if robot.floating:
+            q = sym.q
+            self.base_rotation = quaternion_matrix(q[3], q[4], q[5], q[6])
 
     def to_child(self, i: int, v: ca.SX) -> ca.SX:
         """Parent-body coordinates -> body i coordinates (rotation only)."""
@@ -196,16 +218,32 @@ class NewtonEuler:
             return s, b.pitch * s
         return (s, zero) if b.kind == "revolute" else (zero, s)
 
+    def body_rates(self, v: ca.SX) -> list:
+        """The joints' rates (or accelerations) ``v`` per body: scale * v[joint] (G v)."""
+        if not self.mimic:
+            return v
+        return [s * v[k] if s != 1 else v[k] for s, k in zip(self.scale, self.index)]
+
+    def root_motion(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(w, dw, a) of the root, root coordinates: a is the classical acceleration of its origin
+        minus gravity (zero velocity and acceleration -g for a fixed base)."""
+        zero = ca.SX.zeros(3, 1)
+        if not self.floating:
+            return zero, zero, -self.gravity if gravity else zero
+        w = qd[3:6]
+        a = qdd[0:3] + ca.cross(w, qd[0:3])
+        return w, qdd[3:6], a - self.base_rotation.T @ self.gravity if gravity else a
+
     def rnea(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True) -> ca.SX:
         """tau = RNEA(q, qd, qdd): M qdd + C qd + g (g only if ``gravity``)."""
-        n = len(self.bodies)
+        n, nb = len(self.bodies), self.nb
         w, dw, a = [None] * n, [None] * n, [None] * n
-        zero = ca.SX.zeros(3, 1)
-        a_root = -self.gravity if gravity else zero
+        w_0, dw_0, a_0 = self.root_motion(qd, qdd, gravity)
+        qd, qdd = self.body_rates(qd[nb:]), self.body_rates(qdd[nb:])
         f, t = [None] * n, [None] * n
         for i, b in enumerate(self.bodies):
             s_w, s_v = self._motion_axes(i)
-            w_p, dw_p, a_p = (zero, zero, a_root) if b.parent < 0 else (w[b.parent], dw[b.parent], a[b.parent])
+            w_p, dw_p, a_p = (w_0, dw_0, a_0) if b.parent < 0 else (w[b.parent], dw[b.parent], a[b.parent])
             p = self._p[i]
             w_in = self.to_child(i, w_p)
             w[i] = w_in + s_w * qd[i]
@@ -214,25 +252,38 @@ class NewtonEuler:
             a[i] = self.to_child(i, a_lin) + s_v * qdd[i] + 2 * ca.cross(w[i], s_v * qd[i])
             f[i] = b.m * a[i] + ca.cross(dw[i], b.h) + ca.cross(w[i], ca.cross(w[i], b.h))
             t[i] = b.I_o @ dw[i] + ca.cross(w[i], b.I_o @ w[i]) + ca.cross(b.h, a[i])
-        tau = ca.SX.zeros(n, 1)
+        tau = ca.SX.zeros(self.sym.nv, 1)
+        if self.floating:
+            m, h, I = self.root_mass
+            f_0 = m * a_0 + ca.cross(dw_0, h) + ca.cross(w_0, ca.cross(w_0, h))
+            t_0 = I @ dw_0 + ca.cross(w_0, I @ w_0) + ca.cross(h, a_0)
         for i in reversed(range(n)):
             b = self.bodies[i]
             s_w, s_v = self._motion_axes(i)
-            tau[i] = ca.dot(s_w, t[i]) + ca.dot(s_v, f[i])
+            if self.mimic:  # tau = G^T tau_bodies
+                tau[nb + self.index[i]] += self.scale[i] * (ca.dot(s_w, t[i]) + ca.dot(s_v, f[i]))
+            else:
+                tau[nb + i] = ca.dot(s_w, t[i]) + ca.dot(s_v, f[i])
             if b.parent >= 0:
                 f_p = self.to_parent(i, f[i])
                 f[b.parent] = f[b.parent] + f_p
                 t[b.parent] = t[b.parent] + self.to_parent(i, t[i]) + ca.cross(self._p[i], f_p)
+            elif self.floating:
+                f_p = self.to_parent(i, f[i])
+                f_0, t_0 = f_0 + f_p, t_0 + self.to_parent(i, t[i]) + ca.cross(self._p[i], f_p)
+        if self.floating:
+            tau[0:3], tau[3:6] = f_0, t_0
         return tau
 
     @cached_property
     def mass_matrix(self) -> ca.SX:
         """M(q) by the composite-rigid-body algorithm (Featherstone, Table 6.2)."""
-        n = len(self.bodies)
+        n, nb = len(self.bodies), self.nb
         comp = [[b.m, b.h, b.I_o] for b in self.bodies]
+        root = list(self.root_mass)  # the floating root's composite
         for i in reversed(range(n)):
             b = self.bodies[i]
-            if b.parent < 0:
+            if b.parent < 0 and not self.floating:
                 continue
             m, h, I = comp[i]
             p = self._p[i]
@@ -246,18 +297,24 @@ class NewtonEuler:
             for r in range(3):
                 for c in range(3):
                     I_p[r, c] = I_full[min(r, c), max(r, c)]
-            par = comp[b.parent]
+            par = comp[b.parent] if b.parent >= 0 else root
             par[0] = par[0] + m
             par[1] = par[1] + h_p + m * p
             par[2] = par[2] + I_p
-        M = ca.SX(n, n)
+        M = ca.SX(nb + n, nb + n)  # over the bodies' motions; G^T M G at the end for mimic joints
+        if self.floating:
+            m, h, I = root  # momentum [m v + w x h; I w + h x v] of the whole robot for the base velocity [v; w]
+            M[0:3, 0:3] = m * ca.SX.eye(3)
+            M[0:3, 3:6] = -skew(h)
+            M[3:6, 0:3] = skew(h)
+            M[3:6, 3:6] = I
         for i in range(n):
             m, h, I = comp[i]
             s_w, s_v = self._motion_axes(i)
             # spatial momentum of composite i for a unit rate of joint i, about its origin
             f = ca.cross(s_w, h) + m * s_v
             t = I @ s_w + ca.cross(h, s_v)
-            M[i, i] = ca.dot(s_w, t) + ca.dot(s_v, f)
+            M[nb + i, nb + i] = ca.dot(s_w, t) + ca.dot(s_v, f)
             j = i
             while self.bodies[j].parent >= 0:
                 f_p = self.to_parent(j, f)
@@ -265,16 +322,31 @@ class NewtonEuler:
                 f = f_p
                 j = self.bodies[j].parent
                 sj_w, sj_v = self._motion_axes(j)
-                M[i, j] = M[j, i] = ca.dot(sj_w, t) + ca.dot(sj_v, f)
+                M[nb + i, nb + j] = M[nb + j, nb + i] = ca.dot(sj_w, t) + ca.dot(sj_v, f)
+            if self.floating:
+                f_p = self.to_parent(j, f)
+                t = self.to_parent(j, t) + ca.cross(self._p[j], f_p)
+                M[0:3, nb + i] = f_p
+                M[3:6, nb + i] = t
+                M[nb + i, 0:3] = f_p.T
+                M[nb + i, 3:6] = t.T
+        if self.mimic:
+            G = ca.DM(nb + n, self.sym.nv)
+            for k in range(nb):
+                G[k, k] = 1
+            for i in range(n):
+                G[nb + i, nb + self.index[i]] = self.scale[i]
+            M = G.T @ M @ G
         return M
 
     @cached_property
     def gravity_vector(self) -> ca.SX:
-        zeros = ca.SX.zeros(len(self.bodies), 1)
+        zeros = ca.SX.zeros(self.sym.nv, 1)
         return self.rnea(zeros, zeros)
 
     @cached_property
     def coriolis_matrix(self) -> ca.SX:
+        self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
         return christoffel_coriolis(self.mass_matrix, self.sym.q, self.sym.qd)
 
     def inverse_dynamics(self, qdd: ca.SX | None = None) -> ca.SX:
@@ -283,4 +355,4 @@ class NewtonEuler:
     @cached_property
     def bias(self) -> ca.SX:
         """C(q, qd) qd + g(q) = rnea(q, qd, 0)."""
-        return self.rnea(self.sym.qd, ca.SX.zeros(len(self.bodies), 1))
+        return self.rnea(self.sym.qd, ca.SX.zeros(self.sym.nv, 1))

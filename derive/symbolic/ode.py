@@ -43,21 +43,25 @@ def forward_dynamics(M: ca.SX, bias: ca.SX, tau: ca.SX) -> ca.SX:
     return ldlt_solve(M, tau - bias)
 
 
-def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_fd: ca.SX) -> tuple[ca.SX, ca.SX]:
+def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_fd: ca.SX,
+                  q_rate: ca.SX | None = None) -> tuple[ca.SX, ca.SX]:
     """A = df/dx and B = df/du of f = [qd; qdd(q, qd, u)] without differentiating the solve.
 
     From ID(q, qd, qdd(q, qd, u)) = u (implicit function theorem):
         dqdd/dx = -M^-1 dID/dx |_{qdd = FD},   dqdd/du = M^-1,
     so A = [[0, I], [-M^-1 dID/dq, -M^-1 dID/dqd]] and B = [[0], [M^-1]], each column
     by the same unrolled LDL^T (CSE shares the factorisation). ``tau_id`` is ID as an
-    expression of q, qd and the symbol ``qdd``; ``qdd_fd`` the forward dynamics.
+    expression of q, qd and the symbol ``qdd``; ``qdd_fd`` the forward dynamics. ``q_rate`` is
+    dq/dt as a function of q and qd when that is not qd itself (a floating base's quaternion):
+    the top rows of A are then its Jacobian.
     """
-    n = q.numel()
-    dID = ca.substitute(ca.jacobian(tau_id, ca.vertcat(q, qd)), qdd, qdd_fd)
+    n, nq = qd.numel(), q.numel()
+    x = ca.vertcat(q, qd)
+    dID = ca.substitute(ca.jacobian(tau_id, x), qdd, qdd_fd)
     eye = ca.SX.eye(n)
-    top = ca.horzcat(ca.SX.zeros(n, n), eye)
-    A = ca.vertcat(top, ca.horzcat(*[-ldlt_solve(M, dID[:, k]) for k in range(2 * n)]))
-    B = ca.vertcat(ca.SX.zeros(n, n), ca.horzcat(*[ldlt_solve(M, eye[:, k]) for k in range(n)]))
+    top = ca.horzcat(ca.SX.zeros(n, n), eye) if q_rate is None else ca.jacobian(q_rate, x)
+    A = ca.vertcat(top, ca.horzcat(*[-ldlt_solve(M, dID[:, k]) for k in range(nq + n)]))
+    B = ca.vertcat(ca.SX.zeros(nq, n), ca.horzcat(*[ldlt_solve(M, eye[:, k]) for k in range(n)]))
     return A, B
 
 

@@ -1,7 +1,8 @@
 """Robot -> the symbols of its model, in one fixed order.
 
-q, qd, qdd, tau are (nv, 1) CasADi SX column vectors named after the
-coordinates of the joints (``phi``, ``dphi``, ``ddphi``, ``tau_phi``; a
+q (nq, 1) and qd, qdd, tau (nv, 1) are CasADi SX column vectors named after the
+coordinates of the joints (a floating base adds Robot.BASE_POSITION to q and
+BASE_VELOCITY to the others) (``phi``, ``dphi``, ``ddphi``, ``tau_phi``; a
 multi-DOF joint ``ball`` gives ``ball_z``, ``ball_y``, ``ball_x``, see
 :data:`derive.description.model.COORDINATE_SUFFIXES`); p holds the robot's parameters in
 file order. Every derivation takes its symbols from here, so the order of
@@ -29,8 +30,14 @@ class Symbols:
     joint_names: tuple[str, ...]  # one per entry of q: Robot.coordinates' names
     parameter_names: tuple[str, ...]
 
+    velocity_names: tuple[str, ...] = ()  # one per entry of qd, qdd, tau: Robot.velocity_names
+
     @property
     def nv(self) -> int:
+        return self.qd.numel()
+
+    @property
+    def nq(self) -> int:
         return self.q.numel()
 
     @property
@@ -49,11 +56,13 @@ class Symbols:
 
 def make_symbols(robot: Robot) -> Symbols:
     names = tuple(c.name for c in robot.coordinates)
+    velocities = robot.velocity_names
 
-    def vec(fmt: str) -> ca.SX:
-        return ca.vertcat(*[ca.SX.sym(fmt.format(n)) for n in names]) if names else ca.SX(0, 1)
+    def vec(fmt: str, entries: tuple[str, ...]) -> ca.SX:
+        return ca.vertcat(*[ca.SX.sym(fmt.format(n)) for n in entries]) if entries else ca.SX(0, 1)
 
     params = tuple(p.name for p in robot.parameters)
     p = ca.vertcat(*[ca.SX.sym(n) for n in params]) if params else ca.SX(0, 1)
-    return Symbols(q=vec("{}"), qd=vec("d{}"), qdd=vec("dd{}"), tau=vec("tau_{}"), p=p,
-                   joint_names=names, parameter_names=params)
+    return Symbols(q=vec("{}", names), qd=vec("d{}", velocities), qdd=vec("dd{}", velocities),
+                   tau=vec("tau_{}", velocities), p=p, joint_names=names, parameter_names=params,
+                   velocity_names=velocities)

@@ -111,6 +111,63 @@ def jacobian_tcp(q):
     return J
 
 
+def jdot_qd_tcp(q, qd):
+    """J'(q, qd) qd of frame 'tcp' (6): its classical acceleration [linear; angular] at qdd = 0, world-aligned, without gravity: the bias of task-space control.
+
+    in  q [2]
+    in  qd [2]
+    out a [6]
+    9 ops: 4 mul, 3 add, 0 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    batch = _batch(q, qd)
+    t0 = jnp.sin(q[..., 1])
+    t1 = t0 * qd[..., 1]
+    t2 = qd[..., 1] * t1
+    t3 = jnp.cos(q[..., 1])
+    t4 = t3 * qd[..., 1]
+    t5 = qd[..., 0] - t4
+    t6 = t5 - qd[..., 0]
+    t7 = qd[..., 1] * t6
+    t8 = -t7
+    a = _assemble([t2, 0.0, t8, 0.0, 0.0, 0.0], batch)
+    return a
+
+
+def frame_acceleration_tcp(q, qd, qdd):
+    """Classical acceleration of frame 'tcp' (6): [d/dt of its origin's world velocity; angular acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED).
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out a [6]
+    16 ops: 6 mul, 8 add, 0 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    batch = _batch(q, qd, qdd)
+    t0 = jnp.cos(q[..., 1])
+    t1 = t0 * qdd[..., 1]
+    t2 = qdd[..., 0] - t1
+    t3 = jnp.sin(q[..., 1])
+    t4 = t3 * qd[..., 1]
+    t5 = qd[..., 1] * t4
+    t6 = t2 + t5
+    t7 = q[..., 0] - t3
+    t8 = t7 - q[..., 0]
+    t9 = t8 * qdd[..., 1]
+    t10 = t0 * qd[..., 1]
+    t11 = qd[..., 0] - t10
+    t12 = t11 - qd[..., 0]
+    t13 = qd[..., 1] * t12
+    t14 = t9 + t13
+    t15 = -t14
+    a = _assemble([t6, 0.0, t15, 0.0, qdd[..., 1], 0.0], batch)
+    return a
+
+
 def fk_jacobian_tcp(q):
     """world_T_tcp (4x4) and its geometric Jacobian (6x2, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step.
 
@@ -266,6 +323,178 @@ def forward_dynamics(q, qd, tau):
     t22 = t11 - t21
     qdd = _assemble([t22, t20], batch)
     return qdd
+
+
+def inverse_dynamics_fext(q, qd, qdd, w):
+    """Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  w [6]
+    out tau [2]
+    30 ops: 15 mul, 13 add, 0 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    w = _input(w, 6, "w")
+    batch = _batch(q, qd, qdd, w)
+    t0 = jnp.cos(q[..., 1])
+    t1 = t0 * qdd[..., 0]
+    t2 = jnp.sin(q[..., 1])
+    t3 = 9.81 * t2
+    t4 = t1 - t3
+    t5 = 0.1 * t4
+    t6 = (-0.05) * qdd[..., 1]
+    t7 = t5 + t6
+    t8 = t0 * t7
+    t9 = t2 * qdd[..., 0]
+    t10 = 9.81 * t0
+    t11 = t9 + t10
+    t12 = 0.1 * t11
+    t13 = (-0.05) * qd[..., 1]
+    t14 = qd[..., 1] * t13
+    t15 = t12 - t14
+    t16 = t2 * t15
+    t17 = t8 + t16
+    t18 = qdd[..., 0] + t17
+    t19 = t18 - w[..., 0]
+    t20 = 0.03333333333333333 * qdd[..., 1]
+    t21 = (-0.05) * t4
+    t22 = t20 + t21
+    t23 = t0 * w[..., 0]
+    t24 = q[..., 0] - t2
+    t25 = t24 - q[..., 0]
+    t26 = t25 * w[..., 2]
+    t27 = t23 + t26
+    t28 = w[..., 4] - t27
+    t29 = t22 - t28
+    tau = _assemble([t19, t29], batch)
+    return tau
+
+
+def forward_dynamics_fext(q, qd, tau, w):
+    """Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes.
+
+    in  q [2]
+    in  qd [2]
+    in  tau [2]
+    in  w [6]
+    out qdd [2]
+    31 ops: 14 mul, 13 add, 2 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    tau = _input(tau, 2, "tau")
+    w = _input(w, 6, "w")
+    batch = _batch(q, qd, tau, w)
+    t0 = tau[..., 0] + w[..., 0]
+    t1 = jnp.sin(q[..., 1])
+    t2 = jnp.cos(q[..., 1])
+    t3 = 0.9810000000000001 * t2
+    t4 = (-0.05) * qd[..., 1]
+    t5 = qd[..., 1] * t4
+    t6 = t3 - t5
+    t7 = t1 * t6
+    t8 = 0.9810000000000001 * t1
+    t9 = t2 * t8
+    t10 = t7 - t9
+    t11 = t0 - t10
+    t12 = t11 / 1.1
+    t13 = (-0.045454545454545456) * t2
+    t14 = t2 * w[..., 0]
+    t15 = q[..., 0] - t1
+    t16 = t15 - q[..., 0]
+    t17 = t16 * w[..., 2]
+    t18 = t14 + t17
+    t19 = w[..., 4] - t18
+    t20 = tau[..., 1] + t19
+    t21 = (-0.49050000000000005) * t1
+    t22 = t20 + t21
+    t23 = t13 * t11
+    t24 = t22 - t23
+    t25 = t13 * t13
+    t26 = 1.1 * t25
+    t27 = 0.03333333333333333 - t26
+    t28 = t24 / t27
+    t29 = t13 * t28
+    t30 = t12 - t29
+    qdd = _assemble([t30, t28], batch)
+    return qdd
+
+
+def com(q):
+    """Centre of mass of the moving bodies (the root link is the world and does not count, as in Pinocchio), world coordinates (3).
+
+    in  q [2]
+    out c [3]
+    9 ops: 3 mul, 2 add, 2 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    batch = _batch(q)
+    t0 = 0.1 * q[..., 0]
+    t1 = jnp.sin(q[..., 1])
+    t2 = (-0.05) * t1
+    t3 = t0 + t2
+    t4 = q[..., 0] + t3
+    t5 = t4 / 1.1
+    t6 = jnp.cos(q[..., 1])
+    t7 = (-0.05) * t6
+    t8 = t7 / 1.1
+    c = _assemble([t5, 0.0, t8], batch)
+    return c
+
+
+def com_jacobian(q):
+    """Jacobian of the centre of mass (3x2, row-major): its world velocity is J qd.
+
+    in  q [2]
+    out J [3x2]
+    7 ops: 2 mul, 1 add, 2 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    batch = _batch(q)
+    t0 = jnp.cos(q[..., 1])
+    t1 = (-0.05) * t0
+    t2 = t1 / 1.1
+    t3 = jnp.sin(q[..., 1])
+    t4 = (-0.05) * t3
+    t5 = t4 / 1.1
+    t6 = -t5
+    J = _assemble([1.0, t2, 0.0, 0.0, 0.0, t6], batch).reshape(batch + (3, 2))
+    return J
+
+
+def centroidal_map(q):
+    """Centroidal momentum matrix A_G (6x2, row-major): A_G qd = [linear; angular] momentum about the centre of mass, world axes (Pinocchio's computeCentroidalMap).
+
+    in  q [2]
+    out A [6x2]
+    18 ops: 6 mul, 8 add, 2 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    batch = _batch(q)
+    t0 = jnp.cos(q[..., 1])
+    t1 = (-0.05) * t0
+    t2 = t1 / 1.1
+    t3 = 0.1 * t2
+    t4 = t1 - t3
+    t5 = t4 - t2
+    t6 = jnp.sin(q[..., 1])
+    t7 = (-0.05) * t6
+    t8 = -t7
+    t9 = 0.1 * q[..., 0]
+    t10 = t9 + t7
+    t11 = q[..., 0] + t10
+    t12 = t11 / 1.1
+    t13 = q[..., 0] - t12
+    t14 = t13 * t7
+    t15 = t2 * t1
+    t16 = t14 - t15
+    t17 = 0.03333333333333333 + t16
+    A = _assemble([1.1, t1, 0.0, 0.0, 0.0, t8, 0.0, 0.0, t5, t17, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    return A
 
 
 def ode_rhs(x, u):

@@ -267,6 +267,87 @@ def jacobian_tcp(q):
     return _batch(_J, shape, (6, 2))
 
 
+def jdot_qd_tcp(q, qd):
+    """J'(q, qd) qd of frame 'tcp' (6): its classical acceleration [linear; angular] at qdd = 0, world-aligned, without gravity: the bias of task-space control.
+
+    in  q [2]
+    in  qd [2]
+    out a [6]
+    9 ops: 4 mul, 3 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    if q.ndim == qd.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[1])
+    t0 = t0 * qd[1]
+    t0 = qd[1] * t0
+    t1 = cos(q[1])
+    t1 = t1 * qd[1]
+    t1 = qd[0] - t1
+    t1 = t1 - qd[0]
+    t1 = qd[1] * t1
+    t1 = -t1
+    _a = (t0, 0.0, t1, 0.0, 0.0, 0.0)
+    if shape is None:
+        return np.array(_a)
+    return _batch(_a, shape, (6,))
+
+
+def frame_acceleration_tcp(q, qd, qdd):
+    """Classical acceleration of frame 'tcp' (6): [d/dt of its origin's world velocity; angular acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED).
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out a [6]
+    16 ops: 6 mul, 8 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    if q.ndim == qd.ndim == qdd.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[1])
+    t1 = t0 * qdd[1]
+    t1 = qdd[0] - t1
+    t2 = sin(q[1])
+    t3 = t2 * qd[1]
+    t3 = qd[1] * t3
+    t1 = t1 + t3
+    t2 = q[0] - t2
+    t2 = t2 - q[0]
+    t2 = t2 * qdd[1]
+    t0 = t0 * qd[1]
+    t0 = qd[0] - t0
+    t0 = t0 - qd[0]
+    t0 = qd[1] * t0
+    t0 = t2 + t0
+    t0 = -t0
+    _a = (t1, 0.0, t0, 0.0, qdd[1], 0.0)
+    if shape is None:
+        return np.array(_a)
+    return _batch(_a, shape, (6,))
+
+
 def fk_jacobian_tcp(q):
     """world_T_tcp (4x4) and its geometric Jacobian (6x2, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step.
 
@@ -496,6 +577,242 @@ def forward_dynamics(q, qd, tau):
     if shape is None:
         return np.array(_qdd)
     return _batch(_qdd, shape, (2,))
+
+
+def inverse_dynamics_fext(q, qd, qdd, w):
+    """Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  w [6]
+    out tau [2]
+    30 ops: 15 mul, 13 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    w = _array(w, 6, "w")
+    if q.ndim == qd.ndim == qdd.ndim == w.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        w = w.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], w.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        w = _columns(w)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[1])
+    t1 = t0 * qdd[0]
+    t2 = sin(q[1])
+    t3 = 9.81 * t2
+    t1 = t1 - t3
+    t3 = 0.1 * t1
+    t4 = (-0.05) * qdd[1]
+    t3 = t3 + t4
+    t3 = t0 * t3
+    t4 = t2 * qdd[0]
+    t5 = 9.81 * t0
+    t4 = t4 + t5
+    t4 = 0.1 * t4
+    t5 = (-0.05) * qd[1]
+    t5 = qd[1] * t5
+    t4 = t4 - t5
+    t4 = t2 * t4
+    t3 = t3 + t4
+    t3 = qdd[0] + t3
+    t3 = t3 - w[0]
+    t4 = 0.03333333333333333 * qdd[1]
+    t1 = (-0.05) * t1
+    t1 = t4 + t1
+    t0 = t0 * w[0]
+    t2 = q[0] - t2
+    t2 = t2 - q[0]
+    t2 = t2 * w[2]
+    t0 = t0 + t2
+    t0 = w[4] - t0
+    t0 = t1 - t0
+    _tau = (t3, t0)
+    if shape is None:
+        return np.array(_tau)
+    return _batch(_tau, shape, (2,))
+
+
+def forward_dynamics_fext(q, qd, tau, w):
+    """Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes.
+
+    in  q [2]
+    in  qd [2]
+    in  tau [2]
+    in  w [6]
+    out qdd [2]
+    31 ops: 14 mul, 13 add, 2 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    tau = _array(tau, 2, "tau")
+    w = _array(w, 6, "w")
+    if q.ndim == qd.ndim == tau.ndim == w.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        tau = tau.tolist()
+        w = w.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], w.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        tau = _columns(tau)
+        w = _columns(w)
+        cos, sin = np.cos, np.sin
+    t0 = tau[0] + w[0]
+    t1 = sin(q[1])
+    t2 = cos(q[1])
+    t3 = 0.9810000000000001 * t2
+    t4 = (-0.05) * qd[1]
+    t4 = qd[1] * t4
+    t3 = t3 - t4
+    t3 = t1 * t3
+    t4 = 0.9810000000000001 * t1
+    t4 = t2 * t4
+    t3 = t3 - t4
+    t0 = t0 - t3
+    t3 = t0 / 1.1
+    t4 = (-0.045454545454545456) * t2
+    t2 = t2 * w[0]
+    t5 = q[0] - t1
+    t5 = t5 - q[0]
+    t5 = t5 * w[2]
+    t2 = t2 + t5
+    t2 = w[4] - t2
+    t2 = tau[1] + t2
+    t1 = (-0.49050000000000005) * t1
+    t1 = t2 + t1
+    t0 = t4 * t0
+    t0 = t1 - t0
+    t1 = t4 * t4
+    t1 = 1.1 * t1
+    t1 = 0.03333333333333333 - t1
+    t0 = t0 / t1
+    t1 = t4 * t0
+    t1 = t3 - t1
+    _qdd = (t1, t0)
+    if shape is None:
+        return np.array(_qdd)
+    return _batch(_qdd, shape, (2,))
+
+
+def com(q):
+    """Centre of mass of the moving bodies (the root link is the world and does not count, as in Pinocchio), world coordinates (3).
+
+    in  q [2]
+    out c [3]
+    9 ops: 3 mul, 2 add, 2 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    if q.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1])
+        q = _columns(q)
+        cos, sin = np.cos, np.sin
+    t0 = 0.1 * q[0]
+    t1 = sin(q[1])
+    t1 = (-0.05) * t1
+    t0 = t0 + t1
+    t0 = q[0] + t0
+    t0 = t0 / 1.1
+    t1 = cos(q[1])
+    t1 = (-0.05) * t1
+    t1 = t1 / 1.1
+    _c = (t0, 0.0, t1)
+    if shape is None:
+        return np.array(_c)
+    return _batch(_c, shape, (3,))
+
+
+def com_jacobian(q):
+    """Jacobian of the centre of mass (3x2, row-major): its world velocity is J qd.
+
+    in  q [2]
+    out J [3x2]
+    7 ops: 2 mul, 1 add, 2 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    if q.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1])
+        q = _columns(q)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[1])
+    t0 = (-0.05) * t0
+    t0 = t0 / 1.1
+    t1 = sin(q[1])
+    t1 = (-0.05) * t1
+    t1 = t1 / 1.1
+    t1 = -t1
+    _J = (1.0, t0,
+          0.0, 0.0,
+          0.0, t1)
+    if shape is None:
+        return np.array(_J).reshape(3, 2)
+    return _batch(_J, shape, (3, 2))
+
+
+def centroidal_map(q):
+    """Centroidal momentum matrix A_G (6x2, row-major): A_G qd = [linear; angular] momentum about the centre of mass, world axes (Pinocchio's computeCentroidalMap).
+
+    in  q [2]
+    out A [6x2]
+    18 ops: 6 mul, 8 add, 2 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    if q.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1])
+        q = _columns(q)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[1])
+    t0 = (-0.05) * t0
+    t1 = t0 / 1.1
+    t2 = 0.1 * t1
+    t2 = t0 - t2
+    t2 = t2 - t1
+    t3 = sin(q[1])
+    t3 = (-0.05) * t3
+    t4 = -t3
+    t5 = 0.1 * q[0]
+    t5 = t5 + t3
+    t5 = q[0] + t5
+    t5 = t5 / 1.1
+    t5 = q[0] - t5
+    t3 = t5 * t3
+    t1 = t1 * t0
+    t1 = t3 - t1
+    t1 = 0.03333333333333333 + t1
+    _A = (1.1, t0,
+          0.0, 0.0,
+          0.0, t4,
+          0.0, 0.0,
+          t2, t1,
+          0.0, 0.0)
+    if shape is None:
+        return np.array(_A).reshape(6, 2)
+    return _batch(_A, shape, (6, 2))
 
 
 def ode_rhs(x, u):

@@ -97,6 +97,64 @@ def jacobian_tcp(q, p=DEFAULT_P):
     return J
 
 
+def jdot_qd_tcp(q, qd, p=DEFAULT_P):
+    """J'(q, qd) qd of frame 'tcp' (6): its classical acceleration [linear; angular] at qdd = 0, world-aligned, without gravity: the bias of task-space control. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  p [6]
+    out a [6]
+    8 ops: 6 mul, 0 add, 0 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, p)
+    t0 = jnp.sin(q[..., 0])
+    t1 = t0 * qd[..., 0]
+    t2 = p[..., 4] * t1
+    t3 = qd[..., 0] * t2
+    t4 = jnp.cos(q[..., 0])
+    t5 = t4 * qd[..., 0]
+    t6 = p[..., 4] * t5
+    t7 = qd[..., 0] * t6
+    a = _assemble([t3, 0.0, t7, 0.0, 0.0, 0.0], batch)
+    return a
+
+
+def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
+    """Classical acceleration of frame 'tcp' (6): [d/dt of its origin's world velocity; angular acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out a [6]
+    14 ops: 10 mul, 2 add, 0 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    qdd = _input(qdd, 1, "qdd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.sin(q[..., 0])
+    t1 = t0 * qd[..., 0]
+    t2 = p[..., 4] * t1
+    t3 = qd[..., 0] * t2
+    t4 = jnp.cos(q[..., 0])
+    t5 = t4 * p[..., 4]
+    t6 = t5 * qdd[..., 0]
+    t7 = t3 - t6
+    t8 = t0 * p[..., 4]
+    t9 = t8 * qdd[..., 0]
+    t10 = t4 * qd[..., 0]
+    t11 = p[..., 4] * t10
+    t12 = qd[..., 0] * t11
+    t13 = t9 + t12
+    a = _assemble([t7, 0.0, t13, 0.0, qdd[..., 0], 0.0], batch)
+    return a
+
+
 def fk_jacobian_tcp(q, p=DEFAULT_P):
     """world_T_tcp (4x4) and its geometric Jacobian (6x1, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (6): parameters m_r, m_s, I_r, I_s, l, g.
 
@@ -251,6 +309,189 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t15 = t7 / t14
     qdd = _assemble([t15], batch)
     return qdd
+
+
+def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
+    """Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  w [6]
+    in  p [6]
+    out tau [1]
+    24 ops: 13 mul, 8 add, 1 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    qdd = _input(qdd, 1, "qdd")
+    w = _input(w, 6, "w")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, qdd, w, p)
+    t0 = p[..., 4] / 2.0
+    t1 = t0 * t0
+    t2 = p[..., 0] * t1
+    t3 = p[..., 2] + t2
+    t4 = p[..., 4] * p[..., 4]
+    t5 = p[..., 1] * t4
+    t6 = p[..., 3] + t5
+    t7 = t3 + t6
+    t8 = t7 * qdd[..., 0]
+    t9 = p[..., 0] * t0
+    t10 = p[..., 1] * p[..., 4]
+    t11 = t9 + t10
+    t12 = jnp.sin(q[..., 0])
+    t13 = t12 * p[..., 5]
+    t14 = t11 * t13
+    t15 = t8 + t14
+    t16 = t12 * p[..., 4]
+    t17 = t16 * w[..., 2]
+    t18 = jnp.cos(q[..., 0])
+    t19 = t18 * p[..., 4]
+    t20 = t19 * w[..., 0]
+    t21 = t17 - t20
+    t22 = t21 + w[..., 4]
+    t23 = t15 - t22
+    tau = _assemble([t23], batch)
+    return tau
+
+
+def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
+    """Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  tau [1]
+    in  w [6]
+    in  p [6]
+    out qdd [1]
+    24 ops: 12 mul, 8 add, 2 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    tau = _input(tau, 1, "tau")
+    w = _input(w, 6, "w")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, tau, w, p)
+    t0 = jnp.sin(q[..., 0])
+    t1 = t0 * p[..., 4]
+    t2 = t1 * w[..., 2]
+    t3 = jnp.cos(q[..., 0])
+    t4 = t3 * p[..., 4]
+    t5 = t4 * w[..., 0]
+    t6 = t2 - t5
+    t7 = t6 + w[..., 4]
+    t8 = tau[..., 0] + t7
+    t9 = p[..., 4] / 2.0
+    t10 = p[..., 0] * t9
+    t11 = p[..., 1] * p[..., 4]
+    t12 = t10 + t11
+    t13 = t0 * p[..., 5]
+    t14 = t12 * t13
+    t15 = t8 - t14
+    t16 = t9 * t9
+    t17 = p[..., 0] * t16
+    t18 = p[..., 2] + t17
+    t19 = p[..., 4] * p[..., 4]
+    t20 = p[..., 1] * t19
+    t21 = p[..., 3] + t20
+    t22 = t18 + t21
+    t23 = t15 / t22
+    qdd = _assemble([t23], batch)
+    return qdd
+
+
+def com(q, p=DEFAULT_P):
+    """Centre of mass of the moving bodies (the root link is the world and does not count, as in Pinocchio), world coordinates (3). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out c [3]
+    13 ops: 4 mul, 4 add, 3 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    p = _input(p, 6, "p")
+    batch = _batch(q, p)
+    t0 = jnp.sin(q[..., 0])
+    t1 = p[..., 4] / 2.0
+    t2 = p[..., 0] * t1
+    t3 = p[..., 1] * p[..., 4]
+    t4 = t2 + t3
+    t5 = t0 * t4
+    t6 = p[..., 0] + p[..., 1]
+    t7 = t5 / t6
+    t8 = -t7
+    t9 = jnp.cos(q[..., 0])
+    t10 = t9 * t4
+    t11 = t10 / t6
+    t12 = -t11
+    c = _assemble([t8, 0.0, t12], batch)
+    return c
+
+
+def com_jacobian(q, p=DEFAULT_P):
+    """Jacobian of the centre of mass (3x1, row-major): its world velocity is J qd. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out J [3]
+    12 ops: 4 mul, 3 add, 3 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    p = _input(p, 6, "p")
+    batch = _batch(q, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = p[..., 4] / 2.0
+    t2 = p[..., 0] * t1
+    t3 = p[..., 1] * p[..., 4]
+    t4 = t2 + t3
+    t5 = t0 * t4
+    t6 = p[..., 0] + p[..., 1]
+    t7 = t5 / t6
+    t8 = -t7
+    t9 = jnp.sin(q[..., 0])
+    t10 = t9 * t4
+    t11 = t10 / t6
+    J = _assemble([t8, 0.0, t11], batch)
+    return J
+
+
+def centroidal_map(q, p=DEFAULT_P):
+    """Centroidal momentum matrix A_G (6x1, row-major): A_G qd = [linear; angular] momentum about the centre of mass, world axes (Pinocchio's computeCentroidalMap). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out A [6]
+    23 ops: 10 mul, 8 add, 3 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    p = _input(p, 6, "p")
+    batch = _batch(q, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = p[..., 4] / 2.0
+    t2 = p[..., 0] * t1
+    t3 = p[..., 1] * p[..., 4]
+    t4 = t2 + t3
+    t5 = t0 * t4
+    t6 = -t5
+    t7 = jnp.sin(q[..., 0])
+    t8 = t7 * t4
+    t9 = t1 * t1
+    t10 = p[..., 0] * t9
+    t11 = p[..., 2] + t10
+    t12 = p[..., 4] * p[..., 4]
+    t13 = p[..., 1] * t12
+    t14 = p[..., 3] + t13
+    t15 = t11 + t14
+    t16 = p[..., 0] + p[..., 1]
+    t17 = t5 / t16
+    t18 = t17 * t5
+    t19 = t8 / t16
+    t20 = t19 * t8
+    t21 = t18 + t20
+    t22 = t15 - t21
+    A = _assemble([t6, 0.0, t8, 0.0, t22, 0.0], batch)
+    return A
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

@@ -253,6 +253,92 @@ def jacobian_tcp(q, p=DEFAULT_P):
     return _batch(_J, shape, (6,))
 
 
+def jdot_qd_tcp(q, qd, p=DEFAULT_P):
+    """J'(q, qd) qd of frame 'tcp' (6): its classical acceleration [linear; angular] at qdd = 0, world-aligned, without gravity: the bias of task-space control. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  p [6]
+    out a [6]
+    8 ops: 6 mul, 0 add, 0 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    p = _array(p, 6, "p")
+    if q.ndim == qd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[0])
+    t0 = t0 * qd[0]
+    t0 = p[4] * t0
+    t0 = qd[0] * t0
+    t1 = cos(q[0])
+    t1 = t1 * qd[0]
+    t1 = p[4] * t1
+    t1 = qd[0] * t1
+    _a = (t0, 0.0, t1, 0.0, 0.0, 0.0)
+    if shape is None:
+        return np.array(_a)
+    return _batch(_a, shape, (6,))
+
+
+def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
+    """Classical acceleration of frame 'tcp' (6): [d/dt of its origin's world velocity; angular acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out a [6]
+    14 ops: 10 mul, 2 add, 0 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    qdd = _array(qdd, 1, "qdd")
+    p = _array(p, 6, "p")
+    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[0])
+    t1 = t0 * qd[0]
+    t1 = p[4] * t1
+    t1 = qd[0] * t1
+    t2 = cos(q[0])
+    t3 = t2 * p[4]
+    t3 = t3 * qdd[0]
+    t1 = t1 - t3
+    t0 = t0 * p[4]
+    t0 = t0 * qdd[0]
+    t2 = t2 * qd[0]
+    t2 = p[4] * t2
+    t2 = qd[0] * t2
+    t0 = t0 + t2
+    _a = (t1, 0.0, t0, 0.0, qdd[0], 0.0)
+    if shape is None:
+        return np.array(_a)
+    return _batch(_a, shape, (6,))
+
+
 def fk_jacobian_tcp(q, p=DEFAULT_P):
     """world_T_tcp (4x4) and its geometric Jacobian (6x1, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (6): parameters m_r, m_s, I_r, I_s, l, g.
 
@@ -482,6 +568,256 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     if shape is None:
         return np.array(_qdd)
     return _batch(_qdd, shape, (1,))
+
+
+def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
+    """Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  w [6]
+    in  p [6]
+    out tau [1]
+    24 ops: 13 mul, 8 add, 1 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    qdd = _array(qdd, 1, "qdd")
+    w = _array(w, 6, "w")
+    p = _array(p, 6, "p")
+    if q.ndim == qd.ndim == qdd.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        w = w.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], w.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        w = _columns(w)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = p[4] / 2.0
+    t1 = t0 * t0
+    t1 = p[0] * t1
+    t1 = p[2] + t1
+    t2 = p[4] * p[4]
+    t2 = p[1] * t2
+    t2 = p[3] + t2
+    t1 = t1 + t2
+    t1 = t1 * qdd[0]
+    t0 = p[0] * t0
+    t2 = p[1] * p[4]
+    t0 = t0 + t2
+    t2 = sin(q[0])
+    t3 = t2 * p[5]
+    t0 = t0 * t3
+    t0 = t1 + t0
+    t1 = t2 * p[4]
+    t1 = t1 * w[2]
+    t2 = cos(q[0])
+    t2 = t2 * p[4]
+    t2 = t2 * w[0]
+    t1 = t1 - t2
+    t1 = t1 + w[4]
+    t0 = t0 - t1
+    _tau = (t0,)
+    if shape is None:
+        return np.array(_tau)
+    return _batch(_tau, shape, (1,))
+
+
+def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
+    """Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  tau [1]
+    in  w [6]
+    in  p [6]
+    out qdd [1]
+    24 ops: 12 mul, 8 add, 2 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    tau = _array(tau, 1, "tau")
+    w = _array(w, 6, "w")
+    p = _array(p, 6, "p")
+    if q.ndim == qd.ndim == tau.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        tau = tau.tolist()
+        w = w.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], w.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        tau = _columns(tau)
+        w = _columns(w)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[0])
+    t1 = t0 * p[4]
+    t1 = t1 * w[2]
+    t2 = cos(q[0])
+    t2 = t2 * p[4]
+    t2 = t2 * w[0]
+    t1 = t1 - t2
+    t1 = t1 + w[4]
+    t1 = tau[0] + t1
+    t2 = p[4] / 2.0
+    t3 = p[0] * t2
+    t4 = p[1] * p[4]
+    t3 = t3 + t4
+    t0 = t0 * p[5]
+    t0 = t3 * t0
+    t0 = t1 - t0
+    t1 = t2 * t2
+    t1 = p[0] * t1
+    t1 = p[2] + t1
+    t2 = p[4] * p[4]
+    t2 = p[1] * t2
+    t2 = p[3] + t2
+    t1 = t1 + t2
+    t0 = t0 / t1
+    _qdd = (t0,)
+    if shape is None:
+        return np.array(_qdd)
+    return _batch(_qdd, shape, (1,))
+
+
+def com(q, p=DEFAULT_P):
+    """Centre of mass of the moving bodies (the root link is the world and does not count, as in Pinocchio), world coordinates (3). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out c [3]
+    13 ops: 4 mul, 4 add, 3 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    p = _array(p, 6, "p")
+    if q.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[0])
+    t1 = p[4] / 2.0
+    t1 = p[0] * t1
+    t2 = p[1] * p[4]
+    t1 = t1 + t2
+    t0 = t0 * t1
+    t2 = p[0] + p[1]
+    t0 = t0 / t2
+    t0 = -t0
+    t3 = cos(q[0])
+    t1 = t3 * t1
+    t1 = t1 / t2
+    t1 = -t1
+    _c = (t0, 0.0, t1)
+    if shape is None:
+        return np.array(_c)
+    return _batch(_c, shape, (3,))
+
+
+def com_jacobian(q, p=DEFAULT_P):
+    """Jacobian of the centre of mass (3x1, row-major): its world velocity is J qd. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out J [3]
+    12 ops: 4 mul, 3 add, 3 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    p = _array(p, 6, "p")
+    if q.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[0])
+    t1 = p[4] / 2.0
+    t1 = p[0] * t1
+    t2 = p[1] * p[4]
+    t1 = t1 + t2
+    t0 = t0 * t1
+    t2 = p[0] + p[1]
+    t0 = t0 / t2
+    t0 = -t0
+    t3 = sin(q[0])
+    t1 = t3 * t1
+    t1 = t1 / t2
+    _J = (t0, 0.0, t1)
+    if shape is None:
+        return np.array(_J)
+    return _batch(_J, shape, (3,))
+
+
+def centroidal_map(q, p=DEFAULT_P):
+    """Centroidal momentum matrix A_G (6x1, row-major): A_G qd = [linear; angular] momentum about the centre of mass, world axes (Pinocchio's computeCentroidalMap). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out A [6]
+    23 ops: 10 mul, 8 add, 3 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    p = _array(p, 6, "p")
+    if q.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[0])
+    t1 = p[4] / 2.0
+    t2 = p[0] * t1
+    t3 = p[1] * p[4]
+    t2 = t2 + t3
+    t0 = t0 * t2
+    t3 = -t0
+    t4 = sin(q[0])
+    t2 = t4 * t2
+    t1 = t1 * t1
+    t1 = p[0] * t1
+    t1 = p[2] + t1
+    t4 = p[4] * p[4]
+    t4 = p[1] * t4
+    t4 = p[3] + t4
+    t1 = t1 + t4
+    t4 = p[0] + p[1]
+    t5 = t0 / t4
+    t0 = t5 * t0
+    t4 = t2 / t4
+    t4 = t4 * t2
+    t0 = t0 + t4
+    t0 = t1 - t0
+    _A = (t3, 0.0, t2, 0.0, t0, 0.0)
+    if shape is None:
+        return np.array(_A)
+    return _batch(_A, shape, (6,))
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

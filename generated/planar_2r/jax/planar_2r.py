@@ -140,6 +140,134 @@ def jacobian_tcp(q, p=DEFAULT_P):
     return J
 
 
+def jdot_qd_tcp(q, qd, p=DEFAULT_P):
+    """J'(q, qd) qd of frame 'tcp' (6): its classical acceleration [linear; angular] at qdd = 0, world-aligned, without gravity: the bias of task-space control. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  p [5]
+    out a [6]
+    36 ops: 20 mul, 12 add, 0 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = t0 * qd[..., 0]
+    t2 = p[..., 0] * t1
+    t3 = jnp.cos(q[..., 1])
+    t4 = t3 * t1
+    t5 = jnp.sin(q[..., 0])
+    t6 = jnp.sin(q[..., 1])
+    t7 = t6 * qd[..., 1]
+    t8 = t5 * t7
+    t9 = t4 - t8
+    t10 = t3 * qd[..., 1]
+    t11 = t0 * t10
+    t12 = t5 * qd[..., 0]
+    t13 = t6 * t12
+    t14 = t11 - t13
+    t15 = t9 + t14
+    t16 = p[..., 1] * t15
+    t17 = t2 + t16
+    t18 = qd[..., 0] * t17
+    t19 = qd[..., 1] * t16
+    t20 = t18 + t19
+    t21 = -t20
+    t22 = p[..., 0] * t12
+    t23 = t3 * t12
+    t24 = t0 * t7
+    t25 = t23 + t24
+    t26 = t6 * t1
+    t27 = t5 * t10
+    t28 = t26 + t27
+    t29 = t25 + t28
+    t30 = p[..., 1] * t29
+    t31 = t22 + t30
+    t32 = qd[..., 0] * t31
+    t33 = qd[..., 1] * t30
+    t34 = t32 + t33
+    t35 = -t34
+    a = _assemble([t21, t35, 0.0, 0.0, 0.0, 0.0], batch)
+    return a
+
+
+def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
+    """Classical acceleration of frame 'tcp' (6): [d/dt of its origin's world velocity; angular acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out a [6]
+    56 ops: 32 mul, 20 add, 0 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.sin(q[..., 0])
+    t1 = t0 * p[..., 0]
+    t2 = jnp.cos(q[..., 1])
+    t3 = t0 * t2
+    t4 = jnp.cos(q[..., 0])
+    t5 = jnp.sin(q[..., 1])
+    t6 = t4 * t5
+    t7 = t3 + t6
+    t8 = t7 * p[..., 1]
+    t9 = t1 + t8
+    t10 = t9 * qdd[..., 0]
+    t11 = t8 * qdd[..., 1]
+    t12 = t10 + t11
+    t13 = t4 * qd[..., 0]
+    t14 = p[..., 0] * t13
+    t15 = t2 * t13
+    t16 = t5 * qd[..., 1]
+    t17 = t0 * t16
+    t18 = t15 - t17
+    t19 = t2 * qd[..., 1]
+    t20 = t4 * t19
+    t21 = t0 * qd[..., 0]
+    t22 = t5 * t21
+    t23 = t20 - t22
+    t24 = t18 + t23
+    t25 = p[..., 1] * t24
+    t26 = t14 + t25
+    t27 = qd[..., 0] * t26
+    t28 = qd[..., 1] * t25
+    t29 = t27 + t28
+    t30 = t12 + t29
+    t31 = -t30
+    t32 = t4 * p[..., 0]
+    t33 = t4 * t2
+    t34 = t0 * t5
+    t35 = t33 - t34
+    t36 = t35 * p[..., 1]
+    t37 = t32 + t36
+    t38 = t37 * qdd[..., 0]
+    t39 = t36 * qdd[..., 1]
+    t40 = t38 + t39
+    t41 = p[..., 0] * t21
+    t42 = t2 * t21
+    t43 = t4 * t16
+    t44 = t42 + t43
+    t45 = t5 * t13
+    t46 = t0 * t19
+    t47 = t45 + t46
+    t48 = t44 + t47
+    t49 = p[..., 1] * t48
+    t50 = t41 + t49
+    t51 = qd[..., 0] * t50
+    t52 = qd[..., 1] * t49
+    t53 = t51 + t52
+    t54 = t40 - t53
+    t55 = qdd[..., 0] + qdd[..., 1]
+    a = _assemble([t31, t54, 0.0, 0.0, 0.0, t55], batch)
+    return a
+
+
 def fk_jacobian_tcp(q, p=DEFAULT_P):
     """world_T_tcp (4x4) and its geometric Jacobian (6x2, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (5): parameters L1, L2, m1, m2, g.
 
@@ -448,6 +576,390 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t66 = t56 - t65
     qdd = _assemble([t66, t64], batch)
     return qdd
+
+
+def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
+    """Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  w [6]
+    in  p [5]
+    out tau [2]
+    78 ops: 43 mul, 27 add, 4 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    w = _input(w, 6, "w")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, qdd, w, p)
+    t0 = p[..., 0] * p[..., 0]
+    t1 = p[..., 2] * t0
+    t2 = t1 / 12.0
+    t3 = p[..., 0] / 2.0
+    t4 = p[..., 0] - t3
+    t5 = t4 * t4
+    t6 = p[..., 2] * t5
+    t7 = t2 + t6
+    t8 = t7 * qdd[..., 0]
+    t9 = p[..., 2] * t4
+    t10 = jnp.cos(q[..., 0])
+    t11 = t10 * p[..., 4]
+    t12 = t9 * t11
+    t13 = t8 + t12
+    t14 = p[..., 1] * p[..., 1]
+    t15 = p[..., 3] * t14
+    t16 = t15 / 12.0
+    t17 = p[..., 1] / 2.0
+    t18 = p[..., 1] - t17
+    t19 = t18 * t18
+    t20 = p[..., 3] * t19
+    t21 = t16 + t20
+    t22 = qdd[..., 0] + qdd[..., 1]
+    t23 = t21 * t22
+    t24 = p[..., 3] * t18
+    t25 = jnp.cos(q[..., 1])
+    t26 = qdd[..., 0] * p[..., 0]
+    t27 = t11 + t26
+    t28 = t25 * t27
+    t29 = jnp.sin(q[..., 1])
+    t30 = jnp.sin(q[..., 0])
+    t31 = t30 * p[..., 4]
+    t32 = qd[..., 0] * p[..., 0]
+    t33 = qd[..., 0] * t32
+    t34 = t31 - t33
+    t35 = t29 * t34
+    t36 = t28 - t35
+    t37 = t24 * t36
+    t38 = t23 + t37
+    t39 = t13 + t38
+    t40 = t25 * t34
+    t41 = t29 * t27
+    t42 = t40 + t41
+    t43 = p[..., 3] * t42
+    t44 = qd[..., 0] + qd[..., 1]
+    t45 = t44 * t24
+    t46 = t44 * t45
+    t47 = t43 - t46
+    t48 = t29 * t47
+    t49 = p[..., 3] * t36
+    t50 = t22 * t24
+    t51 = t49 + t50
+    t52 = t25 * t51
+    t53 = t48 + t52
+    t54 = p[..., 0] * t53
+    t55 = t39 + t54
+    t56 = t10 * p[..., 0]
+    t57 = t10 * t25
+    t58 = t30 * t29
+    t59 = t57 - t58
+    t60 = t59 * p[..., 1]
+    t61 = t56 + t60
+    t62 = t61 * w[..., 1]
+    t63 = t30 * p[..., 0]
+    t64 = t30 * t25
+    t65 = t10 * t29
+    t66 = t64 + t65
+    t67 = t66 * p[..., 1]
+    t68 = t63 + t67
+    t69 = t68 * w[..., 0]
+    t70 = t62 - t69
+    t71 = t70 + w[..., 5]
+    t72 = t55 - t71
+    t73 = t60 * w[..., 1]
+    t74 = t67 * w[..., 0]
+    t75 = t73 - t74
+    t76 = t75 + w[..., 5]
+    t77 = t38 - t76
+    tau = _assemble([t72, t77], batch)
+    return tau
+
+
+def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
+    """Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  tau [2]
+    in  w [6]
+    in  p [5]
+    out qdd [2]
+    89 ops: 47 mul, 31 add, 7 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    tau = _input(tau, 2, "tau")
+    w = _input(w, 6, "w")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, tau, w, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = t0 * p[..., 0]
+    t2 = jnp.cos(q[..., 1])
+    t3 = t0 * t2
+    t4 = jnp.sin(q[..., 0])
+    t5 = jnp.sin(q[..., 1])
+    t6 = t4 * t5
+    t7 = t3 - t6
+    t8 = t7 * p[..., 1]
+    t9 = t1 + t8
+    t10 = t9 * w[..., 1]
+    t11 = t4 * p[..., 0]
+    t12 = t4 * t2
+    t13 = t0 * t5
+    t14 = t12 + t13
+    t15 = t14 * p[..., 1]
+    t16 = t11 + t15
+    t17 = t16 * w[..., 0]
+    t18 = t10 - t17
+    t19 = t18 + w[..., 5]
+    t20 = tau[..., 0] + t19
+    t21 = p[..., 0] / 2.0
+    t22 = p[..., 0] - t21
+    t23 = p[..., 2] * t22
+    t24 = t0 * p[..., 4]
+    t25 = t23 * t24
+    t26 = p[..., 1] / 2.0
+    t27 = p[..., 1] - t26
+    t28 = p[..., 3] * t27
+    t29 = t2 * t24
+    t30 = t4 * p[..., 4]
+    t31 = qd[..., 0] * p[..., 0]
+    t32 = qd[..., 0] * t31
+    t33 = t30 - t32
+    t34 = t5 * t33
+    t35 = t29 - t34
+    t36 = t28 * t35
+    t37 = t25 + t36
+    t38 = t2 * t33
+    t39 = t5 * t24
+    t40 = t38 + t39
+    t41 = p[..., 3] * t40
+    t42 = qd[..., 0] + qd[..., 1]
+    t43 = t42 * t28
+    t44 = t42 * t43
+    t45 = t41 - t44
+    t46 = t5 * t45
+    t47 = p[..., 3] * t35
+    t48 = t2 * t47
+    t49 = t46 + t48
+    t50 = p[..., 0] * t49
+    t51 = t37 + t50
+    t52 = t20 - t51
+    t53 = p[..., 0] * p[..., 0]
+    t54 = p[..., 2] * t53
+    t55 = t54 / 12.0
+    t56 = t22 * t22
+    t57 = p[..., 2] * t56
+    t58 = t55 + t57
+    t59 = p[..., 1] * p[..., 1]
+    t60 = p[..., 3] * t59
+    t61 = t60 / 12.0
+    t62 = t27 * t27
+    t63 = p[..., 3] * t62
+    t64 = t61 + t63
+    t65 = t2 * t28
+    t66 = p[..., 0] * t65
+    t67 = t64 + t66
+    t68 = t65 * p[..., 0]
+    t69 = t67 + t68
+    t70 = p[..., 3] * t53
+    t71 = t69 + t70
+    t72 = t58 + t71
+    t73 = t52 / t72
+    t74 = t67 / t72
+    t75 = t8 * w[..., 1]
+    t76 = t15 * w[..., 0]
+    t77 = t75 - t76
+    t78 = t77 + w[..., 5]
+    t79 = tau[..., 1] + t78
+    t80 = t79 - t36
+    t81 = t74 * t52
+    t82 = t80 - t81
+    t83 = t74 * t74
+    t84 = t83 * t72
+    t85 = t64 - t84
+    t86 = t82 / t85
+    t87 = t74 * t86
+    t88 = t73 - t87
+    qdd = _assemble([t88, t86], batch)
+    return qdd
+
+
+def com(q, p=DEFAULT_P):
+    """Centre of mass of the moving bodies (the root link is the world and does not count, as in Pinocchio), world coordinates (3). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out c [3]
+    31 ops: 14 mul, 9 add, 4 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    p = _input(p, 5, "p")
+    batch = _batch(q, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = p[..., 0] / 2.0
+    t2 = p[..., 0] - t1
+    t3 = p[..., 2] * t2
+    t4 = t0 * t3
+    t5 = t0 * p[..., 0]
+    t6 = p[..., 3] * t5
+    t7 = jnp.cos(q[..., 1])
+    t8 = t0 * t7
+    t9 = jnp.sin(q[..., 0])
+    t10 = jnp.sin(q[..., 1])
+    t11 = t9 * t10
+    t12 = t8 - t11
+    t13 = p[..., 1] / 2.0
+    t14 = p[..., 1] - t13
+    t15 = p[..., 3] * t14
+    t16 = t12 * t15
+    t17 = t6 + t16
+    t18 = t4 + t17
+    t19 = p[..., 2] + p[..., 3]
+    t20 = t18 / t19
+    t21 = t9 * t3
+    t22 = t9 * p[..., 0]
+    t23 = p[..., 3] * t22
+    t24 = t9 * t7
+    t25 = t0 * t10
+    t26 = t24 + t25
+    t27 = t26 * t15
+    t28 = t23 + t27
+    t29 = t21 + t28
+    t30 = t29 / t19
+    c = _assemble([t20, t30, 0.0], batch)
+    return c
+
+
+def com_jacobian(q, p=DEFAULT_P):
+    """Jacobian of the centre of mass (3x2, row-major): its world velocity is J qd. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out J [3x2]
+    35 ops: 14 mul, 11 add, 6 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    p = _input(p, 5, "p")
+    batch = _batch(q, p)
+    t0 = jnp.sin(q[..., 0])
+    t1 = p[..., 0] / 2.0
+    t2 = p[..., 0] - t1
+    t3 = p[..., 2] * t2
+    t4 = t0 * t3
+    t5 = t0 * p[..., 0]
+    t6 = p[..., 3] * t5
+    t7 = jnp.cos(q[..., 1])
+    t8 = t0 * t7
+    t9 = jnp.cos(q[..., 0])
+    t10 = jnp.sin(q[..., 1])
+    t11 = t9 * t10
+    t12 = t8 + t11
+    t13 = p[..., 1] / 2.0
+    t14 = p[..., 1] - t13
+    t15 = p[..., 3] * t14
+    t16 = t12 * t15
+    t17 = t6 + t16
+    t18 = t4 + t17
+    t19 = p[..., 2] + p[..., 3]
+    t20 = t18 / t19
+    t21 = -t20
+    t22 = t9 * t3
+    t23 = t9 * p[..., 0]
+    t24 = p[..., 3] * t23
+    t25 = t9 * t7
+    t26 = t0 * t10
+    t27 = t25 - t26
+    t28 = t27 * t15
+    t29 = t24 + t28
+    t30 = t22 + t29
+    t31 = t30 / t19
+    t32 = t16 / t19
+    t33 = -t32
+    t34 = t28 / t19
+    J = _assemble([t21, t33, t31, t34, 0.0, 0.0], batch).reshape(batch + (3, 2))
+    return J
+
+
+def centroidal_map(q, p=DEFAULT_P):
+    """Centroidal momentum matrix A_G (6x2, row-major): A_G qd = [linear; angular] momentum about the centre of mass, world axes (Pinocchio's computeCentroidalMap). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out A [6x2]
+    64 ops: 30 mul, 24 add, 6 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    p = _input(p, 5, "p")
+    batch = _batch(q, p)
+    t0 = jnp.sin(q[..., 0])
+    t1 = p[..., 0] / 2.0
+    t2 = p[..., 0] - t1
+    t3 = p[..., 2] * t2
+    t4 = t0 * t3
+    t5 = t0 * p[..., 0]
+    t6 = p[..., 3] * t5
+    t7 = jnp.cos(q[..., 1])
+    t8 = t0 * t7
+    t9 = jnp.cos(q[..., 0])
+    t10 = jnp.sin(q[..., 1])
+    t11 = t9 * t10
+    t12 = t8 + t11
+    t13 = p[..., 1] / 2.0
+    t14 = p[..., 1] - t13
+    t15 = p[..., 3] * t14
+    t16 = t12 * t15
+    t17 = t6 + t16
+    t18 = t4 + t17
+    t19 = -t18
+    t20 = t9 * t3
+    t21 = t9 * p[..., 0]
+    t22 = p[..., 3] * t21
+    t23 = t9 * t7
+    t24 = t0 * t10
+    t25 = t23 - t24
+    t26 = t25 * t15
+    t27 = t22 + t26
+    t28 = t20 + t27
+    t29 = p[..., 0] * p[..., 0]
+    t30 = p[..., 2] * t29
+    t31 = t30 / 12.0
+    t32 = t2 * t2
+    t33 = p[..., 2] * t32
+    t34 = t31 + t33
+    t35 = p[..., 2] + p[..., 3]
+    t36 = t18 / t35
+    t37 = t36 * t4
+    t38 = t28 / t35
+    t39 = t38 * t20
+    t40 = t37 + t39
+    t41 = t34 - t40
+    t42 = p[..., 1] * p[..., 1]
+    t43 = p[..., 3] * t42
+    t44 = t43 / 12.0
+    t45 = t14 * t14
+    t46 = p[..., 3] * t45
+    t47 = t44 + t46
+    t48 = t16 * t5
+    t49 = t26 * t21
+    t50 = t48 + t49
+    t51 = t47 + t50
+    t52 = t5 - t36
+    t53 = t52 * t17
+    t54 = t21 - t38
+    t55 = t54 * t27
+    t56 = t53 + t55
+    t57 = t51 + t56
+    t58 = t41 + t57
+    t59 = -t16
+    t60 = t52 * t16
+    t61 = t54 * t26
+    t62 = t60 + t61
+    t63 = t47 + t62
+    A = _assemble([t19, t59, t28, t26, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t58, t63], batch).reshape(batch + (6, 2))
+    return A
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

@@ -300,6 +300,162 @@ def jacobian_tcp(q, p=DEFAULT_P):
     return _batch(_J, shape, (6, 2))
 
 
+def jdot_qd_tcp(q, qd, p=DEFAULT_P):
+    """J'(q, qd) qd of frame 'tcp' (6): its classical acceleration [linear; angular] at qdd = 0, world-aligned, without gravity: the bias of task-space control. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  p [5]
+    out a [6]
+    36 ops: 20 mul, 12 add, 0 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    p = _array(p, 5, "p")
+    if q.ndim == qd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[0])
+    t1 = t0 * qd[0]
+    t2 = p[0] * t1
+    t3 = cos(q[1])
+    t4 = t3 * t1
+    t5 = sin(q[0])
+    t6 = sin(q[1])
+    t7 = t6 * qd[1]
+    t8 = t5 * t7
+    t4 = t4 - t8
+    t8 = t3 * qd[1]
+    t9 = t0 * t8
+    t10 = t5 * qd[0]
+    t11 = t6 * t10
+    t9 = t9 - t11
+    t4 = t4 + t9
+    t4 = p[1] * t4
+    t2 = t2 + t4
+    t2 = qd[0] * t2
+    t4 = qd[1] * t4
+    t2 = t2 + t4
+    t2 = -t2
+    t4 = p[0] * t10
+    t3 = t3 * t10
+    t0 = t0 * t7
+    t0 = t3 + t0
+    t1 = t6 * t1
+    t3 = t5 * t8
+    t1 = t1 + t3
+    t0 = t0 + t1
+    t0 = p[1] * t0
+    t1 = t4 + t0
+    t1 = qd[0] * t1
+    t0 = qd[1] * t0
+    t0 = t1 + t0
+    t0 = -t0
+    _a = (t2, t0, 0.0, 0.0, 0.0, 0.0)
+    if shape is None:
+        return np.array(_a)
+    return _batch(_a, shape, (6,))
+
+
+def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
+    """Classical acceleration of frame 'tcp' (6): [d/dt of its origin's world velocity; angular acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out a [6]
+    56 ops: 32 mul, 20 add, 0 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    p = _array(p, 5, "p")
+    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[0])
+    t1 = t0 * p[0]
+    t2 = cos(q[1])
+    t3 = t0 * t2
+    t4 = cos(q[0])
+    t5 = sin(q[1])
+    t6 = t4 * t5
+    t3 = t3 + t6
+    t3 = t3 * p[1]
+    t1 = t1 + t3
+    t1 = t1 * qdd[0]
+    t3 = t3 * qdd[1]
+    t1 = t1 + t3
+    t3 = t4 * qd[0]
+    t6 = p[0] * t3
+    t7 = t2 * t3
+    t8 = t5 * qd[1]
+    t9 = t0 * t8
+    t7 = t7 - t9
+    t9 = t2 * qd[1]
+    t10 = t4 * t9
+    t11 = t0 * qd[0]
+    t12 = t5 * t11
+    t10 = t10 - t12
+    t7 = t7 + t10
+    t7 = p[1] * t7
+    t6 = t6 + t7
+    t6 = qd[0] * t6
+    t7 = qd[1] * t7
+    t6 = t6 + t7
+    t1 = t1 + t6
+    t1 = -t1
+    t6 = t4 * p[0]
+    t7 = t4 * t2
+    t10 = t0 * t5
+    t7 = t7 - t10
+    t7 = t7 * p[1]
+    t6 = t6 + t7
+    t6 = t6 * qdd[0]
+    t7 = t7 * qdd[1]
+    t6 = t6 + t7
+    t7 = p[0] * t11
+    t2 = t2 * t11
+    t4 = t4 * t8
+    t2 = t2 + t4
+    t3 = t5 * t3
+    t0 = t0 * t9
+    t0 = t3 + t0
+    t0 = t2 + t0
+    t0 = p[1] * t0
+    t2 = t7 + t0
+    t2 = qd[0] * t2
+    t0 = qd[1] * t0
+    t0 = t2 + t0
+    t0 = t6 - t0
+    t2 = qdd[0] + qdd[1]
+    _a = (t1, t0, 0.0, 0.0, 0.0, t2)
+    if shape is None:
+        return np.array(_a)
+    return _batch(_a, shape, (6,))
+
+
 def fk_jacobian_tcp(q, p=DEFAULT_P):
     """world_T_tcp (4x4) and its geometric Jacobian (6x2, [linear; angular], LOCAL_WORLD_ALIGNED) in one pass, sharing the transforms: what IK and control loops need each step. p (5): parameters L1, L2, m1, m2, g.
 
@@ -694,6 +850,464 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     if shape is None:
         return np.array(_qdd)
     return _batch(_qdd, shape, (2,))
+
+
+def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
+    """Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  w [6]
+    in  p [5]
+    out tau [2]
+    78 ops: 43 mul, 27 add, 4 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    w = _array(w, 6, "w")
+    p = _array(p, 5, "p")
+    if q.ndim == qd.ndim == qdd.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        w = w.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], w.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        w = _columns(w)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = p[0] * p[0]
+    t0 = p[2] * t0
+    t0 = t0 / 12.0
+    t1 = p[0] / 2.0
+    t1 = p[0] - t1
+    t2 = t1 * t1
+    t2 = p[2] * t2
+    t0 = t0 + t2
+    t0 = t0 * qdd[0]
+    t1 = p[2] * t1
+    t2 = cos(q[0])
+    t3 = t2 * p[4]
+    t1 = t1 * t3
+    t0 = t0 + t1
+    t1 = p[1] * p[1]
+    t1 = p[3] * t1
+    t1 = t1 / 12.0
+    t4 = p[1] / 2.0
+    t4 = p[1] - t4
+    t5 = t4 * t4
+    t5 = p[3] * t5
+    t1 = t1 + t5
+    t5 = qdd[0] + qdd[1]
+    t1 = t1 * t5
+    t4 = p[3] * t4
+    t6 = cos(q[1])
+    t7 = qdd[0] * p[0]
+    t3 = t3 + t7
+    t7 = t6 * t3
+    t8 = sin(q[1])
+    t9 = sin(q[0])
+    t10 = t9 * p[4]
+    t11 = qd[0] * p[0]
+    t11 = qd[0] * t11
+    t10 = t10 - t11
+    t11 = t8 * t10
+    t7 = t7 - t11
+    t11 = t4 * t7
+    t1 = t1 + t11
+    t0 = t0 + t1
+    t10 = t6 * t10
+    t3 = t8 * t3
+    t3 = t10 + t3
+    t3 = p[3] * t3
+    t10 = qd[0] + qd[1]
+    t11 = t10 * t4
+    t10 = t10 * t11
+    t3 = t3 - t10
+    t3 = t8 * t3
+    t7 = p[3] * t7
+    t4 = t5 * t4
+    t4 = t7 + t4
+    t4 = t6 * t4
+    t3 = t3 + t4
+    t3 = p[0] * t3
+    t0 = t0 + t3
+    t3 = t2 * p[0]
+    t4 = t2 * t6
+    t5 = t9 * t8
+    t4 = t4 - t5
+    t4 = t4 * p[1]
+    t3 = t3 + t4
+    t3 = t3 * w[1]
+    t5 = t9 * p[0]
+    t6 = t9 * t6
+    t2 = t2 * t8
+    t2 = t6 + t2
+    t2 = t2 * p[1]
+    t5 = t5 + t2
+    t5 = t5 * w[0]
+    t3 = t3 - t5
+    t3 = t3 + w[5]
+    t0 = t0 - t3
+    t3 = t4 * w[1]
+    t2 = t2 * w[0]
+    t2 = t3 - t2
+    t2 = t2 + w[5]
+    t1 = t1 - t2
+    _tau = (t0, t1)
+    if shape is None:
+        return np.array(_tau)
+    return _batch(_tau, shape, (2,))
+
+
+def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
+    """Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); w (6): the external wrenches [force; torque] acting at the origins of the frames tcp (6 each, in that order), in world-aligned axes. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  tau [2]
+    in  w [6]
+    in  p [5]
+    out qdd [2]
+    89 ops: 47 mul, 31 add, 7 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    tau = _array(tau, 2, "tau")
+    w = _array(w, 6, "w")
+    p = _array(p, 5, "p")
+    if q.ndim == qd.ndim == tau.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        tau = tau.tolist()
+        w = w.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], w.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        tau = _columns(tau)
+        w = _columns(w)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[0])
+    t1 = t0 * p[0]
+    t2 = cos(q[1])
+    t3 = t0 * t2
+    t4 = sin(q[0])
+    t5 = sin(q[1])
+    t6 = t4 * t5
+    t3 = t3 - t6
+    t3 = t3 * p[1]
+    t1 = t1 + t3
+    t1 = t1 * w[1]
+    t6 = t4 * p[0]
+    t7 = t4 * t2
+    t8 = t0 * t5
+    t7 = t7 + t8
+    t7 = t7 * p[1]
+    t6 = t6 + t7
+    t6 = t6 * w[0]
+    t1 = t1 - t6
+    t1 = t1 + w[5]
+    t1 = tau[0] + t1
+    t6 = p[0] / 2.0
+    t6 = p[0] - t6
+    t8 = p[2] * t6
+    t0 = t0 * p[4]
+    t8 = t8 * t0
+    t9 = p[1] / 2.0
+    t9 = p[1] - t9
+    t10 = p[3] * t9
+    t11 = t2 * t0
+    t4 = t4 * p[4]
+    t12 = qd[0] * p[0]
+    t12 = qd[0] * t12
+    t4 = t4 - t12
+    t12 = t5 * t4
+    t11 = t11 - t12
+    t12 = t10 * t11
+    t8 = t8 + t12
+    t4 = t2 * t4
+    t0 = t5 * t0
+    t0 = t4 + t0
+    t0 = p[3] * t0
+    t4 = qd[0] + qd[1]
+    t13 = t4 * t10
+    t4 = t4 * t13
+    t0 = t0 - t4
+    t0 = t5 * t0
+    t4 = p[3] * t11
+    t4 = t2 * t4
+    t0 = t0 + t4
+    t0 = p[0] * t0
+    t0 = t8 + t0
+    t0 = t1 - t0
+    t1 = p[0] * p[0]
+    t4 = p[2] * t1
+    t4 = t4 / 12.0
+    t5 = t6 * t6
+    t5 = p[2] * t5
+    t4 = t4 + t5
+    t5 = p[1] * p[1]
+    t5 = p[3] * t5
+    t5 = t5 / 12.0
+    t6 = t9 * t9
+    t6 = p[3] * t6
+    t5 = t5 + t6
+    t2 = t2 * t10
+    t6 = p[0] * t2
+    t6 = t5 + t6
+    t2 = t2 * p[0]
+    t2 = t6 + t2
+    t1 = p[3] * t1
+    t1 = t2 + t1
+    t1 = t4 + t1
+    t2 = t0 / t1
+    t4 = t6 / t1
+    t3 = t3 * w[1]
+    t6 = t7 * w[0]
+    t3 = t3 - t6
+    t3 = t3 + w[5]
+    t3 = tau[1] + t3
+    t3 = t3 - t12
+    t0 = t4 * t0
+    t0 = t3 - t0
+    t3 = t4 * t4
+    t1 = t3 * t1
+    t1 = t5 - t1
+    t0 = t0 / t1
+    t1 = t4 * t0
+    t1 = t2 - t1
+    _qdd = (t1, t0)
+    if shape is None:
+        return np.array(_qdd)
+    return _batch(_qdd, shape, (2,))
+
+
+def com(q, p=DEFAULT_P):
+    """Centre of mass of the moving bodies (the root link is the world and does not count, as in Pinocchio), world coordinates (3). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out c [3]
+    31 ops: 14 mul, 9 add, 4 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    p = _array(p, 5, "p")
+    if q.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = cos(q[0])
+    t1 = p[0] / 2.0
+    t1 = p[0] - t1
+    t1 = p[2] * t1
+    t2 = t0 * t1
+    t3 = t0 * p[0]
+    t3 = p[3] * t3
+    t4 = cos(q[1])
+    t5 = t0 * t4
+    t6 = sin(q[0])
+    t7 = sin(q[1])
+    t8 = t6 * t7
+    t5 = t5 - t8
+    t8 = p[1] / 2.0
+    t8 = p[1] - t8
+    t8 = p[3] * t8
+    t5 = t5 * t8
+    t3 = t3 + t5
+    t2 = t2 + t3
+    t3 = p[2] + p[3]
+    t2 = t2 / t3
+    t1 = t6 * t1
+    t5 = t6 * p[0]
+    t5 = p[3] * t5
+    t4 = t6 * t4
+    t0 = t0 * t7
+    t0 = t4 + t0
+    t0 = t0 * t8
+    t0 = t5 + t0
+    t0 = t1 + t0
+    t0 = t0 / t3
+    _c = (t2, t0, 0.0)
+    if shape is None:
+        return np.array(_c)
+    return _batch(_c, shape, (3,))
+
+
+def com_jacobian(q, p=DEFAULT_P):
+    """Jacobian of the centre of mass (3x2, row-major): its world velocity is J qd. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out J [3x2]
+    35 ops: 14 mul, 11 add, 6 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    p = _array(p, 5, "p")
+    if q.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[0])
+    t1 = p[0] / 2.0
+    t1 = p[0] - t1
+    t1 = p[2] * t1
+    t2 = t0 * t1
+    t3 = t0 * p[0]
+    t3 = p[3] * t3
+    t4 = cos(q[1])
+    t5 = t0 * t4
+    t6 = cos(q[0])
+    t7 = sin(q[1])
+    t8 = t6 * t7
+    t5 = t5 + t8
+    t8 = p[1] / 2.0
+    t8 = p[1] - t8
+    t8 = p[3] * t8
+    t5 = t5 * t8
+    t3 = t3 + t5
+    t2 = t2 + t3
+    t3 = p[2] + p[3]
+    t2 = t2 / t3
+    t2 = -t2
+    t1 = t6 * t1
+    t9 = t6 * p[0]
+    t9 = p[3] * t9
+    t4 = t6 * t4
+    t0 = t0 * t7
+    t0 = t4 - t0
+    t0 = t0 * t8
+    t4 = t9 + t0
+    t1 = t1 + t4
+    t1 = t1 / t3
+    t4 = t5 / t3
+    t4 = -t4
+    t0 = t0 / t3
+    _J = (t2, t4,
+          t1, t0,
+          0.0, 0.0)
+    if shape is None:
+        return np.array(_J).reshape(3, 2)
+    return _batch(_J, shape, (3, 2))
+
+
+def centroidal_map(q, p=DEFAULT_P):
+    """Centroidal momentum matrix A_G (6x2, row-major): A_G qd = [linear; angular] momentum about the centre of mass, world axes (Pinocchio's computeCentroidalMap). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out A [6x2]
+    64 ops: 30 mul, 24 add, 6 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    p = _array(p, 5, "p")
+    if q.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        p = p.tolist()
+        cos, sin = math.cos, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        p = _columns(p)
+        cos, sin = np.cos, np.sin
+    t0 = sin(q[0])
+    t1 = p[0] / 2.0
+    t1 = p[0] - t1
+    t2 = p[2] * t1
+    t3 = t0 * t2
+    t4 = t0 * p[0]
+    t5 = p[3] * t4
+    t6 = cos(q[1])
+    t7 = t0 * t6
+    t8 = cos(q[0])
+    t9 = sin(q[1])
+    t10 = t8 * t9
+    t7 = t7 + t10
+    t10 = p[1] / 2.0
+    t10 = p[1] - t10
+    t11 = p[3] * t10
+    t7 = t7 * t11
+    t5 = t5 + t7
+    t12 = t3 + t5
+    t13 = -t12
+    t2 = t8 * t2
+    t14 = t8 * p[0]
+    t15 = p[3] * t14
+    t6 = t8 * t6
+    t0 = t0 * t9
+    t0 = t6 - t0
+    t0 = t0 * t11
+    t6 = t15 + t0
+    t8 = t2 + t6
+    t9 = p[0] * p[0]
+    t9 = p[2] * t9
+    t9 = t9 / 12.0
+    t1 = t1 * t1
+    t1 = p[2] * t1
+    t1 = t9 + t1
+    t9 = p[2] + p[3]
+    t11 = t12 / t9
+    t3 = t11 * t3
+    t9 = t8 / t9
+    t2 = t9 * t2
+    t2 = t3 + t2
+    t1 = t1 - t2
+    t2 = p[1] * p[1]
+    t2 = p[3] * t2
+    t2 = t2 / 12.0
+    t3 = t10 * t10
+    t3 = p[3] * t3
+    t2 = t2 + t3
+    t3 = t7 * t4
+    t10 = t0 * t14
+    t3 = t3 + t10
+    t3 = t2 + t3
+    t4 = t4 - t11
+    t5 = t4 * t5
+    t9 = t14 - t9
+    t6 = t9 * t6
+    t5 = t5 + t6
+    t3 = t3 + t5
+    t1 = t1 + t3
+    t3 = -t7
+    t4 = t4 * t7
+    t5 = t9 * t0
+    t4 = t4 + t5
+    t2 = t2 + t4
+    _A = (t13, t3,
+          t8, t0,
+          0.0, 0.0,
+          0.0, 0.0,
+          0.0, 0.0,
+          t1, t2)
+    if shape is None:
+        return np.array(_A).reshape(6, 2)
+    return _batch(_A, shape, (6, 2))
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

@@ -1,0 +1,107 @@
+"""Whole-body quantities: centre of mass, centroidal momentum, frame accelerations, external wrenches.
+
+Conventions (Pinocchio's, so results compare one to one):
+
+- the centre of mass is that of the moving bodies: a fixed base's root link is the world
+  and does not count (``pinocchio.centerOfMass``); a floating base's root link does;
+- ``com_jacobian`` (3 x nv) maps v to the CoM velocity in world coordinates
+  (``jacobianCenterOfMass``); ``centroidal_map`` (6 x nv) maps v to the momentum
+  [linear; angular] about the CoM in world axes (``computeCentroidalMap``'s A_G);
+- a frame's classical acceleration is [d/dt of the world velocity of its origin;
+  angular acceleration], world-aligned (``getFrameClassicalAcceleration`` with
+  LOCAL_WORLD_ALIGNED), without gravity; ``jdot_qd`` is the same at qdd = 0, the
+  bias J'(q, qd) qd of every task-space controller;
+- an external wrench w_f = [force; torque] acts at frame f's origin, in world-aligned
+  axes; inverse dynamics with wrenches is tau = ID(q, qd, qdd) - sum_f J_f^T w_f.
+
+Every quantity is built from body-origin Jacobians (each column is an axis and a cross
+product of :class:`derive.symbolic.kinematics.Kinematics`), so CSE shares them with FK.
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import casadi as ca
+
+from derive.symbolic.kinematics import Kinematics, configuration_rate
+from derive.symbolic.dynamics import NewtonEuler
+from derive.symbolic.spatial import skew
+from derive.symbolic.symbols import Symbols
+
+
+class WholeBody:
+    """Centroidal and task-space quantities of one robot (see the module docstring)."""
+
+    def __init__(self, kin: Kinematics, ne: NewtonEuler, sym: Symbols):
+        self.kin, self.ne, self.sym = kin, ne, sym
+        self.robot = kin.robot
+
+    @cached_property
+    def _bodies(self) -> list[tuple[str, ca.SX, ca.SX, ca.SX]]:
+        """(frame, m, h, I_o) of every body with mass: body-frame first moment and inertia about its origin."""
+        out = []
+        if self.robot.floating:
+            out.append((self.robot.root, *self.ne.root_mass))
+        for b in self.ne.bodies:
+            if b.name in self.kin.poses and not (ca.SX(b.m).is_zero() and ca.SX(b.h).is_zero()):
+                out.append((b.name, b.m, b.h, b.I_o))
+        return out
+
+    @cached_property
+    def mass(self) -> ca.SX:
+        """Total mass of the moving bodies."""
+        return sum((m for _, m, _, _ in self._bodies), ca.SX(0))
+
+    @cached_property
+    def com(self) -> ca.SX:
+        """Centre of mass (3x1, world)."""
+        first = ca.SX.zeros(3, 1)
+        for frame, m, h, _ in self._bodies:
+            pose = self.kin.pose(frame)
+            first += m * pose.p + pose.R @ h
+        return first / self.mass
+
+    def _momentum_rows(self, frame: str, m, h) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(J of the body origin, world first moment h_w, m J_c): m J_c maps v to the body's linear momentum."""
+        J = self.kin.jacobian(frame)
+        h_w = self.kin.pose(frame).R @ h
+        return J, h_w, m * J[0:3, :] - skew(h_w) @ J[3:6, :]
+
+    @cached_property
+    def com_jacobian(self) -> ca.SX:
+        """d(com)/dt = J_com v (3 x nv)."""
+        total = ca.SX.zeros(3, self.sym.nv)
+        for frame, m, h, _ in self._bodies:
+            total += self._momentum_rows(frame, m, h)[2]
+        return total / self.mass
+
+    @cached_property
+    def centroidal_map(self) -> ca.SX:
+        """A_G (6 x nv): [linear; angular] momentum about the CoM, world axes, = A_G v."""
+        c = self.com
+        linear = ca.SX.zeros(3, self.sym.nv)
+        angular = ca.SX.zeros(3, self.sym.nv)
+        for frame, m, h, I_o in self._bodies:
+            J, h_w, P = self._momentum_rows(frame, m, h)
+            pose = self.kin.pose(frame)
+            # about the body origin: R I_o R^T w + h_w x v_o; moved to the CoM: + (p_o - c) x P
+            angular += pose.R @ I_o @ pose.R.T @ J[3:6, :] + skew(h_w) @ J[0:3, :] + skew(pose.p - c) @ P
+            linear += P
+        return ca.vertcat(linear, angular)
+
+    def jdot_qd(self, frame: str) -> ca.SX:
+        """J'(q, qd) qd (6x1): the frame's classical acceleration at qdd = 0, world-aligned."""
+        twist = self.kin.jacobian(frame) @ self.sym.qd
+        return ca.jtimes(twist, self.sym.q, configuration_rate(self.robot, self.sym))
+
+    def frame_acceleration(self, frame: str) -> ca.SX:
+        """[classical linear; angular] acceleration (6x1) of the frame for (q, qd, qdd), world-aligned."""
+        return self.kin.jacobian(frame) @ self.sym.qdd + self.jdot_qd(frame)
+
+    def wrench_torques(self, wrenches: ca.SX) -> ca.SX:
+        """sum_f J_f^T w_f (nv x 1) for ``wrenches`` stacked [w_f; ...] in :attr:`Robot.wrench_frames` order."""
+        tau = ca.SX.zeros(self.sym.nv, 1)
+        for k, frame in enumerate(self.robot.wrench_frames):
+            tau += self.kin.jacobian(frame).T @ wrenches[6 * k:6 * k + 6]
+        return tau
