@@ -67,7 +67,7 @@ def random_inputs(robot: str, module, fn: dict, shape: tuple, rng: np.random.Gen
         elif name == "T":
             extra = [a["p"]] if "p" in a else []
             a[name] = getattr(module, f"fk_{fn['frame']}")(rng.uniform(lo, hi, shape + (r.nq,)), *extra)
-        elif name == "w":  # left to its default (None) in one batch shape, per state in the others
+        elif name == "w" and fn["quantity"] == "ik":  # left to its default (None) in one batch shape, per state in the others
             a[name] = None if shape == (7,) else rng.uniform(0.5, 1.5, shape + (n,))
         else:
             a[name] = rng.normal(size=shape + (n,))

@@ -70,7 +70,7 @@ def inputs(robot: str, rng: np.random.Generator, batch: tuple[int, ...] = (), mo
     qd = rng.normal(size=batch + (r.nv,))
     a = {"q": q, "qd": qd, "qdd": rng.normal(size=batch + (r.nv,)), "tau": 5 * rng.normal(size=batch + (r.nv,)),
          "u": 5 * rng.normal(size=batch + (r.nv,)), "x": np.concatenate([q, qd], axis=-1),
-         "dt": np.full(batch + (1,), 0.01)}
+         "dt": np.full(batch + (1,), 0.01), "w": 5 * rng.normal(size=batch + (6 * len(r.wrench_frames),))}
     return a
 
 
