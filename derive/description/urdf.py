@@ -605,6 +605,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         if j.child in parent_joint:
             raise error(f"joints[{j.name}].child", f"link '{j.child}' already has parent joint '{parent_joint[j.child].name}'")
         parent_joint[j.child] = j
+    if not links:
+        raise error(spelling, "the URDF has no <link>")
     roots = [n for n in links if n not in parent_joint]
     cycle = _find_cycle(links, parent_joint)
     if cycle:
