@@ -2,6 +2,8 @@
 
 - The ur5 and panda entries of models.yaml are exactly what a fresh import of
   example-robot-data's URDFs gives (the file cannot drift from the URDFs).
+- Whole-tree imports (the default), ``--chain``, ``--floating`` and the example-robot-data
+  sweep: tests/test_urdf_trees.py.
 - The importer against Pinocchio's own URDF parser: the imported models, run
   through the numeric reference (derive.reference), give Pinocchio's frame poses,
   frame Jacobians, mass matrix, gravity vector and inverse dynamics at 50 seeded
@@ -366,9 +368,15 @@ def test_zoo_against_pinocchio(pin, tmp_path):
     assert j2.type == "revolute" and (j2.limits.lower, j2.limits.upper) == (None, None)
     assert (j2.limits.velocity, j2.limits.effort) == (3.0, 20.0)
     assert all(link.inertia_rpy == (0.0, 0.0, 0.0) for link in robot.links)
+    assert entry["description"] == ("zoo-bot imported from URDF (tip tool; locked slide_lock = 0.04, wrist_lock = 0.3; "
+                                    "dropped the massless moving branch sensor_joint)")
     # Pinocchio keeps the massless sensor branch that the importer drops: remove it there too
     side = PinSide(pin, ZOO_URDF, robot, ZOO_LOCKS | {"sensor_joint": 0.0}, "tool", from_xml=True)
     cross_check(robot, side)
+    # --chain tool imports the same model
+    chained = import_urdf(path, lock=ZOO_LOCK_ARG, chain="tool")
+    assert {k: v for k, v in chained.items() if k not in ("description", "source")} == \
+        {k: v for k, v in entry.items() if k not in ("description", "source")}
 
 
 def test_lock_zero_copies_origin(tmp_path):
@@ -409,7 +417,7 @@ def test_command_prints_and_appends(tmp_path, capsys):
     path = write(tmp_path, ZOO_URDF)
     models = tmp_path / "models.yaml"
     models.write_text(default_models_path().read_text())
-    ns = argparse.Namespace(file=str(path), tip="tool", lock=ZOO_LOCK_ARG, name=None, out=None)
+    ns = argparse.Namespace(file=str(path), tip="tool", lock=ZOO_LOCK_ARG, name=None, out=None, chain=None, floating=False)
     assert import_urdf_command(ns) == 0
     printed = capsys.readouterr().out
     assert printed == dump_entry("zoo_bot", import_urdf(path, "tool", ZOO_LOCK_ARG))
@@ -446,10 +454,20 @@ def test_mimic_joint_must_be_locked(pin):
     one_line_error(r"mimics joint 'panda_finger_joint1'", SHIPPED["panda"]["path"], "panda_leftfinger")
 
 
-def test_moving_branch_with_mass_off_the_tip_path(tmp_path):
+def test_moving_branch_with_mass_off_the_chain(tmp_path):
     path = write(tmp_path, ZOO_URDF)
     one_line_error(r"^robot 'zoo_bot': joints\[slide_lock\]: moves a branch with mass \(0.3 kg\) that does not lead "
-                   r"to the tip 'tool'; lock it \(--lock wrist_lock,slide_lock\)", path, "tool", "wrist_lock")
+                   r"to the tip 'tool'; lock it \(--lock wrist_lock,slide_lock\)", path, lock="wrist_lock", chain="tool")
+    # the whole tree (the default) keeps the branch: slide_lock moves; the massless sensor branch is dropped
+    entry = import_urdf(path, "tool", "wrist_lock")
+    assert [j["name"] for j in entry["joints"]] == ["j1", "j2", "j3", "slide_lock"]
+    assert entry["description"] == ("zoo-bot imported from URDF (tip tool; locked wrist_lock = 0; dropped the massless "
+                                     "moving branch sensor_joint)")
+    # with both locked, the chain and the whole tree give the same joints
+    chain = import_urdf(path, lock=ZOO_LOCK_ARG, chain="tool")
+    whole = import_urdf(path, "tool", ZOO_LOCK_ARG)
+    assert chain["joints"] == whole["joints"] and chain["links"] == whole["links"] and chain["frames"] == whole["frames"]
+    assert chain["description"] == "zoo-bot imported from URDF (chain to tool; locked slide_lock = 0.04, wrist_lock = 0.3)"
 
 
 def test_unknown_tip(tmp_path):
@@ -467,6 +485,8 @@ def test_unknown_lock_joint(tmp_path):
 
 @pytest.mark.parametrize("jtype", ["floating", "planar"])
 def test_floating_and_planar_joints_are_refused(tmp_path, jtype):
+    """A floating joint is read only from a massless root link to the base (tests/test_urdf_trees.py); here j1
+    hangs off the massive base."""
     text = ZOO_URDF.replace('<joint name="j1" type="revolute">', f'<joint name="j1" type="{jtype}">')
     path = write(tmp_path, text)
     one_line_error(rf"^robot 'zoo_bot': joints\[j1\]: {jtype} joints are not supported", path, "tool", ZOO_LOCK_ARG)

@@ -10,8 +10,9 @@ One test per class of what a new user hits with real URDFs:
 - inertia rounding noise (-2e-22 kg m^2 on a link whose inertia is zero) is accepted,
   clamped below 1e-12 of the robot's largest inertia; a clearly negative moment or a
   clear triangle violation is still refused;
-- double_pendulum, talos_left_arm, anymal and go1 of example-robot-data import without
-  hand edits and match Pinocchio (FK of every frame, mass matrix) to 1e-12 relative.
+- double_pendulum, talos_left_arm, anymal and go1 of example-robot-data import as chains
+  (``--chain``) without hand edits and match Pinocchio (FK of every frame, mass matrix) to
+  1e-12 relative (whole trees: tests/test_urdf_trees.py).
 """
 
 from __future__ import annotations
@@ -119,8 +120,15 @@ def test_deep_branch_is_no_recursion(tmp_path):
     path = write(tmp_path, robot(*parts))
     start = time.perf_counter()
     err = one_line(r"^robot 'odd': joints\[jb\]: moves a branch with mass \(3.999 kg\) that does not lead to the tip "
-                   r"'l0'; lock it \(--lock jb\)", path, "l0")
+                   r"'l0'; lock it \(--lock jb\)", path, chain="l0")
     assert time.perf_counter() - start < 5.0, err
+    entry = import_urdf(path, lock="jb", chain="l0")
+    assert [j["name"] for j in entry["joints"]] == ["j0"]
+    assert entry["links"][0]["mass"] == pytest.approx(1.0 + 0.001 * (n - 1), rel=1e-12)  # the branch, merged into the root
+    start = time.perf_counter()
+    entry = import_urdf(path)  # the whole tree: the branch moves, as one body of 2999 merged links
+    assert time.perf_counter() - start < 5.0
+    assert [j["name"] for j in entry["joints"]] == ["j0", "jb"]
     entry = import_urdf(path, "l0", "jb")
     assert [j["name"] for j in entry["joints"]] == ["j0"]
     assert entry["links"][0]["mass"] == pytest.approx(1.0 + 0.001 * (n - 1), rel=1e-12)  # the branch, merged into the root
@@ -175,6 +183,7 @@ def test_mimic_on_a_fixed_joint_is_ignored(tmp_path, capsys):
     lock = re.search(r"--lock (\S+)\)", str(err)).group(1)
     tip_off_branch = import_urdf(path, "l1", lock)  # the suggested command imports
     assert [j["name"] for j in tip_off_branch["joints"]] == ["j1"]
+    assert import_urdf(path, lock=lock, chain="l1")["joints"] == tip_off_branch["joints"]
 
 
 def test_talos_left_arm_mimic_fixed_joints(capsys):
@@ -255,12 +264,12 @@ def test_example_robot_data_against_pinocchio(key, capsys):
 
     assert example_robot_data_dir() is not None, "example-robot-data is not installed"
     path, tip, lock = ROBOTS[key]
-    if lock == "suggested":
+    if lock == "suggested":  # the chain to the tip: the other legs must be locked
         with pytest.raises(ModelError, match="--lock ") as info:
-            import_urdf_named(path, tip)
+            import_urdf_named(path, chain=tip)
         lock = re.search(r"--lock (\S+)\)", str(info.value)).group(1)
     start = time.perf_counter()
-    name, entry = import_urdf_named(path, tip, lock)
+    name, entry = import_urdf_named(path, lock=lock, chain=tip)
     elapsed = time.perf_counter() - start
     robot = parse_robot(name, entry)
     locks = {n: v for n, (v, _) in parse_lock(lock).items()}

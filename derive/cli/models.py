@@ -9,8 +9,10 @@ from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import
 
 
 def cmd_import_urdf(args) -> int:
-    """``derive import-urdf FILE --tip FRAME [--lock J,...] [--name NAME] [--out models.yaml]``."""
-    name, entry = import_urdf_named(args.file, args.tip, lock=args.lock, name=args.name)
+    """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--name NAME] [--out models.yaml]``."""
+    name, entry = import_urdf_named(args.file, getattr(args, "tip", None), lock=getattr(args, "lock", None),
+                                    name=getattr(args, "name", None), chain=getattr(args, "chain", None),
+                                    floating=bool(getattr(args, "floating", False)))
     if args.out:
         append_entry(args.out, name, entry)
         print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
@@ -38,12 +40,20 @@ def cmd_info(args) -> int:
 
 def add_parser(sub) -> None:
     u = sub.add_parser("import-urdf", help="turn a URDF into a models.yaml entry",
-                       description="Convert a URDF into a models.yaml robot entry (printed, or appended with --out). "
+                       description="Convert a URDF into a models.yaml robot entry (printed, or appended with --out): "
+                                   "every moving joint of the tree (depth-first, Pinocchio's order) unless locked; "
+                                   "links behind fixed joints become named frames; moving branches without any mass "
+                                   "are dropped (named in the description). "
                                    f"FILE may be '{ERD_PREFIX}<path under robots/>' for the installed "
                                    "example-robot-data URDFs.")
     u.add_argument("file", metavar="FILE")
-    u.add_argument("--tip", required=True, metavar="FRAME", help="URDF link that becomes the frame 'tcp'")
+    u.add_argument("--tip", metavar="LINK", help="URDF link that becomes the frame 'tcp' (none without it)")
+    u.add_argument("--chain", metavar="LINK", help="import only the root-to-LINK chain (the frame 'tcp' at LINK): "
+                                                   "moving branches off it with mass must be locked, massless ones are dropped "
+                                                   "(--tip, if given too, must name the same link)")
     u.add_argument("--lock", metavar="JOINT[=VALUE],...", help="joints to make fixed (default value 0)")
+    u.add_argument("--floating", action="store_true",
+                   help="floating base: the URDF root link moves freely (base: floating, Pinocchio's JointModelFreeFlyer)")
     u.add_argument("--name", help="robot name (default: the URDF robot name made a C identifier)")
     u.add_argument("--out", metavar="MODELS", help="append to this models file instead of printing (created if missing)")
     u.set_defaults(func=cmd_import_urdf)

@@ -4,16 +4,27 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
 :func:`derive.description.model.parse_robot` accepts:
 
 - ``revolute``/``prismatic``/``fixed`` joints are kept; ``continuous`` becomes a
-  revolute joint without position limits; ``floating``/``planar`` are refused;
+  revolute joint without position limits; ``planar`` is refused; ``floating`` only
+  as the one joint from a massless root link (a ``world``) to the base, with an
+  identity origin: the root is dropped and the base floats (as ``--floating``);
+- by default the whole tree is imported: every moving joint, in Pinocchio's order
+  (depth-first, siblings by joint name, as urdfdom keeps them), which the entry's
+  joint list follows so that q has Pinocchio's order too. A moving branch that
+  carries no mass at all is dropped (a massless body at a leaf would make the mass
+  matrix singular) and named in the entry's description;
+- ``tip`` names the link that becomes the frame ``tcp`` (none without it); the
+  path to it is kept even where it carries no mass;
+- ``chain`` imports the root-to-``chain`` path only (``tcp`` at that link):
+  moving branches off it are dropped if they carry no mass and refused otherwise
+  (lock them);
 - ``lock`` turns joints into fixed ones at a given position (default 0); the
   lock motion is folded into the fixed transform. Moving ``mimic`` joints must be
   locked (``mimic`` on a fixed joint is ignored);
 - fixed joints are merged: the child's mass properties are added to the parent
   (parallel-axis theorem) and the child survives as a named frame on its moving
-  ancestor. The URDF root link always stays (it is the world frame);
-- the ``tip`` link becomes the named frame ``tcp``;
-- moving branches off the root-to-tip path are dropped if they carry no mass
-  and refused otherwise (lock them);
+  ancestor. The URDF root link always stays (but a world dropped above a
+  floating joint): the world frame, or with ``floating`` (``base: floating``) the
+  free-flying body (Pinocchio's ``JointModelFreeFlyer`` above the root link);
 - inertias are re-expressed in the link frame (no ``inertia_rpy``).
 
 Numbers that come straight from the URDF are copied exactly (``float(text)``);
@@ -296,10 +307,12 @@ class _Reader:
             raise self.error("joints", "a <joint> has no name")
         where = f"joints[{name}]"
         jtype = el.get("type")
-        if jtype in ("floating", "planar"):
-            raise self.error(where, f"{jtype} joints are not supported (fixed-base manipulators only)")
-        if jtype not in ("revolute", "continuous", "prismatic", "fixed"):
-            raise self.error(where + ".type", f"unknown joint type {jtype!r} (known: revolute, continuous, prismatic, fixed)")
+        if jtype == "planar":
+            raise self.error(where, "planar joints are not supported (revolute, continuous, prismatic and fixed joints; "
+                                    "a floating joint only from a massless root link to the base, as the floating base)")
+        if jtype not in ("revolute", "continuous", "prismatic", "fixed", "floating"):
+            raise self.error(where + ".type", f"unknown joint type {jtype!r} (known: revolute, continuous, prismatic, fixed, "
+                                              "floating)")
         ends = {}
         for key in ("parent", "child"):
             sub = el.find(key)
@@ -308,11 +321,12 @@ class _Reader:
             ends[key] = sub.get("link")
         axis_el = el.find("axis")
         axis = self.floats(where + ".axis", None if axis_el is None else axis_el.get("xyz"), 3, (1.0, 0.0, 0.0))
-        if jtype != "fixed" and math.sqrt(sum(a * a for a in axis)) < 1e-12:
+        one_dof = jtype not in ("fixed", "floating")
+        if one_dof and math.sqrt(sum(a * a for a in axis)) < 1e-12:
             raise self.error(where + ".axis", "must not be the zero vector")
-        limits = self.limits(where + ".limit", el.find("limit"), jtype) if jtype != "fixed" else {}
+        limits = self.limits(where + ".limit", el.find("limit"), jtype) if one_dof else {}
         # <mimic> on a fixed joint couples nothing: ignored, as Pinocchio and urdfdom do (talos' grippers)
-        mimic = el.find("mimic") if jtype != "fixed" else None
+        mimic = el.find("mimic") if one_dof else None
         return _Joint(name, "revolute" if jtype == "continuous" else jtype, ends["parent"], ends["child"],
                       self.origin(where + ".origin", el.find("origin")), axis, limits,
                       None if mimic is None else (mimic.get("joint") or "?"))
@@ -436,8 +450,15 @@ def _lock_spelling(j: _Joint) -> str:
     return j.name if value == 0 else f"{j.name}={value!r}"
 
 
-def _command(spelling: str, tip: str, lock: dict, name: str | None) -> str:
-    cmd = f"derive import-urdf {spelling} --tip {tip}"
+def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, lock: dict, name: str | None) -> str:
+    """The ``derive import-urdf`` command line that reproduces an import."""
+    cmd = f"derive import-urdf {spelling}"
+    if chain is not None:
+        cmd += f" --chain {chain}"
+    elif tip is not None:
+        cmd += f" --tip {tip}"
+    if floating:
+        cmd += " --floating"
     if lock:
         cmd += " --lock " + ",".join(s for _, s in lock.values())
     if name:
@@ -528,24 +549,45 @@ def _clamp_inertia_noise(inertia: dict, mass: float, floor: float) -> dict:
     return out if inertia_problem(m, mass) is None else inertia
 
 
-def import_urdf(path: str | Path, tip: str, lock: Any = (), name: str | None = None) -> dict:
+def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
+                chain: str | None = None, floating: bool = False) -> dict:
     """Read a URDF and return one models.yaml robot entry (a plain dict).
 
-    ``path`` may be ``example-robot-data:<path under robots/>``. ``lock`` names
-    joints to make fixed, as ``"a,b=0.3"``, ``["a", "b=0.3"]`` or ``{"b": 0.3}``
-    (value in rad or m, default 0). ``name`` defaults to the URDF robot name made a
-    C identifier. Raises :class:`derive.description.model.ModelError` on any problem.
+    ``path`` may be ``example-robot-data:<path under robots/>``. By default the
+    whole tree is imported: every moving joint (depth-first, siblings by joint
+    name: Pinocchio's order) except the locked ones, and except moving
+    branches that carry no mass at all (a massless body at a leaf would make the
+    mass matrix singular): those are dropped and named in the entry's
+    description. ``tip`` only names the link that becomes the frame ``tcp`` (no
+    ``tcp`` frame without it); the path to it is kept even if massless.
+
+    ``chain`` names a link instead: only the root-to-``chain`` path may move (the
+    ``tcp`` frame sits at ``chain``); moving branches off it are dropped if they
+    carry no mass and refused otherwise (lock them). ``tip``, if given as well,
+    must be the same link.
+
+    ``lock`` names joints to make fixed, as ``"a,b=0.3"``, ``["a", "b=0.3"]`` or
+    ``{"b": 0.3}`` (value in rad or m, default 0). ``floating`` gives the entry
+    ``base: floating``: the URDF root link becomes a free-flying body, as
+    ``pinocchio.buildModelFromUrdf(path, pinocchio.JointModelFreeFlyer())``. A URDF
+    whose root is a massless link joined to the rest by a single ``floating``
+    joint with an identity origin (``world`` -> ``base``) is read the same way:
+    the root is dropped and its child is the floating base. ``name`` defaults to
+    the URDF robot name made a C identifier. Raises
+    :class:`derive.description.model.ModelError` on any problem.
     """
-    return import_urdf_named(path, tip, lock, name)[1]
+    return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating)[1]
 
 
-def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | None = None) -> tuple[str, dict]:
+def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
+                      chain: str | None = None, floating: bool = False) -> tuple[str, dict]:
     """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
     file, spelling, origin_text = resolve_urdf(path, name)
     urdf_name, links, joints = _read(file, name, spelling)
     robot = name or c_identifier(urdf_name)
+    floating_flag = bool(floating)
 
     def error(where: str, problem: str) -> ModelError:
         return ModelError(robot, where, problem)
@@ -563,6 +605,8 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
         if j.child in parent_joint:
             raise error(f"joints[{j.name}].child", f"link '{j.child}' already has parent joint '{parent_joint[j.child].name}'")
         parent_joint[j.child] = j
+    if not links:
+        raise error(spelling, "the URDF has no <link>")
     roots = [n for n in links if n not in parent_joint]
     cycle = _find_cycle(links, parent_joint)
     if cycle:
@@ -582,8 +626,6 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
     for link in reversed(tree):
         behind[link] = links[link].mass + math.fsum(behind[j.child] for j in children[link])
 
-    if tip not in links:
-        raise error("tip", f"unknown link '{tip}' (links: {', '.join(links)})")
     locks = parse_lock(lock, robot)
     by_name = {j.name: j for j in joints}
     for jname, (value, _) in locks.items():
@@ -593,6 +635,8 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
             raise error(f"lock[{jname}]", f"unknown joint (moving joints: {', '.join(moving)})")
         if j.type == "fixed":
             raise error(f"lock[{jname}]", "the joint is fixed already")
+        if j.type == "floating" and value != 0:
+            raise error(f"lock[{jname}]", f"a floating joint is locked at its origin only (--lock {jname}), got {value:g}")
         lo, hi = j.limits.get("lower"), j.limits.get("upper")
         if (lo is not None and value < lo) or (hi is not None and value > hi):
             raise error(f"lock[{jname}]", f"{value} is outside the joint limits [{lo}, {hi}] "
@@ -600,6 +644,37 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
 
     def moves(j: _Joint) -> bool:
         return j.type != "fixed" and j.name not in locks
+
+    # ---- floating joints: only world -> base, read as a floating base
+    world_joint: _Joint | None = None
+    for j in joints:
+        if j.type != "floating" or j.name in locks:
+            continue
+        inr = links[j.parent]
+        at_root = j.parent == root and len(children[root]) == 1 and inr.mass == 0 and not any(inr.inertia.values())
+        if not at_root:
+            raise error(f"joints[{j.name}]", "floating joints are not supported but as the only joint of a massless root "
+                        f"link (the world) to the base, which becomes the floating base; lock it (--lock {j.name}) "
+                        "to make it fixed")
+        if not j.origin.is_identity:
+            raise error(f"joints[{j.name}].origin", "a floating joint read as the floating base must have the identity "
+                        f"origin (it only offsets the base coordinates); remove it, or lock it (--lock {j.name})")
+        world_joint = j
+    world = None
+    if world_joint is not None:
+        world, root, floating = root, world_joint.child, True
+
+    # ---- what moves: the whole tree, or the root-to-tip path (chain)
+    key = "tip"
+    if chain is not None:
+        if tip is not None and tip != chain:
+            raise error("tip", f"'{tip}' is not the --chain link '{chain}'; --chain puts the frame 'tcp' at its link "
+                        "(give --chain alone)")
+        tip, key = chain, "chain"
+    if tip is not None and tip not in links:
+        raise error(key, f"unknown link '{tip}' (links: {', '.join(links)})")
+    if tip is not None and tip == world:
+        raise error(key, f"'{tip}' is the world above the floating joint '{world_joint.name}'; choose a link of the robot")
 
     def lock_list(names: Iterable[str]) -> str:
         """``--lock`` text that keeps the user's locks and adds ``names`` (moving joints) at usable values."""
@@ -609,30 +684,38 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
                 out[n] = _lock_spelling(by_name[n])
         return ",".join(out.values())
 
-    # ---- prune moving branches off the root-to-tip path
     on_path = set()
     link = tip
-    while True:
+    while link is not None:
         on_path.add(link)
-        if link == root:
-            break
-        link = parent_joint[link].parent
+        link = parent_joint[link].parent if link != root else None
 
-    order: list[_Joint] = []  # kept joints, parents first, file order among siblings
-    off_path: list[tuple[_Joint, float]] = []  # moving joints of branches with mass that miss the tip
-    frontier = [root]
-    for link in frontier:
-        for j in children[link]:
-            if moves(j) and j.child not in on_path:
+    # Kept joints in Pinocchio's order: depth-first, siblings by joint name (urdfdom keeps a link's child
+    # joints in a std::map by name, not in file order). Written in this order, the entry's joints give
+    # q in this order too (parse_robot: depth-first, file order among siblings).
+    order: list[_Joint] = []
+    off_path: list[tuple[_Joint, float]] = []  # chain: moving joints of branches with mass that miss the tip
+    dropped: list[str] = []  # whole tree: moving joints of massless branches
+    for link in children:
+        children[link].sort(key=lambda j: j.name)  # str order = UTF-8 byte order, std::string's
+    stack = list(reversed(children[root]))
+    while stack:
+        j = stack.pop()
+        if moves(j) and j.child not in on_path:
+            if chain is not None:
                 if behind[j.child] > 0:
                     off_path.append((j, behind[j.child]))
                 continue  # a massless branch is dropped
-            order.append(j)
-            frontier.append(j.child)
-    for j in order + [j for j, _ in off_path]:
-        if j.mimic is not None and j.name not in locks:
-            raise error(f"joints[{j.name}]", f"mimics joint '{j.mimic}'; mimic joints are not supported: lock them "
-                        f"(--lock {lock_list([j.mimic, j.name])})")
+            if behind[j.child] == 0:
+                dropped.append(j.name)  # nothing to move: a massless body would make M singular
+                continue
+        order.append(j)
+        stack.extend(reversed(children[j.child]))
+    mimics = [j for j in order + [j for j, _ in off_path] if j.mimic is not None and j.name not in locks]
+    if mimics:
+        j = mimics[0]
+        raise error(f"joints[{j.name}]", f"mimics joint '{j.mimic}'; mimic joints are not supported: lock them "
+                    f"(--lock {lock_list(n for m in mimics for n in (m.mimic, m.name))})")
     if off_path:
         # every joint that would still move mass off the path once the branch tops are locked, so that
         # the suggested command works as given
@@ -646,6 +729,9 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
         j, mass = off_path[0]
         raise error(f"joints[{j.name}]", f"moves a branch with mass ({mass:g} kg) that does not lead to the tip "
                     f"'{tip}'; lock it (--lock {lock_list(to_lock)}) or choose another tip")
+    if not floating and not any(moves(j) for j in order):
+        raise error("joints", "no moving joint is left to import (a fixed-base robot needs one); a single rigid body "
+                    "imports as a floating base (--floating)")
 
     # ---- merge fixed joints: body (surviving link) and pose in the body frame of every link
     body: dict[str, str] = {root: root}
@@ -688,7 +774,9 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
         if "inertia" in link:
             link["inertia"] = _clamp_inertia_noise(link["inertia"], link["mass"], NOISE * largest)
 
-    frames = [{"name": "tcp", "link": body[tip], "xyz": list(pose[tip].xyz), "rpy": list(pose[tip].rpy)}]
+    frames = []
+    if tip is not None:
+        frames.append({"name": "tcp", "link": body[tip], "xyz": list(pose[tip].xyz), "rpy": list(pose[tip].rpy)})
     for n in body:
         if body[n] != n and n != tip:
             frames.append({"name": n, "link": body[n], "xyz": list(pose[n].xyz), "rpy": list(pose[n].rpy)})
@@ -704,11 +792,11 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
 
     for link in out_links:
         link["name"] = ident("links", link["name"])
-    for f in frames:
-        f["name"] = ident("frames", f["name"]) if f["name"] != "tcp" else "tcp"
+    for i, f in enumerate(frames):
+        f["name"] = "tcp" if tip is not None and i == 0 else ident("frames", f["name"])
         f["link"] = c_identifier(f["link"])
-    if "tcp" in renamed:
-        raise error("tip", f"the URDF already has a link called '{renamed['tcp']}'; it would clash with the frame 'tcp'")
+    if tip is not None and "tcp" in renamed:
+        raise error(key, f"the URDF already has a link called '{renamed['tcp']}'; it would clash with the frame 'tcp'")
     renamed_joints: dict[str, str] = {}
     for j in out_joints:
         new = c_identifier(j["name"])
@@ -716,12 +804,25 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
             raise error("joints", f"'{j['name']}' and '{renamed_joints[new]}' both become the identifier '{new}'")
         j["name"], j["parent"], j["child"] = new, c_identifier(j["parent"]), c_identifier(j["child"])
 
-    locked = ", ".join(f"{n} = {v:g}" for n, (v, _) in locks.items())
-    description = f"{urdf_name} imported from URDF (tip {tip}{'; locked ' + locked if locked else ''})"
-    command = _command(spelling, tip, locks, name if name and name != c_identifier(urdf_name) else None)
+    notes = []
+    if chain is not None:
+        notes.append(f"chain to {tip}")
+    elif tip is not None:
+        notes.append(f"tip {tip}")
+    if world_joint is not None:
+        notes.append(f"floating base {root}: the floating joint {world_joint.name} from {world}")
+    elif floating:
+        notes.append(f"floating base {root}")
+    if locks:
+        notes.append("locked " + ", ".join(f"{n} = {v:g}" for n, (v, _) in locks.items()))
+    if dropped:
+        notes.append("dropped the massless moving " + ("branches " if len(dropped) > 1 else "branch ") + ", ".join(dropped))
+    description = f"{urdf_name} imported from URDF" + (f" ({'; '.join(notes)})" if notes else "")
+    command = _command(spelling, tip, chain, floating_flag, locks, name if name and name != c_identifier(urdf_name) else None)
     entry = {
         "description": description,
         "source": f"{origin_text}, imported by `{command}`",
+        **({"base": "floating"} if floating else {}),
         "gravity": list(GRAVITY),
         "links": out_links,
         "joints": out_joints,
@@ -732,6 +833,7 @@ def import_urdf_named(path: str | Path, tip: str, lock: Any = (), name: str | No
     except ModelError as exc:
         raise ModelError(robot, exc.field, f"{exc.problem} (in the imported entry)") from None
     return robot, entry
+
 
 
 # --------------------------------------------------------------------------- YAML text
