@@ -446,12 +446,18 @@ def one_line_error(match: str, *args, **kwargs) -> ModelError:
     return info.value
 
 
-def test_mimic_joint_must_be_locked(pin):
-    err = one_line_error(r"^robot 'panda': joints\[panda_finger_joint2\]: mimics joint 'panda_finger_joint1'; "
-                         r".*--lock panda_finger_joint1,panda_finger_joint2",
+def test_mimic_joint_follows_its_joint(pin):
+    """panda's second finger mimics the first: imported as a mimic joint (no entry in q); with the first
+    finger locked, the second must be locked too (one line, with the command that works)."""
+    entry = import_urdf(SHIPPED["panda"]["path"], "panda_hand_tcp")
+    robot = parse_robot("panda", entry)
+    finger = next(j for j in robot.joints if j.name == "panda_finger_joint2")
+    assert (finger.mimic.joint, finger.mimic.multiplier, finger.mimic.offset) == ("panda_finger_joint1", 1.0, 0.0)
+    assert robot.nq == robot.nv == 8 and "panda_finger_joint2" not in [c.name for c in robot.coordinates]
+    err = one_line_error(r"^robot 'panda': joints\[panda_finger_joint2\]\.mimic: mimics 'panda_finger_joint1', a locked "
+                         r"joint: lock it \(--lock panda_finger_joint1,panda_finger_joint2\)",
                          SHIPPED["panda"]["path"], "panda_hand_tcp", "panda_finger_joint1")
-    assert err.field == "joints[panda_finger_joint2]"
-    one_line_error(r"mimics joint 'panda_finger_joint1'", SHIPPED["panda"]["path"], "panda_leftfinger")
+    assert err.field == "joints[panda_finger_joint2].mimic"
 
 
 def test_moving_branch_with_mass_off_the_chain(tmp_path):

@@ -174,12 +174,16 @@ def test_mimic_on_a_fixed_joint_is_ignored(tmp_path, capsys):
     assert [j["name"] for j in entry["joints"]] == ["j1", "j2"]
     assert entry["links"][-1]["mass"] == 2.0  # the finger is merged into l2
     assert "finger" in {f["name"] for f in entry["frames"]}
-    # on a moving joint, mimic is still refused, with a lock suggestion that works (values within limits)
+    # on a moving joint it becomes a mimic joint; with the joint it follows locked, it must be locked too
+    # (one line, with a lock suggestion that works: values within limits)
+    mimic = '<mimic joint="j2" multiplier="-2.0" offset="0.3"/>'
     parts = ARM + (link("finger"), joint("finger_joint", "l2", "finger", extra=mimic,
                                          limit='<limit lower="0.1" upper="0.5" effort="1" velocity="1"/>'))
     path = write(tmp_path, robot(*parts))
-    err = one_line(r"^robot 'odd': joints\[finger_joint\]: mimics joint 'j2'; mimic joints are not supported: "
-                   r"lock them \(--lock j2,finger_joint=0.1\)", path, "tool")
+    finger = import_urdf(path, "tool")["joints"][-1]
+    assert finger["name"] == "finger_joint" and finger["mimic"] == {"joint": "j2", "multiplier": -2.0, "offset": 0.3}
+    err = one_line(r"^robot 'odd': joints\[finger_joint\]\.mimic: mimics 'j2', a locked joint: lock it "
+                   r"\(--lock j2,finger_joint=0.1\)", path, "tool", "j2")
     lock = re.search(r"--lock (\S+)\)", str(err)).group(1)
     tip_off_branch = import_urdf(path, "l1", lock)  # the suggested command imports
     assert [j["name"] for j in tip_off_branch["joints"]] == ["j1"]

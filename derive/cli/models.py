@@ -25,11 +25,17 @@ def cmd_info(args) -> int:
     robots = robots_of(args)
     for name in args.robot or robots:
         r = robots[name]
-        print(f"{r.name}: nq = {r.nq}, joints {', '.join(j.summary for j in r.moving_joints)}")
+        base = f", nv = {r.nv}, floating base ({', '.join(c.name for c in r.base_coordinates)})" if r.floating else ""
+        print(f"{r.name}: nq = {r.nq}{base}, joints {', '.join(j.summary for j in r.moving_joints)}")
+        for j in r.moving_joints:
+            if j.mimic is not None:
+                print(f"  mimic: {j.name} = {j.mimic.multiplier:g} {j.mimic.joint} + {j.mimic.offset:g} (no entry in q)")
         for j in r.moving_joints:
             if j.gimbal_lock:
                 print(f"  gimbal lock: {j.gimbal_lock}")
         print(f"  frames: {', '.join(f.name for f in r.frames)}")
+        if r.wrench_frames:
+            print(f"  wrench frames (the *_fext functions): {', '.join(r.wrench_frames)}")
         if r.parameters:
             print(f"  parameters: {', '.join(f'{p.name} = {p.default:g}' for p in r.parameters)}")
         if r.source:

@@ -18,7 +18,10 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
   moving branches off it are dropped if they carry no mass and refused otherwise
   (lock them);
 - ``lock`` turns joints into fixed ones at a given position (default 0); the
-  lock motion is folded into the fixed transform. Moving ``mimic`` joints must be
+  lock motion is folded into the fixed transform;
+- a moving joint with ``<mimic joint= multiplier= offset=>`` becomes a models.yaml
+  ``mimic`` joint (no entry in q) when the joint it follows keeps its coordinate;
+  otherwise (that joint locked, dropped, fixed, unknown or itself a mimic) it must be
   locked (``mimic`` on a fixed joint is ignored);
 - fixed joints are merged: the child's mass properties are added to the parent
   (parallel-axis theorem) and the child survives as a named frame on its moving
@@ -252,7 +255,7 @@ class _Joint:
     origin: Pose
     axis: tuple
     limits: dict
-    mimic: str | None
+    mimic: tuple[str, float, float] | None  # (joint, multiplier, offset)
 
 
 class _Reader:
@@ -327,9 +330,11 @@ class _Reader:
         limits = self.limits(where + ".limit", el.find("limit"), jtype) if one_dof else {}
         # <mimic> on a fixed joint couples nothing: ignored, as Pinocchio and urdfdom do (talos' grippers)
         mimic = el.find("mimic") if one_dof else None
+        if mimic is not None:
+            mimic = (mimic.get("joint") or "?", self.number(where + ".mimic.multiplier", mimic.get("multiplier"), 1.0),
+                     self.number(where + ".mimic.offset", mimic.get("offset"), 0.0))
         return _Joint(name, "revolute" if jtype == "continuous" else jtype, ends["parent"], ends["child"],
-                      self.origin(where + ".origin", el.find("origin")), axis, limits,
-                      None if mimic is None else (mimic.get("joint") or "?"))
+                      self.origin(where + ".origin", el.find("origin")), axis, limits, mimic)
 
     def limits(self, where: str, lim: ET.Element | None, jtype: str) -> dict:
         """The numbers of a moving joint's <limit>, without the exporters' placeholders.
@@ -711,11 +716,18 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
                 continue
         order.append(j)
         stack.extend(reversed(children[j.child]))
-    mimics = [j for j in order + [j for j, _ in off_path] if j.mimic is not None and j.name not in locks]
-    if mimics:
-        j = mimics[0]
-        raise error(f"joints[{j.name}]", f"mimics joint '{j.mimic}'; mimic joints are not supported: lock them "
-                    f"(--lock {lock_list(n for m in mimics for n in (m.mimic, m.name))})")
+    kept = {j.name for j in order if moves(j)}
+    for j in order:  # a mimic joint follows a joint that keeps its own coordinate
+        if j.mimic is None or not moves(j):
+            continue
+        target = by_name.get(j.mimic[0])
+        problem = ("an unknown joint" if target is None else "itself" if target is j else
+                   "a fixed joint" if target.type == "fixed" else "a locked joint" if target.name in locks else
+                   "a mimic joint" if target.mimic is not None else
+                   "a joint of a dropped massless branch" if target.name not in kept else None)
+        if problem:
+            raise error(f"joints[{j.name}].mimic", f"mimics '{j.mimic[0]}', {problem}: lock it "
+                        f"(--lock {lock_list([j.name])})")
     if off_path:
         # every joint that would still move mass off the path once the branch tops are locked, so that
         # the suggested command works as given
@@ -755,6 +767,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
                      "origin": {"xyz": list(placed.xyz), "rpy": list(placed.rpy)}, "axis": list(j.axis)}
             if j.limits:
                 entry["limits"] = dict(j.limits)
+            if j.mimic is not None:
+                entry["mimic"] = {"joint": j.mimic[0], "multiplier": j.mimic[1], "offset": j.mimic[2]}
             out_joints.append(entry)
         else:
             body[j.child], pose[j.child] = body[j.parent], placed
@@ -803,6 +817,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         if renamed_joints.setdefault(new, j["name"]) != j["name"]:
             raise error("joints", f"'{j['name']}' and '{renamed_joints[new]}' both become the identifier '{new}'")
         j["name"], j["parent"], j["child"] = new, c_identifier(j["parent"]), c_identifier(j["child"])
+        if "mimic" in j:
+            j["mimic"]["joint"] = c_identifier(j["mimic"]["joint"])
 
     notes = []
     if chain is not None:
