@@ -11,9 +11,22 @@
   fixed to it are the universe, whose inertia no algorithm uses (nothing is appended to it).
 - Every link becomes a BODY frame and every named frame an OP_FRAME, so all of
   ``robot.frame_names`` can be queried by name.
+- A mimic joint (``joint.mimic``) is first added as an ordinary joint of its own type, then, once
+  the model is complete, turned into a ``JointModelMimic`` of its leader by Pinocchio's
+  ``transformJointIntoMimic(model, leader, mimic, multiplier, offset)`` (what its URDF parser does
+  with ``mimic=True``): it keeps its type, body and frames and loses its entries of q and v.
+  Pinocchio needs the leader to come before the mimic joint in the tree's order. A helical mimic
+  joint is refused: Pinocchio 4.1 crashes (segmentation fault) on a mimic
+  ``JointModelHelicalUnaligned``, and a mimic ``JointModelHX`` (helical about x) has the pitch's
+  translation left out of its Jacobian and rnea (they disagree with Pinocchio's own fk and crba). ``aba``,
+  ``computeKineticEnergy`` and ``computePotentialEnergy`` refuse such a model, so
+  :class:`PinRobot` answers those from Pinocchio's ``crba``, ``rnea`` and ``centerOfMass``; its
+  ``crba`` is only right on a fresh Data there (:meth:`PinRobot.crba`), and its
+  ``computeCoriolisMatrix`` disagrees with its ``rnea`` (:meth:`PinRobot.coriolis_matrix` refuses).
 - Parameter expressions are evaluated at the defaults (or ``params``) by derive.description.expr.
 
-Joints are added in ``robot.joints`` order, so Pinocchio's q and v are ours entry for entry.
+Joints are added in ``robot.joints`` order, so Pinocchio's q and v are ours entry for entry (mimic
+joints have none in either).
 """
 
 from __future__ import annotations
@@ -68,6 +81,9 @@ def build_model(robot: Robot, params: Mapping[str, float] | None = None) -> pin.
         if joint.type in ("revolute", "prismatic"):
             chain = [_axis_model(joint.type, axis)]
         elif joint.type == "helical":
+            if joint.mimic is not None:
+                raise ValueError(f"pin_model: mimic joint '{joint.name}' is helical: Pinocchio 4.1 gets helical mimic "
+                                 "joints wrong (a segmentation fault when unaligned, else the pitch left out of J and rnea)")
             chain = [pin.JointModelHelicalUnaligned(axis, num(joint.pitch))]
         elif joint.type == "spherical":
             chain = [pin.JointModelSphericalZYX()]
@@ -97,6 +113,17 @@ def build_model(robot: Robot, params: Mapping[str, float] | None = None) -> pin.
     for frame in robot.frames:
         jid, at = placed[frame.link]
         model.addFrame(pin.Frame(frame.name, jid, at * se3(frame.origin), pin.FrameType.OP_FRAME), False)
+
+    for joint in robot.joints:
+        if joint.mimic is None:
+            continue
+        leader, follower = model.getJointId(joint.mimic.joint), model.getJointId(joint.name)
+        if not leader < follower:
+            raise ValueError(f"pin_model: mimic joint '{joint.name}' comes before its leader '{joint.mimic.joint}' "
+                             "(Pinocchio needs the leader first)")
+        name, gravity = model.name, model.gravity
+        model = pin.transformJointIntoMimic(model, leader, follower, float(joint.mimic.multiplier), float(joint.mimic.offset))
+        model.name, model.gravity = name, gravity
     return model
 
 
@@ -113,8 +140,13 @@ class PinRobot:
         names = ([FREE_FLYER] if robot.floating else []) + [j.name for j in robot.moving_joints]
         ours = [n for n in self.model.names[1:] if "__" not in n]
         assert ours == names, (ours, names)
+        self.mimic = any(j.mimic is not None for j in robot.joints)
+        mimics = {j.name for j in robot.joints if j.mimic is not None}
         nq = nv = 0
-        for jmodel in self.model.joints[1:]:
+        for name, jmodel in zip(self.model.names[1:], self.model.joints[1:]):
+            if name in mimics:  # the leader's indexes, no entries of its own
+                assert jmodel.shortname() == "JointModelMimic" and (jmodel.nq, jmodel.nv) == (0, 0), (name, jmodel)
+                continue
             assert (jmodel.idx_q, jmodel.idx_v) == (nq, nv)
             nq, nv = nq + jmodel.nq, nv + jmodel.nv
         self.frame_ids = {name: self.model.getFrameId(name) for name in robot.frame_names}
@@ -140,7 +172,11 @@ class PinRobot:
         return pin.computeFrameJacobian(self.model, self.data, q, self.frame_id(name), pin.LOCAL_WORLD_ALIGNED).copy()
 
     def crba(self, q) -> np.ndarray:
-        m = np.array(pin.crba(self.model, self.data, q))
+        """Pinocchio's M (its upper triangle, mirrored). With mimic joints on a fresh Data: Pinocchio 4.1's
+        crba then adds onto entries a previous crba left in the Data (the coupling of a joint below a
+        mimic joint with its support's coordinates), so only a first call is right."""
+        data = self.model.createData() if self.mimic else self.data
+        m = np.array(pin.crba(self.model, data, q))
         return np.triu(m) + np.triu(m, 1).T
 
     def gravity(self, q) -> np.ndarray:
@@ -168,6 +204,9 @@ class PinRobot:
         return np.array(pin.rnea(self.model, self.data, q, v, a))
 
     def aba(self, q, v, tau, wrenches=None) -> np.ndarray:
+        """Pinocchio's ABA; with mimic joints (which it refuses) M^-1 (tau - rnea(q, v, 0, fext))."""
+        if self.mimic:
+            return np.linalg.solve(self.crba(q), tau - self.rnea(q, v, np.zeros(self.model.nv), wrenches))
         if wrenches:
             return np.array(pin.aba(self.model, self.data, q, v, tau, self.fext(q, wrenches)))
         return np.array(pin.aba(self.model, self.data, q, v, tau))
@@ -190,10 +229,21 @@ class PinRobot:
         return np.array(pin.computeCentroidalMap(self.model, self.data, q))
 
     def coriolis_matrix(self, q, v) -> np.ndarray:
+        """Pinocchio's computeCoriolisMatrix; not for mimic joints: Pinocchio 4.1's C v then differs from
+        its own rnea(q, v, 0) - g."""
+        if self.mimic:
+            raise NotImplementedError("Pinocchio 4.1's Coriolis matrix disagrees with its rnea on mimic joints")
         return np.array(pin.computeCoriolisMatrix(self.model, self.data, q, v))
 
     def kinetic_energy(self, q, v) -> float:
+        """Pinocchio's; with mimic joints (which it refuses) 1/2 v^T M v."""
+        if self.mimic:
+            return float(0.5 * v @ self.crba(q) @ v)
         return float(pin.computeKineticEnergy(self.model, self.data, q, v))
 
     def potential_energy(self, q) -> float:
+        """Pinocchio's; with mimic joints (which it refuses) -m gravity . com."""
+        if self.mimic:
+            mass = sum(inertia.mass for inertia in self.model.inertias[1:])
+            return float(-mass * (self.model.gravity.linear @ self.com(q)))
         return float(pin.computePotentialEnergy(self.model, self.data, q))

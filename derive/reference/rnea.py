@@ -16,6 +16,16 @@ Conventions
   Links hanging off a body through fixed joints are merged rigidly into it (their
   frames keep their own poses). With a fixed base the root link and the links
   fixed to it are the world and carry no dynamics.
+- A mimic joint (``joint.mimic``: follows joint J, q_m = a q_J + b) is a body like any
+  other, but its slices ``qdofs[i]`` and ``dofs[i]`` are J's, with ``scale[i]`` = a and
+  ``offset[i]`` = b (1 and 0 for every other body): the body moves by
+  q_i = a q[qdofs[i]] + b, qd_i = a qd[dofs[i]], qdd_i = a qdd[dofs[i]] (:meth:`NumericRobot.body_q`,
+  :meth:`NumericRobot.body_rate`). Its generalized subspace is a S_i, so wherever a body's
+  entries are written (tau, Jacobian columns, M, the centroidal map) they are ADDED, times a,
+  into J's: tau_J += a S_i^T f_i, M = G^T M_bodies G (an explicit constraint, Featherstone's
+  qd_bodies = G v with a constant G). With a mimic joint, :meth:`NumericRobot.aba` solves
+  M qdd = tau - bias instead of running the articulated-body recursion, which has no
+  place for a coordinate shared by two bodies.
 - A floating base (``robot.floating``) is body 0, the root link (and the links fixed
   to it), moved by a free-flyer joint with Pinocchio's ``JointModelFreeFlyer``
   conventions: q[0:3] is the root origin in the world, q[3:7] the quaternion
@@ -222,7 +232,8 @@ class NumericRobot:
     """A :class:`~derive.model.Robot` evaluated at fixed parameters, with numpy kinematics and dynamics.
 
     q has ``nq`` entries and v (= qd), qdd and tau ``nv`` (nq = nv + 1 with a floating base;
-    see the module docstring for the free-flyer conventions).
+    see the module docstring for the free-flyer conventions). A mimic joint has no entry: it
+    follows its leader's (module docstring), and every method takes and returns the reduced q, v.
 
     Args:
         robot: the parsed model.
@@ -256,8 +267,10 @@ class NumericRobot:
         self.parent: list[int] = []  # lambda(i)
         self.tree_pose: list[np.ndarray] = []  # joint frame i (before motion) in body lambda(i)
         self.joint_model: list[JointModel] = []
-        self.dofs: list[slice] = []  # body i's entries of v, qdd and tau
-        self.qdofs: list[slice] = []  # body i's entries of q
+        self.dofs: list[slice] = []  # body i's entries of v, qdd and tau (a mimic joint's: its leader's)
+        self.qdofs: list[slice] = []  # body i's entries of q (a mimic joint's: its leader's)
+        self.scale: list[float] = []  # q_i = scale * q[qdofs] + offset: the mimic multiplier, else 1
+        self.offset: list[float] = []  # the mimic offset, else 0
         placed = {robot.root: (-1, np.eye(4))}
         if robot.floating:  # body 0: the root link, moved by the free flyer
             self.parent.append(-1)
@@ -265,8 +278,19 @@ class NumericRobot:
             self.joint_model.append(JointModel("freeflyer", np.zeros(3)))
             self.dofs.append(slice(0, 6))
             self.qdofs.append(slice(0, 7))
+            self.scale.append(1.0)
+            self.offset.append(0.0)
             placed[robot.root] = (0, np.eye(4))
         shift = self.nq - self.nv
+        # Every joint with coordinates owns the next entries of v (and of q, shifted past the quaternion);
+        # a mimic joint owns none, its leader may come later in the tree's order.
+        owned: dict[str, slice] = {}
+        start = 6 if robot.floating else 0
+        for joint in robot.joints:
+            if joint.coordinates:
+                owned[joint.name] = slice(start, start + joint.dof)
+                start += joint.dof
+        assert start == self.nv, (start, self.nv)
         for joint in robot.joints:
             body, at = placed[joint.parent]
             joint_pose = at @ pose(joint.origin)
@@ -279,10 +303,16 @@ class NumericRobot:
                 joint.type, np.array(joint.axis, dtype=float),
                 None if joint.axis2 is None else np.array(joint.axis2, dtype=float),
                 0.0 if joint.pitch is None else num(joint.pitch)))
-            start = self.dofs[-1].stop if self.dofs else 0
-            self.dofs.append(slice(start, start + joint.dof))
-            self.qdofs.append(slice(start + shift, start + shift + joint.dof))
+            dof = owned[joint.name if joint.mimic is None else joint.mimic.joint]
+            self.dofs.append(dof)
+            self.qdofs.append(slice(dof.start + shift, dof.stop + shift))
+            self.scale.append(1.0 if joint.mimic is None else float(joint.mimic.multiplier))
+            self.offset.append(0.0 if joint.mimic is None else float(joint.mimic.offset))
             placed[joint.child] = (len(self.parent) - 1, np.eye(4))
+        self.mimic = [joint.mimic is not None for joint in robot.joints if joint.dof > 0]  # per body
+        if robot.floating:
+            self.mimic.insert(0, False)
+        self.has_mimic = any(self.mimic)
         n = self.nb = len(self.parent)
         self.support = []  # bodies from the root down to i, inclusive
         for i in range(n):
@@ -374,23 +404,40 @@ class NumericRobot:
 
     # ------------------------------------------------------------------ kinematics
 
+    def body_q(self, i: int, q) -> np.ndarray:
+        """Body i's joint coordinates q_i: q[qdofs[i]], or a q[qdofs[i]] + b for a mimic joint."""
+        if self.mimic[i]:
+            return self.scale[i] * q[self.qdofs[i]] + self.offset[i]
+        return q[self.qdofs[i]]
+
+    def body_rate(self, i: int, v) -> np.ndarray:
+        """Body i's joint rates (of qd, qdd): v[dofs[i]], or a v[dofs[i]] for a mimic joint."""
+        if self.mimic[i]:
+            return self.scale[i] * v[self.dofs[i]]
+        return v[self.dofs[i]]
+
     def joint_pose(self, i: int, qi) -> np.ndarray:
-        """Pose of body i in body lambda(i): T_tree_i * T_J(q_i), q_i = q[qdofs[i]] (see :class:`JointModel`)."""
+        """Pose of body i in body lambda(i): T_tree_i * T_J(q_i), q_i = body_q(i, q) (see :class:`JointModel`)."""
         return self.tree_pose[i] @ self.joint_model[i].transform(qi)
 
     def subspace(self, i: int, q) -> np.ndarray:
-        """S_i(q_i), 6 x DOF_i, body i's frame."""
-        return self.joint_model[i].subspace(q[self.qdofs[i]])
+        """S_i(q_i), 6 x DOF_i, body i's frame: the body's velocity per unit of its OWN joint rate."""
+        return self.joint_model[i].subspace(self.body_q(i, q))
+
+    def generalized_subspace(self, i: int, q) -> np.ndarray:
+        """d v_i / d v[dofs[i]] (6 x DOF_i, body i's frame): S_i, or a S_i for a mimic joint."""
+        s = self.subspace(i, q)
+        return self.scale[i] * s if self.mimic[i] else s
 
     def body_transforms(self, q) -> list[np.ndarray]:
         """X_i = i_X_lambda(i)(q_i), the motion transform from the parent body to body i."""
-        return [motion_transform(self.joint_pose(i, q[self.qdofs[i]])) for i in range(self.nb)]
+        return [motion_transform(self.joint_pose(i, self.body_q(i, q))) for i in range(self.nb)]
 
     def body_poses(self, q) -> list[np.ndarray]:
         """World pose of every body: T_i = T_lambda(i) * T_tree_i * T_J(q_i)."""
         poses: list[np.ndarray] = []
         for i in range(self.nb):
-            local = self.joint_pose(i, q[self.qdofs[i]])
+            local = self.joint_pose(i, self.body_q(i, q))
             poses.append(local if self.parent[i] < 0 else poses[self.parent[i]] @ local)
         return poses
 
@@ -409,11 +456,11 @@ class NumericRobot:
         jac = np.zeros((6, self.nv), dtype=np.result_type(q, p, float))
         if body < 0:
             return jac
-        for j in self.support[body]:
-            rot, s = poses[j][:3, :3], self.subspace(j, q)
+        for j in self.support[body]:  # a mimic joint's column adds to its leader's
+            rot, s = poses[j][:3, :3], self.generalized_subspace(j, q)
             w = rot @ s[:3]
-            jac[3:, self.dofs[j]] = w
-            jac[:3, self.dofs[j]] = rot @ s[3:] + np.cross(w.T, p - poses[j][:3, 3]).T
+            jac[3:, self.dofs[j]] += w
+            jac[:3, self.dofs[j]] += rot @ s[3:] + np.cross(w.T, p - poses[j][:3, 3]).T
         return jac
 
     def jacobian(self, q, name: str) -> np.ndarray:
@@ -424,7 +471,7 @@ class NumericRobot:
         S_j = [s_w; s_v] turned to world axes and moved to p:
         ``[R_j s_v + (R_j s_w) x (p - o_j); R_j s_w]`` (revolute: ``[a x (p - o_j); a]``,
         prismatic: ``[a; 0]``, free flyer: ``[[R, -R (p - o)^]; [0, R]]``, as v is in the root frame);
-        other columns are zero.
+        other columns are zero. A mimic joint's column, times its multiplier, adds to its leader's.
         """
         q = self._q(q)
         body, at = self._frame(name)
@@ -440,11 +487,12 @@ class NumericRobot:
         return a0.astype(dtype)
 
     def _velocities(self, q, qd, xs) -> tuple[list, list, list]:
-        """Body velocities v_i = X_i v_lambda + v_J, joint velocities v_J = S_i qd_i and the S_i."""
+        """Body velocities v_i = X_i v_lambda + v_J, joint velocities v_J = S_i qd_i and the S_i
+        (qd_i = body_rate(i, qd); S_i per unit of the body's own rate)."""
         v, vj, ss = [], [], []
         for i in range(self.nb):
             ss.append(self.subspace(i, q))
-            vj.append(ss[i] @ qd[self.dofs[i]])
+            vj.append(ss[i] @ self.body_rate(i, qd))
             v.append(vj[i] if self.parent[i] < 0 else xs[i] @ v[self.parent[i]] + vj[i])
         return v, vj, ss
 
@@ -452,9 +500,9 @@ class NumericRobot:
         """Body accelerations a_i = X_i a_lambda + S_i qdd_i + c_J + v_i x S_i qd_i (a_-1 = a0)."""
         a = []
         for i in range(self.nb):
-            lam, dof, qdof = self.parent[i], self.dofs[i], self.qdofs[i]
-            c_j = self.joint_model[i].bias(q[qdof], qd[dof])
-            a.append(xs[i] @ (a0 if lam < 0 else a[lam]) + ss[i] @ qdd[dof] + c_j + crm(v[i]) @ vj[i])
+            lam = self.parent[i]
+            c_j = self.joint_model[i].bias(self.body_q(i, q), self.body_rate(i, qd))
+            a.append(xs[i] @ (a0 if lam < 0 else a[lam]) + ss[i] @ self.body_rate(i, qdd) + c_j + crm(v[i]) @ vj[i])
         return a
 
     def external_forces(self, q, wrenches: Mapping[str, np.ndarray] | None, poses=None) -> list[np.ndarray]:
@@ -489,7 +537,8 @@ class NumericRobot:
 
         Forward: v_i = X_i v_lambda + S_i qd_i, a_i = X_i a_lambda + S_i qdd_i + c_J + v_i x S_i qd_i,
         with v_0 = 0 and a_0 = -[0; gravity]. Backward: f_i = I_i a_i + v_i x* I_i v_i - f^ext_i,
-        tau_i = S_i^T f_i, f_lambda += X_i^T f_i.
+        tau_i = S_i^T f_i, f_lambda += X_i^T f_i. A mimic body (qd_i = a qd_J, qdd_i = a qdd_J)
+        adds a S_i^T f_i to tau_J (tau = G^T tau_bodies).
 
         ``wrenches`` (frame name -> [force; torque] at the frame origin, world axes; see
         :meth:`external_forces`) act on the robot; J_f is the LOCAL_WORLD_ALIGNED :meth:`jacobian`.
@@ -507,7 +556,7 @@ class NumericRobot:
                 f[i] = f[i] - fext[i]
         tau = np.zeros(self.nv, np.result_type(dtype, *(fext or [])))
         for i in reversed(range(self.nb)):
-            tau[self.dofs[i]] = ss[i].T @ f[i]
+            tau[self.dofs[i]] += (self.scale[i] * ss[i] if self.mimic[i] else ss[i]).T @ f[i]
             if self.parent[i] >= 0:
                 f[self.parent[i]] = f[self.parent[i]] + xs[i].T @ f[i]
         return tau
@@ -523,11 +572,16 @@ class NumericRobot:
         I^c_i = I_i + sum over children j of X_j^T I^c_j X_j; M_ii = S_i^T I^c_i S_i and,
         walking F = I^c_i S_i up the support (F <- X_j^T F), M_ij = M_ji^T = F^T S_j (blocks
         of DOF_i x DOF_j).
+
+        With mimic joints S_i is the generalized subspace (a S_i for a mimic body) and the blocks
+        are ADDED into the rows and columns of the bodies' coordinates: that is M = G^T M_bodies G,
+        M_bodies being the CRBA of the tree with every body its own coordinate (a body pair
+        i != j sharing one coordinate adds both M_ij and M_ji to that coordinate's diagonal).
         """
         q = self._q(q)
         dtype = np.result_type(q, float)
         xs = self.body_transforms(q)
-        ss = [self.subspace(i, q) for i in range(self.nb)]
+        ss = [self.generalized_subspace(i, q) for i in range(self.nb)]
         ic = [inertia.astype(dtype) for inertia in self.inertia]
         for i in reversed(range(self.nb)):
             if self.parent[i] >= 0:
@@ -536,13 +590,14 @@ class NumericRobot:
         for i in range(self.nb):
             di = self.dofs[i]
             force = ic[i] @ ss[i]
-            m[di, di] = ss[i].T @ force
+            m[di, di] += ss[i].T @ force
             j = i
             while self.parent[j] >= 0:
                 force = xs[j].T @ force
                 j = self.parent[j]
-                m[di, self.dofs[j]] = force.T @ ss[j]
-                m[self.dofs[j], di] = m[di, self.dofs[j]].T
+                block = force.T @ ss[j]
+                m[di, self.dofs[j]] += block
+                m[self.dofs[j], di] += block.T
         return m
 
     mass_matrix = crba
@@ -557,7 +612,14 @@ class NumericRobot:
         p^A_lambda += X_i^T (p^A_i + I^a_i c_i + U_i D_i^-1 u_i).
         Pass 3: a'_i = X_i a_lambda + c_i, qdd_i = D_i^-1 (u_i - U_i^T a'_i), a_i = a'_i + S_i qdd_i,
         a_0 = -[0; gravity].
+
+        With mimic joints (:attr:`has_mimic`) the recursion does not apply: a coordinate shared by
+        two bodies, possibly on different branches, couples subtrees that pass 2 treats as
+        independent. Then qdd = M^-1 (tau - rnea(q, qd, 0, wrenches)), with :meth:`crba` and
+        :meth:`rnea` (both G^T ... of the bodies), solved by LU (np.linalg.solve).
         """
+        if self.has_mimic:
+            return self._forward_dynamics_by_solve(q, qd, tau, wrenches)
         q, qd, tau = self._q(q), self._v(qd, "qd"), self._v(tau, "tau")
         xs = self.body_transforms(q)
         n = self.nb
@@ -593,6 +655,13 @@ class NumericRobot:
             qdd[self.dofs[i]] = np.linalg.solve(d[i], u[i] - u_mat[i].T @ a_prime)
             a[i] = a_prime + ss[i] @ qdd[self.dofs[i]]
         return qdd
+
+    def _forward_dynamics_by_solve(self, q, qd, tau, wrenches=None) -> np.ndarray:
+        """qdd = M(q)^-1 (tau - rnea(q, qd, 0, wrenches)): the bias (Coriolis, gravity, wrenches) by
+        :meth:`rnea` at qdd = 0, M by :meth:`crba` (what :meth:`aba` does with mimic joints)."""
+        q, qd, tau = self._q(q), self._v(qd, "qd"), self._v(tau, "tau")
+        bias = self.rnea(q, qd, np.zeros(self.nv), wrenches)
+        return np.linalg.solve(self.crba(q), tau - bias)
 
     # ------------------------------------------------------------------ frame accelerations
 
@@ -640,8 +709,8 @@ class NumericRobot:
 
         With world-frame body inertias I0_i = X_i^T I_i X_i (X_i = i_X_0), their composites
         I0c_j over the subtree of j and the world-frame subspaces S0_j = 0_X_j S_j, the momentum
-        about the world origin is sum_j I0c_j S0_j v_j; it is then moved to the COM G:
-        n_G = n_0 - G x p.
+        about the world origin is sum_j I0c_j S0_j v_j (a mimic body: a S0_j in its leader's
+        columns); it is then moved to the COM G: n_G = n_0 - G x p.
         """
         q = self._q(q)
         poses = self.body_poses(q)
@@ -654,8 +723,8 @@ class NumericRobot:
             if self.parent[i] >= 0:
                 ic[self.parent[i]] = ic[self.parent[i]] + ic[i]
         momentum = np.zeros((6, self.nv), dtype)
-        for j in range(self.nb):
-            momentum[:, self.dofs[j]] = ic[j] @ to_world(poses[j], self.subspace(j, q))
+        for j in range(self.nb):  # a mimic joint's column adds to its leader's
+            momentum[:, self.dofs[j]] += ic[j] @ to_world(poses[j], self.generalized_subspace(j, q))
         g = self.com(q)
         angular = momentum[:3] - np.cross(g, momentum[3:].T).T
         return np.concatenate([momentum[3:], angular])
@@ -696,32 +765,36 @@ class NumericRobot:
         """C = sum_i J_i^T (I0_i Jdot_i + B_i J_i) in world-frame spatial terms (Echeandia and Wensing, 2021;
         what Pinocchio's computeCoriolisMatrix computes), for a fixed or floating base.
 
-        J_i (6, nv): body i's world-frame Jacobian, columns S0_j = 0_X_j S_j of its support;
-        Jdot_i: columns v0_j x S0_j + 0_X_j Sdot_j; I0_i: world-frame inertia; v0_i = J_i qd;
+        J_i (6, nv): body i's world-frame Jacobian, columns S0_j = 0_X_j S_j of its support (a mimic
+        body's a S0_j added to its leader's column); Jdot_i: columns v0_j x S0_j + 0_X_j Sdot_j; I0_i: world-frame inertia; v0_i = J_i qd;
         B_i = 1/2 (v0_i x* I0_i - I0_i v0_i x + (I0_i v0_i) x-bar*). Then C qd = rnea(q, qd, 0) - g
         and Mdot - 2C is skew.
         """
         q, qd = self._q(q), self._v(qd, "qd")
         dtype = np.result_type(q, qd, float)
         poses = self.body_poses(q)
-        cols = np.zeros((6, self.nv), dtype)  # S0_j, all bodies
-        dcols = np.zeros((6, self.nv), dtype)  # d/dt S0_j
+        jacs: list[np.ndarray] = []  # J_i: the parent's plus S0_i in body i's columns
+        jdots: list[np.ndarray] = []  # Jdot_i likewise
         vel: list[np.ndarray] = []
         for j in range(self.nb):
-            s = to_world(poses[j], self.subspace(j, q))
-            v0 = s @ qd[self.dofs[j]] + (vel[self.parent[j]] if self.parent[j] >= 0 else 0)
+            lam = self.parent[j]
+            s = to_world(poses[j], self.generalized_subspace(j, q))
+            v0 = s @ qd[self.dofs[j]] + (vel[lam] if lam >= 0 else 0)
             vel.append(v0)
-            cols[:, self.dofs[j]] = s
-            sdot = to_world(poses[j], self.joint_model[j].subspace_rate(q[self.qdofs[j]], qd[self.dofs[j]]))
-            dcols[:, self.dofs[j]] = crm(v0) @ s + sdot
+            sdot = to_world(poses[j], self.joint_model[j].subspace_rate(self.body_q(j, q), self.body_rate(j, qd)))
+            if self.mimic[j]:
+                sdot = self.scale[j] * sdot
+            jac = jacs[lam].copy() if lam >= 0 else np.zeros((6, self.nv), dtype)
+            jdot = jdots[lam].copy() if lam >= 0 else np.zeros((6, self.nv), dtype)
+            jac[:, self.dofs[j]] += s  # a mimic joint's column adds to its leader's
+            jdot[:, self.dofs[j]] += crm(v0) @ s + sdot
+            jacs.append(jac)
+            jdots.append(jdot)
         c = np.zeros((self.nv, self.nv), dtype)
         for i in range(self.nb):
             x = motion_transform(poses[i])
             inertia = x.T @ self.inertia[i] @ x
-            mask = np.zeros(self.nv, bool)
-            for j in self.support[i]:
-                mask[self.dofs[j]] = True
-            jac, jdot = cols * mask, dcols * mask
+            jac, jdot = jacs[i], jdots[i]
             v0 = vel[i]
             b = 0.5 * (crf(v0) @ inertia - inertia @ crm(v0) + crf_bar(inertia @ v0))
             c = c + jac.T @ (inertia @ jdot + b @ jac)
