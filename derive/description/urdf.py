@@ -717,7 +717,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         order.append(j)
         stack.extend(reversed(children[j.child]))
     kept = {j.name for j in order if moves(j)}
-    for j in order:  # a mimic joint follows a joint that keeps its own coordinate
+    stuck: list[tuple[_Joint, str]] = []  # a mimic joint follows a joint that keeps its own coordinate
+    for j in order:
         if j.mimic is None or not moves(j):
             continue
         target = by_name.get(j.mimic[0])
@@ -726,8 +727,12 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
                    "a mimic joint" if target.mimic is not None else
                    "a joint of a dropped massless branch" if target.name not in kept else None)
         if problem:
-            raise error(f"joints[{j.name}].mimic", f"mimics '{j.mimic[0]}', {problem}: lock it "
-                        f"(--lock {lock_list([j.name])})")
+            stuck.append((j, problem))
+    if stuck:
+        j, problem = stuck[0]
+        others = f" (and {len(stuck) - 1} more mimic joint{'s' * (len(stuck) > 2)} alike)" if len(stuck) > 1 else ""
+        raise error(f"joints[{j.name}].mimic", f"mimics '{j.mimic[0]}', {problem}{others}: lock "
+                    f"{'them' if others else 'it'} (--lock {lock_list(m.name for m, _ in stuck)})")
     if off_path:
         # every joint that would still move mass off the path once the branch tops are locked, so that
         # the suggested command works as given
