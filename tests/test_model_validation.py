@@ -79,6 +79,46 @@ CASES = {
     "limits_reversed": (robot_yaml(joints="[{name: j1, type: revolute, parent: base, child: l1, "
                                           "limits: {lower: 1.0, upper: -1.0}}]"),
                         ["robot 'arm'", "limits", "above upper"]),
+    # whole robots: base, wrenches, mimic joints
+    "unknown_base": (robot_yaml() + "    base: wobbly\n", ["robot 'arm'", "base", "expected one of fixed, floating"]),
+    "wrenches_not_a_list": (robot_yaml() + "    wrenches: tcp\n", ["robot 'arm'", "wrenches", "a list of frame names"]),
+    "wrench_frame_unknown": (robot_yaml() + "    wrenches: [l1, foot]\n",
+                             ["robot 'arm'", "wrenches[1]", "unknown frame 'foot'"]),
+    "wrench_frame_twice": (robot_yaml() + "    wrenches: [l1, l1]\n", ["robot 'arm'", "wrenches", "listed twice"]),
+    "mimic_of_unknown_joint": (robot_yaml(
+        links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}]",
+        joints="[{name: j1, type: revolute, parent: base, child: l1}, "
+               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j7}}]"),
+        ["robot 'arm'", "joints (j2).mimic.joint", "unknown joint 'j7'"]),
+    "mimic_of_itself": (robot_yaml(
+        links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}]",
+        joints="[{name: j1, type: revolute, parent: base, child: l1}, "
+               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j2}}]"),
+        ["robot 'arm'", "joints (j2).mimic.joint", "not itself"]),
+    "mimic_of_a_mimic": (robot_yaml(
+        links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}, {{name: l3, mass: 1.0}}]",
+        joints="[{name: j1, type: revolute, parent: base, child: l1}, "
+               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j1}}, "
+               "{name: j3, type: revolute, parent: l2, child: l3, mimic: {joint: j2}}]"),
+        ["robot 'arm'", "joints (j3).mimic.joint", "which mimics another joint"]),
+    "mimic_on_a_spherical_joint": (robot_yaml(
+        links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}]",
+        joints="[{name: j1, type: revolute, parent: base, child: l1}, "
+               "{name: j2, type: spherical, parent: l1, child: l2, mimic: {joint: j1}}]"),
+        ["robot 'arm'", "joints[1].mimic", "only a 1-DOF joint can mimic"]),
+    "mimic_multiplier_not_a_number": (robot_yaml(
+        links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}]",
+        joints="[{name: j1, type: revolute, parent: base, child: l1}, "
+               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j1, multiplier: lots}}]"),
+        ["robot 'arm'", "joints[1].mimic.multiplier"]),
+    "mimic_unknown_field": (robot_yaml(
+        links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}]",
+        joints="[{name: j1, type: revolute, parent: base, child: l1}, "
+               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j1, gain: 2}}]"),
+        ["robot 'arm'", "joints[1].mimic.gain", "unknown field"]),
+    "floating_base_coordinate_clash": (robot_yaml(joints="[{name: base_qw, type: revolute, parent: base, child: l1}]")
+                                       + "    base: floating\n",
+                                       ["robot 'arm'", "joints (base_qw)", "coordinate of the floating base"]),
 }
 
 

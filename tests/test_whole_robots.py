@@ -21,12 +21,15 @@ import json
 import subprocess
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 
 from derive.codegen.generate import generate
-from derive.description.model import load_models, parse_models
-from derive.description.urdf import example_robot_data_dir
+from derive.codegen.program import build_program
+from derive.symbolic.model import SXModel
+from derive.description.model import load_models, parse_models, parse_robot
+from derive.description.urdf import example_robot_data_dir, import_urdf_named
 from util import assert_close
 
 pin = pytest.importorskip("pinocchio")
@@ -275,8 +278,6 @@ def test_fixed_base_com_and_accelerations_against_pinocchio(tmp_path):
 
 
 def imported(rel: str, floating: bool = True):
-    from derive.description.urdf import import_urdf_named
-    from derive.description.model import parse_robot
     name, entry = import_urdf_named("example-robot-data:" + rel, floating=floating)
     return parse_robot(name, entry)
 
@@ -308,9 +309,6 @@ def test_talos_reduced_floating_against_pinocchio():
     """talos_reduced (32 joints) with a floating base: M, ID, FD, the centre of mass and its Jacobian of the
     derived model (evaluated through CasADi, without generating its 146 functions) against Pinocchio's
     free-flyer model, and the ODE with rk4_step's renormalisation keeps the quaternion unit over 10 s."""
-    import casadi as ca
-    from derive.symbolic.model import SXModel
-
     rel = "talos_data/robots/talos_reduced.urdf"
     robot = imported(rel)
     m = SXModel(robot)
@@ -343,3 +341,46 @@ def test_talos_reduced_floating_against_pinocchio():
         x[3:7] /= np.linalg.norm(x[3:7])
         worst = max(worst, abs(np.linalg.norm(x[3:7]) - 1))
     assert np.isfinite(x).all() and worst <= 1e-12, worst
+
+
+def legged(legs: int, depth: int = 3):
+    """A floating body with ``legs`` legs of ``depth`` revolute joints each (a synthetic quadruped family)."""
+    links = ["{name: base, mass: 5.0, inertia: [0.1, 0.2, 0.3]}"]
+    joints = []
+    for leg in range(legs):
+        parent = "base"
+        for d in range(depth):
+            links.append(f"{{name: l{leg}_{d}, mass: 1.0, com: [0.1, 0.02, 0.01], inertia: [0.01, 0.02, 0.015]}}")
+            joints.append(f"{{name: j{leg}_{d}, type: revolute, parent: {parent}, child: l{leg}_{d}, "
+                          f"axis: {[[0, 0, 1], [0, 1, 0], [1, 0, 0]][d % 3]}, "
+                          f"origin: {{xyz: [0.3, {0.1 * leg if d == 0 else 0}, 0], rpy: [0.1, 0.2, {0.3 * leg}]}}}}")
+            parent = f"l{leg}_{d}"
+    text = ("robots:\n  legs:\n    base: floating\n    links:\n" + "".join(f"      - {x}\n" for x in links)
+            + "    joints:\n" + "".join(f"      - {x}\n" for x in joints))
+    return parse_models(text)["legs"]
+
+
+def test_inverse_and_forward_dynamics_grow_linearly_on_trees():
+    """Doubling the legs of a floating robot doubles the ops of ID, M and FD (RNEA, CRBA and the LTDL
+    solve along the tree: no fill-in), where LDL^T from the root filled the whole matrix (FD 4x)."""
+    ops = []
+    for legs in (4, 8, 16):
+        m = SXModel(legged(legs))
+        s, ne = m.sym, m.newton_euler
+        ops.append([build_program(ins, [("out", e)]).ops()["total"] for ins, e in (
+            ([("q", s.q), ("qd", s.qd), ("qdd", s.qdd)], ne.inverse_dynamics()),
+            ([("q", s.q)], ne.mass_matrix),
+            ([("q", s.q), ("qd", s.qd), ("tau", s.tau)], m.forward_dynamics()))])
+    for small, large in zip(ops, ops[1:]):
+        for a, b in zip(small, large):
+            assert b <= 2.1 * a, ops
+    m = SXModel(legged(4))
+    rng = np.random.default_rng(0)
+    f = ca.Function("f", [m.sym.q, m.sym.qd, m.sym.tau], [m.forward_dynamics(), m.newton_euler.mass_matrix,
+                                                          m.newton_euler.bias])
+    for _ in range(5):
+        q = rng.normal(size=m.sym.nq)
+        q[3:7] /= np.linalg.norm(q[3:7])
+        qd, tau = rng.normal(size=(2, m.sym.nv))
+        qdd, M, bias = [np.asarray(x) for x in f(q, qd, tau)]
+        assert_close(qdd.ravel(), np.linalg.solve(M, tau - bias.ravel()), 1e-12, "LTDL solve")

@@ -218,6 +218,18 @@ class NewtonEuler:
             return s, b.pitch * s
         return (s, zero) if b.kind == "revolute" else (zero, s)
 
+    @cached_property
+    def dof_parents(self) -> tuple[int, ...] | None:
+        """For each entry of v, the entry of its parent motion (-1 at the root), for the LTDL of M along a
+        branched tree or floating base; None for an unbranched fixed-base chain (LDL^T costs the same and
+        keeps its code) and with mimic joints (a coordinate moving two branches couples them in M)."""
+        n, nb = len(self.bodies), self.nb
+        chain = all(b.parent == i - 1 for i, b in enumerate(self.bodies))
+        if self.mimic or (chain and not self.floating):
+            return None
+        base = tuple(range(-1, nb - 1))  # the free flyer's six, as a chain
+        return base + tuple(nb + b.parent if b.parent >= 0 else nb - 1 for b in self.bodies[:n])
+
     def body_rates(self, v: ca.SX) -> list:
         """The joints' rates (or accelerations) ``v`` per body: scale * v[joint] (G v)."""
         if not self.mimic:

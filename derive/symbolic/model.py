@@ -80,7 +80,7 @@ class SXModel:
             r = self.lagrangian
             bias = r.coriolis_matrix @ self.sym.qd + r.gravity_vector
         tau = self.sym.tau if extra_torque is None else self.sym.tau + extra_torque
-        return forward_dynamics(self.mass_matrix(method), bias, tau)
+        return forward_dynamics(self.mass_matrix(method), bias, tau, self.newton_euler.dof_parents)
 
     def ode_rhs(self, method: str = "newton-euler") -> ca.SX:
         """f(x, u) = [dq/dt; qdd] with x = [q; qd], u = tau (dq/dt = qd for a fixed base)."""

@@ -1,8 +1,9 @@
 """Forward dynamics and the first-order reduced ODE (the lecture's section 3.2).
 
 qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) is computed by an unrolled LDL^T
-factorisation and two triangular solves: M is never inverted symbolically (the
-PyDy blow-up), and the same operations appear in the generated C.
+factorisation and two triangular solves (for a branched tree or a floating base, the
+LTDL factorisation along the tree, which creates no fill-in): M is never inverted
+symbolically (the PyDy blow-up), and the same operations appear in the generated C.
 
 x = [q; qd], u = tau:  x' = f(x, u) = [qd; qdd(q, qd, u)], with df/dx and df/du
 from the implicit-function theorem on the inverse dynamics (:func:`ode_jacobians`).
@@ -38,13 +39,59 @@ def ldlt_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     return ca.vertcat(*x)
 
 
-def forward_dynamics(M: ca.SX, bias: ca.SX, tau: ca.SX) -> ca.SX:
-    """qdd = M^-1 (tau - bias), bias = C qd + g, by LDL^T."""
-    return ldlt_solve(M, tau - bias)
+def ltdl_solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
+    """Solve M x = b for the mass matrix of a branched tree by M = L^T D L (Featherstone's LTDL,
+    RBDA section 6.5): unit lower-triangular L with L[k, i] != 0 only where i is an ancestor of k
+    (``parents[k]``: the index of k's parent coordinate, -1 at the root).
+
+    Eliminating from the leaves up creates no fill-in, so the cost follows the tree, O(n d^2)
+    for depth d, where LDL^T from the root fills the whole matrix (a floating base couples every
+    coordinate to the base's six).
+    """
+    n = M.shape[0]
+    H = {(k, i): M[k, i] for k in range(n) for i in _ancestors(k, parents, inclusive=True)}
+    for k in reversed(range(n)):
+        i = parents[k]
+        while i != -1:
+            a = H[k, i] / H[k, k]
+            j = i
+            while j != -1:
+                H[i, j] = H[i, j] - a * H[k, j]
+                j = parents[j]
+            H[k, i] = a
+            i = parents[i]
+    y = [b[k] for k in range(n)]
+    for k in reversed(range(n)):  # L^T y = b, leaves first
+        for i in _ancestors(k, parents):
+            y[i] = y[i] - H[k, i] * y[k]
+    x = [y[k] / H[k, k] for k in range(n)]
+    for k in range(n):  # L x = z, root first
+        for i in _ancestors(k, parents):
+            x[k] = x[k] - H[k, i] * x[i]
+    return ca.vertcat(*x)
+
+
+def _ancestors(k: int, parents: tuple[int, ...], inclusive: bool = False) -> list[int]:
+    out = [k] if inclusive else []
+    i = parents[k]
+    while i != -1:
+        out.append(i)
+        i = parents[i]
+    return out
+
+
+def solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...] | None = None) -> ca.SX:
+    """M^-1 b: LTDL along the tree where ``parents`` is given (a branched tree), LDL^T otherwise."""
+    return ldlt_solve(M, b) if parents is None else ltdl_solve(M, b, parents)
+
+
+def forward_dynamics(M: ca.SX, bias: ca.SX, tau: ca.SX, parents: tuple[int, ...] | None = None) -> ca.SX:
+    """qdd = M^-1 (tau - bias), bias = C qd + g, by LDL^T (or LTDL along a branched tree)."""
+    return solve(M, tau - bias, parents)
 
 
 def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_fd: ca.SX,
-                  q_rate: ca.SX | None = None) -> tuple[ca.SX, ca.SX]:
+                  q_rate: ca.SX | None = None, parents: tuple[int, ...] | None = None) -> tuple[ca.SX, ca.SX]:
     """A = df/dx and B = df/du of f = [qd; qdd(q, qd, u)] without differentiating the solve.
 
     From ID(q, qd, qdd(q, qd, u)) = u (implicit function theorem):
@@ -60,8 +107,8 @@ def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_
     dID = ca.substitute(ca.jacobian(tau_id, x), qdd, qdd_fd)
     eye = ca.SX.eye(n)
     top = ca.horzcat(ca.SX.zeros(n, n), eye) if q_rate is None else ca.jacobian(q_rate, x)
-    A = ca.vertcat(top, ca.horzcat(*[-ldlt_solve(M, dID[:, k]) for k in range(nq + n)]))
-    B = ca.vertcat(ca.SX.zeros(nq, n), ca.horzcat(*[ldlt_solve(M, eye[:, k]) for k in range(n)]))
+    A = ca.vertcat(top, ca.horzcat(*[-solve(M, dID[:, k], parents) for k in range(nq + n)]))
+    B = ca.vertcat(ca.SX.zeros(nq, n), ca.horzcat(*[solve(M, eye[:, k], parents) for k in range(n)]))
     return A, B
 
 
