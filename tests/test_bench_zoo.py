@@ -9,7 +9,7 @@ from test_urdf import write
 LINK = ('<link name="{n}"><inertial><origin xyz="0 0 -0.5"/><mass value="1"/>'
         '<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>')
 TWO_LINK = f"""<robot name="two-link">
-  <link name="base"/>{LINK.format(n="a")}{LINK.format(n="b")}
+  {LINK.format(n="base")}{LINK.format(n="a")}{LINK.format(n="b")}
   <joint name="j1" type="revolute"><parent link="base"/><child link="a"/><axis xyz="0 1 0"/>
     <limit lower="-2" upper="2" effort="5" velocity="1"/></joint>
   <joint name="j2" type="revolute"><parent link="a"/><child link="b"/><origin xyz="0 0 -1"/><axis xyz="0 1 0"/>

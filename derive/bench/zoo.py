@@ -24,13 +24,16 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable, Iterable
 
-from derive.codegen.generate import check_mass_matrix, render
+import numpy as np
+
+from derive.codegen.generate import check_constants, check_mass_matrix, render
 from derive.codegen.render import render_robot
 from derive.codegen.spec import FunctionSpec
 from derive.description.model import parse_robot
 from derive.description.robot import ModelError
 from derive.description.urdf import example_robot_data_dir, example_robot_data_version, import_urdf_named
 from derive.errors import DeriveError
+from derive.reference import NumericRobot
 from derive.symbolic.model import SXModel
 
 TITLE = "## example-robot-data: whole trees"
@@ -111,6 +114,7 @@ class Row:
     mimic: int = 0  # joints that follow another (no entry in q)
     ops: dict[str, int] = field(default_factory=dict)
     refused: str | None = None  # the one-line ModelError / DeriveError
+    error: float = float("nan")  # worst relative error of the generated Python's ID, M, FD against the reference
 
 
 def erd_urdfs(loads: Callable[[Path], bool] | None = None) -> tuple[list[str], list[str]]:
@@ -182,7 +186,8 @@ def measure(urdf: str, floating: bool, max_nv: int = WHOLE_SET_MAX_NV) -> Row:
         else:
             model = SXModel(robot)
             check_mass_matrix(model)
-            files = render_robot(robot, id_m_fd_specs(model), "0" * 16)
+            files = render_robot(robot, id_m_fd_specs(model), "0" * 16,
+                                 progress=lambda spec, prog: check_constants(robot, spec, prog))
         row.seconds = time.perf_counter() - start
     except DeriveError as exc:
         row.refused = str(exc)
@@ -191,7 +196,31 @@ def measure(urdf: str, floating: bool, max_nv: int = WHOLE_SET_MAX_NV) -> Row:
     row.functions = len(functions)
     by_name = {f["name"]: f for f in functions}
     row.ops = {qty: by_name[f"{robot.name}_{qty}"]["ops"]["total"] for qty in QUANTITIES}
+    row.error = check_against_reference(robot, files[f"python/{robot.name}.py"])
     return row
+
+
+def check_against_reference(robot, module_text: str, states: int = 3) -> float:
+    """Worst relative error (max |a - b| / max(1, max |b|)) of the generated Python's inverse dynamics,
+    mass matrix and forward dynamics against the numpy reference at ``states`` seeded states (the
+    reference itself is checked against Pinocchio on every URDF by tests/test_urdf_trees.py)."""
+    namespace: dict = {"__name__": f"zoo_{robot.name}"}
+    exec(compile(module_text, f"<generated {robot.name}>", "exec"), namespace)  # the text render just produced
+    ref = NumericRobot(robot)
+    rng = np.random.default_rng(0)
+    worst = 0.0
+
+    def rel(a, b) -> float:
+        b = np.asarray(b, dtype=float)
+        return float(np.abs(np.asarray(a, dtype=float).reshape(b.shape) - b).max() / max(1.0, np.abs(b).max()))
+
+    for _ in range(states):
+        q = ref.random_configuration(rng)
+        qd, qdd, tau = rng.normal(size=(3, robot.nv))
+        worst = max(worst, rel(namespace["inverse_dynamics"](q, qd, qdd), ref.rnea(q, qd, qdd)),
+                    rel(namespace["mass_matrix"](q), ref.crba(q)), rel(namespace["forward_dynamics"](q, qd, tau),
+                                                                        ref.aba(q, qd, tau)))
+    return worst
 
 
 def cases(urdfs: Iterable[str], floating: Iterable[str] = FLOATING) -> list[tuple[str, bool]]:
@@ -200,14 +229,14 @@ def cases(urdfs: Iterable[str], floating: Iterable[str] = FLOATING) -> list[tupl
 
 
 def table(rows: list[Row], max_nv: int = WHOLE_SET_MAX_NV) -> list[str]:
-    out = ["| robot (URDF) | base | nq | nv | frames | derive + generate (s) | ID ops | M ops | FD ops |",
-           "|---|---|---|---|---|---|---|---|---|"]
+    out = ["| robot (URDF) | base | nq | nv | frames | derive + generate (s) | ID ops | M ops | FD ops | "
+           "max rel. error |", "|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r.refused:
             continue
         secs = f"{r.seconds:.1f} ({r.functions} functions)" if r.whole else f"ID/M/FD only: {r.seconds:.1f}"
         out.append(f"| {r.urdf} | {'floating' if r.floating else 'fixed'} | {r.nq} | {r.nv} | {r.frames} | {secs} | "
-                   + " | ".join(str(r.ops[q]) for q in QUANTITIES) + " |")
+                   + " | ".join(str(r.ops[q]) for q in QUANTITIES) + f" | {r.error:.1e} |")
     return out
 
 
@@ -243,7 +272,10 @@ def section(rows: list[Row], not_loaded: list[str], seconds: float, quick: bool,
              "derive + generate: wall time of deriving and rendering the robot's whole function set in C, Python and "
              "JAX (what `derive generate` does; FK, Jacobians, J'qd and accelerations of every frame, M, C, g, ID, FD, "
              "CoM, centroidal map, ODE and its Jacobians, rk4_step, IK, manipulability). ops: arithmetic per call of "
-             "the generated inverse dynamics, mass matrix and forward dynamics after CSE (manifest.json's counts).", "",
+             "the generated inverse dynamics, mass matrix and forward dynamics after CSE (manifest.json's counts). "
+             "max rel. error: of those three generated Python functions against the numpy reference at 3 seeded "
+             "states (max |a - b| / max(1, max |b|)); the reference matches Pinocchio on every one of these URDFs, "
+             "fixed and floating (tests/test_urdf_trees.py).", "",
              *table(rows, max_nv), "",
              f"ID/M/FD only: above nv = {max_nv} the whole set is not rendered, to keep the bench near 10 minutes: "
              "its cost grows fast with nv, mostly through ode_jac_x (df/dx of the ODE). Measured alone on this machine "
@@ -295,7 +327,7 @@ def run_cases(todo: list[tuple[str, bool]], max_nv: int = WHOLE_SET_MAX_NV,
         else:
             what = "whole set" if row.whole else "ID/M/FD only"
             log(f"[zoo] {k}/{len(todo)} {urdf} {base}: nv {row.nv}, {what} {row.seconds:.1f} s, ops ID/M/FD "
-                + "/".join(str(row.ops[q]) for q in QUANTITIES))
+                + "/".join(str(row.ops[q]) for q in QUANTITIES) + f", error {row.error:.1e}")
         rows.append(row)
     return rows
 

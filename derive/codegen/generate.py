@@ -119,7 +119,14 @@ def check_mass_matrix(model: SXModel, samples: int = 3) -> None:
     lo, hi = robot.joint_box()
     rng = np.random.default_rng(0)
     p = np.array([par.default for par in robot.parameters], dtype=float)
-    diag = np.min([np.diag(np.array(f(rng.uniform(lo, hi), p))) for _ in range(samples)], axis=0)
+    Ms = []
+    for _ in range(samples):
+        q = rng.uniform(lo, hi)
+        if robot.floating:  # a unit quaternion
+            q[3:7] = rng.normal(size=4)
+            q[3:7] /= np.linalg.norm(q[3:7])
+        Ms.append(np.array(f(q, p)))
+    diag = np.min([np.diag(M) for M in Ms], axis=0)
     scale = max(float(np.max(np.abs(diag), initial=0.0)), 1e-300)
     for c, d in zip(robot.coordinates, diag):
         if not np.isfinite(d):
@@ -129,6 +136,15 @@ def check_mass_matrix(model: SXModel, samples: int = 3) -> None:
             raise DeriveError(f"robot '{robot.name}': joints ({c.joint}): coordinate '{c.name}' moves no mass or "
                               "inertia, so M(q) is singular and forward dynamics do not exist; give the links it "
                               "moves a mass (links[i].mass) or inertia about its axis")
+    if all(np.isfinite(M).all() for M in Ms):
+        eig = [np.linalg.eigh(M) for M in Ms]
+        if all(w[0] <= 1e-12 * max(w[-1], 1e-300) for w, _ in eig):
+            v = eig[0][1]
+            names = robot.velocity_names
+            moving = [names[int(k)] for k in np.argsort(-np.abs(v[:, 0]))[:3] if abs(v[int(k), 0]) > 1e-6]
+            raise DeriveError(f"robot '{robot.name}': M(q) is singular at every q tried: the coordinates "
+                              f"{', '.join(moving)} move the same way (e.g. a joint about the same axis through the "
+                              "same point as a massless floating base's turn), so forward dynamics do not exist")
 
 
 def check_constants(robot: Robot, spec, prog) -> None:
