@@ -66,6 +66,10 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     if not robot.floating:
         add("coriolis_matrix", None, [q, qd], [("C", ne.coriolis_matrix)],
             f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.")
+    else:  # the Christoffel symbols need qd = dq/dt; the spatial factorisation does not
+        add("coriolis_matrix", None, [q, qd], [("C", wb.coriolis_matrix)],
+            f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) by the spatial factorisation sum_i J_i^T (I_i Jdot_i + "
+            "B_i J_i) (Pinocchio's computeCoriolisMatrix): C qd = the velocity terms of ID, Mdot - 2C skew-symmetric.")
     add("gravity", None, [q], [("g", ne.gravity_vector)],
         "Gravity torques g(q) = dU/dq = rnea(q, 0, 0).")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],

@@ -105,3 +105,43 @@ class WholeBody:
         for k, frame in enumerate(self.robot.wrench_frames):
             tau += self.kin.jacobian(frame).T @ wrenches[6 * k:6 * k + 6]
         return tau
+
+    @cached_property
+    def coriolis_matrix(self) -> ca.SX:
+        """C(q, qd) with Mdot - 2C skew-symmetric and C qd = the velocity terms of inverse dynamics, for any
+        base (Pinocchio's computeCoriolisMatrix; the Christoffel symbols need qd = dq/dt, which a floating
+        base's quaternion breaks). In spatial world coordinates at the world origin ([w; v]), per body:
+
+            C = sum_i J_i^T (I_i Jdot_i + B_i J_i),  B_i = 1/2 (v_i x* I_i - I_i v_i x + (I_i v_i) xbar*),
+
+        with J_i the body's spatial world Jacobian, v_i = J_i qd, I_i its spatial inertia at the origin,
+        Jdot_i = dJ_i/dq dq/dt and (f xbar*) m = m x* f.
+        """
+        nv = self.sym.nv
+        rate = configuration_rate(self.robot, self.sym)
+        C = ca.SX.zeros(nv, nv)
+        for frame, m, h, I_o in self._bodies:
+            pose = self.kin.pose(frame)
+            J = self.kin.jacobian(frame)
+            J0 = ca.vertcat(J[3:6, :], J[0:3, :] + skew(pose.p) @ J[3:6, :])  # [w; v at the world origin]
+            Jdot = ca.reshape(ca.jtimes(ca.vec(J0), self.sym.q, rate), 6, nv)
+            h_w = pose.R @ h
+            I_p = ca.blockcat([[pose.R @ I_o @ pose.R.T, skew(h_w)], [skew(h_w).T, m * ca.SX.eye(3)]])
+            X = ca.blockcat([[ca.SX.eye(3), ca.SX.zeros(3, 3)], [-skew(pose.p), ca.SX.eye(3)]])
+            I0 = X.T @ I_p @ X
+            v = J0 @ self.sym.qd
+            f = I0 @ v
+            B = 0.5 * (crf(v) @ I0 - I0 @ crm(v) + ca.blockcat([[-skew(f[0:3]), -skew(f[3:6])],
+                                                               [-skew(f[3:6]), ca.SX.zeros(3, 3)]]))
+            C += J0.T @ (I0 @ Jdot + B @ J0)
+        return C
+
+
+def crm(v: ca.SX) -> ca.SX:
+    """Motion cross product v x = [[w x, 0], [u x, w x]] for v = [w; u]."""
+    return ca.blockcat([[skew(v[0:3]), ca.SX.zeros(3, 3)], [skew(v[3:6]), skew(v[0:3])]])
+
+
+def crf(v: ca.SX) -> ca.SX:
+    """Force cross product v x* = -(v x)^T."""
+    return -crm(v).T
