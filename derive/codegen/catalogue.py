@@ -107,7 +107,7 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     else:
         ode_doc = f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd]."
     add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))], ode_doc)
-    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(), s.q, s.qd, s.qdd, qdd_fd,
+    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(smooth=True), s.q, s.qd, s.qdd, qdd_fd,
                          model.configuration_rate if robot.floating else None, ne.dof_parents)
     add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))],
         f"df/dx ({nq + n}x{nq + n}, row-major) of the ODE x' = f(x, u): the linearisation's A.")
