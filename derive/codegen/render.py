@@ -57,7 +57,7 @@ def expression_function(spec: FunctionSpec, progress=None) -> Function:
     return Function(spec, prog, {
         "name": spec.name, "short_name": spec.short_name, "quantity": spec.quantity, "frame": spec.frame,
         "doc_lines": [spec.doc], "io_lines": _io_lines(inputs, outputs), "ops": ops, "ops_comment": ops_comment(ops),
-        "calls": [], "manifest": (),
+        "calls": [], "manifest": spec.manifest,
         "inputs": [{"name": n, "shape": list(s)} for n, s in inputs],
         "outputs": [{"name": n, "shape": list(s)} for n, s in outputs]})
 

@@ -681,6 +681,62 @@ class NumericRobot:
         bias = self.rnea(q, qd, np.zeros(self.nv), wrenches, smooth=True)
         return np.linalg.solve(self.crba(q), tau - bias)
 
+    # ------------------------------------------------------------------ the inertial-parameter regressor
+
+    def dynamic_parameters(self) -> np.ndarray:
+        """pi (10 nb + 3 per joint coordinate): per body [m, h_x, h_y, h_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz],
+        read off its spatial inertia [[I_o, h^], [h^T, m 1]] about the body origin (h = m c; Pinocchio's
+        Inertia.toDynamicParameters), then per joint coordinate (a floating base's six have none) its
+        [armature, viscous, coulomb]."""
+        pi = []
+        for inertia in self.inertia:
+            i_o, h_hat = inertia[:3, :3], inertia[:3, 3:]
+            pi += [inertia[5, 5], h_hat[2, 1], h_hat[0, 2], h_hat[1, 0],
+                   i_o[0, 0], i_o[0, 1], i_o[1, 1], i_o[0, 2], i_o[1, 2], i_o[2, 2]]
+        first = 6 if self.floating else 0
+        for k in range(first, self.nv):
+            pi += [self.armature[k], self.viscous[k], self.coulomb[k]]
+        return np.array(pi, dtype=float)
+
+    @staticmethod
+    def unit_inertia(k: int) -> np.ndarray:
+        """The spatial inertia of the parameter vector e_k (k < 10): I(pi) = sum_k pi_k unit_inertia(k)."""
+        e = np.zeros(10)
+        e[k] = 1.0
+        h_hat = skew(e[1:4])
+        i_o = np.array([[e[4], e[5], e[7]], [e[5], e[6], e[8]], [e[7], e[8], e[9]]])
+        return np.block([[i_o, h_hat], [h_hat.T, e[0] * np.eye(3)]])
+
+    def regressor(self, q, qd, qdd) -> np.ndarray:
+        """Y (nv, len(pi)) with :meth:`rnea` (Coulomb as sign(qd)) = Y @ :meth:`dynamic_parameters`.
+
+        Featherstone's linear form: body i's force I_i a_i + v_i x* I_i v_i is A_i pi_i, the 6 x 10 A_i
+        having the column I(e_k) a_i + v_i x* I(e_k) v_i per parameter; A_i is then carried to the root like
+        f_i in :meth:`rnea` (A <- X_j^T A), each supporting joint j taking (scale_j S_j)^T A into its rows of
+        body i's ten columns (a mimic body's into its leader's). The actuator columns are qdd, qd and
+        sign(qd) in their coordinate's row.
+        """
+        q, qd, qdd = self._q(q), self._v(qd, "qd"), self._v(qdd, "qdd")
+        dtype = np.result_type(q, qd, qdd, float)
+        xs = self.body_transforms(q)
+        v, vj, ss = self._velocities(q, qd, xs)
+        a = self._accelerations(q, qd, qdd, xs, v, vj, ss, self._base_acceleration(dtype))
+        units = [self.unit_inertia(k) for k in range(10)]
+        first = 6 if self.floating else 0
+        y = np.zeros((self.nv, 10 * self.nb + 3 * (self.nv - first)), dtype)
+        for i in range(self.nb):
+            force = np.column_stack([u @ a[i] + crf(v[i]) @ (u @ v[i]) for u in units])
+            j = i
+            while j >= 0:
+                s = self.scale[j] * ss[j] if self.mimic[j] else ss[j]
+                y[self.dofs[j], 10 * i:10 * i + 10] += s.T @ force
+                force = xs[j].T @ force
+                j = self.parent[j]
+        for k in range(first, self.nv):
+            c = 10 * self.nb + 3 * (k - first)
+            y[k, c:c + 3] = qdd[k], qd[k], np.sign(qd[k])
+        return y
+
     # ------------------------------------------------------------------ frame accelerations
 
     def frame_acceleration(self, q, qd, qdd, name: str) -> np.ndarray:

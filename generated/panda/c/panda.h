@@ -44,6 +44,8 @@
 #include "panda_ode_rhs.h"
 #include "panda_ode_jac_x.h"
 #include "panda_ode_jac_u.h"
+#include "panda_regressor.h"
+#include "panda_base_regressor.h"
 #include "panda_rk4_step.h"
 #include "panda_ik_tcp.h"
 #include "panda_manipulability_tcp.h"
