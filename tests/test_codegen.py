@@ -113,6 +113,10 @@ def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
         if ref.floating:  # rk4_step projects the base quaternion back onto the unit sphere
             x[3:7] /= np.linalg.norm(x[3:7])
         return x
+    if kind == "regressor":  # the reference's own Y (Featherstone's linear form); pi in the manifest
+        return ref.regressor(q, qd, qdd)
+    if kind == "base_regressor":  # its base columns
+        return ref.regressor(q, qd, qdd)[:, [b["column"] for b in fn["base_parameters"]]]
     if kind == "ode_jac_u":
         return np.vstack([np.zeros((nq, nv)), np.linalg.inv(ref.crba(q))])
     if kind == "ode_jac_x":  # complex step through the reference ABA

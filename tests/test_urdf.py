@@ -44,7 +44,7 @@ N_SAMPLES = 50
 SHIPPED = {
     "ur5": dict(path="example-robot-data:ur_description/urdf/ur5_robot.urdf", tip="tool0", lock=None),
     "panda": dict(path="example-robot-data:panda_description/urdf/panda.urdf", tip="panda_hand_tcp",
-                  lock="panda_finger_joint1,panda_finger_joint2"),
+                  lock="panda_finger_joint1,panda_finger_joint2", friction=False),
 }
 
 # Covers what ur5 and panda do not: a massless root named world fixed to a massive, rotated
@@ -303,7 +303,7 @@ def test_models_yaml_matches_a_fresh_import(pin, name):
     assert data[name] == fresh  # exact, float for float
     assert dump_entry(name, fresh) in default_models_path().read_text()  # comments and layout too
     # the same URDF given as a plain path imports identically
-    assert import_urdf(erd_path(args["path"]), args["tip"], args["lock"]) == fresh
+    assert import_urdf(erd_path(args["path"]), args["tip"], args["lock"], friction=args.get("friction", True)) == fresh
 
 
 @pytest.mark.parametrize("name", SHIPPED)

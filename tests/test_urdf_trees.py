@@ -185,7 +185,12 @@ def compare(robot, side: TreePin, states: int = N_STATES, seed: int = 0) -> dict
             worst["jacobian"] = max(worst["jacobian"], rel(nr.jacobian(q, name), jac[name]))
         worst["crba"] = max(worst["crba"], rel(nr.crba(q), side.crba(q)))
         worst["gravity"] = max(worst["gravity"], rel(nr.gravity(q), side.gravity(q)))
-        worst["rnea"] = max(worst["rnea"], rel(nr.rnea(q, qd, qdd), side.rnea(q, qd, qdd)))
+        rigid = nr.rnea(q, qd, qdd) - nr.friction(qd)  # Pinocchio's rnea has no joint friction
+        worst["rnea"] = max(worst["rnea"], rel(rigid, side.rnea(q, qd, qdd)))
+    # <dynamics damping friction> as Pinocchio reads it (model.damping, model.friction) for joints with coordinates
+    for joint, (k, _, _), ours in zip(side.joints, side.drive, robot.moving_joints):
+        if ours.mimic is None:
+            assert (nr.viscous[k], nr.coulomb[k]) == (side.model.damping[joint.idx_v], side.model.friction[joint.idx_v])
     return worst
 
 

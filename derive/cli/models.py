@@ -9,10 +9,11 @@ from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import
 
 
 def cmd_import_urdf(args) -> int:
-    """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--name NAME] [--out models.yaml]``."""
+    """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--no-friction] [--name NAME] [--out models.yaml]``."""
     name, entry = import_urdf_named(args.file, getattr(args, "tip", None), lock=getattr(args, "lock", None),
                                     name=getattr(args, "name", None), chain=getattr(args, "chain", None),
-                                    floating=bool(getattr(args, "floating", False)))
+                                    floating=bool(getattr(args, "floating", False)),
+                                    friction=not getattr(args, "no_friction", False))
     if args.out:
         append_entry(args.out, name, entry)
         print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
@@ -58,6 +59,8 @@ def add_parser(sub) -> None:
                                                    "moving branches off it with mass must be locked, massless ones are dropped "
                                                    "(--tip, if given too, must name the same link)")
     u.add_argument("--lock", metavar="JOINT[=VALUE],...", help="joints to make fixed (default value 0)")
+    u.add_argument("--no-friction", action="store_true",
+                   help="ignore the URDF's <dynamics damping friction> (by default: viscous and Coulomb friction)")
     u.add_argument("--floating", action="store_true",
                    help="floating base: the URDF root link moves freely (base: floating, Pinocchio's JointModelFreeFlyer)")
     u.add_argument("--name", help="robot name (default: the URDF robot name made a C identifier)")

@@ -13,14 +13,17 @@ import casadi as ca
 import numpy as np
 
 from derive.description.robot import Robot
+from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
 from derive.symbolic.model import SXModel
 from derive.symbolic.ode import ode_jacobians
+from derive.symbolic.regressor import Regressor, body_links
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 
 QUANTITIES = ("fk", "jacobian", "fk_jacobian", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
               "gravity", "inverse_dynamics", "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext",
-              "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u")
+              "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor",
+              "base_regressor")
 
 IK_FRAMES = ("tcp",)      # the frames that have a generated fk_jacobian
 IK_MAX_ITERATIONS = 5000  # the generated solver's iteration cap
@@ -41,8 +44,9 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     ne = model.newton_euler
     specs: list[FunctionSpec] = []
 
-    def add(quantity, frame, inputs, outputs, doc):
-        specs.append(FunctionSpec(robot.name, quantity, frame, tuple(inputs) + extra, tuple(outputs), doc + pdoc))
+    def add(quantity, frame, inputs, outputs, doc, manifest=()):
+        specs.append(FunctionSpec(robot.name, quantity, frame, tuple(inputs) + extra, tuple(outputs), doc + pdoc,
+                                  tuple(manifest)))
 
     for f in robot.frames:
         add("fk", f.name, [q], [("T", model.fk(f.name))],
@@ -111,13 +115,40 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     else:
         ode_doc = f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd]."
     add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))], ode_doc)
-    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(), s.q, s.qd, s.qdd, qdd_fd,
+    A, B = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(smooth=True), s.q, s.qd, s.qdd, qdd_fd,
                          model.configuration_rate if robot.floating else None, ne.dof_parents)
     add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))],
         f"df/dx ({nq + n}x{nq + n}, row-major) of the ODE x' = f(x, u): the linearisation's A.")
     add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))],
         f"df/du ({nq + n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.")
+    regressor_specs(model, add)
     return specs
+
+
+def regressor_specs(model: SXModel, add) -> None:
+    """``regressor`` (Y, every standard parameter) and ``base_regressor`` (Y_b, its base columns), with pi's
+    names and values and the base parameters' combinations in the manifest."""
+    robot, n = model.robot, model.robot.nv
+    s = model.sym
+    q, qd, qdd = ("q", s.q), ("qd", s.qd), ("qdd", s.qdd)
+    reg = Regressor(model.newton_euler)
+    pi = reg.values()
+    at = " (numbers at the parameters' defaults)" if s.p.numel() else ""
+    bodies = ", ".join(body_links(robot))
+    add("regressor", None, [q, qd, qdd], [("Y", reg.matrix)],
+        f"Inertial-parameter regressor Y(q, qd, qdd) ({n}x{reg.size}, row-major): inverse_dynamics = Y pi, "
+        f"pi = per body ({bodies}) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (first moment and "
+        "inertia about the body origin, body axes: Pinocchio's toDynamicParameters), then per joint coordinate "
+        "[armature, viscous, coulomb] (columns qdd, qd, sign(qd)); pi's names and the model's values in "
+        f"manifest.json (regressor_parameters){at}.",
+        manifest=(("regressor_parameters", [{"name": k, "value": float(v)} for k, v in zip(reg.names, pi)]),))
+    base = base_parameters(robot, regressor=reg)
+    add("base_regressor", None, [q, qd, qdd], [("Y_b", reg.matrix[:, list(base.columns)])],
+        f"Base regressor Y_b(q, qd, qdd) ({n}x{base.rank}, row-major): the {base.rank} independent columns of "
+        "regressor, so that inverse_dynamics = Y_b pi_b with the base parameters pi_b = pi_1 + beta pi_2 (the "
+        "parameters of those columns plus the others regrouped into them, Gautier's QR); names, values, "
+        f"columns and combinations in manifest.json (base_parameters){at}.",
+        manifest=(("rank", base.rank), ("base_parameters", base.manifest(pi))))
 
 
 def template_functions(model: SXModel) -> list[TemplateFunction]:

@@ -19,7 +19,7 @@ UNARY = {
     ca.OP_NEG: "neg", ca.OP_SQ: "sq", ca.OP_TWICE: "twice", ca.OP_INV: "inv", ca.OP_SQRT: "sqrt",
     ca.OP_SIN: "sin", ca.OP_COS: "cos", ca.OP_TAN: "tan", ca.OP_EXP: "exp", ca.OP_LOG: "log",
     ca.OP_FABS: "fabs", ca.OP_ASIN: "asin", ca.OP_ACOS: "acos", ca.OP_ATAN: "atan", ca.OP_TANH: "tanh",
-    ca.OP_ASSIGN: "assign",
+    ca.OP_ASSIGN: "assign", ca.OP_SIGN: "sign",
 }
 BINARY = {
     ca.OP_ADD: "add", ca.OP_SUB: "sub", ca.OP_MUL: "mul", ca.OP_DIV: "div", ca.OP_POW: "pow",
@@ -29,7 +29,7 @@ TRIG = {"sin", "cos", "tan", "asin", "acos", "atan", "atan2"}
 # cost class of each op for the "ops" comment: mul, add, div, trig, other
 COST = {"add": "add", "sub": "add", "neg": "add", "mul": "mul", "sq": "mul", "twice": "add",
         "div": "div", "inv": "div", "sqrt": "other", "pow": "other", "exp": "other", "log": "other",
-        "fabs": "other", "tanh": "other", "fmin": "other", "fmax": "other", "assign": None}
+        "fabs": "other", "tanh": "other", "sign": "other", "fmin": "other", "fmax": "other", "assign": None}
 
 
 @dataclass(frozen=True)

@@ -20,6 +20,7 @@ from derive.codegen.backends.base import Backend, Function, RobotContext, ops_co
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 from derive.description.robot import Robot
+from derive.description.expr import evaluate
 from derive.resources import TEMPLATES
 
 SHARED_TEMPLATES = ("manifest", "latex")
@@ -56,7 +57,7 @@ def expression_function(spec: FunctionSpec, progress=None) -> Function:
     return Function(spec, prog, {
         "name": spec.name, "short_name": spec.short_name, "quantity": spec.quantity, "frame": spec.frame,
         "doc_lines": [spec.doc], "io_lines": _io_lines(inputs, outputs), "ops": ops, "ops_comment": ops_comment(ops),
-        "calls": [], "manifest": (),
+        "calls": [], "manifest": spec.manifest,
         "inputs": [{"name": n, "shape": list(s)} for n, s in inputs],
         "outputs": [{"name": n, "shape": list(s)} for n, s in outputs]})
 
@@ -89,6 +90,26 @@ FLOATING_CONVENTION = ("q = [base position (3, world); base orientation quaterni
                        "JointModelFreeFlyer); rk4_step renormalises the quaternion after each step")
 
 
+ACTUATOR_CONVENTION = ("M includes the armature (reflected rotor inertia armature + gear_ratio^2 motor_inertia) on its "
+                       "diagonal; inverse_dynamics adds viscous qd + coulomb sign(qd); forward_dynamics, the ODE and its "
+                       "Jacobians subtract viscous qd + coulomb tanh(qd / coulomb_smoothing)")
+
+
+def actuator_table(robot: Robot) -> dict:
+    """Per entry of v, the actuator values at the parameter defaults (a floating base's six are 0)."""
+    env = robot.parameter_defaults
+    nb = robot.nv - len(robot.joint_coordinates)
+
+    def num(v) -> float:
+        return float(evaluate(v, env))
+
+    acts = [c.actuator for c in robot.joint_coordinates]
+    return {"coulomb_smoothing": robot.smoothing,
+            "armature": [0.0] * nb + [num(a.armature) + num(a.gear_ratio) ** 2 * num(a.motor_inertia) for a in acts],
+            "viscous": [0.0] * nb + [num(a.viscous) for a in acts],
+            "coulomb": [0.0] * nb + [num(a.coulomb) for a in acts]}
+
+
 def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,
                  templates: list[TemplateFunction] = (), backends: list[Backend] | None = None) -> dict[str, str]:
     """All files of one robot, as {path relative to generated/<robot>/: text}."""
@@ -111,7 +132,9 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         "base": robot.base,
         "velocities": list(robot.velocity_names),
         "wrench_frames": list(robot.wrench_frames),
-        "conventions": CONVENTIONS | ({"floating_base": FLOATING_CONVENTION} if robot.floating else {}),
+        "conventions": CONVENTIONS | ({"floating_base": FLOATING_CONVENTION} if robot.floating else {})
+        | ({"actuators": ACTUATOR_CONVENTION} if robot.actuated else {}),
+        **({"actuators": actuator_table(robot)} if robot.actuated else {}),
         "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
                     "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
         "frames": [fr.name for fr in robot.frames],

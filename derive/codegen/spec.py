@@ -44,6 +44,7 @@ class FunctionSpec(Named):
     inputs: tuple[tuple[str, ca.SX], ...]
     outputs: tuple[tuple[str, ca.SX], ...]
     doc: str
+    manifest: tuple[tuple[str, object], ...] = ()  # extra plain-data facts for manifest.json (e.g. the regressor's pi)
 
 
 @dataclass(frozen=True)

@@ -18,7 +18,7 @@ from derive.description.dh import dh_to_tree
 from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
-from derive.description.robot import (BASES, robot_name, Frame, Joint, Limits, Link, Mimic, ModelError, Origin, Parameter, Robot, Value, Vec3,
+from derive.description.robot import (BASES, Actuator, robot_name, Frame, Joint, Limits, Link, Mimic, ModelError, Origin, Parameter, Robot, Value, Vec3,
                                       identifier, shown)
 from derive.resources import EXAMPLE_MODELS
 
@@ -223,7 +223,7 @@ class _Parser:
 
     def joint(self, where: str, raw: Any) -> Joint:
         self.check_keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "axis2", "pitch", "limits",
-                                           "mimic"})
+                                           "mimic", "actuator"})
         for key in ("name", "type", "parent", "child"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
@@ -260,7 +260,25 @@ class _Parser:
             pitch=pitch,
             axis2=axis2,
             mimic=self.mimic(f"{where}.mimic", raw["mimic"], jtype) if "mimic" in raw else None,
+            actuator=self.joint_actuator(f"{where}.actuator", raw["actuator"], JOINT_TYPES[jtype], "mimic" in raw)
+            if raw.get("actuator") is not None else None,
         )
+
+    def actuator(self, where: str, raw: Any) -> Actuator:
+        if not isinstance(raw, Mapping):
+            raise self.error(where, "expected a mapping {armature, gear_ratio, motor_inertia, viscous, coulomb}")
+        self.check_keys(where + ".", raw, {"armature", "gear_ratio", "motor_inertia", "viscous", "coulomb"})
+        return Actuator(**{k: self.value(f"{where}.{k}", v) for k, v in raw.items()})
+
+    def joint_actuator(self, where: str, raw: Any, dof: int, mimic: bool) -> Actuator | tuple[Actuator, ...]:
+        """One mapping for all coordinates, or a list with one per coordinate (as limits)."""
+        if dof == 0 or mimic:
+            raise self.error(where, "only a joint with coordinates (not fixed, not a mimic) has an actuator")
+        if isinstance(raw, list):
+            if len(raw) != dof:
+                raise self.error(where, f"expected {dof} actuators (one per coordinate), got {len(raw)}")
+            return tuple(self.actuator(f"{where}[{i}]", r) for i, r in enumerate(raw))
+        return self.actuator(where, raw)
 
     def mimic(self, where: str, raw: Any, jtype: str) -> Mimic:
         if JOINT_TYPES[jtype] != 1:
@@ -299,7 +317,7 @@ class _Parser:
     def robot(self) -> Robot:
         spec = self.spec
         self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
-                                   "base", "wrenches"})
+                                   "base", "wrenches", "coulomb_smoothing"})
         base = spec.get("base", "fixed")
         if base not in BASES:
             raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
@@ -336,7 +354,11 @@ class _Parser:
             source=str(spec.get("source", "")).strip(),
             base=base,
             wrenches=self.wrenches(spec),
+            coulomb_smoothing=None if spec.get("coulomb_smoothing") is None else self.number(
+                "coulomb_smoothing", spec["coulomb_smoothing"]),
         )
+        if robot.coulomb_smoothing is not None and robot.coulomb_smoothing <= 0:
+            raise self.error("coulomb_smoothing", f"must be > 0 (rad/s or m/s), got {robot.coulomb_smoothing:g}")
         if robot.nv == 0:
             raise self.error("joints", "no moving joint: a robot needs at least one degree of freedom")
         self.check_names(robot)
@@ -497,6 +519,13 @@ class _Parser:
             for k in range(3):
                 num(f"joints ({j.name}).origin.xyz[{k}]", j.origin.xyz[k])
                 num(f"joints ({j.name}).origin.rpy[{k}]", j.origin.rpy[k])
+            for c in j.coordinates:
+                a, where = c.actuator, f"joints ({j.name}).actuator" + (f" ({c.name})" if c.name != j.name else "")
+                for key in ("armature", "motor_inertia", "viscous", "coulomb"):
+                    if num(f"{where}.{key}", getattr(a, key)) < 0:
+                        raise self.error(f"{where}.{key}", f"must be >= 0, got {num(where, getattr(a, key)):g}")
+                if num(f"{where}.gear_ratio", a.gear_ratio) == 0:
+                    raise self.error(f"{where}.gear_ratio", "must not be 0")
             if j.pitch is not None and num(f"joints ({j.name}).pitch", j.pitch) == 0:
                 raise self.error(f"joints ({j.name}).pitch", "must not be 0 (a helical joint of pitch 0 is a revolute joint)")
         for k in range(3):

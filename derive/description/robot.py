@@ -85,6 +85,31 @@ class Limits:
 
 
 @dataclass(frozen=True)
+class Actuator:
+    """Drive and friction of one coordinate; all zero by default (an ideal joint).
+
+    The reflected rotor inertia ``armature + gear_ratio**2 * motor_inertia`` (kg m^2 for a
+    turn, kg for a slide) adds to M's diagonal, as Pinocchio's ``model.armature``; friction
+    ``viscous * qd + coulomb * sign(qd)`` adds to the joint torque (URDF's ``<dynamics
+    damping friction>``). Values are numbers or parameter expressions.
+    """
+
+    armature: Value = 0.0
+    gear_ratio: Value = 1.0
+    motor_inertia: Value = 0.0
+    viscous: Value = 0.0
+    coulomb: Value = 0.0
+
+    @property
+    def ideal(self) -> bool:
+        """No armature and no friction (the default)."""
+        return self == Actuator()
+
+
+IDEAL = Actuator()
+
+
+@dataclass(frozen=True)
 class Coordinate:
     """One entry of q: ``name`` (a C identifier), its ``joint`` and that joint's ``type``.
 
@@ -97,6 +122,7 @@ class Coordinate:
     type: str
     unit: str
     limits: Limits = Limits()
+    actuator: Actuator = IDEAL
 
 
 @dataclass(frozen=True)
@@ -129,6 +155,7 @@ class Joint:
     pitch: Value | None = None  # helical only: m of travel per rad
     axis2: tuple | None = None  # universal only
     mimic: Mimic | None = None  # a 1-DOF joint driven by another one's coordinate
+    actuator: Actuator | tuple[Actuator, ...] | None = None  # like limits: one, or one per coordinate
 
     @property
     def dof(self) -> int:
@@ -144,11 +171,20 @@ class Joint:
         """The joint's entries of q, in order (none for a fixed or a mimic joint)."""
         if self.mimic is not None:
             return ()
+        actuators = self.actuators
         if self.dof <= 1:
             unit = "m" if self.type == "prismatic" else "rad"
-            return (Coordinate(self.name, self.name, self.type, unit, self.limits),) * self.dof
-        return tuple(Coordinate(f"{self.name}_{s}", self.name, self.type, "m" if s == "trans" else "rad", lim)
-                     for s, lim in zip(COORDINATE_SUFFIXES[self.type], self.limits))
+            return (Coordinate(self.name, self.name, self.type, unit, self.limits, actuators[0]),) * self.dof
+        return tuple(Coordinate(f"{self.name}_{s}", self.name, self.type, "m" if s == "trans" else "rad", lim, act)
+                     for s, lim, act in zip(COORDINATE_SUFFIXES[self.type], self.limits, actuators))
+
+    @property
+    def actuators(self) -> tuple[Actuator, ...]:
+        """One Actuator per coordinate (IDEAL where none is given)."""
+        n = max(self.dof, 1)
+        if self.actuator is None:
+            return (IDEAL,) * n
+        return self.actuator if isinstance(self.actuator, tuple) else (self.actuator,) * n
 
     @property
     def summary(self) -> str:
@@ -192,6 +228,9 @@ BASE_VELOCITY = ("base_vx", "base_vy", "base_vz", "base_wx", "base_wy", "base_wz
 """A floating base's 6 entries of v (= qd): the linear velocity of the root link's origin and its
 angular velocity, both in the root link's frame (Pinocchio's LOCAL convention)."""
 BASES = ("fixed", "floating")
+SMOOTHING = 1e-2
+"""Default eps (rad/s or m/s) of the smooth Coulomb friction tanh(qd / eps): within 1 % of sign(qd)
+above 2.6 eps (0.026 rad/s)."""
 
 
 @dataclass(frozen=True)
@@ -213,6 +252,17 @@ class Robot:
     source: str = ""
     base: str = "fixed"
     wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
+    coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
+
+    @property
+    def actuated(self) -> bool:
+        """Any coordinate with armature or friction (else every function is that of ideal joints)."""
+        return any(not c.actuator.ideal for c in self.joint_coordinates)
+
+    @property
+    def smoothing(self) -> float:
+        """eps of the smooth Coulomb friction tanh(qd / eps) of forward dynamics, the ODE and trajopt."""
+        return SMOOTHING if self.coulomb_smoothing is None else self.coulomb_smoothing
 
     @property
     def floating(self) -> bool:
@@ -314,10 +364,11 @@ def model_data(robot: Robot) -> dict:
     data = asdict(robot)
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    if data["wrenches"] is None:
-        del data["wrenches"]
+    for key in ("wrenches", "coulomb_smoothing"):
+        if data[key] is None:
+            del data[key]
     for joint in data["joints"]:
-        for key in ("pitch", "axis2", "mimic"):
+        for key in ("pitch", "axis2", "mimic", "actuator"):
             if joint[key] is None:
                 del joint[key]
     return data

@@ -256,6 +256,7 @@ class _Joint:
     axis: tuple
     limits: dict
     mimic: tuple[str, float, float] | None  # (joint, multiplier, offset)
+    dynamics: tuple[float, float] = (0.0, 0.0)  # <dynamics damping= friction=>: viscous, Coulomb
 
 
 class _Reader:
@@ -333,8 +334,15 @@ class _Reader:
         if mimic is not None:
             mimic = (mimic.get("joint") or "?", self.number(where + ".mimic.multiplier", mimic.get("multiplier"), 1.0),
                      self.number(where + ".mimic.offset", mimic.get("offset"), 0.0))
+        dyn = el.find("dynamics") if one_dof else None
+        dynamics = (0.0, 0.0)
+        if dyn is not None:
+            dynamics = tuple(self.number(f"{where}.dynamics.{k}", dyn.get(k), 0.0) for k in ("damping", "friction"))
+            for k, v in zip(("damping", "friction"), dynamics):
+                if not v >= 0:
+                    raise self.error(f"{where}.dynamics.{k}", f"must be >= 0, got {v:g}")
         return _Joint(name, "revolute" if jtype == "continuous" else jtype, ends["parent"], ends["child"],
-                      self.origin(where + ".origin", el.find("origin")), axis, limits, mimic)
+                      self.origin(where + ".origin", el.find("origin")), axis, limits, mimic, dynamics)
 
     def limits(self, where: str, lim: ET.Element | None, jtype: str) -> dict:
         """The numbers of a moving joint's <limit>, without the exporters' placeholders.
@@ -455,7 +463,8 @@ def _lock_spelling(j: _Joint) -> str:
     return j.name if value == 0 else f"{j.name}={value!r}"
 
 
-def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, lock: dict, name: str | None) -> str:
+def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, lock: dict, name: str | None,
+             friction: bool = True) -> str:
     """The ``derive import-urdf`` command line that reproduces an import."""
     cmd = f"derive import-urdf {spelling}"
     if chain is not None:
@@ -468,6 +477,8 @@ def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, 
         cmd += " --lock " + ",".join(s for _, s in lock.values())
     if name:
         cmd += f" --name {name}"
+    if not friction:
+        cmd += " --no-friction"
     return cmd
 
 
@@ -555,7 +566,7 @@ def _clamp_inertia_noise(inertia: dict, mass: float, floor: float) -> dict:
 
 
 def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
-                chain: str | None = None, floating: bool = False) -> dict:
+                chain: str | None = None, floating: bool = False, friction: bool = True) -> dict:
     """Read a URDF and return one models.yaml robot entry (a plain dict).
 
     ``path`` may be ``example-robot-data:<path under robots/>``. By default the
@@ -577,15 +588,17 @@ def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: 
     ``pinocchio.buildModelFromUrdf(path, pinocchio.JointModelFreeFlyer())``. A URDF
     whose root is a massless link joined to the rest by a single ``floating``
     joint with an identity origin (``world`` -> ``base``) is read the same way:
-    the root is dropped and its child is the floating base. ``name`` defaults to
+    the root is dropped and its child is the floating base. A moving joint's
+    ``<dynamics damping= friction=>`` becomes its ``actuator: {viscous, coulomb}``
+    (where non-zero) unless ``friction`` is False. ``name`` defaults to
     the URDF robot name made a C identifier. Raises
     :class:`derive.description.model.ModelError` on any problem.
     """
-    return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating)[1]
+    return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating, friction=friction)[1]
 
 
 def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
-                      chain: str | None = None, floating: bool = False) -> tuple[str, dict]:
+                      chain: str | None = None, floating: bool = False, friction: bool = True) -> tuple[str, dict]:
     """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
@@ -774,6 +787,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
                 entry["limits"] = dict(j.limits)
             if j.mimic is not None:
                 entry["mimic"] = {"joint": j.mimic[0], "multiplier": j.mimic[1], "offset": j.mimic[2]}
+            elif friction and any(j.dynamics):  # URDF damping and friction: viscous and Coulomb friction
+                entry["actuator"] = {k: v for k, v in zip(("viscous", "coulomb"), j.dynamics) if v}
             out_joints.append(entry)
         else:
             body[j.child], pose[j.child] = body[j.parent], placed
@@ -839,7 +854,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
     if dropped:
         notes.append("dropped the massless moving " + ("branches " if len(dropped) > 1 else "branch ") + ", ".join(dropped))
     description = f"{urdf_name} imported from URDF" + (f" ({'; '.join(notes)})" if notes else "")
-    command = _command(spelling, tip, chain, floating_flag, locks, name if name and name != c_identifier(urdf_name) else None)
+    command = _command(spelling, tip, chain, floating_flag, locks, name if name and name != c_identifier(urdf_name) else None,
+                       friction or not any(any(j.dynamics) for j in order))
     entry = {
         "description": description,
         "source": f"{origin_text}, imported by `{command}`",
@@ -915,12 +931,12 @@ def _item(d: Mapping, indent: str, width: int = 120) -> list[str]:
     return out
 
 
-def dump_entry(name: str, entry: Mapping, indent: str = "  ") -> str:
+def dump_entry(name: str, entry: Mapping, indent: str = "  ", generator: str = "derive import-urdf") -> str:
     """Deterministic YAML text of one robot entry, to sit under ``robots:`` of models.yaml."""
     source = str(entry.get("source", ""))
     command = source.split("`")[1] if source.count("`") >= 2 else None
-    origin = source.split(", imported by")[0] or "a URDF"
-    lines = [f"{indent}# {name}: generated by `derive import-urdf` from {origin}; do not edit by hand."]
+    origin = source.split(", imported by")[0].split(", identified by")[0] or "a URDF"
+    lines = [f"{indent}# {name}: generated by `{generator}` from {origin}; do not edit by hand."]
     if command:
         lines.append(f"{indent}# Regenerate with: {command}")
     lines.append(f"{indent}{name}:")

@@ -337,6 +337,15 @@ class NumericRobot:
             self.inertia[body] = self.inertia[body] + spatial_inertia(mass, com, inertia_com)
         self.total_mass = sum(mass for _, mass, _ in self.masses)  # what moves (floating: the root too)
 
+        # Actuators per entry of v (none for a floating base's six): armature, viscous and Coulomb friction.
+        self.armature, self.viscous, self.coulomb = np.zeros(self.nv), np.zeros(self.nv), np.zeros(self.nv)
+        first = 6 if robot.floating else 0
+        for k, c in enumerate(robot.joint_coordinates):
+            a = c.actuator
+            self.armature[first + k] = num(a.armature) + num(a.gear_ratio) ** 2 * num(a.motor_inertia)
+            self.viscous[first + k], self.coulomb[first + k] = num(a.viscous), num(a.coulomb)
+        self.smoothing = robot.smoothing
+
         # Every placeable frame: (body, constant pose in the body frame).
         self.frames: dict[str, tuple[int, np.ndarray]] = {}
         for name in [robot.root] + [j.child for j in robot.joints]:
@@ -532,7 +541,7 @@ class NumericRobot:
             out[body] = out[body] + np.concatenate([rot.T @ (wrench[3:] + np.cross(arm, force)), rot.T @ force])
         return out
 
-    def rnea(self, q, qd, qdd, wrenches: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
+    def rnea(self, q, qd, qdd, wrenches: Mapping[str, np.ndarray] | None = None, smooth: bool = False) -> np.ndarray:
         """Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q) - sum_f J_f^T w_f (Featherstone, Table 5.1).
 
         Forward: v_i = X_i v_lambda + S_i qd_i, a_i = X_i a_lambda + S_i qdd_i + c_J + v_i x S_i qd_i,
@@ -542,6 +551,8 @@ class NumericRobot:
 
         ``wrenches`` (frame name -> [force; torque] at the frame origin, world axes; see
         :meth:`external_forces`) act on the robot; J_f is the LOCAL_WORLD_ALIGNED :meth:`jacobian`.
+
+        Actuators add I_a qdd + :meth:`friction` (Coulomb as sign(qd), or tanh(qd / eps) if ``smooth``).
         """
         q, qd, qdd = self._q(q), self._v(qd, "qd"), self._v(qdd, "qdd")
         dtype = np.result_type(q, qd, qdd, float)
@@ -559,7 +570,12 @@ class NumericRobot:
             tau[self.dofs[i]] += (self.scale[i] * ss[i] if self.mimic[i] else ss[i]).T @ f[i]
             if self.parent[i] >= 0:
                 f[self.parent[i]] = f[self.parent[i]] + xs[i].T @ f[i]
-        return tau
+        return tau + self.armature * qdd + self.friction(qd, smooth)
+
+    def friction(self, qd, smooth: bool = False) -> np.ndarray:
+        """Joint friction f_v qd + f_c sign(qd), or f_c tanh(qd / eps) if ``smooth`` (what forward dynamics uses)."""
+        qd = self._v(qd, "qd")
+        return self.viscous * qd + self.coulomb * (np.tanh(qd / self.smoothing) if smooth else np.sign(qd))
 
     def gravity(self, q) -> np.ndarray:
         """Generalized gravity g(q) = rnea(q, 0, 0)."""
@@ -598,13 +614,14 @@ class NumericRobot:
                 block = force.T @ ss[j]
                 m[di, self.dofs[j]] += block
                 m[self.dofs[j], di] += block.T
-        return m
+        return m + np.diag(self.armature)  # the actuators' reflected inertia
 
     mass_matrix = crba
 
     def aba(self, q, qd, tau, wrenches: Mapping[str, np.ndarray] | None = None) -> np.ndarray:
-        """Forward dynamics qdd = M^-1 (tau - C qd - g + sum_f J_f^T w_f) by the articulated body algorithm
-        (Featherstone, Table 7.1); the inverse of :meth:`rnea` with the same ``wrenches``.
+        """Forward dynamics qdd = M^-1 (tau - C qd - g - friction + sum_f J_f^T w_f) by the articulated body
+        algorithm (Featherstone, Table 7.1); the inverse of :meth:`rnea` with the same ``wrenches`` and
+        ``smooth=True`` (the Coulomb friction as f_c tanh(qd / eps)); the armature adds to D_i.
 
         Pass 1: v_i, c_i = c_J + v_i x S_i qd_i, I^A_i = I_i, p^A_i = v_i x* I_i v_i - f^ext_i.
         Pass 2 (leaves to root): U_i = I^A_i S_i, D_i = S_i^T U_i, u_i = tau_i - S_i^T p^A_i;
@@ -621,6 +638,7 @@ class NumericRobot:
         if self.has_mimic:
             return self._forward_dynamics_by_solve(q, qd, tau, wrenches)
         q, qd, tau = self._q(q), self._v(qd, "qd"), self._v(tau, "tau")
+        tau = tau - self.friction(qd, smooth=True)  # the smooth friction; the armature joins D_i below
         xs = self.body_transforms(q)
         n = self.nb
         fext = self.external_forces(q, wrenches) if wrenches else None
@@ -637,7 +655,7 @@ class NumericRobot:
         u_mat, d, u = [None] * n, [None] * n, [None] * n
         for i in reversed(range(n)):
             u_mat[i] = ia[i] @ ss[i]
-            d[i] = ss[i].T @ u_mat[i]
+            d[i] = ss[i].T @ u_mat[i] + np.diag(self.armature[self.dofs[i]])
             u[i] = tau[self.dofs[i]] - ss[i].T @ pa[i]
             lam = self.parent[i]
             if lam >= 0:
@@ -660,8 +678,64 @@ class NumericRobot:
         """qdd = M(q)^-1 (tau - rnea(q, qd, 0, wrenches)): the bias (Coriolis, gravity, wrenches) by
         :meth:`rnea` at qdd = 0, M by :meth:`crba` (what :meth:`aba` does with mimic joints)."""
         q, qd, tau = self._q(q), self._v(qd, "qd"), self._v(tau, "tau")
-        bias = self.rnea(q, qd, np.zeros(self.nv), wrenches)
+        bias = self.rnea(q, qd, np.zeros(self.nv), wrenches, smooth=True)
         return np.linalg.solve(self.crba(q), tau - bias)
+
+    # ------------------------------------------------------------------ the inertial-parameter regressor
+
+    def dynamic_parameters(self) -> np.ndarray:
+        """pi (10 nb + 3 per joint coordinate): per body [m, h_x, h_y, h_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz],
+        read off its spatial inertia [[I_o, h^], [h^T, m 1]] about the body origin (h = m c; Pinocchio's
+        Inertia.toDynamicParameters), then per joint coordinate (a floating base's six have none) its
+        [armature, viscous, coulomb]."""
+        pi = []
+        for inertia in self.inertia:
+            i_o, h_hat = inertia[:3, :3], inertia[:3, 3:]
+            pi += [inertia[5, 5], h_hat[2, 1], h_hat[0, 2], h_hat[1, 0],
+                   i_o[0, 0], i_o[0, 1], i_o[1, 1], i_o[0, 2], i_o[1, 2], i_o[2, 2]]
+        first = 6 if self.floating else 0
+        for k in range(first, self.nv):
+            pi += [self.armature[k], self.viscous[k], self.coulomb[k]]
+        return np.array(pi, dtype=float)
+
+    @staticmethod
+    def unit_inertia(k: int) -> np.ndarray:
+        """The spatial inertia of the parameter vector e_k (k < 10): I(pi) = sum_k pi_k unit_inertia(k)."""
+        e = np.zeros(10)
+        e[k] = 1.0
+        h_hat = skew(e[1:4])
+        i_o = np.array([[e[4], e[5], e[7]], [e[5], e[6], e[8]], [e[7], e[8], e[9]]])
+        return np.block([[i_o, h_hat], [h_hat.T, e[0] * np.eye(3)]])
+
+    def regressor(self, q, qd, qdd) -> np.ndarray:
+        """Y (nv, len(pi)) with :meth:`rnea` (Coulomb as sign(qd)) = Y @ :meth:`dynamic_parameters`.
+
+        Featherstone's linear form: body i's force I_i a_i + v_i x* I_i v_i is A_i pi_i, the 6 x 10 A_i
+        having the column I(e_k) a_i + v_i x* I(e_k) v_i per parameter; A_i is then carried to the root like
+        f_i in :meth:`rnea` (A <- X_j^T A), each supporting joint j taking (scale_j S_j)^T A into its rows of
+        body i's ten columns (a mimic body's into its leader's). The actuator columns are qdd, qd and
+        sign(qd) in their coordinate's row.
+        """
+        q, qd, qdd = self._q(q), self._v(qd, "qd"), self._v(qdd, "qdd")
+        dtype = np.result_type(q, qd, qdd, float)
+        xs = self.body_transforms(q)
+        v, vj, ss = self._velocities(q, qd, xs)
+        a = self._accelerations(q, qd, qdd, xs, v, vj, ss, self._base_acceleration(dtype))
+        units = [self.unit_inertia(k) for k in range(10)]
+        first = 6 if self.floating else 0
+        y = np.zeros((self.nv, 10 * self.nb + 3 * (self.nv - first)), dtype)
+        for i in range(self.nb):
+            force = np.column_stack([u @ a[i] + crf(v[i]) @ (u @ v[i]) for u in units])
+            j = i
+            while j >= 0:
+                s = self.scale[j] * ss[j] if self.mimic[j] else ss[j]
+                y[self.dofs[j], 10 * i:10 * i + 10] += s.T @ force
+                force = xs[j].T @ force
+                j = self.parent[j]
+        for k in range(first, self.nv):
+            c = 10 * self.nb + 3 * (k - first)
+            y[k, c:c + 3] = qdd[k], qd[k], np.sign(qd[k])
+        return y
 
     # ------------------------------------------------------------------ frame accelerations
 
@@ -801,10 +875,11 @@ class NumericRobot:
         return c
 
     def kinetic_energy(self, q, qd):
-        """T = 1/2 sum_i v_i^T I_i v_i over the body spatial velocities (= 1/2 qd^T M qd)."""
+        """T = 1/2 sum_i v_i^T I_i v_i over the body spatial velocities, plus the rotors' 1/2 I_a qd^2
+        (= 1/2 qd^T M qd)."""
         q, qd = self._q(q), self._v(qd, "qd")
         v, _, _ = self._velocities(q, qd, self.body_transforms(q))
-        return sum(0.5 * v[i] @ self.inertia[i] @ v[i] for i in range(self.nb))
+        return sum(0.5 * v[i] @ self.inertia[i] @ v[i] for i in range(self.nb)) + 0.5 * np.sum(self.armature * qd * qd)
 
     def potential_energy(self, q):
         """U = -sum_l m_l gravity . p_com_l over the links that move (world COM positions).

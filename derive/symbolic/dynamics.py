@@ -25,6 +25,7 @@ from functools import cached_property
 
 import casadi as ca
 
+from derive.symbolic.actuators import Drive
 from derive.symbolic.kinematics import Kinematics, Motion, joint_motions, quaternion_matrix
 from derive.description.robot import Robot
 from derive.symbolic.spatial import axis_angle, rpy, skew
@@ -91,8 +92,8 @@ class Lagrangian:
 
     @cached_property
     def mass_matrix(self) -> ca.SX:
-        """M(q) = d2T/dqd2, symmetric positive definite (nv x nv)."""
-        return ca.hessian(self.kinetic_energy, self.sym.qd)[0]
+        """M(q) = d2T/dqd2 (plus the actuators' armature), symmetric positive definite (nv x nv)."""
+        return Drive(self.robot, self.sym).mass(ca.hessian(self.kinetic_energy, self.sym.qd)[0])
 
     @cached_property
     def gravity_vector(self) -> ca.SX:
@@ -107,7 +108,9 @@ class Lagrangian:
     def inverse_dynamics(self, qdd: ca.SX | None = None) -> ca.SX:
         """tau = M(q) qdd + C(q, qd) qd + g(q)."""
         qdd = self.sym.qdd if qdd is None else qdd
-        return self.mass_matrix @ qdd + self.coriolis_matrix @ self.sym.qd + self.gravity_vector
+        tau = self.mass_matrix @ qdd + self.coriolis_matrix @ self.sym.qd + self.gravity_vector
+        friction = Drive(self.robot, self.sym).torque(self.sym.qd, ca.SX.zeros(self.sym.nv, 1), smooth=False)
+        return tau if friction is None else tau + friction
 
 
 @dataclass(frozen=True)
@@ -199,6 +202,7 @@ class NewtonEuler:
         if robot.floating:
             q = sym.q
             self.base_rotation = quaternion_matrix(q[3], q[4], q[5], q[6])
+        self.drive = Drive(robot, sym)
 
     def to_child(self, i: int, v: ca.SX) -> ca.SX:
         """Parent-body coordinates -> body i coordinates (rotation only)."""
@@ -289,7 +293,12 @@ class NewtonEuler:
 
     @cached_property
     def mass_matrix(self) -> ca.SX:
-        """M(q) by the composite-rigid-body algorithm (Featherstone, Table 6.2)."""
+        """M(q) (with the actuators' armature on its diagonal, :mod:`derive.symbolic.actuators`)."""
+        return self.drive.mass(self.rigid_mass_matrix)
+
+    @cached_property
+    def rigid_mass_matrix(self) -> ca.SX:
+        """M(q) of the rigid bodies by the composite-rigid-body algorithm (Featherstone, Table 6.2)."""
         n, nb = len(self.bodies), self.nb
         comp = [[b.m, b.h, b.I_o] for b in self.bodies]
         root = list(self.root_mass)  # the floating root's composite
@@ -361,10 +370,17 @@ class NewtonEuler:
         self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
         return christoffel_coriolis(self.mass_matrix, self.sym.q, self.sym.qd)
 
-    def inverse_dynamics(self, qdd: ca.SX | None = None) -> ca.SX:
-        return self.rnea(self.sym.qd, self.sym.qdd if qdd is None else qdd)
+    def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False) -> ca.SX:
+        """RNEA plus the actuators' armature and friction (Coulomb as sign(qd), tanh(qd / eps) if ``smooth``)."""
+        qdd = self.sym.qdd if qdd is None else qdd
+        tau = self.rnea(self.sym.qd, qdd)
+        drive = self.drive.torque(self.sym.qd, qdd, smooth)
+        return tau if drive is None else tau + drive
 
     @cached_property
     def bias(self) -> ca.SX:
-        """C(q, qd) qd + g(q) = rnea(q, qd, 0)."""
-        return self.rnea(self.sym.qd, ca.SX.zeros(self.sym.nv, 1))
+        """C(q, qd) qd + g(q) = rnea(q, qd, 0), plus the smooth friction: what forward dynamics subtracts."""
+        zero = ca.SX.zeros(self.sym.nv, 1)
+        tau = self.rnea(self.sym.qd, zero)
+        drive = self.drive.torque(self.sym.qd, zero, smooth=True)
+        return tau if drive is None else tau + drive

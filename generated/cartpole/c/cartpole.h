@@ -28,6 +28,8 @@
 #include "cartpole_ode_rhs.h"
 #include "cartpole_ode_jac_x.h"
 #include "cartpole_ode_jac_u.h"
+#include "cartpole_regressor.h"
+#include "cartpole_base_regressor.h"
 #include "cartpole_rk4_step.h"
 #include "cartpole_ik_tcp.h"
 #include "cartpole_manipulability_tcp.h"

@@ -638,6 +638,81 @@ def ode_jac_u(x, u):
     return B
 
 
+def regressor(q, qd, qdd):
+    """Inertial-parameter regressor Y(q, qd, qdd) (2x26, row-major): inverse_dynamics = Y pi, pi = per body (cart, pole) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (first moment and inertia about the body origin, body axes: Pinocchio's toDynamicParameters), then per joint coordinate [armature, viscous, coulomb] (columns qdd, qd, sign(qd)); pi's names and the model's values in manifest.json (regressor_parameters).
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out Y [2x26]
+    22 ops: 11 mul, 7 add, 0 div, 2 trig, 2 other
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    batch = _batch(q, qd, qdd)
+    t0 = jnp.cos(q[..., 1])
+    t1 = t0 * qdd[..., 0]
+    t2 = jnp.sin(q[..., 1])
+    t3 = 9.81 * t2
+    t4 = t1 - t3
+    t5 = t0 * t4
+    t6 = t2 * qdd[..., 0]
+    t7 = 9.81 * t0
+    t8 = t6 + t7
+    t9 = t2 * t8
+    t10 = t5 + t9
+    t11 = qd[..., 1] * qd[..., 1]
+    t12 = t0 * t11
+    t13 = t2 * qdd[..., 1]
+    t14 = t12 + t13
+    t15 = -t14
+    t16 = -t8
+    t17 = t0 * qdd[..., 1]
+    t18 = t2 * t11
+    t19 = t17 - t18
+    t20 = jnp.sign(qd[..., 0])
+    t21 = jnp.sign(qd[..., 1])
+    Y = _assemble([qdd[..., 0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t10, t15, 0.0, t19, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[..., 0], qd[..., 0], t20, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t16, 0.0, t4, 0.0, 0.0, qdd[..., 1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[..., 1], qd[..., 1], t21], batch).reshape(batch + (2, 26))
+    return Y
+
+
+def base_regressor(q, qd, qdd):
+    """Base regressor Y_b(q, qd, qdd) (2x8, row-major): the 8 independent columns of regressor, so that inverse_dynamics = Y_b pi_b with the base parameters pi_b = pi_1 + beta pi_2 (the parameters of those columns plus the others regrouped into them, Gautier's QR); names, values, columns and combinations in manifest.json (base_parameters).
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out Y_b [2x8]
+    19 ops: 9 mul, 6 add, 0 div, 2 trig, 2 other
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    batch = _batch(q, qd, qdd)
+    t0 = jnp.cos(q[..., 1])
+    t1 = qd[..., 1] * qd[..., 1]
+    t2 = t0 * t1
+    t3 = jnp.sin(q[..., 1])
+    t4 = t3 * qdd[..., 1]
+    t5 = t2 + t4
+    t6 = -t5
+    t7 = t3 * qdd[..., 0]
+    t8 = 9.81 * t0
+    t9 = t7 + t8
+    t10 = -t9
+    t11 = t0 * qdd[..., 1]
+    t12 = t3 * t1
+    t13 = t11 - t12
+    t14 = t0 * qdd[..., 0]
+    t15 = 9.81 * t3
+    t16 = t14 - t15
+    t17 = jnp.sign(qd[..., 0])
+    t18 = jnp.sign(qd[..., 1])
+    Y_b = _assemble([qdd[..., 0], t6, t13, 0.0, qd[..., 0], t17, 0.0, 0.0, 0.0, t10, t16, qdd[..., 1], 0.0, 0.0, qd[..., 1], t18], batch).reshape(batch + (2, 8))
+    return Y_b
+
+
 def rk4_step(x, u, dt):
     """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
 

@@ -54,6 +54,10 @@ def _batch(entries, shape, dims):
     return np.ascontiguousarray(np.moveaxis(out, 0, -1)).reshape(shape + dims)
 
 
+def _sign(x):
+    return float((x > 0) - (x < 0))
+
+
 # ---- templates/python/support/ik.py: the same in every generated module ----
 # Levenberg-Marquardt inverse kinematics over n joints (as derive.ik, method "lm", and the C
 # derive_ik.h): the same in every generated module, which passes its limits, caps and
@@ -993,6 +997,109 @@ def ode_jac_u(x, u):
     if shape is None:
         return np.array(_B).reshape(4, 2)
     return _batch(_B, shape, (4, 2))
+
+
+def regressor(q, qd, qdd):
+    """Inertial-parameter regressor Y(q, qd, qdd) (2x26, row-major): inverse_dynamics = Y pi, pi = per body (cart, pole) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (first moment and inertia about the body origin, body axes: Pinocchio's toDynamicParameters), then per joint coordinate [armature, viscous, coulomb] (columns qdd, qd, sign(qd)); pi's names and the model's values in manifest.json (regressor_parameters).
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out Y [2x26]
+    22 ops: 11 mul, 7 add, 0 div, 2 trig, 2 other
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    if q.ndim == qd.ndim == qdd.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        cos, sign, sin = math.cos, _sign, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        cos, sign, sin = np.cos, np.sign, np.sin
+    t0 = cos(q[1])
+    t1 = t0 * qdd[0]
+    t2 = sin(q[1])
+    t3 = 9.81 * t2
+    t1 = t1 - t3
+    t3 = t0 * t1
+    t4 = t2 * qdd[0]
+    t5 = 9.81 * t0
+    t4 = t4 + t5
+    t5 = t2 * t4
+    t3 = t3 + t5
+    t5 = qd[1] * qd[1]
+    t6 = t0 * t5
+    t7 = t2 * qdd[1]
+    t6 = t6 + t7
+    t6 = -t6
+    t4 = -t4
+    t0 = t0 * qdd[1]
+    t2 = t2 * t5
+    t0 = t0 - t2
+    t2 = sign(qd[0])
+    t5 = sign(qd[1])
+    _Y = (qdd[0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t3, t6, 0.0, t0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[0], qd[0], t2, 0.0, 0.0, 0.0,
+          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t4, 0.0, t1, 0.0, 0.0, qdd[1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[1], qd[1], t5)
+    if shape is None:
+        return np.array(_Y).reshape(2, 26)
+    return _batch(_Y, shape, (2, 26))
+
+
+def base_regressor(q, qd, qdd):
+    """Base regressor Y_b(q, qd, qdd) (2x8, row-major): the 8 independent columns of regressor, so that inverse_dynamics = Y_b pi_b with the base parameters pi_b = pi_1 + beta pi_2 (the parameters of those columns plus the others regrouped into them, Gautier's QR); names, values, columns and combinations in manifest.json (base_parameters).
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out Y_b [2x8]
+    19 ops: 9 mul, 6 add, 0 div, 2 trig, 2 other
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    if q.ndim == qd.ndim == qdd.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        cos, sign, sin = math.cos, _sign, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        cos, sign, sin = np.cos, np.sign, np.sin
+    t0 = cos(q[1])
+    t1 = qd[1] * qd[1]
+    t2 = t0 * t1
+    t3 = sin(q[1])
+    t4 = t3 * qdd[1]
+    t2 = t2 + t4
+    t2 = -t2
+    t4 = t3 * qdd[0]
+    t5 = 9.81 * t0
+    t4 = t4 + t5
+    t4 = -t4
+    t5 = t0 * qdd[1]
+    t1 = t3 * t1
+    t1 = t5 - t1
+    t0 = t0 * qdd[0]
+    t3 = 9.81 * t3
+    t0 = t0 - t3
+    t3 = sign(qd[0])
+    t5 = sign(qd[1])
+    _Y_b = (qdd[0], t2, t1, 0.0, qd[0], t3, 0.0, 0.0,
+            0.0, t4, t0, qdd[1], 0.0, 0.0, qd[1], t5)
+    if shape is None:
+        return np.array(_Y_b).reshape(2, 8)
+    return _batch(_Y_b, shape, (2, 8))
 
 
 def rk4_step(x, u, dt):

@@ -34,6 +34,8 @@
 #include "pendulum_ode_rhs.h"
 #include "pendulum_ode_jac_x.h"
 #include "pendulum_ode_jac_u.h"
+#include "pendulum_regressor.h"
+#include "pendulum_base_regressor.h"
 #include "pendulum_rk4_step.h"
 #include "pendulum_ik_tcp.h"
 

@@ -586,6 +586,58 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     return B
 
 
+def regressor(q, qd, qdd, p=DEFAULT_P):
+    """Inertial-parameter regressor Y(q, qd, qdd) (1x13, row-major): inverse_dynamics = Y pi, pi = per body (rod) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (first moment and inertia about the body origin, body axes: Pinocchio's toDynamicParameters), then per joint coordinate [armature, viscous, coulomb] (columns qdd, qd, sign(qd)); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out Y [1x13]
+    7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    qdd = _input(qdd, 1, "qdd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = t0 * p[..., 5]
+    t2 = -t1
+    t3 = jnp.sin(q[..., 0])
+    t4 = t3 * p[..., 5]
+    t5 = -t4
+    t6 = jnp.sign(qd[..., 0])
+    Y = _assemble([0.0, t2, 0.0, t5, 0.0, 0.0, qdd[..., 0], 0.0, 0.0, 0.0, qdd[..., 0], qd[..., 0], t6], batch).reshape(batch + (1, 13))
+    return Y
+
+
+def base_regressor(q, qd, qdd, p=DEFAULT_P):
+    """Base regressor Y_b(q, qd, qdd) (1x5, row-major): the 5 independent columns of regressor, so that inverse_dynamics = Y_b pi_b with the base parameters pi_b = pi_1 + beta pi_2 (the parameters of those columns plus the others regrouped into them, Gautier's QR); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out Y_b [1x5]
+    7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    qdd = _input(qdd, 1, "qdd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = t0 * p[..., 5]
+    t2 = -t1
+    t3 = jnp.sin(q[..., 0])
+    t4 = t3 * p[..., 5]
+    t5 = -t4
+    t6 = jnp.sign(qd[..., 0])
+    Y_b = _assemble([t2, t5, qdd[..., 0], qd[..., 0], t6], batch).reshape(batch + (1, 5))
+    return Y_b
+
+
 def rk4_step(x, u, dt, p=DEFAULT_P):
     """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
 

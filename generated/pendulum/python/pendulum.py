@@ -54,6 +54,10 @@ def _batch(entries, shape, dims):
     return np.ascontiguousarray(np.moveaxis(out, 0, -1)).reshape(shape + dims)
 
 
+def _sign(x):
+    return float((x > 0) - (x < 0))
+
+
 # ---- templates/python/support/ik.py: the same in every generated module ----
 # Levenberg-Marquardt inverse kinematics over n joints (as derive.ik, method "lm", and the C
 # derive_ik.h): the same in every generated module, which passes its limits, caps and
@@ -948,6 +952,88 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     if shape is None:
         return np.array(_B)
     return _batch(_B, shape, (2,))
+
+
+def regressor(q, qd, qdd, p=DEFAULT_P):
+    """Inertial-parameter regressor Y(q, qd, qdd) (1x13, row-major): inverse_dynamics = Y pi, pi = per body (rod) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (first moment and inertia about the body origin, body axes: Pinocchio's toDynamicParameters), then per joint coordinate [armature, viscous, coulomb] (columns qdd, qd, sign(qd)); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out Y [1x13]
+    7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    qdd = _array(qdd, 1, "qdd")
+    p = _array(p, 6, "p")
+    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        p = p.tolist()
+        cos, sign, sin = math.cos, _sign, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        p = _columns(p)
+        cos, sign, sin = np.cos, np.sign, np.sin
+    t0 = cos(q[0])
+    t0 = t0 * p[5]
+    t0 = -t0
+    t1 = sin(q[0])
+    t1 = t1 * p[5]
+    t1 = -t1
+    t2 = sign(qd[0])
+    _Y = (0.0, t0, 0.0, t1, 0.0, 0.0, qdd[0], 0.0, 0.0, 0.0, qdd[0], qd[0], t2)
+    if shape is None:
+        return np.array(_Y).reshape(1, 13)
+    return _batch(_Y, shape, (1, 13))
+
+
+def base_regressor(q, qd, qdd, p=DEFAULT_P):
+    """Base regressor Y_b(q, qd, qdd) (1x5, row-major): the 5 independent columns of regressor, so that inverse_dynamics = Y_b pi_b with the base parameters pi_b = pi_1 + beta pi_2 (the parameters of those columns plus the others regrouped into them, Gautier's QR); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out Y_b [1x5]
+    7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    qdd = _array(qdd, 1, "qdd")
+    p = _array(p, 6, "p")
+    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        p = p.tolist()
+        cos, sign, sin = math.cos, _sign, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        p = _columns(p)
+        cos, sign, sin = np.cos, np.sign, np.sin
+    t0 = cos(q[0])
+    t0 = t0 * p[5]
+    t0 = -t0
+    t1 = sin(q[0])
+    t1 = t1 * p[5]
+    t1 = -t1
+    t2 = sign(qd[0])
+    _Y_b = (t0, t1, qdd[0], qd[0], t2)
+    if shape is None:
+        return np.array(_Y_b).reshape(1, 5)
+    return _batch(_Y_b, shape, (1, 5))
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

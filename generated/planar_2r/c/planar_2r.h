@@ -33,6 +33,8 @@
 #include "planar_2r_ode_rhs.h"
 #include "planar_2r_ode_jac_x.h"
 #include "planar_2r_ode_jac_u.h"
+#include "planar_2r_regressor.h"
+#include "planar_2r_base_regressor.h"
 #include "planar_2r_rk4_step.h"
 #include "planar_2r_ik_tcp.h"
 #include "planar_2r_manipulability_tcp.h"

@@ -1274,6 +1274,117 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     return B
 
 
+def regressor(q, qd, qdd, p=DEFAULT_P):
+    """Inertial-parameter regressor Y(q, qd, qdd) (2x26, row-major): inverse_dynamics = Y pi, pi = per body (link1_dh, link2_dh) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (first moment and inertia about the body origin, body axes: Pinocchio's toDynamicParameters), then per joint coordinate [armature, viscous, coulomb] (columns qdd, qd, sign(qd)); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out Y [2x26]
+    38 ops: 18 mul, 14 add, 0 div, 4 trig, 2 other
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = t0 * p[..., 4]
+    t2 = jnp.sin(q[..., 0])
+    t3 = t2 * p[..., 4]
+    t4 = -t3
+    t5 = jnp.sin(q[..., 1])
+    t6 = t5 * p[..., 0]
+    t7 = jnp.cos(q[..., 1])
+    t8 = qd[..., 0] * p[..., 0]
+    t9 = qd[..., 0] * t8
+    t10 = t3 - t9
+    t11 = t7 * t10
+    t12 = qdd[..., 0] * p[..., 0]
+    t13 = t1 + t12
+    t14 = t5 * t13
+    t15 = t11 + t14
+    t16 = t6 * t15
+    t17 = t7 * p[..., 0]
+    t18 = t7 * t13
+    t19 = t5 * t10
+    t20 = t18 - t19
+    t21 = t17 * t20
+    t22 = t16 + t21
+    t23 = qdd[..., 0] + qdd[..., 1]
+    t24 = t17 * t23
+    t25 = qd[..., 0] + qd[..., 1]
+    t26 = t25 * t25
+    t27 = t6 * t26
+    t28 = t24 - t27
+    t29 = t20 + t28
+    t30 = t6 * t23
+    t31 = t17 * t26
+    t32 = t30 + t31
+    t33 = t15 + t32
+    t34 = -t33
+    t35 = -t15
+    t36 = jnp.sign(qd[..., 0])
+    t37 = jnp.sign(qd[..., 1])
+    Y = _assemble([0.0, t1, t4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[..., 0], t22, t29, t34, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t23, qdd[..., 0], qd[..., 0], t36, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t20, t35, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t23, 0.0, 0.0, 0.0, qdd[..., 1], qd[..., 1], t37], batch).reshape(batch + (2, 26))
+    return Y
+
+
+def base_regressor(q, qd, qdd, p=DEFAULT_P):
+    """Base regressor Y_b(q, qd, qdd) (2x11, row-major): the 11 independent columns of regressor, so that inverse_dynamics = Y_b pi_b with the base parameters pi_b = pi_1 + beta pi_2 (the parameters of those columns plus the others regrouped into them, Gautier's QR); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out Y_b [2x11]
+    35 ops: 16 mul, 13 add, 0 div, 4 trig, 2 other
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = t0 * p[..., 4]
+    t2 = jnp.sin(q[..., 0])
+    t3 = t2 * p[..., 4]
+    t4 = -t3
+    t5 = jnp.cos(q[..., 1])
+    t6 = qdd[..., 0] * p[..., 0]
+    t7 = t1 + t6
+    t8 = t5 * t7
+    t9 = jnp.sin(q[..., 1])
+    t10 = qd[..., 0] * p[..., 0]
+    t11 = qd[..., 0] * t10
+    t12 = t3 - t11
+    t13 = t9 * t12
+    t14 = t8 - t13
+    t15 = t5 * p[..., 0]
+    t16 = qdd[..., 0] + qdd[..., 1]
+    t17 = t15 * t16
+    t18 = t9 * p[..., 0]
+    t19 = qd[..., 0] + qd[..., 1]
+    t20 = t19 * t19
+    t21 = t18 * t20
+    t22 = t17 - t21
+    t23 = t14 + t22
+    t24 = t5 * t12
+    t25 = t9 * t7
+    t26 = t24 + t25
+    t27 = t18 * t16
+    t28 = t15 * t20
+    t29 = t27 + t28
+    t30 = t26 + t29
+    t31 = -t30
+    t32 = -t26
+    t33 = jnp.sign(qd[..., 0])
+    t34 = jnp.sign(qd[..., 1])
+    Y_b = _assemble([t1, t4, qdd[..., 0], t23, t31, t16, qd[..., 0], t33, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t14, t32, t16, 0.0, 0.0, qdd[..., 1], qd[..., 1], t34], batch).reshape(batch + (2, 11))
+    return Y_b
+
+
 def rk4_step(x, u, dt, p=DEFAULT_P):
     """One classical Runge-Kutta step of x' = f(x, u) with u held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs.
 

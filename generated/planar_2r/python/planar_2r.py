@@ -54,6 +54,10 @@ def _batch(entries, shape, dims):
     return np.ascontiguousarray(np.moveaxis(out, 0, -1)).reshape(shape + dims)
 
 
+def _sign(x):
+    return float((x > 0) - (x < 0))
+
+
 # ---- templates/python/support/ik.py: the same in every generated module ----
 # Levenberg-Marquardt inverse kinematics over n joints (as derive.ik, method "lm", and the C
 # derive_ik.h): the same in every generated module, which passes its limits, caps and
@@ -1665,6 +1669,149 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     if shape is None:
         return np.array(_B).reshape(4, 2)
     return _batch(_B, shape, (4, 2))
+
+
+def regressor(q, qd, qdd, p=DEFAULT_P):
+    """Inertial-parameter regressor Y(q, qd, qdd) (2x26, row-major): inverse_dynamics = Y pi, pi = per body (link1_dh, link2_dh) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] (first moment and inertia about the body origin, body axes: Pinocchio's toDynamicParameters), then per joint coordinate [armature, viscous, coulomb] (columns qdd, qd, sign(qd)); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out Y [2x26]
+    38 ops: 18 mul, 14 add, 0 div, 4 trig, 2 other
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    p = _array(p, 5, "p")
+    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        p = p.tolist()
+        cos, sign, sin = math.cos, _sign, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        p = _columns(p)
+        cos, sign, sin = np.cos, np.sign, np.sin
+    t0 = cos(q[0])
+    t0 = t0 * p[4]
+    t1 = sin(q[0])
+    t1 = t1 * p[4]
+    t2 = -t1
+    t3 = sin(q[1])
+    t4 = t3 * p[0]
+    t5 = cos(q[1])
+    t6 = qd[0] * p[0]
+    t6 = qd[0] * t6
+    t1 = t1 - t6
+    t6 = t5 * t1
+    t7 = qdd[0] * p[0]
+    t7 = t0 + t7
+    t8 = t3 * t7
+    t6 = t6 + t8
+    t8 = t4 * t6
+    t9 = t5 * p[0]
+    t5 = t5 * t7
+    t1 = t3 * t1
+    t1 = t5 - t1
+    t3 = t9 * t1
+    t3 = t8 + t3
+    t5 = qdd[0] + qdd[1]
+    t7 = t9 * t5
+    t8 = qd[0] + qd[1]
+    t8 = t8 * t8
+    t10 = t4 * t8
+    t7 = t7 - t10
+    t7 = t1 + t7
+    t4 = t4 * t5
+    t8 = t9 * t8
+    t4 = t4 + t8
+    t4 = t6 + t4
+    t4 = -t4
+    t6 = -t6
+    t8 = sign(qd[0])
+    t9 = sign(qd[1])
+    _Y = (0.0, t0, t2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[0], t3, t7, t4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t5, qdd[0], qd[0], t8, 0.0, 0.0, 0.0,
+          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t1, t6, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t5, 0.0, 0.0, 0.0, qdd[1], qd[1], t9)
+    if shape is None:
+        return np.array(_Y).reshape(2, 26)
+    return _batch(_Y, shape, (2, 26))
+
+
+def base_regressor(q, qd, qdd, p=DEFAULT_P):
+    """Base regressor Y_b(q, qd, qdd) (2x11, row-major): the 11 independent columns of regressor, so that inverse_dynamics = Y_b pi_b with the base parameters pi_b = pi_1 + beta pi_2 (the parameters of those columns plus the others regrouped into them, Gautier's QR); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out Y_b [2x11]
+    35 ops: 16 mul, 13 add, 0 div, 4 trig, 2 other
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    p = _array(p, 5, "p")
+    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
+        shape = None
+        q = q.tolist()
+        qd = qd.tolist()
+        qdd = qdd.tolist()
+        p = p.tolist()
+        cos, sign, sin = math.cos, _sign, math.sin
+    else:  # a batch: numpy arrays of the broadcast batch shape
+        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
+        q = _columns(q)
+        qd = _columns(qd)
+        qdd = _columns(qdd)
+        p = _columns(p)
+        cos, sign, sin = np.cos, np.sign, np.sin
+    t0 = cos(q[0])
+    t0 = t0 * p[4]
+    t1 = sin(q[0])
+    t1 = t1 * p[4]
+    t2 = -t1
+    t3 = cos(q[1])
+    t4 = qdd[0] * p[0]
+    t4 = t0 + t4
+    t5 = t3 * t4
+    t6 = sin(q[1])
+    t7 = qd[0] * p[0]
+    t7 = qd[0] * t7
+    t1 = t1 - t7
+    t7 = t6 * t1
+    t5 = t5 - t7
+    t7 = t3 * p[0]
+    t8 = qdd[0] + qdd[1]
+    t9 = t7 * t8
+    t10 = t6 * p[0]
+    t11 = qd[0] + qd[1]
+    t11 = t11 * t11
+    t12 = t10 * t11
+    t9 = t9 - t12
+    t9 = t5 + t9
+    t1 = t3 * t1
+    t3 = t6 * t4
+    t1 = t1 + t3
+    t3 = t10 * t8
+    t4 = t7 * t11
+    t3 = t3 + t4
+    t3 = t1 + t3
+    t3 = -t3
+    t1 = -t1
+    t4 = sign(qd[0])
+    t6 = sign(qd[1])
+    _Y_b = (t0, t2, qdd[0], t9, t3, t8, qd[0], t4, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, t5, t1, t8, 0.0, 0.0, qdd[1], qd[1], t6)
+    if shape is None:
+        return np.array(_Y_b).reshape(2, 11)
+    return _batch(_Y_b, shape, (2, 11))
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

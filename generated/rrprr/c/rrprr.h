@@ -31,6 +31,8 @@
 #include "rrprr_ode_rhs.h"
 #include "rrprr_ode_jac_x.h"
 #include "rrprr_ode_jac_u.h"
+#include "rrprr_regressor.h"
+#include "rrprr_base_regressor.h"
 #include "rrprr_rk4_step.h"
 #include "rrprr_ik_tcp.h"
 #include "rrprr_manipulability_tcp.h"

@@ -63,4 +63,7 @@
 #define DERIVE_FMAX fmax
 #endif
 
+/* sign(x): -1, 0 or 1 (Coulomb friction) */
+#define DERIVE_SIGN(x) ((DERIVE_REAL)(((x) > 0) - ((x) < 0)))
+
 #endif /* DERIVE_REAL_H */

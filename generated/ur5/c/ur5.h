@@ -40,6 +40,8 @@
 #include "ur5_ode_rhs.h"
 #include "ur5_ode_jac_x.h"
 #include "ur5_ode_jac_u.h"
+#include "ur5_regressor.h"
+#include "ur5_base_regressor.h"
 #include "ur5_rk4_step.h"
 #include "ur5_ik_tcp.h"
 #include "ur5_manipulability_tcp.h"

@@ -8,7 +8,8 @@ from derive.codegen.backends.base import ExpressionPrinter, float_literal
 class CPrinter(ExpressionPrinter):
     FUNCS = {"sin": "DERIVE_SIN", "cos": "DERIVE_COS", "tan": "DERIVE_TAN", "sqrt": "DERIVE_SQRT",
              "exp": "DERIVE_EXP", "log": "DERIVE_LOG", "fabs": "DERIVE_FABS", "asin": "DERIVE_ASIN",
-             "acos": "DERIVE_ACOS", "atan": "DERIVE_ATAN", "tanh": "DERIVE_TANH"}
+             "acos": "DERIVE_ACOS", "atan": "DERIVE_ATAN", "tanh": "DERIVE_TANH",
+             "sign": "DERIVE_SIGN"}
     BINFUNCS = {"pow": "DERIVE_POW", "atan2": "DERIVE_ATAN2", "fmin": "DERIVE_FMIN", "fmax": "DERIVE_FMAX"}
     ONE = "DERIVE_LIT(1.0)"
 

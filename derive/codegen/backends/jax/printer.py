@@ -12,7 +12,7 @@ from derive.codegen.backends.base import ExpressionPrinter, float_literal
 class JaxPrinter(ExpressionPrinter):
     FUNCS = {"sin": "jnp.sin", "cos": "jnp.cos", "tan": "jnp.tan", "sqrt": "jnp.sqrt", "exp": "jnp.exp",
              "log": "jnp.log", "fabs": "jnp.abs", "asin": "jnp.arcsin", "acos": "jnp.arccos", "atan": "jnp.arctan",
-             "tanh": "jnp.tanh"}
+             "tanh": "jnp.tanh", "sign": "jnp.sign"}
     BINFUNCS = {"pow": "jnp.power", "atan2": "jnp.arctan2", "fmin": "jnp.minimum", "fmax": "jnp.maximum"}
 
     def element(self, array: str, index: int) -> str:

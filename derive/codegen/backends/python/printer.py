@@ -19,19 +19,20 @@ from derive.codegen.program import Program
 
 
 class PythonPrinter(ExpressionPrinter):
-    FUNCS = {k: f"math.{k}" for k in ("sin", "cos", "tan", "sqrt", "exp", "log", "fabs", "asin", "acos", "atan", "tanh")}
+    FUNCS = {**{k: f"math.{k}" for k in ("sin", "cos", "tan", "sqrt", "exp", "log", "fabs", "asin", "acos", "atan", "tanh")},
+             "sign": "_sign"}
     BINFUNCS = {"pow": "math.pow", "atan2": "math.atan2", "fmin": "min", "fmax": "max"}
 
     def const(self, x: float) -> str:
         return float_literal(x) if x >= 0 else f"({float_literal(x)})"
 
 
-SCALAR = {**{k: f"math.{k}" for k in PythonPrinter.FUNCS}, "pow": "math.pow", "atan2": "math.atan2",
-          "fmin": "min", "fmax": "max"}
+SCALAR = {**{k: f"math.{k}" for k in PythonPrinter.FUNCS if k != "sign"}, "sign": "_sign", "pow": "math.pow",
+          "atan2": "math.atan2", "fmin": "min", "fmax": "max"}
 """Function name in the printed body -> its one-state binding: the math module on Python floats,
 which is what the C code calls too (the same libm), and Python's min and max."""
 
-BATCH = {"sin": "np.sin", "cos": "np.cos", "sqrt": "np.sqrt", "fabs": "np.fabs",
+BATCH = {"sin": "np.sin", "cos": "np.cos", "sqrt": "np.sqrt", "fabs": "np.fabs", "sign": "np.sign",
          **{k: f"_batch_{k}" for k in ("tan", "exp", "log", "asin", "acos", "atan", "tanh", "pow", "atan2", "fmin", "fmax")}}
 """Function name in the printed body -> its batch binding. numpy's sin and cos on float64 call the
 same libm as math.sin and math.cos, and sqrt and fabs are exact: those are numpy ufuncs. numpy's
@@ -49,6 +50,7 @@ BATCH_DEFINITIONS = {
     "atan2": "_batch_atan2 = _elementwise(math.atan2, 2)",
     "fmin": "def _batch_fmin(a, b):\n    return np.where(b < a, b, a)",
     "fmax": "def _batch_fmax(a, b):\n    return np.where(b > a, b, a)",
+    "sign": "def _sign(x):\n    return float((x > 0) - (x < 0))",  # the one-state sign (np.sign for a batch): -1, 0 or 1
 }
 """Module-level definitions of the ``_batch_<name>`` functions of :data:`BATCH` (only those used)."""
 

@@ -1,0 +1,125 @@
+"""Identification commands: ``derive identify ROBOT DATA.csv`` and ``derive excite ROBOT``.
+
+    derive excite panda                       optimised excitation: excite_out/panda/excitation.csv and .png
+    derive identify panda data.csv            base parameters, std devs, residuals; panda_identified.yaml
+    derive --models panda_identified.yaml generate      the identified robot's code
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import casadi as ca
+import numpy as np
+
+from derive.description.files import load_yaml, read_text
+from derive.description.model import default_models_path, load_robot, parse_robot
+from derive.description.urdf import dump_entry
+from derive.errors import DeriveError
+from derive.plot.excite import plot_excitation
+from derive.solvers.excite import check_options, excite
+from derive.solvers.identify import identified_entry, identify, read_measurements
+from derive.symbolic.base_parameters import base_parameters
+from derive.symbolic.dynamics import NewtonEuler
+from derive.symbolic.regressor import Regressor
+from derive.symbolic.symbols import make_symbols
+
+
+def add_parser(sub) -> None:
+    i = sub.add_parser("identify", help="identify the base dynamic parameters from measured q, (qd, qdd,) tau",
+                       description="Weighted least squares of the base parameters (Gautier's numerical QR) on a CSV "
+                                   "with columns t, q_<c>..., [qd_<c>..., qdd_<c>...,] tau_<c>... (trajopt's and "
+                                   "excite's CSV; missing qd and qdd are filtered and differentiated from q). Prints "
+                                   "each base parameter with its standard deviation, the condition number and the "
+                                   "torque residual per joint, and writes the robot with the identified values as a "
+                                   "models file that `derive --models FILE generate` uses.")
+    i.add_argument("robot_name", metavar="ROBOT")
+    i.add_argument("data", metavar="DATA.csv")
+    i.add_argument("--physical", action="store_true",
+                   help="physically consistent standard parameters (pseudo-inertia LMI per body, actuators >= 0)")
+    i.add_argument("--out", metavar="MODELS", help="models file to write (default ./<robot>_identified.yaml)")
+    i.add_argument("--name", help="name of the identified robot (default <robot>_identified)")
+    i.set_defaults(func=cmd_identify)
+
+    e = sub.add_parser("excite", help="an excitation trajectory for identification (Fourier series, min cond)",
+                       description="A periodic finite Fourier series per coordinate whose coefficients minimise the "
+                                   "condition number of the stacked base regressor within the position, velocity, "
+                                   "acceleration (2x the velocity limit per s) and effort limits; writes the CSV a "
+                                   "controller can play (t, q, qd, qdd, tau) and a plot.")
+    e.add_argument("robot_name", metavar="ROBOT")
+    e.add_argument("--period", type=float, default=10.0, help="period T in s (default 10)")
+    e.add_argument("--harmonics", type=int, default=5, help="Fourier harmonics per coordinate (default 5)")
+    e.add_argument("--samples", type=int, default=100, help="samples of one period in the objective (default 100)")
+    e.add_argument("--seed", type=int, default=0, help="seed of the random start (default 0)")
+    e.add_argument("--iterations", type=int, default=200, help="SLSQP iterations at most (default 200)")
+    e.add_argument("--out", help="output folder (default ./excite_out/<robot>/)")
+    e.set_defaults(func=cmd_excite)
+
+
+def regressor_of(robot) -> tuple[Regressor, object]:
+    """The symbolic regressor of ``robot`` and its base parameters."""
+    reg = Regressor(NewtonEuler(robot, make_symbols(robot)))
+    return reg, base_parameters(robot, regressor=reg)
+
+
+def cmd_identify(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    data = read_measurements(args.data, list(robot.velocity_names))
+    if robot.floating and data.q.shape[1] != robot.nq:
+        raise DeriveError(f"identify {robot.name}: floating bases are not supported by the CSV reader yet")
+    print(f"identifying {robot.name} from {data.q.shape[0]} samples of {args.data} ...", file=sys.stderr, flush=True)
+    reg, bp = regressor_of(robot)
+    s = reg.sym
+    pi0 = np.asarray(reg.values(), dtype=float)
+    Ysx = reg.matrix
+    if s.p.numel():  # the model's parameter values: pi carries the inertial ones, p the lengths
+        Ysx = ca.substitute(Ysx, s.p, ca.DM([robot.parameter_defaults[n] for n in s.parameter_names]))
+    f = ca.Function("Y", [s.q, s.qd, s.qdd], [Ysx]).map(data.q.shape[0])
+
+    def Y(q, qd, qdd):  # (N, nv, n): the map's blocks side by side, one per sample
+        out = np.array(f(q.T, qd.T, qdd.T))
+        return out.reshape(robot.nv, q.shape[0], -1).transpose(1, 0, 2)
+
+    result = identify(Y, bp.K, list(bp.names), pi0, data, physical=args.physical, bodies=len(reg.bodies))
+    print(result.report(list(robot.velocity_names)))
+    name = args.name or f"{robot.name}_identified"
+    out = Path(args.out) if args.out else Path(f"{robot.name}_identified.yaml")
+    source_path = Path(args.models) if args.models else default_models_path()
+    raw = load_yaml(read_text(source_path, "models file"), f"models file {source_path}")["robots"][robot.name]
+    command = f"derive identify {robot.name} {args.data}" + (" --physical" if args.physical else "")
+    entry = identified_entry(raw, robot, list(reg.names), result.standard, f"{args.data}, identified by `{command}`")
+    try:
+        parse_robot(name, entry)
+    except DeriveError as exc:
+        raise DeriveError(f"identify {robot.name}: the standard parameters reproducing the identified base "
+                          f"parameters are not physical ({exc}); rerun with --physical") from None
+    out.parent.mkdir(parents=True, exist_ok=True)
+    tmp = out.with_name(f".{out.name}.tmp")
+    tmp.write_text("robots:\n" + dump_entry(name, entry, generator="derive identify"))
+    tmp.replace(out)
+    print(f"wrote {out} (robot '{name}'): derive --models {out} generate")
+    return 0
+
+
+def cmd_excite(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    check_options(robot.name, args.period, args.harmonics, args.samples)
+    robot.require_fixed_base("derive excite")
+    print(f"deriving the base regressor of {robot.name} ...", file=sys.stderr, flush=True)
+    reg, bp = regressor_of(robot)
+    s = reg.sym
+    p = ca.DM([robot.parameter_defaults[n] for n in s.parameter_names]) if s.p.numel() else None
+    Yb = reg.matrix[:, list(bp.columns)]
+    tau_id = NewtonEuler(robot, s).inverse_dynamics()
+    if p is not None:
+        Yb, tau_id = ca.substitute(Yb, s.p, p), ca.substitute(tau_id, s.p, p)
+    ex = excite(robot, Yb, s.q, s.qd, s.qdd, tau_id, period=args.period, harmonics=args.harmonics,
+                samples=args.samples, seed=args.seed, max_iterations=args.iterations,
+                log=lambda m: print(m, file=sys.stderr, flush=True))
+    out = Path(args.out) if args.out else Path("excite_out") / robot.name
+    csv = ex.write_csv(out / "excitation.csv")
+    print(ex.summary())
+    png = plot_excitation(ex, out / "excitation.png")
+    print(f"wrote {csv} and {png}")
+    return 0 if ex.limits_ok else 1
