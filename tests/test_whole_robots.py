@@ -280,7 +280,9 @@ def test_fixed_base_com_and_accelerations_against_pinocchio(tmp_path):
 
 
 def imported(rel: str, floating: bool = True):
-    name, entry = import_urdf_named("example-robot-data:" + rel, floating=floating)
+    """A URDF imported whole; without its <dynamics> friction, which Pinocchio's rnea and aba leave out
+    (tests/test_actuators.py and tests/test_urdf_trees.py check the friction)."""
+    name, entry = import_urdf_named("example-robot-data:" + rel, floating=floating, friction=False)
     return parse_robot(name, entry)
 
 
