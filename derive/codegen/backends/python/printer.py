@@ -3,11 +3,13 @@
 :class:`PythonPrinter`: plain float arithmetic with the math module on scalars (``math.sin(q[0])``),
 for straight-line code on one state (the toy list backend of the tests prints with it).
 
-:class:`BatchPrinter`: the numpy module's printer. It prints the same arithmetic in the same order,
-but calls each function by its bare name (``sin(q[0])``, ``fmin(a, b)``), which the generated
-function binds once per call to the scalar version (Python floats, the math module) or to the
-array version (numpy arrays of a batch of states); see :data:`SCALAR` and :data:`BATCH`. Its
-temporaries are reused once dead, so that a batch keeps only the live intermediate arrays.
+:class:`StatePrinter`: the numpy module's one-state body. It prints the same arithmetic, but calls
+each function by its bare name (``sin(q[0])``, ``fmin(a, b)``), which the generated function binds
+once per call to the math module (:data:`SCALAR`), and reuses a temporary's variable once it is dead.
+
+:class:`ChunkPrinter`: the numpy module's batch body, the same instructions in the same order as
+ufunc calls that write into preallocated rows (``multiply(t1, qd_0, t2)``: ``t2 = t1 * qd[0]`` for
+every state of a chunk at once); see :data:`UFUNCS` and :data:`BATCH`.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import heapq
 
 from derive.codegen.backends.base import ExpressionPrinter, float_literal
-from derive.codegen.program import Program
+from derive.codegen.program import Instr, Program
 
 
 class PythonPrinter(ExpressionPrinter):
@@ -28,33 +30,89 @@ class PythonPrinter(ExpressionPrinter):
 
 SCALAR = {**{k: f"math.{k}" for k in PythonPrinter.FUNCS}, "pow": "math.pow", "atan2": "math.atan2",
           "fmin": "min", "fmax": "max"}
-"""Function name in the printed body -> its one-state binding: the math module on Python floats,
-which is what the C code calls too (the same libm), and Python's min and max."""
+"""Function name in the one-state body -> its binding: the math module on Python floats, which is
+what the C code calls too (the same libm), and Python's min and max."""
 
-BATCH = {"sin": "np.sin", "cos": "np.cos", "sqrt": "np.sqrt", "fabs": "np.fabs",
-         **{k: f"_batch_{k}" for k in ("tan", "exp", "log", "asin", "acos", "atan", "tanh", "pow", "atan2", "fmin", "fmax")}}
-"""Function name in the printed body -> its batch binding. numpy's sin and cos on float64 call the
-same libm as math.sin and math.cos, and sqrt and fabs are exact: those are numpy ufuncs. numpy's
-SIMD tan, exp, log, asin, acos, atan, tanh, arctan2 and power differ from libm in the last bit on
-some inputs and machines (AVX-512 builds), so those map the math function over the batch
-(``_batch_<name>``, defined in the module: bit for bit the one-state result, at Python speed per
-element; the robots' bodies call none of them today); ``fmin``/``fmax`` are ``np.where`` with
-Python's min/max rule (the first argument unless the second is strictly smaller/larger), NaN and
-signed zeros included. Where the scalar version raises (math.sqrt of a negative number, a float
-division by zero in the body), numpy gives nan or inf with a RuntimeWarning."""
+UFUNCS = {"add": "add", "sub": "subtract", "mul": "multiply", "div": "divide", "neg": "negative",
+          "sq": "multiply", "twice": "add", "inv": "divide", "sin": "sin", "cos": "cos", "sqrt": "sqrt",
+          "fabs": "fabs"}
+"""Instruction -> the numpy ufunc of the batch body (``sq`` is ``multiply(a, a, out)``, ``twice``
+``add(a, a, out)``, ``inv`` ``divide(1.0, a, out)``). IEEE arithmetic, sqrt and fabs are exact, and
+numpy's sin and cos on float64 call the same libm as math.sin and math.cos: bit for bit the
+one-state results."""
+
+BATCH = {k: f"_batch_{k}" for k in ("tan", "exp", "log", "asin", "acos", "atan", "tanh", "pow", "atan2", "fmin", "fmax")}
+"""The other functions of the batch body, each called as ``_batch_<name>(*args, out)`` (defined in
+the module, only those used: :data:`BATCH_DEFINITIONS`). numpy's SIMD tan, exp, log, asin, acos,
+atan, tanh, arctan2 and power differ from libm in the last bit on some inputs and machines
+(AVX-512 builds), so those map the math function over the chunk (bit for bit the one-state result,
+at Python speed per element; the robots' bodies call none of them today); ``fmin``/``fmax`` are
+``np.where`` with Python's min/max rule (the first argument unless the second is strictly
+smaller/larger), NaN and signed zeros included. Where the one-state body raises (math.sqrt of a
+negative number, a float division by zero), numpy gives nan or inf with a RuntimeWarning."""
 
 BATCH_DEFINITIONS = {
     **{k: f"_batch_{k} = _elementwise(math.{k}, 1)" for k in ("tan", "exp", "log", "asin", "acos", "atan", "tanh")},
     "pow": "_batch_pow = _elementwise(math.pow, 2)",
     "atan2": "_batch_atan2 = _elementwise(math.atan2, 2)",
-    "fmin": "def _batch_fmin(a, b):\n    return np.where(b < a, b, a)",
-    "fmax": "def _batch_fmax(a, b):\n    return np.where(b > a, b, a)",
+    "fmin": "def _batch_fmin(a, b, out):\n    np.copyto(out, np.where(b < a, b, a))",
+    "fmax": "def _batch_fmax(a, b, out):\n    np.copyto(out, np.where(b > a, b, a))",
 }
 """Module-level definitions of the ``_batch_<name>`` functions of :data:`BATCH` (only those used)."""
 
 
-class BatchPrinter(PythonPrinter):
-    """One body for one state and for a batch: functions by bare name, temporaries reused once dead."""
+def functions(prog: Program) -> list[str]:
+    """The function names a body calls (math functions, min and max), sorted."""
+    names = {**PythonPrinter.FUNCS, **PythonPrinter.BINFUNCS}
+    return sorted({ins.op for ins in prog.body if ins.op in names})
+
+
+def _last_reads(prog: Program) -> dict[int, int]:
+    """Temporary -> the index of the last instruction reading it; one an output reads: len(body)."""
+    last: dict[int, int] = {}
+    for j, ins in enumerate(prog.body):
+        for a in ins.args:
+            if a[0] == "t":
+                last[a[1]] = j
+    for _, _, a in prog.results:
+        if a[0] == "t":
+            last[a[1]] = len(prog.body)
+    return last
+
+
+def _allocate(prog: Program, fixed=(), in_place: bool = False) -> tuple[dict[int, int], int]:
+    """Give each SSA temporary not in ``fixed`` a variable: with ``in_place``, that of its first
+    argument dying there if any (the ufunc then writes where it reads), else the lowest one free
+    (dead) when it is assigned; a temporary an output reads stays live to the end. Returns
+    (temporary -> variable, the number of variables)."""
+    last = _last_reads(prog)
+    free: list[int] = []
+    count = 0
+    register: dict[int, int] = {}
+    for j, ins in enumerate(prog.body):
+        dying = []  # args dying here free their variables before the result takes one
+        for a in ins.args:
+            if a[0] == "t" and last[a[1]] == j and a[1] in register and register[a[1]] not in dying:
+                dying.append(register[a[1]])
+                heapq.heappush(free, register[a[1]])
+        if j in fixed:
+            continue
+        if in_place and dying:
+            register[j] = dying[0]
+            free.remove(dying[0])
+            heapq.heapify(free)
+        elif free:
+            register[j] = heapq.heappop(free)
+        else:
+            register[j] = count
+            count += 1
+        if j not in last:  # never read: its variable is free again at once
+            heapq.heappush(free, register[j])
+    return register, count
+
+
+class StatePrinter(PythonPrinter):
+    """The one-state body: functions by bare name, temporaries' variables reused once dead."""
 
     FUNCS = {k: k for k in PythonPrinter.FUNCS}
     BINFUNCS = {k: k for k in PythonPrinter.BINFUNCS}
@@ -63,46 +121,12 @@ class BatchPrinter(PythonPrinter):
         super().__init__(input_names)
         self.register: dict[int, int] = {}
 
-    def allocate(self, prog: Program) -> int:
-        """Give each SSA temporary a variable: the lowest one free (dead) when it is assigned; a
-        temporary an output reads stays live to the end. Returns the number of variables."""
-        last: dict[int, int] = {}
-        for j, ins in enumerate(prog.body):
-            for a in ins.args:
-                if a[0] == "t":
-                    last[a[1]] = j
-        end = len(prog.body)
-        for _, _, a in prog.results:
-            if a[0] == "t":
-                last[a[1]] = end
-        free: list[int] = []
-        count = 0
-        self.register = {}
-        for j, ins in enumerate(prog.body):
-            for a in set(ins.args):  # args dying here free their variables before the result takes one
-                if a[0] == "t" and last[a[1]] == j:
-                    heapq.heappush(free, self.register[a[1]])
-            if free:
-                self.register[j] = heapq.heappop(free)
-            else:
-                self.register[j] = count
-                count += 1
-            if j not in last:  # never read: its variable is free again at once
-                heapq.heappush(free, self.register[j])
-        return count
-
     def temporary(self, k: int) -> str:
         return f"t{self.register[k]}"
 
     def body(self, prog: Program) -> list[tuple[str, str]]:
-        self.allocate(prog)
+        self.register, _ = _allocate(prog)
         return super().body(prog)
-
-    @staticmethod
-    def functions(prog: Program) -> list[str]:
-        """The function names the body calls, sorted."""
-        names = {**PythonPrinter.FUNCS, **PythonPrinter.BINFUNCS}
-        return sorted({ins.op for ins in prog.body if ins.op in names})
 
     def outputs(self, prog: Program, sizes: list[int]) -> list[list[str]]:
         """Each output's entries (row-major) as operands: a temporary, an input element or a constant."""
@@ -110,3 +134,75 @@ class BatchPrinter(PythonPrinter):
         for oi, idx, a in prog.results:
             entries[oi][idx] = self.operand(a)
         return entries
+
+
+class ChunkPrinter:
+    """The batch body: each instruction one ufunc call on rows of a chunk of states, in place.
+
+    Every number of the body is a row (one float per state of the chunk): the inputs' elements
+    ``<input>_<i>``, the temporaries ``t<k>`` (a row reused once its temporary is dead) and the
+    output entries ``<output>_<i>`` (row-major, each output's entries in order), into which the
+    instruction computing an entry writes directly. Constants are the 0-d arrays ``k<i>`` (numpy
+    broadcasts them, faster than a Python float). An entry that is an input element, a constant or
+    a temporary already in another entry is copied after the arithmetic.
+    """
+
+    def __init__(self, inputs: list[tuple[str, int]], outputs: list[tuple[str, int]]):
+        names = {n for n, _ in inputs}
+        self.inputs = [f"{n}_{i}" for n, size in inputs for i in range(size)]
+        self.offsets = {}
+        self.outputs: list[str] = []
+        for k, (n, size) in enumerate(outputs):
+            self.offsets[k] = len(self.outputs)
+            prefix = f"{n}_out" if n in names else n
+            self.outputs += [f"{prefix}_{i}" for i in range(size)]
+        self.input_offsets = {}
+        row = 0
+        for k, (_, size) in enumerate(inputs):
+            self.input_offsets[k] = row
+            row += size
+        self.constants: dict[str, int] = {}  # literal -> index
+        self.output_row: dict[int, int] = {}  # temporary -> the output entry it is written to
+        self.register: dict[int, int] = {}
+        self.registers = 0
+
+    def operand(self, a: tuple) -> str:
+        if a[0] == "t":
+            k = a[1]
+            return self.outputs[self.output_row[k]] if k in self.output_row else f"t{self.register[k]}"
+        if a[0] == "in":
+            return self.inputs[self.input_offsets[a[1]] + a[2]]
+        return f"k{self.constants.setdefault(float_literal(a[1]), len(self.constants))}"
+
+    def call(self, ins: Instr, out: str) -> str:
+        a = [self.operand(x) for x in ins.args]
+        op = ins.op
+        if op in ("sq", "twice"):
+            a = [a[0], a[0]]
+        elif op == "inv":
+            a = [self.operand(("c", 1.0)), a[0]]
+        name = UFUNCS.get(op) or BATCH.get(op)
+        if name is None:
+            raise NotImplementedError(op)
+        return f"{name}({', '.join(a)}, {out})"
+
+    def body(self, prog: Program) -> list[str]:
+        """The statements: the instructions' ufunc calls, then the copies into output entries."""
+        for oi, idx, a in prog.results:
+            if a[0] == "t" and a[1] not in self.output_row:
+                self.output_row[a[1]] = self.offsets[oi] + idx
+        self.register, self.registers = _allocate(prog, self.output_row, in_place=True)
+        lines = [self.call(ins, self.operand(("t", j))) for j, ins in enumerate(prog.body)]
+        for oi, idx, a in prog.results:
+            row = self.offsets[oi] + idx
+            if not (a[0] == "t" and self.output_row[a[1]] == row):
+                lines.append(f"copyto({self.outputs[row]}, {self.operand(a)})")
+        return lines
+
+    def functions(self, lines: list[str]) -> list[str]:
+        """The numpy functions the statements call (bound to local names in the body), sorted."""
+        return sorted({line.split("(", 1)[0] for line in lines} - set(BATCH.values()))
+
+    def constant_values(self) -> list[str]:
+        """The constants' literals, in the order of their names k0, k1, ..."""
+        return sorted(self.constants, key=self.constants.get)
