@@ -102,7 +102,9 @@ def _chunk_context(name: str, prog, inputs: list[tuple[str, int]], outputs: list
                                          _unpack(chunk.outputs, "y"),
                                          _unpack([f"k{k}" for k in range(len(chunk.constants))], f"_{name}_constants"))
                        if line],
-            "literals": _wrap(chunk.constant_values())}
+            "literals": _wrap(chunk.constant_values()),
+            "fixed": [_wrap([f"{j}: {v}" for j, v in sorted(fixed.items())]) for fixed in chunk.fixed]
+            if any(chunk.fixed) else None}
 
 
 class PythonBackend(Backend):

@@ -141,35 +141,30 @@ class ChunkPrinter:
 
     Every number of the body is a row (one float per state of the chunk): the inputs' elements
     ``<input>_<i>``, the temporaries ``t<k>`` (a row reused once its temporary is dead) and the
-    output entries ``<output>_<i>`` (row-major, each output's entries in order), into which the
-    instruction computing an entry writes directly. Constants are the 0-d arrays ``k<i>`` (numpy
-    broadcasts them, faster than a Python float). An entry that is an input element, a constant or
-    a temporary already in another entry is copied after the arithmetic.
+    output entries ``<output>_<i>`` (i the row-major index), into which the instruction computing
+    an entry writes directly. Constants are the 0-d arrays ``k<i>`` (numpy broadcasts them, faster
+    than a Python float). An entry that is an input element or a temporary already in another entry
+    is copied after the arithmetic; a constant entry has no row (:attr:`fixed`: ``_batch`` writes
+    it once into the output).
     """
 
     def __init__(self, inputs: list[tuple[str, int]], outputs: list[tuple[str, int]]):
         names = {n for n, _ in inputs}
         self.inputs = [f"{n}_{i}" for n, size in inputs for i in range(size)]
-        self.offsets = {}
-        self.outputs: list[str] = []
-        for k, (n, size) in enumerate(outputs):
-            self.offsets[k] = len(self.outputs)
-            prefix = f"{n}_out" if n in names else n
-            self.outputs += [f"{prefix}_{i}" for i in range(size)]
-        self.input_offsets = {}
-        row = 0
-        for k, (_, size) in enumerate(inputs):
-            self.input_offsets[k] = row
-            row += size
+        self.input_offsets = [sum(size for _, size in inputs[:k]) for k in range(len(inputs))]
+        self.prefixes = [f"{n}_out" if n in names else n for n, _ in outputs]
+        self.sizes = [size for _, size in outputs]
+        self.outputs: list[str] = []  # the rows of the computed output entries, in order
+        self.fixed: list[dict[int, str]] = [{} for _ in outputs]  # per output: constant entry -> literal
         self.constants: dict[str, int] = {}  # literal -> index
-        self.output_row: dict[int, int] = {}  # temporary -> the output entry it is written to
+        self.output_row: dict[int, str] = {}  # temporary -> the output entry's row it is written to
         self.register: dict[int, int] = {}
         self.registers = 0
 
     def operand(self, a: tuple) -> str:
         if a[0] == "t":
             k = a[1]
-            return self.outputs[self.output_row[k]] if k in self.output_row else f"t{self.register[k]}"
+            return self.output_row[k] if k in self.output_row else f"t{self.register[k]}"
         if a[0] == "in":
             return self.inputs[self.input_offsets[a[1]] + a[2]]
         return f"k{self.constants.setdefault(float_literal(a[1]), len(self.constants))}"
@@ -188,16 +183,22 @@ class ChunkPrinter:
 
     def body(self, prog: Program) -> list[str]:
         """The statements: the instructions' ufunc calls, then the copies into output entries."""
-        for oi, idx, a in prog.results:
+        entries = {(oi, idx): ("c", 0.0) for oi, size in enumerate(self.sizes) for idx in range(size)}
+        entries.update(((oi, idx), a) for oi, idx, a in prog.results)
+        copies = []
+        for (oi, idx), a in sorted(entries.items()):
+            if a[0] == "c":
+                self.fixed[oi][idx] = float_literal(a[1])
+                continue
+            row = f"{self.prefixes[oi]}_{idx}"
+            self.outputs.append(row)
             if a[0] == "t" and a[1] not in self.output_row:
-                self.output_row[a[1]] = self.offsets[oi] + idx
+                self.output_row[a[1]] = row
+            else:
+                copies.append((row, a))
         self.register, self.registers = _allocate(prog, self.output_row, in_place=True)
         lines = [self.call(ins, self.operand(("t", j))) for j, ins in enumerate(prog.body)]
-        for oi, idx, a in prog.results:
-            row = self.offsets[oi] + idx
-            if not (a[0] == "t" and self.output_row[a[1]] == row):
-                lines.append(f"copyto({self.outputs[row]}, {self.operand(a)})")
-        return lines
+        return lines + [f"copyto({row}, {self.operand(a)})" for row, a in copies]
 
     def functions(self, lines: list[str]) -> list[str]:
         """The numpy functions the statements call (bound to local names in the body), sorted."""
