@@ -26,7 +26,7 @@ from __future__ import annotations
 import jinja2
 
 from derive.codegen.backends.base import Backend, Function, RobotContext, float_literal
-from derive.codegen.backends.python.printer import BATCH_DEFINITIONS, SCALAR, ChunkPrinter, StatePrinter, functions
+from derive.codegen.backends.python.printer import BATCH_DEFINITIONS, PARAMETERS, SCALAR, ChunkPrinter, StatePrinter, functions
 
 SUPPORT = {"ik": ("ik.py",), "manipulability": ("manipulability.py",)}
 """Fixed algorithms -> the sections (templates/python/support/) inserted verbatim into the module."""
@@ -94,11 +94,17 @@ def _chunk_context(name: str, prog, inputs: list[tuple[str, int]], outputs: list
     """What the template needs of a function's batch body ``_<name>_chunk`` and its ``_batch`` call."""
     chunk = ChunkPrinter(inputs, outputs)
     statements = chunk.body(prog)
-    names = [n for n, _ in inputs]
-    return {"registers": chunk.registers, "body": statements, "ufuncs": chunk.functions(statements),
-            "inputs": "(" + ", ".join(names) + ("," if len(names) == 1 else "") + ")",
-            "dims": "(" + " ".join(f"{d}," for d in dims) + ")",
-            "unpack": [line for line in (_unpack(chunk.inputs, "x"), _unpack([f"t{k}" for k in range(chunk.registers)], "t"),
+    names = [n for n, size in inputs if size > 0]
+    if any(n in PARAMETERS for n in names[:-1]):  # _batch: the parameters' temporaries shared iff the last input is
+        raise ValueError(f"{name}: the parameters must be the last input, got {names}")
+    options = ([f"fixed=_{name}_fixed"] if any(chunk.fixed) else []) + \
+        ([f"pure={chunk.pure_registers}"] if chunk.pure_registers else [])
+    return {"call": f"_batch(_{name}_chunk, ({', '.join(names)}{',' if len(names) == 1 else ''}), {chunk.registers}, "
+                    f"({' '.join(f'{d},' for d in dims)})" + "".join(f", {o}" for o in options) + ")",
+            "body": statements, "ufuncs": chunk.functions(statements),
+            "unpack": [line for line in (_unpack([r for rows in chunk.inputs for r in rows], "x"),
+                                         _unpack([f"t{k}" for k in range(chunk.registers)], "t"),
+                                         _unpack([f"s{k}" for k in range(chunk.pure_registers)], "s"),
                                          _unpack(chunk.outputs, "y"),
                                          _unpack([f"k{k}" for k in range(len(chunk.constants))], f"_{name}_constants"))
                        if line],
@@ -126,8 +132,8 @@ class PythonBackend(Backend):
         return {**fn.common, "py_args": _args(spec), "py_template": None, "py_loops": False,
                 "py_inputs": inputs, "py_body": body, "py_outputs": outputs, "py_functions": called,
                 "py_scalar": [SCALAR[k] for k in called],
-                "py_chunk": _chunk_context(spec.short_name, prog, inputs, list(zip([n for n, _ in spec.outputs], sizes)),
-                                           [o["dims_text"] for o in outputs]),
+                "py_chunk": _chunk_context(spec.short_name, prog, [(n, x.shape[0]) for n, x in spec.inputs],
+                                           list(zip([n for n, _ in spec.outputs], sizes)), [o["dims_text"] for o in outputs]),
                 "py_returns": _returns([(n, e.shape) for n, e in spec.outputs])}
 
     def template_context(self, fn: Function) -> dict:

@@ -61,6 +61,10 @@ BATCH_DEFINITIONS = {
 """Module-level definitions of the ``_batch_<name>`` functions of :data:`BATCH` (only those used)."""
 
 
+PARAMETERS = {"p"}
+"""Inputs that are parameters: one array for all states, most often (the default p)."""
+
+
 def functions(prog: Program) -> list[str]:
     """The function names a body calls (math functions, min and max), sorted."""
     names = {**PythonPrinter.FUNCS, **PythonPrinter.BINFUNCS}
@@ -143,15 +147,18 @@ class ChunkPrinter:
     ``<input>_<i>``, the temporaries ``t<k>`` (a row reused once its temporary is dead) and the
     output entries ``<output>_<i>`` (i the row-major index), into which the instruction computing
     an entry writes directly. Constants are the 0-d arrays ``k<i>`` (numpy broadcasts them, faster
-    than a Python float). An entry that is an input element or a temporary already in another entry
-    is copied after the arithmetic; a constant entry has no row (:attr:`fixed`: ``_batch`` writes
-    it once into the output).
+    than a Python float). A temporary computed from the parameters alone (the input ``p``: see
+    :data:`PARAMETERS`) and constants is an ``s<k>`` instead, which ``_batch`` makes a 0-d array,
+    computed once per chunk, when one p serves all states (a 1-D p, the default), and a row
+    otherwise; an input shared by all states is a 0-d array too. An entry that is an input element,
+    a parameters' temporary or a temporary already in another entry is copied after the arithmetic;
+    a constant entry has no row (:attr:`fixed`: ``_batch`` writes it once into the output).
     """
 
     def __init__(self, inputs: list[tuple[str, int]], outputs: list[tuple[str, int]]):
         names = {n for n, _ in inputs}
-        self.inputs = [f"{n}_{i}" for n, size in inputs for i in range(size)]
-        self.input_offsets = [sum(size for _, size in inputs[:k]) for k in range(len(inputs))]
+        self.inputs = [[f"{n}_{i}" for i in range(size)] for n, size in inputs]
+        self.parameters = {k for k, (n, _) in enumerate(inputs) if n in PARAMETERS}
         self.prefixes = [f"{n}_out" if n in names else n for n, _ in outputs]
         self.sizes = [size for _, size in outputs]
         self.outputs: list[str] = []  # the rows of the computed output entries, in order
@@ -160,13 +167,19 @@ class ChunkPrinter:
         self.output_row: dict[int, str] = {}  # temporary -> the output entry's row it is written to
         self.register: dict[int, int] = {}
         self.registers = 0
+        self.pure: set[int] = set()  # the temporaries of the parameters alone
+        self.pure_registers = 0
+
+    def variable(self, k: int) -> str:
+        if k in self.output_row:
+            return self.output_row[k]
+        return f"{'s' if k in self.pure else 't'}{self.register[k]}"
 
     def operand(self, a: tuple) -> str:
         if a[0] == "t":
-            k = a[1]
-            return self.output_row[k] if k in self.output_row else f"t{self.register[k]}"
+            return self.variable(a[1])
         if a[0] == "in":
-            return self.inputs[self.input_offsets[a[1]] + a[2]]
+            return self.inputs[a[1]][a[2]]
         return f"k{self.constants.setdefault(float_literal(a[1]), len(self.constants))}"
 
     def call(self, ins: Instr, out: str) -> str:
@@ -183,6 +196,10 @@ class ChunkPrinter:
 
     def body(self, prog: Program) -> list[str]:
         """The statements: the instructions' ufunc calls, then the copies into output entries."""
+        for j, ins in enumerate(prog.body):
+            if all(a[0] == "c" or (a[0] == "in" and a[1] in self.parameters) or (a[0] == "t" and a[1] in self.pure)
+                   for a in ins.args):
+                self.pure.add(j)
         entries = {(oi, idx): ("c", 0.0) for oi, size in enumerate(self.sizes) for idx in range(size)}
         entries.update(((oi, idx), a) for oi, idx, a in prog.results)
         copies = []
@@ -192,12 +209,15 @@ class ChunkPrinter:
                 continue
             row = f"{self.prefixes[oi]}_{idx}"
             self.outputs.append(row)
-            if a[0] == "t" and a[1] not in self.output_row:
+            if a[0] == "t" and a[1] not in self.output_row and a[1] not in self.pure:
                 self.output_row[a[1]] = row
             else:
                 copies.append((row, a))
-        self.register, self.registers = _allocate(prog, self.output_row, in_place=True)
-        lines = [self.call(ins, self.operand(("t", j))) for j, ins in enumerate(prog.body)]
+        others = set(range(len(prog.body))) - self.pure
+        registers, self.registers = _allocate(prog, self.pure | set(self.output_row), in_place=True)
+        pure, self.pure_registers = _allocate(prog, others, in_place=True)
+        self.register = {**registers, **pure}
+        lines = [self.call(ins, self.variable(j)) for j, ins in enumerate(prog.body)]
         return lines + [f"copyto({row}, {self.operand(a)})" for row, a in copies]
 
     def functions(self, lines: list[str]) -> list[str]:
