@@ -183,6 +183,31 @@ def test_one_p_broadcasts_against_a_batch(robot, generated):
         assert_bits(step[i, j], module.rk4_step(x[i, j], tau, [0.01], p1), "rk4_step with one dt")
 
 
+@pytest.mark.parametrize("robot", ["panda", "pendulum"])
+def test_a_batch_of_several_chunks_equals_the_states_one_by_one(robot, generated):
+    """A batch runs in chunks of at most _CHUNK states (one chunk in the batches above): with
+    chunks of 7, a batch (5, 10) of 50 states is 8 chunks, the last one shorter, and the outputs,
+    constant entries included, are still each state's bit for bit; one p for all states as well,
+    and a batch of one state (1, 1) (run as two copies of it)."""
+    module, manifest = load(generated, robot)
+    module._CHUNK = 7
+    rng = np.random.default_rng(19)
+    for fn in manifest["functions"]:
+        if fn["quantity"] == "ik":
+            continue
+        f = getattr(module, fn["python"]["function"])
+        for shape in ((5, 10), (1, 1)):
+            a = random_inputs(robot, module, fn, shape, rng)
+            if "p" in a:
+                a["p"] = a["p"].reshape(-1, a["p"].shape[-1])[0]
+            args = [a[i["name"]] for i in fn["inputs"]]
+            got = outputs(f(*args), fn)
+            want = per_state(f, [v if v.ndim > 1 else np.broadcast_to(v, shape + v.shape) for v in args], shape, fn)
+            for g, w, declared in zip(got, want, fn["python"]["returns"]):
+                assert g.shape == w.shape and g.flags.c_contiguous, fn["name"]
+                assert_bits(g, w, f"{fn['name']} batch {shape} in chunks of 7 -> {declared['name']}")
+
+
 def test_inputs_are_checked_and_a_number_is_one_element(generated):
     module, _ = load(generated, "planar_2r")
     with pytest.raises(ValueError, match="q must have 2 elements in its last axis, got shape \\(5, 3\\)"):

@@ -4,12 +4,13 @@ Do not edit: change models.yaml or derive, then run `make derive`.
 numpy only. Every function takes one state or a batch of states: an input of n elements is an
 array (..., n) with any leading batch shape, the batch shapes of the inputs broadcast against
 each other, and an output documented as shape s is
-returned as (..., *s), the whole batch computed in one call (numpy arrays, no Python loop per
-state). One state (1-D inputs; a number for an input of one element) returns exactly the shapes
-documented. A batch gives bit for bit the results of calling the function on each state alone;
-those are the C code's arithmetic, in the same order, on float64. Where one state raises (a
-division by zero, the square root of a negative number), a batch gives inf or nan with numpy's
-RuntimeWarning instead.
+returned as (..., *s), the whole batch computed in one call (numpy ufuncs on rows of up to
+_CHUNK states at a time, each function's ``_<name>_chunk``; no Python loop per state). One state
+(1-D inputs; a number for an input of one element) returns exactly the shapes documented. A
+batch gives bit for bit the results of calling the function on each state alone; those are the
+C code's arithmetic, in the same order, on float64. Where one state raises (a division by zero,
+the square root of a negative number), a batch gives inf or nan with numpy's RuntimeWarning
+instead.
 The exception: ik_tcp, iterative per state, solves a batch one state after the
 other in Python, with status an int array of the batch shape.
 Joints (q order): s, theta.
@@ -37,21 +38,90 @@ def _array(value, n, name):
     return v
 
 
-def _columns(v):
-    """An input of a batch, indexed by element: an input shared by all states (1-D) as its list of
-    floats, else an array (n, ...) whose row i holds element i of every state (contiguous)."""
-    if v.ndim == 1:
-        return v.tolist()
-    return np.ascontiguousarray(np.moveaxis(v, -1, 0))
+_CHUNK = 16384
+"""Most states per chunk of a batch: each ufunc call of a batch body works on one chunk's rows."""
+
+_FLOATS = 4_000_000
+"""Most floats per buffer of rows (30.5 MB): the C allocator reuses blocks under 32 MB from call to
+call, and maps (page-faults) larger ones anew each time."""
 
 
-def _batch(entries, shape, dims):
-    """A batch output (*shape, *dims) from its entries in row-major order: arrays of the batch
-    shape or broadcasting to it, and numbers."""
-    out = np.empty((len(entries),) + shape)
-    for i, e in enumerate(entries):
-        out[i] = e
-    return np.ascontiguousarray(np.moveaxis(out, 0, -1)).reshape(shape + dims)
+def _constants(*values):
+    """The constants of a batch body as 0-d float arrays (numpy broadcasts them faster than floats)."""
+    return tuple(np.array(v) for v in values)
+
+
+def _rows(count, size):
+    """An uninitialised float array (count, size) whose rows lie an odd number of 64-byte cache lines
+    apart: rows a multiple of 4096 bytes apart (size a power of 2) share the same cache sets, and
+    copying them transposed into the outputs would be several times slower."""
+    return np.empty((count, 8 * ((size + 7) // 8 | 1)))[:, :size]
+
+
+def _batch(chunk, inputs, registers, dims, fixed=None, pure=0):
+    """A function on a batch of states: the inputs (..., n_i) broadcast against each other, split
+    evenly into chunks of at most _CHUNK states (and _FLOATS floats per buffer), and chunk(x, t, s, y)
+    computing a chunk, each number a row (one float per state of the chunk):
+    x: the inputs' elements, a 0-d array for an input one for all states (1-D);
+    t: rows for the temporaries, registers of them;
+    s: pure rows for the temporaries of the parameters alone (the last input), 0-d arrays when
+    one p serves all states;
+    y: the output entries (the outputs in order, each row-major) but the constant ones, fixed
+    (per output, {row-major index: value}), written once.
+    Returns each output (*shape, *dims[k]); one output: the array itself."""
+    shape = np.broadcast_shapes(*(v.shape[:-1] for v in inputs))
+    n = math.prod(shape)
+    if n == 1:  # numpy's in-place ufuncs are several times slower on one element: the state twice
+        twice = _batch(chunk, [v if v.ndim == 1 else np.broadcast_to(v.reshape(-1), (2, v.size)) for v in inputs],
+                       registers, dims, fixed, pure)
+        outputs = [out[:1].reshape(shape + d) for out, d in zip(twice if len(dims) > 1 else (twice,), dims)]
+        return outputs[0] if len(outputs) == 1 else tuple(outputs)
+    rows = np.empty((sum(v.shape[-1] for v in inputs if v.ndim > 1), n))
+    elements, r = [], 0  # per input element: its row of rows or, one for all states, a 0-d array
+    for v in inputs:
+        k = v.shape[-1]
+        if v.ndim == 1:
+            elements += [v[i, ...] for i in range(k)]
+        else:
+            np.copyto(rows[r:r + k], (v if v.shape[:-1] == shape else np.broadcast_to(v, shape + (k,))).reshape(n, k).T)
+            elements += list(rows[r:r + k])
+            r += k
+    outputs = [np.empty((n, math.prod(d))) for d in dims]
+    runs = []  # [output, first entry, end, first row of y]: the computed entries, run by run
+    row = 0
+    for out, constant in zip(outputs, fixed or [{}] * len(dims)):
+        if not constant:
+            runs.append([out, 0, out.shape[1], row])
+            row += out.shape[1]
+            continue
+        if len(constant) * 4 > out.shape[1]:  # many: a pass writing every entry
+            out[...] = [constant.get(j, 0.0) for j in range(out.shape[1])]
+        else:  # few: one column each
+            for j, value in constant.items():
+                out[:, j] = value
+        for j in range(out.shape[1]):
+            if j in constant:
+                continue
+            if runs and runs[-1][0] is out and runs[-1][2] == j:
+                runs[-1][2] += 1
+            else:
+                runs.append([out, j, j + 1, row])
+            row += 1
+    shared = inputs[-1].ndim == 1
+    chunks = -(-n // min(_CHUNK, max(1, _FLOATS // max(registers, row, 0 if shared else pure, 1))))
+    size = -(-n // chunks) if n else 0
+    t, y = _rows(registers, size), _rows(row, size)
+    s = [np.empty(()) for _ in range(pure)] if shared else _rows(pure, size)
+    for start in range(0, n, size or 1):
+        stop = min(start + size, n)
+        if stop - start < size:  # the last chunk, shorter
+            t, y = t[:, :stop - start], y[:, :stop - start]
+            s = s if shared else s[:, :stop - start]
+        chunk([e[start:stop] if e.ndim else e for e in elements], t, s, y)
+        for out, first, end, r in runs:
+            np.copyto(out[start:stop, first:end], y[r:r + end - first].T)
+    outputs = [out.reshape(shape + d) for out, d in zip(outputs, dims)]
+    return outputs[0] if len(outputs) == 1 else tuple(outputs)
 
 
 def _sign(x):
@@ -216,14 +286,11 @@ def fk_tcp(q):
     5 ops: 0 mul, 3 add, 0 div, 2 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_tcp_chunk, (q,), 0, ((4, 4),), fixed=_fk_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t1 = sin(q[1])
     t2 = -t1
@@ -233,9 +300,27 @@ def fk_tcp(q):
           0.0, 1.0, 0.0, 0.0,
           t2, 0.0, t0, t4,
           0.0, 0.0, 0.0, 1.0)
-    if shape is None:
-        return np.array(_T).reshape(4, 4)
-    return _batch(_T, shape, (4, 4))
+    return np.array(_T).reshape(4, 4)
+
+
+_fk_tcp_fixed = (
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+)
+"""fk_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_tcp_chunk(x, t, s, y):
+    """fk_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, negative, sin, subtract = np.copyto, np.cos, np.negative, np.sin, np.subtract
+    q_0, q_1 = x
+    T_0, T_2, T_3, T_8, T_10, T_11 = y
+    cos(q_1, T_0)
+    sin(q_1, T_2)
+    negative(T_2, T_8)
+    subtract(q_0, T_2, T_3)
+    negative(T_0, T_11)
+    copyto(T_10, T_0)
 
 
 def jacobian_tcp(q):
@@ -246,14 +331,11 @@ def jacobian_tcp(q):
     6 ops: 0 mul, 4 add, 0 div, 2 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_jacobian_tcp_chunk, (q,), 1, ((6, 2),), fixed=_jacobian_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t0 = -t0
     t1 = sin(q[1])
@@ -266,9 +348,28 @@ def jacobian_tcp(q):
           0.0, 0.0,
           0.0, 1.0,
           0.0, 0.0)
-    if shape is None:
-        return np.array(_J).reshape(6, 2)
-    return _batch(_J, shape, (6, 2))
+    return np.array(_J).reshape(6, 2)
+
+
+_jacobian_tcp_fixed = (
+    {0: 1.0, 2: 0.0, 3: 0.0, 4: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 1.0, 10: 0.0, 11: 0.0},
+)
+"""jacobian_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _jacobian_tcp_chunk(x, t, s, y):
+    """jacobian_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    cos, negative, sin, subtract = np.cos, np.negative, np.sin, np.subtract
+    q_0, q_1 = x
+    t0, = t
+    J_1, J_5 = y
+    cos(q_1, t0)
+    negative(t0, J_1)
+    sin(q_1, t0)
+    subtract(q_0, t0, t0)
+    subtract(t0, q_0, t0)
+    negative(t0, J_5)
 
 
 def jdot_qd_tcp(q, qd):
@@ -281,16 +382,12 @@ def jdot_qd_tcp(q, qd):
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
-    if q.ndim == qd.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_jdot_qd_tcp_chunk, (q, qd), 1, ((6,),), fixed=_jdot_qd_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[1])
     t0 = t0 * qd[1]
     t0 = qd[1] * t0
@@ -301,9 +398,31 @@ def jdot_qd_tcp(q, qd):
     t1 = qd[1] * t1
     t1 = -t1
     _a = (t0, 0.0, t1, 0.0, 0.0, 0.0)
-    if shape is None:
-        return np.array(_a)
-    return _batch(_a, shape, (6,))
+    return np.array(_a)
+
+
+_jdot_qd_tcp_fixed = (
+    {1: 0.0, 3: 0.0, 4: 0.0, 5: 0.0},
+)
+"""jdot_qd_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _jdot_qd_tcp_chunk(x, t, s, y):
+    """jdot_qd_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    cos, multiply, negative, sin, subtract = np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1 = x
+    t0, = t
+    a_0, a_2 = y
+    sin(q_1, t0)
+    multiply(t0, qd_1, t0)
+    multiply(qd_1, t0, a_0)
+    cos(q_1, t0)
+    multiply(t0, qd_1, t0)
+    subtract(qd_0, t0, t0)
+    subtract(t0, qd_0, t0)
+    multiply(qd_1, t0, t0)
+    negative(t0, a_2)
 
 
 def frame_acceleration_tcp(q, qd, qdd):
@@ -318,18 +437,13 @@ def frame_acceleration_tcp(q, qd, qdd):
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
-    if q.ndim == qd.ndim == qdd.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 4, ((6,),), fixed=_frame_acceleration_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t1 = t0 * qdd[1]
     t1 = qdd[0] - t1
@@ -347,9 +461,39 @@ def frame_acceleration_tcp(q, qd, qdd):
     t0 = t2 + t0
     t0 = -t0
     _a = (t1, 0.0, t0, 0.0, qdd[1], 0.0)
-    if shape is None:
-        return np.array(_a)
-    return _batch(_a, shape, (6,))
+    return np.array(_a)
+
+
+_frame_acceleration_tcp_fixed = (
+    {1: 0.0, 3: 0.0, 5: 0.0},
+)
+"""frame_acceleration_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _frame_acceleration_tcp_chunk(x, t, s, y):
+    """frame_acceleration_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1 = x
+    t0, t1, t2, t3 = t
+    a_0, a_2, a_4 = y
+    cos(q_1, t0)
+    multiply(t0, qdd_1, t1)
+    subtract(qdd_0, t1, t1)
+    sin(q_1, t2)
+    multiply(t2, qd_1, t3)
+    multiply(qd_1, t3, t3)
+    add(t1, t3, a_0)
+    subtract(q_0, t2, t2)
+    subtract(t2, q_0, t2)
+    multiply(t2, qdd_1, t2)
+    multiply(t0, qd_1, t0)
+    subtract(qd_0, t0, t0)
+    subtract(t0, qd_0, t0)
+    multiply(qd_1, t0, t0)
+    add(t2, t0, t2)
+    negative(t2, a_2)
+    copyto(a_4, qdd_1)
 
 
 def fk_jacobian_tcp(q):
@@ -361,14 +505,11 @@ def fk_jacobian_tcp(q):
     7 ops: 0 mul, 5 add, 0 div, 2 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_jacobian_tcp_chunk, (q,), 1, ((4, 4), (6, 2),), fixed=_fk_jacobian_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t1 = sin(q[1])
     t2 = -t1
@@ -386,9 +527,32 @@ def fk_jacobian_tcp(q):
           0.0, 0.0,
           0.0, 1.0,
           0.0, 0.0)
-    if shape is None:
-        return np.array(_T).reshape(4, 4), np.array(_J).reshape(6, 2)
-    return _batch(_T, shape, (4, 4)), _batch(_J, shape, (6, 2))
+    return np.array(_T).reshape(4, 4), np.array(_J).reshape(6, 2)
+
+
+_fk_jacobian_tcp_fixed = (
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {0: 1.0, 2: 0.0, 3: 0.0, 4: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 1.0, 10: 0.0, 11: 0.0},
+)
+"""fk_jacobian_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_jacobian_tcp_chunk(x, t, s, y):
+    """fk_jacobian_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, negative, sin, subtract = np.copyto, np.cos, np.negative, np.sin, np.subtract
+    q_0, q_1 = x
+    t0, = t
+    T_0, T_2, T_3, T_8, T_10, T_11, J_1, J_5 = y
+    cos(q_1, T_0)
+    sin(q_1, T_2)
+    negative(T_2, T_8)
+    subtract(q_0, T_2, T_3)
+    negative(T_0, T_11)
+    subtract(T_3, q_0, t0)
+    negative(t0, J_5)
+    copyto(T_10, T_0)
+    copyto(J_1, T_11)
 
 
 def mass_matrix(q):
@@ -399,21 +563,39 @@ def mass_matrix(q):
     2 ops: 1 mul, 0 add, 0 div, 1 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos = math.cos
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos = np.cos
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_mass_matrix_chunk, (q,), 1, ((2, 2),), fixed=_mass_matrix_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos = math.cos
     t0 = cos(q[1])
     t0 = (-0.05) * t0
     _M = (1.1, t0,
           t0, 0.03333333333333333)
-    if shape is None:
-        return np.array(_M).reshape(2, 2)
-    return _batch(_M, shape, (2, 2))
+    return np.array(_M).reshape(2, 2)
+
+
+_mass_matrix_constants = _constants(
+    -0.05)
+
+
+_mass_matrix_fixed = (
+    {0: 1.1, 3: 0.03333333333333333},
+)
+"""mass_matrix's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _mass_matrix_chunk(x, t, s, y):
+    """mass_matrix on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, multiply = np.copyto, np.cos, np.multiply
+    q_0, q_1 = x
+    t0, = t
+    M_1, M_2 = y
+    k0, = _mass_matrix_constants
+    cos(q_1, t0)
+    multiply(k0, t0, M_1)
+    copyto(M_2, M_1)
 
 
 def coriolis_matrix(q, qd):
@@ -426,25 +608,43 @@ def coriolis_matrix(q, qd):
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
-    if q.ndim == qd.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        sin = math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        sin = np.sin
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_coriolis_matrix_chunk, (q, qd), 1, ((2, 2),), fixed=_coriolis_matrix_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    sin = math.sin
     t0 = sin(q[1])
     t0 = (-0.05) * t0
     t0 = t0 * qd[1]
     t0 = -t0
     _C = (0.0, t0,
           0.0, 0.0)
-    if shape is None:
-        return np.array(_C).reshape(2, 2)
-    return _batch(_C, shape, (2, 2))
+    return np.array(_C).reshape(2, 2)
+
+
+_coriolis_matrix_constants = _constants(
+    -0.05)
+
+
+_coriolis_matrix_fixed = (
+    {0: 0.0, 2: 0.0, 3: 0.0},
+)
+"""coriolis_matrix's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _coriolis_matrix_chunk(x, t, s, y):
+    """coriolis_matrix on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    multiply, negative, sin = np.multiply, np.negative, np.sin
+    q_0, q_1, qd_0, qd_1 = x
+    t0, = t
+    C_1, = y
+    k0, = _coriolis_matrix_constants
+    sin(q_1, t0)
+    multiply(k0, t0, t0)
+    multiply(t0, qd_1, t0)
+    negative(t0, C_1)
 
 
 def gravity(q):
@@ -455,14 +655,11 @@ def gravity(q):
     9 ops: 5 mul, 2 add, 0 div, 2 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_gravity_chunk, (q,), 4, ((2,),))
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[1])
     t1 = cos(q[1])
     t2 = 0.9810000000000001 * t1
@@ -473,9 +670,30 @@ def gravity(q):
     t0 = (-0.49050000000000005) * t0
     t0 = -t0
     _g = (t1, t0)
-    if shape is None:
-        return np.array(_g)
-    return _batch(_g, shape, (2,))
+    return np.array(_g)
+
+
+_gravity_constants = _constants(
+    0.9810000000000001, -0.49050000000000005)
+
+
+def _gravity_chunk(x, t, s, y):
+    """gravity on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    cos, multiply, negative, sin, subtract = np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1 = x
+    t0, t1, t2, t3 = t
+    g_0, g_1 = y
+    k0, k1 = _gravity_constants
+    sin(q_1, t0)
+    cos(q_1, t1)
+    multiply(k0, t1, t2)
+    multiply(t0, t2, t2)
+    multiply(k0, t0, t3)
+    multiply(t1, t3, t1)
+    subtract(t2, t1, g_0)
+    multiply(k1, t0, t0)
+    negative(t0, g_1)
 
 
 def inverse_dynamics(q, qd, qdd):
@@ -490,18 +708,13 @@ def inverse_dynamics(q, qd, qdd):
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
-    if q.ndim == qd.ndim == qdd.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_chunk, (q, qd, qdd), 5, ((2,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t1 = t0 * qdd[0]
     t2 = sin(q[1])
@@ -525,9 +738,43 @@ def inverse_dynamics(q, qd, qdd):
     t1 = (-0.05) * t1
     t1 = t2 + t1
     _tau = (t0, t1)
-    if shape is None:
-        return np.array(_tau)
-    return _batch(_tau, shape, (2,))
+    return np.array(_tau)
+
+
+_inverse_dynamics_constants = _constants(
+    9.81, 0.1, -0.05, 0.03333333333333333)
+
+
+def _inverse_dynamics_chunk(x, t, s, y):
+    """inverse_dynamics on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1 = x
+    t0, t1, t2, t3, t4 = t
+    tau_0, tau_1 = y
+    k0, k1, k2, k3 = _inverse_dynamics_constants
+    cos(q_1, t0)
+    multiply(t0, qdd_0, t1)
+    sin(q_1, t2)
+    multiply(k0, t2, t3)
+    subtract(t1, t3, t1)
+    multiply(k1, t1, t3)
+    multiply(k2, qdd_1, t4)
+    add(t3, t4, t3)
+    multiply(t0, t3, t3)
+    multiply(t2, qdd_0, t4)
+    multiply(k0, t0, t0)
+    add(t4, t0, t4)
+    multiply(k1, t4, t4)
+    multiply(k2, qd_1, t0)
+    multiply(qd_1, t0, t0)
+    subtract(t4, t0, t4)
+    multiply(t2, t4, t2)
+    add(t3, t2, t3)
+    add(qdd_0, t3, tau_0)
+    multiply(k3, qdd_1, t0)
+    multiply(k2, t1, t1)
+    add(t0, t1, tau_1)
 
 
 def forward_dynamics(q, qd, tau):
@@ -542,18 +789,13 @@ def forward_dynamics(q, qd, tau):
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     tau = _array(tau, 2, "tau")
-    if q.ndim == qd.ndim == tau.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        tau = tau.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        tau = _columns(tau)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_forward_dynamics_chunk, (q, qd, tau), 4, ((2,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    tau = tau.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[1])
     t1 = cos(q[1])
     t2 = 0.9810000000000001 * t1
@@ -578,9 +820,44 @@ def forward_dynamics(q, qd, tau):
     t1 = t1 * t0
     t1 = t3 - t1
     _qdd = (t1, t0)
-    if shape is None:
-        return np.array(_qdd)
-    return _batch(_qdd, shape, (2,))
+    return np.array(_qdd)
+
+
+_forward_dynamics_constants = _constants(
+    0.9810000000000001, -0.05, 1.1, -0.045454545454545456, -0.49050000000000005, 0.03333333333333333)
+
+
+def _forward_dynamics_chunk(x, t, s, y):
+    """forward_dynamics on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, tau_0, tau_1 = x
+    t0, t1, t2, t3 = t
+    qdd_0, qdd_1 = y
+    k0, k1, k2, k3, k4, k5 = _forward_dynamics_constants
+    sin(q_1, t0)
+    cos(q_1, t1)
+    multiply(k0, t1, t2)
+    multiply(k1, qd_1, t3)
+    multiply(qd_1, t3, t3)
+    subtract(t2, t3, t2)
+    multiply(t0, t2, t2)
+    multiply(k0, t0, t3)
+    multiply(t1, t3, t3)
+    subtract(t2, t3, t2)
+    subtract(tau_0, t2, t2)
+    divide(t2, k2, t3)
+    multiply(k3, t1, t1)
+    multiply(k4, t0, t0)
+    add(tau_1, t0, t0)
+    multiply(t1, t2, t2)
+    subtract(t0, t2, t0)
+    multiply(t1, t1, t2)
+    multiply(k2, t2, t2)
+    subtract(k5, t2, t2)
+    divide(t0, t2, qdd_1)
+    multiply(t1, qdd_1, t1)
+    subtract(t3, t1, qdd_0)
 
 
 def inverse_dynamics_fext(q, qd, qdd, w):
@@ -597,20 +874,14 @@ def inverse_dynamics_fext(q, qd, qdd, w):
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
     w = _array(w, 6, "w")
-    if q.ndim == qd.ndim == qdd.ndim == w.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        w = w.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], w.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        w = _columns(w)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w), 6, ((2,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    w = w.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t1 = t0 * qdd[0]
     t2 = sin(q[1])
@@ -642,9 +913,51 @@ def inverse_dynamics_fext(q, qd, qdd, w):
     t0 = w[4] - t0
     t0 = t1 - t0
     _tau = (t3, t0)
-    if shape is None:
-        return np.array(_tau)
-    return _batch(_tau, shape, (2,))
+    return np.array(_tau)
+
+
+_inverse_dynamics_fext_constants = _constants(
+    9.81, 0.1, -0.05, 0.03333333333333333)
+
+
+def _inverse_dynamics_fext_chunk(x, t, s, y):
+    """inverse_dynamics_fext on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, w_0, w_1, w_2, w_3, w_4, w_5 = x
+    t0, t1, t2, t3, t4, t5 = t
+    tau_0, tau_1 = y
+    k0, k1, k2, k3 = _inverse_dynamics_fext_constants
+    cos(q_1, t0)
+    multiply(t0, qdd_0, t1)
+    sin(q_1, t2)
+    multiply(k0, t2, t3)
+    subtract(t1, t3, t1)
+    multiply(k1, t1, t3)
+    multiply(k2, qdd_1, t4)
+    add(t3, t4, t3)
+    multiply(t0, t3, t3)
+    multiply(t2, qdd_0, t4)
+    multiply(k0, t0, t5)
+    add(t4, t5, t4)
+    multiply(k1, t4, t4)
+    multiply(k2, qd_1, t5)
+    multiply(qd_1, t5, t5)
+    subtract(t4, t5, t4)
+    multiply(t2, t4, t4)
+    add(t3, t4, t3)
+    add(qdd_0, t3, t3)
+    subtract(t3, w_0, tau_0)
+    multiply(k3, qdd_1, t3)
+    multiply(k2, t1, t1)
+    add(t3, t1, t3)
+    multiply(t0, w_0, t0)
+    subtract(q_0, t2, t2)
+    subtract(t2, q_0, t2)
+    multiply(t2, w_2, t2)
+    add(t0, t2, t0)
+    subtract(w_4, t0, t0)
+    subtract(t3, t0, tau_1)
 
 
 def forward_dynamics_fext(q, qd, tau, w):
@@ -661,20 +974,14 @@ def forward_dynamics_fext(q, qd, tau, w):
     qd = _array(qd, 2, "qd")
     tau = _array(tau, 2, "tau")
     w = _array(w, 6, "w")
-    if q.ndim == qd.ndim == tau.ndim == w.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        tau = tau.tolist()
-        w = w.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], w.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        tau = _columns(tau)
-        w = _columns(w)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w), 6, ((2,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    tau = tau.tolist()
+    w = w.tolist()
+    cos, sin = math.cos, math.sin
     t0 = tau[0] + w[0]
     t1 = sin(q[1])
     t2 = cos(q[1])
@@ -707,9 +1014,52 @@ def forward_dynamics_fext(q, qd, tau, w):
     t1 = t4 * t0
     t1 = t3 - t1
     _qdd = (t1, t0)
-    if shape is None:
-        return np.array(_qdd)
-    return _batch(_qdd, shape, (2,))
+    return np.array(_qdd)
+
+
+_forward_dynamics_fext_constants = _constants(
+    0.9810000000000001, -0.05, 1.1, -0.045454545454545456, -0.49050000000000005, 0.03333333333333333)
+
+
+def _forward_dynamics_fext_chunk(x, t, s, y):
+    """forward_dynamics_fext on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, tau_0, tau_1, w_0, w_1, w_2, w_3, w_4, w_5 = x
+    t0, t1, t2, t3, t4, t5 = t
+    qdd_0, qdd_1 = y
+    k0, k1, k2, k3, k4, k5 = _forward_dynamics_fext_constants
+    add(tau_0, w_0, t0)
+    sin(q_1, t1)
+    cos(q_1, t2)
+    multiply(k0, t2, t3)
+    multiply(k1, qd_1, t4)
+    multiply(qd_1, t4, t4)
+    subtract(t3, t4, t3)
+    multiply(t1, t3, t3)
+    multiply(k0, t1, t4)
+    multiply(t2, t4, t4)
+    subtract(t3, t4, t3)
+    subtract(t0, t3, t0)
+    divide(t0, k2, t3)
+    multiply(k3, t2, t4)
+    multiply(t2, w_0, t2)
+    subtract(q_0, t1, t5)
+    subtract(t5, q_0, t5)
+    multiply(t5, w_2, t5)
+    add(t2, t5, t2)
+    subtract(w_4, t2, t2)
+    add(tau_1, t2, t2)
+    multiply(k4, t1, t1)
+    add(t2, t1, t2)
+    multiply(t4, t0, t0)
+    subtract(t2, t0, t2)
+    multiply(t4, t4, t0)
+    multiply(k2, t0, t0)
+    subtract(k5, t0, t0)
+    divide(t2, t0, qdd_1)
+    multiply(t4, qdd_1, t4)
+    subtract(t3, t4, qdd_0)
 
 
 def com(q):
@@ -720,14 +1070,11 @@ def com(q):
     9 ops: 3 mul, 2 add, 2 div, 2 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_com_chunk, (q,), 2, ((3,),), fixed=_com_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
     t0 = 0.1 * q[0]
     t1 = sin(q[1])
     t1 = (-0.05) * t1
@@ -738,9 +1085,36 @@ def com(q):
     t1 = (-0.05) * t1
     t1 = t1 / 1.1
     _c = (t0, 0.0, t1)
-    if shape is None:
-        return np.array(_c)
-    return _batch(_c, shape, (3,))
+    return np.array(_c)
+
+
+_com_constants = _constants(
+    0.1, -0.05, 1.1)
+
+
+_com_fixed = (
+    {1: 0.0},
+)
+"""com's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _com_chunk(x, t, s, y):
+    """com on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin = np.add, np.cos, np.divide, np.multiply, np.sin
+    q_0, q_1 = x
+    t0, t1 = t
+    c_0, c_2 = y
+    k0, k1, k2 = _com_constants
+    multiply(k0, q_0, t0)
+    sin(q_1, t1)
+    multiply(k1, t1, t1)
+    add(t0, t1, t0)
+    add(q_0, t0, t0)
+    divide(t0, k2, c_0)
+    cos(q_1, t0)
+    multiply(k1, t0, t0)
+    divide(t0, k2, c_2)
 
 
 def com_jacobian(q):
@@ -751,14 +1125,11 @@ def com_jacobian(q):
     7 ops: 2 mul, 1 add, 2 div, 2 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_com_jacobian_chunk, (q,), 1, ((3, 2),), fixed=_com_jacobian_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t0 = (-0.05) * t0
     t0 = t0 / 1.1
@@ -769,9 +1140,34 @@ def com_jacobian(q):
     _J = (1.0, t0,
           0.0, 0.0,
           0.0, t1)
-    if shape is None:
-        return np.array(_J).reshape(3, 2)
-    return _batch(_J, shape, (3, 2))
+    return np.array(_J).reshape(3, 2)
+
+
+_com_jacobian_constants = _constants(
+    -0.05, 1.1)
+
+
+_com_jacobian_fixed = (
+    {0: 1.0, 2: 0.0, 3: 0.0, 4: 0.0},
+)
+"""com_jacobian's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _com_jacobian_chunk(x, t, s, y):
+    """com_jacobian on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    cos, divide, multiply, negative, sin = np.cos, np.divide, np.multiply, np.negative, np.sin
+    q_0, q_1 = x
+    t0, = t
+    J_1, J_5 = y
+    k0, k1 = _com_jacobian_constants
+    cos(q_1, t0)
+    multiply(k0, t0, t0)
+    divide(t0, k1, J_1)
+    sin(q_1, t0)
+    multiply(k0, t0, t0)
+    divide(t0, k1, t0)
+    negative(t0, J_5)
 
 
 def centroidal_map(q):
@@ -782,14 +1178,11 @@ def centroidal_map(q):
     18 ops: 6 mul, 8 add, 2 div, 2 trig
     """
     q = _array(q, 2, "q")
-    if q.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1])
-        q = _columns(q)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_centroidal_map_chunk, (q,), 3, ((6, 2),), fixed=_centroidal_map_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[1])
     t0 = (-0.05) * t0
     t1 = t0 / 1.1
@@ -814,9 +1207,45 @@ def centroidal_map(q):
           0.0, 0.0,
           t2, t1,
           0.0, 0.0)
-    if shape is None:
-        return np.array(_A).reshape(6, 2)
-    return _batch(_A, shape, (6, 2))
+    return np.array(_A).reshape(6, 2)
+
+
+_centroidal_map_constants = _constants(
+    -0.05, 1.1, 0.1, 0.03333333333333333)
+
+
+_centroidal_map_fixed = (
+    {0: 1.1, 2: 0.0, 3: 0.0, 4: 0.0, 6: 0.0, 7: 0.0, 10: 0.0, 11: 0.0},
+)
+"""centroidal_map's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _centroidal_map_chunk(x, t, s, y):
+    """centroidal_map on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1 = x
+    t0, t1, t2 = t
+    A_1, A_5, A_8, A_9 = y
+    k0, k1, k2, k3 = _centroidal_map_constants
+    cos(q_1, t0)
+    multiply(k0, t0, A_1)
+    divide(A_1, k1, t0)
+    multiply(k2, t0, t1)
+    subtract(A_1, t1, t1)
+    subtract(t1, t0, A_8)
+    sin(q_1, t1)
+    multiply(k0, t1, t1)
+    negative(t1, A_5)
+    multiply(k2, q_0, t2)
+    add(t2, t1, t2)
+    add(q_0, t2, t2)
+    divide(t2, k1, t2)
+    subtract(q_0, t2, t2)
+    multiply(t2, t1, t2)
+    multiply(t0, A_1, t0)
+    subtract(t2, t0, t2)
+    add(k3, t2, A_9)
 
 
 def ode_rhs(x, u):
@@ -829,16 +1258,12 @@ def ode_rhs(x, u):
     """
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
-    if x.ndim == u.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        cos, sin = np.cos, np.sin
+    if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_rhs_chunk, (x, u), 4, ((4,),))
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(x[1])
     t1 = cos(x[1])
     t2 = 0.9810000000000001 * t1
@@ -863,9 +1288,46 @@ def ode_rhs(x, u):
     t1 = t1 * t0
     t1 = t3 - t1
     _xdot = (x[2], x[3], t1, t0)
-    if shape is None:
-        return np.array(_xdot)
-    return _batch(_xdot, shape, (4,))
+    return np.array(_xdot)
+
+
+_ode_rhs_constants = _constants(
+    0.9810000000000001, -0.05, 1.1, -0.045454545454545456, -0.49050000000000005, 0.03333333333333333)
+
+
+def _ode_rhs_chunk(x, t, s, y):
+    """ode_rhs on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, sin, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    x_0, x_1, x_2, x_3, u_0, u_1 = x
+    t0, t1, t2, t3 = t
+    xdot_0, xdot_1, xdot_2, xdot_3 = y
+    k0, k1, k2, k3, k4, k5 = _ode_rhs_constants
+    sin(x_1, t0)
+    cos(x_1, t1)
+    multiply(k0, t1, t2)
+    multiply(k1, x_3, t3)
+    multiply(x_3, t3, t3)
+    subtract(t2, t3, t2)
+    multiply(t0, t2, t2)
+    multiply(k0, t0, t3)
+    multiply(t1, t3, t3)
+    subtract(t2, t3, t2)
+    subtract(u_0, t2, t2)
+    divide(t2, k2, t3)
+    multiply(k3, t1, t1)
+    multiply(k4, t0, t0)
+    add(u_1, t0, t0)
+    multiply(t1, t2, t2)
+    subtract(t0, t2, t0)
+    multiply(t1, t1, t2)
+    multiply(k2, t2, t2)
+    subtract(k5, t2, t2)
+    divide(t0, t2, xdot_3)
+    multiply(t1, xdot_3, t1)
+    subtract(t3, t1, xdot_2)
+    copyto(xdot_0, x_2)
+    copyto(xdot_1, x_3)
 
 
 def ode_jac_x(x, u):
@@ -878,16 +1340,12 @@ def ode_jac_x(x, u):
     """
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
-    if x.ndim == u.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        cos, sin = np.cos, np.sin
+    if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_jac_x_chunk, (x, u), 10, ((4, 4),), fixed=_ode_jac_x_fixed)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(x[1])
     t1 = cos(x[1])
     t2 = 0.9810000000000001 * t1
@@ -955,9 +1413,91 @@ def ode_jac_x(x, u):
           0.0, 0.0, 0.0, 1.0,
           0.0, t2, 0.0, t3,
           0.0, t1, 0.0, t0)
-    if shape is None:
-        return np.array(_A).reshape(4, 4)
-    return _batch(_A, shape, (4, 4))
+    return np.array(_A).reshape(4, 4)
+
+
+_ode_jac_x_constants = _constants(
+    0.9810000000000001, -0.05, 1.1, -0.045454545454545456, -0.49050000000000005, 0.03333333333333333,
+    9.81, 0.1, -0.1)
+
+
+_ode_jac_x_fixed = (
+    {0: 0.0, 1: 0.0, 2: 1.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 1.0, 8: 0.0, 10: 0.0, 12: 0.0, 14: 0.0},
+)
+"""ode_jac_x's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _ode_jac_x_chunk(x, t, s, y):
+    """ode_jac_x on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    x_0, x_1, x_2, x_3, u_0, u_1 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9 = t
+    A_9, A_11, A_13, A_15 = y
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _ode_jac_x_constants
+    sin(x_1, t0)
+    cos(x_1, t1)
+    multiply(k0, t1, t2)
+    multiply(k1, x_3, t3)
+    multiply(x_3, t3, t3)
+    subtract(t2, t3, t2)
+    multiply(t0, t2, t2)
+    multiply(k0, t0, t4)
+    multiply(t1, t4, t4)
+    subtract(t2, t4, t2)
+    subtract(u_0, t2, t2)
+    divide(t2, k2, t4)
+    multiply(k3, t1, t5)
+    multiply(k4, t0, t6)
+    add(u_1, t6, t6)
+    multiply(t5, t2, t2)
+    subtract(t6, t2, t6)
+    multiply(t5, t5, t2)
+    multiply(k2, t2, t2)
+    subtract(k5, t2, t2)
+    divide(t6, t2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    multiply(t0, t4, t7)
+    multiply(k6, t1, t8)
+    add(t7, t8, t7)
+    multiply(k7, t7, t7)
+    subtract(t7, t3, t7)
+    multiply(t7, t1, t7)
+    multiply(t4, t1, t3)
+    multiply(k6, t0, t9)
+    subtract(t3, t9, t3)
+    multiply(k7, t3, t3)
+    multiply(t0, t3, t3)
+    add(t7, t3, t7)
+    multiply(t1, t4, t3)
+    subtract(t3, t9, t3)
+    multiply(k7, t3, t3)
+    multiply(k1, t6, t6)
+    add(t3, t6, t3)
+    multiply(t3, t0, t3)
+    multiply(t4, t0, t4)
+    add(t4, t8, t4)
+    multiply(k7, t4, t6)
+    multiply(t1, t6, t1)
+    add(t3, t1, t3)
+    subtract(t7, t3, t7)
+    divide(t7, k2, t1)
+    multiply(k1, t4, t4)
+    multiply(t5, t7, t7)
+    add(t4, t7, t4)
+    divide(t4, t2, A_13)
+    multiply(t5, A_13, t3)
+    add(t1, t3, t1)
+    negative(t1, A_9)
+    multiply(k8, x_3, t1)
+    multiply(t0, t1, t0)
+    divide(t0, k2, t1)
+    multiply(t5, t0, t0)
+    divide(t0, t2, t0)
+    multiply(t5, t0, t5)
+    add(t1, t5, A_11)
+    negative(t0, A_15)
 
 
 def ode_jac_u(x, u):
@@ -970,16 +1510,12 @@ def ode_jac_u(x, u):
     """
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
-    if x.ndim == u.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        cos = math.cos
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        cos = np.cos
+    if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_jac_u_chunk, (x, u), 3, ((4, 2),), fixed=_ode_jac_u_fixed)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    cos = math.cos
     t0 = cos(x[1])
     t0 = (-0.045454545454545456) * t0
     t1 = t0 * t0
@@ -994,9 +1530,38 @@ def ode_jac_u(x, u):
           0.0, 0.0,
           t0, t2,
           t2, t1)
-    if shape is None:
-        return np.array(_B).reshape(4, 2)
-    return _batch(_B, shape, (4, 2))
+    return np.array(_B).reshape(4, 2)
+
+
+_ode_jac_u_constants = _constants(
+    -0.045454545454545456, 1.1, 0.03333333333333333, 0.9090909090909091, 1.0)
+
+
+_ode_jac_u_fixed = (
+    {0: 0.0, 1: 0.0, 2: 0.0, 3: 0.0},
+)
+"""ode_jac_u's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _ode_jac_u_chunk(x, t, s, y):
+    """ode_jac_u on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.subtract
+    x_0, x_1, x_2, x_3, u_0, u_1 = x
+    t0, t1, t2 = t
+    B_4, B_5, B_6, B_7 = y
+    k0, k1, k2, k3, k4 = _ode_jac_u_constants
+    cos(x_1, t0)
+    multiply(k0, t0, t0)
+    multiply(t0, t0, t1)
+    multiply(k1, t1, t1)
+    subtract(k2, t1, t1)
+    divide(t0, t1, t2)
+    multiply(t0, t2, t0)
+    add(k3, t0, B_4)
+    negative(t2, B_5)
+    divide(k4, t1, B_7)
+    copyto(B_6, B_5)
 
 
 def regressor(q, qd, qdd):
@@ -1011,18 +1576,13 @@ def regressor(q, qd, qdd):
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
-    if q.ndim == qd.ndim == qdd.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        cos, sign, sin = math.cos, _sign, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        cos, sign, sin = np.cos, np.sign, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_chunk, (q, qd, qdd), 6, ((2, 26),), fixed=_regressor_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
     t0 = cos(q[1])
     t1 = t0 * qdd[0]
     t2 = sin(q[1])
@@ -1047,9 +1607,58 @@ def regressor(q, qd, qdd):
     t5 = sign(qd[1])
     _Y = (qdd[0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t3, t6, 0.0, t0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[0], qd[0], t2, 0.0, 0.0, 0.0,
           0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t4, 0.0, t1, 0.0, 0.0, qdd[1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[1], qd[1], t5)
-    if shape is None:
-        return np.array(_Y).reshape(2, 26)
-    return _batch(_Y, shape, (2, 26))
+    return np.array(_Y).reshape(2, 26)
+
+
+_regressor_constants = _constants(
+    9.81)
+
+
+_regressor_fixed = (
+    {1: 0.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 12: 0.0, 14: 0.0, 15: 0.0,
+     16: 0.0, 17: 0.0, 18: 0.0, 19: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 0.0, 27: 0.0, 28: 0.0, 29: 0.0,
+     30: 0.0, 31: 0.0, 32: 0.0, 33: 0.0, 34: 0.0, 35: 0.0, 36: 0.0, 38: 0.0, 40: 0.0, 41: 0.0, 43: 0.0,
+     44: 0.0, 45: 0.0, 46: 0.0, 47: 0.0, 48: 0.0},
+)
+"""regressor's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_chunk(x, t, s, y):
+    """regressor on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sign, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sign, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1 = x
+    t0, t1, t2, t3, t4, t5 = t
+    Y_0, Y_10, Y_11, Y_13, Y_20, Y_21, Y_22, Y_37, Y_39, Y_42, Y_49, Y_50, Y_51 = y
+    k0, = _regressor_constants
+    cos(q_1, t0)
+    multiply(t0, qdd_0, t1)
+    sin(q_1, t2)
+    multiply(k0, t2, t3)
+    subtract(t1, t3, Y_39)
+    multiply(t0, Y_39, t1)
+    multiply(t2, qdd_0, t3)
+    multiply(k0, t0, t4)
+    add(t3, t4, t3)
+    multiply(t2, t3, t4)
+    add(t1, t4, Y_10)
+    multiply(qd_1, qd_1, t1)
+    multiply(t0, t1, t4)
+    multiply(t2, qdd_1, t5)
+    add(t4, t5, t4)
+    negative(t4, Y_11)
+    negative(t3, Y_37)
+    multiply(t0, qdd_1, t0)
+    multiply(t2, t1, t2)
+    subtract(t0, t2, Y_13)
+    sign(qd_0, Y_22)
+    sign(qd_1, Y_51)
+    copyto(Y_0, qdd_0)
+    copyto(Y_20, qdd_0)
+    copyto(Y_21, qd_0)
+    copyto(Y_42, qdd_1)
+    copyto(Y_49, qdd_1)
+    copyto(Y_50, qd_1)
 
 
 def base_regressor(q, qd, qdd):
@@ -1064,18 +1673,13 @@ def base_regressor(q, qd, qdd):
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
-    if q.ndim == qd.ndim == qdd.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        cos, sign, sin = math.cos, _sign, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        cos, sign, sin = np.cos, np.sign, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_chunk, (q, qd, qdd), 5, ((2, 8),), fixed=_base_regressor_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
     t0 = cos(q[1])
     t1 = qd[1] * qd[1]
     t2 = t0 * t1
@@ -1097,9 +1701,50 @@ def base_regressor(q, qd, qdd):
     t5 = sign(qd[1])
     _Y_b = (qdd[0], t2, t1, 0.0, qd[0], t3, 0.0, 0.0,
             0.0, t4, t0, qdd[1], 0.0, 0.0, qd[1], t5)
-    if shape is None:
-        return np.array(_Y_b).reshape(2, 8)
-    return _batch(_Y_b, shape, (2, 8))
+    return np.array(_Y_b).reshape(2, 8)
+
+
+_base_regressor_constants = _constants(
+    9.81)
+
+
+_base_regressor_fixed = (
+    {3: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 12: 0.0, 13: 0.0},
+)
+"""base_regressor's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _base_regressor_chunk(x, t, s, y):
+    """base_regressor on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sign, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sign, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1 = x
+    t0, t1, t2, t3, t4 = t
+    Y_b_0, Y_b_1, Y_b_2, Y_b_4, Y_b_5, Y_b_9, Y_b_10, Y_b_11, Y_b_14, Y_b_15 = y
+    k0, = _base_regressor_constants
+    cos(q_1, t0)
+    multiply(qd_1, qd_1, t1)
+    multiply(t0, t1, t2)
+    sin(q_1, t3)
+    multiply(t3, qdd_1, t4)
+    add(t2, t4, t2)
+    negative(t2, Y_b_1)
+    multiply(t3, qdd_0, t2)
+    multiply(k0, t0, t4)
+    add(t2, t4, t2)
+    negative(t2, Y_b_9)
+    multiply(t0, qdd_1, t2)
+    multiply(t3, t1, t1)
+    subtract(t2, t1, Y_b_2)
+    multiply(t0, qdd_0, t0)
+    multiply(k0, t3, t3)
+    subtract(t0, t3, Y_b_10)
+    sign(qd_0, Y_b_5)
+    sign(qd_1, Y_b_15)
+    copyto(Y_b_0, qdd_0)
+    copyto(Y_b_4, qd_0)
+    copyto(Y_b_11, qdd_1)
+    copyto(Y_b_14, qd_1)
 
 
 def rk4_step(x, u, dt):

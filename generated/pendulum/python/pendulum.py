@@ -4,12 +4,13 @@ Do not edit: change models.yaml or derive, then run `make derive`.
 numpy only. Every function takes one state or a batch of states: an input of n elements is an
 array (..., n) with any leading batch shape, the batch shapes of the inputs broadcast against
 each other (one p for all states, say), and an output documented as shape s is
-returned as (..., *s), the whole batch computed in one call (numpy arrays, no Python loop per
-state). One state (1-D inputs; a number for an input of one element) returns exactly the shapes
-documented. A batch gives bit for bit the results of calling the function on each state alone;
-those are the C code's arithmetic, in the same order, on float64. Where one state raises (a
-division by zero, the square root of a negative number), a batch gives inf or nan with numpy's
-RuntimeWarning instead.
+returned as (..., *s), the whole batch computed in one call (numpy ufuncs on rows of up to
+_CHUNK states at a time, each function's ``_<name>_chunk``; no Python loop per state). One state
+(1-D inputs; a number for an input of one element) returns exactly the shapes documented. A
+batch gives bit for bit the results of calling the function on each state alone; those are the
+C code's arithmetic, in the same order, on float64. Where one state raises (a division by zero,
+the square root of a negative number), a batch gives inf or nan with numpy's RuntimeWarning
+instead.
 The exception: ik_tcp, iterative per state, solves a batch one state after the
 other in Python, with status an int array of the batch shape.
 Joints (q order): phi.
@@ -37,21 +38,90 @@ def _array(value, n, name):
     return v
 
 
-def _columns(v):
-    """An input of a batch, indexed by element: an input shared by all states (1-D) as its list of
-    floats, else an array (n, ...) whose row i holds element i of every state (contiguous)."""
-    if v.ndim == 1:
-        return v.tolist()
-    return np.ascontiguousarray(np.moveaxis(v, -1, 0))
+_CHUNK = 16384
+"""Most states per chunk of a batch: each ufunc call of a batch body works on one chunk's rows."""
+
+_FLOATS = 4_000_000
+"""Most floats per buffer of rows (30.5 MB): the C allocator reuses blocks under 32 MB from call to
+call, and maps (page-faults) larger ones anew each time."""
 
 
-def _batch(entries, shape, dims):
-    """A batch output (*shape, *dims) from its entries in row-major order: arrays of the batch
-    shape or broadcasting to it, and numbers."""
-    out = np.empty((len(entries),) + shape)
-    for i, e in enumerate(entries):
-        out[i] = e
-    return np.ascontiguousarray(np.moveaxis(out, 0, -1)).reshape(shape + dims)
+def _constants(*values):
+    """The constants of a batch body as 0-d float arrays (numpy broadcasts them faster than floats)."""
+    return tuple(np.array(v) for v in values)
+
+
+def _rows(count, size):
+    """An uninitialised float array (count, size) whose rows lie an odd number of 64-byte cache lines
+    apart: rows a multiple of 4096 bytes apart (size a power of 2) share the same cache sets, and
+    copying them transposed into the outputs would be several times slower."""
+    return np.empty((count, 8 * ((size + 7) // 8 | 1)))[:, :size]
+
+
+def _batch(chunk, inputs, registers, dims, fixed=None, pure=0):
+    """A function on a batch of states: the inputs (..., n_i) broadcast against each other, split
+    evenly into chunks of at most _CHUNK states (and _FLOATS floats per buffer), and chunk(x, t, s, y)
+    computing a chunk, each number a row (one float per state of the chunk):
+    x: the inputs' elements, a 0-d array for an input one for all states (1-D);
+    t: rows for the temporaries, registers of them;
+    s: pure rows for the temporaries of the parameters alone (the last input), 0-d arrays when
+    one p serves all states;
+    y: the output entries (the outputs in order, each row-major) but the constant ones, fixed
+    (per output, {row-major index: value}), written once.
+    Returns each output (*shape, *dims[k]); one output: the array itself."""
+    shape = np.broadcast_shapes(*(v.shape[:-1] for v in inputs))
+    n = math.prod(shape)
+    if n == 1:  # numpy's in-place ufuncs are several times slower on one element: the state twice
+        twice = _batch(chunk, [v if v.ndim == 1 else np.broadcast_to(v.reshape(-1), (2, v.size)) for v in inputs],
+                       registers, dims, fixed, pure)
+        outputs = [out[:1].reshape(shape + d) for out, d in zip(twice if len(dims) > 1 else (twice,), dims)]
+        return outputs[0] if len(outputs) == 1 else tuple(outputs)
+    rows = np.empty((sum(v.shape[-1] for v in inputs if v.ndim > 1), n))
+    elements, r = [], 0  # per input element: its row of rows or, one for all states, a 0-d array
+    for v in inputs:
+        k = v.shape[-1]
+        if v.ndim == 1:
+            elements += [v[i, ...] for i in range(k)]
+        else:
+            np.copyto(rows[r:r + k], (v if v.shape[:-1] == shape else np.broadcast_to(v, shape + (k,))).reshape(n, k).T)
+            elements += list(rows[r:r + k])
+            r += k
+    outputs = [np.empty((n, math.prod(d))) for d in dims]
+    runs = []  # [output, first entry, end, first row of y]: the computed entries, run by run
+    row = 0
+    for out, constant in zip(outputs, fixed or [{}] * len(dims)):
+        if not constant:
+            runs.append([out, 0, out.shape[1], row])
+            row += out.shape[1]
+            continue
+        if len(constant) * 4 > out.shape[1]:  # many: a pass writing every entry
+            out[...] = [constant.get(j, 0.0) for j in range(out.shape[1])]
+        else:  # few: one column each
+            for j, value in constant.items():
+                out[:, j] = value
+        for j in range(out.shape[1]):
+            if j in constant:
+                continue
+            if runs and runs[-1][0] is out and runs[-1][2] == j:
+                runs[-1][2] += 1
+            else:
+                runs.append([out, j, j + 1, row])
+            row += 1
+    shared = inputs[-1].ndim == 1
+    chunks = -(-n // min(_CHUNK, max(1, _FLOATS // max(registers, row, 0 if shared else pure, 1))))
+    size = -(-n // chunks) if n else 0
+    t, y = _rows(registers, size), _rows(row, size)
+    s = [np.empty(()) for _ in range(pure)] if shared else _rows(pure, size)
+    for start in range(0, n, size or 1):
+        stop = min(start + size, n)
+        if stop - start < size:  # the last chunk, shorter
+            t, y = t[:, :stop - start], y[:, :stop - start]
+            s = s if shared else s[:, :stop - start]
+        chunk([e[start:stop] if e.ndim else e for e in elements], t, s, y)
+        for out, first, end, r in runs:
+            np.copyto(out[start:stop, first:end], y[r:r + end - first].T)
+    outputs = [out.reshape(shape + d) for out, d in zip(outputs, dims)]
+    return outputs[0] if len(outputs) == 1 else tuple(outputs)
 
 
 def _sign(x):
@@ -200,16 +270,12 @@ def fk_tcp(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_tcp_chunk, (q, p), 1, ((4, 4),), fixed=_fk_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = sin(q[0])
     t2 = -t1
@@ -221,9 +287,30 @@ def fk_tcp(q, p=DEFAULT_P):
           0.0, 1.0, 0.0, 0.0,
           t2, 0.0, t0, t4,
           0.0, 0.0, 0.0, 1.0)
-    if shape is None:
-        return np.array(_T).reshape(4, 4)
-    return _batch(_T, shape, (4, 4))
+    return np.array(_T).reshape(4, 4)
+
+
+_fk_tcp_fixed = (
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+)
+"""fk_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_tcp_chunk(x, t, s, y):
+    """fk_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, multiply, negative, sin = np.copyto, np.cos, np.multiply, np.negative, np.sin
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    T_0, T_2, T_3, T_8, T_10, T_11 = y
+    cos(q_0, T_0)
+    sin(q_0, T_2)
+    negative(T_2, T_8)
+    multiply(T_2, p_4, t0)
+    negative(t0, T_3)
+    multiply(T_0, p_4, t0)
+    negative(t0, T_11)
+    copyto(T_10, T_0)
 
 
 def jacobian_tcp(q, p=DEFAULT_P):
@@ -236,25 +323,39 @@ def jacobian_tcp(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_jacobian_tcp_chunk, (q, p), 1, ((6,),), fixed=_jacobian_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t0 = t0 * p[4]
     t0 = -t0
     t1 = sin(q[0])
     t1 = t1 * p[4]
     _J = (t0, 0.0, t1, 0.0, 1.0, 0.0)
-    if shape is None:
-        return np.array(_J)
-    return _batch(_J, shape, (6,))
+    return np.array(_J)
+
+
+_jacobian_tcp_fixed = (
+    {1: 0.0, 3: 0.0, 4: 1.0, 5: 0.0},
+)
+"""jacobian_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _jacobian_tcp_chunk(x, t, s, y):
+    """jacobian_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    cos, multiply, negative, sin = np.cos, np.multiply, np.negative, np.sin
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    J_0, J_2 = y
+    cos(q_0, t0)
+    multiply(t0, p_4, t0)
+    negative(t0, J_0)
+    sin(q_0, t0)
+    multiply(t0, p_4, J_2)
 
 
 def jdot_qd_tcp(q, qd, p=DEFAULT_P):
@@ -269,18 +370,13 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     q = _array(q, 1, "q")
     qd = _array(qd, 1, "qd")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 1, ((6,),), fixed=_jdot_qd_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t0 = t0 * qd[0]
     t0 = p[4] * t0
@@ -290,9 +386,30 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     t1 = p[4] * t1
     t1 = qd[0] * t1
     _a = (t0, 0.0, t1, 0.0, 0.0, 0.0)
-    if shape is None:
-        return np.array(_a)
-    return _batch(_a, shape, (6,))
+    return np.array(_a)
+
+
+_jdot_qd_tcp_fixed = (
+    {1: 0.0, 3: 0.0, 4: 0.0, 5: 0.0},
+)
+"""jdot_qd_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _jdot_qd_tcp_chunk(x, t, s, y):
+    """jdot_qd_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    cos, multiply, sin = np.cos, np.multiply, np.sin
+    q_0, qd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    a_0, a_2 = y
+    sin(q_0, t0)
+    multiply(t0, qd_0, t0)
+    multiply(p_4, t0, t0)
+    multiply(qd_0, t0, a_0)
+    cos(q_0, t0)
+    multiply(t0, qd_0, t0)
+    multiply(p_4, t0, t0)
+    multiply(qd_0, t0, a_2)
 
 
 def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
@@ -309,20 +426,14 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 1, "qd")
     qdd = _array(qdd, 1, "qdd")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 4, ((6,),), fixed=_frame_acceleration_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t1 = t0 * qd[0]
     t1 = p[4] * t1
@@ -338,9 +449,37 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     t2 = qd[0] * t2
     t0 = t0 + t2
     _a = (t1, 0.0, t0, 0.0, qdd[0], 0.0)
-    if shape is None:
-        return np.array(_a)
-    return _batch(_a, shape, (6,))
+    return np.array(_a)
+
+
+_frame_acceleration_tcp_fixed = (
+    {1: 0.0, 3: 0.0, 5: 0.0},
+)
+"""frame_acceleration_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _frame_acceleration_tcp_chunk(x, t, s, y):
+    """frame_acceleration_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.sin, np.subtract
+    q_0, qd_0, qdd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, t1, t2, t3 = t
+    a_0, a_2, a_4 = y
+    sin(q_0, t0)
+    multiply(t0, qd_0, t1)
+    multiply(p_4, t1, t1)
+    multiply(qd_0, t1, t1)
+    cos(q_0, t2)
+    multiply(t2, p_4, t3)
+    multiply(t3, qdd_0, t3)
+    subtract(t1, t3, a_0)
+    multiply(t0, p_4, t0)
+    multiply(t0, qdd_0, t0)
+    multiply(t2, qd_0, t2)
+    multiply(p_4, t2, t2)
+    multiply(qd_0, t2, t2)
+    add(t0, t2, a_2)
+    copyto(a_4, qdd_0)
 
 
 def fk_jacobian_tcp(q, p=DEFAULT_P):
@@ -354,16 +493,12 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_jacobian_tcp_chunk, (q, p), 1, ((4, 4), (6,),), fixed=_fk_jacobian_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = sin(q[0])
     t2 = -t1
@@ -376,9 +511,32 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
           t2, 0.0, t0, t5,
           0.0, 0.0, 0.0, 1.0)
     _J = (t5, 0.0, t3, 0.0, 1.0, 0.0)
-    if shape is None:
-        return np.array(_T).reshape(4, 4), np.array(_J)
-    return _batch(_T, shape, (4, 4)), _batch(_J, shape, (6,))
+    return np.array(_T).reshape(4, 4), np.array(_J)
+
+
+_fk_jacobian_tcp_fixed = (
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {1: 0.0, 3: 0.0, 4: 1.0, 5: 0.0},
+)
+"""fk_jacobian_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_jacobian_tcp_chunk(x, t, s, y):
+    """fk_jacobian_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, multiply, negative, sin = np.copyto, np.cos, np.multiply, np.negative, np.sin
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    T_0, T_2, T_3, T_8, T_10, T_11, J_0, J_2 = y
+    cos(q_0, T_0)
+    sin(q_0, T_2)
+    negative(T_2, T_8)
+    multiply(T_2, p_4, J_2)
+    negative(J_2, T_3)
+    multiply(T_0, p_4, t0)
+    negative(t0, T_11)
+    copyto(T_10, T_0)
+    copyto(J_0, T_11)
 
 
 def mass_matrix(q, p=DEFAULT_P):
@@ -391,14 +549,11 @@ def mass_matrix(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_mass_matrix_chunk, (q, p), 0, ((1,),), pure=2)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
     t0 = p[4] / 2.0
     t0 = t0 * t0
     t0 = p[0] * t0
@@ -408,9 +563,30 @@ def mass_matrix(q, p=DEFAULT_P):
     t1 = p[3] + t1
     t0 = t0 + t1
     _M = (t0,)
-    if shape is None:
-        return np.array(_M)
-    return _batch(_M, shape, (1,))
+    return np.array(_M)
+
+
+_mass_matrix_constants = _constants(
+    2.0)
+
+
+def _mass_matrix_chunk(x, t, s, y):
+    """mass_matrix on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, divide, multiply = np.add, np.copyto, np.divide, np.multiply
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    s0, s1 = s
+    M_0, = y
+    k0, = _mass_matrix_constants
+    divide(p_4, k0, s0)
+    multiply(s0, s0, s0)
+    multiply(p_0, s0, s0)
+    add(p_2, s0, s0)
+    multiply(p_4, p_4, s1)
+    multiply(p_1, s1, s1)
+    add(p_3, s1, s1)
+    add(s0, s1, s0)
+    copyto(M_0, s0)
 
 
 def coriolis_matrix(q, qd, p=DEFAULT_P):
@@ -425,20 +601,26 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     q = _array(q, 1, "q")
     qd = _array(qd, 1, "qd")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        p = p.tolist()
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        p = _columns(p)
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_coriolis_matrix_chunk, (q, qd, p), 0, ((1,),), fixed=_coriolis_matrix_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
     _C = (0.0,)
-    if shape is None:
-        return np.array(_C)
-    return _batch(_C, shape, (1,))
+    return np.array(_C)
+
+
+_coriolis_matrix_fixed = (
+    {0: 0.0},
+)
+"""coriolis_matrix's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _coriolis_matrix_chunk(x, t, s, y):
+    """coriolis_matrix on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    q_0, qd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
 
 
 def gravity(q, p=DEFAULT_P):
@@ -451,16 +633,12 @@ def gravity(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        sin = math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        sin = np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_gravity_chunk, (q, p), 1, ((1,),), pure=2)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    sin = math.sin
     t0 = p[4] / 2.0
     t0 = p[0] * t0
     t1 = p[1] * p[4]
@@ -469,9 +647,29 @@ def gravity(q, p=DEFAULT_P):
     t1 = t1 * p[5]
     t0 = t0 * t1
     _g = (t0,)
-    if shape is None:
-        return np.array(_g)
-    return _batch(_g, shape, (1,))
+    return np.array(_g)
+
+
+_gravity_constants = _constants(
+    2.0)
+
+
+def _gravity_chunk(x, t, s, y):
+    """gravity on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, divide, multiply, sin = np.add, np.divide, np.multiply, np.sin
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1 = s
+    g_0, = y
+    k0, = _gravity_constants
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    sin(q_0, t0)
+    multiply(t0, p_5, t0)
+    multiply(s0, t0, g_0)
 
 
 def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
@@ -488,20 +686,14 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 1, "qd")
     qdd = _array(qdd, 1, "qdd")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        sin = math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        sin = np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_chunk, (q, qd, qdd, p), 2, ((1,),), pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    sin = math.sin
     t0 = p[4] / 2.0
     t1 = t0 * t0
     t1 = p[0] * t1
@@ -519,9 +711,38 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     t0 = t0 * t2
     t0 = t1 + t0
     _tau = (t0,)
-    if shape is None:
-        return np.array(_tau)
-    return _batch(_tau, shape, (1,))
+    return np.array(_tau)
+
+
+_inverse_dynamics_constants = _constants(
+    2.0)
+
+
+def _inverse_dynamics_chunk(x, t, s, y):
+    """inverse_dynamics on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, divide, multiply, sin = np.add, np.divide, np.multiply, np.sin
+    q_0, qd_0, qdd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, t1 = t
+    s0, s1, s2 = s
+    tau_0, = y
+    k0, = _inverse_dynamics_constants
+    divide(p_4, k0, s0)
+    multiply(s0, s0, s1)
+    multiply(p_0, s1, s1)
+    add(p_2, s1, s1)
+    multiply(p_4, p_4, s2)
+    multiply(p_1, s2, s2)
+    add(p_3, s2, s2)
+    add(s1, s2, s1)
+    multiply(s1, qdd_0, t0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    sin(q_0, t1)
+    multiply(t1, p_5, t1)
+    multiply(s0, t1, t1)
+    add(t0, t1, tau_0)
 
 
 def forward_dynamics(q, qd, tau, p=DEFAULT_P):
@@ -538,20 +759,14 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     qd = _array(qd, 1, "qd")
     tau = _array(tau, 1, "tau")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == tau.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        tau = tau.tolist()
-        p = p.tolist()
-        sin = math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        tau = _columns(tau)
-        p = _columns(p)
-        sin = np.sin
+    if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_forward_dynamics_chunk, (q, qd, tau, p), 1, ((1,),), pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    tau = tau.tolist()
+    p = p.tolist()
+    sin = math.sin
     t0 = p[4] / 2.0
     t1 = p[0] * t0
     t2 = p[1] * p[4]
@@ -569,9 +784,38 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t0 = t0 + t2
     t0 = t1 / t0
     _qdd = (t0,)
-    if shape is None:
-        return np.array(_qdd)
-    return _batch(_qdd, shape, (1,))
+    return np.array(_qdd)
+
+
+_forward_dynamics_constants = _constants(
+    2.0)
+
+
+def _forward_dynamics_chunk(x, t, s, y):
+    """forward_dynamics on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, divide, multiply, sin, subtract = np.add, np.divide, np.multiply, np.sin, np.subtract
+    q_0, qd_0, tau_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1, s2 = s
+    qdd_0, = y
+    k0, = _forward_dynamics_constants
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s1)
+    multiply(p_1, p_4, s2)
+    add(s1, s2, s1)
+    sin(q_0, t0)
+    multiply(t0, p_5, t0)
+    multiply(s1, t0, t0)
+    subtract(tau_0, t0, t0)
+    multiply(s0, s0, s0)
+    multiply(p_0, s0, s0)
+    add(p_2, s0, s0)
+    multiply(p_4, p_4, s1)
+    multiply(p_1, s1, s1)
+    add(p_3, s1, s1)
+    add(s0, s1, s0)
+    divide(t0, s0, qdd_0)
 
 
 def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
@@ -590,22 +834,15 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     qdd = _array(qdd, 1, "qdd")
     w = _array(w, 6, "w")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == qdd.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        w = w.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], w.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        w = _columns(w)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w, p), 3, ((1,),), pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    w = w.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = p[4] / 2.0
     t1 = t0 * t0
     t1 = p[0] * t1
@@ -631,9 +868,46 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     t1 = t1 + w[4]
     t0 = t0 - t1
     _tau = (t0,)
-    if shape is None:
-        return np.array(_tau)
-    return _batch(_tau, shape, (1,))
+    return np.array(_tau)
+
+
+_inverse_dynamics_fext_constants = _constants(
+    2.0)
+
+
+def _inverse_dynamics_fext_chunk(x, t, s, y):
+    """inverse_dynamics_fext on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, qd_0, qdd_0, w_0, w_1, w_2, w_3, w_4, w_5, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, t1, t2 = t
+    s0, s1, s2 = s
+    tau_0, = y
+    k0, = _inverse_dynamics_fext_constants
+    divide(p_4, k0, s0)
+    multiply(s0, s0, s1)
+    multiply(p_0, s1, s1)
+    add(p_2, s1, s1)
+    multiply(p_4, p_4, s2)
+    multiply(p_1, s2, s2)
+    add(p_3, s2, s2)
+    add(s1, s2, s1)
+    multiply(s1, qdd_0, t0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    sin(q_0, t1)
+    multiply(t1, p_5, t2)
+    multiply(s0, t2, t2)
+    add(t0, t2, t0)
+    multiply(t1, p_4, t1)
+    multiply(t1, w_2, t1)
+    cos(q_0, t2)
+    multiply(t2, p_4, t2)
+    multiply(t2, w_0, t2)
+    subtract(t1, t2, t1)
+    add(t1, w_4, t1)
+    subtract(t0, t1, tau_0)
 
 
 def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
@@ -652,22 +926,15 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     tau = _array(tau, 1, "tau")
     w = _array(w, 6, "w")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == tau.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        tau = tau.tolist()
-        w = w.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], w.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        tau = _columns(tau)
-        w = _columns(w)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w, p), 3, ((1,),), pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    tau = tau.tolist()
+    w = w.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t1 = t0 * p[4]
     t1 = t1 * w[2]
@@ -693,9 +960,46 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     t1 = t1 + t2
     t0 = t0 / t1
     _qdd = (t0,)
-    if shape is None:
-        return np.array(_qdd)
-    return _batch(_qdd, shape, (1,))
+    return np.array(_qdd)
+
+
+_forward_dynamics_fext_constants = _constants(
+    2.0)
+
+
+def _forward_dynamics_fext_chunk(x, t, s, y):
+    """forward_dynamics_fext on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, qd_0, tau_0, w_0, w_1, w_2, w_3, w_4, w_5, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, t1, t2 = t
+    s0, s1, s2 = s
+    qdd_0, = y
+    k0, = _forward_dynamics_fext_constants
+    sin(q_0, t0)
+    multiply(t0, p_4, t1)
+    multiply(t1, w_2, t1)
+    cos(q_0, t2)
+    multiply(t2, p_4, t2)
+    multiply(t2, w_0, t2)
+    subtract(t1, t2, t1)
+    add(t1, w_4, t1)
+    add(tau_0, t1, t1)
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s1)
+    multiply(p_1, p_4, s2)
+    add(s1, s2, s1)
+    multiply(t0, p_5, t0)
+    multiply(s1, t0, t0)
+    subtract(t1, t0, t1)
+    multiply(s0, s0, s0)
+    multiply(p_0, s0, s0)
+    add(p_2, s0, s0)
+    multiply(p_4, p_4, s1)
+    multiply(p_1, s1, s1)
+    add(p_3, s1, s1)
+    add(s0, s1, s0)
+    divide(t1, s0, qdd_0)
 
 
 def com(q, p=DEFAULT_P):
@@ -708,16 +1012,12 @@ def com(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_com_chunk, (q, p), 1, ((3,),), fixed=_com_fixed, pure=2)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t1 = p[4] / 2.0
     t1 = p[0] * t1
@@ -732,9 +1032,41 @@ def com(q, p=DEFAULT_P):
     t1 = t1 / t2
     t1 = -t1
     _c = (t0, 0.0, t1)
-    if shape is None:
-        return np.array(_c)
-    return _batch(_c, shape, (3,))
+    return np.array(_c)
+
+
+_com_constants = _constants(
+    2.0)
+
+
+_com_fixed = (
+    {1: 0.0},
+)
+"""com's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _com_chunk(x, t, s, y):
+    """com on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1 = s
+    c_0, c_2 = y
+    k0, = _com_constants
+    sin(q_0, t0)
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    multiply(t0, s0, t0)
+    add(p_0, p_1, s1)
+    divide(t0, s1, t0)
+    negative(t0, c_0)
+    cos(q_0, t0)
+    multiply(t0, s0, t0)
+    divide(t0, s1, t0)
+    negative(t0, c_2)
 
 
 def com_jacobian(q, p=DEFAULT_P):
@@ -747,16 +1079,12 @@ def com_jacobian(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_com_jacobian_chunk, (q, p), 1, ((3,),), fixed=_com_jacobian_fixed, pure=2)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = p[4] / 2.0
     t1 = p[0] * t1
@@ -770,9 +1098,40 @@ def com_jacobian(q, p=DEFAULT_P):
     t1 = t3 * t1
     t1 = t1 / t2
     _J = (t0, 0.0, t1)
-    if shape is None:
-        return np.array(_J)
-    return _batch(_J, shape, (3,))
+    return np.array(_J)
+
+
+_com_jacobian_constants = _constants(
+    2.0)
+
+
+_com_jacobian_fixed = (
+    {1: 0.0},
+)
+"""com_jacobian's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _com_jacobian_chunk(x, t, s, y):
+    """com_jacobian on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1 = s
+    J_0, J_2 = y
+    k0, = _com_jacobian_constants
+    cos(q_0, t0)
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    multiply(t0, s0, t0)
+    add(p_0, p_1, s1)
+    divide(t0, s1, t0)
+    negative(t0, J_0)
+    sin(q_0, t0)
+    multiply(t0, s0, t0)
+    divide(t0, s1, J_2)
 
 
 def centroidal_map(q, p=DEFAULT_P):
@@ -785,16 +1144,12 @@ def centroidal_map(q, p=DEFAULT_P):
     """
     q = _array(q, 1, "q")
     p = _array(p, 6, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_centroidal_map_chunk, (q, p), 2, ((6,),), fixed=_centroidal_map_fixed, pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = p[4] / 2.0
     t2 = p[0] * t1
@@ -819,9 +1174,51 @@ def centroidal_map(q, p=DEFAULT_P):
     t0 = t0 + t4
     t0 = t1 - t0
     _A = (t3, 0.0, t2, 0.0, t0, 0.0)
-    if shape is None:
-        return np.array(_A)
-    return _batch(_A, shape, (6,))
+    return np.array(_A)
+
+
+_centroidal_map_constants = _constants(
+    2.0)
+
+
+_centroidal_map_fixed = (
+    {1: 0.0, 3: 0.0, 5: 0.0},
+)
+"""centroidal_map's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _centroidal_map_chunk(x, t, s, y):
+    """centroidal_map on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, t1 = t
+    s0, s1, s2 = s
+    A_0, A_2, A_4 = y
+    k0, = _centroidal_map_constants
+    cos(q_0, t0)
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s1)
+    multiply(p_1, p_4, s2)
+    add(s1, s2, s1)
+    multiply(t0, s1, t0)
+    negative(t0, A_0)
+    sin(q_0, t1)
+    multiply(t1, s1, A_2)
+    multiply(s0, s0, s0)
+    multiply(p_0, s0, s0)
+    add(p_2, s0, s0)
+    multiply(p_4, p_4, s1)
+    multiply(p_1, s1, s1)
+    add(p_3, s1, s1)
+    add(s0, s1, s0)
+    add(p_0, p_1, s1)
+    divide(t0, s1, t1)
+    multiply(t1, t0, t1)
+    divide(A_2, s1, t0)
+    multiply(t0, A_2, t0)
+    add(t1, t0, t1)
+    subtract(s0, t1, A_4)
 
 
 def ode_rhs(x, u, p=DEFAULT_P):
@@ -836,18 +1233,13 @@ def ode_rhs(x, u, p=DEFAULT_P):
     x = _array(x, 2, "x")
     u = _array(u, 1, "u")
     p = _array(p, 6, "p")
-    if x.ndim == u.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        p = p.tolist()
-        sin = math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        p = _columns(p)
-        sin = np.sin
+    if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_rhs_chunk, (x, u, p), 1, ((2,),), pure=3)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    p = p.tolist()
+    sin = math.sin
     t0 = p[4] / 2.0
     t1 = p[0] * t0
     t2 = p[1] * p[4]
@@ -865,9 +1257,39 @@ def ode_rhs(x, u, p=DEFAULT_P):
     t0 = t0 + t2
     t0 = t1 / t0
     _xdot = (x[1], t0)
-    if shape is None:
-        return np.array(_xdot)
-    return _batch(_xdot, shape, (2,))
+    return np.array(_xdot)
+
+
+_ode_rhs_constants = _constants(
+    2.0)
+
+
+def _ode_rhs_chunk(x, t, s, y):
+    """ode_rhs on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, divide, multiply, sin, subtract = np.add, np.copyto, np.divide, np.multiply, np.sin, np.subtract
+    x_0, x_1, u_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1, s2 = s
+    xdot_0, xdot_1 = y
+    k0, = _ode_rhs_constants
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s1)
+    multiply(p_1, p_4, s2)
+    add(s1, s2, s1)
+    sin(x_0, t0)
+    multiply(t0, p_5, t0)
+    multiply(s1, t0, t0)
+    subtract(u_0, t0, t0)
+    multiply(s0, s0, s0)
+    multiply(p_0, s0, s0)
+    add(p_2, s0, s0)
+    multiply(p_4, p_4, s1)
+    multiply(p_1, s1, s1)
+    add(p_3, s1, s1)
+    add(s0, s1, s0)
+    divide(t0, s0, xdot_1)
+    copyto(xdot_0, x_1)
 
 
 def ode_jac_x(x, u, p=DEFAULT_P):
@@ -882,18 +1304,13 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     x = _array(x, 2, "x")
     u = _array(u, 1, "u")
     p = _array(p, 6, "p")
-    if x.ndim == u.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        p = p.tolist()
-        cos = math.cos
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        p = _columns(p)
-        cos = np.cos
+    if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_jac_x_chunk, (x, u, p), 1, ((2, 2),), fixed=_ode_jac_x_fixed, pure=3)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    p = p.tolist()
+    cos = math.cos
     t0 = p[4] / 2.0
     t1 = p[0] * t0
     t2 = p[1] * p[4]
@@ -912,9 +1329,44 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t0 = -t0
     _A = (0.0, 1.0,
           t0, 0.0)
-    if shape is None:
-        return np.array(_A).reshape(2, 2)
-    return _batch(_A, shape, (2, 2))
+    return np.array(_A).reshape(2, 2)
+
+
+_ode_jac_x_constants = _constants(
+    2.0)
+
+
+_ode_jac_x_fixed = (
+    {0: 0.0, 1: 1.0, 3: 0.0},
+)
+"""ode_jac_x's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _ode_jac_x_chunk(x, t, s, y):
+    """ode_jac_x on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative = np.add, np.cos, np.divide, np.multiply, np.negative
+    x_0, x_1, u_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1, s2 = s
+    A_2, = y
+    k0, = _ode_jac_x_constants
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s1)
+    multiply(p_1, p_4, s2)
+    add(s1, s2, s1)
+    cos(x_0, t0)
+    multiply(p_5, t0, t0)
+    multiply(s1, t0, t0)
+    multiply(s0, s0, s0)
+    multiply(p_0, s0, s0)
+    add(p_2, s0, s0)
+    multiply(p_4, p_4, s1)
+    multiply(p_1, s1, s1)
+    add(p_3, s1, s1)
+    add(s0, s1, s0)
+    divide(t0, s0, t0)
+    negative(t0, A_2)
 
 
 def ode_jac_u(x, u, p=DEFAULT_P):
@@ -929,16 +1381,12 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     x = _array(x, 2, "x")
     u = _array(u, 1, "u")
     p = _array(p, 6, "p")
-    if x.ndim == u.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        p = p.tolist()
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        p = _columns(p)
+    if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_jac_u_chunk, (x, u, p), 0, ((2,),), fixed=_ode_jac_u_fixed, pure=2)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    p = p.tolist()
     t0 = p[4] / 2.0
     t0 = t0 * t0
     t0 = p[0] * t0
@@ -949,9 +1397,37 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t0 = t0 + t1
     t0 = 1.0 / t0
     _B = (0.0, t0)
-    if shape is None:
-        return np.array(_B)
-    return _batch(_B, shape, (2,))
+    return np.array(_B)
+
+
+_ode_jac_u_constants = _constants(
+    2.0, 1.0)
+
+
+_ode_jac_u_fixed = (
+    {0: 0.0},
+)
+"""ode_jac_u's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _ode_jac_u_chunk(x, t, s, y):
+    """ode_jac_u on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, divide, multiply = np.add, np.copyto, np.divide, np.multiply
+    x_0, x_1, u_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    s0, s1 = s
+    B_1, = y
+    k0, k1 = _ode_jac_u_constants
+    divide(p_4, k0, s0)
+    multiply(s0, s0, s0)
+    multiply(p_0, s0, s0)
+    add(p_2, s0, s0)
+    multiply(p_4, p_4, s1)
+    multiply(p_1, s1, s1)
+    add(p_3, s1, s1)
+    add(s0, s1, s0)
+    divide(k1, s0, s0)
+    copyto(B_1, s0)
 
 
 def regressor(q, qd, qdd, p=DEFAULT_P):
@@ -968,20 +1444,14 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 1, "qd")
     qdd = _array(qdd, 1, "qdd")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        cos, sign, sin = math.cos, _sign, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        cos, sign, sin = np.cos, np.sign, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_chunk, (q, qd, qdd, p), 1, ((1, 13),), fixed=_regressor_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
     t0 = cos(q[0])
     t0 = t0 * p[5]
     t0 = -t0
@@ -990,9 +1460,32 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t1 = -t1
     t2 = sign(qd[0])
     _Y = (0.0, t0, 0.0, t1, 0.0, 0.0, qdd[0], 0.0, 0.0, 0.0, qdd[0], qd[0], t2)
-    if shape is None:
-        return np.array(_Y).reshape(1, 13)
-    return _batch(_Y, shape, (1, 13))
+    return np.array(_Y).reshape(1, 13)
+
+
+_regressor_fixed = (
+    {0: 0.0, 2: 0.0, 4: 0.0, 5: 0.0, 7: 0.0, 8: 0.0, 9: 0.0},
+)
+"""regressor's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_chunk(x, t, s, y):
+    """regressor on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, multiply, negative, sign, sin = np.copyto, np.cos, np.multiply, np.negative, np.sign, np.sin
+    q_0, qd_0, qdd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    Y_1, Y_3, Y_6, Y_10, Y_11, Y_12 = y
+    cos(q_0, t0)
+    multiply(t0, p_5, t0)
+    negative(t0, Y_1)
+    sin(q_0, t0)
+    multiply(t0, p_5, t0)
+    negative(t0, Y_3)
+    sign(qd_0, Y_12)
+    copyto(Y_6, qdd_0)
+    copyto(Y_10, qdd_0)
+    copyto(Y_11, qd_0)
 
 
 def base_regressor(q, qd, qdd, p=DEFAULT_P):
@@ -1009,20 +1502,14 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 1, "qd")
     qdd = _array(qdd, 1, "qdd")
     p = _array(p, 6, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        cos, sign, sin = math.cos, _sign, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        cos, sign, sin = np.cos, np.sign, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_chunk, (q, qd, qdd, p), 1, ((1, 5),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
     t0 = cos(q[0])
     t0 = t0 * p[5]
     t0 = -t0
@@ -1031,9 +1518,25 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t1 = -t1
     t2 = sign(qd[0])
     _Y_b = (t0, t1, qdd[0], qd[0], t2)
-    if shape is None:
-        return np.array(_Y_b).reshape(1, 5)
-    return _batch(_Y_b, shape, (1, 5))
+    return np.array(_Y_b).reshape(1, 5)
+
+
+def _base_regressor_chunk(x, t, s, y):
+    """base_regressor on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, multiply, negative, sign, sin = np.copyto, np.cos, np.multiply, np.negative, np.sign, np.sin
+    q_0, qd_0, qdd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    Y_b_0, Y_b_1, Y_b_2, Y_b_3, Y_b_4 = y
+    cos(q_0, t0)
+    multiply(t0, p_5, t0)
+    negative(t0, Y_b_0)
+    sin(q_0, t0)
+    multiply(t0, p_5, t0)
+    negative(t0, Y_b_1)
+    sign(qd_0, Y_b_4)
+    copyto(Y_b_2, qdd_0)
+    copyto(Y_b_3, qd_0)
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

@@ -4,12 +4,13 @@ Do not edit: change models.yaml or derive, then run `make derive`.
 numpy only. Every function takes one state or a batch of states: an input of n elements is an
 array (..., n) with any leading batch shape, the batch shapes of the inputs broadcast against
 each other (one p for all states, say), and an output documented as shape s is
-returned as (..., *s), the whole batch computed in one call (numpy arrays, no Python loop per
-state). One state (1-D inputs; a number for an input of one element) returns exactly the shapes
-documented. A batch gives bit for bit the results of calling the function on each state alone;
-those are the C code's arithmetic, in the same order, on float64. Where one state raises (a
-division by zero, the square root of a negative number), a batch gives inf or nan with numpy's
-RuntimeWarning instead.
+returned as (..., *s), the whole batch computed in one call (numpy ufuncs on rows of up to
+_CHUNK states at a time, each function's ``_<name>_chunk``; no Python loop per state). One state
+(1-D inputs; a number for an input of one element) returns exactly the shapes documented. A
+batch gives bit for bit the results of calling the function on each state alone; those are the
+C code's arithmetic, in the same order, on float64. Where one state raises (a division by zero,
+the square root of a negative number), a batch gives inf or nan with numpy's RuntimeWarning
+instead.
 The exception: ik_tcp, iterative per state, solves a batch one state after the
 other in Python, with status an int array of the batch shape.
 Joints (q order): theta1, theta2.
@@ -37,21 +38,90 @@ def _array(value, n, name):
     return v
 
 
-def _columns(v):
-    """An input of a batch, indexed by element: an input shared by all states (1-D) as its list of
-    floats, else an array (n, ...) whose row i holds element i of every state (contiguous)."""
-    if v.ndim == 1:
-        return v.tolist()
-    return np.ascontiguousarray(np.moveaxis(v, -1, 0))
+_CHUNK = 16384
+"""Most states per chunk of a batch: each ufunc call of a batch body works on one chunk's rows."""
+
+_FLOATS = 4_000_000
+"""Most floats per buffer of rows (30.5 MB): the C allocator reuses blocks under 32 MB from call to
+call, and maps (page-faults) larger ones anew each time."""
 
 
-def _batch(entries, shape, dims):
-    """A batch output (*shape, *dims) from its entries in row-major order: arrays of the batch
-    shape or broadcasting to it, and numbers."""
-    out = np.empty((len(entries),) + shape)
-    for i, e in enumerate(entries):
-        out[i] = e
-    return np.ascontiguousarray(np.moveaxis(out, 0, -1)).reshape(shape + dims)
+def _constants(*values):
+    """The constants of a batch body as 0-d float arrays (numpy broadcasts them faster than floats)."""
+    return tuple(np.array(v) for v in values)
+
+
+def _rows(count, size):
+    """An uninitialised float array (count, size) whose rows lie an odd number of 64-byte cache lines
+    apart: rows a multiple of 4096 bytes apart (size a power of 2) share the same cache sets, and
+    copying them transposed into the outputs would be several times slower."""
+    return np.empty((count, 8 * ((size + 7) // 8 | 1)))[:, :size]
+
+
+def _batch(chunk, inputs, registers, dims, fixed=None, pure=0):
+    """A function on a batch of states: the inputs (..., n_i) broadcast against each other, split
+    evenly into chunks of at most _CHUNK states (and _FLOATS floats per buffer), and chunk(x, t, s, y)
+    computing a chunk, each number a row (one float per state of the chunk):
+    x: the inputs' elements, a 0-d array for an input one for all states (1-D);
+    t: rows for the temporaries, registers of them;
+    s: pure rows for the temporaries of the parameters alone (the last input), 0-d arrays when
+    one p serves all states;
+    y: the output entries (the outputs in order, each row-major) but the constant ones, fixed
+    (per output, {row-major index: value}), written once.
+    Returns each output (*shape, *dims[k]); one output: the array itself."""
+    shape = np.broadcast_shapes(*(v.shape[:-1] for v in inputs))
+    n = math.prod(shape)
+    if n == 1:  # numpy's in-place ufuncs are several times slower on one element: the state twice
+        twice = _batch(chunk, [v if v.ndim == 1 else np.broadcast_to(v.reshape(-1), (2, v.size)) for v in inputs],
+                       registers, dims, fixed, pure)
+        outputs = [out[:1].reshape(shape + d) for out, d in zip(twice if len(dims) > 1 else (twice,), dims)]
+        return outputs[0] if len(outputs) == 1 else tuple(outputs)
+    rows = np.empty((sum(v.shape[-1] for v in inputs if v.ndim > 1), n))
+    elements, r = [], 0  # per input element: its row of rows or, one for all states, a 0-d array
+    for v in inputs:
+        k = v.shape[-1]
+        if v.ndim == 1:
+            elements += [v[i, ...] for i in range(k)]
+        else:
+            np.copyto(rows[r:r + k], (v if v.shape[:-1] == shape else np.broadcast_to(v, shape + (k,))).reshape(n, k).T)
+            elements += list(rows[r:r + k])
+            r += k
+    outputs = [np.empty((n, math.prod(d))) for d in dims]
+    runs = []  # [output, first entry, end, first row of y]: the computed entries, run by run
+    row = 0
+    for out, constant in zip(outputs, fixed or [{}] * len(dims)):
+        if not constant:
+            runs.append([out, 0, out.shape[1], row])
+            row += out.shape[1]
+            continue
+        if len(constant) * 4 > out.shape[1]:  # many: a pass writing every entry
+            out[...] = [constant.get(j, 0.0) for j in range(out.shape[1])]
+        else:  # few: one column each
+            for j, value in constant.items():
+                out[:, j] = value
+        for j in range(out.shape[1]):
+            if j in constant:
+                continue
+            if runs and runs[-1][0] is out and runs[-1][2] == j:
+                runs[-1][2] += 1
+            else:
+                runs.append([out, j, j + 1, row])
+            row += 1
+    shared = inputs[-1].ndim == 1
+    chunks = -(-n // min(_CHUNK, max(1, _FLOATS // max(registers, row, 0 if shared else pure, 1))))
+    size = -(-n // chunks) if n else 0
+    t, y = _rows(registers, size), _rows(row, size)
+    s = [np.empty(()) for _ in range(pure)] if shared else _rows(pure, size)
+    for start in range(0, n, size or 1):
+        stop = min(start + size, n)
+        if stop - start < size:  # the last chunk, shorter
+            t, y = t[:, :stop - start], y[:, :stop - start]
+            s = s if shared else s[:, :stop - start]
+        chunk([e[start:stop] if e.ndim else e for e in elements], t, s, y)
+        for out, first, end, r in runs:
+            np.copyto(out[start:stop, first:end], y[r:r + end - first].T)
+    outputs = [out.reshape(shape + d) for out, d in zip(outputs, dims)]
+    return outputs[0] if len(outputs) == 1 else tuple(outputs)
 
 
 def _sign(x):
@@ -218,16 +288,12 @@ def fk_tcp(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_tcp_chunk, (q, p), 6, ((4, 4),), fixed=_fk_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = cos(q[1])
     t2 = t0 * t1
@@ -250,9 +316,41 @@ def fk_tcp(q, p=DEFAULT_P):
           t5, t2, 0.0, t3,
           0.0, 0.0, 1.0, 0.0,
           0.0, 0.0, 0.0, 1.0)
-    if shape is None:
-        return np.array(_T).reshape(4, 4)
-    return _batch(_T, shape, (4, 4))
+    return np.array(_T).reshape(4, 4)
+
+
+_fk_tcp_fixed = (
+    {2: 0.0, 6: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+)
+"""fk_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_tcp_chunk(x, t, s, y):
+    """fk_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5 = t
+    T_0, T_1, T_3, T_4, T_5, T_7 = y
+    cos(q_0, t0)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    sin(q_0, t3)
+    sin(q_1, t4)
+    multiply(t3, t4, t5)
+    subtract(t2, t5, T_0)
+    multiply(t3, t1, t1)
+    multiply(t0, t4, t4)
+    add(t1, t4, T_4)
+    add(t4, t1, t4)
+    negative(t4, T_1)
+    multiply(t0, p_0, t0)
+    multiply(T_0, p_1, t1)
+    add(t0, t1, T_3)
+    multiply(t3, p_0, t3)
+    multiply(T_4, p_1, t0)
+    add(t3, t0, T_7)
+    copyto(T_5, T_0)
 
 
 def jacobian_tcp(q, p=DEFAULT_P):
@@ -265,16 +363,12 @@ def jacobian_tcp(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_jacobian_tcp_chunk, (q, p), 7, ((6, 2),), fixed=_jacobian_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t1 = t0 * p[0]
     t2 = cos(q[1])
@@ -299,9 +393,40 @@ def jacobian_tcp(q, p=DEFAULT_P):
           0.0, 0.0,
           0.0, 0.0,
           1.0, 1.0)
-    if shape is None:
-        return np.array(_J).reshape(6, 2)
-    return _batch(_J, shape, (6, 2))
+    return np.array(_J).reshape(6, 2)
+
+
+_jacobian_tcp_fixed = (
+    {4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 1.0},
+)
+"""jacobian_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _jacobian_tcp_chunk(x, t, s, y):
+    """jacobian_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6 = t
+    J_0, J_1, J_2, J_3 = y
+    sin(q_0, t0)
+    multiply(t0, p_0, t1)
+    cos(q_1, t2)
+    multiply(t0, t2, t3)
+    cos(q_0, t4)
+    sin(q_1, t5)
+    multiply(t4, t5, t6)
+    add(t3, t6, t3)
+    multiply(t3, p_1, t3)
+    add(t1, t3, t1)
+    negative(t1, J_0)
+    multiply(t4, p_0, t1)
+    multiply(t4, t2, t4)
+    multiply(t0, t5, t0)
+    subtract(t4, t0, t4)
+    multiply(t4, p_1, J_3)
+    add(t1, J_3, J_2)
+    negative(t3, J_1)
 
 
 def jdot_qd_tcp(q, qd, p=DEFAULT_P):
@@ -316,18 +441,13 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 12, ((6,),), fixed=_jdot_qd_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = t0 * qd[0]
     t2 = p[0] * t1
@@ -365,9 +485,58 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     t0 = t1 + t0
     t0 = -t0
     _a = (t2, t0, 0.0, 0.0, 0.0, 0.0)
-    if shape is None:
-        return np.array(_a)
-    return _batch(_a, shape, (6,))
+    return np.array(_a)
+
+
+_jdot_qd_tcp_fixed = (
+    {2: 0.0, 3: 0.0, 4: 0.0, 5: 0.0},
+)
+"""jdot_qd_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _jdot_qd_tcp_chunk(x, t, s, y):
+    """jdot_qd_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11 = t
+    a_0, a_1 = y
+    cos(q_0, t0)
+    multiply(t0, qd_0, t1)
+    multiply(p_0, t1, t2)
+    cos(q_1, t3)
+    multiply(t3, t1, t4)
+    sin(q_0, t5)
+    sin(q_1, t6)
+    multiply(t6, qd_1, t7)
+    multiply(t5, t7, t8)
+    subtract(t4, t8, t4)
+    multiply(t3, qd_1, t8)
+    multiply(t0, t8, t9)
+    multiply(t5, qd_0, t10)
+    multiply(t6, t10, t11)
+    subtract(t9, t11, t9)
+    add(t4, t9, t4)
+    multiply(p_1, t4, t4)
+    add(t2, t4, t2)
+    multiply(qd_0, t2, t2)
+    multiply(qd_1, t4, t4)
+    add(t2, t4, t2)
+    negative(t2, a_0)
+    multiply(p_0, t10, t2)
+    multiply(t3, t10, t3)
+    multiply(t0, t7, t0)
+    add(t3, t0, t3)
+    multiply(t6, t1, t6)
+    multiply(t5, t8, t5)
+    add(t6, t5, t6)
+    add(t3, t6, t3)
+    multiply(p_1, t3, t3)
+    add(t2, t3, t2)
+    multiply(qd_0, t2, t2)
+    multiply(qd_1, t3, t3)
+    add(t2, t3, t2)
+    negative(t2, a_1)
 
 
 def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
@@ -384,20 +553,14 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 13, ((6,),), fixed=_frame_acceleration_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t1 = t0 * p[0]
     t2 = cos(q[1])
@@ -455,9 +618,78 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     t0 = t6 - t0
     t2 = qdd[0] + qdd[1]
     _a = (t1, t0, 0.0, 0.0, 0.0, t2)
-    if shape is None:
-        return np.array(_a)
-    return _batch(_a, shape, (6,))
+    return np.array(_a)
+
+
+_frame_acceleration_tcp_fixed = (
+    {2: 0.0, 3: 0.0, 4: 0.0},
+)
+"""frame_acceleration_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _frame_acceleration_tcp_chunk(x, t, s, y):
+    """frame_acceleration_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12 = t
+    a_0, a_1, a_5 = y
+    sin(q_0, t0)
+    multiply(t0, p_0, t1)
+    cos(q_1, t2)
+    multiply(t0, t2, t3)
+    cos(q_0, t4)
+    sin(q_1, t5)
+    multiply(t4, t5, t6)
+    add(t3, t6, t3)
+    multiply(t3, p_1, t3)
+    add(t1, t3, t1)
+    multiply(t1, qdd_0, t1)
+    multiply(t3, qdd_1, t3)
+    add(t1, t3, t1)
+    multiply(t4, qd_0, t3)
+    multiply(p_0, t3, t6)
+    multiply(t2, t3, t7)
+    multiply(t5, qd_1, t8)
+    multiply(t0, t8, t9)
+    subtract(t7, t9, t7)
+    multiply(t2, qd_1, t9)
+    multiply(t4, t9, t10)
+    multiply(t0, qd_0, t11)
+    multiply(t5, t11, t12)
+    subtract(t10, t12, t10)
+    add(t7, t10, t7)
+    multiply(p_1, t7, t7)
+    add(t6, t7, t6)
+    multiply(qd_0, t6, t6)
+    multiply(qd_1, t7, t7)
+    add(t6, t7, t6)
+    add(t1, t6, t1)
+    negative(t1, a_0)
+    multiply(t4, p_0, t1)
+    multiply(t4, t2, t6)
+    multiply(t0, t5, t7)
+    subtract(t6, t7, t6)
+    multiply(t6, p_1, t6)
+    add(t1, t6, t1)
+    multiply(t1, qdd_0, t1)
+    multiply(t6, qdd_1, t6)
+    add(t1, t6, t1)
+    multiply(p_0, t11, t6)
+    multiply(t2, t11, t2)
+    multiply(t4, t8, t4)
+    add(t2, t4, t2)
+    multiply(t5, t3, t5)
+    multiply(t0, t9, t0)
+    add(t5, t0, t5)
+    add(t2, t5, t2)
+    multiply(p_1, t2, t2)
+    add(t6, t2, t6)
+    multiply(qd_0, t6, t6)
+    multiply(qd_1, t2, t2)
+    add(t6, t2, t6)
+    subtract(t1, t6, a_1)
+    add(qdd_0, qdd_1, a_5)
 
 
 def fk_jacobian_tcp(q, p=DEFAULT_P):
@@ -471,16 +703,12 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_jacobian_tcp_chunk, (q, p), 6, ((4, 4), (6, 2),), fixed=_fk_jacobian_tcp_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = cos(q[1])
     t2 = t0 * t1
@@ -511,9 +739,45 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
           0.0, 0.0,
           0.0, 0.0,
           1.0, 1.0)
-    if shape is None:
-        return np.array(_T).reshape(4, 4), np.array(_J).reshape(6, 2)
-    return _batch(_T, shape, (4, 4)), _batch(_J, shape, (6, 2))
+    return np.array(_T).reshape(4, 4), np.array(_J).reshape(6, 2)
+
+
+_fk_jacobian_tcp_fixed = (
+    {2: 0.0, 6: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 1.0},
+)
+"""fk_jacobian_tcp's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_jacobian_tcp_chunk(x, t, s, y):
+    """fk_jacobian_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5 = t
+    T_0, T_1, T_3, T_4, T_5, T_7, J_0, J_1, J_2, J_3 = y
+    cos(q_0, t0)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    sin(q_0, t3)
+    sin(q_1, t4)
+    multiply(t3, t4, t5)
+    subtract(t2, t5, T_0)
+    multiply(t3, t1, t1)
+    multiply(t0, t4, t4)
+    add(t1, t4, T_4)
+    add(t4, t1, t4)
+    negative(t4, T_1)
+    multiply(t0, p_0, t0)
+    multiply(T_0, p_1, J_3)
+    add(t0, J_3, T_3)
+    multiply(t3, p_0, t3)
+    multiply(T_4, p_1, t0)
+    add(t3, t0, T_7)
+    negative(T_7, J_0)
+    negative(t0, J_1)
+    copyto(T_5, T_0)
+    copyto(J_2, T_3)
 
 
 def mass_matrix(q, p=DEFAULT_P):
@@ -526,16 +790,12 @@ def mass_matrix(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos = math.cos
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos = np.cos
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_mass_matrix_chunk, (q, p), 2, ((2, 2),), pure=5)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos = math.cos
     t0 = p[0] * p[0]
     t1 = p[2] * t0
     t1 = t1 / 12.0
@@ -564,9 +824,50 @@ def mass_matrix(q, p=DEFAULT_P):
     t0 = t1 + t0
     _M = (t0, t4,
           t4, t2)
-    if shape is None:
-        return np.array(_M).reshape(2, 2)
-    return _batch(_M, shape, (2, 2))
+    return np.array(_M).reshape(2, 2)
+
+
+_mass_matrix_constants = _constants(
+    12.0, 2.0)
+
+
+def _mass_matrix_chunk(x, t, s, y):
+    """mass_matrix on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1 = t
+    s0, s1, s2, s3, s4 = s
+    M_0, M_1, M_2, M_3 = y
+    k0, k1 = _mass_matrix_constants
+    multiply(p_0, p_0, s0)
+    multiply(p_2, s0, s1)
+    divide(s1, k0, s1)
+    divide(p_0, k1, s2)
+    subtract(p_0, s2, s2)
+    multiply(s2, s2, s2)
+    multiply(p_2, s2, s2)
+    add(s1, s2, s1)
+    multiply(p_1, p_1, s2)
+    multiply(p_3, s2, s2)
+    divide(s2, k0, s2)
+    divide(p_1, k1, s3)
+    subtract(p_1, s3, s3)
+    multiply(s3, s3, s4)
+    multiply(p_3, s4, s4)
+    add(s2, s4, s2)
+    cos(q_1, t0)
+    multiply(p_3, s3, s3)
+    multiply(t0, s3, t0)
+    multiply(p_0, t0, t1)
+    add(s2, t1, M_1)
+    multiply(t0, p_0, t0)
+    add(M_1, t0, t0)
+    multiply(p_3, s0, s0)
+    add(t0, s0, t0)
+    add(s1, t0, M_0)
+    copyto(M_2, M_1)
+    copyto(M_3, s2)
 
 
 def coriolis_matrix(q, qd, p=DEFAULT_P):
@@ -581,18 +882,13 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        p = p.tolist()
-        sin = math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        p = _columns(p)
-        sin = np.sin
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_coriolis_matrix_chunk, (q, qd, p), 2, ((2, 2),), fixed=_coriolis_matrix_fixed, pure=1)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    sin = math.sin
     t0 = p[1] / 2.0
     t0 = p[1] - t0
     t0 = p[3] * t0
@@ -606,9 +902,39 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     t1 = -t1
     _C = (t2, t1,
           t0, 0.0)
-    if shape is None:
-        return np.array(_C).reshape(2, 2)
-    return _batch(_C, shape, (2, 2))
+    return np.array(_C).reshape(2, 2)
+
+
+_coriolis_matrix_constants = _constants(
+    2.0)
+
+
+_coriolis_matrix_fixed = (
+    {3: 0.0},
+)
+"""coriolis_matrix's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _coriolis_matrix_chunk(x, t, s, y):
+    """coriolis_matrix on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, divide, multiply, negative, sin, subtract = np.add, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1 = t
+    s0, = s
+    C_0, C_1, C_2 = y
+    k0, = _coriolis_matrix_constants
+    divide(p_1, k0, s0)
+    subtract(p_1, s0, s0)
+    multiply(p_3, s0, s0)
+    sin(q_1, t0)
+    multiply(s0, t0, t0)
+    multiply(p_0, t0, t0)
+    multiply(t0, qd_1, t1)
+    negative(t1, C_0)
+    multiply(t0, qd_0, C_2)
+    add(C_2, t1, t1)
+    negative(t1, C_1)
 
 
 def gravity(q, p=DEFAULT_P):
@@ -621,16 +947,12 @@ def gravity(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_gravity_chunk, (q, p), 7, ((2,),), pure=1)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = p[0] / 2.0
     t0 = p[0] - t0
     t0 = p[2] * t0
@@ -660,9 +982,50 @@ def gravity(q, p=DEFAULT_P):
     t1 = p[0] * t1
     t0 = t0 + t1
     _g = (t0, t2)
-    if shape is None:
-        return np.array(_g)
-    return _batch(_g, shape, (2,))
+    return np.array(_g)
+
+
+_gravity_constants = _constants(
+    2.0)
+
+
+def _gravity_chunk(x, t, s, y):
+    """gravity on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6 = t
+    s0, = s
+    g_0, g_1 = y
+    k0, = _gravity_constants
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s0)
+    cos(q_0, t0)
+    multiply(t0, p_4, t0)
+    multiply(s0, t0, t1)
+    divide(p_1, k0, s0)
+    subtract(p_1, s0, s0)
+    multiply(p_3, s0, s0)
+    cos(q_1, t2)
+    multiply(t2, t0, t3)
+    sin(q_1, t4)
+    sin(q_0, t5)
+    multiply(t5, p_4, t5)
+    multiply(t4, t5, t6)
+    subtract(t3, t6, t3)
+    multiply(s0, t3, g_1)
+    add(t1, g_1, t1)
+    multiply(t2, t5, t5)
+    multiply(t4, t0, t0)
+    add(t5, t0, t5)
+    multiply(p_3, t5, t5)
+    multiply(t4, t5, t4)
+    multiply(p_3, t3, t3)
+    multiply(t2, t3, t2)
+    add(t4, t2, t4)
+    multiply(p_0, t4, t4)
+    add(t1, t4, g_0)
 
 
 def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
@@ -679,20 +1042,14 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_chunk, (q, qd, qdd, p), 9, ((2,),), pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = p[0] * p[0]
     t0 = p[2] * t0
     t0 = t0 / 12.0
@@ -750,9 +1107,78 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     t2 = p[0] * t2
     t0 = t0 + t2
     _tau = (t0, t1)
-    if shape is None:
-        return np.array(_tau)
-    return _batch(_tau, shape, (2,))
+    return np.array(_tau)
+
+
+_inverse_dynamics_constants = _constants(
+    12.0, 2.0)
+
+
+def _inverse_dynamics_chunk(x, t, s, y):
+    """inverse_dynamics on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8 = t
+    s0, s1, s2 = s
+    tau_0, tau_1 = y
+    k0, k1 = _inverse_dynamics_constants
+    multiply(p_0, p_0, s0)
+    multiply(p_2, s0, s0)
+    divide(s0, k0, s0)
+    divide(p_0, k1, s1)
+    subtract(p_0, s1, s1)
+    multiply(s1, s1, s2)
+    multiply(p_2, s2, s2)
+    add(s0, s2, s0)
+    multiply(s0, qdd_0, t0)
+    multiply(p_2, s1, s1)
+    cos(q_0, t1)
+    multiply(t1, p_4, t1)
+    multiply(s1, t1, t2)
+    add(t0, t2, t0)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k0, s0)
+    divide(p_1, k1, s1)
+    subtract(p_1, s1, s1)
+    multiply(s1, s1, s2)
+    multiply(p_3, s2, s2)
+    add(s0, s2, s0)
+    add(qdd_0, qdd_1, t2)
+    multiply(s0, t2, t3)
+    multiply(p_3, s1, s1)
+    cos(q_1, t4)
+    multiply(qdd_0, p_0, t5)
+    add(t1, t5, t1)
+    multiply(t4, t1, t5)
+    sin(q_1, t6)
+    sin(q_0, t7)
+    multiply(t7, p_4, t7)
+    multiply(qd_0, p_0, t8)
+    multiply(qd_0, t8, t8)
+    subtract(t7, t8, t7)
+    multiply(t6, t7, t8)
+    subtract(t5, t8, t5)
+    multiply(s1, t5, t8)
+    add(t3, t8, tau_1)
+    add(t0, tau_1, t0)
+    multiply(t4, t7, t7)
+    multiply(t6, t1, t1)
+    add(t7, t1, t7)
+    multiply(p_3, t7, t7)
+    add(qd_0, qd_1, t1)
+    multiply(t1, s1, t3)
+    multiply(t1, t3, t1)
+    subtract(t7, t1, t7)
+    multiply(t6, t7, t6)
+    multiply(p_3, t5, t5)
+    multiply(t2, s1, t2)
+    add(t5, t2, t5)
+    multiply(t4, t5, t4)
+    add(t6, t4, t6)
+    multiply(p_0, t6, t6)
+    add(t0, t6, tau_0)
 
 
 def forward_dynamics(q, qd, tau, p=DEFAULT_P):
@@ -769,20 +1195,14 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     qd = _array(qd, 2, "qd")
     tau = _array(tau, 2, "tau")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == tau.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        tau = tau.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        tau = _columns(tau)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_forward_dynamics_chunk, (q, qd, tau, p), 8, ((2,),), pure=5)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    tau = tau.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = p[0] / 2.0
     t0 = p[0] - t0
     t1 = p[2] * t0
@@ -851,9 +1271,89 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t1 = t4 * t0
     t1 = t2 - t1
     _qdd = (t1, t0)
-    if shape is None:
-        return np.array(_qdd)
-    return _batch(_qdd, shape, (2,))
+    return np.array(_qdd)
+
+
+_forward_dynamics_constants = _constants(
+    2.0, 12.0)
+
+
+def _forward_dynamics_chunk(x, t, s, y):
+    """forward_dynamics on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, tau_0, tau_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7 = t
+    s0, s1, s2, s3, s4 = s
+    qdd_0, qdd_1 = y
+    k0, k1 = _forward_dynamics_constants
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s1)
+    cos(q_0, t0)
+    multiply(t0, p_4, t0)
+    multiply(s1, t0, t1)
+    divide(p_1, k0, s1)
+    subtract(p_1, s1, s1)
+    multiply(p_3, s1, s2)
+    cos(q_1, t2)
+    multiply(t2, t0, t3)
+    sin(q_1, t4)
+    sin(q_0, t5)
+    multiply(t5, p_4, t5)
+    multiply(qd_0, p_0, t6)
+    multiply(qd_0, t6, t6)
+    subtract(t5, t6, t5)
+    multiply(t4, t5, t6)
+    subtract(t3, t6, t3)
+    multiply(s2, t3, t6)
+    add(t1, t6, t1)
+    multiply(t2, t5, t5)
+    multiply(t4, t0, t0)
+    add(t5, t0, t5)
+    multiply(p_3, t5, t5)
+    add(qd_0, qd_1, t0)
+    multiply(t0, s2, t7)
+    multiply(t0, t7, t0)
+    subtract(t5, t0, t5)
+    multiply(t4, t5, t4)
+    multiply(p_3, t3, t3)
+    multiply(t2, t3, t3)
+    add(t4, t3, t4)
+    multiply(p_0, t4, t4)
+    add(t1, t4, t1)
+    subtract(tau_0, t1, t1)
+    multiply(p_0, p_0, s3)
+    multiply(p_2, s3, s4)
+    divide(s4, k1, s4)
+    multiply(s0, s0, s0)
+    multiply(p_2, s0, s0)
+    add(s4, s0, s4)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k1, s0)
+    multiply(s1, s1, s1)
+    multiply(p_3, s1, s1)
+    add(s0, s1, s0)
+    multiply(t2, s2, t2)
+    multiply(p_0, t2, t0)
+    add(s0, t0, t0)
+    multiply(t2, p_0, t2)
+    add(t0, t2, t2)
+    multiply(p_3, s3, s3)
+    add(t2, s3, t2)
+    add(s4, t2, t2)
+    divide(t1, t2, t3)
+    divide(t0, t2, t0)
+    subtract(tau_1, t6, t6)
+    multiply(t0, t1, t1)
+    subtract(t6, t1, t6)
+    multiply(t0, t0, t1)
+    multiply(t1, t2, t1)
+    subtract(s0, t1, t1)
+    divide(t6, t1, qdd_1)
+    multiply(t0, qdd_1, t0)
+    subtract(t3, t0, qdd_0)
 
 
 def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
@@ -872,22 +1372,15 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     qdd = _array(qdd, 2, "qdd")
     w = _array(w, 6, "w")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == qdd.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        w = w.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], w.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        w = _columns(w)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w, p), 11, ((2,),), pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    w = w.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = p[0] * p[0]
     t0 = p[2] * t0
     t0 = t0 / 12.0
@@ -967,9 +1460,100 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     t2 = t2 + w[5]
     t1 = t1 - t2
     _tau = (t0, t1)
-    if shape is None:
-        return np.array(_tau)
-    return _batch(_tau, shape, (2,))
+    return np.array(_tau)
+
+
+_inverse_dynamics_fext_constants = _constants(
+    12.0, 2.0)
+
+
+def _inverse_dynamics_fext_chunk(x, t, s, y):
+    """inverse_dynamics_fext on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, w_0, w_1, w_2, w_3, w_4, w_5, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10 = t
+    s0, s1, s2 = s
+    tau_0, tau_1 = y
+    k0, k1 = _inverse_dynamics_fext_constants
+    multiply(p_0, p_0, s0)
+    multiply(p_2, s0, s0)
+    divide(s0, k0, s0)
+    divide(p_0, k1, s1)
+    subtract(p_0, s1, s1)
+    multiply(s1, s1, s2)
+    multiply(p_2, s2, s2)
+    add(s0, s2, s0)
+    multiply(s0, qdd_0, t0)
+    multiply(p_2, s1, s1)
+    cos(q_0, t1)
+    multiply(t1, p_4, t2)
+    multiply(s1, t2, t3)
+    add(t0, t3, t0)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k0, s0)
+    divide(p_1, k1, s1)
+    subtract(p_1, s1, s1)
+    multiply(s1, s1, s2)
+    multiply(p_3, s2, s2)
+    add(s0, s2, s0)
+    add(qdd_0, qdd_1, t3)
+    multiply(s0, t3, t4)
+    multiply(p_3, s1, s1)
+    cos(q_1, t5)
+    multiply(qdd_0, p_0, t6)
+    add(t2, t6, t2)
+    multiply(t5, t2, t6)
+    sin(q_1, t7)
+    sin(q_0, t8)
+    multiply(t8, p_4, t9)
+    multiply(qd_0, p_0, t10)
+    multiply(qd_0, t10, t10)
+    subtract(t9, t10, t9)
+    multiply(t7, t9, t10)
+    subtract(t6, t10, t6)
+    multiply(s1, t6, t10)
+    add(t4, t10, t4)
+    add(t0, t4, t0)
+    multiply(t5, t9, t9)
+    multiply(t7, t2, t2)
+    add(t9, t2, t9)
+    multiply(p_3, t9, t9)
+    add(qd_0, qd_1, t2)
+    multiply(t2, s1, t10)
+    multiply(t2, t10, t2)
+    subtract(t9, t2, t9)
+    multiply(t7, t9, t9)
+    multiply(p_3, t6, t6)
+    multiply(t3, s1, t3)
+    add(t6, t3, t6)
+    multiply(t5, t6, t6)
+    add(t9, t6, t9)
+    multiply(p_0, t9, t9)
+    add(t0, t9, t0)
+    multiply(t1, p_0, t2)
+    multiply(t1, t5, t3)
+    multiply(t8, t7, t6)
+    subtract(t3, t6, t3)
+    multiply(t3, p_1, t3)
+    add(t2, t3, t2)
+    multiply(t2, w_1, t2)
+    multiply(t8, p_0, t6)
+    multiply(t8, t5, t8)
+    multiply(t1, t7, t1)
+    add(t8, t1, t8)
+    multiply(t8, p_1, t8)
+    add(t6, t8, t6)
+    multiply(t6, w_0, t6)
+    subtract(t2, t6, t2)
+    add(t2, w_5, t2)
+    subtract(t0, t2, tau_0)
+    multiply(t3, w_1, t3)
+    multiply(t8, w_0, t8)
+    subtract(t3, t8, t3)
+    add(t3, w_5, t3)
+    subtract(t4, t3, tau_1)
 
 
 def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
@@ -988,22 +1572,15 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     tau = _array(tau, 2, "tau")
     w = _array(w, 6, "w")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == tau.ndim == w.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        tau = tau.tolist()
-        w = w.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], tau.shape[:-1], w.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        tau = _columns(tau)
-        w = _columns(w)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w, p), 11, ((2,),), pure=5)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    tau = tau.tolist()
+    w = w.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = t0 * p[0]
     t2 = cos(q[1])
@@ -1094,9 +1671,111 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     t1 = t4 * t0
     t1 = t2 - t1
     _qdd = (t1, t0)
-    if shape is None:
-        return np.array(_qdd)
-    return _batch(_qdd, shape, (2,))
+    return np.array(_qdd)
+
+
+_forward_dynamics_fext_constants = _constants(
+    2.0, 12.0)
+
+
+def _forward_dynamics_fext_chunk(x, t, s, y):
+    """forward_dynamics_fext on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, tau_0, tau_1, w_0, w_1, w_2, w_3, w_4, w_5, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10 = t
+    s0, s1, s2, s3, s4 = s
+    qdd_0, qdd_1 = y
+    k0, k1 = _forward_dynamics_fext_constants
+    cos(q_0, t0)
+    multiply(t0, p_0, t1)
+    cos(q_1, t2)
+    multiply(t0, t2, t3)
+    sin(q_0, t4)
+    sin(q_1, t5)
+    multiply(t4, t5, t6)
+    subtract(t3, t6, t3)
+    multiply(t3, p_1, t3)
+    add(t1, t3, t1)
+    multiply(t1, w_1, t1)
+    multiply(t4, p_0, t6)
+    multiply(t4, t2, t7)
+    multiply(t0, t5, t8)
+    add(t7, t8, t7)
+    multiply(t7, p_1, t7)
+    add(t6, t7, t6)
+    multiply(t6, w_0, t6)
+    subtract(t1, t6, t1)
+    add(t1, w_5, t1)
+    add(tau_0, t1, t1)
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s1)
+    multiply(t0, p_4, t0)
+    multiply(s1, t0, t6)
+    divide(p_1, k0, s1)
+    subtract(p_1, s1, s1)
+    multiply(p_3, s1, s2)
+    multiply(t2, t0, t8)
+    multiply(t4, p_4, t4)
+    multiply(qd_0, p_0, t9)
+    multiply(qd_0, t9, t9)
+    subtract(t4, t9, t4)
+    multiply(t5, t4, t9)
+    subtract(t8, t9, t8)
+    multiply(s2, t8, t9)
+    add(t6, t9, t6)
+    multiply(t2, t4, t4)
+    multiply(t5, t0, t0)
+    add(t4, t0, t4)
+    multiply(p_3, t4, t4)
+    add(qd_0, qd_1, t0)
+    multiply(t0, s2, t10)
+    multiply(t0, t10, t0)
+    subtract(t4, t0, t4)
+    multiply(t5, t4, t5)
+    multiply(p_3, t8, t8)
+    multiply(t2, t8, t8)
+    add(t5, t8, t5)
+    multiply(p_0, t5, t5)
+    add(t6, t5, t6)
+    subtract(t1, t6, t1)
+    multiply(p_0, p_0, s3)
+    multiply(p_2, s3, s4)
+    divide(s4, k1, s4)
+    multiply(s0, s0, s0)
+    multiply(p_2, s0, s0)
+    add(s4, s0, s4)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k1, s0)
+    multiply(s1, s1, s1)
+    multiply(p_3, s1, s1)
+    add(s0, s1, s0)
+    multiply(t2, s2, t2)
+    multiply(p_0, t2, t0)
+    add(s0, t0, t0)
+    multiply(t2, p_0, t2)
+    add(t0, t2, t2)
+    multiply(p_3, s3, s3)
+    add(t2, s3, t2)
+    add(s4, t2, t2)
+    divide(t1, t2, t4)
+    divide(t0, t2, t0)
+    multiply(t3, w_1, t3)
+    multiply(t7, w_0, t7)
+    subtract(t3, t7, t3)
+    add(t3, w_5, t3)
+    add(tau_1, t3, t3)
+    subtract(t3, t9, t3)
+    multiply(t0, t1, t1)
+    subtract(t3, t1, t3)
+    multiply(t0, t0, t1)
+    multiply(t1, t2, t1)
+    subtract(s0, t1, t1)
+    divide(t3, t1, qdd_1)
+    multiply(t0, qdd_1, t0)
+    subtract(t4, t0, qdd_0)
 
 
 def com(q, p=DEFAULT_P):
@@ -1109,16 +1788,12 @@ def com(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_com_chunk, (q, p), 8, ((3,),), fixed=_com_fixed, pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = p[0] / 2.0
     t1 = p[0] - t1
@@ -1151,9 +1826,59 @@ def com(q, p=DEFAULT_P):
     t0 = t1 + t0
     t0 = t0 / t3
     _c = (t2, t0, 0.0)
-    if shape is None:
-        return np.array(_c)
-    return _batch(_c, shape, (3,))
+    return np.array(_c)
+
+
+_com_constants = _constants(
+    2.0)
+
+
+_com_fixed = (
+    {2: 0.0},
+)
+"""com's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _com_chunk(x, t, s, y):
+    """com on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7 = t
+    s0, s1, s2 = s
+    c_0, c_1 = y
+    k0, = _com_constants
+    cos(q_0, t0)
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s0)
+    multiply(t0, s0, t1)
+    multiply(t0, p_0, t2)
+    multiply(p_3, t2, t2)
+    cos(q_1, t3)
+    multiply(t0, t3, t4)
+    sin(q_0, t5)
+    sin(q_1, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    divide(p_1, k0, s1)
+    subtract(p_1, s1, s1)
+    multiply(p_3, s1, s1)
+    multiply(t4, s1, t4)
+    add(t2, t4, t2)
+    add(t1, t2, t1)
+    add(p_2, p_3, s2)
+    divide(t1, s2, c_0)
+    multiply(t5, s0, t1)
+    multiply(t5, p_0, t2)
+    multiply(p_3, t2, t2)
+    multiply(t5, t3, t5)
+    multiply(t0, t6, t0)
+    add(t5, t0, t5)
+    multiply(t5, s1, t5)
+    add(t2, t5, t2)
+    add(t1, t2, t1)
+    divide(t1, s2, c_1)
 
 
 def com_jacobian(q, p=DEFAULT_P):
@@ -1166,16 +1891,12 @@ def com_jacobian(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_com_jacobian_chunk, (q, p), 8, ((3, 2),), fixed=_com_jacobian_fixed, pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t1 = p[0] / 2.0
     t1 = p[0] - t1
@@ -1214,9 +1935,63 @@ def com_jacobian(q, p=DEFAULT_P):
     _J = (t2, t4,
           t1, t0,
           0.0, 0.0)
-    if shape is None:
-        return np.array(_J).reshape(3, 2)
-    return _batch(_J, shape, (3, 2))
+    return np.array(_J).reshape(3, 2)
+
+
+_com_jacobian_constants = _constants(
+    2.0)
+
+
+_com_jacobian_fixed = (
+    {4: 0.0, 5: 0.0},
+)
+"""com_jacobian's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _com_jacobian_chunk(x, t, s, y):
+    """com_jacobian on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7 = t
+    s0, s1, s2 = s
+    J_0, J_1, J_2, J_3 = y
+    k0, = _com_jacobian_constants
+    sin(q_0, t0)
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s0)
+    multiply(t0, s0, t1)
+    multiply(t0, p_0, t2)
+    multiply(p_3, t2, t2)
+    cos(q_1, t3)
+    multiply(t0, t3, t4)
+    cos(q_0, t5)
+    sin(q_1, t6)
+    multiply(t5, t6, t7)
+    add(t4, t7, t4)
+    divide(p_1, k0, s1)
+    subtract(p_1, s1, s1)
+    multiply(p_3, s1, s1)
+    multiply(t4, s1, t4)
+    add(t2, t4, t2)
+    add(t1, t2, t1)
+    add(p_2, p_3, s2)
+    divide(t1, s2, t1)
+    negative(t1, J_0)
+    multiply(t5, s0, t1)
+    multiply(t5, p_0, t2)
+    multiply(p_3, t2, t2)
+    multiply(t5, t3, t5)
+    multiply(t0, t6, t0)
+    subtract(t5, t0, t5)
+    multiply(t5, s1, t5)
+    add(t2, t5, t2)
+    add(t1, t2, t1)
+    divide(t1, s2, J_2)
+    divide(t4, s2, t4)
+    negative(t4, J_1)
+    divide(t5, s2, J_3)
 
 
 def centroidal_map(q, p=DEFAULT_P):
@@ -1229,16 +2004,12 @@ def centroidal_map(q, p=DEFAULT_P):
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
-    if q.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_centroidal_map_chunk, (q, p), 12, ((6, 2),), fixed=_centroidal_map_fixed, pure=4)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(q[0])
     t1 = p[0] / 2.0
     t1 = p[0] - t1
@@ -1309,9 +2080,92 @@ def centroidal_map(q, p=DEFAULT_P):
           0.0, 0.0,
           0.0, 0.0,
           t1, t2)
-    if shape is None:
-        return np.array(_A).reshape(6, 2)
-    return _batch(_A, shape, (6, 2))
+    return np.array(_A).reshape(6, 2)
+
+
+_centroidal_map_constants = _constants(
+    2.0, 12.0)
+
+
+_centroidal_map_fixed = (
+    {4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0},
+)
+"""centroidal_map's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _centroidal_map_chunk(x, t, s, y):
+    """centroidal_map on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11 = t
+    s0, s1, s2, s3 = s
+    A_0, A_1, A_2, A_3, A_10, A_11 = y
+    k0, k1 = _centroidal_map_constants
+    sin(q_0, t0)
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s1)
+    multiply(t0, s1, t1)
+    multiply(t0, p_0, t2)
+    multiply(p_3, t2, t3)
+    cos(q_1, t4)
+    multiply(t0, t4, t5)
+    cos(q_0, t6)
+    sin(q_1, t7)
+    multiply(t6, t7, t8)
+    add(t5, t8, t5)
+    divide(p_1, k0, s2)
+    subtract(p_1, s2, s2)
+    multiply(p_3, s2, s3)
+    multiply(t5, s3, t5)
+    add(t3, t5, t3)
+    add(t1, t3, t8)
+    negative(t8, A_0)
+    multiply(t6, s1, t9)
+    multiply(t6, p_0, t10)
+    multiply(p_3, t10, t11)
+    multiply(t6, t4, t6)
+    multiply(t0, t7, t0)
+    subtract(t6, t0, t6)
+    multiply(t6, s3, A_3)
+    add(t11, A_3, t11)
+    add(t9, t11, A_2)
+    multiply(p_0, p_0, s1)
+    multiply(p_2, s1, s1)
+    divide(s1, k1, s1)
+    multiply(s0, s0, s0)
+    multiply(p_2, s0, s0)
+    add(s1, s0, s1)
+    add(p_2, p_3, s0)
+    divide(t8, s0, t8)
+    multiply(t8, t1, t1)
+    divide(A_2, s0, t0)
+    multiply(t0, t9, t9)
+    add(t1, t9, t1)
+    subtract(s1, t1, t1)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k1, s0)
+    multiply(s2, s2, s2)
+    multiply(p_3, s2, s2)
+    add(s0, s2, s0)
+    multiply(t5, t2, t4)
+    multiply(A_3, t10, t6)
+    add(t4, t6, t4)
+    add(s0, t4, t4)
+    subtract(t2, t8, t2)
+    multiply(t2, t3, t3)
+    subtract(t10, t0, t10)
+    multiply(t10, t11, t11)
+    add(t3, t11, t3)
+    add(t4, t3, t4)
+    add(t1, t4, A_10)
+    negative(t5, A_1)
+    multiply(t2, t5, t2)
+    multiply(t10, A_3, t10)
+    add(t2, t10, t2)
+    add(s0, t2, A_11)
 
 
 def ode_rhs(x, u, p=DEFAULT_P):
@@ -1326,18 +2180,13 @@ def ode_rhs(x, u, p=DEFAULT_P):
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
     p = _array(p, 5, "p")
-    if x.ndim == u.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_rhs_chunk, (x, u, p), 8, ((4,),), pure=5)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = p[0] / 2.0
     t0 = p[0] - t0
     t1 = p[2] * t0
@@ -1406,9 +2255,91 @@ def ode_rhs(x, u, p=DEFAULT_P):
     t1 = t4 * t0
     t1 = t2 - t1
     _xdot = (x[2], x[3], t1, t0)
-    if shape is None:
-        return np.array(_xdot)
-    return _batch(_xdot, shape, (4,))
+    return np.array(_xdot)
+
+
+_ode_rhs_constants = _constants(
+    2.0, 12.0)
+
+
+def _ode_rhs_chunk(x, t, s, y):
+    """ode_rhs on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, sin, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    x_0, x_1, x_2, x_3, u_0, u_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7 = t
+    s0, s1, s2, s3, s4 = s
+    xdot_0, xdot_1, xdot_2, xdot_3 = y
+    k0, k1 = _ode_rhs_constants
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s1)
+    cos(x_0, t0)
+    multiply(t0, p_4, t0)
+    multiply(s1, t0, t1)
+    divide(p_1, k0, s1)
+    subtract(p_1, s1, s1)
+    multiply(p_3, s1, s2)
+    cos(x_1, t2)
+    multiply(t2, t0, t3)
+    sin(x_1, t4)
+    sin(x_0, t5)
+    multiply(t5, p_4, t5)
+    multiply(x_2, p_0, t6)
+    multiply(x_2, t6, t6)
+    subtract(t5, t6, t5)
+    multiply(t4, t5, t6)
+    subtract(t3, t6, t3)
+    multiply(s2, t3, t6)
+    add(t1, t6, t1)
+    multiply(t2, t5, t5)
+    multiply(t4, t0, t0)
+    add(t5, t0, t5)
+    multiply(p_3, t5, t5)
+    add(x_2, x_3, t0)
+    multiply(t0, s2, t7)
+    multiply(t0, t7, t0)
+    subtract(t5, t0, t5)
+    multiply(t4, t5, t4)
+    multiply(p_3, t3, t3)
+    multiply(t2, t3, t3)
+    add(t4, t3, t4)
+    multiply(p_0, t4, t4)
+    add(t1, t4, t1)
+    subtract(u_0, t1, t1)
+    multiply(p_0, p_0, s3)
+    multiply(p_2, s3, s4)
+    divide(s4, k1, s4)
+    multiply(s0, s0, s0)
+    multiply(p_2, s0, s0)
+    add(s4, s0, s4)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k1, s0)
+    multiply(s1, s1, s1)
+    multiply(p_3, s1, s1)
+    add(s0, s1, s0)
+    multiply(t2, s2, t2)
+    multiply(p_0, t2, t0)
+    add(s0, t0, t0)
+    multiply(t2, p_0, t2)
+    add(t0, t2, t2)
+    multiply(p_3, s3, s3)
+    add(t2, s3, t2)
+    add(s4, t2, t2)
+    divide(t1, t2, t3)
+    divide(t0, t2, t0)
+    subtract(u_1, t6, t6)
+    multiply(t0, t1, t1)
+    subtract(t6, t1, t6)
+    multiply(t0, t0, t1)
+    multiply(t1, t2, t1)
+    subtract(s0, t1, t1)
+    divide(t6, t1, xdot_3)
+    multiply(t0, xdot_3, t0)
+    subtract(t3, t0, xdot_2)
+    copyto(xdot_0, x_2)
+    copyto(xdot_1, x_3)
 
 
 def ode_jac_x(x, u, p=DEFAULT_P):
@@ -1423,18 +2354,13 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
     p = _array(p, 5, "p")
-    if x.ndim == u.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        p = p.tolist()
-        cos, sin = math.cos, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        p = _columns(p)
-        cos, sin = np.cos, np.sin
+    if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_jac_x_chunk, (x, u, p), 16, ((4, 4),), fixed=_ode_jac_x_fixed, pure=6)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
     t0 = sin(x[1])
     t1 = cos(x[1])
     t2 = cos(x[0])
@@ -1597,9 +2523,186 @@ def ode_jac_x(x, u, p=DEFAULT_P):
           0.0, 0.0, 0.0, 1.0,
           t7, t5, t9, t4,
           t3, t2, t1, t0)
-    if shape is None:
-        return np.array(_A).reshape(4, 4)
-    return _batch(_A, shape, (4, 4))
+    return np.array(_A).reshape(4, 4)
+
+
+_ode_jac_x_constants = _constants(
+    2.0, 12.0)
+
+
+_ode_jac_x_fixed = (
+    {0: 0.0, 1: 0.0, 2: 1.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 1.0},
+)
+"""ode_jac_x's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _ode_jac_x_chunk(x, t, s, y):
+    """ode_jac_x on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    x_0, x_1, x_2, x_3, u_0, u_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15 = t
+    s0, s1, s2, s3, s4, s5 = s
+    A_8, A_9, A_10, A_11, A_12, A_13, A_14, A_15 = y
+    k0, k1 = _ode_jac_x_constants
+    sin(x_1, t0)
+    cos(x_1, t1)
+    cos(x_0, t2)
+    multiply(p_4, t2, t3)
+    multiply(t1, t3, t4)
+    sin(x_0, t5)
+    multiply(p_4, t5, t6)
+    multiply(t0, t6, t7)
+    subtract(t4, t7, t4)
+    multiply(p_3, t4, t4)
+    multiply(t0, t4, t4)
+    multiply(t1, t6, t7)
+    multiply(t0, t3, t3)
+    add(t7, t3, t7)
+    multiply(p_3, t7, t3)
+    multiply(t1, t3, t3)
+    subtract(t4, t3, t4)
+    multiply(p_0, t4, t4)
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s1)
+    multiply(s1, t6, t6)
+    divide(p_1, k0, s2)
+    subtract(p_1, s2, s2)
+    multiply(p_3, s2, s3)
+    multiply(s3, t7, t7)
+    add(t6, t7, t6)
+    subtract(t4, t6, t4)
+    multiply(p_0, p_0, s4)
+    multiply(p_2, s4, s5)
+    divide(s5, k1, s5)
+    multiply(s0, s0, s0)
+    multiply(p_2, s0, s0)
+    add(s5, s0, s5)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k1, s0)
+    multiply(s2, s2, s2)
+    multiply(p_3, s2, s2)
+    add(s0, s2, s0)
+    multiply(t1, s3, t3)
+    multiply(p_0, t3, t6)
+    add(s0, t6, t6)
+    multiply(t3, p_0, t3)
+    add(t6, t3, t3)
+    multiply(p_3, s4, s4)
+    add(t3, s4, t3)
+    add(s5, t3, t3)
+    divide(t4, t3, t8)
+    divide(t6, t3, t6)
+    multiply(t6, t4, t4)
+    add(t7, t4, t7)
+    multiply(t6, t6, t4)
+    multiply(t4, t3, t4)
+    subtract(s0, t4, t4)
+    divide(t7, t4, A_12)
+    multiply(t6, A_12, t7)
+    add(t8, t7, t8)
+    negative(t8, A_8)
+    multiply(t5, p_4, t5)
+    multiply(x_2, p_0, t7)
+    multiply(x_2, t7, t8)
+    subtract(t5, t8, t5)
+    multiply(t1, t5, t8)
+    multiply(t2, p_4, t2)
+    multiply(s1, t2, t9)
+    multiply(t1, t2, t10)
+    multiply(t0, t5, t11)
+    subtract(t10, t11, t10)
+    multiply(s3, t10, t12)
+    add(t9, t12, t9)
+    multiply(t0, t2, t13)
+    add(t8, t13, t13)
+    multiply(p_3, t13, t13)
+    add(x_2, x_3, t14)
+    multiply(t14, s3, t15)
+    multiply(t14, t15, t14)
+    subtract(t13, t14, t13)
+    multiply(t0, t13, t13)
+    multiply(p_3, t10, t10)
+    multiply(t1, t10, t10)
+    add(t13, t10, t13)
+    multiply(p_0, t13, t13)
+    add(t9, t13, t9)
+    subtract(u_0, t9, t9)
+    divide(t9, t3, t10)
+    subtract(u_1, t12, t12)
+    multiply(t6, t9, t9)
+    subtract(t12, t9, t12)
+    divide(t12, t4, t12)
+    multiply(t6, t12, t9)
+    subtract(t10, t9, t10)
+    multiply(t10, p_0, t9)
+    add(t2, t9, t2)
+    multiply(t0, t2, t9)
+    add(t8, t9, t8)
+    multiply(p_3, t8, t8)
+    subtract(t8, t14, t8)
+    multiply(t8, t1, t8)
+    multiply(t2, t1, t9)
+    multiply(t5, t0, t13)
+    subtract(t9, t13, t9)
+    multiply(p_3, t9, t9)
+    multiply(t0, t9, t9)
+    add(t8, t9, t8)
+    multiply(t1, t2, t9)
+    subtract(t9, t11, t9)
+    multiply(p_3, t9, t9)
+    add(t10, t12, t10)
+    multiply(t10, s3, t10)
+    add(t9, t10, t9)
+    multiply(t9, t0, t9)
+    multiply(t2, t0, t2)
+    multiply(t5, t1, t5)
+    add(t2, t5, t2)
+    multiply(p_3, t2, t5)
+    multiply(t1, t5, t5)
+    add(t9, t5, t9)
+    subtract(t8, t9, t8)
+    multiply(p_0, t8, t8)
+    multiply(s3, t2, t2)
+    subtract(t8, t2, t8)
+    divide(t8, t3, t5)
+    multiply(t6, t8, t8)
+    add(t2, t8, t2)
+    divide(t2, t4, A_13)
+    multiply(t6, A_13, t2)
+    add(t5, t2, t5)
+    negative(t5, A_9)
+    add(t7, t7, t7)
+    multiply(t0, t7, t2)
+    multiply(s3, t2, t5)
+    multiply(p_3, t2, t2)
+    multiply(t1, t2, t2)
+    multiply(t1, t7, t1)
+    multiply(p_3, t1, t1)
+    add(t15, t15, t15)
+    add(t1, t15, t1)
+    multiply(t0, t1, t1)
+    subtract(t2, t1, t2)
+    multiply(p_0, t2, t2)
+    add(t5, t2, t2)
+    divide(t2, t3, t1)
+    multiply(t6, t2, t2)
+    subtract(t5, t2, t5)
+    divide(t5, t4, t5)
+    multiply(t6, t5, t2)
+    subtract(t1, t2, t1)
+    negative(t1, A_10)
+    negative(t5, A_14)
+    multiply(t0, t15, t0)
+    multiply(p_0, t0, t0)
+    divide(t0, t3, t3)
+    multiply(t6, t0, t0)
+    divide(t0, t4, t0)
+    multiply(t6, t0, t6)
+    add(t3, t6, A_11)
+    negative(t0, A_15)
 
 
 def ode_jac_u(x, u, p=DEFAULT_P):
@@ -1614,18 +2717,13 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
     p = _array(p, 5, "p")
-    if x.ndim == u.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        x = x.tolist()
-        u = u.tolist()
-        p = p.tolist()
-        cos = math.cos
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(x.shape[:-1], u.shape[:-1], p.shape[:-1])
-        x = _columns(x)
-        u = _columns(u)
-        p = _columns(p)
-        cos = np.cos
+    if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_ode_jac_u_chunk, (x, u, p), 4, ((4, 2),), fixed=_ode_jac_u_fixed, pure=5)
+    # one state: Python floats
+    x = x.tolist()
+    u = u.tolist()
+    p = p.tolist()
+    cos = math.cos
     t0 = p[0] * p[0]
     t1 = p[2] * t0
     t1 = t1 / 12.0
@@ -1666,9 +2764,65 @@ def ode_jac_u(x, u, p=DEFAULT_P):
           0.0, 0.0,
           t1, t2,
           t2, t0)
-    if shape is None:
-        return np.array(_B).reshape(4, 2)
-    return _batch(_B, shape, (4, 2))
+    return np.array(_B).reshape(4, 2)
+
+
+_ode_jac_u_constants = _constants(
+    12.0, 2.0, 1.0)
+
+
+_ode_jac_u_fixed = (
+    {0: 0.0, 1: 0.0, 2: 0.0, 3: 0.0},
+)
+"""ode_jac_u's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _ode_jac_u_chunk(x, t, s, y):
+    """ode_jac_u on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.subtract
+    x_0, x_1, x_2, x_3, u_0, u_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3 = t
+    s0, s1, s2, s3, s4 = s
+    B_4, B_5, B_6, B_7 = y
+    k0, k1, k2 = _ode_jac_u_constants
+    multiply(p_0, p_0, s0)
+    multiply(p_2, s0, s1)
+    divide(s1, k0, s1)
+    divide(p_0, k1, s2)
+    subtract(p_0, s2, s2)
+    multiply(s2, s2, s2)
+    multiply(p_2, s2, s2)
+    add(s1, s2, s1)
+    multiply(p_1, p_1, s2)
+    multiply(p_3, s2, s2)
+    divide(s2, k0, s2)
+    divide(p_1, k1, s3)
+    subtract(p_1, s3, s3)
+    multiply(s3, s3, s4)
+    multiply(p_3, s4, s4)
+    add(s2, s4, s2)
+    cos(x_1, t0)
+    multiply(p_3, s3, s3)
+    multiply(t0, s3, t0)
+    multiply(p_0, t0, t1)
+    add(s2, t1, t1)
+    multiply(t0, p_0, t0)
+    add(t1, t0, t0)
+    multiply(p_3, s0, s0)
+    add(t0, s0, t0)
+    add(s1, t0, t0)
+    divide(k2, t0, t2)
+    divide(t1, t0, t1)
+    multiply(t1, t1, t3)
+    multiply(t3, t0, t3)
+    subtract(s2, t3, t3)
+    divide(t1, t3, t0)
+    multiply(t1, t0, t1)
+    add(t2, t1, B_4)
+    negative(t0, B_5)
+    divide(k2, t3, B_7)
+    copyto(B_6, B_5)
 
 
 def regressor(q, qd, qdd, p=DEFAULT_P):
@@ -1685,20 +2839,14 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        cos, sign, sin = math.cos, _sign, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        cos, sign, sin = np.cos, np.sign, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_chunk, (q, qd, qdd, p), 8, ((2, 26),), fixed=_regressor_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
     t0 = cos(q[0])
     t0 = t0 * p[4]
     t1 = sin(q[0])
@@ -1739,9 +2887,69 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t9 = sign(qd[1])
     _Y = (0.0, t0, t2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[0], t3, t7, t4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t5, qdd[0], qd[0], t8, 0.0, 0.0, 0.0,
           0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t1, t6, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t5, 0.0, 0.0, 0.0, qdd[1], qd[1], t9)
-    if shape is None:
-        return np.array(_Y).reshape(2, 26)
-    return _batch(_Y, shape, (2, 26))
+    return np.array(_Y).reshape(2, 26)
+
+
+_regressor_fixed = (
+    {0: 0.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 13: 0.0, 14: 0.0, 15: 0.0, 16: 0.0, 17: 0.0,
+     18: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 0.0, 27: 0.0, 28: 0.0, 29: 0.0, 30: 0.0, 31: 0.0, 32: 0.0,
+     33: 0.0, 34: 0.0, 35: 0.0, 36: 0.0, 39: 0.0, 40: 0.0, 41: 0.0, 42: 0.0, 43: 0.0, 44: 0.0, 46: 0.0,
+     47: 0.0, 48: 0.0},
+)
+"""regressor's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_chunk(x, t, s, y):
+    """regressor on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sign, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sign, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7 = t
+    Y_1, Y_2, Y_9, Y_10, Y_11, Y_12, Y_19, Y_20, Y_21, Y_22, Y_37, Y_38, Y_45, Y_49, Y_50, Y_51 = y
+    cos(q_0, t0)
+    multiply(t0, p_4, Y_1)
+    sin(q_0, t0)
+    multiply(t0, p_4, t0)
+    negative(t0, Y_2)
+    sin(q_1, t1)
+    multiply(t1, p_0, t2)
+    cos(q_1, t3)
+    multiply(qd_0, p_0, t4)
+    multiply(qd_0, t4, t4)
+    subtract(t0, t4, t0)
+    multiply(t3, t0, t4)
+    multiply(qdd_0, p_0, t5)
+    add(Y_1, t5, t5)
+    multiply(t1, t5, t6)
+    add(t4, t6, t4)
+    multiply(t2, t4, t6)
+    multiply(t3, p_0, t7)
+    multiply(t3, t5, t3)
+    multiply(t1, t0, t1)
+    subtract(t3, t1, Y_37)
+    multiply(t7, Y_37, t0)
+    add(t6, t0, Y_10)
+    add(qdd_0, qdd_1, Y_19)
+    multiply(t7, Y_19, t0)
+    add(qd_0, qd_1, t1)
+    multiply(t1, t1, t1)
+    multiply(t2, t1, t3)
+    subtract(t0, t3, t0)
+    add(Y_37, t0, Y_11)
+    multiply(t2, Y_19, t2)
+    multiply(t7, t1, t7)
+    add(t2, t7, t2)
+    add(t4, t2, t2)
+    negative(t2, Y_12)
+    negative(t4, Y_38)
+    sign(qd_0, Y_22)
+    sign(qd_1, Y_51)
+    copyto(Y_9, qdd_0)
+    copyto(Y_20, qdd_0)
+    copyto(Y_21, qd_0)
+    copyto(Y_45, Y_19)
+    copyto(Y_49, qdd_1)
+    copyto(Y_50, qd_1)
 
 
 def base_regressor(q, qd, qdd, p=DEFAULT_P):
@@ -1758,20 +2966,14 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
     p = _array(p, 5, "p")
-    if q.ndim == qd.ndim == qdd.ndim == p.ndim == 1:  # one state: Python floats
-        shape = None
-        q = q.tolist()
-        qd = qd.tolist()
-        qdd = qdd.tolist()
-        p = p.tolist()
-        cos, sign, sin = math.cos, _sign, math.sin
-    else:  # a batch: numpy arrays of the broadcast batch shape
-        shape = np.broadcast_shapes(q.shape[:-1], qd.shape[:-1], qdd.shape[:-1], p.shape[:-1])
-        q = _columns(q)
-        qd = _columns(qd)
-        qdd = _columns(qdd)
-        p = _columns(p)
-        cos, sign, sin = np.cos, np.sign, np.sin
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_chunk, (q, qd, qdd, p), 9, ((2, 11),), fixed=_base_regressor_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
     t0 = cos(q[0])
     t0 = t0 * p[4]
     t1 = sin(q[0])
@@ -1809,9 +3011,63 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t6 = sign(qd[1])
     _Y_b = (t0, t2, qdd[0], t9, t3, t8, qd[0], t4, 0.0, 0.0, 0.0,
             0.0, 0.0, 0.0, t5, t1, t8, 0.0, 0.0, qdd[1], qd[1], t6)
-    if shape is None:
-        return np.array(_Y_b).reshape(2, 11)
-    return _batch(_Y_b, shape, (2, 11))
+    return np.array(_Y_b).reshape(2, 11)
+
+
+_base_regressor_fixed = (
+    {8: 0.0, 9: 0.0, 10: 0.0, 11: 0.0, 12: 0.0, 13: 0.0, 17: 0.0, 18: 0.0},
+)
+"""base_regressor's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _base_regressor_chunk(x, t, s, y):
+    """base_regressor on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sign, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sign, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8 = t
+    (Y_b_0, Y_b_1, Y_b_2, Y_b_3, Y_b_4, Y_b_5, Y_b_6, Y_b_7, Y_b_14, Y_b_15, Y_b_16, Y_b_19, Y_b_20,
+     Y_b_21) = y
+    cos(q_0, t0)
+    multiply(t0, p_4, Y_b_0)
+    sin(q_0, t0)
+    multiply(t0, p_4, t0)
+    negative(t0, Y_b_1)
+    cos(q_1, t1)
+    multiply(qdd_0, p_0, t2)
+    add(Y_b_0, t2, t2)
+    multiply(t1, t2, t3)
+    sin(q_1, t4)
+    multiply(qd_0, p_0, t5)
+    multiply(qd_0, t5, t5)
+    subtract(t0, t5, t0)
+    multiply(t4, t0, t5)
+    subtract(t3, t5, Y_b_14)
+    multiply(t1, p_0, t3)
+    add(qdd_0, qdd_1, Y_b_5)
+    multiply(t3, Y_b_5, t5)
+    multiply(t4, p_0, t6)
+    add(qd_0, qd_1, t7)
+    multiply(t7, t7, t7)
+    multiply(t6, t7, t8)
+    subtract(t5, t8, t5)
+    add(Y_b_14, t5, Y_b_3)
+    multiply(t1, t0, t1)
+    multiply(t4, t2, t4)
+    add(t1, t4, t1)
+    multiply(t6, Y_b_5, t6)
+    multiply(t3, t7, t3)
+    add(t6, t3, t6)
+    add(t1, t6, t6)
+    negative(t6, Y_b_4)
+    negative(t1, Y_b_15)
+    sign(qd_0, Y_b_7)
+    sign(qd_1, Y_b_21)
+    copyto(Y_b_2, qdd_0)
+    copyto(Y_b_6, qd_0)
+    copyto(Y_b_16, Y_b_5)
+    copyto(Y_b_19, qdd_1)
+    copyto(Y_b_20, qd_1)
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

@@ -6,13 +6,17 @@ namespace) and take the same inputs as the C functions; robots with parameters t
 
 Every function takes one state or a batch: an input of n elements is an array (..., n), the
 batch shapes broadcast, and each output of shape s comes back as (..., *s). An expression
-function has ONE printed body (:class:`~derive.codegen.backends.python.printer.BatchPrinter`)
-for both: for one state (all inputs 1-D) it binds the inputs to lists of Python floats and the
-functions it calls to the math module, for a batch to rows ``x[i]`` (element i of every state,
-an array of the batch shape) and to numpy (:data:`~derive.codegen.backends.python.printer.BATCH`).
-The floating-point operations are the same, in the same order, so a batch gives bit for bit the
-per-state results, and one state gives those of the C code. The outputs are built from the
-entries' tuple: ``np.array`` for one state, :func:`_batch` (in the module) for a batch.
+function prints its SSA program twice, the same instructions in the same order, so that a batch
+gives bit for bit the per-state results, and one state those of the C code:
+
+- for one state (all inputs 1-D), straight-line Python on floats
+  (:class:`~derive.codegen.backends.python.printer.StatePrinter`): the inputs bound to lists of
+  floats, the functions it calls to the math module; the outputs ``np.array`` of the entries' tuple;
+- for a batch, the function ``_<name>_chunk`` (:class:`~derive.codegen.backends.python.printer.ChunkPrinter`):
+  one numpy ufunc call per instruction on rows of a chunk of states (element i of every state),
+  each writing into a preallocated row; the module's ``_batch`` runs it over the batch chunk by
+  chunk and lays the output rows out as (..., *s).
+
 Template functions: ``rk4_step`` and ``manipulability_<frame>`` are batched as well; ``ik_<frame>``
 (:data:`LOOPS`), iterative per state, solves a batch one state after the other.
 """
@@ -22,13 +26,24 @@ from __future__ import annotations
 import jinja2
 
 from derive.codegen.backends.base import Backend, Function, RobotContext, float_literal
-from derive.codegen.backends.python.printer import BATCH, BATCH_DEFINITIONS, SCALAR, BatchPrinter
+from derive.codegen.backends.python.printer import BATCH_DEFINITIONS, PARAMETERS, SCALAR, ChunkPrinter, StatePrinter, functions
 
 SUPPORT = {"ik": ("ik.py",), "manipulability": ("manipulability.py",)}
 """Fixed algorithms -> the sections (templates/python/support/) inserted verbatim into the module."""
 
 LOOPS = {"ik"}
 """Templates whose functions take a batch but loop over it in Python (iterative per state)."""
+
+CHUNK = 16384
+"""Most states per chunk of a batch (``_CHUNK`` in the module). Each ufunc call of a batch body costs
+about 0.27 µs on top of its arithmetic (0.1 ns per state from the L1 cache, 0.25 from the L2 or
+L3), so chunks are large: Panda's inverse_dynamics body takes 973, 431, 373, 342 and 331 ns per
+state in chunks of 250, 1000, 2000, 4000 and 8000 states, and the 10 000 states of the
+python-speed bench are one chunk."""
+
+CHUNK_FLOATS = 4_000_000
+"""Most floats per buffer of a chunk's rows (``_FLOATS``, 30.5 MB): glibc's malloc keeps reusing blocks
+under 32 MB from call to call, and maps a larger one anew each time (page faults on every call)."""
 
 ENTRIES_PER_LINE = 8
 """Entries per line of a vector output's tuple (a matrix has one line per row)."""
@@ -46,6 +61,27 @@ def _returns(outputs, status: bool = False) -> list[dict]:
     return out + ([{"name": "status", "shape": [], "type": "int"}] if status else [])
 
 
+def _wrap(names: list[str], width: int = 100) -> list[str]:
+    """Comma-separated names in lines of at most about ``width`` characters."""
+    lines, line = [], ""
+    for name in names:
+        if line and len(line) + len(name) + 2 > width:
+            lines.append(line + ",")
+            line = ""
+        line = f"{line}, {name}" if line else name
+    return lines + [line] if line else lines
+
+
+def _unpack(names: list[str], value: str) -> str | None:
+    """``a, b, c = value`` (in parentheses over lines of about 100 characters), None for no names."""
+    if not names:
+        return None
+    lines = _wrap(names)
+    if len(lines) == 1:
+        return f"{lines[0]}{',' if len(names) == 1 else ''} = {value}"
+    return "(" + "\n     ".join(lines) + f") = {value}"
+
+
 def _entries(var: str, entries: list[str], cols: int) -> str:
     """``<var> = (...)``: an output's entries, row-major, a matrix one row per line."""
     per_line = cols if cols > 1 else ENTRIES_PER_LINE
@@ -54,14 +90,38 @@ def _entries(var: str, entries: list[str], cols: int) -> str:
     return f"{var} = (" + ("," + indent).join(lines) + ("," if len(entries) == 1 else "") + ")"
 
 
+def _chunk_context(name: str, prog, inputs: list[tuple[str, int]], outputs: list[tuple[str, int]],
+                   dims: list[str]) -> dict:
+    """What the template needs of a function's batch body ``_<name>_chunk`` and its ``_batch`` call."""
+    chunk = ChunkPrinter(inputs, outputs)
+    statements = chunk.body(prog)
+    names = [n for n, size in inputs if size > 0]
+    if any(n in PARAMETERS for n in names[:-1]):  # _batch: the parameters' temporaries shared iff the last input is
+        raise ValueError(f"{name}: the parameters must be the last input, got {names}")
+    options = ([f"fixed=_{name}_fixed"] if any(chunk.fixed) else []) + \
+        ([f"pure={chunk.pure_registers}"] if chunk.pure_registers else [])
+    return {"call": f"_batch(_{name}_chunk, ({', '.join(names)}{',' if len(names) == 1 else ''}), {chunk.registers}, "
+                    f"({' '.join(f'{d},' for d in dims)})" + "".join(f", {o}" for o in options) + ")",
+            "body": statements, "ufuncs": chunk.functions(statements),
+            "unpack": [line for line in (_unpack([r for rows in chunk.inputs for r in rows], "x"),
+                                         _unpack([f"t{k}" for k in range(chunk.registers)], "t"),
+                                         _unpack([f"s{k}" for k in range(chunk.pure_registers)], "s"),
+                                         _unpack(chunk.outputs, "y"),
+                                         _unpack([f"k{k}" for k in range(len(chunk.constants))], f"_{name}_constants"))
+                       if line],
+            "literals": _wrap(chunk.constant_values()),
+            "fixed": [_wrap([f"{j}: {v}" for j, v in sorted(fixed.items())]) for fixed in chunk.fixed]
+            if any(chunk.fixed) else None}
+
+
 class PythonBackend(Backend):
     name = "python"
 
     def function_context(self, fn: Function) -> dict:
         spec, prog = fn.spec, fn.program
-        printer = BatchPrinter([n for n, _ in spec.inputs])
+        printer = StatePrinter([n for n, _ in spec.inputs])
         body = printer.body(prog)  # first: it gives the temporaries their variables
-        functions = printer.functions(prog)
+        called = functions(prog)
         sizes = [e.shape[0] * e.shape[1] for _, e in spec.outputs]
         outputs = []
         for (n, e), entries in zip(spec.outputs, printer.outputs(prog, sizes)):
@@ -69,10 +129,12 @@ class PythonBackend(Backend):
             dims = (r,) if c == 1 else (r, c)
             outputs.append({"var": f"_{n}", "text": _entries(f"_{n}", entries, c), "dims": dims,
                             "dims_text": f"({r},)" if c == 1 else f"({r}, {c})"})
+        inputs = [(n, x.shape[0]) for n, x in spec.inputs if x.shape[0] > 0]
         return {**fn.common, "py_args": _args(spec), "py_template": None, "py_loops": False,
-                "py_inputs": [(n, x.shape[0]) for n, x in spec.inputs if x.shape[0] > 0],
-                "py_body": body, "py_outputs": outputs, "py_functions": functions,
-                "py_scalar": [SCALAR[k] for k in functions], "py_batch": [BATCH[k] for k in functions],
+                "py_inputs": inputs, "py_body": body, "py_outputs": outputs, "py_functions": called,
+                "py_scalar": [SCALAR[k] for k in called],
+                "py_chunk": _chunk_context(spec.short_name, prog, [(n, x.shape[0]) for n, x in spec.inputs],
+                                           list(zip([n for n, _ in spec.outputs], sizes)), [o["dims_text"] for o in outputs]),
                 "py_returns": _returns([(n, e.shape) for n, e in spec.outputs])}
 
     def template_context(self, fn: Function) -> dict:
@@ -94,6 +156,7 @@ class PythonBackend(Backend):
             robot.data(), functions=functions, support=self.sections(functions),
             loops=[f["short_name"] for f in functions if f.get("py_loops")],
             elementwise=any(BATCH_DEFINITIONS[k].startswith("_batch") for k in used),
+            chunk_size=CHUNK, chunk_floats=f"{CHUNK_FLOATS:_}",
             batch_definitions=[BATCH_DEFINITIONS[k] for k in used])
         return {f"python/{robot.robot}.py": text}
 

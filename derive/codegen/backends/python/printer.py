@@ -3,11 +3,13 @@
 :class:`PythonPrinter`: plain float arithmetic with the math module on scalars (``math.sin(q[0])``),
 for straight-line code on one state (the toy list backend of the tests prints with it).
 
-:class:`BatchPrinter`: the numpy module's printer. It prints the same arithmetic in the same order,
-but calls each function by its bare name (``sin(q[0])``, ``fmin(a, b)``), which the generated
-function binds once per call to the scalar version (Python floats, the math module) or to the
-array version (numpy arrays of a batch of states); see :data:`SCALAR` and :data:`BATCH`. Its
-temporaries are reused once dead, so that a batch keeps only the live intermediate arrays.
+:class:`StatePrinter`: the numpy module's one-state body. It prints the same arithmetic, but calls
+each function by its bare name (``sin(q[0])``, ``fmin(a, b)``), which the generated function binds
+once per call to the math module (:data:`SCALAR`), and reuses a temporary's variable once it is dead.
+
+:class:`ChunkPrinter`: the numpy module's batch body, the same instructions in the same order as
+ufunc calls that write into preallocated rows (``multiply(t1, qd_0, t2)``: ``t2 = t1 * qd[0]`` for
+every state of a chunk at once); see :data:`UFUNCS` and :data:`BATCH`.
 """
 
 from __future__ import annotations
@@ -15,7 +17,7 @@ from __future__ import annotations
 import heapq
 
 from derive.codegen.backends.base import ExpressionPrinter, float_literal
-from derive.codegen.program import Program
+from derive.codegen.program import Instr, Program
 
 
 class PythonPrinter(ExpressionPrinter):
@@ -29,34 +31,94 @@ class PythonPrinter(ExpressionPrinter):
 
 SCALAR = {**{k: f"math.{k}" for k in PythonPrinter.FUNCS if k != "sign"}, "sign": "_sign", "pow": "math.pow",
           "atan2": "math.atan2", "fmin": "min", "fmax": "max"}
-"""Function name in the printed body -> its one-state binding: the math module on Python floats,
-which is what the C code calls too (the same libm), and Python's min and max."""
+"""Function name in the one-state body -> its binding: the math module on Python floats, which is
+what the C code calls too (the same libm), and Python's min and max."""
 
-BATCH = {"sin": "np.sin", "cos": "np.cos", "sqrt": "np.sqrt", "fabs": "np.fabs", "sign": "np.sign",
-         **{k: f"_batch_{k}" for k in ("tan", "exp", "log", "asin", "acos", "atan", "tanh", "pow", "atan2", "fmin", "fmax")}}
-"""Function name in the printed body -> its batch binding. numpy's sin and cos on float64 call the
-same libm as math.sin and math.cos, and sqrt and fabs are exact: those are numpy ufuncs. numpy's
-SIMD tan, exp, log, asin, acos, atan, tanh, arctan2 and power differ from libm in the last bit on
-some inputs and machines (AVX-512 builds), so those map the math function over the batch
-(``_batch_<name>``, defined in the module: bit for bit the one-state result, at Python speed per
-element; the robots' bodies call none of them today); ``fmin``/``fmax`` are ``np.where`` with
-Python's min/max rule (the first argument unless the second is strictly smaller/larger), NaN and
-signed zeros included. Where the scalar version raises (math.sqrt of a negative number, a float
-division by zero in the body), numpy gives nan or inf with a RuntimeWarning."""
+UFUNCS = {"add": "add", "sub": "subtract", "mul": "multiply", "div": "divide", "neg": "negative",
+          "sq": "multiply", "twice": "add", "inv": "divide", "sin": "sin", "cos": "cos", "sqrt": "sqrt",
+          "fabs": "fabs", "sign": "sign"}
+"""Instruction -> the numpy ufunc of the batch body (``sq`` is ``multiply(a, a, out)``, ``twice``
+``add(a, a, out)``, ``inv`` ``divide(1.0, a, out)``). IEEE arithmetic, sqrt, fabs and sign (-1, 0 or 1) are exact, and
+numpy's sin and cos on float64 call the same libm as math.sin and math.cos: bit for bit the
+one-state results."""
+
+BATCH = {k: f"_batch_{k}" for k in ("tan", "exp", "log", "asin", "acos", "atan", "tanh", "pow", "atan2", "fmin", "fmax")}
+"""The other functions of the batch body, each called as ``_batch_<name>(*args, out)`` (defined in
+the module, only those used: :data:`BATCH_DEFINITIONS`). numpy's SIMD tan, exp, log, asin, acos,
+atan, tanh, arctan2 and power differ from libm in the last bit on some inputs and machines
+(AVX-512 builds), so those map the math function over the chunk (bit for bit the one-state result,
+at Python speed per element; the robots' bodies call none of them today); ``fmin``/``fmax`` are
+``np.where`` with Python's min/max rule (the first argument unless the second is strictly
+smaller/larger), NaN and signed zeros included. Where the one-state body raises (math.sqrt of a
+negative number, a float division by zero), numpy gives nan or inf with a RuntimeWarning."""
 
 BATCH_DEFINITIONS = {
     **{k: f"_batch_{k} = _elementwise(math.{k}, 1)" for k in ("tan", "exp", "log", "asin", "acos", "atan", "tanh")},
     "pow": "_batch_pow = _elementwise(math.pow, 2)",
     "atan2": "_batch_atan2 = _elementwise(math.atan2, 2)",
-    "fmin": "def _batch_fmin(a, b):\n    return np.where(b < a, b, a)",
-    "fmax": "def _batch_fmax(a, b):\n    return np.where(b > a, b, a)",
-    "sign": "def _sign(x):\n    return float((x > 0) - (x < 0))",  # the one-state sign (np.sign for a batch): -1, 0 or 1
+    "fmin": "def _batch_fmin(a, b, out):\n    np.copyto(out, np.where(b < a, b, a))",
+    "fmax": "def _batch_fmax(a, b, out):\n    np.copyto(out, np.where(b > a, b, a))",
+    "sign": "def _sign(x):\n    return float((x > 0) - (x < 0))",  # the one-state sign (np.sign in a batch): -1, 0 or 1
 }
 """Module-level definitions of the ``_batch_<name>`` functions of :data:`BATCH` (only those used)."""
 
 
-class BatchPrinter(PythonPrinter):
-    """One body for one state and for a batch: functions by bare name, temporaries reused once dead."""
+PARAMETERS = {"p"}
+"""Inputs that are parameters: one array for all states, most often (the default p)."""
+
+
+def functions(prog: Program) -> list[str]:
+    """The function names a body calls (math functions, min and max), sorted."""
+    names = {**PythonPrinter.FUNCS, **PythonPrinter.BINFUNCS}
+    return sorted({ins.op for ins in prog.body if ins.op in names})
+
+
+def _last_reads(prog: Program) -> dict[int, int]:
+    """Temporary -> the index of the last instruction reading it; one an output reads: len(body)."""
+    last: dict[int, int] = {}
+    for j, ins in enumerate(prog.body):
+        for a in ins.args:
+            if a[0] == "t":
+                last[a[1]] = j
+    for _, _, a in prog.results:
+        if a[0] == "t":
+            last[a[1]] = len(prog.body)
+    return last
+
+
+def _allocate(prog: Program, fixed=(), in_place: bool = False) -> tuple[dict[int, int], int]:
+    """Give each SSA temporary not in ``fixed`` a variable: with ``in_place``, that of its first
+    argument dying there if any (the ufunc then writes where it reads), else the lowest one free
+    (dead) when it is assigned; a temporary an output reads stays live to the end. Returns
+    (temporary -> variable, the number of variables)."""
+    last = _last_reads(prog)
+    free: list[int] = []
+    count = 0
+    register: dict[int, int] = {}
+    for j, ins in enumerate(prog.body):
+        dying = []  # args dying here free their variables before the result takes one
+        for a in ins.args:
+            if a[0] == "t" and last[a[1]] == j and a[1] in register and register[a[1]] not in dying:
+                dying.append(register[a[1]])
+                heapq.heappush(free, register[a[1]])
+        if j in fixed:
+            continue
+        if in_place and dying:
+            register[j] = dying[0]
+            free.remove(dying[0])
+            heapq.heapify(free)
+        elif free:
+            register[j] = heapq.heappop(free)
+        else:
+            register[j] = count
+            count += 1
+        if j not in last:  # never read: its variable is free again at once
+            heapq.heappush(free, register[j])
+    return register, count
+
+
+class StatePrinter(PythonPrinter):
+    """The one-state body: functions by bare name, temporaries' variables reused once dead."""
 
     FUNCS = {k: k for k in PythonPrinter.FUNCS}
     BINFUNCS = {k: k for k in PythonPrinter.BINFUNCS}
@@ -65,46 +127,12 @@ class BatchPrinter(PythonPrinter):
         super().__init__(input_names)
         self.register: dict[int, int] = {}
 
-    def allocate(self, prog: Program) -> int:
-        """Give each SSA temporary a variable: the lowest one free (dead) when it is assigned; a
-        temporary an output reads stays live to the end. Returns the number of variables."""
-        last: dict[int, int] = {}
-        for j, ins in enumerate(prog.body):
-            for a in ins.args:
-                if a[0] == "t":
-                    last[a[1]] = j
-        end = len(prog.body)
-        for _, _, a in prog.results:
-            if a[0] == "t":
-                last[a[1]] = end
-        free: list[int] = []
-        count = 0
-        self.register = {}
-        for j, ins in enumerate(prog.body):
-            for a in set(ins.args):  # args dying here free their variables before the result takes one
-                if a[0] == "t" and last[a[1]] == j:
-                    heapq.heappush(free, self.register[a[1]])
-            if free:
-                self.register[j] = heapq.heappop(free)
-            else:
-                self.register[j] = count
-                count += 1
-            if j not in last:  # never read: its variable is free again at once
-                heapq.heappush(free, self.register[j])
-        return count
-
     def temporary(self, k: int) -> str:
         return f"t{self.register[k]}"
 
     def body(self, prog: Program) -> list[tuple[str, str]]:
-        self.allocate(prog)
+        self.register, _ = _allocate(prog)
         return super().body(prog)
-
-    @staticmethod
-    def functions(prog: Program) -> list[str]:
-        """The function names the body calls, sorted."""
-        names = {**PythonPrinter.FUNCS, **PythonPrinter.BINFUNCS}
-        return sorted({ins.op for ins in prog.body if ins.op in names})
 
     def outputs(self, prog: Program, sizes: list[int]) -> list[list[str]]:
         """Each output's entries (row-major) as operands: a temporary, an input element or a constant."""
@@ -112,3 +140,92 @@ class BatchPrinter(PythonPrinter):
         for oi, idx, a in prog.results:
             entries[oi][idx] = self.operand(a)
         return entries
+
+
+class ChunkPrinter:
+    """The batch body: each instruction one ufunc call on rows of a chunk of states, in place.
+
+    Every number of the body is a row (one float per state of the chunk): the inputs' elements
+    ``<input>_<i>``, the temporaries ``t<k>`` (a row reused once its temporary is dead) and the
+    output entries ``<output>_<i>`` (i the row-major index), into which the instruction computing
+    an entry writes directly. Constants are the 0-d arrays ``k<i>`` (numpy broadcasts them, faster
+    than a Python float). A temporary computed from the parameters alone (the input ``p``: see
+    :data:`PARAMETERS`) and constants is an ``s<k>`` instead, which ``_batch`` makes a 0-d array,
+    computed once per chunk, when one p serves all states (a 1-D p, the default), and a row
+    otherwise; an input shared by all states is a 0-d array too. An entry that is an input element,
+    a parameters' temporary or a temporary already in another entry is copied after the arithmetic;
+    a constant entry has no row (:attr:`fixed`: ``_batch`` writes it once into the output).
+    """
+
+    def __init__(self, inputs: list[tuple[str, int]], outputs: list[tuple[str, int]]):
+        names = {n for n, _ in inputs}
+        self.inputs = [[f"{n}_{i}" for i in range(size)] for n, size in inputs]
+        self.parameters = {k for k, (n, _) in enumerate(inputs) if n in PARAMETERS}
+        self.prefixes = [f"{n}_out" if n in names else n for n, _ in outputs]
+        self.sizes = [size for _, size in outputs]
+        self.outputs: list[str] = []  # the rows of the computed output entries, in order
+        self.fixed: list[dict[int, str]] = [{} for _ in outputs]  # per output: constant entry -> literal
+        self.constants: dict[str, int] = {}  # literal -> index
+        self.output_row: dict[int, str] = {}  # temporary -> the output entry's row it is written to
+        self.register: dict[int, int] = {}
+        self.registers = 0
+        self.pure: set[int] = set()  # the temporaries of the parameters alone
+        self.pure_registers = 0
+
+    def variable(self, k: int) -> str:
+        if k in self.output_row:
+            return self.output_row[k]
+        return f"{'s' if k in self.pure else 't'}{self.register[k]}"
+
+    def operand(self, a: tuple) -> str:
+        if a[0] == "t":
+            return self.variable(a[1])
+        if a[0] == "in":
+            return self.inputs[a[1]][a[2]]
+        return f"k{self.constants.setdefault(float_literal(a[1]), len(self.constants))}"
+
+    def call(self, ins: Instr, out: str) -> str:
+        a = [self.operand(x) for x in ins.args]
+        op = ins.op
+        if op in ("sq", "twice"):
+            a = [a[0], a[0]]
+        elif op == "inv":
+            a = [self.operand(("c", 1.0)), a[0]]
+        name = UFUNCS.get(op) or BATCH.get(op)
+        if name is None:
+            raise NotImplementedError(op)
+        return f"{name}({', '.join(a)}, {out})"
+
+    def body(self, prog: Program) -> list[str]:
+        """The statements: the instructions' ufunc calls, then the copies into output entries."""
+        for j, ins in enumerate(prog.body):
+            if all(a[0] == "c" or (a[0] == "in" and a[1] in self.parameters) or (a[0] == "t" and a[1] in self.pure)
+                   for a in ins.args):
+                self.pure.add(j)
+        entries = {(oi, idx): ("c", 0.0) for oi, size in enumerate(self.sizes) for idx in range(size)}
+        entries.update(((oi, idx), a) for oi, idx, a in prog.results)
+        copies = []
+        for (oi, idx), a in sorted(entries.items()):
+            if a[0] == "c":
+                self.fixed[oi][idx] = float_literal(a[1])
+                continue
+            row = f"{self.prefixes[oi]}_{idx}"
+            self.outputs.append(row)
+            if a[0] == "t" and a[1] not in self.output_row and a[1] not in self.pure:
+                self.output_row[a[1]] = row
+            else:
+                copies.append((row, a))
+        others = set(range(len(prog.body))) - self.pure
+        registers, self.registers = _allocate(prog, self.pure | set(self.output_row), in_place=True)
+        pure, self.pure_registers = _allocate(prog, others, in_place=True)
+        self.register = {**registers, **pure}
+        lines = [self.call(ins, self.variable(j)) for j, ins in enumerate(prog.body)]
+        return lines + [f"copyto({row}, {self.operand(a)})" for row, a in copies]
+
+    def functions(self, lines: list[str]) -> list[str]:
+        """The numpy functions the statements call (bound to local names in the body), sorted."""
+        return sorted({line.split("(", 1)[0] for line in lines} - set(BATCH.values()))
+
+    def constant_values(self) -> list[str]:
+        """The constants' literals, in the order of their names k0, k1, ..."""
+        return sorted(self.constants, key=self.constants.get)
