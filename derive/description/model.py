@@ -419,7 +419,7 @@ class _Parser:
         for j in joints:
             children[j.parent].append(j)
         ordered: list[Joint] = []
-        stack = list(reversed(children[roots[0]]))  # depth-first, file order among siblings (Pinocchio's q order)
+        stack = list(reversed(children[roots[0]]))  # depth-first, file order among siblings (import-urdf writes URDF siblings sorted by joint name, as Pinocchio orders them)
         while stack:
             j = stack.pop()
             ordered.append(j)
