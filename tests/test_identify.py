@@ -172,3 +172,14 @@ def test_excite_lowers_the_condition_number_within_the_limits(tmp_path, capsys):
     assert rows.shape == (40, 1 + 4 * 5) and (out / "excitation.png").is_file()
     P, V, A = fourier_basis(np.array([0.0, 10.0]), 10.0, 2)  # periodic: the start and one period later agree
     assert np.allclose(P[0], P[1]) and np.allclose(V[0], V[1]) and np.allclose(A[0], A[1])
+
+
+def test_base_parameters_command(capsys):
+    """The planar 2R of the lecture (l1 = 1): ZZR_1 = ZZ_1 + m_2 l1^2 (+ the first armature), in text and LaTeX."""
+    assert main(["base-parameters", "planar_2r"]) == 0
+    text = capsys.readouterr().out
+    assert text.startswith("planar_2r: 11 base parameters of 26 standard ones")
+    assert "  ZZR_link1_dh = Izz_link1_dh + m_link2_dh + Ia_theta1    [1.03333]" in text
+    assert main(["base-parameters", "planar_2r", "--latex"]) == 0
+    latex = capsys.readouterr().out
+    assert latex.startswith("\\begin{align*}") and "\\mathrm{ZZR}^{\\mathrm{link1\\_dh}} &= I_{zz}^{" in latex

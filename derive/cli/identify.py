@@ -1,5 +1,6 @@
 """Identification commands: ``derive identify ROBOT DATA.csv`` and ``derive excite ROBOT``.
 
+    derive base-parameters panda [--latex]    the identifiable combinations (ZZR_panda_link1 = Izz_... + ...)
     derive excite panda                       optimised excitation: excite_out/panda/excitation.csv and .png
     derive identify panda data.csv            base parameters, std devs, residuals; panda_identified.yaml
     derive --models panda_identified.yaml generate      the identified robot's code
@@ -42,6 +43,15 @@ def add_parser(sub) -> None:
     i.add_argument("--name", help="name of the identified robot (default <robot>_identified)")
     i.set_defaults(func=cmd_identify)
 
+    b = sub.add_parser("base-parameters", help="the identifiable combinations of a robot's dynamic parameters",
+                       description="Gautier's numerical QR on the regressor stacked at seeded random states: each base "
+                                   "parameter as a linear combination of the standard ones (10 per body, then armature, "
+                                   "viscous and Coulomb friction per coordinate), with its value at the model's "
+                                   "parameters; --latex prints an align* environment for papers.")
+    b.add_argument("robot_name", metavar="ROBOT")
+    b.add_argument("--latex", action="store_true", help="LaTeX (align*) instead of text")
+    b.set_defaults(func=cmd_base_parameters)
+
     e = sub.add_parser("excite", help="an excitation trajectory for identification (Fourier series, min cond)",
                        description="A periodic finite Fourier series per coordinate whose coefficients minimise the "
                                    "condition number of the stacked base regressor within the position, velocity, "
@@ -61,6 +71,20 @@ def regressor_of(robot) -> tuple[Regressor, object]:
     """The symbolic regressor of ``robot`` and its base parameters."""
     reg = Regressor(NewtonEuler(robot, make_symbols(robot)))
     return reg, base_parameters(robot, regressor=reg)
+
+
+def cmd_base_parameters(args) -> int:
+    robot = load_robot(args.robot_name, args.models)
+    reg, bp = regressor_of(robot)
+    if args.latex:
+        sys.stdout.write(bp.latex())
+        return 0
+    values = bp.K @ np.asarray(reg.values(), dtype=float)
+    print(f"{robot.name}: {len(bp.names)} base parameters of {len(reg.names)} standard ones"
+          + (f" (never identifiable: {', '.join(bp.unidentifiable)})" if bp.unidentifiable else ""))
+    for equation, value in zip(bp.equations(), values):
+        print(f"  {equation}    [{value:.6g}]")
+    return 0
 
 
 def cmd_identify(args) -> int:
