@@ -9,31 +9,24 @@ held-out motion to within the noise level. A CSV without qd and qdd is filtered 
 
 from __future__ import annotations
 
-import dataclasses
 from pathlib import Path
 
-import casadi as ca
 import numpy as np
 import pytest
 
 from derive.cli import main
 from derive.description.model import load_models
-from derive.description.robot import Actuator
+from derive.bench.identification import perturbed as bench_perturbed
 from derive.solvers.excite import fourier_basis
+from derive.solvers.identify import Measurements, identify, regressor_along, torques_along
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.dynamics import NewtonEuler
 from derive.symbolic.regressor import Regressor
 from derive.symbolic.symbols import make_symbols
 
 
-def perturbed(robot, seed: int = 5):
-    rng = np.random.default_rng(seed)
-    links = tuple(dataclasses.replace(link, mass=float(link.mass) * rng.uniform(0.8, 1.2),
-                                      com=tuple(float(c) + rng.normal() * 0.01 for c in link.com))
-                  for link in robot.links)
-    joints = tuple(dataclasses.replace(j, actuator=Actuator(armature=0.05, viscous=0.3, coulomb=0.8)) if j.dof else j
-                   for j in robot.joints)
-    return dataclasses.replace(robot, links=links, joints=joints)
+def perturbed(robot):
+    return bench_perturbed(robot, armature=0.05, viscous=0.3, coulomb=0.8)
 
 
 def motion(n: int, samples: int, seed: int, dt: float = 0.01):
@@ -50,10 +43,7 @@ def motion(n: int, samples: int, seed: int, dt: float = 0.01):
     return t, q, qd, qdd
 
 
-def torques(robot, q, qd, qdd) -> np.ndarray:
-    s = make_symbols(robot)
-    f = ca.Function("id", [s.q, s.qd, s.qdd], [NewtonEuler(robot, s).inverse_dynamics()]).map(q.shape[0])
-    return np.array(f(q.T, qd.T, qdd.T)).T
+torques = torques_along
 
 
 def write_csv(path: Path, robot, t, q, qd, qdd, tau, with_rates: bool = True) -> Path:
@@ -102,18 +92,10 @@ def test_noise_free_round_trip_recovers_the_base_parameters(ur5, tmp_path, capsy
 
 def test_identify_core_is_exact_without_noise(ur5):
     """The least squares itself: pi_b to 1e-8 relative (the CLI rounds its report)."""
-    from derive.solvers.identify import Measurements, identify
-
     nominal, true, bp, pib_true = ur5
     t, q, qd, qdd = motion(nominal.nv, 300, seed=2)
     reg = Regressor(NewtonEuler(nominal, make_symbols(nominal)))
-    s = reg.sym
-    f = ca.Function("Y", [s.q, s.qd, s.qdd], [reg.matrix]).map(q.shape[0])
-
-    def Y(q_, qd_, qdd_):
-        return np.array(f(q_.T, qd_.T, qdd_.T)).reshape(nominal.nv, q_.shape[0], -1).transpose(1, 0, 2)
-
-    result = identify(Y, bp.K, list(bp.names), np.asarray(reg.values()),
+    result = identify(regressor_along(reg, nominal), bp, np.asarray(reg.values()),
                       Measurements(t, q, qd, qdd, torques(true, q, qd, qdd)), bodies=len(reg.bodies))
     assert np.abs(result.base_values - pib_true).max() <= 1e-8 * np.abs(pib_true).max()
     assert np.all(result.residual_rms <= 1e-9 * result.tau_rms)

@@ -14,34 +14,27 @@ from __future__ import annotations
 import dataclasses
 import time
 
-import casadi as ca
 import numpy as np
 
 from derive.description.model import load_models
 from derive.description.robot import Actuator
 from derive.solvers.excite import excite, fourier_basis, random_coefficients
-from derive.solvers.identify import Measurements, identify
+from derive.solvers.identify import Measurements, identify, regressor_along, torques_along
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.dynamics import NewtonEuler
 from derive.symbolic.regressor import Regressor
 from derive.symbolic.symbols import make_symbols
 
 
-def perturbed(robot, seed: int = 5):
-    """The robot with masses (+-20 %) and centres of mass (~1 cm) perturbed and actuators on every joint."""
+def perturbed(robot, seed: int = 5, armature: float = 0.1, viscous: float = 0.5, coulomb: float = 1.0):
+    """The robot with masses (+-20 %) and centres of mass (~1 cm) perturbed and the same actuator on every joint."""
     rng = np.random.default_rng(seed)
     links = tuple(dataclasses.replace(link, mass=float(link.mass) * rng.uniform(0.8, 1.2),
                                       com=tuple(float(c) + rng.normal() * 0.01 for c in link.com))
                   for link in robot.links)
-    joints = tuple(dataclasses.replace(j, actuator=Actuator(armature=0.1, viscous=0.5, coulomb=1.0)) if j.dof else j
-                   for j in robot.joints)
+    act = Actuator(armature=armature, viscous=viscous, coulomb=coulomb)
+    joints = tuple(dataclasses.replace(j, actuator=act) if j.dof else j for j in robot.joints)
     return dataclasses.replace(robot, links=links, joints=joints)
-
-
-def _torques(robot, q, qd, qdd) -> np.ndarray:
-    s = make_symbols(robot)
-    f = ca.Function("id", [s.q, s.qd, s.qdd], [NewtonEuler(robot, s).inverse_dynamics()]).map(q.shape[0])
-    return np.array(f(q.T, qd.T, qdd.T)).T
 
 
 def bench_identification(args) -> str:
@@ -60,11 +53,7 @@ def bench_identification(args) -> str:
     true = perturbed(nominal)
     pi_true = np.asarray(Regressor(NewtonEuler(true, make_symbols(true))).values())
     pib_true = bp.K @ pi_true
-    f = ca.Function("Y", [s.q, s.qd, s.qdd], [reg.matrix])
-
-    def Y(q, qd, qdd):
-        out = np.array(f.map(q.shape[0])(q.T, qd.T, qdd.T))
-        return out.reshape(nominal.nv, q.shape[0], -1).transpose(1, 0, 2)
+    Y = regressor_along(reg, nominal)
 
     # one period of the excitation at 10x the optimiser's sampling (the controller's rate)
     t = np.linspace(0.0, ex.period, 10 * samples, endpoint=False)
@@ -72,13 +61,13 @@ def bench_identification(args) -> str:
     P0, _, _ = fourier_basis(ex.t, ex.period, ex.harmonics)
     theta = np.linalg.lstsq(P0, ex.q, rcond=None)[0]  # the coefficients back from the samples (exact)
     q, qd, qdd = P @ theta, V @ theta, A @ theta
-    tau = _torques(true, q, qd, qdd)
-    clean = identify(Y, bp.K, list(bp.names), np.asarray(reg.values()), Measurements(t, q, qd, qdd, tau),
+    tau = torques_along(true, q, qd, qdd)
+    clean = identify(Y, bp, np.asarray(reg.values()), Measurements(t, q, qd, qdd, tau),
                      bodies=len(reg.bodies))
     err_clean = float(np.abs(clean.base_values - pib_true).max() / np.abs(pib_true).max())
     rng = np.random.default_rng(1)
     noise = 0.01 * np.sqrt(np.mean(tau ** 2, axis=0))
-    noisy = identify(Y, bp.K, list(bp.names), np.asarray(reg.values()),
+    noisy = identify(Y, bp, np.asarray(reg.values()),
                      Measurements(t, q, qd, qdd, tau + rng.normal(size=tau.shape) * noise), bodies=len(reg.bodies))
     # held out: the random Fourier trajectory the optimiser started from, at the same rate
     lo, hi = (np.array(b) for b in nominal.joint_box())
@@ -88,7 +77,7 @@ def bench_identification(args) -> str:
     q2, qd2, qdd2 = P @ x0, V @ x0, A @ x0
     Y2 = Y(q2, qd2, qdd2).reshape(-1, len(reg.names))[:, list(bp.columns)]
     pred = (Y2 @ noisy.base_values).reshape(-1, nominal.nv)
-    held = np.sqrt(np.mean((pred - _torques(true, q2, qd2, qdd2)) ** 2, axis=0))
+    held = np.sqrt(np.mean((pred - torques_along(true, q2, qd2, qdd2)) ** 2, axis=0))
     lines = ["## Identification: excitation and round trip (panda)", "",
              f"`derive excite panda` ({harmonics} harmonics, period {ex.period:g} s, {samples} samples, "
              f"{ex.iterations} SLSQP iterations, {excite_s:.0f} s): "

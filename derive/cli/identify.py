@@ -20,7 +20,7 @@ from derive.description.urdf import dump_entry
 from derive.errors import DeriveError
 from derive.plot.excite import plot_excitation
 from derive.solvers.excite import check_options, excite
-from derive.solvers.identify import identified_entry, identify, read_measurements
+from derive.solvers.identify import identified_entry, identify, read_measurements, regressor_along
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.dynamics import NewtonEuler
 from derive.symbolic.regressor import Regressor
@@ -94,18 +94,8 @@ def cmd_identify(args) -> int:
         raise DeriveError(f"identify {robot.name}: floating bases are not supported by the CSV reader yet")
     print(f"identifying {robot.name} from {data.q.shape[0]} samples of {args.data} ...", file=sys.stderr, flush=True)
     reg, bp = regressor_of(robot)
-    s = reg.sym
     pi0 = np.asarray(reg.values(), dtype=float)
-    Ysx = reg.matrix
-    if s.p.numel():  # the model's parameter values: pi carries the inertial ones, p the lengths
-        Ysx = ca.substitute(Ysx, s.p, ca.DM([robot.parameter_defaults[n] for n in s.parameter_names]))
-    f = ca.Function("Y", [s.q, s.qd, s.qdd], [Ysx]).map(data.q.shape[0])
-
-    def Y(q, qd, qdd):  # (N, nv, n): the map's blocks side by side, one per sample
-        out = np.array(f(q.T, qd.T, qdd.T))
-        return out.reshape(robot.nv, q.shape[0], -1).transpose(1, 0, 2)
-
-    result = identify(Y, bp.K, list(bp.names), pi0, data, physical=args.physical, bodies=len(reg.bodies))
+    result = identify(regressor_along(reg, robot), bp, pi0, data, physical=args.physical, bodies=len(reg.bodies))
     print(result.report(list(robot.velocity_names)))
     name = args.name or f"{robot.name}_identified"
     out = Path(args.out) if args.out else Path(f"{robot.name}_identified.yaml")

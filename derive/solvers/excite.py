@@ -168,7 +168,7 @@ def excite(robot, Yb: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, tau_id: ca.SX | No
     taus = np.zeros_like(qs)
     if tau_id is not None:
         taus = np.array(ca.Function("tau", [q, qd, qdd], [tau_id]).map(samples)(qs.T, qds.T, qdds.T)).T
-    use = [np.max(np.maximum((qs - (lo + hi) / 2) / ((hi - lo) / 2), 0)) if np.all(np.isfinite(hi - lo)) else 0.0,
+    use = [np.max(np.abs(qs - (lo + hi) / 2) / ((hi - lo) / 2)) if np.all(np.isfinite(hi - lo)) else 0.0,
            np.max(np.abs(qds) / vmax), np.max(np.abs(qdds) / amax), np.max(np.abs(taus) / emax)]
     worst = float(np.nanmax([u for u in use if np.isfinite(u)] or [0.0]))
     within = bool(np.all(qs >= lo - 1e-9) and np.all(qs <= hi + 1e-9) and np.all(np.abs(qds) <= vmax + 1e-9)

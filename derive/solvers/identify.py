@@ -31,9 +31,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Callable
 
+import casadi as ca
 import numpy as np
 
+from derive.description.robot import Robot
 from derive.errors import DeriveError
+from derive.symbolic.base_parameters import BaseParameters
+from derive.symbolic.dynamics import NewtonEuler
+from derive.symbolic.regressor import Regressor
+from derive.symbolic.symbols import make_symbols
 
 FILTER_ORDER = 4
 FILTER_CUTOFF = 0.1  # of the sampling frequency (Nyquist = 0.5)
@@ -155,31 +161,42 @@ class Identification:
         return "\n".join(lines)
 
 
-def stack(Y: Callable, data: Measurements) -> np.ndarray:
-    """(N nv, n) regressor rows stacked sample after sample; ``Y(q, qd, qdd)`` takes (N, nv) arrays and
-    returns (N, nv, n) (e.g. a mapped CasADi function) or is called sample by sample."""
-    try:
-        out = np.asarray(Y(data.q, data.qd, data.qdd), dtype=float)
-        if out.ndim == 3 and out.shape[:2] == data.q.shape[:1] + data.tau.shape[1:]:
-            return out.reshape(-1, out.shape[2])
-    except (TypeError, ValueError, RuntimeError):
-        pass
-    return np.concatenate([np.asarray(Y(q, qd, qdd), dtype=float) for q, qd, qdd in zip(data.q, data.qd, data.qdd)])
+def regressor_along(reg: Regressor, robot: Robot) -> Callable:
+    """Y(q, qd, qdd) for (N, nv) arrays -> (N, nv, n): the symbolic regressor at the model's parameter
+    values p (pi carries the inertial ones), mapped over the samples in one CasADi call."""
+    s = reg.sym
+    Ysx = reg.matrix
+    if s.p.numel():
+        Ysx = ca.substitute(Ysx, s.p, ca.DM([robot.parameter_defaults[n] for n in s.parameter_names]))
+    f = ca.Function("Y", [s.q, s.qd, s.qdd], [Ysx])
+
+    def Y(q, qd, qdd):  # the map's blocks side by side, one per sample
+        out = np.array(f.map(q.shape[0])(q.T, qd.T, qdd.T))
+        return out.reshape(robot.nv, q.shape[0], -1).transpose(1, 0, 2)
+    return Y
 
 
-def identify(Y: Callable, K: np.ndarray, base_names: list[str], pi0: np.ndarray, data: Measurements,
+def torques_along(robot: Robot, q: np.ndarray, qd: np.ndarray, qdd: np.ndarray) -> np.ndarray:
+    """The robot's inverse dynamics at (N, nv) samples (N, nv): data for round trips and benchmarks."""
+    s = make_symbols(robot)
+    f = ca.Function("id", [s.q, s.qd, s.qdd], [NewtonEuler(robot, s).inverse_dynamics()]).map(q.shape[0])
+    return np.array(f(q.T, qd.T, qdd.T)).T
+
+
+def identify(Y: Callable, base: BaseParameters, pi0: np.ndarray, data: Measurements,
              physical: bool = False, bodies: int = 0) -> Identification:
     """Weighted least squares of tau = Y_b pi_b on the base parameters pi_b = K pi (see the module docstring).
 
-    ``Y(q, qd, qdd)`` is the full regressor (nv x n, see :func:`stack`), ``K`` (r x n) maps standard to
-    base parameters, ``pi0`` the model's standard parameters; ``bodies`` is the number of 10-parameter
-    blocks at the front of pi (the rest are the actuators' armature, viscous, Coulomb: kept >= 0 by
-    ``physical``).
+    ``Y(q, qd, qdd)`` is the full regressor, (N, nv, n) for (N, nv) samples (:func:`regressor_along`);
+    ``base`` gives K (r x n), the base columns and names; ``pi0`` the model's standard parameters;
+    ``bodies`` is the number of 10-parameter blocks at the front of pi (the rest are the actuators'
+    armature, viscous, Coulomb: kept >= 0 by ``physical``).
     """
-    full, tau = stack(Y, data), data.tau.reshape(-1)
+    K = base.K
+    full = np.asarray(Y(data.q, data.qd, data.qdd), dtype=float).reshape(-1, K.shape[1])
+    tau = data.tau.reshape(-1)
     nv = data.tau.shape[1]
-    columns = base_columns(K)  # Y = Y_b K: Y_b is Y's base columns (or Y K^+ for any other K of full row rank)
-    Yb = full @ np.linalg.pinv(K) if columns is None else full[:, columns]
+    Yb = full[:, list(base.columns)]  # Y = Y_b K: the base columns
     n_rows, r = Yb.shape
     if n_rows <= r:
         raise DeriveError(f"identify: {data.q.shape[0]} samples give {n_rows} equations for {r} base parameters: "
@@ -217,28 +234,14 @@ def identify(Y: Callable, K: np.ndarray, base_names: list[str], pi0: np.ndarray,
             notes.append("no physically consistent standard parameters give these base parameters: the written ones "
                          "are the model's moved the least (use --physical for a consistent fit)")
     resid = (tau - Yb @ pib).reshape(-1, nv)
-    return Identification(list(base_names), pib, K @ pi0, std, condition, sigma,
+    return Identification(list(base.names), pib, K @ pi0, std, condition, sigma,
                           np.sqrt(np.mean(resid ** 2, axis=0)), np.sqrt(np.mean(data.tau ** 2, axis=0)),
                           standard, physical, data.q.shape[0], data.derived, notes)
-
-
-def base_columns(K: np.ndarray) -> list[int] | None:
-    """The columns of K that are unit vectors (the base columns of Gautier's K = [1, beta] P^T), else None."""
-    cols = []
-    for row in K:
-        nz = np.flatnonzero(row)
-        cand = [c for c in nz if row[c] == 1.0 and np.count_nonzero(K[:, c]) == 1]
-        if not cand:
-            return None
-        cols.append(cand[0])
-    return cols
 
 
 def pseudo_inertia_params(L) -> list:
     """Standard parameters [m, hx, hy, hz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz] of the pseudo-inertia J = L L^T,
     J = [[S, h], [h^T, m]] with S = 1/2 tr(I) 1 - I (I about the body origin): I = tr(S) 1 - S."""
-    import casadi as ca
-
     J = L @ L.T
     S, h, m = J[0:3, 0:3], J[0:3, 3], J[3, 3]
     trace = S[0, 0] + S[1, 1] + S[2, 2]
@@ -261,7 +264,6 @@ def physical_fit(full: np.ndarray | None, tau: np.ndarray | None, w: np.ndarray 
                  K: np.ndarray | None = None, pib: np.ndarray | None = None) -> np.ndarray:
     """Physically consistent standard parameters (see the module docstring): the weighted least squares of
     the data, or (``full`` None) the ones closest to ``pi0`` with K pi = ``pib`` exactly."""
-    import casadi as ca
 
     n = len(pi0)
     x, params, x0 = [], [], []

@@ -36,6 +36,11 @@ class WholeBody:
     def __init__(self, kin: Kinematics, ne: NewtonEuler, sym: Symbols):
         self.kin, self.ne, self.sym = kin, ne, sym
         self.robot = kin.robot
+        self._jdot: dict[str, ca.SX] = {}  # per frame: frame_acceleration reuses jdot_qd's derivative
+
+    @cached_property
+    def _rate(self) -> ca.SX:
+        return configuration_rate(self.robot, self.sym)
 
     @cached_property
     def _bodies(self) -> list[tuple[str, ca.SX, ca.SX, ca.SX]]:
@@ -92,8 +97,10 @@ class WholeBody:
 
     def jdot_qd(self, frame: str) -> ca.SX:
         """J'(q, qd) qd (6x1): the frame's classical acceleration at qdd = 0, world-aligned."""
-        twist = self.kin.jacobian(frame) @ self.sym.qd
-        return ca.jtimes(twist, self.sym.q, configuration_rate(self.robot, self.sym))
+        if frame not in self._jdot:
+            twist = self.kin.jacobian(frame) @ self.sym.qd
+            self._jdot[frame] = ca.jtimes(twist, self.sym.q, self._rate)
+        return self._jdot[frame]
 
     def frame_acceleration(self, frame: str) -> ca.SX:
         """[classical linear; angular] acceleration (6x1) of the frame for (q, qd, qdd), world-aligned."""
@@ -118,7 +125,7 @@ class WholeBody:
         Jdot_i = dJ_i/dq dq/dt and (f xbar*) m = m x* f.
         """
         nv = self.sym.nv
-        rate = configuration_rate(self.robot, self.sym)
+        rate = self._rate
         C = ca.SX.zeros(nv, nv)
         for frame, m, h, I_o in self._bodies:
             pose = self.kin.pose(frame)
