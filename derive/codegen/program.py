@@ -11,6 +11,8 @@ input i, ("c", value) a constant.
 
 from __future__ import annotations
 
+import heapq
+from collections import deque
 from dataclasses import dataclass, field
 
 import casadi as ca
@@ -90,3 +92,53 @@ def build_program(inputs: list[tuple[str, ca.SX]], outputs: list[tuple[str, ca.S
             raise NotImplementedError(f"CasADi operation {op} has no printer")
     prog.results.sort(key=lambda r: (r[0], r[1]))
     return prog
+
+
+def last_reads(prog: Program) -> dict[int, int]:
+    """Temporary -> the index of the last instruction reading it; one an output reads: len(body)."""
+    last: dict[int, int] = {}
+    for j, ins in enumerate(prog.body):
+        for a in ins.args:
+            if a[0] == "t":
+                last[a[1]] = j
+    for _, _, a in prog.results:
+        if a[0] == "t":
+            last[a[1]] = len(prog.body)
+    return last
+
+
+def allocate(prog: Program, fixed=(), in_place: bool = False, oldest: bool = False) -> tuple[dict[int, int], int]:
+    """Give each SSA temporary not in ``fixed`` a variable: with ``in_place``, that of its first
+    argument dying there if any (the ufunc then writes where it reads), else a free (dead) one when it
+    is assigned: the lowest, or with ``oldest`` the one dead the longest (the C printer's choice: it
+    perturbs an optimising compiler's register allocation least); a temporary an output reads stays
+    live to the end. Returns (temporary -> variable, the number of variables)."""
+    last = last_reads(prog)
+    free: list[int] = []
+    queue: deque[int] = deque()  # with ``oldest``: free variables, longest dead first
+    count = 0
+    register: dict[int, int] = {}
+
+    def release(variable: int) -> None:
+        queue.append(variable) if oldest else heapq.heappush(free, variable)
+
+    for j, ins in enumerate(prog.body):
+        dying = []  # args dying here free their variables before the result takes one
+        for a in sorted({a for a in ins.args if a[0] == "t"}, key=lambda a: a[1]) if oldest else ins.args:
+            if a[0] == "t" and last[a[1]] == j and a[1] in register and register[a[1]] not in dying:
+                dying.append(register[a[1]])
+                release(register[a[1]])
+        if j in fixed:
+            continue
+        if in_place and dying:
+            register[j] = dying[0]
+            free.remove(dying[0])
+            heapq.heapify(free)
+        elif free or queue:
+            register[j] = queue.popleft() if oldest else heapq.heappop(free)
+        else:
+            register[j] = count
+            count += 1
+        if j not in last:  # never read: its variable is free again at once
+            release(register[j])
+    return register, count

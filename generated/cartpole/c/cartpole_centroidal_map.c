@@ -7,34 +7,35 @@
 DERIVE_FN void cartpole_centroidal_map(const DERIVE_REAL *q, DERIVE_REAL *A)
 {
     /* 18 ops: 6 mul, 8 add, 2 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = (-DERIVE_LIT(0.05)) * t0;
-    const DERIVE_REAL t2 = t1 / DERIVE_LIT(1.1);
-    const DERIVE_REAL t3 = DERIVE_LIT(0.1) * t2;
-    const DERIVE_REAL t4 = t1 - t3;
-    const DERIVE_REAL t5 = t4 - t2;
-    const DERIVE_REAL t6 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t7 = (-DERIVE_LIT(0.05)) * t6;
-    const DERIVE_REAL t8 = -t7;
-    const DERIVE_REAL t9 = DERIVE_LIT(0.1) * q[0];
-    const DERIVE_REAL t10 = t9 + t7;
-    const DERIVE_REAL t11 = q[0] + t10;
-    const DERIVE_REAL t12 = t11 / DERIVE_LIT(1.1);
-    const DERIVE_REAL t13 = q[0] - t12;
-    const DERIVE_REAL t14 = t13 * t7;
-    const DERIVE_REAL t15 = t2 * t1;
-    const DERIVE_REAL t16 = t14 - t15;
-    const DERIVE_REAL t17 = DERIVE_LIT(0.03333333333333333) + t16;
+    DERIVE_REAL w0, w1, w2, w3, w4, w5;
+    w0 = DERIVE_COS(q[1]);
+    w0 = (-DERIVE_LIT(0.05)) * w0;
+    w1 = w0 / DERIVE_LIT(1.1);
+    w2 = DERIVE_LIT(0.1) * w1;
+    w2 = w0 - w2;
+    w2 = w2 - w1;
+    w3 = DERIVE_SIN(q[1]);
+    w3 = (-DERIVE_LIT(0.05)) * w3;
+    w4 = -w3;
+    w5 = DERIVE_LIT(0.1) * q[0];
+    w5 = w5 + w3;
+    w5 = q[0] + w5;
+    w5 = w5 / DERIVE_LIT(1.1);
+    w5 = q[0] - w5;
+    w3 = w5 * w3;
+    w5 = w1 * w0;
+    w1 = w3 - w5;
+    w3 = DERIVE_LIT(0.03333333333333333) + w1;
     A[0] = DERIVE_LIT(1.1);
-    A[1] = t1;
+    A[1] = w0;
     A[2] = DERIVE_LIT(0.0);
     A[3] = DERIVE_LIT(0.0);
     A[4] = DERIVE_LIT(0.0);
-    A[5] = t8;
+    A[5] = w4;
     A[6] = DERIVE_LIT(0.0);
     A[7] = DERIVE_LIT(0.0);
-    A[8] = t5;
-    A[9] = t17;
+    A[8] = w2;
+    A[9] = w3;
     A[10] = DERIVE_LIT(0.0);
     A[11] = DERIVE_LIT(0.0);
 }

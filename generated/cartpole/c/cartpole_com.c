@@ -7,16 +7,17 @@
 DERIVE_FN void cartpole_com(const DERIVE_REAL *q, DERIVE_REAL *c)
 {
     /* 9 ops: 3 mul, 2 add, 2 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_LIT(0.1) * q[0];
-    const DERIVE_REAL t1 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t2 = (-DERIVE_LIT(0.05)) * t1;
-    const DERIVE_REAL t3 = t0 + t2;
-    const DERIVE_REAL t4 = q[0] + t3;
-    const DERIVE_REAL t5 = t4 / DERIVE_LIT(1.1);
-    const DERIVE_REAL t6 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t7 = (-DERIVE_LIT(0.05)) * t6;
-    const DERIVE_REAL t8 = t7 / DERIVE_LIT(1.1);
-    c[0] = t5;
+    DERIVE_REAL w0, w1;
+    w0 = DERIVE_LIT(0.1) * q[0];
+    w1 = DERIVE_SIN(q[1]);
+    w1 = (-DERIVE_LIT(0.05)) * w1;
+    w0 = w0 + w1;
+    w1 = q[0] + w0;
+    w0 = w1 / DERIVE_LIT(1.1);
+    w1 = DERIVE_COS(q[1]);
+    w1 = (-DERIVE_LIT(0.05)) * w1;
+    w1 = w1 / DERIVE_LIT(1.1);
+    c[0] = w0;
     c[1] = DERIVE_LIT(0.0);
-    c[2] = t8;
+    c[2] = w1;
 }

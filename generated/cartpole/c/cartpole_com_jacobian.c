@@ -7,17 +7,18 @@
 DERIVE_FN void cartpole_com_jacobian(const DERIVE_REAL *q, DERIVE_REAL *J)
 {
     /* 7 ops: 2 mul, 1 add, 2 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = (-DERIVE_LIT(0.05)) * t0;
-    const DERIVE_REAL t2 = t1 / DERIVE_LIT(1.1);
-    const DERIVE_REAL t3 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t4 = (-DERIVE_LIT(0.05)) * t3;
-    const DERIVE_REAL t5 = t4 / DERIVE_LIT(1.1);
-    const DERIVE_REAL t6 = -t5;
+    DERIVE_REAL w0, w1;
+    w0 = DERIVE_COS(q[1]);
+    w0 = (-DERIVE_LIT(0.05)) * w0;
+    w0 = w0 / DERIVE_LIT(1.1);
+    w1 = DERIVE_SIN(q[1]);
+    w1 = (-DERIVE_LIT(0.05)) * w1;
+    w1 = w1 / DERIVE_LIT(1.1);
+    w1 = -w1;
     J[0] = DERIVE_LIT(1.0);
-    J[1] = t2;
+    J[1] = w0;
     J[2] = DERIVE_LIT(0.0);
     J[3] = DERIVE_LIT(0.0);
     J[4] = DERIVE_LIT(0.0);
-    J[5] = t6;
+    J[5] = w1;
 }

@@ -7,12 +7,13 @@
 DERIVE_FN void cartpole_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *C)
 {
     /* 4 ops: 2 mul, 1 add, 0 div, 1 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t1 = (-DERIVE_LIT(0.05)) * t0;
-    const DERIVE_REAL t2 = t1 * qd[1];
-    const DERIVE_REAL t3 = -t2;
+    DERIVE_REAL w0;
+    w0 = DERIVE_SIN(q[1]);
+    w0 = (-DERIVE_LIT(0.05)) * w0;
+    w0 = w0 * qd[1];
+    w0 = -w0;
     C[0] = DERIVE_LIT(0.0);
-    C[1] = t3;
+    C[1] = w0;
     C[2] = DERIVE_LIT(0.0);
     C[3] = DERIVE_LIT(0.0);
 }

@@ -7,23 +7,24 @@
 DERIVE_FN void cartpole_fk_tcp(const DERIVE_REAL *q, DERIVE_REAL *T)
 {
     /* 5 ops: 0 mul, 3 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t2 = -t1;
-    const DERIVE_REAL t3 = q[0] - t1;
-    const DERIVE_REAL t4 = -t0;
-    T[0] = t0;
+    DERIVE_REAL w0, w1, w2, w3, w4;
+    w0 = DERIVE_COS(q[1]);
+    w1 = DERIVE_SIN(q[1]);
+    w2 = -w1;
+    w3 = q[0] - w1;
+    w4 = -w0;
+    T[0] = w0;
     T[1] = DERIVE_LIT(0.0);
-    T[2] = t1;
-    T[3] = t3;
+    T[2] = w1;
+    T[3] = w3;
     T[4] = DERIVE_LIT(0.0);
     T[5] = DERIVE_LIT(1.0);
     T[6] = DERIVE_LIT(0.0);
     T[7] = DERIVE_LIT(0.0);
-    T[8] = t2;
+    T[8] = w2;
     T[9] = DERIVE_LIT(0.0);
-    T[10] = t0;
-    T[11] = t4;
+    T[10] = w0;
+    T[11] = w4;
     T[12] = DERIVE_LIT(0.0);
     T[13] = DERIVE_LIT(0.0);
     T[14] = DERIVE_LIT(0.0);

@@ -7,29 +7,30 @@
 DERIVE_FN void cartpole_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd)
 {
     /* 23 ops: 12 mul, 7 add, 2 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t1 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t2 = DERIVE_LIT(0.9810000000000001) * t1;
-    const DERIVE_REAL t3 = (-DERIVE_LIT(0.05)) * qd[1];
-    const DERIVE_REAL t4 = qd[1] * t3;
-    const DERIVE_REAL t5 = t2 - t4;
-    const DERIVE_REAL t6 = t0 * t5;
-    const DERIVE_REAL t7 = DERIVE_LIT(0.9810000000000001) * t0;
-    const DERIVE_REAL t8 = t1 * t7;
-    const DERIVE_REAL t9 = t6 - t8;
-    const DERIVE_REAL t10 = tau[0] - t9;
-    const DERIVE_REAL t11 = t10 / DERIVE_LIT(1.1);
-    const DERIVE_REAL t12 = (-DERIVE_LIT(0.045454545454545456)) * t1;
-    const DERIVE_REAL t13 = (-DERIVE_LIT(0.49050000000000005)) * t0;
-    const DERIVE_REAL t14 = tau[1] + t13;
-    const DERIVE_REAL t15 = t12 * t10;
-    const DERIVE_REAL t16 = t14 - t15;
-    const DERIVE_REAL t17 = t12 * t12;
-    const DERIVE_REAL t18 = DERIVE_LIT(1.1) * t17;
-    const DERIVE_REAL t19 = DERIVE_LIT(0.03333333333333333) - t18;
-    const DERIVE_REAL t20 = t16 / t19;
-    const DERIVE_REAL t21 = t12 * t20;
-    const DERIVE_REAL t22 = t11 - t21;
-    qdd[0] = t22;
-    qdd[1] = t20;
+    DERIVE_REAL w0, w1, w2, w3;
+    w0 = DERIVE_SIN(q[1]);
+    w1 = DERIVE_COS(q[1]);
+    w2 = DERIVE_LIT(0.9810000000000001) * w1;
+    w3 = (-DERIVE_LIT(0.05)) * qd[1];
+    w3 = qd[1] * w3;
+    w2 = w2 - w3;
+    w3 = w0 * w2;
+    w2 = DERIVE_LIT(0.9810000000000001) * w0;
+    w2 = w1 * w2;
+    w3 = w3 - w2;
+    w2 = tau[0] - w3;
+    w3 = w2 / DERIVE_LIT(1.1);
+    w1 = (-DERIVE_LIT(0.045454545454545456)) * w1;
+    w0 = (-DERIVE_LIT(0.49050000000000005)) * w0;
+    w0 = tau[1] + w0;
+    w2 = w1 * w2;
+    w0 = w0 - w2;
+    w2 = w1 * w1;
+    w2 = DERIVE_LIT(1.1) * w2;
+    w2 = DERIVE_LIT(0.03333333333333333) - w2;
+    w0 = w0 / w2;
+    w2 = w1 * w0;
+    w1 = w3 - w2;
+    qdd[0] = w1;
+    qdd[1] = w0;
 }

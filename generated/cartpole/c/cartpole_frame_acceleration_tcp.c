@@ -7,25 +7,26 @@
 DERIVE_FN void cartpole_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *a)
 {
     /* 16 ops: 6 mul, 8 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = t0 * qdd[1];
-    const DERIVE_REAL t2 = qdd[0] - t1;
-    const DERIVE_REAL t3 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t4 = t3 * qd[1];
-    const DERIVE_REAL t5 = qd[1] * t4;
-    const DERIVE_REAL t6 = t2 + t5;
-    const DERIVE_REAL t7 = q[0] - t3;
-    const DERIVE_REAL t8 = t7 - q[0];
-    const DERIVE_REAL t9 = t8 * qdd[1];
-    const DERIVE_REAL t10 = t0 * qd[1];
-    const DERIVE_REAL t11 = qd[0] - t10;
-    const DERIVE_REAL t12 = t11 - qd[0];
-    const DERIVE_REAL t13 = qd[1] * t12;
-    const DERIVE_REAL t14 = t9 + t13;
-    const DERIVE_REAL t15 = -t14;
-    a[0] = t6;
+    DERIVE_REAL w0, w1, w2, w3;
+    w0 = DERIVE_COS(q[1]);
+    w1 = w0 * qdd[1];
+    w1 = qdd[0] - w1;
+    w2 = DERIVE_SIN(q[1]);
+    w3 = w2 * qd[1];
+    w3 = qd[1] * w3;
+    w1 = w1 + w3;
+    w3 = q[0] - w2;
+    w2 = w3 - q[0];
+    w3 = w2 * qdd[1];
+    w2 = w0 * qd[1];
+    w0 = qd[0] - w2;
+    w2 = w0 - qd[0];
+    w0 = qd[1] * w2;
+    w2 = w3 + w0;
+    w3 = -w2;
+    a[0] = w1;
     a[1] = DERIVE_LIT(0.0);
-    a[2] = t15;
+    a[2] = w3;
     a[3] = DERIVE_LIT(0.0);
     a[4] = qdd[1];
     a[5] = DERIVE_LIT(0.0);

@@ -7,15 +7,16 @@
 DERIVE_FN void cartpole_gravity(const DERIVE_REAL *q, DERIVE_REAL *g)
 {
     /* 9 ops: 5 mul, 2 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t1 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t2 = DERIVE_LIT(0.9810000000000001) * t1;
-    const DERIVE_REAL t3 = t0 * t2;
-    const DERIVE_REAL t4 = DERIVE_LIT(0.9810000000000001) * t0;
-    const DERIVE_REAL t5 = t1 * t4;
-    const DERIVE_REAL t6 = t3 - t5;
-    const DERIVE_REAL t7 = (-DERIVE_LIT(0.49050000000000005)) * t0;
-    const DERIVE_REAL t8 = -t7;
-    g[0] = t6;
-    g[1] = t8;
+    DERIVE_REAL w0, w1, w2, w3;
+    w0 = DERIVE_SIN(q[1]);
+    w1 = DERIVE_COS(q[1]);
+    w2 = DERIVE_LIT(0.9810000000000001) * w1;
+    w2 = w0 * w2;
+    w3 = DERIVE_LIT(0.9810000000000001) * w0;
+    w1 = w1 * w3;
+    w3 = w2 - w1;
+    w2 = (-DERIVE_LIT(0.49050000000000005)) * w0;
+    w1 = -w2;
+    g[0] = w3;
+    g[1] = w1;
 }

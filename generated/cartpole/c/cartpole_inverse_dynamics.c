@@ -7,28 +7,29 @@
 DERIVE_FN void cartpole_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *tau)
 {
     /* 22 ops: 13 mul, 7 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = t0 * qdd[0];
-    const DERIVE_REAL t2 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t3 = DERIVE_LIT(9.81) * t2;
-    const DERIVE_REAL t4 = t1 - t3;
-    const DERIVE_REAL t5 = DERIVE_LIT(0.1) * t4;
-    const DERIVE_REAL t6 = (-DERIVE_LIT(0.05)) * qdd[1];
-    const DERIVE_REAL t7 = t5 + t6;
-    const DERIVE_REAL t8 = t0 * t7;
-    const DERIVE_REAL t9 = t2 * qdd[0];
-    const DERIVE_REAL t10 = DERIVE_LIT(9.81) * t0;
-    const DERIVE_REAL t11 = t9 + t10;
-    const DERIVE_REAL t12 = DERIVE_LIT(0.1) * t11;
-    const DERIVE_REAL t13 = (-DERIVE_LIT(0.05)) * qd[1];
-    const DERIVE_REAL t14 = qd[1] * t13;
-    const DERIVE_REAL t15 = t12 - t14;
-    const DERIVE_REAL t16 = t2 * t15;
-    const DERIVE_REAL t17 = t8 + t16;
-    const DERIVE_REAL t18 = qdd[0] + t17;
-    const DERIVE_REAL t19 = DERIVE_LIT(0.03333333333333333) * qdd[1];
-    const DERIVE_REAL t20 = (-DERIVE_LIT(0.05)) * t4;
-    const DERIVE_REAL t21 = t19 + t20;
-    tau[0] = t18;
-    tau[1] = t21;
+    DERIVE_REAL w0, w1, w2, w3, w4;
+    w0 = DERIVE_COS(q[1]);
+    w1 = w0 * qdd[0];
+    w2 = DERIVE_SIN(q[1]);
+    w3 = DERIVE_LIT(9.81) * w2;
+    w1 = w1 - w3;
+    w3 = DERIVE_LIT(0.1) * w1;
+    w4 = (-DERIVE_LIT(0.05)) * qdd[1];
+    w3 = w3 + w4;
+    w4 = w0 * w3;
+    w3 = w2 * qdd[0];
+    w0 = DERIVE_LIT(9.81) * w0;
+    w3 = w3 + w0;
+    w0 = DERIVE_LIT(0.1) * w3;
+    w3 = (-DERIVE_LIT(0.05)) * qd[1];
+    w3 = qd[1] * w3;
+    w0 = w0 - w3;
+    w3 = w2 * w0;
+    w2 = w4 + w3;
+    w0 = qdd[0] + w2;
+    w4 = DERIVE_LIT(0.03333333333333333) * qdd[1];
+    w3 = (-DERIVE_LIT(0.05)) * w1;
+    w2 = w4 + w3;
+    tau[0] = w0;
+    tau[1] = w2;
 }

@@ -7,18 +7,19 @@
 DERIVE_FN void cartpole_jacobian_tcp(const DERIVE_REAL *q, DERIVE_REAL *J)
 {
     /* 6 ops: 0 mul, 4 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = -t0;
-    const DERIVE_REAL t2 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t3 = q[0] - t2;
-    const DERIVE_REAL t4 = t3 - q[0];
-    const DERIVE_REAL t5 = -t4;
+    DERIVE_REAL w0, w1;
+    w0 = DERIVE_COS(q[1]);
+    w0 = -w0;
+    w1 = DERIVE_SIN(q[1]);
+    w1 = q[0] - w1;
+    w1 = w1 - q[0];
+    w1 = -w1;
     J[0] = DERIVE_LIT(1.0);
-    J[1] = t1;
+    J[1] = w0;
     J[2] = DERIVE_LIT(0.0);
     J[3] = DERIVE_LIT(0.0);
     J[4] = DERIVE_LIT(0.0);
-    J[5] = t5;
+    J[5] = w1;
     J[6] = DERIVE_LIT(0.0);
     J[7] = DERIVE_LIT(0.0);
     J[8] = DERIVE_LIT(0.0);

@@ -7,18 +7,19 @@
 DERIVE_FN void cartpole_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *a)
 {
     /* 9 ops: 4 mul, 3 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t1 = t0 * qd[1];
-    const DERIVE_REAL t2 = qd[1] * t1;
-    const DERIVE_REAL t3 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t4 = t3 * qd[1];
-    const DERIVE_REAL t5 = qd[0] - t4;
-    const DERIVE_REAL t6 = t5 - qd[0];
-    const DERIVE_REAL t7 = qd[1] * t6;
-    const DERIVE_REAL t8 = -t7;
-    a[0] = t2;
+    DERIVE_REAL w0, w1;
+    w0 = DERIVE_SIN(q[1]);
+    w0 = w0 * qd[1];
+    w0 = qd[1] * w0;
+    w1 = DERIVE_COS(q[1]);
+    w1 = w1 * qd[1];
+    w1 = qd[0] - w1;
+    w1 = w1 - qd[0];
+    w1 = qd[1] * w1;
+    w1 = -w1;
+    a[0] = w0;
     a[1] = DERIVE_LIT(0.0);
-    a[2] = t8;
+    a[2] = w1;
     a[3] = DERIVE_LIT(0.0);
     a[4] = DERIVE_LIT(0.0);
     a[5] = DERIVE_LIT(0.0);

@@ -7,10 +7,11 @@
 DERIVE_FN void cartpole_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M)
 {
     /* 2 ops: 1 mul, 0 add, 0 div, 1 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = (-DERIVE_LIT(0.05)) * t0;
+    DERIVE_REAL w0;
+    w0 = DERIVE_COS(q[1]);
+    w0 = (-DERIVE_LIT(0.05)) * w0;
     M[0] = DERIVE_LIT(1.1);
-    M[1] = t1;
-    M[2] = t1;
+    M[1] = w0;
+    M[2] = w0;
     M[3] = DERIVE_LIT(0.03333333333333333);
 }

@@ -8,22 +8,23 @@ DERIVE_FN void cartpole_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DE
 {
     /* 10 ops: 4 mul, 3 add, 2 div, 1 trig */
     (void)u;
-    const DERIVE_REAL t0 = DERIVE_COS(x[1]);
-    const DERIVE_REAL t1 = (-DERIVE_LIT(0.045454545454545456)) * t0;
-    const DERIVE_REAL t2 = t1 * t1;
-    const DERIVE_REAL t3 = DERIVE_LIT(1.1) * t2;
-    const DERIVE_REAL t4 = DERIVE_LIT(0.03333333333333333) - t3;
-    const DERIVE_REAL t5 = t1 / t4;
-    const DERIVE_REAL t6 = t1 * t5;
-    const DERIVE_REAL t7 = DERIVE_LIT(0.9090909090909091) + t6;
-    const DERIVE_REAL t8 = -t5;
-    const DERIVE_REAL t9 = DERIVE_LIT(1.0) / t4;
+    DERIVE_REAL w0, w1, w2;
+    w0 = DERIVE_COS(x[1]);
+    w0 = (-DERIVE_LIT(0.045454545454545456)) * w0;
+    w1 = w0 * w0;
+    w1 = DERIVE_LIT(1.1) * w1;
+    w1 = DERIVE_LIT(0.03333333333333333) - w1;
+    w2 = w0 / w1;
+    w0 = w0 * w2;
+    w0 = DERIVE_LIT(0.9090909090909091) + w0;
+    w2 = -w2;
+    w1 = DERIVE_LIT(1.0) / w1;
     B[0] = DERIVE_LIT(0.0);
     B[1] = DERIVE_LIT(0.0);
     B[2] = DERIVE_LIT(0.0);
     B[3] = DERIVE_LIT(0.0);
-    B[4] = t7;
-    B[5] = t8;
-    B[6] = t8;
-    B[7] = t9;
+    B[4] = w0;
+    B[5] = w2;
+    B[6] = w2;
+    B[7] = w1;
 }

@@ -7,31 +7,32 @@
 DERIVE_FN void cartpole_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *xdot)
 {
     /* 23 ops: 12 mul, 7 add, 2 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(x[1]);
-    const DERIVE_REAL t1 = DERIVE_COS(x[1]);
-    const DERIVE_REAL t2 = DERIVE_LIT(0.9810000000000001) * t1;
-    const DERIVE_REAL t3 = (-DERIVE_LIT(0.05)) * x[3];
-    const DERIVE_REAL t4 = x[3] * t3;
-    const DERIVE_REAL t5 = t2 - t4;
-    const DERIVE_REAL t6 = t0 * t5;
-    const DERIVE_REAL t7 = DERIVE_LIT(0.9810000000000001) * t0;
-    const DERIVE_REAL t8 = t1 * t7;
-    const DERIVE_REAL t9 = t6 - t8;
-    const DERIVE_REAL t10 = u[0] - t9;
-    const DERIVE_REAL t11 = t10 / DERIVE_LIT(1.1);
-    const DERIVE_REAL t12 = (-DERIVE_LIT(0.045454545454545456)) * t1;
-    const DERIVE_REAL t13 = (-DERIVE_LIT(0.49050000000000005)) * t0;
-    const DERIVE_REAL t14 = u[1] + t13;
-    const DERIVE_REAL t15 = t12 * t10;
-    const DERIVE_REAL t16 = t14 - t15;
-    const DERIVE_REAL t17 = t12 * t12;
-    const DERIVE_REAL t18 = DERIVE_LIT(1.1) * t17;
-    const DERIVE_REAL t19 = DERIVE_LIT(0.03333333333333333) - t18;
-    const DERIVE_REAL t20 = t16 / t19;
-    const DERIVE_REAL t21 = t12 * t20;
-    const DERIVE_REAL t22 = t11 - t21;
+    DERIVE_REAL w0, w1, w2, w3;
+    w0 = DERIVE_SIN(x[1]);
+    w1 = DERIVE_COS(x[1]);
+    w2 = DERIVE_LIT(0.9810000000000001) * w1;
+    w3 = (-DERIVE_LIT(0.05)) * x[3];
+    w3 = x[3] * w3;
+    w2 = w2 - w3;
+    w3 = w0 * w2;
+    w2 = DERIVE_LIT(0.9810000000000001) * w0;
+    w2 = w1 * w2;
+    w3 = w3 - w2;
+    w2 = u[0] - w3;
+    w3 = w2 / DERIVE_LIT(1.1);
+    w1 = (-DERIVE_LIT(0.045454545454545456)) * w1;
+    w0 = (-DERIVE_LIT(0.49050000000000005)) * w0;
+    w0 = u[1] + w0;
+    w2 = w1 * w2;
+    w0 = w0 - w2;
+    w2 = w1 * w1;
+    w2 = DERIVE_LIT(1.1) * w2;
+    w2 = DERIVE_LIT(0.03333333333333333) - w2;
+    w0 = w0 / w2;
+    w2 = w1 * w0;
+    w1 = w3 - w2;
     xdot[0] = x[2];
     xdot[1] = x[3];
-    xdot[2] = t22;
-    xdot[3] = t20;
+    xdot[2] = w1;
+    xdot[3] = w0;
 }

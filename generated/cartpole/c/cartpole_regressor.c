@@ -7,28 +7,29 @@
 DERIVE_FN void cartpole_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *Y)
 {
     /* 22 ops: 11 mul, 7 add, 0 div, 2 trig, 2 other */
-    const DERIVE_REAL t0 = DERIVE_COS(q[1]);
-    const DERIVE_REAL t1 = t0 * qdd[0];
-    const DERIVE_REAL t2 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t3 = DERIVE_LIT(9.81) * t2;
-    const DERIVE_REAL t4 = t1 - t3;
-    const DERIVE_REAL t5 = t0 * t4;
-    const DERIVE_REAL t6 = t2 * qdd[0];
-    const DERIVE_REAL t7 = DERIVE_LIT(9.81) * t0;
-    const DERIVE_REAL t8 = t6 + t7;
-    const DERIVE_REAL t9 = t2 * t8;
-    const DERIVE_REAL t10 = t5 + t9;
-    const DERIVE_REAL t11 = qd[1] * qd[1];
-    const DERIVE_REAL t12 = t0 * t11;
-    const DERIVE_REAL t13 = t2 * qdd[1];
-    const DERIVE_REAL t14 = t12 + t13;
-    const DERIVE_REAL t15 = -t14;
-    const DERIVE_REAL t16 = -t8;
-    const DERIVE_REAL t17 = t0 * qdd[1];
-    const DERIVE_REAL t18 = t2 * t11;
-    const DERIVE_REAL t19 = t17 - t18;
-    const DERIVE_REAL t20 = DERIVE_SIGN(qd[0]);
-    const DERIVE_REAL t21 = DERIVE_SIGN(qd[1]);
+    DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7;
+    w0 = DERIVE_COS(q[1]);
+    w1 = w0 * qdd[0];
+    w2 = DERIVE_SIN(q[1]);
+    w3 = DERIVE_LIT(9.81) * w2;
+    w1 = w1 - w3;
+    w3 = w0 * w1;
+    w4 = w2 * qdd[0];
+    w5 = DERIVE_LIT(9.81) * w0;
+    w4 = w4 + w5;
+    w5 = w2 * w4;
+    w3 = w3 + w5;
+    w5 = qd[1] * qd[1];
+    w6 = w0 * w5;
+    w7 = w2 * qdd[1];
+    w6 = w6 + w7;
+    w7 = -w6;
+    w6 = -w4;
+    w4 = w0 * qdd[1];
+    w0 = w2 * w5;
+    w2 = w4 - w0;
+    w5 = DERIVE_SIGN(qd[0]);
+    w4 = DERIVE_SIGN(qd[1]);
     Y[0] = qdd[0];
     Y[1] = DERIVE_LIT(0.0);
     Y[2] = DERIVE_LIT(0.0);
@@ -39,10 +40,10 @@ DERIVE_FN void cartpole_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, c
     Y[7] = DERIVE_LIT(0.0);
     Y[8] = DERIVE_LIT(0.0);
     Y[9] = DERIVE_LIT(0.0);
-    Y[10] = t10;
-    Y[11] = t15;
+    Y[10] = w3;
+    Y[11] = w7;
     Y[12] = DERIVE_LIT(0.0);
-    Y[13] = t19;
+    Y[13] = w2;
     Y[14] = DERIVE_LIT(0.0);
     Y[15] = DERIVE_LIT(0.0);
     Y[16] = DERIVE_LIT(0.0);
@@ -51,7 +52,7 @@ DERIVE_FN void cartpole_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, c
     Y[19] = DERIVE_LIT(0.0);
     Y[20] = qdd[0];
     Y[21] = qd[0];
-    Y[22] = t20;
+    Y[22] = w5;
     Y[23] = DERIVE_LIT(0.0);
     Y[24] = DERIVE_LIT(0.0);
     Y[25] = DERIVE_LIT(0.0);
@@ -66,9 +67,9 @@ DERIVE_FN void cartpole_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, c
     Y[34] = DERIVE_LIT(0.0);
     Y[35] = DERIVE_LIT(0.0);
     Y[36] = DERIVE_LIT(0.0);
-    Y[37] = t16;
+    Y[37] = w6;
     Y[38] = DERIVE_LIT(0.0);
-    Y[39] = t4;
+    Y[39] = w1;
     Y[40] = DERIVE_LIT(0.0);
     Y[41] = DERIVE_LIT(0.0);
     Y[42] = qdd[1];
@@ -80,5 +81,5 @@ DERIVE_FN void cartpole_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, c
     Y[48] = DERIVE_LIT(0.0);
     Y[49] = qdd[1];
     Y[50] = qd[1];
-    Y[51] = t21;
+    Y[51] = w4;
 }

@@ -7,16 +7,17 @@
 DERIVE_FN void pendulum_base_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *Y_b)
 {
     /* 7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other */
-    const DERIVE_REAL t0 = DERIVE_COS(q[0]);
-    const DERIVE_REAL t1 = t0 * p[5];
-    const DERIVE_REAL t2 = -t1;
-    const DERIVE_REAL t3 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t4 = t3 * p[5];
-    const DERIVE_REAL t5 = -t4;
-    const DERIVE_REAL t6 = DERIVE_SIGN(qd[0]);
-    Y_b[0] = t2;
-    Y_b[1] = t5;
+    DERIVE_REAL w0, w1, w2;
+    w0 = DERIVE_COS(q[0]);
+    w0 = w0 * p[5];
+    w0 = -w0;
+    w1 = DERIVE_SIN(q[0]);
+    w1 = w1 * p[5];
+    w1 = -w1;
+    w2 = DERIVE_SIGN(qd[0]);
+    Y_b[0] = w0;
+    Y_b[1] = w1;
     Y_b[2] = qdd[0];
     Y_b[3] = qd[0];
-    Y_b[4] = t6;
+    Y_b[4] = w2;
 }

@@ -7,20 +7,21 @@
 DERIVE_FN void pendulum_com(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *c)
 {
     /* 13 ops: 4 mul, 4 add, 3 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t1 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t2 = p[0] * t1;
-    const DERIVE_REAL t3 = p[1] * p[4];
-    const DERIVE_REAL t4 = t2 + t3;
-    const DERIVE_REAL t5 = t0 * t4;
-    const DERIVE_REAL t6 = p[0] + p[1];
-    const DERIVE_REAL t7 = t5 / t6;
-    const DERIVE_REAL t8 = -t7;
-    const DERIVE_REAL t9 = DERIVE_COS(q[0]);
-    const DERIVE_REAL t10 = t9 * t4;
-    const DERIVE_REAL t11 = t10 / t6;
-    const DERIVE_REAL t12 = -t11;
-    c[0] = t8;
+    DERIVE_REAL w0, w1, w2, w3;
+    w0 = DERIVE_SIN(q[0]);
+    w1 = p[4] / DERIVE_LIT(2.0);
+    w1 = p[0] * w1;
+    w2 = p[1] * p[4];
+    w1 = w1 + w2;
+    w2 = w0 * w1;
+    w0 = p[0] + p[1];
+    w2 = w2 / w0;
+    w2 = -w2;
+    w3 = DERIVE_COS(q[0]);
+    w1 = w3 * w1;
+    w3 = w1 / w0;
+    w0 = -w3;
+    c[0] = w2;
     c[1] = DERIVE_LIT(0.0);
-    c[2] = t12;
+    c[2] = w0;
 }

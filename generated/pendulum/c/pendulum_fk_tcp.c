@@ -7,25 +7,26 @@
 DERIVE_FN void pendulum_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T)
 {
     /* 7 ops: 2 mul, 3 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[0]);
-    const DERIVE_REAL t1 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t2 = -t1;
-    const DERIVE_REAL t3 = t1 * p[4];
-    const DERIVE_REAL t4 = -t3;
-    const DERIVE_REAL t5 = t0 * p[4];
-    const DERIVE_REAL t6 = -t5;
-    T[0] = t0;
+    DERIVE_REAL w0, w1, w2, w3, w4;
+    w0 = DERIVE_COS(q[0]);
+    w1 = DERIVE_SIN(q[0]);
+    w2 = -w1;
+    w3 = w1 * p[4];
+    w3 = -w3;
+    w4 = w0 * p[4];
+    w4 = -w4;
+    T[0] = w0;
     T[1] = DERIVE_LIT(0.0);
-    T[2] = t1;
-    T[3] = t4;
+    T[2] = w1;
+    T[3] = w3;
     T[4] = DERIVE_LIT(0.0);
     T[5] = DERIVE_LIT(1.0);
     T[6] = DERIVE_LIT(0.0);
     T[7] = DERIVE_LIT(0.0);
-    T[8] = t2;
+    T[8] = w2;
     T[9] = DERIVE_LIT(0.0);
-    T[10] = t0;
-    T[11] = t6;
+    T[10] = w0;
+    T[11] = w4;
     T[12] = DERIVE_LIT(0.0);
     T[13] = DERIVE_LIT(0.0);
     T[14] = DERIVE_LIT(0.0);

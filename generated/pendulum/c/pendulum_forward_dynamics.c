@@ -8,21 +8,22 @@ DERIVE_FN void pendulum_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL
 {
     /* 16 ops: 8 mul, 5 add, 2 div, 1 trig */
     (void)qd;
-    const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = p[0] * t0;
-    const DERIVE_REAL t2 = p[1] * p[4];
-    const DERIVE_REAL t3 = t1 + t2;
-    const DERIVE_REAL t4 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t5 = t4 * p[5];
-    const DERIVE_REAL t6 = t3 * t5;
-    const DERIVE_REAL t7 = tau[0] - t6;
-    const DERIVE_REAL t8 = t0 * t0;
-    const DERIVE_REAL t9 = p[0] * t8;
-    const DERIVE_REAL t10 = p[2] + t9;
-    const DERIVE_REAL t11 = p[4] * p[4];
-    const DERIVE_REAL t12 = p[1] * t11;
-    const DERIVE_REAL t13 = p[3] + t12;
-    const DERIVE_REAL t14 = t10 + t13;
-    const DERIVE_REAL t15 = t7 / t14;
-    qdd[0] = t15;
+    DERIVE_REAL w0, w1, w2;
+    w0 = p[4] / DERIVE_LIT(2.0);
+    w1 = p[0] * w0;
+    w2 = p[1] * p[4];
+    w1 = w1 + w2;
+    w2 = DERIVE_SIN(q[0]);
+    w2 = w2 * p[5];
+    w1 = w1 * w2;
+    w2 = tau[0] - w1;
+    w1 = w0 * w0;
+    w0 = p[0] * w1;
+    w1 = p[2] + w0;
+    w0 = p[4] * p[4];
+    w0 = p[1] * w0;
+    w0 = p[3] + w0;
+    w1 = w1 + w0;
+    w0 = w2 / w1;
+    qdd[0] = w0;
 }

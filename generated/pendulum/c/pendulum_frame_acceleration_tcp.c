@@ -7,23 +7,24 @@
 DERIVE_FN void pendulum_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *a)
 {
     /* 14 ops: 10 mul, 2 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t1 = t0 * qd[0];
-    const DERIVE_REAL t2 = p[4] * t1;
-    const DERIVE_REAL t3 = qd[0] * t2;
-    const DERIVE_REAL t4 = DERIVE_COS(q[0]);
-    const DERIVE_REAL t5 = t4 * p[4];
-    const DERIVE_REAL t6 = t5 * qdd[0];
-    const DERIVE_REAL t7 = t3 - t6;
-    const DERIVE_REAL t8 = t0 * p[4];
-    const DERIVE_REAL t9 = t8 * qdd[0];
-    const DERIVE_REAL t10 = t4 * qd[0];
-    const DERIVE_REAL t11 = p[4] * t10;
-    const DERIVE_REAL t12 = qd[0] * t11;
-    const DERIVE_REAL t13 = t9 + t12;
-    a[0] = t7;
+    DERIVE_REAL w0, w1, w2, w3;
+    w0 = DERIVE_SIN(q[0]);
+    w1 = w0 * qd[0];
+    w1 = p[4] * w1;
+    w1 = qd[0] * w1;
+    w2 = DERIVE_COS(q[0]);
+    w3 = w2 * p[4];
+    w3 = w3 * qdd[0];
+    w1 = w1 - w3;
+    w3 = w0 * p[4];
+    w0 = w3 * qdd[0];
+    w3 = w2 * qd[0];
+    w2 = p[4] * w3;
+    w3 = qd[0] * w2;
+    w2 = w0 + w3;
+    a[0] = w1;
     a[1] = DERIVE_LIT(0.0);
-    a[2] = t13;
+    a[2] = w2;
     a[3] = DERIVE_LIT(0.0);
     a[4] = qdd[0];
     a[5] = DERIVE_LIT(0.0);

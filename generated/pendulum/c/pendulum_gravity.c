@@ -7,12 +7,13 @@
 DERIVE_FN void pendulum_gravity(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *g)
 {
     /* 7 ops: 4 mul, 1 add, 1 div, 1 trig */
-    const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = p[0] * t0;
-    const DERIVE_REAL t2 = p[1] * p[4];
-    const DERIVE_REAL t3 = t1 + t2;
-    const DERIVE_REAL t4 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t5 = t4 * p[5];
-    const DERIVE_REAL t6 = t3 * t5;
-    g[0] = t6;
+    DERIVE_REAL w0, w1;
+    w0 = p[4] / DERIVE_LIT(2.0);
+    w0 = p[0] * w0;
+    w1 = p[1] * p[4];
+    w0 = w0 + w1;
+    w1 = DERIVE_SIN(q[0]);
+    w1 = w1 * p[5];
+    w0 = w0 * w1;
+    g[0] = w0;
 }

@@ -8,21 +8,22 @@ DERIVE_FN void pendulum_inverse_dynamics(const DERIVE_REAL *q, const DERIVE_REAL
 {
     /* 16 ops: 9 mul, 5 add, 1 div, 1 trig */
     (void)qd;
-    const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = t0 * t0;
-    const DERIVE_REAL t2 = p[0] * t1;
-    const DERIVE_REAL t3 = p[2] + t2;
-    const DERIVE_REAL t4 = p[4] * p[4];
-    const DERIVE_REAL t5 = p[1] * t4;
-    const DERIVE_REAL t6 = p[3] + t5;
-    const DERIVE_REAL t7 = t3 + t6;
-    const DERIVE_REAL t8 = t7 * qdd[0];
-    const DERIVE_REAL t9 = p[0] * t0;
-    const DERIVE_REAL t10 = p[1] * p[4];
-    const DERIVE_REAL t11 = t9 + t10;
-    const DERIVE_REAL t12 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t13 = t12 * p[5];
-    const DERIVE_REAL t14 = t11 * t13;
-    const DERIVE_REAL t15 = t8 + t14;
-    tau[0] = t15;
+    DERIVE_REAL w0, w1, w2;
+    w0 = p[4] / DERIVE_LIT(2.0);
+    w1 = w0 * w0;
+    w1 = p[0] * w1;
+    w1 = p[2] + w1;
+    w2 = p[4] * p[4];
+    w2 = p[1] * w2;
+    w2 = p[3] + w2;
+    w1 = w1 + w2;
+    w2 = w1 * qdd[0];
+    w1 = p[0] * w0;
+    w0 = p[1] * p[4];
+    w1 = w1 + w0;
+    w0 = DERIVE_SIN(q[0]);
+    w0 = w0 * p[5];
+    w1 = w1 * w0;
+    w0 = w2 + w1;
+    tau[0] = w0;
 }

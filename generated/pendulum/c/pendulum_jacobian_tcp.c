@@ -7,14 +7,15 @@
 DERIVE_FN void pendulum_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *J)
 {
     /* 5 ops: 2 mul, 1 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_COS(q[0]);
-    const DERIVE_REAL t1 = t0 * p[4];
-    const DERIVE_REAL t2 = -t1;
-    const DERIVE_REAL t3 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t4 = t3 * p[4];
-    J[0] = t2;
+    DERIVE_REAL w0, w1;
+    w0 = DERIVE_COS(q[0]);
+    w0 = w0 * p[4];
+    w0 = -w0;
+    w1 = DERIVE_SIN(q[0]);
+    w1 = w1 * p[4];
+    J[0] = w0;
     J[1] = DERIVE_LIT(0.0);
-    J[2] = t4;
+    J[2] = w1;
     J[3] = DERIVE_LIT(0.0);
     J[4] = DERIVE_LIT(1.0);
     J[5] = DERIVE_LIT(0.0);

@@ -7,17 +7,18 @@
 DERIVE_FN void pendulum_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *a)
 {
     /* 8 ops: 6 mul, 0 add, 0 div, 2 trig */
-    const DERIVE_REAL t0 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t1 = t0 * qd[0];
-    const DERIVE_REAL t2 = p[4] * t1;
-    const DERIVE_REAL t3 = qd[0] * t2;
-    const DERIVE_REAL t4 = DERIVE_COS(q[0]);
-    const DERIVE_REAL t5 = t4 * qd[0];
-    const DERIVE_REAL t6 = p[4] * t5;
-    const DERIVE_REAL t7 = qd[0] * t6;
-    a[0] = t3;
+    DERIVE_REAL w0, w1;
+    w0 = DERIVE_SIN(q[0]);
+    w0 = w0 * qd[0];
+    w0 = p[4] * w0;
+    w0 = qd[0] * w0;
+    w1 = DERIVE_COS(q[0]);
+    w1 = w1 * qd[0];
+    w1 = p[4] * w1;
+    w1 = qd[0] * w1;
+    a[0] = w0;
     a[1] = DERIVE_LIT(0.0);
-    a[2] = t7;
+    a[2] = w1;
     a[3] = DERIVE_LIT(0.0);
     a[4] = DERIVE_LIT(0.0);
     a[5] = DERIVE_LIT(0.0);

@@ -8,13 +8,14 @@ DERIVE_FN void pendulum_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, 
 {
     /* 8 ops: 4 mul, 3 add, 1 div, 0 trig */
     (void)q;
-    const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = t0 * t0;
-    const DERIVE_REAL t2 = p[0] * t1;
-    const DERIVE_REAL t3 = p[2] + t2;
-    const DERIVE_REAL t4 = p[4] * p[4];
-    const DERIVE_REAL t5 = p[1] * t4;
-    const DERIVE_REAL t6 = p[3] + t5;
-    const DERIVE_REAL t7 = t3 + t6;
-    M[0] = t7;
+    DERIVE_REAL w0, w1;
+    w0 = p[4] / DERIVE_LIT(2.0);
+    w0 = w0 * w0;
+    w0 = p[0] * w0;
+    w0 = p[2] + w0;
+    w1 = p[4] * p[4];
+    w1 = p[1] * w1;
+    w1 = p[3] + w1;
+    w0 = w0 + w1;
+    M[0] = w0;
 }

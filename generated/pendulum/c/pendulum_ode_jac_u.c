@@ -9,15 +9,16 @@ DERIVE_FN void pendulum_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, co
     /* 9 ops: 4 mul, 3 add, 2 div, 0 trig */
     (void)x;
     (void)u;
-    const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = t0 * t0;
-    const DERIVE_REAL t2 = p[0] * t1;
-    const DERIVE_REAL t3 = p[2] + t2;
-    const DERIVE_REAL t4 = p[4] * p[4];
-    const DERIVE_REAL t5 = p[1] * t4;
-    const DERIVE_REAL t6 = p[3] + t5;
-    const DERIVE_REAL t7 = t3 + t6;
-    const DERIVE_REAL t8 = DERIVE_LIT(1.0) / t7;
+    DERIVE_REAL w0, w1;
+    w0 = p[4] / DERIVE_LIT(2.0);
+    w0 = w0 * w0;
+    w0 = p[0] * w0;
+    w0 = p[2] + w0;
+    w1 = p[4] * p[4];
+    w1 = p[1] * w1;
+    w1 = p[3] + w1;
+    w0 = w0 + w1;
+    w1 = DERIVE_LIT(1.0) / w0;
     B[0] = DERIVE_LIT(0.0);
-    B[1] = t8;
+    B[1] = w1;
 }

@@ -8,24 +8,25 @@ DERIVE_FN void pendulum_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, co
 {
     /* 16 ops: 8 mul, 5 add, 2 div, 1 trig */
     (void)u;
-    const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = p[0] * t0;
-    const DERIVE_REAL t2 = p[1] * p[4];
-    const DERIVE_REAL t3 = t1 + t2;
-    const DERIVE_REAL t4 = DERIVE_COS(x[0]);
-    const DERIVE_REAL t5 = p[5] * t4;
-    const DERIVE_REAL t6 = t3 * t5;
-    const DERIVE_REAL t7 = t0 * t0;
-    const DERIVE_REAL t8 = p[0] * t7;
-    const DERIVE_REAL t9 = p[2] + t8;
-    const DERIVE_REAL t10 = p[4] * p[4];
-    const DERIVE_REAL t11 = p[1] * t10;
-    const DERIVE_REAL t12 = p[3] + t11;
-    const DERIVE_REAL t13 = t9 + t12;
-    const DERIVE_REAL t14 = t6 / t13;
-    const DERIVE_REAL t15 = -t14;
+    DERIVE_REAL w0, w1, w2;
+    w0 = p[4] / DERIVE_LIT(2.0);
+    w1 = p[0] * w0;
+    w2 = p[1] * p[4];
+    w1 = w1 + w2;
+    w2 = DERIVE_COS(x[0]);
+    w2 = p[5] * w2;
+    w1 = w1 * w2;
+    w2 = w0 * w0;
+    w0 = p[0] * w2;
+    w2 = p[2] + w0;
+    w0 = p[4] * p[4];
+    w0 = p[1] * w0;
+    w0 = p[3] + w0;
+    w2 = w2 + w0;
+    w0 = w1 / w2;
+    w1 = -w0;
     A[0] = DERIVE_LIT(0.0);
     A[1] = DERIVE_LIT(1.0);
-    A[2] = t15;
+    A[2] = w1;
     A[3] = DERIVE_LIT(0.0);
 }

@@ -7,22 +7,23 @@
 DERIVE_FN void pendulum_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot)
 {
     /* 16 ops: 8 mul, 5 add, 2 div, 1 trig */
-    const DERIVE_REAL t0 = p[4] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = p[0] * t0;
-    const DERIVE_REAL t2 = p[1] * p[4];
-    const DERIVE_REAL t3 = t1 + t2;
-    const DERIVE_REAL t4 = DERIVE_SIN(x[0]);
-    const DERIVE_REAL t5 = t4 * p[5];
-    const DERIVE_REAL t6 = t3 * t5;
-    const DERIVE_REAL t7 = u[0] - t6;
-    const DERIVE_REAL t8 = t0 * t0;
-    const DERIVE_REAL t9 = p[0] * t8;
-    const DERIVE_REAL t10 = p[2] + t9;
-    const DERIVE_REAL t11 = p[4] * p[4];
-    const DERIVE_REAL t12 = p[1] * t11;
-    const DERIVE_REAL t13 = p[3] + t12;
-    const DERIVE_REAL t14 = t10 + t13;
-    const DERIVE_REAL t15 = t7 / t14;
+    DERIVE_REAL w0, w1, w2;
+    w0 = p[4] / DERIVE_LIT(2.0);
+    w1 = p[0] * w0;
+    w2 = p[1] * p[4];
+    w1 = w1 + w2;
+    w2 = DERIVE_SIN(x[0]);
+    w2 = w2 * p[5];
+    w1 = w1 * w2;
+    w2 = u[0] - w1;
+    w1 = w0 * w0;
+    w0 = p[0] * w1;
+    w1 = p[2] + w0;
+    w0 = p[4] * p[4];
+    w0 = p[1] * w0;
+    w0 = p[3] + w0;
+    w1 = w1 + w0;
+    w0 = w2 / w1;
     xdot[0] = x[1];
-    xdot[1] = t15;
+    xdot[1] = w0;
 }

@@ -7,17 +7,18 @@
 DERIVE_FN void pendulum_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *Y)
 {
     /* 7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other */
-    const DERIVE_REAL t0 = DERIVE_COS(q[0]);
-    const DERIVE_REAL t1 = t0 * p[5];
-    const DERIVE_REAL t2 = -t1;
-    const DERIVE_REAL t3 = DERIVE_SIN(q[0]);
-    const DERIVE_REAL t4 = t3 * p[5];
-    const DERIVE_REAL t5 = -t4;
-    const DERIVE_REAL t6 = DERIVE_SIGN(qd[0]);
+    DERIVE_REAL w0, w1, w2;
+    w0 = DERIVE_COS(q[0]);
+    w0 = w0 * p[5];
+    w0 = -w0;
+    w1 = DERIVE_SIN(q[0]);
+    w1 = w1 * p[5];
+    w1 = -w1;
+    w2 = DERIVE_SIGN(qd[0]);
     Y[0] = DERIVE_LIT(0.0);
-    Y[1] = t2;
+    Y[1] = w0;
     Y[2] = DERIVE_LIT(0.0);
-    Y[3] = t5;
+    Y[3] = w1;
     Y[4] = DERIVE_LIT(0.0);
     Y[5] = DERIVE_LIT(0.0);
     Y[6] = qdd[0];
@@ -26,5 +27,5 @@ DERIVE_FN void pendulum_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, c
     Y[9] = DERIVE_LIT(0.0);
     Y[10] = qdd[0];
     Y[11] = qd[0];
-    Y[12] = t6;
+    Y[12] = w2;
 }

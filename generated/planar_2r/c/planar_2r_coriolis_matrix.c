@@ -7,19 +7,20 @@
 DERIVE_FN void planar_2r_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C)
 {
     /* 11 ops: 5 mul, 4 add, 1 div, 1 trig */
-    const DERIVE_REAL t0 = p[1] / DERIVE_LIT(2.0);
-    const DERIVE_REAL t1 = p[1] - t0;
-    const DERIVE_REAL t2 = p[3] * t1;
-    const DERIVE_REAL t3 = DERIVE_SIN(q[1]);
-    const DERIVE_REAL t4 = t2 * t3;
-    const DERIVE_REAL t5 = p[0] * t4;
-    const DERIVE_REAL t6 = t5 * qd[1];
-    const DERIVE_REAL t7 = -t6;
-    const DERIVE_REAL t8 = t5 * qd[0];
-    const DERIVE_REAL t9 = t8 + t6;
-    const DERIVE_REAL t10 = -t9;
-    C[0] = t7;
-    C[1] = t10;
-    C[2] = t8;
+    DERIVE_REAL w0, w1, w2;
+    w0 = p[1] / DERIVE_LIT(2.0);
+    w0 = p[1] - w0;
+    w0 = p[3] * w0;
+    w1 = DERIVE_SIN(q[1]);
+    w0 = w0 * w1;
+    w1 = p[0] * w0;
+    w0 = w1 * qd[1];
+    w2 = -w0;
+    w1 = w1 * qd[0];
+    w0 = w1 + w0;
+    w0 = -w0;
+    C[0] = w2;
+    C[1] = w0;
+    C[2] = w1;
     C[3] = DERIVE_LIT(0.0);
 }

@@ -47,7 +47,8 @@ class CBackend(Backend):
         return {**fn.common, **self._files(spec),
                 **self._contract([(n, x.shape) for n, x in spec.inputs], [(n, e.shape) for n, e in spec.outputs]),
                 "unused": [n for i, n in enumerate(in_names) if i not in used],
-                "body": printer.body(prog), "stores": printer.stores(prog, [n for n, _ in spec.outputs])}
+                "body": printer.body(prog), "work": printer.declarations(),
+                "stores": printer.stores(prog, [n for n, _ in spec.outputs])}
 
     def template_context(self, fn: Function) -> dict:
         t = fn.spec

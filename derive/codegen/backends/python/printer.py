@@ -14,10 +14,8 @@ every state of a chunk at once); see :data:`UFUNCS` and :data:`BATCH`.
 
 from __future__ import annotations
 
-import heapq
-
 from derive.codegen.backends.base import ExpressionPrinter, float_literal
-from derive.codegen.program import Instr, Program
+from derive.codegen.program import Instr, Program, allocate
 
 
 class PythonPrinter(ExpressionPrinter):
@@ -73,50 +71,6 @@ def functions(prog: Program) -> list[str]:
     return sorted({ins.op for ins in prog.body if ins.op in names})
 
 
-def _last_reads(prog: Program) -> dict[int, int]:
-    """Temporary -> the index of the last instruction reading it; one an output reads: len(body)."""
-    last: dict[int, int] = {}
-    for j, ins in enumerate(prog.body):
-        for a in ins.args:
-            if a[0] == "t":
-                last[a[1]] = j
-    for _, _, a in prog.results:
-        if a[0] == "t":
-            last[a[1]] = len(prog.body)
-    return last
-
-
-def _allocate(prog: Program, fixed=(), in_place: bool = False) -> tuple[dict[int, int], int]:
-    """Give each SSA temporary not in ``fixed`` a variable: with ``in_place``, that of its first
-    argument dying there if any (the ufunc then writes where it reads), else the lowest one free
-    (dead) when it is assigned; a temporary an output reads stays live to the end. Returns
-    (temporary -> variable, the number of variables)."""
-    last = _last_reads(prog)
-    free: list[int] = []
-    count = 0
-    register: dict[int, int] = {}
-    for j, ins in enumerate(prog.body):
-        dying = []  # args dying here free their variables before the result takes one
-        for a in ins.args:
-            if a[0] == "t" and last[a[1]] == j and a[1] in register and register[a[1]] not in dying:
-                dying.append(register[a[1]])
-                heapq.heappush(free, register[a[1]])
-        if j in fixed:
-            continue
-        if in_place and dying:
-            register[j] = dying[0]
-            free.remove(dying[0])
-            heapq.heapify(free)
-        elif free:
-            register[j] = heapq.heappop(free)
-        else:
-            register[j] = count
-            count += 1
-        if j not in last:  # never read: its variable is free again at once
-            heapq.heappush(free, register[j])
-    return register, count
-
-
 class StatePrinter(PythonPrinter):
     """The one-state body: functions by bare name, temporaries' variables reused once dead."""
 
@@ -131,7 +85,7 @@ class StatePrinter(PythonPrinter):
         return f"t{self.register[k]}"
 
     def body(self, prog: Program) -> list[tuple[str, str]]:
-        self.register, _ = _allocate(prog)
+        self.register, _ = allocate(prog)
         return super().body(prog)
 
     def outputs(self, prog: Program, sizes: list[int]) -> list[list[str]]:
@@ -216,8 +170,8 @@ class ChunkPrinter:
             else:
                 copies.append((row, a))
         others = set(range(len(prog.body))) - self.pure
-        registers, self.registers = _allocate(prog, self.pure | set(self.output_row), in_place=True)
-        pure, self.pure_registers = _allocate(prog, others, in_place=True)
+        registers, self.registers = allocate(prog, self.pure | set(self.output_row), in_place=True)
+        pure, self.pure_registers = allocate(prog, others, in_place=True)
         self.register = {**registers, **pure}
         lines = [self.call(ins, self.variable(j)) for j, ins in enumerate(prog.body)]
         return lines + [f"copyto({row}, {self.operand(a)})" for row, a in copies]
