@@ -68,6 +68,10 @@ def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
     def f(x, u):  # the ODE x' = [dq/dt; qdd]
         return np.concatenate([ref.q_dot(x[:nq], x[nq:]), ref.aba(x[:nq], x[nq:], u)])
 
+    if kind == "bundle":  # each output is the quantity of its name
+        return [reference(ref, part, a) for part in fn["bundle"]]
+    if kind == "bias":
+        return ref.rnea(q, qd, np.zeros(nv))
     if kind == "jdot_qd":
         return ref.jdot_v(q, qd, fn["frame"])
     if kind == "frame_acceleration":

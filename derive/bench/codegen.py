@@ -98,7 +98,7 @@ def _harness(fn: dict, call: str, decl: str) -> str:
     return HARNESS % {"decl": decl, "buffers": "\n".join(buffers), "perturb": "\n".join(perturb), "call": call}
 
 
-def _callgrind(exe: Path, n: int) -> int | None:
+def callgrind_instructions(exe: Path, n: int) -> int | None:
     if not shutil.which("valgrind"):
         return None
     out = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", str(exe), str(n)],
@@ -142,7 +142,7 @@ def bench_time(args) -> str:
             res = {}
             for name in ("ours", "theirs"):
                 exe = tmp / name
-                i1, i0 = _callgrind(exe, calls), _callgrind(exe, 0)
+                i1, i0 = callgrind_instructions(exe, calls), callgrind_instructions(exe, 0)
                 instr = (i1 - i0) / calls if i1 is not None and i0 is not None else float("nan")
                 wall = statistics.median(float(subprocess.run([str(exe), "200000" if not args.quick else "20000"],
                                                               capture_output=True, text=True).stdout.split()[1])

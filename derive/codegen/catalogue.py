@@ -23,7 +23,7 @@ from derive.codegen.spec import FunctionSpec, TemplateFunction
 QUANTITIES = ("fk", "jacobian", "fk_jacobian", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
               "gravity", "inverse_dynamics", "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext",
               "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor",
-              "base_regressor")
+              "base_regressor", "bias", "bundle")
 
 IK_FRAMES = ("tcp",)      # the frames that have a generated fk_jacobian
 IK_MAX_ITERATIONS = 5000  # the generated solver's iteration cap
@@ -76,6 +76,9 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
             "B_i J_i) (Pinocchio's computeCoriolisMatrix): C qd = the velocity terms of ID, Mdot - 2C skew-symmetric.")
     add("gravity", None, [q], [("g", ne.gravity_vector)],
         "Gravity torques g(q) = dU/dq = rnea(q, 0, 0).")
+    add("bias", None, [q, qd], [("h", ne.inverse_dynamics(ca.SX.zeros(n, 1)))],
+        "Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), "
+        "so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
         "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.")
     qdd_fd = model.forward_dynamics()
@@ -122,7 +125,50 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))],
         f"df/du ({nq + n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.")
     regressor_specs(model, add)
+    bundle_specs(model, specs, add)
     return specs
+
+
+def bundle_specs(model: SXModel, specs: list[FunctionSpec], add) -> None:
+    """``bundle_<name>`` for each of the robot's control-tick bundles (:attr:`Robot.control_bundles`):
+    the outputs of the functions it names, as one graph of their joint inputs, so CSE computes every
+    shared transform, sine, cosine and the RNEA's forward pass once."""
+    robot, wb = model.robot, model.whole_body
+    by_name = {spec.short_name: spec for spec in specs}
+    frame_quantity = {"fk": model.fk, "jacobian": model.jacobian, "jdot_qd": wb.jdot_qd,
+                      "frame_acceleration": wb.frame_acceleration}
+    s = model.sym
+    frame_inputs = {"fk": [("q", s.q)], "jacobian": [("q", s.q)], "jdot_qd": [("q", s.q), ("qd", s.qd)],
+                    "frame_acceleration": [("q", s.q), ("qd", s.qd), ("qdd", s.qdd)]}
+    order = ("q", "qd", "qdd", "tau", "w")
+    zero = ca.SX.zeros(robot.nv, 1)
+    ne = model.newton_euler
+    split = {"bias": lambda: ne.inverse_dynamics(zero, split=True),  # share the frames' gravity-free forward pass
+             "inverse_dynamics": lambda: ne.inverse_dynamics(split=True)}
+    for bundle in robot.control_bundles:
+        inputs: dict[str, ca.SX] = {}
+        outputs, parts = [], []
+        for quantity in bundle.quantities:
+            spec = by_name.get(quantity)
+            if spec is not None and len(spec.outputs) == 1:
+                ins = [(n, x) for n, x in spec.inputs if n != "p"]
+                expression = split[quantity]() if quantity in split else spec.outputs[0][1]
+                parts.append({"output": quantity, "quantity": spec.quantity, "frame": spec.frame})
+            else:
+                prefix = next((p for p in frame_quantity if quantity.startswith(p + "_")
+                               and quantity[len(p) + 1:] in model.kinematics.poses), None)
+                if prefix is None:  # the description checked the names; a whole-robot function absent here
+                    raise ValueError(f"bundle '{bundle.name}': no generated function '{quantity}' for robot '{robot.name}'")
+                ins, expression = frame_inputs[prefix], frame_quantity[prefix](quantity[len(prefix) + 1:])
+                parts.append({"output": quantity, "quantity": prefix, "frame": quantity[len(prefix) + 1:]})
+            inputs.update(ins)
+            outputs.append((quantity, expression))
+        listed = ", ".join(f"{name} ({'x'.join(map(str, e.shape)) if e.shape[1] > 1 else e.shape[0]})"
+                           for name, e in outputs)
+        add("bundle", bundle.name, [(k, inputs[k]) for k in order if k in inputs], outputs,
+            f"Control tick '{bundle.name}': {listed} in one pass that computes every shared transform, sine and "
+            "cosine once; each output equals the generated function of its name.",
+            manifest=(("bundle", parts),))
 
 
 def regressor_specs(model: SXModel, add) -> None:

@@ -18,7 +18,7 @@ from derive.description.dh import dh_to_tree
 from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
-from derive.description.robot import (BASES, Actuator, robot_name, Frame, Joint, Limits, Link, Mimic, ModelError, Origin, Parameter, Robot, Value, Vec3,
+from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, ModelError, Origin, Parameter, Robot, Value, Vec3,
                                       identifier, shown)
 from derive.resources import EXAMPLE_MODELS
 
@@ -317,7 +317,7 @@ class _Parser:
     def robot(self) -> Robot:
         spec = self.spec
         self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
-                                   "base", "wrenches", "coulomb_smoothing"})
+                                   "base", "wrenches", "coulomb_smoothing", "bundles"})
         base = spec.get("base", "fixed")
         if base not in BASES:
             raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
@@ -354,6 +354,7 @@ class _Parser:
             source=str(spec.get("source", "")).strip(),
             base=base,
             wrenches=self.wrenches(spec),
+            bundles=self.bundles(spec),
             coulomb_smoothing=None if spec.get("coulomb_smoothing") is None else self.number(
                 "coulomb_smoothing", spec["coulomb_smoothing"]),
         )
@@ -379,7 +380,46 @@ class _Parser:
         for i, frame in enumerate(robot.wrench_frames):
             if frame not in known:
                 raise self.error(f"wrenches[{i}]", f"unknown frame '{shown(frame)}' (links and frames: {', '.join(known)})")
+        for i, bundle in enumerate(robot.bundles or ()):
+            for k, quantity in enumerate(bundle.quantities):
+                self.check_bundle_quantity(f"bundles[{i}].quantities[{k}]", quantity, known)
         return robot
+
+    def bundles(self, spec: Mapping) -> tuple[Bundle, ...] | None:
+        raw = spec.get("bundles")
+        if raw is None:
+            return None
+        if not isinstance(raw, list):
+            raise self.error("bundles", "expected a list of {name, quantities}")
+        out = []
+        for i, item in enumerate(raw):
+            where = f"bundles[{i}]"
+            if not isinstance(item, Mapping):
+                raise self.error(where, "expected a mapping with name and quantities")
+            self.check_keys(where + ".", item, {"name", "quantities"})
+            for key in ("name", "quantities"):
+                if key not in item:
+                    raise self.error(f"{where}.{key}", "missing")
+            name = identifier(self.name, f"{where}.name", item["name"])
+            quantities = item["quantities"]
+            if not isinstance(quantities, list) or not quantities:
+                raise self.error(f"{where}.quantities", "expected a non-empty list of quantities")
+            if len(set(map(str, quantities))) != len(quantities):
+                raise self.error(f"{where}.quantities", "a quantity is listed twice")
+            out.append(Bundle(name, tuple(identifier(self.name, f"{where}.quantities[{k}]", q)
+                                          for k, q in enumerate(quantities))))
+        if len({b.name for b in out}) != len(out):
+            raise self.error("bundles", "two bundles have the same name")
+        return tuple(out)
+
+    def check_bundle_quantity(self, where: str, quantity: str, frames: Iterable[str]) -> None:
+        frames = tuple(frames)
+        if quantity in BUNDLE_QUANTITIES or any(quantity == f"{prefix}_{frame}" for prefix in BUNDLE_FRAME_QUANTITIES
+                                                for frame in frames):
+            return
+        raise self.error(where, f"unknown quantity '{shown(quantity)}': one of {', '.join(BUNDLE_QUANTITIES)}, or "
+                                f"{', '.join(p + '_<frame>' for p in BUNDLE_FRAME_QUANTITIES)} for a link or frame "
+                                f"({', '.join(frames)})")
 
     def wrenches(self, spec: Mapping) -> tuple[str, ...] | None:
         raw = spec.get("wrenches")

@@ -210,6 +210,23 @@ class Joint:
                 f"the z and x turns of '{self.name}' align")
 
 
+BUNDLE_QUANTITIES = ("mass_matrix", "bias", "gravity", "coriolis_matrix", "inverse_dynamics", "forward_dynamics",
+                     "inverse_dynamics_fext", "forward_dynamics_fext", "com", "com_jacobian", "centroidal_map",
+                     "regressor", "base_regressor")
+"""What a control-tick bundle may hold: these generated functions' outputs, and per frame F
+those of :data:`BUNDLE_FRAME_QUANTITIES` (``fk_F``, ``jacobian_F``, ...)."""
+BUNDLE_FRAME_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration")
+
+
+@dataclass(frozen=True)
+class Bundle:
+    """A control-tick function: the outputs of several generated functions of (q, qd, ...) in one
+    pass that computes every shared transform, sine and cosine once (``<robot>_bundle_<name>``)."""
+
+    name: str
+    quantities: tuple[str, ...]
+
+
 @dataclass(frozen=True)
 class Frame:
     """A named frame rigidly attached to a link, e.g. the tool centre point."""
@@ -253,6 +270,7 @@ class Robot:
     base: str = "fixed"
     wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
     coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
+    bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
 
     @property
     def actuated(self) -> bool:
@@ -275,6 +293,23 @@ class Robot:
         if self.wrenches is not None:
             return self.wrenches
         return ("tcp",) if any(f.name == "tcp" for f in self.frames) else ()
+
+    @property
+    def control_bundles(self) -> tuple[Bundle, ...]:
+        """The model's ``bundles``, by default two: ``control`` = M, the bias h = C qd + g, and of the
+        ``tcp`` frame (if any) its pose, Jacobian and J'qd, plus the Jacobian and J'qd of every other
+        wrench frame (the contacts); ``computed_torque`` (with a tcp) = tau for a given qdd, and the
+        tcp's pose, Jacobian and the acceleration that qdd gives it."""
+        if self.bundles is not None:
+            return self.bundles
+        tcp = any(f.name == "tcp" for f in self.frames)
+        control = ["mass_matrix", "bias"] + (["fk_tcp", "jacobian_tcp", "jdot_qd_tcp"] if tcp else [])
+        control += [f"{q}_{f}" for f in self.wrench_frames if f != "tcp" for q in ("jacobian", "jdot_qd")]
+        out = [Bundle("control", tuple(control))]
+        if tcp:
+            out.append(Bundle("computed_torque", ("inverse_dynamics", "fk_tcp", "jacobian_tcp",
+                                                  "frame_acceleration_tcp")))
+        return tuple(out)
 
     @property
     def root(self) -> str:
@@ -364,7 +399,7 @@ def model_data(robot: Robot) -> dict:
     data = asdict(robot)
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    for key in ("wrenches", "coulomb_smoothing"):
+    for key in ("wrenches", "coulomb_smoothing", "bundles"):
         if data[key] is None:
             del data[key]
     for joint in data["joints"]:

@@ -139,8 +139,9 @@ class Body:
     motion: Motion | None = None  # its elementary motion: a mimic joint's moves by scale * q[joint] + offset
 
 
-def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
-    """Merge fixed joints; returns the moving bodies (in q order) and the root's mass properties."""
+def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple, dict]:
+    """Merge fixed joints; returns the moving bodies (in q order), the root's mass properties and
+    where each link sits: link -> (body index, -1 the root; rotation and offset in that body's frame)."""
     # link -> (body index, rotation and offset of the link in that body's frame)
     where: dict[str, tuple[int, ca.SX, ca.SX]] = {robot.root: (-1, ca.SX.eye(3), ca.SX.zeros(3, 1))}
     bodies: list[dict] = []
@@ -168,7 +169,7 @@ def build_bodies(robot: Robot, sym: Symbols) -> tuple[list[Body], tuple]:
         acc[1] += m * c
         acc[2] += R_bl @ I_c @ R_bl.T - m * (skew(c) @ skew(c))
     out = [Body(**d, m=mass[i][0], h=mass[i][1], I_o=mass[i][2]) for i, d in enumerate(bodies)]
-    return out, tuple(mass[-1])
+    return out, tuple(mass[-1]), where
 
 
 class NewtonEuler:
@@ -183,7 +184,7 @@ class NewtonEuler:
 
     def __init__(self, robot: Robot, sym: Symbols):
         self.robot, self.sym = robot, sym
-        self.bodies, root = build_bodies(robot, sym)
+        self.bodies, root, self.where = build_bodies(robot, sym)
         self.floating = robot.floating
         self.root_mass = root  # (m, h, I_o) of the root link: a body only with a floating base
         self.nb = 6 if robot.floating else 0  # entries of v before the joints'
@@ -250,22 +251,48 @@ class NewtonEuler:
         a = qdd[0:3] + ca.cross(w, qd[0:3])
         return w, qdd[3:6], a - self.base_rotation.T @ self.gravity if gravity else a
 
-    def rnea(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True) -> ca.SX:
-        """tau = RNEA(q, qd, qdd): M qdd + C qd + g (g only if ``gravity``)."""
+    def forward(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True) -> tuple[list, list, list]:
+        """The RNEA's forward pass: per body its angular velocity w, angular acceleration dw and the
+        classical acceleration a of its origin minus gravity (only if ``gravity``), body coordinates;
+        index -1 (the last entry) is the root's."""
         n, nb = len(self.bodies), self.nb
-        w, dw, a = [None] * n, [None] * n, [None] * n
-        w_0, dw_0, a_0 = self.root_motion(qd, qdd, gravity)
+        w, dw, a = [None] * (n + 1), [None] * (n + 1), [None] * (n + 1)
+        w[-1], dw[-1], a[-1] = self.root_motion(qd, qdd, gravity)
         qd, qdd = self.body_rates(qd[nb:]), self.body_rates(qdd[nb:])
-        f, t = [None] * n, [None] * n
         for i, b in enumerate(self.bodies):
             s_w, s_v = self._motion_axes(i)
-            w_p, dw_p, a_p = (w_0, dw_0, a_0) if b.parent < 0 else (w[b.parent], dw[b.parent], a[b.parent])
+            w_p, dw_p, a_p = w[b.parent], dw[b.parent], a[b.parent]
             p = self._p[i]
             w_in = self.to_child(i, w_p)
             w[i] = w_in + s_w * qd[i]
             dw[i] = self.to_child(i, dw_p) + s_w * qdd[i] + ca.cross(w_in, s_w * qd[i])
             a_lin = a_p + ca.cross(dw_p, p) + ca.cross(w_p, ca.cross(w_p, p))
             a[i] = self.to_child(i, a_lin) + s_v * qdd[i] + 2 * ca.cross(w[i], s_v * qd[i])
+        return w, dw, a
+
+    @cached_property
+    def gravity_accelerations(self) -> list:
+        """-g in each body's coordinates (index -1: the root's): what ``forward`` with gravity adds to a."""
+        n = len(self.bodies)
+        g = [None] * (n + 1)
+        g[-1] = -self.base_rotation.T @ self.gravity if self.floating else -self.gravity
+        for i, b in enumerate(self.bodies):
+            g[i] = self.to_child(i, g[b.parent])
+        return g
+
+    def rnea(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True, split: bool = False) -> ca.SX:
+        """tau = RNEA(q, qd, qdd): M qdd + C qd + g (g only if ``gravity``). With ``split`` the forward
+        pass runs without gravity and -g is added per body (:attr:`gravity_accelerations`): a few more
+        operations, but the pass is then the one frame accelerations use (bundles share it)."""
+        n, nb = len(self.bodies), self.nb
+        if split and gravity:
+            w, dw, a = self.forward(qd, qdd, gravity=False)
+            a = [a_i + g_i for a_i, g_i in zip(a, self.gravity_accelerations)]
+        else:
+            w, dw, a = self.forward(qd, qdd, gravity)
+        w_0, dw_0, a_0 = w[-1], dw[-1], a[-1]
+        f, t = [None] * n, [None] * n
+        for i, b in enumerate(self.bodies):
             f[i] = b.m * a[i] + ca.cross(dw[i], b.h) + ca.cross(w[i], ca.cross(w[i], b.h))
             t[i] = b.I_o @ dw[i] + ca.cross(w[i], b.I_o @ w[i]) + ca.cross(b.h, a[i])
         tau = ca.SX.zeros(self.sym.nv, 1)
@@ -370,10 +397,11 @@ class NewtonEuler:
         self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
         return christoffel_coriolis(self.mass_matrix, self.sym.q, self.sym.qd)
 
-    def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False) -> ca.SX:
-        """RNEA plus the actuators' armature and friction (Coulomb as sign(qd), tanh(qd / eps) if ``smooth``)."""
+    def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False, split: bool = False) -> ca.SX:
+        """RNEA plus the actuators' armature and friction (Coulomb as sign(qd), tanh(qd / eps) if ``smooth``);
+        ``split``: gravity added per body after a gravity-free forward pass (see :meth:`rnea`)."""
         qdd = self.sym.qdd if qdd is None else qdd
-        tau = self.rnea(self.sym.qd, qdd)
+        tau = self.rnea(self.sym.qd, qdd, split=split)
         drive = self.drive.torque(self.sym.qd, qdd, smooth)
         return tau if drive is None else tau + drive
 

@@ -26,7 +26,7 @@ import casadi as ca
 
 from derive.symbolic.kinematics import Kinematics, configuration_rate
 from derive.symbolic.dynamics import NewtonEuler
-from derive.symbolic.spatial import skew
+from derive.symbolic.spatial import rpy, skew
 from derive.symbolic.symbols import Symbols
 
 
@@ -36,7 +36,7 @@ class WholeBody:
     def __init__(self, kin: Kinematics, ne: NewtonEuler, sym: Symbols):
         self.kin, self.ne, self.sym = kin, ne, sym
         self.robot = kin.robot
-        self._jdot: dict[str, ca.SX] = {}  # per frame: frame_acceleration reuses jdot_qd's derivative
+        self._jdot: dict[str, ca.SX] = {}  # per frame
 
     @cached_property
     def _rate(self) -> ca.SX:
@@ -95,16 +95,32 @@ class WholeBody:
             linear += P
         return ca.vertcat(linear, angular)
 
+    def _classical_acceleration(self, frame: str, qdd: ca.SX) -> ca.SX:
+        """[linear; angular] classical acceleration (6x1) of the frame's origin, world-aligned, without
+        gravity, from the RNEA's forward pass without gravity (that of ``rnea(split=True)``, which
+        bundles share): its body's a + dw x r + w x (w x r), rotated into the world."""
+        named = {f.name: f for f in self.robot.frames}
+        if frame in named:  # a named frame on a link
+            f = named[frame]
+            body, R_bl, p_bl = self.ne.where[f.link]
+            R_bf = R_bl @ rpy(*(self.sym.value(v) for v in f.origin.rpy))
+            r = p_bl + R_bl @ ca.vertcat(*(self.sym.value(v) for v in f.origin.xyz))
+        else:  # a link
+            body, R_bf, r = self.ne.where[frame]
+        w, dw, a = (x[body] for x in self.ne.forward(self.sym.qd, qdd, gravity=False))
+        R_wb = self.kin.pose(frame).R @ R_bf.T
+        linear = R_wb @ (a + ca.cross(dw, r) + ca.cross(w, ca.cross(w, r)))
+        return ca.vertcat(linear, R_wb @ dw)
+
     def jdot_qd(self, frame: str) -> ca.SX:
         """J'(q, qd) qd (6x1): the frame's classical acceleration at qdd = 0, world-aligned."""
         if frame not in self._jdot:
-            twist = self.kin.jacobian(frame) @ self.sym.qd
-            self._jdot[frame] = ca.jtimes(twist, self.sym.q, self._rate)
+            self._jdot[frame] = self._classical_acceleration(frame, ca.SX.zeros(self.sym.nv, 1))
         return self._jdot[frame]
 
     def frame_acceleration(self, frame: str) -> ca.SX:
         """[classical linear; angular] acceleration (6x1) of the frame for (q, qd, qdd), world-aligned."""
-        return self.kin.jacobian(frame) @ self.sym.qdd + self.jdot_qd(frame)
+        return self._classical_acceleration(frame, self.sym.qdd)
 
     def wrench_torques(self, wrenches: ca.SX) -> ca.SX:
         """sum_f J_f^T w_f (nv x 1) for ``wrenches`` stacked [w_f; ...] in :attr:`Robot.wrench_frames` order."""

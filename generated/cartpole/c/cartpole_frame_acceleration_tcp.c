@@ -6,27 +6,24 @@
 
 DERIVE_FN void cartpole_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *a)
 {
-    /* 16 ops: 6 mul, 8 add, 0 div, 2 trig */
-    DERIVE_REAL w0, w1, w2, w3;
+    /* 13 ops: 7 mul, 4 add, 0 div, 2 trig */
+    DERIVE_REAL w0, w1, w2, w3, w4, w5;
     w0 = DERIVE_COS(q[1]);
-    w1 = w0 * qdd[1];
-    w1 = qdd[0] - w1;
-    w2 = DERIVE_SIN(q[1]);
-    w3 = w2 * qd[1];
-    w3 = qd[1] * w3;
-    w1 = w1 + w3;
-    w3 = q[0] - w2;
-    w2 = w3 - q[0];
-    w3 = w2 * qdd[1];
-    w2 = w0 * qd[1];
-    w0 = qd[0] - w2;
-    w2 = w0 - qd[0];
-    w0 = qd[1] * w2;
-    w2 = w3 + w0;
-    w3 = -w2;
-    a[0] = w1;
+    w1 = w0 * qdd[0];
+    w1 = w1 - qdd[1];
+    w2 = w0 * w1;
+    w3 = DERIVE_SIN(q[1]);
+    w4 = w3 * qdd[0];
+    w5 = qd[1] * qd[1];
+    w4 = w4 + w5;
+    w5 = w3 * w4;
+    w2 = w2 + w5;
+    w5 = w0 * w4;
+    w0 = w3 * w1;
+    w4 = w5 - w0;
+    a[0] = w2;
     a[1] = DERIVE_LIT(0.0);
-    a[2] = w3;
+    a[2] = w4;
     a[3] = DERIVE_LIT(0.0);
     a[4] = qdd[1];
     a[5] = DERIVE_LIT(0.0);

@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [2]
  * in  qdd [2]
  * out a [6]
- * Arrays are row-major. 16 ops: 6 mul, 8 add, 0 div, 2 trig
+ * Arrays are row-major. 13 ops: 7 mul, 4 add, 0 div, 2 trig
  */
 DERIVE_FN void cartpole_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *a);
 

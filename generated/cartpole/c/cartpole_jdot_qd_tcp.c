@@ -6,17 +6,13 @@
 
 DERIVE_FN void cartpole_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *a)
 {
-    /* 9 ops: 4 mul, 3 add, 0 div, 2 trig */
-    DERIVE_REAL w0, w1;
+    /* 5 ops: 3 mul, 0 add, 0 div, 2 trig */
+    DERIVE_REAL w0, w1, w2;
     w0 = DERIVE_SIN(q[1]);
-    w0 = w0 * qd[1];
-    w0 = qd[1] * w0;
-    w1 = DERIVE_COS(q[1]);
-    w1 = w1 * qd[1];
-    w1 = qd[0] - w1;
-    w1 = w1 - qd[0];
-    w1 = qd[1] * w1;
-    w1 = -w1;
+    w1 = qd[1] * qd[1];
+    w0 = w0 * w1;
+    w2 = DERIVE_COS(q[1]);
+    w1 = w2 * w1;
     a[0] = w0;
     a[1] = DERIVE_LIT(0.0);
     a[2] = w1;

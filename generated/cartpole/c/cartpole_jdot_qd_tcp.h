@@ -17,7 +17,7 @@ extern "C" {
  * in  q [2]
  * in  qd [2]
  * out a [6]
- * Arrays are row-major. 9 ops: 4 mul, 3 add, 0 div, 2 trig
+ * Arrays are row-major. 5 ops: 3 mul, 0 add, 0 div, 2 trig
  */
 DERIVE_FN void cartpole_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *a);
 

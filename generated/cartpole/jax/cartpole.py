@@ -117,21 +117,17 @@ def jdot_qd_tcp(q, qd):
     in  q [2]
     in  qd [2]
     out a [6]
-    9 ops: 4 mul, 3 add, 0 div, 2 trig
+    5 ops: 3 mul, 0 add, 0 div, 2 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     batch = _batch(q, qd)
     t0 = jnp.sin(q[..., 1])
-    t1 = t0 * qd[..., 1]
-    t2 = qd[..., 1] * t1
+    t1 = qd[..., 1] * qd[..., 1]
+    t2 = t0 * t1
     t3 = jnp.cos(q[..., 1])
-    t4 = t3 * qd[..., 1]
-    t5 = qd[..., 0] - t4
-    t6 = t5 - qd[..., 0]
-    t7 = qd[..., 1] * t6
-    t8 = -t7
-    a = _assemble([t2, 0.0, t8, 0.0, 0.0, 0.0], batch)
+    t4 = t3 * t1
+    a = _assemble([t2, 0.0, t4, 0.0, 0.0, 0.0], batch)
     return a
 
 
@@ -142,29 +138,26 @@ def frame_acceleration_tcp(q, qd, qdd):
     in  qd [2]
     in  qdd [2]
     out a [6]
-    16 ops: 6 mul, 8 add, 0 div, 2 trig
+    13 ops: 7 mul, 4 add, 0 div, 2 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     batch = _batch(q, qd, qdd)
     t0 = jnp.cos(q[..., 1])
-    t1 = t0 * qdd[..., 1]
-    t2 = qdd[..., 0] - t1
-    t3 = jnp.sin(q[..., 1])
-    t4 = t3 * qd[..., 1]
-    t5 = qd[..., 1] * t4
-    t6 = t2 + t5
-    t7 = q[..., 0] - t3
-    t8 = t7 - q[..., 0]
-    t9 = t8 * qdd[..., 1]
-    t10 = t0 * qd[..., 1]
-    t11 = qd[..., 0] - t10
-    t12 = t11 - qd[..., 0]
-    t13 = qd[..., 1] * t12
-    t14 = t9 + t13
-    t15 = -t14
-    a = _assemble([t6, 0.0, t15, 0.0, qdd[..., 1], 0.0], batch)
+    t1 = t0 * qdd[..., 0]
+    t2 = t1 - qdd[..., 1]
+    t3 = t0 * t2
+    t4 = jnp.sin(q[..., 1])
+    t5 = t4 * qdd[..., 0]
+    t6 = qd[..., 1] * qd[..., 1]
+    t7 = t5 + t6
+    t8 = t4 * t7
+    t9 = t3 + t8
+    t10 = t0 * t7
+    t11 = t4 * t2
+    t12 = t10 - t11
+    a = _assemble([t9, 0.0, t12, 0.0, qdd[..., 1], 0.0], batch)
     return a
 
 
@@ -244,6 +237,33 @@ def gravity(q):
     t8 = -t7
     g = _assemble([t6, t8], batch)
     return g
+
+
+def bias(q, qd):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.
+
+    in  q [2]
+    in  qd [2]
+    out h [2]
+    12 ops: 7 mul, 3 add, 0 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    batch = _batch(q, qd)
+    t0 = jnp.sin(q[..., 1])
+    t1 = jnp.cos(q[..., 1])
+    t2 = 0.9810000000000001 * t1
+    t3 = (-0.05) * qd[..., 1]
+    t4 = qd[..., 1] * t3
+    t5 = t2 - t4
+    t6 = t0 * t5
+    t7 = 0.9810000000000001 * t0
+    t8 = t1 * t7
+    t9 = t6 - t8
+    t10 = (-0.49050000000000005) * t0
+    t11 = -t10
+    h = _assemble([t9, t11], batch)
+    return h
 
 
 def inverse_dynamics(q, qd, qdd):
@@ -711,6 +731,109 @@ def base_regressor(q, qd, qdd):
     t18 = jnp.sign(qd[..., 1])
     Y_b = _assemble([qdd[..., 0], t6, t13, 0.0, qd[..., 0], t17, 0.0, 0.0, 0.0, t10, t16, qdd[..., 1], 0.0, 0.0, qd[..., 1], t18], batch).reshape(batch + (2, 8))
     return Y_b
+
+
+def bundle_control(q, qd):
+    """Control tick 'control': mass_matrix (2x2), bias (2), fk_tcp (4x4), jacobian_tcp (6x2), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [2]
+    in  qd [2]
+    out mass_matrix [2x2]
+    out bias [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out jdot_qd_tcp [6]
+    21 ops: 11 mul, 8 add, 0 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    batch = _batch(q, qd)
+    t0 = jnp.cos(q[..., 1])
+    t1 = (-0.05) * t0
+    t2 = jnp.sin(q[..., 1])
+    t3 = 0.9810000000000001 * t0
+    t4 = (-0.05) * qd[..., 1]
+    t5 = qd[..., 1] * t4
+    t6 = t3 - t5
+    t7 = t2 * t6
+    t8 = 0.9810000000000001 * t2
+    t9 = t0 * t8
+    t10 = t7 - t9
+    t11 = (-0.49050000000000005) * t2
+    t12 = -t11
+    t13 = -t2
+    t14 = q[..., 0] - t2
+    t15 = -t0
+    t16 = t14 - q[..., 0]
+    t17 = -t16
+    t18 = qd[..., 1] * qd[..., 1]
+    t19 = t2 * t18
+    t20 = t0 * t18
+    mass_matrix = _assemble([1.1, t1, t1, 0.03333333333333333], batch).reshape(batch + (2, 2))
+    bias = _assemble([t10, t12], batch)
+    fk_tcp = _assemble([t0, 0.0, t2, t14, 0.0, 1.0, 0.0, 0.0, t13, 0.0, t0, t15, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([1.0, t15, 0.0, 0.0, 0.0, t17, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    jdot_qd_tcp = _assemble([t19, 0.0, t20, 0.0, 0.0, 0.0], batch)
+    return mass_matrix, bias, fk_tcp, jacobian_tcp, jdot_qd_tcp
+
+
+def bundle_computed_torque(q, qd, qdd):
+    """Control tick 'computed_torque': inverse_dynamics (2), fk_tcp (4x4), jacobian_tcp (6x2), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out inverse_dynamics [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out frame_acceleration_tcp [6]
+    36 ops: 18 mul, 16 add, 0 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    batch = _batch(q, qd, qdd)
+    t0 = jnp.cos(q[..., 1])
+    t1 = t0 * qdd[..., 0]
+    t2 = jnp.sin(q[..., 1])
+    t3 = 9.81 * t2
+    t4 = t1 - t3
+    t5 = 0.1 * t4
+    t6 = (-0.05) * qdd[..., 1]
+    t7 = t5 + t6
+    t8 = t0 * t7
+    t9 = t2 * qdd[..., 0]
+    t10 = 9.81 * t0
+    t11 = t9 + t10
+    t12 = 0.1 * t11
+    t13 = (-0.05) * qd[..., 1]
+    t14 = qd[..., 1] * t13
+    t15 = t12 - t14
+    t16 = t2 * t15
+    t17 = t8 + t16
+    t18 = qdd[..., 0] + t17
+    t19 = 0.03333333333333333 * qdd[..., 1]
+    t20 = (-0.05) * t4
+    t21 = t19 + t20
+    t22 = -t2
+    t23 = q[..., 0] - t2
+    t24 = -t0
+    t25 = t23 - q[..., 0]
+    t26 = -t25
+    t27 = t1 - qdd[..., 1]
+    t28 = t0 * t27
+    t29 = qd[..., 1] * qd[..., 1]
+    t30 = t9 + t29
+    t31 = t2 * t30
+    t32 = t28 + t31
+    t33 = t0 * t30
+    t34 = t2 * t27
+    t35 = t33 - t34
+    inverse_dynamics = _assemble([t18, t21], batch)
+    fk_tcp = _assemble([t0, 0.0, t2, t23, 0.0, 1.0, 0.0, 0.0, t22, 0.0, t0, t24, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([1.0, t24, 0.0, 0.0, 0.0, t26, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    frame_acceleration_tcp = _assemble([t32, 0.0, t35, 0.0, qdd[..., 1], 0.0], batch)
+    return inverse_dynamics, fk_tcp, jacobian_tcp, frame_acceleration_tcp
 
 
 def rk4_step(x, u, dt):

@@ -378,25 +378,21 @@ def jdot_qd_tcp(q, qd):
     in  q [2]
     in  qd [2]
     out a [6]
-    9 ops: 4 mul, 3 add, 0 div, 2 trig
+    5 ops: 3 mul, 0 add, 0 div, 2 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_tcp_chunk, (q, qd), 1, ((6,),), fixed=_jdot_qd_tcp_fixed)
+        return _batch(_jdot_qd_tcp_chunk, (q, qd), 2, ((6,),), fixed=_jdot_qd_tcp_fixed)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = sin(q[1])
-    t0 = t0 * qd[1]
-    t0 = qd[1] * t0
-    t1 = cos(q[1])
-    t1 = t1 * qd[1]
-    t1 = qd[0] - t1
-    t1 = t1 - qd[0]
-    t1 = qd[1] * t1
-    t1 = -t1
+    t1 = qd[1] * qd[1]
+    t0 = t0 * t1
+    t2 = cos(q[1])
+    t1 = t2 * t1
     _a = (t0, 0.0, t1, 0.0, 0.0, 0.0)
     return np.array(_a)
 
@@ -410,19 +406,15 @@ _jdot_qd_tcp_fixed = (
 def _jdot_qd_tcp_chunk(x, t, s, y):
     """jdot_qd_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
-    cos, multiply, negative, sin, subtract = np.cos, np.multiply, np.negative, np.sin, np.subtract
+    cos, multiply, sin = np.cos, np.multiply, np.sin
     q_0, q_1, qd_0, qd_1 = x
-    t0, = t
+    t0, t1 = t
     a_0, a_2 = y
     sin(q_1, t0)
-    multiply(t0, qd_1, t0)
-    multiply(qd_1, t0, a_0)
+    multiply(qd_1, qd_1, t1)
+    multiply(t0, t1, a_0)
     cos(q_1, t0)
-    multiply(t0, qd_1, t0)
-    subtract(qd_0, t0, t0)
-    subtract(t0, qd_0, t0)
-    multiply(qd_1, t0, t0)
-    negative(t0, a_2)
+    multiply(t0, t1, a_2)
 
 
 def frame_acceleration_tcp(q, qd, qdd):
@@ -432,35 +424,32 @@ def frame_acceleration_tcp(q, qd, qdd):
     in  qd [2]
     in  qdd [2]
     out a [6]
-    16 ops: 6 mul, 8 add, 0 div, 2 trig
+    13 ops: 7 mul, 4 add, 0 div, 2 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 4, ((6,),), fixed=_frame_acceleration_tcp_fixed)
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 6, ((6,),), fixed=_frame_acceleration_tcp_fixed)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     qdd = qdd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[1])
-    t1 = t0 * qdd[1]
-    t1 = qdd[0] - t1
-    t2 = sin(q[1])
-    t3 = t2 * qd[1]
-    t3 = qd[1] * t3
-    t1 = t1 + t3
-    t2 = q[0] - t2
-    t2 = t2 - q[0]
-    t2 = t2 * qdd[1]
-    t0 = t0 * qd[1]
-    t0 = qd[0] - t0
-    t0 = t0 - qd[0]
-    t0 = qd[1] * t0
-    t0 = t2 + t0
-    t0 = -t0
-    _a = (t1, 0.0, t0, 0.0, qdd[1], 0.0)
+    t1 = t0 * qdd[0]
+    t1 = t1 - qdd[1]
+    t2 = t0 * t1
+    t3 = sin(q[1])
+    t4 = t3 * qdd[0]
+    t5 = qd[1] * qd[1]
+    t4 = t4 + t5
+    t5 = t3 * t4
+    t2 = t2 + t5
+    t0 = t0 * t4
+    t1 = t3 * t1
+    t0 = t0 - t1
+    _a = (t2, 0.0, t0, 0.0, qdd[1], 0.0)
     return np.array(_a)
 
 
@@ -473,26 +462,23 @@ _frame_acceleration_tcp_fixed = (
 def _frame_acceleration_tcp_chunk(x, t, s, y):
     """frame_acceleration_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
-    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    add, copyto, cos, multiply, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, qd_0, qd_1, qdd_0, qdd_1 = x
-    t0, t1, t2, t3 = t
+    t0, t1, t2, t3, t4, t5 = t
     a_0, a_2, a_4 = y
     cos(q_1, t0)
-    multiply(t0, qdd_1, t1)
-    subtract(qdd_0, t1, t1)
-    sin(q_1, t2)
-    multiply(t2, qd_1, t3)
-    multiply(qd_1, t3, t3)
-    add(t1, t3, a_0)
-    subtract(q_0, t2, t2)
-    subtract(t2, q_0, t2)
-    multiply(t2, qdd_1, t2)
-    multiply(t0, qd_1, t0)
-    subtract(qd_0, t0, t0)
-    subtract(t0, qd_0, t0)
-    multiply(qd_1, t0, t0)
-    add(t2, t0, t2)
-    negative(t2, a_2)
+    multiply(t0, qdd_0, t1)
+    subtract(t1, qdd_1, t1)
+    multiply(t0, t1, t2)
+    sin(q_1, t3)
+    multiply(t3, qdd_0, t4)
+    multiply(qd_1, qd_1, t5)
+    add(t4, t5, t4)
+    multiply(t3, t4, t5)
+    add(t2, t5, a_0)
+    multiply(t0, t4, t0)
+    multiply(t3, t1, t3)
+    subtract(t0, t3, a_2)
     copyto(a_4, qdd_1)
 
 
@@ -694,6 +680,64 @@ def _gravity_chunk(x, t, s, y):
     subtract(t2, t1, g_0)
     multiply(k1, t0, t0)
     negative(t0, g_1)
+
+
+def bias(q, qd):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.
+
+    in  q [2]
+    in  qd [2]
+    out h [2]
+    12 ops: 7 mul, 3 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bias_chunk, (q, qd), 4, ((2,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = sin(q[1])
+    t1 = cos(q[1])
+    t2 = 0.9810000000000001 * t1
+    t3 = (-0.05) * qd[1]
+    t3 = qd[1] * t3
+    t2 = t2 - t3
+    t2 = t0 * t2
+    t3 = 0.9810000000000001 * t0
+    t1 = t1 * t3
+    t1 = t2 - t1
+    t0 = (-0.49050000000000005) * t0
+    t0 = -t0
+    _h = (t1, t0)
+    return np.array(_h)
+
+
+_bias_constants = _constants(
+    0.9810000000000001, -0.05, -0.49050000000000005)
+
+
+def _bias_chunk(x, t, s, y):
+    """bias on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    cos, multiply, negative, sin, subtract = np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1 = x
+    t0, t1, t2, t3 = t
+    h_0, h_1 = y
+    k0, k1, k2 = _bias_constants
+    sin(q_1, t0)
+    cos(q_1, t1)
+    multiply(k0, t1, t2)
+    multiply(k1, qd_1, t3)
+    multiply(qd_1, t3, t3)
+    subtract(t2, t3, t2)
+    multiply(t0, t2, t2)
+    multiply(k0, t0, t3)
+    multiply(t1, t3, t1)
+    subtract(t2, t1, h_0)
+    multiply(k2, t0, t0)
+    negative(t0, h_1)
 
 
 def inverse_dynamics(q, qd, qdd):
@@ -1745,6 +1789,250 @@ def _base_regressor_chunk(x, t, s, y):
     copyto(Y_b_4, qd_0)
     copyto(Y_b_11, qdd_1)
     copyto(Y_b_14, qd_1)
+
+
+def bundle_control(q, qd):
+    """Control tick 'control': mass_matrix (2x2), bias (2), fk_tcp (4x4), jacobian_tcp (6x2), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [2]
+    in  qd [2]
+    out mass_matrix [2x2]
+    out bias [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out jdot_qd_tcp [6]
+    21 ops: 11 mul, 8 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_control_chunk, (q, qd), 2, ((2, 2), (2,), (4, 4), (6, 2), (6,),), fixed=_bundle_control_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[1])
+    t1 = (-0.05) * t0
+    t2 = sin(q[1])
+    t3 = 0.9810000000000001 * t0
+    t4 = (-0.05) * qd[1]
+    t4 = qd[1] * t4
+    t3 = t3 - t4
+    t3 = t2 * t3
+    t4 = 0.9810000000000001 * t2
+    t4 = t0 * t4
+    t3 = t3 - t4
+    t4 = (-0.49050000000000005) * t2
+    t4 = -t4
+    t5 = -t2
+    t6 = q[0] - t2
+    t7 = -t0
+    t8 = t6 - q[0]
+    t8 = -t8
+    t9 = qd[1] * qd[1]
+    t10 = t2 * t9
+    t9 = t0 * t9
+    _mass_matrix = (1.1, t1,
+                    t1, 0.03333333333333333)
+    _bias = (t3, t4)
+    _fk_tcp = (t0, 0.0, t2, t6,
+               0.0, 1.0, 0.0, 0.0,
+               t5, 0.0, t0, t7,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (1.0, t7,
+                     0.0, 0.0,
+                     0.0, t8,
+                     0.0, 0.0,
+                     0.0, 1.0,
+                     0.0, 0.0)
+    _jdot_qd_tcp = (t10, 0.0, t9, 0.0, 0.0, 0.0)
+    return np.array(_mass_matrix).reshape(2, 2), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 2), np.array(_jdot_qd_tcp)
+
+
+_bundle_control_constants = _constants(
+    -0.05, 0.9810000000000001, -0.49050000000000005)
+
+
+_bundle_control_fixed = (
+    {0: 1.1, 3: 0.03333333333333333},
+    {},
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {0: 1.0, 2: 0.0, 3: 0.0, 4: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 1.0, 10: 0.0, 11: 0.0},
+    {1: 0.0, 3: 0.0, 4: 0.0, 5: 0.0},
+)
+"""bundle_control's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_control_chunk(x, t, s, y):
+    """bundle_control on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, multiply, negative, sin, subtract = np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1 = x
+    t0, t1 = t
+    (mass_matrix_1, mass_matrix_2, bias_0, bias_1, fk_tcp_0, fk_tcp_2, fk_tcp_3, fk_tcp_8, fk_tcp_10,
+     fk_tcp_11, jacobian_tcp_1, jacobian_tcp_5, jdot_qd_tcp_0, jdot_qd_tcp_2) = y
+    k0, k1, k2 = _bundle_control_constants
+    cos(q_1, fk_tcp_0)
+    multiply(k0, fk_tcp_0, mass_matrix_1)
+    sin(q_1, fk_tcp_2)
+    multiply(k1, fk_tcp_0, t0)
+    multiply(k0, qd_1, t1)
+    multiply(qd_1, t1, t1)
+    subtract(t0, t1, t0)
+    multiply(fk_tcp_2, t0, t0)
+    multiply(k1, fk_tcp_2, t1)
+    multiply(fk_tcp_0, t1, t1)
+    subtract(t0, t1, bias_0)
+    multiply(k2, fk_tcp_2, t0)
+    negative(t0, bias_1)
+    negative(fk_tcp_2, fk_tcp_8)
+    subtract(q_0, fk_tcp_2, fk_tcp_3)
+    negative(fk_tcp_0, fk_tcp_11)
+    subtract(fk_tcp_3, q_0, t0)
+    negative(t0, jacobian_tcp_5)
+    multiply(qd_1, qd_1, t0)
+    multiply(fk_tcp_2, t0, jdot_qd_tcp_0)
+    multiply(fk_tcp_0, t0, jdot_qd_tcp_2)
+    copyto(mass_matrix_2, mass_matrix_1)
+    copyto(fk_tcp_10, fk_tcp_0)
+    copyto(jacobian_tcp_1, fk_tcp_11)
+
+
+def bundle_computed_torque(q, qd, qdd):
+    """Control tick 'computed_torque': inverse_dynamics (2), fk_tcp (4x4), jacobian_tcp (6x2), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out inverse_dynamics [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out frame_acceleration_tcp [6]
+    36 ops: 18 mul, 16 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_computed_torque_chunk, (q, qd, qdd), 6, ((2,), (4, 4), (6, 2), (6,),), fixed=_bundle_computed_torque_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[1])
+    t1 = t0 * qdd[0]
+    t2 = sin(q[1])
+    t3 = 9.81 * t2
+    t3 = t1 - t3
+    t4 = 0.1 * t3
+    t5 = (-0.05) * qdd[1]
+    t4 = t4 + t5
+    t4 = t0 * t4
+    t5 = t2 * qdd[0]
+    t6 = 9.81 * t0
+    t6 = t5 + t6
+    t6 = 0.1 * t6
+    t7 = (-0.05) * qd[1]
+    t7 = qd[1] * t7
+    t6 = t6 - t7
+    t6 = t2 * t6
+    t4 = t4 + t6
+    t4 = qdd[0] + t4
+    t6 = 0.03333333333333333 * qdd[1]
+    t3 = (-0.05) * t3
+    t3 = t6 + t3
+    t6 = -t2
+    t7 = q[0] - t2
+    t8 = -t0
+    t9 = t7 - q[0]
+    t9 = -t9
+    t1 = t1 - qdd[1]
+    t10 = t0 * t1
+    t11 = qd[1] * qd[1]
+    t5 = t5 + t11
+    t11 = t2 * t5
+    t10 = t10 + t11
+    t5 = t0 * t5
+    t1 = t2 * t1
+    t1 = t5 - t1
+    _inverse_dynamics = (t4, t3)
+    _fk_tcp = (t0, 0.0, t2, t7,
+               0.0, 1.0, 0.0, 0.0,
+               t6, 0.0, t0, t8,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (1.0, t8,
+                     0.0, 0.0,
+                     0.0, t9,
+                     0.0, 0.0,
+                     0.0, 1.0,
+                     0.0, 0.0)
+    _frame_acceleration_tcp = (t10, 0.0, t1, 0.0, qdd[1], 0.0)
+    return np.array(_inverse_dynamics), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 2), np.array(_frame_acceleration_tcp)
+
+
+_bundle_computed_torque_constants = _constants(
+    9.81, 0.1, -0.05, 0.03333333333333333)
+
+
+_bundle_computed_torque_fixed = (
+    {},
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {0: 1.0, 2: 0.0, 3: 0.0, 4: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 1.0, 10: 0.0, 11: 0.0},
+    {1: 0.0, 3: 0.0, 5: 0.0},
+)
+"""bundle_computed_torque's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_computed_torque_chunk(x, t, s, y):
+    """bundle_computed_torque on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1 = x
+    t0, t1, t2, t3, t4, t5 = t
+    (inverse_dynamics_0, inverse_dynamics_1, fk_tcp_0, fk_tcp_2, fk_tcp_3, fk_tcp_8, fk_tcp_10, fk_tcp_11,
+     jacobian_tcp_1, jacobian_tcp_5, frame_acceleration_tcp_0, frame_acceleration_tcp_2,
+     frame_acceleration_tcp_4) = y
+    k0, k1, k2, k3 = _bundle_computed_torque_constants
+    cos(q_1, fk_tcp_0)
+    multiply(fk_tcp_0, qdd_0, t0)
+    sin(q_1, fk_tcp_2)
+    multiply(k0, fk_tcp_2, t1)
+    subtract(t0, t1, t1)
+    multiply(k1, t1, t2)
+    multiply(k2, qdd_1, t3)
+    add(t2, t3, t2)
+    multiply(fk_tcp_0, t2, t2)
+    multiply(fk_tcp_2, qdd_0, t3)
+    multiply(k0, fk_tcp_0, t4)
+    add(t3, t4, t4)
+    multiply(k1, t4, t4)
+    multiply(k2, qd_1, t5)
+    multiply(qd_1, t5, t5)
+    subtract(t4, t5, t4)
+    multiply(fk_tcp_2, t4, t4)
+    add(t2, t4, t2)
+    add(qdd_0, t2, inverse_dynamics_0)
+    multiply(k3, qdd_1, t2)
+    multiply(k2, t1, t1)
+    add(t2, t1, inverse_dynamics_1)
+    negative(fk_tcp_2, fk_tcp_8)
+    subtract(q_0, fk_tcp_2, fk_tcp_3)
+    negative(fk_tcp_0, fk_tcp_11)
+    subtract(fk_tcp_3, q_0, t1)
+    negative(t1, jacobian_tcp_5)
+    subtract(t0, qdd_1, t0)
+    multiply(fk_tcp_0, t0, t1)
+    multiply(qd_1, qd_1, t2)
+    add(t3, t2, t3)
+    multiply(fk_tcp_2, t3, t2)
+    add(t1, t2, frame_acceleration_tcp_0)
+    multiply(fk_tcp_0, t3, t3)
+    multiply(fk_tcp_2, t0, t0)
+    subtract(t3, t0, frame_acceleration_tcp_2)
+    copyto(fk_tcp_10, fk_tcp_0)
+    copyto(jacobian_tcp_1, fk_tcp_11)
+    copyto(frame_acceleration_tcp_4, qdd_1)
 
 
 def rk4_step(x, u, dt):

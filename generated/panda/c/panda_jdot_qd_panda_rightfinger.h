@@ -17,7 +17,7 @@ extern "C" {
  * in  q [7]
  * in  qd [7]
  * out a [6]
- * Arrays are row-major. 546 ops: 303 mul, 231 add, 0 div, 12 trig
+ * Arrays are row-major. 361 ops: 221 mul, 126 add, 0 div, 14 trig
  */
 DERIVE_FN void panda_jdot_qd_panda_rightfinger(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *a);
 

@@ -1075,568 +1075,384 @@ def jdot_qd_tcp(q, qd):
     in  q [7]
     in  qd [7]
     out a [6]
-    546 ops: 303 mul, 231 add, 0 div, 12 trig
+    361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_tcp_chunk, (q, qd), 71, ((6,),))
+        return _batch(_jdot_qd_tcp_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = sin(q[1])
-    t2 = t1 * qd[1]
-    t3 = (-0.316) * t2
-    t4 = cos(q[2])
-    t5 = cos(q[1])
-    t6 = t5 * qd[1]
-    t7 = t4 * t6
-    t8 = sin(q[2])
-    t9 = t8 * qd[2]
-    t10 = t1 * t9
-    t7 = t7 - t10
-    t10 = 0.0825 * t7
-    t10 = t3 - t10
-    t11 = cos(q[3])
-    t12 = t11 * qd[3]
-    t13 = t5 * t12
-    t14 = sin(q[3])
-    t15 = t14 * t2
+    t1 = cos(q[1])
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
+    t12 = cos(q[4])
+    t13 = t8 * t12
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
     t13 = t13 - t15
-    t15 = t11 * t7
-    t16 = t1 * t4
-    t17 = t14 * qd[3]
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
+    t16 = t16 + t17
+    t17 = cos(q[6])
     t18 = t16 * t17
-    t15 = t15 - t18
-    t13 = t13 - t15
-    t15 = (-0.0825) * t13
-    t7 = t14 * t7
-    t18 = t16 * t12
-    t7 = t7 + t18
-    t18 = t11 * t2
-    t19 = t5 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
     t18 = t18 + t19
-    t7 = t7 - t18
-    t18 = 0.384 * t7
-    t15 = t15 + t18
-    t15 = t10 + t15
-    t18 = cos(q[5])
-    t19 = cos(q[4])
-    t20 = t19 * t13
-    t21 = t5 * t14
-    t22 = t16 * t11
-    t21 = t21 - t22
-    t22 = sin(q[4])
-    t23 = t22 * qd[4]
-    t24 = t21 * t23
-    t20 = t20 - t24
-    t24 = t8 * t6
-    t25 = t4 * qd[2]
-    t26 = t1 * t25
-    t24 = t24 + t26
-    t26 = t22 * t24
-    t27 = t1 * t8
-    t28 = t19 * qd[4]
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = t3 * t22
+    t24 = t19 * qd[1]
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
     t29 = t27 * t28
-    t26 = t26 + t29
-    t20 = t20 + t26
-    t26 = t18 * t20
-    t29 = t21 * t19
-    t30 = t27 * t22
-    t29 = t29 + t30
-    t30 = sin(q[5])
-    t31 = t30 * qd[5]
-    t32 = t29 * t31
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
     t26 = t26 - t32
-    t32 = t30 * t7
-    t33 = t16 * t14
-    t34 = t5 * t11
-    t33 = t33 + t34
-    t34 = t18 * qd[5]
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t30 = 0.384 * t26
+    t29 = t29 + t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t27 = t27 * qd[2]
+    t24 = t3 * t24
+    t24 = t27 - t24
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t11 * t20
+    t27 = t27 - t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t24 = t11 * t24
+    t37 = t7 * t20
+    t24 = t24 + t37
+    t37 = t19 * qd[3]
+    t24 = t24 + t37
+    t37 = (-0.0825) * t24
+    t36 = t36 + t37
+    t28 = t31 * t28
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = 0.0825 * t20
+    t20 = t22 + t20
+    t20 = t28 - t20
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 - t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
     t35 = t33 * t34
     t32 = t32 + t35
-    t26 = t26 + t32
-    t26 = 0.088 * t26
-    t26 = t15 + t26
-    t32 = t18 * t7
-    t35 = t33 * t31
-    t32 = t32 - t35
-    t20 = t30 * t20
-    t35 = t29 * t34
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t29 = t12 * t27
+    t35 = t14 * t26
+    t29 = t29 + t35
+    t19 = t19 * qd[4]
+    t19 = t29 - t19
+    t29 = t10 * t19
+    t35 = t15 * t24
+    t29 = t29 + t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 + t35
+    t35 = 0.088 * t29
     t20 = t20 + t35
-    t20 = t32 - t20
-    t32 = 0.2104 * t20
-    t32 = t26 - t32
-    t35 = t0 * t32
-    t36 = (-0.316) * t5
-    t36 = 0.333 - t36
-    t16 = 0.0825 * t16
-    t16 = t36 - t16
-    t37 = (-0.0825) * t21
-    t38 = 0.384 * t33
-    t37 = t37 + t38
-    t37 = t16 + t37
-    t38 = t29 * t18
-    t39 = t33 * t30
-    t38 = t38 + t39
-    t38 = 0.088 * t38
-    t38 = t37 + t38
-    t39 = t33 * t18
-    t29 = t29 * t30
-    t29 = t39 - t29
-    t39 = 0.2104 * t29
-    t39 = t38 - t39
-    t40 = t39 - 0.333
-    t41 = sin(q[0])
-    t42 = t41 * qd[0]
-    t43 = t40 * t42
-    t35 = t35 - t43
-    t35 = qd[1] * t35
-    t43 = t0 * qd[0]
-    t44 = t5 * t43
-    t45 = t41 * t2
-    t44 = t44 - t45
-    t45 = t4 * t44
-    t46 = t41 * t5
-    t47 = t46 * t9
-    t45 = t45 - t47
-    t47 = t0 * t25
-    t48 = t8 * t42
-    t47 = t47 - t48
-    t45 = t45 + t47
-    t47 = 0.0825 * t45
-    t48 = t1 * t43
-    t49 = t41 * t6
-    t48 = t48 + t49
-    t49 = (-0.316) * t48
-    t47 = t47 - t49
-    t50 = t11 * t45
-    t51 = t46 * t4
-    t52 = t0 * t8
-    t51 = t51 + t52
-    t52 = t51 * t17
-    t50 = t50 - t52
-    t52 = t14 * t48
-    t53 = t41 * t1
-    t54 = t53 * t12
-    t52 = t52 + t54
-    t50 = t50 + t52
-    t52 = (-0.0825) * t50
-    t54 = t11 * t48
-    t55 = t53 * t17
-    t54 = t54 - t55
-    t45 = t14 * t45
-    t55 = t51 * t12
-    t45 = t45 + t55
-    t45 = t54 - t45
-    t54 = 0.384 * t45
-    t52 = t52 + t54
-    t52 = t47 + t52
-    t54 = t19 * t50
-    t55 = t51 * t11
-    t56 = t53 * t14
-    t55 = t55 + t56
-    t56 = t55 * t23
-    t54 = t54 - t56
-    t56 = t0 * t4
-    t57 = t46 * t8
-    t56 = t56 - t57
-    t57 = t56 * t28
-    t58 = t4 * t42
-    t59 = t0 * t9
-    t58 = t58 + t59
-    t44 = t8 * t44
-    t46 = t46 * t25
-    t44 = t44 + t46
-    t44 = t58 + t44
-    t46 = t22 * t44
-    t46 = t57 - t46
-    t46 = t54 + t46
-    t54 = t18 * t46
-    t57 = t55 * t19
-    t58 = t56 * t22
-    t57 = t57 + t58
-    t58 = t57 * t31
-    t54 = t54 - t58
-    t58 = t30 * t45
-    t59 = t53 * t11
-    t60 = t51 * t14
-    t59 = t59 - t60
-    t60 = t59 * t34
-    t58 = t58 + t60
-    t54 = t54 + t58
-    t54 = 0.088 * t54
-    t54 = t52 + t54
-    t58 = t18 * t45
-    t60 = t59 * t31
-    t58 = t58 - t60
-    t46 = t30 * t46
-    t60 = t57 * t34
-    t46 = t46 + t60
-    t46 = t58 - t46
-    t58 = 0.2104 * t46
-    t58 = t54 - t58
-    t60 = qd[0] * t58
-    t35 = t35 - t60
-    t36 = t39 - t36
-    t60 = t36 * t48
-    t3 = t32 - t3
-    t61 = t53 * t3
-    t60 = t60 + t61
-    t49 = t58 + t49
-    t61 = t5 * t49
-    t51 = 0.0825 * t51
-    t62 = (-0.316) * t53
-    t51 = t51 - t62
-    t63 = (-0.0825) * t55
-    t64 = 0.384 * t59
-    t63 = t63 + t64
-    t63 = t51 + t63
-    t64 = t57 * t18
-    t65 = t59 * t30
-    t64 = t64 + t65
-    t64 = 0.088 * t64
-    t64 = t63 + t64
-    t65 = t59 * t18
-    t57 = t57 * t30
-    t57 = t65 - t57
-    t65 = 0.2104 * t57
-    t65 = t64 - t65
-    t62 = t65 + t62
-    t66 = t62 * t2
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[2] * t60
-    t35 = t35 + t60
-    t51 = t65 - t51
-    t60 = t51 * t24
-    t47 = t58 - t47
-    t61 = t27 * t47
-    t60 = t60 + t61
-    t10 = t32 - t10
-    t61 = t56 * t10
-    t16 = t39 - t16
-    t66 = t16 * t44
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[3] * t60
-    t35 = t35 + t60
-    t37 = t39 - t37
-    t60 = t37 * t45
-    t15 = t32 - t15
-    t61 = t59 * t15
-    t60 = t60 + t61
-    t61 = t65 - t63
-    t63 = t61 * t7
-    t52 = t58 - t52
-    t66 = t33 * t52
-    t63 = t63 + t66
-    t60 = t60 - t63
-    t60 = qd[4] * t60
-    t35 = t35 + t60
-    t60 = t19 * t24
-    t63 = t27 * t23
-    t60 = t60 - t63
-    t13 = t22 * t13
-    t63 = t21 * t28
-    t13 = t13 + t63
-    t13 = t60 - t13
-    t60 = t61 * t13
-    t63 = t27 * t19
-    t21 = t21 * t22
-    t21 = t63 - t21
-    t63 = t21 * t52
-    t60 = t60 + t63
-    t63 = t56 * t19
-    t66 = t55 * t22
-    t63 = t63 - t66
-    t66 = t63 * t15
-    t67 = t19 * t44
-    t68 = t56 * t23
-    t67 = t67 + t68
-    t50 = t22 * t50
-    t55 = t55 * t28
-    t50 = t50 + t55
-    t50 = t67 + t50
-    t55 = t37 * t50
-    t55 = t66 - t55
-    t55 = t60 - t55
-    t55 = qd[5] * t55
-    t35 = t35 + t55
-    t55 = t65 - t64
-    t60 = t55 * t20
-    t54 = t58 - t54
-    t64 = t29 * t54
-    t60 = t60 + t64
-    t38 = t39 - t38
-    t39 = t38 * t46
-    t26 = t32 - t26
-    t64 = t57 * t26
-    t39 = t39 + t64
-    t39 = t60 - t39
-    t39 = qd[6] * t39
-    t35 = t35 + t39
-    t6 = t0 * t6
-    t39 = t1 * t42
-    t6 = t6 - t39
-    t39 = t14 * t6
-    t1 = t0 * t1
-    t60 = t1 * t12
-    t39 = t39 + t60
-    t60 = t5 * t42
-    t64 = t0 * t2
-    t60 = t60 + t64
-    t64 = t4 * t60
-    t66 = t0 * t5
-    t67 = t66 * t9
-    t64 = t64 + t67
-    t67 = t8 * t43
-    t68 = t41 * t25
-    t67 = t67 + t68
-    t64 = t64 + t67
-    t67 = t11 * t64
-    t68 = t66 * t4
-    t69 = t41 * t8
-    t68 = t68 - t69
-    t69 = t68 * t17
-    t67 = t67 + t69
-    t39 = t39 - t67
-    t67 = (-0.0825) * t39
-    t69 = t11 * t6
-    t17 = t1 * t17
-    t17 = t69 - t17
-    t12 = t68 * t12
-    t69 = t14 * t64
-    t12 = t12 - t69
-    t12 = t17 - t12
-    t17 = 0.384 * t12
-    t17 = t67 + t17
-    t64 = 0.0825 * t64
-    t67 = (-0.316) * t6
-    t64 = t64 + t67
-    t17 = t17 - t64
-    t69 = t19 * t39
-    t70 = t68 * t11
-    t71 = t1 * t14
-    t70 = t70 + t71
-    t71 = t70 * t23
-    t69 = t69 - t71
-    t25 = t66 * t25
-    t60 = t8 * t60
-    t25 = t25 - t60
-    t60 = t4 * t43
-    t9 = t41 * t9
-    t9 = t60 - t9
-    t9 = t25 + t9
-    t25 = t22 * t9
-    t8 = t66 * t8
-    t4 = t41 * t4
-    t4 = t8 + t4
-    t8 = t4 * t28
-    t8 = t25 + t8
-    t8 = t69 - t8
-    t25 = t18 * t8
-    t60 = t70 * t19
-    t66 = t4 * t22
-    t60 = t60 - t66
-    t66 = t60 * t31
-    t25 = t25 - t66
-    t66 = t30 * t12
-    t11 = t1 * t11
-    t14 = t68 * t14
-    t11 = t11 - t14
-    t14 = t11 * t34
-    t14 = t66 + t14
-    t14 = t25 + t14
-    t14 = 0.088 * t14
-    t14 = t17 + t14
-    t25 = t18 * t12
-    t31 = t11 * t31
-    t25 = t25 - t31
-    t8 = t30 * t8
-    t31 = t60 * t34
-    t8 = t8 + t31
-    t8 = t25 - t8
-    t25 = 0.2104 * t8
-    t25 = t14 - t25
-    t31 = qd[0] * t25
-    t34 = t40 * t43
-    t32 = t41 * t32
-    t32 = t34 + t32
-    t32 = qd[1] * t32
-    t31 = t31 + t32
-    t32 = t25 + t67
-    t5 = t5 * t32
-    t34 = 0.0825 * t68
-    t40 = (-0.316) * t1
-    t34 = t34 - t40
-    t66 = (-0.0825) * t70
-    t67 = 0.384 * t11
-    t66 = t66 + t67
-    t66 = t34 + t66
-    t67 = t60 * t18
-    t68 = t11 * t30
-    t67 = t67 + t68
-    t67 = 0.088 * t67
-    t67 = t66 + t67
-    t18 = t11 * t18
-    t30 = t60 * t30
-    t18 = t18 - t30
-    t30 = 0.2104 * t18
-    t30 = t67 - t30
-    t40 = t30 + t40
-    t60 = t40 * t2
-    t5 = t5 - t60
-    t36 = t36 * t6
-    t3 = t1 * t3
-    t3 = t36 + t3
-    t3 = t5 - t3
-    t3 = qd[2] * t3
-    t3 = t31 + t3
-    t5 = t30 - t34
-    t31 = t5 * t24
-    t34 = t25 + t64
-    t27 = t27 * t34
-    t27 = t31 + t27
-    t16 = t16 * t9
-    t10 = t4 * t10
-    t10 = t16 + t10
-    t10 = t27 + t10
-    t10 = qd[3] * t10
-    t3 = t3 - t10
-    t10 = t30 - t66
-    t16 = t10 * t7
-    t17 = t25 - t17
-    t27 = t33 * t17
-    t16 = t16 + t27
-    t27 = t37 * t12
-    t31 = t11 * t15
-    t27 = t27 + t31
-    t16 = t16 - t27
-    t16 = qd[4] * t16
-    t3 = t3 + t16
-    t16 = t10 * t13
-    t21 = t21 * t17
-    t16 = t16 + t21
-    t21 = t22 * t39
-    t27 = t70 * t28
-    t21 = t21 + t27
-    t27 = t19 * t9
-    t23 = t4 * t23
-    t23 = t27 - t23
-    t21 = t21 + t23
-    t23 = t37 * t21
-    t22 = t70 * t22
-    t19 = t4 * t19
-    t19 = t22 + t19
-    t15 = t19 * t15
-    t15 = t23 + t15
-    t15 = t16 + t15
-    t15 = qd[5] * t15
-    t3 = t3 - t15
-    t15 = t38 * t8
-    t16 = t18 * t26
-    t15 = t15 + t16
-    t16 = t30 - t67
-    t22 = t16 * t20
-    t14 = t25 - t14
-    t23 = t29 * t14
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 - t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t26 = t12 * t26
+    t27 = t14 * t27
+    t26 = t26 - t27
+    t27 = t30 * qd[4]
+    t26 = t26 - t27
+    t27 = t17 * t26
+    t24 = t24 + t27
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 + t30
+    t30 = 0.2104 * t24
+    t30 = t32 - t30
+    t28 = qd[6] - t28
+    t32 = 0.2104 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 - t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.2104 * t19
+    t16 = t16 - t23
+    t23 = 0.2104 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 - t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
     t22 = t22 + t23
-    t15 = t15 - t22
-    t15 = qd[6] * t15
-    t3 = t3 + t15
-    t15 = t62 * t6
-    t1 = t1 * t49
-    t1 = t15 + t1
-    t15 = t40 * t48
-    t22 = t53 * t32
-    t15 = t15 + t22
-    t1 = t1 - t15
-    t1 = qd[2] * t1
-    t15 = t65 * t43
-    t22 = t41 * t58
-    t15 = t15 + t22
-    t0 = t0 * t25
-    t22 = t30 * t42
-    t0 = t0 - t22
-    t0 = t15 + t0
-    t0 = qd[1] * t0
-    t0 = t1 - t0
-    t1 = t51 * t9
-    t4 = t4 * t47
-    t1 = t1 + t4
-    t4 = t56 * t34
-    t5 = t5 * t44
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[3] * t1
-    t0 = t0 + t1
-    t1 = t61 * t12
-    t4 = t11 * t52
-    t1 = t1 + t4
-    t4 = t10 * t45
-    t5 = t59 * t17
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[4] * t1
-    t0 = t0 + t1
-    t1 = t61 * t21
-    t4 = t19 * t52
-    t1 = t1 + t4
-    t4 = t63 * t17
-    t5 = t10 * t50
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[5] * t1
-    t0 = t0 + t1
-    t1 = t16 * t46
-    t4 = t57 * t14
-    t1 = t1 + t4
-    t4 = t55 * t8
-    t5 = t18 * t54
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[6] * t1
-    t0 = t0 + t1
-    t1 = qd[2] * t6
-    t4 = qd[1] * t43
-    t1 = t1 - t4
-    t4 = qd[3] * t9
-    t1 = t1 + t4
-    t4 = qd[4] * t12
-    t1 = t1 + t4
-    t4 = qd[5] * t21
-    t1 = t1 + t4
-    t4 = qd[6] * t8
-    t1 = t1 - t4
-    t4 = qd[2] * t48
-    t5 = qd[1] * t42
-    t4 = t4 - t5
-    t5 = qd[3] * t44
-    t4 = t4 + t5
-    t5 = qd[4] * t45
-    t4 = t4 + t5
-    t5 = qd[5] * t50
-    t4 = t4 + t5
-    t5 = qd[6] * t46
-    t4 = t4 - t5
-    t5 = qd[4] * t7
-    t2 = qd[2] * t2
-    t6 = qd[3] * t24
-    t2 = t2 + t6
-    t2 = t5 - t2
-    t5 = qd[5] * t13
-    t2 = t2 - t5
-    t5 = qd[6] * t20
-    t2 = t2 - t5
-    _a = (t35, t3, t0, t1, t4, t2)
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 - t2
+    t4 = t4 * t29
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 - t0
+    t4 = t5 * t29
+    t0 = t0 - t4
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 - t3
+    t1 = t1 * t29
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _jdot_qd_tcp_constants = _constants(
-    -0.316, 0.0825, -0.0825, 0.384, 0.088, 0.2104, 0.333)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.2104)
 
 
 def _jdot_qd_tcp_chunk(x, t, s, y):
@@ -1645,557 +1461,370 @@ def _jdot_qd_tcp_chunk(x, t, s, y):
     add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _jdot_qd_tcp_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _jdot_qd_tcp_constants
     cos(q_0, t0)
-    sin(q_1, t1)
-    multiply(t1, qd_1, t2)
-    multiply(k0, t2, t3)
-    cos(q_2, t4)
-    cos(q_1, t5)
-    multiply(t5, qd_1, t6)
-    multiply(t4, t6, t7)
-    sin(q_2, t8)
-    multiply(t8, qd_2, t9)
-    multiply(t1, t9, t10)
-    subtract(t7, t10, t7)
-    multiply(k1, t7, t10)
-    subtract(t3, t10, t10)
-    cos(q_3, t11)
-    multiply(t11, qd_3, t12)
-    multiply(t5, t12, t13)
-    sin(q_3, t14)
-    multiply(t14, t2, t15)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
+    cos(q_4, t12)
+    multiply(t8, t12, t13)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
     subtract(t13, t15, t13)
-    multiply(t11, t7, t15)
-    multiply(t1, t4, t16)
-    multiply(t14, qd_3, t17)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
     multiply(t16, t17, t18)
-    subtract(t15, t18, t15)
-    subtract(t13, t15, t13)
-    multiply(k2, t13, t15)
-    multiply(t14, t7, t7)
-    multiply(t16, t12, t18)
-    add(t7, t18, t7)
-    multiply(t11, t2, t18)
-    multiply(t5, t17, t19)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
     add(t18, t19, t18)
-    subtract(t7, t18, t7)
-    multiply(k3, t7, t18)
-    add(t15, t18, t15)
-    add(t10, t15, t15)
-    cos(q_5, t18)
-    cos(q_4, t19)
-    multiply(t19, t13, t20)
-    multiply(t5, t14, t21)
-    multiply(t16, t11, t22)
-    subtract(t21, t22, t21)
-    sin(q_4, t22)
-    multiply(t22, qd_4, t23)
-    multiply(t21, t23, t24)
-    subtract(t20, t24, t20)
-    multiply(t8, t6, t24)
-    multiply(t4, qd_2, t25)
-    multiply(t1, t25, t26)
-    add(t24, t26, t24)
-    multiply(t22, t24, t26)
-    multiply(t1, t8, t27)
-    multiply(t19, qd_4, t28)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(t3, t22, t23)
+    multiply(t8, qd_1, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
     multiply(t27, t28, t29)
-    add(t26, t29, t26)
-    add(t20, t26, t20)
-    multiply(t18, t20, t26)
-    multiply(t21, t19, t29)
-    multiply(t27, t22, t30)
-    add(t29, t30, t29)
-    sin(q_5, t30)
-    multiply(t30, qd_5, t31)
-    multiply(t29, t31, t32)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
+    add(t29, t31, t29)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
     subtract(t26, t32, t26)
-    multiply(t30, t7, t32)
-    multiply(t16, t14, t33)
-    multiply(t5, t11, t34)
-    add(t33, t34, t33)
-    multiply(t18, qd_5, t34)
-    multiply(t33, t34, t35)
-    add(t32, t35, t32)
-    add(t26, t32, t26)
-    multiply(k4, t26, t26)
-    add(t15, t26, t26)
-    multiply(t18, t7, t32)
-    multiply(t33, t31, t35)
-    subtract(t32, t35, t32)
-    multiply(t30, t20, t20)
-    multiply(t29, t34, t35)
-    add(t20, t35, t20)
-    subtract(t32, t20, t32)
-    multiply(k5, t32, t20)
-    subtract(t26, t20, t20)
-    multiply(t0, t20, t35)
-    multiply(k0, t5, t36)
-    subtract(k6, t36, t36)
-    multiply(k1, t16, t16)
-    subtract(t36, t16, t16)
-    multiply(k2, t21, t37)
-    multiply(k3, t33, t38)
-    add(t37, t38, t37)
-    add(t16, t37, t37)
-    multiply(t29, t18, t38)
-    multiply(t33, t30, t39)
-    add(t38, t39, t38)
-    multiply(k4, t38, t38)
-    add(t37, t38, t38)
-    multiply(t33, t18, t39)
-    multiply(t29, t30, t29)
-    subtract(t39, t29, t39)
-    multiply(k5, t39, t29)
-    subtract(t38, t29, t29)
-    subtract(t29, k6, t40)
-    sin(q_0, t41)
-    multiply(t41, qd_0, t42)
-    multiply(t40, t42, t43)
-    subtract(t35, t43, t35)
-    multiply(qd_1, t35, t35)
-    multiply(t0, qd_0, t43)
-    multiply(t5, t43, t44)
-    multiply(t41, t2, t45)
-    subtract(t44, t45, t44)
-    multiply(t4, t44, t45)
-    multiply(t41, t5, t46)
-    multiply(t46, t9, t47)
-    subtract(t45, t47, t45)
-    multiply(t0, t25, t47)
-    multiply(t8, t42, t48)
-    subtract(t47, t48, t47)
-    add(t45, t47, t45)
-    multiply(k1, t45, t47)
-    multiply(t1, t43, t48)
-    multiply(t41, t6, t49)
-    add(t48, t49, t48)
-    multiply(k0, t48, t49)
-    subtract(t47, t49, t47)
-    multiply(t11, t45, t50)
-    multiply(t46, t4, t51)
-    multiply(t0, t8, t52)
-    add(t51, t52, t51)
-    multiply(t51, t17, t52)
-    subtract(t50, t52, t50)
-    multiply(t14, t48, t52)
-    multiply(t41, t1, t53)
-    multiply(t53, t12, t54)
-    add(t52, t54, t52)
-    add(t50, t52, t50)
-    multiply(k2, t50, t52)
-    multiply(t11, t48, t54)
-    multiply(t53, t17, t55)
-    subtract(t54, t55, t54)
-    multiply(t14, t45, t45)
-    multiply(t51, t12, t55)
-    add(t45, t55, t45)
-    subtract(t54, t45, t54)
-    multiply(k3, t54, t45)
-    add(t52, t45, t52)
-    add(t47, t52, t52)
-    multiply(t19, t50, t45)
-    multiply(t51, t11, t55)
-    multiply(t53, t14, t56)
-    add(t55, t56, t55)
-    multiply(t55, t23, t56)
-    subtract(t45, t56, t45)
-    multiply(t0, t4, t56)
-    multiply(t46, t8, t57)
-    subtract(t56, t57, t56)
-    multiply(t56, t28, t57)
-    multiply(t4, t42, t58)
-    multiply(t0, t9, t59)
-    add(t58, t59, t58)
-    multiply(t8, t44, t44)
-    multiply(t46, t25, t46)
-    add(t44, t46, t44)
-    add(t58, t44, t58)
-    multiply(t22, t58, t44)
-    subtract(t57, t44, t57)
-    add(t45, t57, t45)
-    multiply(t18, t45, t44)
-    multiply(t55, t19, t46)
-    multiply(t56, t22, t57)
-    add(t46, t57, t46)
-    multiply(t46, t31, t57)
-    subtract(t44, t57, t44)
-    multiply(t30, t54, t57)
-    multiply(t53, t11, t59)
-    multiply(t51, t14, t60)
-    subtract(t59, t60, t59)
-    multiply(t59, t34, t60)
-    add(t57, t60, t57)
-    add(t44, t57, t44)
-    multiply(k4, t44, t44)
-    add(t52, t44, t44)
-    multiply(t18, t54, t57)
-    multiply(t59, t31, t60)
-    subtract(t57, t60, t57)
-    multiply(t30, t45, t45)
-    multiply(t46, t34, t60)
-    add(t45, t60, t45)
-    subtract(t57, t45, t57)
-    multiply(k5, t57, t45)
-    subtract(t44, t45, t45)
-    multiply(qd_0, t45, t60)
-    subtract(t35, t60, t35)
-    subtract(t29, t36, t36)
-    multiply(t36, t48, t60)
-    subtract(t20, t3, t3)
-    multiply(t53, t3, t61)
-    add(t60, t61, t60)
-    add(t45, t49, t49)
-    multiply(t5, t49, t61)
-    multiply(k1, t51, t51)
-    multiply(k0, t53, t62)
-    subtract(t51, t62, t51)
-    multiply(k2, t55, t63)
-    multiply(k3, t59, t64)
-    add(t63, t64, t63)
-    add(t51, t63, t63)
-    multiply(t46, t18, t64)
-    multiply(t59, t30, t65)
-    add(t64, t65, t64)
-    multiply(k4, t64, t64)
-    add(t63, t64, t64)
-    multiply(t59, t18, t65)
-    multiply(t46, t30, t46)
-    subtract(t65, t46, t65)
-    multiply(k5, t65, t46)
-    subtract(t64, t46, t46)
-    add(t46, t62, t62)
-    multiply(t62, t2, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_2, t60, t60)
-    add(t35, t60, t35)
-    subtract(t46, t51, t51)
-    multiply(t51, t24, t60)
-    subtract(t45, t47, t47)
-    multiply(t27, t47, t61)
-    add(t60, t61, t60)
-    subtract(t20, t10, t10)
-    multiply(t56, t10, t61)
-    subtract(t29, t16, t16)
-    multiply(t16, t58, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_3, t60, t60)
-    add(t35, t60, t35)
-    subtract(t29, t37, t37)
-    multiply(t37, t54, t60)
-    subtract(t20, t15, t15)
-    multiply(t59, t15, t61)
-    add(t60, t61, t60)
-    subtract(t46, t63, t63)
-    multiply(t63, t7, t61)
-    subtract(t45, t52, t52)
-    multiply(t33, t52, t66)
-    add(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_4, t60, t60)
-    add(t35, t60, t35)
-    multiply(t19, t24, t60)
-    multiply(t27, t23, t61)
-    subtract(t60, t61, t60)
-    multiply(t22, t13, t13)
-    multiply(t21, t28, t61)
-    add(t13, t61, t13)
-    subtract(t60, t13, t60)
-    multiply(t63, t60, t13)
-    multiply(t27, t19, t61)
-    multiply(t21, t22, t21)
-    subtract(t61, t21, t61)
-    multiply(t61, t52, t21)
-    add(t13, t21, t13)
-    multiply(t56, t19, t21)
-    multiply(t55, t22, t66)
-    subtract(t21, t66, t21)
-    multiply(t21, t15, t66)
-    multiply(t19, t58, t67)
-    multiply(t56, t23, t68)
-    add(t67, t68, t67)
-    multiply(t22, t50, t50)
-    multiply(t55, t28, t55)
-    add(t50, t55, t50)
-    add(t67, t50, t67)
-    multiply(t37, t67, t50)
-    subtract(t66, t50, t66)
-    subtract(t13, t66, t13)
-    multiply(qd_5, t13, t13)
-    add(t35, t13, t35)
-    subtract(t46, t64, t64)
-    multiply(t64, t32, t13)
-    subtract(t45, t44, t44)
-    multiply(t39, t44, t50)
-    add(t13, t50, t13)
-    subtract(t29, t38, t29)
-    multiply(t29, t57, t38)
-    subtract(t20, t26, t26)
-    multiply(t65, t26, t50)
-    add(t38, t50, t38)
-    subtract(t13, t38, t13)
-    multiply(qd_6, t13, t13)
-    add(t35, t13, a_0)
-    multiply(t0, t6, t6)
-    multiply(t1, t42, t13)
-    subtract(t6, t13, t6)
-    multiply(t14, t6, t13)
-    multiply(t0, t1, t1)
-    multiply(t1, t12, t35)
-    add(t13, t35, t13)
-    multiply(t5, t42, t35)
-    multiply(t0, t2, t38)
-    add(t35, t38, t35)
-    multiply(t4, t35, t38)
-    multiply(t0, t5, t50)
-    multiply(t50, t9, t55)
-    add(t38, t55, t38)
-    multiply(t8, t43, t55)
-    multiply(t41, t25, t66)
-    add(t55, t66, t55)
-    add(t38, t55, t38)
-    multiply(t11, t38, t55)
-    multiply(t50, t4, t66)
-    multiply(t41, t8, t68)
-    subtract(t66, t68, t66)
-    multiply(t66, t17, t68)
-    add(t55, t68, t55)
-    subtract(t13, t55, t13)
-    multiply(k2, t13, t55)
-    multiply(t11, t6, t68)
-    multiply(t1, t17, t17)
-    subtract(t68, t17, t68)
-    multiply(t66, t12, t12)
-    multiply(t14, t38, t17)
-    subtract(t12, t17, t12)
-    subtract(t68, t12, t68)
-    multiply(k3, t68, t12)
-    add(t55, t12, t55)
-    multiply(k1, t38, t38)
-    multiply(k0, t6, t12)
-    add(t38, t12, t38)
-    subtract(t55, t38, t55)
-    multiply(t19, t13, t17)
-    multiply(t66, t11, t69)
-    multiply(t1, t14, t70)
-    add(t69, t70, t69)
-    multiply(t69, t23, t70)
-    subtract(t17, t70, t17)
-    multiply(t50, t25, t25)
-    multiply(t8, t35, t35)
-    subtract(t25, t35, t25)
-    multiply(t4, t43, t35)
-    multiply(t41, t9, t9)
-    subtract(t35, t9, t35)
-    add(t25, t35, t25)
-    multiply(t22, t25, t9)
-    multiply(t50, t8, t50)
-    multiply(t41, t4, t4)
-    add(t50, t4, t50)
-    multiply(t50, t28, t4)
-    add(t9, t4, t9)
-    subtract(t17, t9, t17)
-    multiply(t18, t17, t4)
-    multiply(t69, t19, t8)
-    multiply(t50, t22, t9)
-    subtract(t8, t9, t8)
-    multiply(t8, t31, t9)
-    subtract(t4, t9, t4)
-    multiply(t30, t68, t9)
-    multiply(t1, t11, t11)
-    multiply(t66, t14, t14)
-    subtract(t11, t14, t11)
-    multiply(t11, t34, t14)
-    add(t9, t14, t9)
-    add(t4, t9, t4)
-    multiply(k4, t4, t4)
-    add(t55, t4, t4)
-    multiply(t18, t68, t9)
-    multiply(t11, t31, t31)
-    subtract(t9, t31, t9)
-    multiply(t30, t17, t17)
-    multiply(t8, t34, t34)
-    add(t17, t34, t17)
-    subtract(t9, t17, t9)
-    multiply(k5, t9, t14)
-    subtract(t4, t14, t14)
-    multiply(qd_0, t14, t17)
-    multiply(t40, t43, t40)
-    multiply(t41, t20, t20)
-    add(t40, t20, t40)
-    multiply(qd_1, t40, t40)
-    add(t17, t40, t17)
-    add(t14, t12, t12)
-    multiply(t5, t12, t5)
-    multiply(k1, t66, t66)
-    multiply(k0, t1, t20)
-    subtract(t66, t20, t66)
-    multiply(k2, t69, t31)
-    multiply(k3, t11, t34)
-    add(t31, t34, t31)
-    add(t66, t31, t31)
-    multiply(t8, t18, t34)
-    multiply(t11, t30, t35)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    multiply(k5, t21, t30)
+    add(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t27, qd_2, t27)
+    multiply(t3, t24, t24)
+    subtract(t27, t24, t27)
+    multiply(t7, t27, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t11, t20, t36)
+    subtract(t24, t36, t24)
+    multiply(t30, qd_3, t36)
+    add(t24, t36, t24)
+    multiply(k5, t24, t36)
+    multiply(t11, t27, t27)
+    multiply(t7, t20, t37)
+    add(t27, t37, t27)
+    multiply(t32, qd_3, t37)
+    add(t27, t37, t27)
+    multiply(k6, t27, t37)
+    add(t36, t37, t36)
+    multiply(t31, t28, t31)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    multiply(k4, t20, t20)
+    add(t22, t20, t22)
+    subtract(t31, t22, t31)
+    subtract(t36, t31, t36)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t36, t35, t36)
+    multiply(t14, t36, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t36, t36)
+    add(t29, t36, t29)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
     add(t34, t35, t34)
-    multiply(k4, t34, t34)
-    add(t31, t34, t34)
-    multiply(t11, t18, t18)
-    multiply(t8, t30, t8)
-    subtract(t18, t8, t18)
-    multiply(k5, t18, t8)
-    subtract(t34, t8, t8)
-    add(t8, t20, t20)
-    multiply(t20, t2, t30)
-    subtract(t5, t30, t5)
-    multiply(t36, t6, t36)
-    multiply(t1, t3, t3)
-    add(t36, t3, t36)
-    subtract(t5, t36, t5)
-    multiply(qd_2, t5, t5)
-    add(t17, t5, t17)
-    subtract(t8, t66, t66)
-    multiply(t66, t24, t3)
-    add(t14, t38, t38)
-    multiply(t27, t38, t27)
-    add(t3, t27, t3)
-    multiply(t16, t25, t16)
-    multiply(t50, t10, t10)
-    add(t16, t10, t16)
-    add(t3, t16, t3)
-    multiply(qd_3, t3, t3)
-    subtract(t17, t3, t17)
-    subtract(t8, t31, t31)
-    multiply(t31, t7, t3)
-    subtract(t14, t55, t55)
-    multiply(t33, t55, t33)
-    add(t3, t33, t3)
-    multiply(t37, t68, t5)
-    multiply(t11, t15, t10)
-    add(t5, t10, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t17, t3, t17)
-    multiply(t31, t60, t3)
-    multiply(t61, t55, t61)
-    add(t3, t61, t3)
-    multiply(t22, t13, t13)
-    multiply(t69, t28, t28)
-    add(t13, t28, t13)
-    multiply(t19, t25, t5)
-    multiply(t50, t23, t23)
-    subtract(t5, t23, t5)
-    add(t13, t5, t13)
-    multiply(t37, t13, t37)
-    multiply(t69, t22, t69)
-    multiply(t50, t19, t19)
-    add(t69, t19, t69)
-    multiply(t69, t15, t15)
-    add(t37, t15, t37)
-    add(t3, t37, t3)
-    multiply(qd_5, t3, t3)
-    subtract(t17, t3, t17)
-    multiply(t29, t9, t29)
-    multiply(t18, t26, t26)
-    add(t29, t26, t29)
-    subtract(t8, t34, t34)
-    multiply(t34, t32, t3)
-    subtract(t14, t4, t4)
-    multiply(t39, t4, t39)
-    add(t3, t39, t3)
-    subtract(t29, t3, t29)
-    multiply(qd_6, t29, t29)
-    add(t17, t29, a_1)
-    multiply(t62, t6, t62)
-    multiply(t1, t49, t1)
-    add(t62, t1, t62)
-    multiply(t20, t48, t20)
-    multiply(t53, t12, t53)
-    add(t20, t53, t20)
-    subtract(t62, t20, t62)
-    multiply(qd_2, t62, t62)
-    multiply(t46, t43, t46)
-    multiply(t41, t45, t41)
-    add(t46, t41, t46)
-    multiply(t0, t14, t0)
-    multiply(t8, t42, t8)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    multiply(t15, t27, t35)
+    add(t32, t35, t32)
+    multiply(t15, t20, t35)
+    multiply(t4, t30, t30)
+    add(t35, t30, t35)
+    multiply(t35, qd_5, t30)
+    add(t32, t30, t32)
+    multiply(k7, t32, t30)
+    add(t29, t30, t29)
+    multiply(t35, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t15, t34, t34)
+    multiply(t4, t27, t27)
+    subtract(t34, t27, t34)
+    multiply(t8, qd_5, t27)
+    add(t34, t27, t34)
+    multiply(t2, t34, t27)
+    multiply(t12, t21, t21)
+    multiply(t14, t24, t24)
+    subtract(t21, t24, t21)
+    multiply(t20, qd_4, t20)
+    subtract(t21, t20, t21)
+    multiply(t17, t21, t20)
+    add(t27, t20, t27)
+    multiply(t17, t35, t20)
+    multiply(t2, t28, t24)
+    add(t20, t24, t20)
+    multiply(t20, qd_6, t24)
+    add(t27, t24, t27)
+    multiply(k8, t27, t24)
+    subtract(t25, t24, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t20, t24)
+    multiply(t8, t24, t30)
+    add(t25, t30, t25)
+    multiply(t16, t25, t30)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t21, t18)
+    subtract(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t35, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t30, t8, t30)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t21, t21)
+    subtract(t26, t21, t26)
+    multiply(t35, t23, t35)
+    add(t26, t35, t26)
+    multiply(t20, t24, t20)
+    multiply(t28, t18, t28)
+    add(t20, t28, t20)
+    add(t26, t20, t26)
+    multiply(t10, t26, t8)
+    add(t30, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t20)
+    add(t18, t20, t18)
+    multiply(t18, t12, t20)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
     subtract(t0, t8, t0)
-    add(t46, t0, t46)
-    multiply(qd_1, t46, t46)
-    subtract(t62, t46, t62)
-    multiply(t51, t25, t51)
-    multiply(t50, t47, t50)
-    add(t51, t50, t51)
-    multiply(t56, t38, t56)
-    multiply(t66, t58, t66)
-    subtract(t56, t66, t56)
-    add(t51, t56, t51)
-    multiply(qd_3, t51, t51)
-    add(t62, t51, t62)
-    multiply(t63, t68, t0)
-    multiply(t11, t52, t11)
-    add(t0, t11, t0)
-    multiply(t31, t54, t1)
-    multiply(t59, t55, t59)
-    add(t1, t59, t1)
-    subtract(t0, t1, t0)
-    multiply(qd_4, t0, t0)
-    add(t62, t0, t62)
-    multiply(t63, t13, t63)
-    multiply(t69, t52, t69)
-    add(t63, t69, t63)
-    multiply(t21, t55, t21)
-    multiply(t31, t67, t31)
-    subtract(t21, t31, t21)
-    add(t63, t21, t63)
-    multiply(qd_5, t63, t63)
-    add(t62, t63, t62)
-    multiply(t34, t57, t34)
-    multiply(t65, t4, t65)
-    add(t34, t65, t34)
-    multiply(t64, t9, t64)
-    multiply(t18, t44, t18)
-    add(t64, t18, t64)
-    subtract(t34, t64, t34)
-    multiply(qd_6, t34, t34)
-    add(t62, t34, a_2)
-    multiply(qd_2, t6, t6)
-    multiply(qd_1, t43, t43)
-    subtract(t6, t43, t6)
-    multiply(qd_3, t25, t25)
-    add(t6, t25, t6)
-    multiply(qd_4, t68, t68)
-    add(t6, t68, t6)
-    multiply(qd_5, t13, t13)
-    add(t6, t13, t6)
-    multiply(qd_6, t9, t9)
-    subtract(t6, t9, a_3)
-    multiply(qd_2, t48, t48)
-    multiply(qd_1, t42, t42)
-    subtract(t48, t42, t48)
-    multiply(qd_3, t58, t58)
-    add(t48, t58, t48)
-    multiply(qd_4, t54, t54)
-    add(t48, t54, t48)
-    multiply(qd_5, t67, t67)
-    add(t48, t67, t48)
-    multiply(qd_6, t57, t57)
-    subtract(t48, t57, a_4)
-    multiply(qd_4, t7, t7)
-    multiply(qd_2, t2, t2)
-    multiply(qd_3, t24, t24)
-    add(t2, t24, t2)
+    multiply(t0, t14, t8)
+    add(t20, t8, t20)
+    multiply(t20, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t20, t4, t20)
+    subtract(t5, t20, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
     subtract(t7, t2, t7)
-    multiply(qd_5, t60, t60)
-    subtract(t7, t60, t7)
-    multiply(qd_6, t32, t32)
-    subtract(t7, t32, a_5)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t27, t19)
+    subtract(t16, t19, t16)
+    multiply(t10, t32, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t27, t18)
+    subtract(t0, t18, t0)
+    multiply(t5, t32, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t27, t7)
+    subtract(t2, t7, t2)
+    multiply(t3, t32, t3)
+    subtract(t2, t3, a_5)
 
 
 def frame_acceleration_tcp(q, qd, qdd):
@@ -2205,13 +1834,13 @@ def frame_acceleration_tcp(q, qd, qdd):
     in  qd [7]
     in  qdd [7]
     out a [6]
-    671 ops: 374 mul, 285 add, 0 div, 12 trig
+    376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     qdd = _array(qdd, 7, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 81, ((6,),))
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -2219,681 +1848,387 @@ def frame_acceleration_tcp(q, qd, qdd):
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = cos(q[1])
-    t2 = (-0.316) * t1
-    t2 = 0.333 - t2
-    t3 = sin(q[1])
-    t4 = cos(q[2])
-    t5 = t3 * t4
-    t6 = 0.0825 * t5
-    t6 = t2 - t6
-    t7 = sin(q[3])
-    t8 = t1 * t7
-    t9 = cos(q[3])
-    t10 = t5 * t9
-    t8 = t8 - t10
-    t10 = (-0.0825) * t8
-    t11 = t5 * t7
-    t12 = t1 * t9
-    t11 = t11 + t12
-    t12 = 0.384 * t11
-    t10 = t10 + t12
-    t10 = t6 + t10
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
     t12 = cos(q[4])
     t13 = t8 * t12
-    t14 = sin(q[2])
-    t15 = t3 * t14
-    t16 = sin(q[4])
-    t17 = t15 * t16
-    t13 = t13 + t17
-    t17 = cos(q[5])
-    t18 = t13 * t17
-    t19 = sin(q[5])
-    t20 = t11 * t19
-    t18 = t18 + t20
-    t18 = 0.088 * t18
-    t18 = t10 + t18
-    t20 = t11 * t17
-    t21 = t13 * t19
-    t20 = t20 - t21
-    t21 = 0.2104 * t20
-    t21 = t18 - t21
-    t22 = t21 - 0.333
-    t23 = t0 * t22
-    t23 = t23 * qdd[1]
-    t24 = sin(q[0])
-    t25 = t24 * t1
-    t26 = t25 * t4
-    t27 = t0 * t14
-    t26 = t26 + t27
-    t27 = 0.0825 * t26
-    t28 = t24 * t3
-    t29 = (-0.316) * t28
-    t27 = t27 - t29
-    t30 = t26 * t9
-    t31 = t28 * t7
-    t30 = t30 + t31
-    t31 = (-0.0825) * t30
-    t32 = t28 * t9
-    t33 = t26 * t7
-    t32 = t32 - t33
-    t33 = 0.384 * t32
-    t31 = t31 + t33
-    t31 = t27 + t31
-    t33 = t30 * t12
-    t34 = t0 * t4
-    t35 = t25 * t14
-    t34 = t34 - t35
-    t35 = t34 * t16
-    t33 = t33 + t35
-    t35 = t33 * t17
-    t36 = t32 * t19
-    t35 = t35 + t36
-    t35 = 0.088 * t35
-    t35 = t31 + t35
-    t36 = t32 * t17
-    t37 = t33 * t19
-    t36 = t36 - t37
-    t37 = 0.2104 * t36
-    t37 = t35 - t37
-    t38 = t37 * qdd[0]
-    t23 = t23 - t38
-    t2 = t21 - t2
-    t38 = t28 * t2
-    t29 = t37 + t29
-    t39 = t1 * t29
-    t38 = t38 - t39
-    t38 = t38 * qdd[2]
-    t23 = t23 + t38
-    t27 = t37 - t27
-    t38 = t15 * t27
-    t6 = t21 - t6
-    t39 = t34 * t6
-    t38 = t38 - t39
-    t38 = t38 * qdd[3]
-    t23 = t23 + t38
-    t10 = t21 - t10
-    t38 = t32 * t10
-    t31 = t37 - t31
-    t39 = t11 * t31
-    t38 = t38 - t39
-    t38 = t38 * qdd[4]
-    t23 = t23 + t38
-    t38 = t15 * t12
-    t39 = t8 * t16
-    t38 = t38 - t39
-    t39 = t38 * t31
-    t40 = t34 * t12
-    t41 = t30 * t16
-    t40 = t40 - t41
-    t41 = t40 * t10
-    t39 = t39 - t41
-    t39 = t39 * qdd[5]
-    t23 = t23 + t39
-    t35 = t37 - t35
-    t39 = t20 * t35
-    t18 = t21 - t18
-    t21 = t36 * t18
-    t21 = t39 - t21
-    t21 = t21 * qdd[6]
-    t21 = t23 + t21
-    t23 = t3 * qd[1]
-    t39 = (-0.316) * t23
-    t41 = t1 * qd[1]
-    t42 = t4 * t41
-    t43 = t14 * qd[2]
-    t44 = t3 * t43
-    t42 = t42 - t44
-    t44 = 0.0825 * t42
-    t44 = t39 - t44
-    t45 = t9 * qd[3]
-    t46 = t1 * t45
-    t47 = t7 * t23
-    t46 = t46 - t47
-    t47 = t9 * t42
-    t48 = t7 * qd[3]
-    t49 = t5 * t48
-    t47 = t47 - t49
-    t46 = t46 - t47
-    t47 = (-0.0825) * t46
-    t42 = t7 * t42
-    t5 = t5 * t45
-    t5 = t42 + t5
-    t42 = t9 * t23
-    t49 = t1 * t48
-    t42 = t42 + t49
-    t5 = t5 - t42
-    t42 = 0.384 * t5
-    t42 = t47 + t42
-    t42 = t44 + t42
-    t47 = t12 * t46
-    t49 = t16 * qd[4]
-    t50 = t8 * t49
-    t47 = t47 - t50
-    t50 = t14 * t41
-    t51 = t4 * qd[2]
-    t52 = t3 * t51
-    t50 = t50 + t52
-    t52 = t16 * t50
-    t53 = t12 * qd[4]
-    t54 = t15 * t53
-    t52 = t52 + t54
-    t47 = t47 + t52
-    t52 = t17 * t47
-    t54 = t19 * qd[5]
-    t55 = t13 * t54
-    t52 = t52 - t55
-    t55 = t19 * t5
-    t56 = t17 * qd[5]
-    t57 = t11 * t56
-    t55 = t55 + t57
-    t52 = t52 + t55
-    t52 = 0.088 * t52
-    t52 = t42 + t52
-    t55 = t17 * t5
-    t57 = t11 * t54
-    t55 = t55 - t57
-    t47 = t19 * t47
-    t13 = t13 * t56
-    t13 = t47 + t13
-    t13 = t55 - t13
-    t47 = 0.2104 * t13
-    t47 = t52 - t47
-    t55 = t0 * t47
-    t57 = t24 * qd[0]
-    t58 = t22 * t57
-    t55 = t55 - t58
-    t55 = qd[1] * t55
-    t58 = t0 * qd[0]
-    t59 = t1 * t58
-    t60 = t24 * t23
-    t59 = t59 - t60
-    t60 = t4 * t59
-    t61 = t25 * t43
-    t60 = t60 - t61
-    t61 = t0 * t51
-    t62 = t14 * t57
-    t61 = t61 - t62
-    t60 = t60 + t61
-    t61 = 0.0825 * t60
-    t62 = t3 * t58
-    t63 = t24 * t41
-    t62 = t62 + t63
-    t63 = (-0.316) * t62
-    t61 = t61 - t63
-    t64 = t9 * t60
-    t65 = t26 * t48
-    t64 = t64 - t65
-    t65 = t7 * t62
-    t66 = t28 * t45
-    t65 = t65 + t66
-    t64 = t64 + t65
-    t65 = (-0.0825) * t64
-    t66 = t9 * t62
-    t67 = t28 * t48
-    t66 = t66 - t67
-    t60 = t7 * t60
-    t26 = t26 * t45
-    t26 = t60 + t26
-    t26 = t66 - t26
-    t60 = 0.384 * t26
-    t60 = t65 + t60
-    t60 = t61 + t60
-    t65 = t12 * t64
-    t66 = t30 * t49
-    t65 = t65 - t66
-    t66 = t34 * t53
-    t67 = t4 * t57
-    t68 = t0 * t43
-    t67 = t67 + t68
-    t59 = t14 * t59
-    t25 = t25 * t51
-    t25 = t59 + t25
-    t25 = t67 + t25
-    t59 = t16 * t25
-    t59 = t66 - t59
-    t59 = t65 + t59
-    t65 = t17 * t59
-    t66 = t33 * t54
-    t65 = t65 - t66
-    t66 = t19 * t26
-    t67 = t32 * t56
-    t66 = t66 + t67
-    t65 = t65 + t66
-    t65 = 0.088 * t65
-    t65 = t60 + t65
-    t66 = t17 * t26
-    t67 = t32 * t54
-    t66 = t66 - t67
-    t59 = t19 * t59
-    t33 = t33 * t56
-    t33 = t59 + t33
-    t33 = t66 - t33
-    t59 = 0.2104 * t33
-    t59 = t65 - t59
-    t66 = qd[0] * t59
-    t55 = t55 - t66
-    t66 = t2 * t62
-    t39 = t47 - t39
-    t67 = t28 * t39
-    t66 = t66 + t67
-    t63 = t59 + t63
-    t67 = t1 * t63
-    t68 = t29 * t23
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[2] * t66
-    t55 = t55 + t66
-    t66 = t27 * t50
-    t61 = t59 - t61
-    t67 = t15 * t61
-    t66 = t66 + t67
-    t44 = t47 - t44
-    t67 = t34 * t44
-    t68 = t6 * t25
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[3] * t66
-    t55 = t55 + t66
-    t66 = t10 * t26
-    t42 = t47 - t42
-    t67 = t32 * t42
-    t66 = t66 + t67
-    t67 = t31 * t5
-    t60 = t59 - t60
-    t68 = t11 * t60
-    t67 = t67 + t68
-    t66 = t66 - t67
-    t66 = qd[4] * t66
-    t55 = t55 + t66
-    t66 = t12 * t50
-    t67 = t15 * t49
-    t66 = t66 - t67
-    t46 = t16 * t46
-    t8 = t8 * t53
-    t8 = t46 + t8
-    t8 = t66 - t8
-    t46 = t31 * t8
-    t66 = t38 * t60
-    t46 = t46 + t66
-    t66 = t40 * t42
-    t67 = t12 * t25
-    t68 = t34 * t49
-    t67 = t67 + t68
-    t64 = t16 * t64
-    t30 = t30 * t53
-    t30 = t64 + t30
-    t30 = t67 + t30
-    t64 = t10 * t30
-    t64 = t66 - t64
-    t46 = t46 - t64
-    t46 = qd[5] * t46
-    t46 = t55 + t46
-    t55 = t35 * t13
-    t64 = t59 - t65
-    t65 = t20 * t64
-    t55 = t55 + t65
-    t65 = t18 * t33
-    t52 = t47 - t52
-    t66 = t36 * t52
-    t65 = t65 + t66
-    t55 = t55 - t65
-    t55 = qd[6] * t55
-    t46 = t46 + t55
-    t21 = t21 + t46
-    t46 = t0 * t1
-    t55 = t46 * t4
-    t65 = t24 * t14
-    t55 = t55 - t65
-    t65 = 0.0825 * t55
-    t66 = t0 * t3
-    t67 = (-0.316) * t66
-    t65 = t65 - t67
-    t68 = t55 * t9
-    t69 = t66 * t7
-    t68 = t68 + t69
-    t69 = (-0.0825) * t68
-    t70 = t66 * t9
-    t71 = t55 * t7
-    t70 = t70 - t71
-    t71 = 0.384 * t70
-    t69 = t69 + t71
-    t69 = t65 + t69
-    t71 = t68 * t12
-    t72 = t46 * t14
-    t73 = t24 * t4
-    t72 = t72 + t73
-    t73 = t72 * t16
-    t71 = t71 - t73
-    t73 = t71 * t17
-    t74 = t70 * t19
-    t73 = t73 + t74
-    t73 = 0.088 * t73
-    t73 = t69 + t73
-    t74 = t70 * t17
-    t75 = t71 * t19
-    t74 = t74 - t75
-    t75 = 0.2104 * t74
-    t75 = t73 - t75
-    t76 = t75 * qdd[0]
-    t77 = t24 * t22
-    t77 = t77 * qdd[1]
-    t76 = t76 + t77
-    t67 = t75 + t67
-    t77 = t1 * t67
-    t78 = t66 * t2
-    t77 = t77 - t78
-    t77 = t77 * qdd[2]
-    t76 = t76 + t77
-    t65 = t75 - t65
-    t77 = t15 * t65
-    t78 = t72 * t6
-    t77 = t77 + t78
-    t77 = t77 * qdd[3]
-    t76 = t76 - t77
-    t69 = t75 - t69
-    t77 = t11 * t69
-    t78 = t70 * t10
-    t77 = t77 - t78
-    t77 = t77 * qdd[4]
-    t76 = t76 + t77
-    t77 = t38 * t69
-    t78 = t68 * t16
-    t79 = t72 * t12
-    t78 = t78 + t79
-    t79 = t78 * t10
-    t77 = t77 + t79
-    t77 = t77 * qdd[5]
-    t76 = t76 - t77
-    t77 = t74 * t18
-    t73 = t75 - t73
-    t79 = t20 * t73
-    t77 = t77 - t79
-    t77 = t77 * qdd[6]
-    t76 = t76 + t77
-    t41 = t0 * t41
-    t3 = t3 * t57
-    t3 = t41 - t3
-    t41 = t7 * t3
-    t77 = t66 * t45
-    t41 = t41 + t77
-    t77 = t1 * t57
-    t79 = t0 * t23
-    t77 = t77 + t79
-    t79 = t4 * t77
-    t80 = t46 * t43
-    t79 = t79 + t80
-    t80 = t14 * t58
-    t81 = t24 * t51
-    t80 = t80 + t81
-    t79 = t79 + t80
-    t80 = t9 * t79
-    t81 = t55 * t48
-    t80 = t80 + t81
-    t41 = t41 - t80
-    t80 = (-0.0825) * t41
-    t9 = t9 * t3
-    t48 = t66 * t48
-    t9 = t9 - t48
-    t45 = t55 * t45
-    t7 = t7 * t79
-    t7 = t45 - t7
-    t7 = t9 - t7
-    t9 = 0.384 * t7
-    t9 = t80 + t9
-    t45 = 0.0825 * t79
-    t48 = (-0.316) * t3
-    t45 = t45 + t48
-    t9 = t9 - t45
-    t55 = t12 * t41
-    t79 = t68 * t49
-    t55 = t55 - t79
-    t46 = t46 * t51
-    t14 = t14 * t77
-    t14 = t46 - t14
-    t4 = t4 * t58
-    t43 = t24 * t43
-    t4 = t4 - t43
-    t4 = t14 + t4
-    t14 = t16 * t4
-    t43 = t72 * t53
-    t14 = t14 + t43
-    t14 = t55 - t14
-    t43 = t17 * t14
-    t46 = t71 * t54
-    t43 = t43 - t46
-    t46 = t19 * t7
-    t51 = t70 * t56
-    t46 = t46 + t51
-    t43 = t43 + t46
-    t43 = 0.088 * t43
-    t43 = t9 + t43
-    t17 = t17 * t7
-    t46 = t70 * t54
-    t17 = t17 - t46
-    t14 = t19 * t14
-    t19 = t71 * t56
-    t14 = t14 + t19
-    t14 = t17 - t14
-    t17 = 0.2104 * t14
-    t17 = t43 - t17
-    t19 = qd[0] * t17
-    t22 = t22 * t58
-    t46 = t24 * t47
-    t22 = t22 + t46
-    t22 = qd[1] * t22
-    t19 = t19 + t22
-    t22 = t17 + t48
-    t46 = t1 * t22
-    t47 = t67 * t23
-    t46 = t46 - t47
-    t2 = t2 * t3
-    t39 = t66 * t39
-    t2 = t2 + t39
-    t2 = t46 - t2
-    t2 = qd[2] * t2
-    t2 = t19 + t2
-    t19 = t65 * t50
-    t39 = t17 + t45
-    t45 = t15 * t39
-    t19 = t19 + t45
-    t6 = t6 * t4
-    t44 = t72 * t44
-    t6 = t6 + t44
-    t6 = t19 + t6
-    t6 = qd[3] * t6
-    t2 = t2 - t6
-    t6 = t69 * t5
-    t9 = t17 - t9
-    t19 = t11 * t9
-    t6 = t6 + t19
-    t19 = t10 * t7
-    t44 = t70 * t42
-    t19 = t19 + t44
-    t6 = t6 - t19
-    t6 = qd[4] * t6
-    t2 = t2 + t6
-    t6 = t69 * t8
-    t19 = t38 * t9
-    t6 = t6 + t19
-    t16 = t16 * t41
-    t19 = t68 * t53
-    t16 = t16 + t19
-    t12 = t12 * t4
-    t19 = t72 * t49
-    t12 = t12 - t19
-    t12 = t16 + t12
-    t10 = t10 * t12
-    t16 = t78 * t42
-    t10 = t10 + t16
-    t6 = t6 + t10
-    t6 = qd[5] * t6
-    t2 = t2 - t6
-    t6 = t18 * t14
-    t10 = t74 * t52
-    t6 = t6 + t10
-    t10 = t73 * t13
-    t16 = t17 - t43
-    t18 = t20 * t16
-    t10 = t10 + t18
-    t6 = t6 - t10
-    t6 = qd[6] * t6
-    t2 = t2 + t6
-    t2 = t76 + t2
-    t6 = t66 * t29
-    t10 = t28 * t67
-    t6 = t6 - t10
-    t6 = t6 * qdd[2]
-    t10 = t24 * t37
-    t18 = t0 * t75
-    t10 = t10 + t18
-    t10 = t10 * qdd[1]
-    t6 = t6 - t10
-    t10 = t72 * t27
-    t18 = t34 * t65
-    t10 = t10 + t18
-    t10 = t10 * qdd[3]
-    t6 = t6 + t10
-    t10 = t70 * t31
-    t18 = t32 * t69
-    t10 = t10 - t18
-    t10 = t10 * qdd[4]
-    t6 = t6 + t10
-    t10 = t78 * t31
-    t18 = t40 * t69
-    t10 = t10 + t18
-    t10 = t10 * qdd[5]
-    t6 = t6 + t10
-    t10 = t36 * t73
-    t18 = t74 * t35
-    t10 = t10 - t18
-    t10 = t10 * qdd[6]
-    t6 = t6 + t10
-    t10 = t29 * t3
-    t18 = t66 * t63
-    t10 = t10 + t18
-    t18 = t67 * t62
-    t19 = t28 * t22
-    t18 = t18 + t19
-    t10 = t10 - t18
-    t10 = qd[2] * t10
-    t18 = t37 * t58
-    t19 = t24 * t59
-    t18 = t18 + t19
-    t17 = t0 * t17
-    t19 = t75 * t57
-    t17 = t17 - t19
-    t17 = t18 + t17
-    t17 = qd[1] * t17
-    t10 = t10 - t17
-    t17 = t27 * t4
-    t18 = t72 * t61
-    t17 = t17 + t18
-    t18 = t34 * t39
-    t19 = t65 * t25
-    t18 = t18 - t19
-    t17 = t17 + t18
-    t17 = qd[3] * t17
-    t10 = t10 + t17
-    t17 = t31 * t7
-    t18 = t70 * t60
-    t17 = t17 + t18
-    t18 = t69 * t26
-    t19 = t32 * t9
-    t18 = t18 + t19
-    t17 = t17 - t18
-    t17 = qd[4] * t17
-    t10 = t10 + t17
-    t17 = t31 * t12
-    t18 = t78 * t60
-    t17 = t17 + t18
-    t9 = t40 * t9
-    t18 = t69 * t30
-    t9 = t9 - t18
-    t9 = t17 + t9
-    t9 = qd[5] * t9
-    t9 = t10 + t9
-    t10 = t73 * t33
-    t16 = t36 * t16
-    t10 = t10 + t16
-    t16 = t35 * t14
-    t17 = t74 * t64
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
+    t13 = t13 - t15
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
     t16 = t16 + t17
-    t10 = t10 - t16
-    t10 = qd[6] * t10
-    t9 = t9 + t10
-    t6 = t6 + t9
-    t9 = t66 * qdd[2]
-    t10 = t24 * qdd[1]
-    t9 = t9 - t10
-    t10 = t72 * qdd[3]
-    t9 = t9 + t10
-    t10 = t70 * qdd[4]
-    t9 = t9 + t10
-    t10 = t78 * qdd[5]
-    t9 = t9 + t10
-    t10 = t74 * qdd[6]
-    t9 = t9 - t10
-    t3 = qd[2] * t3
-    t10 = qd[1] * t58
-    t3 = t3 - t10
-    t4 = qd[3] * t4
-    t3 = t3 + t4
-    t4 = qd[4] * t7
-    t3 = t3 + t4
-    t4 = qd[5] * t12
-    t3 = t3 + t4
-    t4 = qd[6] * t14
-    t3 = t3 - t4
-    t3 = t9 + t3
-    t0 = t0 * qdd[1]
-    t4 = t28 * qdd[2]
-    t0 = t0 + t4
-    t4 = t34 * qdd[3]
+    t17 = cos(q[6])
+    t18 = t16 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
+    t18 = t18 + t19
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = (-0.316) * qdd[1]
+    t22 = t22 - t23
+    t23 = t3 * t22
+    t24 = t9 * qdd[0]
+    t25 = t19 * qd[1]
+    t24 = t24 + t25
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
+    t29 = t27 * t28
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t3 * qdd[1]
+    t26 = t26 + t31
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
+    t26 = t26 - t32
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t26 = qdd[3] - t26
+    t30 = 0.384 * t26
+    t29 = t29 - t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t36 = t6 * qdd[1]
+    t24 = t3 * t24
+    t24 = t36 - t24
+    t27 = t27 * qd[2]
+    t24 = t24 + t27
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t1 * qdd[0]
+    t20 = t20 - t36
+    t20 = qdd[2] - t20
+    t36 = t11 * t20
+    t27 = t27 + t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t37 = t7 * t20
+    t24 = t11 * t24
+    t24 = t37 - t24
+    t37 = t19 * qd[3]
+    t24 = t24 - t37
+    t37 = (-0.0825) * t24
+    t36 = t36 - t37
+    t20 = 0.0825 * t20
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = t20 - t22
+    t22 = t31 * t28
+    t20 = t20 + t22
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 + t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
+    t35 = t33 * t34
+    t32 = t32 + t35
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t24 = t24 + qdd[4]
+    t29 = t15 * t24
+    t35 = t12 * t27
+    t36 = t14 * t26
+    t35 = t35 - t36
+    t19 = t19 * qd[4]
+    t19 = t35 - t19
+    t35 = t10 * t19
+    t29 = t29 - t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 - t35
+    t35 = 0.088 * t29
+    t20 = t20 - t35
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t27 = t14 * t27
+    t26 = t12 * t26
+    t26 = t27 + t26
+    t27 = t30 * qd[4]
+    t26 = t26 + t27
+    t26 = t26 + qdd[5]
+    t27 = t17 * t26
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 + t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t24 = t27 - t24
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 - t30
+    t30 = 0.2104 * t24
+    t30 = t32 + t30
+    t28 = qd[6] - t28
+    t32 = 0.2104 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 + t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.2104 * t19
+    t16 = t16 - t23
+    t23 = 0.2104 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 + t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
+    t22 = t22 + t23
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 + t2
+    t8 = qdd[6] - t29
+    t4 = t4 * t8
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 + t0
+    t4 = t5 * t8
     t0 = t0 - t4
-    t4 = t32 * qdd[4]
-    t0 = t0 + t4
-    t4 = t40 * qdd[5]
-    t0 = t0 - t4
-    t4 = t36 * qdd[6]
-    t0 = t0 - t4
-    t4 = qd[2] * t62
-    t7 = qd[1] * t57
-    t4 = t4 - t7
-    t7 = qd[3] * t25
-    t4 = t4 + t7
-    t7 = qd[4] * t26
-    t4 = t4 + t7
-    t7 = qd[5] * t30
-    t4 = t4 + t7
-    t7 = qd[6] * t33
-    t4 = t4 - t7
-    t0 = t0 + t4
-    t1 = t1 * qdd[2]
-    t1 = qdd[0] + t1
-    t4 = t15 * qdd[3]
-    t1 = t1 - t4
-    t4 = t11 * qdd[4]
-    t1 = t1 + t4
-    t4 = t38 * qdd[5]
-    t1 = t1 - t4
-    t4 = t20 * qdd[6]
-    t1 = t1 - t4
-    t4 = qd[4] * t5
-    t5 = qd[2] * t23
-    t7 = qd[3] * t50
-    t5 = t5 + t7
-    t4 = t4 - t5
-    t5 = qd[5] * t8
-    t4 = t4 - t5
-    t5 = qd[6] * t13
-    t4 = t4 - t5
-    t1 = t1 + t4
-    _a = (t21, t2, t6, t3, t0, t1)
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 + t3
+    t1 = t1 * t8
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _frame_acceleration_tcp_constants = _constants(
-    -0.316, 0.333, 0.0825, -0.0825, 0.384, 0.088, 0.2104)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.2104)
 
 
 def _frame_acceleration_tcp_chunk(x, t, s, y):
@@ -2903,682 +2238,385 @@ def _frame_acceleration_tcp_chunk(x, t, s, y):
     (q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qdd_0, qdd_1, qdd_2,
      qdd_3, qdd_4, qdd_5, qdd_6) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _frame_acceleration_tcp_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _frame_acceleration_tcp_constants
     cos(q_0, t0)
     cos(q_1, t1)
-    multiply(k0, t1, t2)
-    subtract(k1, t2, t2)
-    sin(q_1, t3)
-    cos(q_2, t4)
-    multiply(t3, t4, t5)
-    multiply(k2, t5, t6)
-    subtract(t2, t6, t6)
-    sin(q_3, t7)
-    multiply(t1, t7, t8)
-    cos(q_3, t9)
-    multiply(t5, t9, t10)
-    subtract(t8, t10, t8)
-    multiply(k3, t8, t10)
-    multiply(t5, t7, t11)
-    multiply(t1, t9, t12)
-    add(t11, t12, t11)
-    multiply(k4, t11, t12)
-    add(t10, t12, t10)
-    add(t6, t10, t10)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
     cos(q_4, t12)
     multiply(t8, t12, t13)
-    sin(q_2, t14)
-    multiply(t3, t14, t15)
-    sin(q_4, t16)
-    multiply(t15, t16, t17)
-    add(t13, t17, t13)
-    cos(q_5, t17)
-    multiply(t13, t17, t18)
-    sin(q_5, t19)
-    multiply(t11, t19, t20)
-    add(t18, t20, t18)
-    multiply(k5, t18, t18)
-    add(t10, t18, t18)
-    multiply(t11, t17, t20)
-    multiply(t13, t19, t21)
-    subtract(t20, t21, t20)
-    multiply(k6, t20, t21)
-    subtract(t18, t21, t21)
-    subtract(t21, k1, t22)
-    multiply(t0, t22, t23)
-    multiply(t23, qdd_1, t23)
-    sin(q_0, t24)
-    multiply(t24, t1, t25)
-    multiply(t25, t4, t26)
-    multiply(t0, t14, t27)
-    add(t26, t27, t26)
-    multiply(k2, t26, t27)
-    multiply(t24, t3, t28)
-    multiply(k0, t28, t29)
-    subtract(t27, t29, t27)
-    multiply(t26, t9, t30)
-    multiply(t28, t7, t31)
-    add(t30, t31, t30)
-    multiply(k3, t30, t31)
-    multiply(t28, t9, t32)
-    multiply(t26, t7, t33)
-    subtract(t32, t33, t32)
-    multiply(k4, t32, t33)
-    add(t31, t33, t31)
-    add(t27, t31, t31)
-    multiply(t30, t12, t33)
-    multiply(t0, t4, t34)
-    multiply(t25, t14, t35)
-    subtract(t34, t35, t34)
-    multiply(t34, t16, t35)
-    add(t33, t35, t33)
-    multiply(t33, t17, t35)
-    multiply(t32, t19, t36)
-    add(t35, t36, t35)
-    multiply(k5, t35, t35)
-    add(t31, t35, t35)
-    multiply(t32, t17, t36)
-    multiply(t33, t19, t37)
-    subtract(t36, t37, t36)
-    multiply(k6, t36, t37)
-    subtract(t35, t37, t37)
-    multiply(t37, qdd_0, t38)
-    subtract(t23, t38, t23)
-    subtract(t21, t2, t2)
-    multiply(t28, t2, t38)
-    add(t37, t29, t29)
-    multiply(t1, t29, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_2, t38)
-    add(t23, t38, t23)
-    subtract(t37, t27, t27)
-    multiply(t15, t27, t38)
-    subtract(t21, t6, t6)
-    multiply(t34, t6, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_3, t38)
-    add(t23, t38, t23)
-    subtract(t21, t10, t10)
-    multiply(t32, t10, t38)
-    subtract(t37, t31, t31)
-    multiply(t11, t31, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_4, t38)
-    add(t23, t38, t23)
-    multiply(t15, t12, t38)
-    multiply(t8, t16, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, t31, t39)
-    multiply(t34, t12, t40)
-    multiply(t30, t16, t41)
-    subtract(t40, t41, t40)
-    multiply(t40, t10, t41)
-    subtract(t39, t41, t39)
-    multiply(t39, qdd_5, t39)
-    add(t23, t39, t23)
-    subtract(t37, t35, t35)
-    multiply(t20, t35, t39)
-    subtract(t21, t18, t21)
-    multiply(t36, t21, t18)
-    subtract(t39, t18, t39)
-    multiply(t39, qdd_6, t39)
-    add(t23, t39, t23)
-    multiply(t3, qd_1, t18)
-    multiply(k0, t18, t39)
-    multiply(t1, qd_1, t41)
-    multiply(t4, t41, t42)
-    multiply(t14, qd_2, t43)
-    multiply(t3, t43, t44)
-    subtract(t42, t44, t42)
-    multiply(k2, t42, t44)
-    subtract(t39, t44, t44)
-    multiply(t9, qd_3, t45)
-    multiply(t1, t45, t46)
-    multiply(t7, t18, t47)
-    subtract(t46, t47, t46)
-    multiply(t9, t42, t47)
-    multiply(t7, qd_3, t48)
-    multiply(t5, t48, t49)
-    subtract(t47, t49, t47)
-    subtract(t46, t47, t46)
-    multiply(k3, t46, t47)
-    multiply(t7, t42, t42)
-    multiply(t5, t45, t5)
-    add(t42, t5, t42)
-    multiply(t9, t18, t5)
-    multiply(t1, t48, t49)
-    add(t5, t49, t5)
-    subtract(t42, t5, t42)
-    multiply(k4, t42, t5)
-    add(t47, t5, t47)
-    add(t44, t47, t47)
-    multiply(t12, t46, t5)
-    multiply(t16, qd_4, t49)
-    multiply(t8, t49, t50)
-    subtract(t5, t50, t5)
-    multiply(t14, t41, t50)
-    multiply(t4, qd_2, t51)
-    multiply(t3, t51, t52)
-    add(t50, t52, t50)
-    multiply(t16, t50, t52)
-    multiply(t12, qd_4, t53)
-    multiply(t15, t53, t54)
-    add(t52, t54, t52)
-    add(t5, t52, t5)
-    multiply(t17, t5, t52)
-    multiply(t19, qd_5, t54)
-    multiply(t13, t54, t55)
-    subtract(t52, t55, t52)
-    multiply(t19, t42, t55)
-    multiply(t17, qd_5, t56)
-    multiply(t11, t56, t57)
-    add(t55, t57, t55)
-    add(t52, t55, t52)
-    multiply(k5, t52, t52)
-    add(t47, t52, t52)
-    multiply(t17, t42, t55)
-    multiply(t11, t54, t57)
-    subtract(t55, t57, t55)
-    multiply(t19, t5, t5)
-    multiply(t13, t56, t13)
-    add(t5, t13, t5)
-    subtract(t55, t5, t55)
-    multiply(k6, t55, t5)
-    subtract(t52, t5, t5)
-    multiply(t0, t5, t13)
-    multiply(t24, qd_0, t57)
-    multiply(t22, t57, t58)
-    subtract(t13, t58, t13)
-    multiply(qd_1, t13, t13)
-    multiply(t0, qd_0, t58)
-    multiply(t1, t58, t59)
-    multiply(t24, t18, t60)
-    subtract(t59, t60, t59)
-    multiply(t4, t59, t60)
-    multiply(t25, t43, t61)
-    subtract(t60, t61, t60)
-    multiply(t0, t51, t61)
-    multiply(t14, t57, t62)
-    subtract(t61, t62, t61)
-    add(t60, t61, t60)
-    multiply(k2, t60, t61)
-    multiply(t3, t58, t62)
-    multiply(t24, t41, t63)
-    add(t62, t63, t62)
-    multiply(k0, t62, t63)
-    subtract(t61, t63, t61)
-    multiply(t9, t60, t64)
-    multiply(t26, t48, t65)
-    subtract(t64, t65, t64)
-    multiply(t7, t62, t65)
-    multiply(t28, t45, t66)
-    add(t65, t66, t65)
-    add(t64, t65, t64)
-    multiply(k3, t64, t65)
-    multiply(t9, t62, t66)
-    multiply(t28, t48, t67)
-    subtract(t66, t67, t66)
-    multiply(t7, t60, t60)
-    multiply(t26, t45, t26)
-    add(t60, t26, t60)
-    subtract(t66, t60, t66)
-    multiply(k4, t66, t26)
-    add(t65, t26, t65)
-    add(t61, t65, t65)
-    multiply(t12, t64, t26)
-    multiply(t30, t49, t60)
-    subtract(t26, t60, t26)
-    multiply(t34, t53, t60)
-    multiply(t4, t57, t67)
-    multiply(t0, t43, t68)
-    add(t67, t68, t67)
-    multiply(t14, t59, t59)
-    multiply(t25, t51, t25)
-    add(t59, t25, t59)
-    add(t67, t59, t67)
-    multiply(t16, t67, t25)
-    subtract(t60, t25, t60)
-    add(t26, t60, t26)
-    multiply(t17, t26, t25)
-    multiply(t33, t54, t59)
-    subtract(t25, t59, t25)
-    multiply(t19, t66, t59)
-    multiply(t32, t56, t60)
-    add(t59, t60, t59)
-    add(t25, t59, t25)
-    multiply(k5, t25, t25)
-    add(t65, t25, t25)
-    multiply(t17, t66, t59)
-    multiply(t32, t54, t60)
-    subtract(t59, t60, t59)
-    multiply(t19, t26, t26)
-    multiply(t33, t56, t33)
-    add(t26, t33, t26)
-    subtract(t59, t26, t59)
-    multiply(k6, t59, t26)
-    subtract(t25, t26, t26)
-    multiply(qd_0, t26, t33)
-    subtract(t13, t33, t13)
-    multiply(t2, t62, t33)
-    subtract(t5, t39, t39)
-    multiply(t28, t39, t60)
-    add(t33, t60, t33)
-    add(t26, t63, t63)
-    multiply(t1, t63, t60)
-    multiply(t29, t18, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_2, t33, t33)
-    add(t13, t33, t13)
-    multiply(t27, t50, t33)
-    subtract(t26, t61, t61)
-    multiply(t15, t61, t60)
-    add(t33, t60, t33)
-    subtract(t5, t44, t44)
-    multiply(t34, t44, t60)
-    multiply(t6, t67, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_3, t33, t33)
-    add(t13, t33, t13)
-    multiply(t10, t66, t33)
-    subtract(t5, t47, t47)
-    multiply(t32, t47, t60)
-    add(t33, t60, t33)
-    multiply(t31, t42, t60)
-    subtract(t26, t65, t65)
-    multiply(t11, t65, t68)
-    add(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_4, t33, t33)
-    add(t13, t33, t13)
-    multiply(t12, t50, t33)
-    multiply(t15, t49, t60)
-    subtract(t33, t60, t33)
-    multiply(t16, t46, t46)
-    multiply(t8, t53, t8)
-    add(t46, t8, t46)
-    subtract(t33, t46, t33)
-    multiply(t31, t33, t8)
-    multiply(t38, t65, t46)
-    add(t8, t46, t8)
-    multiply(t40, t47, t46)
-    multiply(t12, t67, t60)
-    multiply(t34, t49, t68)
-    add(t60, t68, t60)
-    multiply(t16, t64, t64)
-    multiply(t30, t53, t30)
-    add(t64, t30, t64)
-    add(t60, t64, t60)
-    multiply(t10, t60, t30)
-    subtract(t46, t30, t46)
-    subtract(t8, t46, t8)
-    multiply(qd_5, t8, t8)
-    add(t13, t8, t13)
-    multiply(t35, t55, t8)
-    subtract(t26, t25, t25)
-    multiply(t20, t25, t30)
-    add(t8, t30, t8)
-    multiply(t21, t59, t30)
-    subtract(t5, t52, t52)
-    multiply(t36, t52, t46)
-    add(t30, t46, t30)
-    subtract(t8, t30, t8)
-    multiply(qd_6, t8, t8)
-    add(t13, t8, t13)
-    add(t23, t13, a_0)
-    multiply(t0, t1, t8)
-    multiply(t8, t4, t13)
-    multiply(t24, t14, t23)
-    subtract(t13, t23, t13)
-    multiply(k2, t13, t23)
-    multiply(t0, t3, t30)
-    multiply(k0, t30, t46)
-    subtract(t23, t46, t23)
-    multiply(t13, t9, t64)
-    multiply(t30, t7, t68)
-    add(t64, t68, t64)
-    multiply(k3, t64, t68)
-    multiply(t30, t9, t69)
-    multiply(t13, t7, t70)
-    subtract(t69, t70, t69)
-    multiply(k4, t69, t70)
-    add(t68, t70, t68)
-    add(t23, t68, t68)
-    multiply(t64, t12, t70)
-    multiply(t8, t14, t71)
-    multiply(t24, t4, t72)
-    add(t71, t72, t71)
-    multiply(t71, t16, t72)
-    subtract(t70, t72, t70)
-    multiply(t70, t17, t72)
-    multiply(t69, t19, t73)
-    add(t72, t73, t72)
-    multiply(k5, t72, t72)
-    add(t68, t72, t72)
-    multiply(t69, t17, t73)
-    multiply(t70, t19, t74)
-    subtract(t73, t74, t73)
-    multiply(k6, t73, t74)
-    subtract(t72, t74, t74)
-    multiply(t74, qdd_0, t75)
-    multiply(t24, t22, t76)
-    multiply(t76, qdd_1, t76)
-    add(t75, t76, t75)
-    add(t74, t46, t46)
-    multiply(t1, t46, t76)
-    multiply(t30, t2, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_2, t76)
-    add(t75, t76, t75)
-    subtract(t74, t23, t23)
-    multiply(t15, t23, t76)
-    multiply(t71, t6, t77)
-    add(t76, t77, t76)
-    multiply(t76, qdd_3, t76)
-    subtract(t75, t76, t75)
-    subtract(t74, t68, t68)
-    multiply(t11, t68, t76)
-    multiply(t69, t10, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_4, t76)
-    add(t75, t76, t75)
-    multiply(t38, t68, t76)
-    multiply(t64, t16, t77)
-    multiply(t71, t12, t78)
-    add(t77, t78, t77)
-    multiply(t77, t10, t78)
-    add(t76, t78, t76)
-    multiply(t76, qdd_5, t76)
-    subtract(t75, t76, t75)
-    multiply(t73, t21, t76)
-    subtract(t74, t72, t72)
-    multiply(t20, t72, t78)
-    subtract(t76, t78, t76)
-    multiply(t76, qdd_6, t76)
-    add(t75, t76, t75)
-    multiply(t0, t41, t41)
-    multiply(t3, t57, t3)
-    subtract(t41, t3, t41)
-    multiply(t7, t41, t3)
-    multiply(t30, t45, t76)
-    add(t3, t76, t3)
-    multiply(t1, t57, t76)
-    multiply(t0, t18, t78)
-    add(t76, t78, t76)
-    multiply(t4, t76, t78)
-    multiply(t8, t43, t79)
-    add(t78, t79, t78)
-    multiply(t14, t58, t79)
-    multiply(t24, t51, t80)
-    add(t79, t80, t79)
-    add(t78, t79, t78)
-    multiply(t9, t78, t79)
-    multiply(t13, t48, t80)
-    add(t79, t80, t79)
-    subtract(t3, t79, t3)
-    multiply(k3, t3, t79)
-    multiply(t9, t41, t9)
-    multiply(t30, t48, t48)
-    subtract(t9, t48, t9)
-    multiply(t13, t45, t13)
-    multiply(t7, t78, t7)
-    subtract(t13, t7, t13)
-    subtract(t9, t13, t9)
-    multiply(k4, t9, t7)
-    add(t79, t7, t79)
-    multiply(k2, t78, t78)
-    multiply(k0, t41, t7)
-    add(t78, t7, t78)
-    subtract(t79, t78, t79)
-    multiply(t12, t3, t13)
-    multiply(t64, t49, t45)
-    subtract(t13, t45, t13)
-    multiply(t8, t51, t8)
-    multiply(t14, t76, t14)
-    subtract(t8, t14, t8)
-    multiply(t4, t58, t4)
-    multiply(t24, t43, t43)
-    subtract(t4, t43, t4)
-    add(t8, t4, t8)
-    multiply(t16, t8, t4)
-    multiply(t71, t53, t14)
-    add(t4, t14, t4)
-    subtract(t13, t4, t13)
-    multiply(t17, t13, t4)
-    multiply(t70, t54, t14)
-    subtract(t4, t14, t4)
-    multiply(t19, t9, t14)
-    multiply(t69, t56, t43)
-    add(t14, t43, t14)
-    add(t4, t14, t4)
-    multiply(k5, t4, t4)
-    add(t79, t4, t4)
-    multiply(t17, t9, t17)
-    multiply(t69, t54, t54)
-    subtract(t17, t54, t17)
-    multiply(t19, t13, t19)
-    multiply(t70, t56, t70)
-    add(t19, t70, t19)
-    subtract(t17, t19, t17)
-    multiply(k6, t17, t13)
-    subtract(t4, t13, t13)
-    multiply(qd_0, t13, t14)
-    multiply(t22, t58, t22)
-    multiply(t24, t5, t5)
-    add(t22, t5, t22)
-    multiply(qd_1, t22, t22)
-    add(t14, t22, t14)
-    add(t13, t7, t7)
-    multiply(t1, t7, t5)
-    multiply(t46, t18, t19)
-    subtract(t5, t19, t5)
-    multiply(t2, t41, t2)
-    multiply(t30, t39, t39)
-    add(t2, t39, t2)
-    subtract(t5, t2, t5)
-    multiply(qd_2, t5, t5)
-    add(t14, t5, t14)
-    multiply(t23, t50, t2)
-    add(t13, t78, t78)
-    multiply(t15, t78, t5)
-    add(t2, t5, t2)
-    multiply(t6, t8, t6)
-    multiply(t71, t44, t44)
-    add(t6, t44, t6)
-    add(t2, t6, t2)
-    multiply(qd_3, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t68, t42, t2)
-    subtract(t13, t79, t79)
-    multiply(t11, t79, t5)
-    add(t2, t5, t2)
-    multiply(t10, t9, t5)
-    multiply(t69, t47, t6)
-    add(t5, t6, t5)
-    subtract(t2, t5, t2)
-    multiply(qd_4, t2, t2)
-    add(t14, t2, t14)
-    multiply(t68, t33, t2)
-    multiply(t38, t79, t5)
-    add(t2, t5, t2)
-    multiply(t16, t3, t16)
-    multiply(t64, t53, t64)
-    add(t16, t64, t16)
-    multiply(t12, t8, t12)
-    multiply(t71, t49, t49)
-    subtract(t12, t49, t12)
-    add(t16, t12, t16)
-    multiply(t10, t16, t10)
-    multiply(t77, t47, t47)
-    add(t10, t47, t10)
-    add(t2, t10, t2)
-    multiply(qd_5, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t21, t17, t21)
-    multiply(t73, t52, t52)
-    add(t21, t52, t21)
-    multiply(t72, t55, t2)
-    subtract(t13, t4, t4)
-    multiply(t20, t4, t3)
-    add(t2, t3, t2)
-    subtract(t21, t2, t21)
-    multiply(qd_6, t21, t21)
-    add(t14, t21, t14)
-    add(t75, t14, a_1)
-    multiply(t30, t29, t2)
-    multiply(t28, t46, t3)
-    subtract(t2, t3, t2)
-    multiply(t2, qdd_2, t2)
-    multiply(t24, t37, t3)
-    multiply(t0, t74, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_1, t3)
-    subtract(t2, t3, t2)
-    multiply(t71, t27, t3)
-    multiply(t34, t23, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_3, t3)
-    add(t2, t3, t2)
-    multiply(t69, t31, t3)
-    multiply(t32, t68, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_4, t3)
-    add(t2, t3, t2)
-    multiply(t77, t31, t3)
-    multiply(t40, t68, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_5, t3)
-    add(t2, t3, t2)
-    multiply(t36, t72, t3)
-    multiply(t73, t35, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_6, t3)
-    add(t2, t3, t2)
-    multiply(t29, t41, t29)
-    multiply(t30, t63, t63)
-    add(t29, t63, t29)
-    multiply(t46, t62, t46)
-    multiply(t28, t7, t7)
-    add(t46, t7, t46)
-    subtract(t29, t46, t29)
-    multiply(qd_2, t29, t29)
-    multiply(t37, t58, t37)
-    multiply(t24, t26, t26)
-    add(t37, t26, t37)
-    multiply(t0, t13, t13)
-    multiply(t74, t57, t74)
-    subtract(t13, t74, t13)
-    add(t37, t13, t37)
-    multiply(qd_1, t37, t37)
-    subtract(t29, t37, t29)
-    multiply(t27, t8, t27)
-    multiply(t71, t61, t61)
-    add(t27, t61, t27)
-    multiply(t34, t78, t78)
-    multiply(t23, t67, t23)
-    subtract(t78, t23, t78)
-    add(t27, t78, t27)
-    multiply(qd_3, t27, t27)
-    add(t29, t27, t29)
-    multiply(t31, t9, t3)
-    multiply(t69, t65, t5)
-    add(t3, t5, t3)
-    multiply(t68, t66, t5)
-    multiply(t32, t79, t6)
-    add(t5, t6, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t29, t3, t29)
-    multiply(t31, t16, t31)
-    multiply(t77, t65, t65)
-    add(t31, t65, t31)
-    multiply(t40, t79, t79)
-    multiply(t68, t60, t68)
-    subtract(t79, t68, t79)
-    add(t31, t79, t31)
-    multiply(qd_5, t31, t31)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
+    subtract(t13, t15, t13)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
+    multiply(t16, t17, t18)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
+    add(t18, t19, t18)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(k3, qdd_1, t23)
+    subtract(t22, t23, t22)
+    multiply(t3, t22, t23)
+    multiply(t9, qdd_0, t24)
+    multiply(t8, qd_1, t25)
+    add(t24, t25, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
+    multiply(t27, t28, t29)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
     add(t29, t31, t29)
-    multiply(t72, t59, t72)
-    multiply(t36, t4, t4)
-    add(t72, t4, t72)
-    multiply(t35, t17, t35)
-    multiply(t73, t25, t25)
-    add(t35, t25, t35)
-    subtract(t72, t35, t72)
-    multiply(qd_6, t72, t72)
-    add(t29, t72, t29)
-    add(t2, t29, a_2)
-    multiply(t30, qdd_2, t30)
-    multiply(t24, qdd_1, t24)
-    subtract(t30, t24, t30)
-    multiply(t71, qdd_3, t71)
-    add(t30, t71, t30)
-    multiply(t69, qdd_4, t69)
-    add(t30, t69, t30)
-    multiply(t77, qdd_5, t77)
-    add(t30, t77, t30)
-    multiply(t73, qdd_6, t73)
-    subtract(t30, t73, t30)
-    multiply(qd_2, t41, t41)
-    multiply(qd_1, t58, t58)
-    subtract(t41, t58, t41)
-    multiply(qd_3, t8, t8)
-    add(t41, t8, t41)
-    multiply(qd_4, t9, t9)
-    add(t41, t9, t41)
-    multiply(qd_5, t16, t16)
-    add(t41, t16, t41)
-    multiply(qd_6, t17, t17)
-    subtract(t41, t17, t41)
-    add(t30, t41, a_3)
-    multiply(t0, qdd_1, t0)
-    multiply(t28, qdd_2, t28)
-    add(t0, t28, t0)
-    multiply(t34, qdd_3, t34)
-    subtract(t0, t34, t0)
-    multiply(t32, qdd_4, t32)
-    add(t0, t32, t0)
-    multiply(t40, qdd_5, t40)
-    subtract(t0, t40, t0)
-    multiply(t36, qdd_6, t36)
-    subtract(t0, t36, t0)
-    multiply(qd_2, t62, t62)
-    multiply(qd_1, t57, t57)
-    subtract(t62, t57, t62)
-    multiply(qd_3, t67, t67)
-    add(t62, t67, t62)
-    multiply(qd_4, t66, t66)
-    add(t62, t66, t62)
-    multiply(qd_5, t60, t60)
-    add(t62, t60, t62)
-    multiply(qd_6, t59, t59)
-    subtract(t62, t59, t62)
-    add(t0, t62, a_4)
-    multiply(t1, qdd_2, t1)
-    add(qdd_0, t1, t1)
-    multiply(t15, qdd_3, t15)
-    subtract(t1, t15, t1)
-    multiply(t11, qdd_4, t11)
-    add(t1, t11, t1)
-    multiply(t38, qdd_5, t38)
-    subtract(t1, t38, t1)
-    multiply(t20, qdd_6, t20)
-    subtract(t1, t20, t1)
-    multiply(qd_4, t42, t42)
-    multiply(qd_2, t18, t18)
-    multiply(qd_3, t50, t50)
-    add(t18, t50, t18)
-    subtract(t42, t18, t42)
-    multiply(qd_5, t33, t33)
-    subtract(t42, t33, t42)
-    multiply(qd_6, t55, t55)
-    subtract(t42, t55, t42)
-    add(t1, t42, a_5)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t3, qdd_1, t31)
+    add(t21, t31, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
+    subtract(t26, t32, t26)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    subtract(qdd_3, t21, t21)
+    multiply(k5, t21, t30)
+    subtract(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t6, qdd_1, t36)
+    multiply(t3, t24, t24)
+    subtract(t36, t24, t36)
+    multiply(t27, qd_2, t27)
+    add(t36, t27, t36)
+    multiply(t7, t36, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t1, qdd_0, t27)
+    subtract(t20, t27, t20)
+    subtract(qdd_2, t20, t20)
+    multiply(t11, t20, t27)
+    add(t24, t27, t24)
+    multiply(t30, qd_3, t27)
+    add(t24, t27, t24)
+    multiply(k5, t24, t27)
+    multiply(t7, t20, t37)
+    multiply(t11, t36, t36)
+    subtract(t37, t36, t37)
+    multiply(t32, qd_3, t36)
+    subtract(t37, t36, t37)
+    multiply(k6, t37, t36)
+    subtract(t27, t36, t27)
+    multiply(k4, t20, t20)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    subtract(t20, t22, t20)
+    multiply(t31, t28, t31)
+    add(t20, t31, t20)
+    subtract(t27, t20, t27)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t27, t35, t27)
+    multiply(t14, t27, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    add(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t27, t27)
+    add(t29, t27, t29)
+    add(t37, qdd_4, t37)
+    multiply(t15, t37, t27)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
+    subtract(t34, t35, t34)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    subtract(t27, t32, t27)
+    multiply(t15, t20, t32)
+    multiply(t4, t30, t30)
+    add(t32, t30, t32)
+    multiply(t32, qd_5, t30)
+    subtract(t27, t30, t27)
+    multiply(k7, t27, t30)
+    subtract(t29, t30, t29)
+    multiply(t32, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t14, t24, t24)
+    multiply(t12, t21, t21)
+    add(t24, t21, t24)
+    multiply(t20, qd_4, t20)
+    add(t24, t20, t24)
+    add(t24, qdd_5, t24)
+    multiply(t17, t24, t20)
+    multiply(t15, t34, t34)
+    multiply(t4, t37, t37)
+    add(t34, t37, t34)
+    multiply(t8, qd_5, t21)
+    add(t34, t21, t34)
+    multiply(t2, t34, t21)
+    subtract(t20, t21, t20)
+    multiply(t17, t32, t21)
+    multiply(t2, t28, t30)
+    add(t21, t30, t21)
+    multiply(t21, qd_6, t30)
+    subtract(t20, t30, t20)
+    multiply(k8, t20, t30)
+    add(t25, t30, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t21, t30)
+    multiply(t8, t30, t31)
+    add(t25, t31, t25)
+    multiply(t16, t25, t31)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t24, t18)
+    add(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t32, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t31, t8, t31)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t24, t24)
+    add(t26, t24, t26)
+    multiply(t32, t23, t32)
+    add(t26, t32, t26)
+    multiply(t21, t30, t21)
+    multiply(t28, t18, t28)
+    add(t21, t28, t21)
+    add(t26, t21, t26)
+    multiply(t10, t26, t8)
+    add(t31, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t21)
+    add(t18, t21, t18)
+    multiply(t18, t12, t21)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
+    subtract(t0, t8, t0)
+    multiply(t0, t14, t8)
+    add(t21, t8, t21)
+    multiply(t21, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t21, t4, t21)
+    subtract(t5, t21, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
+    subtract(t7, t2, t7)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t20, t19)
+    add(t16, t19, t16)
+    subtract(qdd_6, t27, t27)
+    multiply(t10, t27, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t20, t18)
+    add(t0, t18, t0)
+    multiply(t5, t27, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t20, t7)
+    add(t2, t7, t2)
+    multiply(t3, t27, t3)
+    subtract(t2, t3, a_5)
 
 
 def fk_panda_link8(q):
@@ -4345,568 +3383,347 @@ def jdot_qd_panda_link8(q, qd):
     in  q [7]
     in  qd [7]
     out a [6]
-    546 ops: 303 mul, 231 add, 0 div, 12 trig
+    325 ops: 197 mul, 114 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_panda_link8_chunk, (q, qd), 71, ((6,),))
+        return _batch(_jdot_qd_panda_link8_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = sin(q[1])
-    t2 = t1 * qd[1]
-    t3 = (-0.316) * t2
-    t4 = cos(q[2])
-    t5 = cos(q[1])
-    t6 = t5 * qd[1]
-    t7 = t4 * t6
-    t8 = sin(q[2])
-    t9 = t8 * qd[2]
-    t10 = t1 * t9
-    t7 = t7 - t10
-    t10 = 0.0825 * t7
-    t10 = t3 - t10
-    t11 = cos(q[3])
-    t12 = t11 * qd[3]
-    t13 = t5 * t12
-    t14 = sin(q[3])
-    t15 = t14 * t2
+    t1 = cos(q[1])
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
+    t12 = cos(q[4])
+    t13 = t8 * t12
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
     t13 = t13 - t15
-    t15 = t11 * t7
-    t16 = t1 * t4
-    t17 = t14 * qd[3]
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
+    t16 = t16 + t17
+    t17 = cos(q[6])
     t18 = t16 * t17
-    t15 = t15 - t18
-    t13 = t13 - t15
-    t15 = (-0.0825) * t13
-    t7 = t14 * t7
-    t18 = t16 * t12
-    t7 = t7 + t18
-    t18 = t11 * t2
-    t19 = t5 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
     t18 = t18 + t19
-    t7 = t7 - t18
-    t18 = 0.384 * t7
-    t15 = t15 + t18
-    t15 = t10 + t15
-    t18 = cos(q[5])
-    t19 = cos(q[4])
-    t20 = t19 * t13
-    t21 = t5 * t14
-    t22 = t16 * t11
-    t21 = t21 - t22
-    t22 = sin(q[4])
-    t23 = t22 * qd[4]
-    t24 = t21 * t23
-    t20 = t20 - t24
-    t24 = t8 * t6
-    t25 = t4 * qd[2]
-    t26 = t1 * t25
-    t24 = t24 + t26
-    t26 = t22 * t24
-    t27 = t1 * t8
-    t28 = t19 * qd[4]
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = t3 * t22
+    t24 = t19 * qd[1]
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
     t29 = t27 * t28
-    t26 = t26 + t29
-    t20 = t20 + t26
-    t26 = t18 * t20
-    t29 = t21 * t19
-    t30 = t27 * t22
-    t29 = t29 + t30
-    t30 = sin(q[5])
-    t31 = t30 * qd[5]
-    t32 = t29 * t31
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
     t26 = t26 - t32
-    t32 = t30 * t7
-    t33 = t16 * t14
-    t34 = t5 * t11
-    t33 = t33 + t34
-    t34 = t18 * qd[5]
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t30 = 0.384 * t26
+    t29 = t29 + t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t27 = t27 * qd[2]
+    t24 = t3 * t24
+    t24 = t27 - t24
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t11 * t20
+    t27 = t27 - t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t24 = t11 * t24
+    t37 = t7 * t20
+    t24 = t24 + t37
+    t37 = t19 * qd[3]
+    t24 = t24 + t37
+    t37 = (-0.0825) * t24
+    t36 = t36 + t37
+    t28 = t31 * t28
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = 0.0825 * t20
+    t20 = t22 + t20
+    t20 = t28 - t20
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 - t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
     t35 = t33 * t34
     t32 = t32 + t35
-    t26 = t26 + t32
-    t26 = 0.088 * t26
-    t26 = t15 + t26
-    t32 = t18 * t7
-    t35 = t33 * t31
-    t32 = t32 - t35
-    t20 = t30 * t20
-    t35 = t29 * t34
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t29 = t12 * t27
+    t35 = t14 * t26
+    t29 = t29 + t35
+    t19 = t19 * qd[4]
+    t19 = t29 - t19
+    t29 = t10 * t19
+    t35 = t15 * t24
+    t29 = t29 + t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 + t35
+    t35 = 0.088 * t29
     t20 = t20 + t35
-    t20 = t32 - t20
-    t32 = 0.107 * t20
-    t32 = t26 - t32
-    t35 = t0 * t32
-    t36 = (-0.316) * t5
-    t36 = 0.333 - t36
-    t16 = 0.0825 * t16
-    t16 = t36 - t16
-    t37 = (-0.0825) * t21
-    t38 = 0.384 * t33
-    t37 = t37 + t38
-    t37 = t16 + t37
-    t38 = t29 * t18
-    t39 = t33 * t30
-    t38 = t38 + t39
-    t38 = 0.088 * t38
-    t38 = t37 + t38
-    t39 = t33 * t18
-    t29 = t29 * t30
-    t29 = t39 - t29
-    t39 = 0.107 * t29
-    t39 = t38 - t39
-    t40 = t39 - 0.333
-    t41 = sin(q[0])
-    t42 = t41 * qd[0]
-    t43 = t40 * t42
-    t35 = t35 - t43
-    t35 = qd[1] * t35
-    t43 = t0 * qd[0]
-    t44 = t5 * t43
-    t45 = t41 * t2
-    t44 = t44 - t45
-    t45 = t4 * t44
-    t46 = t41 * t5
-    t47 = t46 * t9
-    t45 = t45 - t47
-    t47 = t0 * t25
-    t48 = t8 * t42
-    t47 = t47 - t48
-    t45 = t45 + t47
-    t47 = 0.0825 * t45
-    t48 = t1 * t43
-    t49 = t41 * t6
-    t48 = t48 + t49
-    t49 = (-0.316) * t48
-    t47 = t47 - t49
-    t50 = t11 * t45
-    t51 = t46 * t4
-    t52 = t0 * t8
-    t51 = t51 + t52
-    t52 = t51 * t17
-    t50 = t50 - t52
-    t52 = t14 * t48
-    t53 = t41 * t1
-    t54 = t53 * t12
-    t52 = t52 + t54
-    t50 = t50 + t52
-    t52 = (-0.0825) * t50
-    t54 = t11 * t48
-    t55 = t53 * t17
-    t54 = t54 - t55
-    t45 = t14 * t45
-    t55 = t51 * t12
-    t45 = t45 + t55
-    t45 = t54 - t45
-    t54 = 0.384 * t45
-    t52 = t52 + t54
-    t52 = t47 + t52
-    t54 = t19 * t50
-    t55 = t51 * t11
-    t56 = t53 * t14
-    t55 = t55 + t56
-    t56 = t55 * t23
-    t54 = t54 - t56
-    t56 = t0 * t4
-    t57 = t46 * t8
-    t56 = t56 - t57
-    t57 = t56 * t28
-    t58 = t4 * t42
-    t59 = t0 * t9
-    t58 = t58 + t59
-    t44 = t8 * t44
-    t46 = t46 * t25
-    t44 = t44 + t46
-    t44 = t58 + t44
-    t46 = t22 * t44
-    t46 = t57 - t46
-    t46 = t54 + t46
-    t54 = t18 * t46
-    t57 = t55 * t19
-    t58 = t56 * t22
-    t57 = t57 + t58
-    t58 = t57 * t31
-    t54 = t54 - t58
-    t58 = t30 * t45
-    t59 = t53 * t11
-    t60 = t51 * t14
-    t59 = t59 - t60
-    t60 = t59 * t34
-    t58 = t58 + t60
-    t54 = t54 + t58
-    t54 = 0.088 * t54
-    t54 = t52 + t54
-    t58 = t18 * t45
-    t60 = t59 * t31
-    t58 = t58 - t60
-    t46 = t30 * t46
-    t60 = t57 * t34
-    t46 = t46 + t60
-    t46 = t58 - t46
-    t58 = 0.107 * t46
-    t58 = t54 - t58
-    t60 = qd[0] * t58
-    t35 = t35 - t60
-    t36 = t39 - t36
-    t60 = t36 * t48
-    t3 = t32 - t3
-    t61 = t53 * t3
-    t60 = t60 + t61
-    t49 = t58 + t49
-    t61 = t5 * t49
-    t51 = 0.0825 * t51
-    t62 = (-0.316) * t53
-    t51 = t51 - t62
-    t63 = (-0.0825) * t55
-    t64 = 0.384 * t59
-    t63 = t63 + t64
-    t63 = t51 + t63
-    t64 = t57 * t18
-    t65 = t59 * t30
-    t64 = t64 + t65
-    t64 = 0.088 * t64
-    t64 = t63 + t64
-    t65 = t59 * t18
-    t57 = t57 * t30
-    t57 = t65 - t57
-    t65 = 0.107 * t57
-    t65 = t64 - t65
-    t62 = t65 + t62
-    t66 = t62 * t2
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[2] * t60
-    t35 = t35 + t60
-    t51 = t65 - t51
-    t60 = t51 * t24
-    t47 = t58 - t47
-    t61 = t27 * t47
-    t60 = t60 + t61
-    t10 = t32 - t10
-    t61 = t56 * t10
-    t16 = t39 - t16
-    t66 = t16 * t44
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[3] * t60
-    t35 = t35 + t60
-    t37 = t39 - t37
-    t60 = t37 * t45
-    t15 = t32 - t15
-    t61 = t59 * t15
-    t60 = t60 + t61
-    t61 = t65 - t63
-    t63 = t61 * t7
-    t52 = t58 - t52
-    t66 = t33 * t52
-    t63 = t63 + t66
-    t60 = t60 - t63
-    t60 = qd[4] * t60
-    t35 = t35 + t60
-    t60 = t19 * t24
-    t63 = t27 * t23
-    t60 = t60 - t63
-    t13 = t22 * t13
-    t63 = t21 * t28
-    t13 = t13 + t63
-    t13 = t60 - t13
-    t60 = t61 * t13
-    t63 = t27 * t19
-    t21 = t21 * t22
-    t21 = t63 - t21
-    t63 = t21 * t52
-    t60 = t60 + t63
-    t63 = t56 * t19
-    t66 = t55 * t22
-    t63 = t63 - t66
-    t66 = t63 * t15
-    t67 = t19 * t44
-    t68 = t56 * t23
-    t67 = t67 + t68
-    t50 = t22 * t50
-    t55 = t55 * t28
-    t50 = t50 + t55
-    t50 = t67 + t50
-    t55 = t37 * t50
-    t55 = t66 - t55
-    t55 = t60 - t55
-    t55 = qd[5] * t55
-    t35 = t35 + t55
-    t55 = t65 - t64
-    t60 = t55 * t20
-    t54 = t58 - t54
-    t64 = t29 * t54
-    t60 = t60 + t64
-    t38 = t39 - t38
-    t39 = t38 * t46
-    t26 = t32 - t26
-    t64 = t57 * t26
-    t39 = t39 + t64
-    t39 = t60 - t39
-    t39 = qd[6] * t39
-    t35 = t35 + t39
-    t6 = t0 * t6
-    t39 = t1 * t42
-    t6 = t6 - t39
-    t39 = t14 * t6
-    t1 = t0 * t1
-    t60 = t1 * t12
-    t39 = t39 + t60
-    t60 = t5 * t42
-    t64 = t0 * t2
-    t60 = t60 + t64
-    t64 = t4 * t60
-    t66 = t0 * t5
-    t67 = t66 * t9
-    t64 = t64 + t67
-    t67 = t8 * t43
-    t68 = t41 * t25
-    t67 = t67 + t68
-    t64 = t64 + t67
-    t67 = t11 * t64
-    t68 = t66 * t4
-    t69 = t41 * t8
-    t68 = t68 - t69
-    t69 = t68 * t17
-    t67 = t67 + t69
-    t39 = t39 - t67
-    t67 = (-0.0825) * t39
-    t69 = t11 * t6
-    t17 = t1 * t17
-    t17 = t69 - t17
-    t12 = t68 * t12
-    t69 = t14 * t64
-    t12 = t12 - t69
-    t12 = t17 - t12
-    t17 = 0.384 * t12
-    t17 = t67 + t17
-    t64 = 0.0825 * t64
-    t67 = (-0.316) * t6
-    t64 = t64 + t67
-    t17 = t17 - t64
-    t69 = t19 * t39
-    t70 = t68 * t11
-    t71 = t1 * t14
-    t70 = t70 + t71
-    t71 = t70 * t23
-    t69 = t69 - t71
-    t25 = t66 * t25
-    t60 = t8 * t60
-    t25 = t25 - t60
-    t60 = t4 * t43
-    t9 = t41 * t9
-    t9 = t60 - t9
-    t9 = t25 + t9
-    t25 = t22 * t9
-    t8 = t66 * t8
-    t4 = t41 * t4
-    t4 = t8 + t4
-    t8 = t4 * t28
-    t8 = t25 + t8
-    t8 = t69 - t8
-    t25 = t18 * t8
-    t60 = t70 * t19
-    t66 = t4 * t22
-    t60 = t60 - t66
-    t66 = t60 * t31
-    t25 = t25 - t66
-    t66 = t30 * t12
-    t11 = t1 * t11
-    t14 = t68 * t14
-    t11 = t11 - t14
-    t14 = t11 * t34
-    t14 = t66 + t14
-    t14 = t25 + t14
-    t14 = 0.088 * t14
-    t14 = t17 + t14
-    t25 = t18 * t12
-    t31 = t11 * t31
-    t25 = t25 - t31
-    t8 = t30 * t8
-    t31 = t60 * t34
-    t8 = t8 + t31
-    t8 = t25 - t8
-    t25 = 0.107 * t8
-    t25 = t14 - t25
-    t31 = qd[0] * t25
-    t34 = t40 * t43
-    t32 = t41 * t32
-    t32 = t34 + t32
-    t32 = qd[1] * t32
-    t31 = t31 + t32
-    t32 = t25 + t67
-    t5 = t5 * t32
-    t34 = 0.0825 * t68
-    t40 = (-0.316) * t1
-    t34 = t34 - t40
-    t66 = (-0.0825) * t70
-    t67 = 0.384 * t11
-    t66 = t66 + t67
-    t66 = t34 + t66
-    t67 = t60 * t18
-    t68 = t11 * t30
-    t67 = t67 + t68
-    t67 = 0.088 * t67
-    t67 = t66 + t67
-    t18 = t11 * t18
-    t30 = t60 * t30
-    t18 = t18 - t30
-    t30 = 0.107 * t18
-    t30 = t67 - t30
-    t40 = t30 + t40
-    t60 = t40 * t2
-    t5 = t5 - t60
-    t36 = t36 * t6
-    t3 = t1 * t3
-    t3 = t36 + t3
-    t3 = t5 - t3
-    t3 = qd[2] * t3
-    t3 = t31 + t3
-    t5 = t30 - t34
-    t31 = t5 * t24
-    t34 = t25 + t64
-    t27 = t27 * t34
-    t27 = t31 + t27
-    t16 = t16 * t9
-    t10 = t4 * t10
-    t10 = t16 + t10
-    t10 = t27 + t10
-    t10 = qd[3] * t10
-    t3 = t3 - t10
-    t10 = t30 - t66
-    t16 = t10 * t7
-    t17 = t25 - t17
-    t27 = t33 * t17
-    t16 = t16 + t27
-    t27 = t37 * t12
-    t31 = t11 * t15
-    t27 = t27 + t31
-    t16 = t16 - t27
-    t16 = qd[4] * t16
-    t3 = t3 + t16
-    t16 = t10 * t13
-    t21 = t21 * t17
-    t16 = t16 + t21
-    t21 = t22 * t39
-    t27 = t70 * t28
-    t21 = t21 + t27
-    t27 = t19 * t9
-    t23 = t4 * t23
-    t23 = t27 - t23
-    t21 = t21 + t23
-    t23 = t37 * t21
-    t22 = t70 * t22
-    t19 = t4 * t19
-    t19 = t22 + t19
-    t15 = t19 * t15
-    t15 = t23 + t15
-    t15 = t16 + t15
-    t15 = qd[5] * t15
-    t3 = t3 - t15
-    t15 = t38 * t8
-    t16 = t18 * t26
-    t15 = t15 + t16
-    t16 = t30 - t67
-    t22 = t16 * t20
-    t14 = t25 - t14
-    t23 = t29 * t14
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 - t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t26 = t12 * t26
+    t27 = t14 * t27
+    t26 = t26 - t27
+    t27 = t30 * qd[4]
+    t26 = t26 - t27
+    t27 = t17 * t26
+    t24 = t24 + t27
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 + t30
+    t30 = 0.107 * t24
+    t30 = t32 - t30
+    t28 = qd[6] - t28
+    t32 = 0.107 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 - t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.107 * t19
+    t16 = t16 - t23
+    t23 = 0.107 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 - t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
     t22 = t22 + t23
-    t15 = t15 - t22
-    t15 = qd[6] * t15
-    t3 = t3 + t15
-    t15 = t62 * t6
-    t1 = t1 * t49
-    t1 = t15 + t1
-    t15 = t40 * t48
-    t22 = t53 * t32
-    t15 = t15 + t22
-    t1 = t1 - t15
-    t1 = qd[2] * t1
-    t15 = t65 * t43
-    t22 = t41 * t58
-    t15 = t15 + t22
-    t0 = t0 * t25
-    t22 = t30 * t42
-    t0 = t0 - t22
-    t0 = t15 + t0
-    t0 = qd[1] * t0
-    t0 = t1 - t0
-    t1 = t51 * t9
-    t4 = t4 * t47
-    t1 = t1 + t4
-    t4 = t56 * t34
-    t5 = t5 * t44
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[3] * t1
-    t0 = t0 + t1
-    t1 = t61 * t12
-    t4 = t11 * t52
-    t1 = t1 + t4
-    t4 = t10 * t45
-    t5 = t59 * t17
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[4] * t1
-    t0 = t0 + t1
-    t1 = t61 * t21
-    t4 = t19 * t52
-    t1 = t1 + t4
-    t4 = t63 * t17
-    t5 = t10 * t50
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[5] * t1
-    t0 = t0 + t1
-    t1 = t16 * t46
-    t4 = t57 * t14
-    t1 = t1 + t4
-    t4 = t55 * t8
-    t5 = t18 * t54
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[6] * t1
-    t0 = t0 + t1
-    t1 = qd[2] * t6
-    t4 = qd[1] * t43
-    t1 = t1 - t4
-    t4 = qd[3] * t9
-    t1 = t1 + t4
-    t4 = qd[4] * t12
-    t1 = t1 + t4
-    t4 = qd[5] * t21
-    t1 = t1 + t4
-    t4 = qd[6] * t8
-    t1 = t1 - t4
-    t4 = qd[2] * t48
-    t5 = qd[1] * t42
-    t4 = t4 - t5
-    t5 = qd[3] * t44
-    t4 = t4 + t5
-    t5 = qd[4] * t45
-    t4 = t4 + t5
-    t5 = qd[5] * t50
-    t4 = t4 + t5
-    t5 = qd[6] * t46
-    t4 = t4 - t5
-    t5 = qd[4] * t7
-    t2 = qd[2] * t2
-    t6 = qd[3] * t24
-    t2 = t2 + t6
-    t2 = t5 - t2
-    t5 = qd[5] * t13
-    t2 = t2 - t5
-    t5 = qd[6] * t20
-    t2 = t2 - t5
-    _a = (t35, t3, t0, t1, t4, t2)
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = t23 * t30
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 - t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = t7 * t30
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = t3 * t16
+    t6 = t11 - t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 - t2
+    t4 = t4 * t29
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 + t0
+    t4 = t5 * t29
+    t0 = t0 - t4
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 + t3
+    t1 = t1 * t29
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _jdot_qd_panda_link8_constants = _constants(
-    -0.316, 0.0825, -0.0825, 0.384, 0.088, 0.107, 0.333)
+    -0.316, 0.0825, 0.384, -0.0825, 0.088, 0.107)
 
 
 def _jdot_qd_panda_link8_chunk(x, t, s, y):
@@ -4915,557 +3732,334 @@ def _jdot_qd_panda_link8_chunk(x, t, s, y):
     add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _jdot_qd_panda_link8_constants
+    k0, k1, k2, k3, k4, k5 = _jdot_qd_panda_link8_constants
     cos(q_0, t0)
-    sin(q_1, t1)
-    multiply(t1, qd_1, t2)
-    multiply(k0, t2, t3)
-    cos(q_2, t4)
-    cos(q_1, t5)
-    multiply(t5, qd_1, t6)
-    multiply(t4, t6, t7)
-    sin(q_2, t8)
-    multiply(t8, qd_2, t9)
-    multiply(t1, t9, t10)
-    subtract(t7, t10, t7)
-    multiply(k1, t7, t10)
-    subtract(t3, t10, t10)
-    cos(q_3, t11)
-    multiply(t11, qd_3, t12)
-    multiply(t5, t12, t13)
-    sin(q_3, t14)
-    multiply(t14, t2, t15)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
+    cos(q_4, t12)
+    multiply(t8, t12, t13)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
     subtract(t13, t15, t13)
-    multiply(t11, t7, t15)
-    multiply(t1, t4, t16)
-    multiply(t14, qd_3, t17)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
     multiply(t16, t17, t18)
-    subtract(t15, t18, t15)
-    subtract(t13, t15, t13)
-    multiply(k2, t13, t15)
-    multiply(t14, t7, t7)
-    multiply(t16, t12, t18)
-    add(t7, t18, t7)
-    multiply(t11, t2, t18)
-    multiply(t5, t17, t19)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
     add(t18, t19, t18)
-    subtract(t7, t18, t7)
-    multiply(k3, t7, t18)
-    add(t15, t18, t15)
-    add(t10, t15, t15)
-    cos(q_5, t18)
-    cos(q_4, t19)
-    multiply(t19, t13, t20)
-    multiply(t5, t14, t21)
-    multiply(t16, t11, t22)
-    subtract(t21, t22, t21)
-    sin(q_4, t22)
-    multiply(t22, qd_4, t23)
-    multiply(t21, t23, t24)
-    subtract(t20, t24, t20)
-    multiply(t8, t6, t24)
-    multiply(t4, qd_2, t25)
-    multiply(t1, t25, t26)
-    add(t24, t26, t24)
-    multiply(t22, t24, t26)
-    multiply(t1, t8, t27)
-    multiply(t19, qd_4, t28)
+    multiply(t1, qd_0, t19)
+    multiply(t9, qd_0, t20)
+    multiply(k0, t20, t21)
+    multiply(t19, t21, t22)
+    multiply(t3, t22, t23)
+    multiply(t19, qd_1, t24)
+    multiply(k0, t24, t25)
+    multiply(k0, qd_1, t26)
+    multiply(t19, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k1, t27, t28)
     multiply(t27, t28, t29)
-    add(t26, t29, t26)
-    add(t20, t26, t20)
-    multiply(t18, t20, t26)
-    multiply(t21, t19, t29)
-    multiply(t27, t22, t30)
-    add(t29, t30, t29)
-    sin(q_5, t30)
-    multiply(t30, qd_5, t31)
-    multiply(t29, t31, t32)
+    add(t19, qd_2, t19)
+    multiply(k1, t19, t30)
+    multiply(t19, t30, t31)
+    add(t29, t31, t29)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k1, t21, t32)
     subtract(t26, t32, t26)
-    multiply(t30, t7, t32)
-    multiply(t16, t14, t33)
-    multiply(t5, t11, t34)
-    add(t33, t34, t33)
-    multiply(t18, qd_5, t34)
-    multiply(t33, t34, t35)
-    add(t32, t35, t32)
-    add(t26, t32, t26)
-    multiply(k4, t26, t26)
-    add(t15, t26, t26)
-    multiply(t18, t7, t32)
-    multiply(t33, t31, t35)
-    subtract(t32, t35, t32)
-    multiply(t30, t20, t20)
-    multiply(t29, t34, t35)
-    add(t20, t35, t20)
-    subtract(t32, t20, t32)
-    multiply(k5, t32, t20)
-    subtract(t26, t20, t20)
-    multiply(t0, t20, t35)
-    multiply(k0, t5, t36)
-    subtract(k6, t36, t36)
-    multiply(k1, t16, t16)
-    subtract(t36, t16, t16)
-    multiply(k2, t21, t37)
-    multiply(k3, t33, t38)
-    add(t37, t38, t37)
-    add(t16, t37, t37)
-    multiply(t29, t18, t38)
-    multiply(t33, t30, t39)
-    add(t38, t39, t38)
-    multiply(k4, t38, t38)
-    add(t37, t38, t38)
-    multiply(t33, t18, t39)
-    multiply(t29, t30, t29)
-    subtract(t39, t29, t39)
-    multiply(k5, t39, t29)
-    subtract(t38, t29, t29)
-    subtract(t29, k6, t40)
-    sin(q_0, t41)
-    multiply(t41, qd_0, t42)
-    multiply(t40, t42, t43)
-    subtract(t35, t43, t35)
-    multiply(qd_1, t35, t35)
-    multiply(t0, qd_0, t43)
-    multiply(t5, t43, t44)
-    multiply(t41, t2, t45)
-    subtract(t44, t45, t44)
-    multiply(t4, t44, t45)
-    multiply(t41, t5, t46)
-    multiply(t46, t9, t47)
-    subtract(t45, t47, t45)
-    multiply(t0, t25, t47)
-    multiply(t8, t42, t48)
-    subtract(t47, t48, t47)
-    add(t45, t47, t45)
-    multiply(k1, t45, t47)
-    multiply(t1, t43, t48)
-    multiply(t41, t6, t49)
-    add(t48, t49, t48)
-    multiply(k0, t48, t49)
-    subtract(t47, t49, t47)
-    multiply(t11, t45, t50)
-    multiply(t46, t4, t51)
-    multiply(t0, t8, t52)
-    add(t51, t52, t51)
-    multiply(t51, t17, t52)
-    subtract(t50, t52, t50)
-    multiply(t14, t48, t52)
-    multiply(t41, t1, t53)
-    multiply(t53, t12, t54)
-    add(t52, t54, t52)
-    add(t50, t52, t50)
-    multiply(k2, t50, t52)
-    multiply(t11, t48, t54)
-    multiply(t53, t17, t55)
-    subtract(t54, t55, t54)
-    multiply(t14, t45, t45)
-    multiply(t51, t12, t55)
-    add(t45, t55, t45)
-    subtract(t54, t45, t54)
-    multiply(k3, t54, t45)
-    add(t52, t45, t52)
-    add(t47, t52, t52)
-    multiply(t19, t50, t45)
-    multiply(t51, t11, t55)
-    multiply(t53, t14, t56)
-    add(t55, t56, t55)
-    multiply(t55, t23, t56)
-    subtract(t45, t56, t45)
-    multiply(t0, t4, t56)
-    multiply(t46, t8, t57)
-    subtract(t56, t57, t56)
-    multiply(t56, t28, t57)
-    multiply(t4, t42, t58)
-    multiply(t0, t9, t59)
-    add(t58, t59, t58)
-    multiply(t8, t44, t44)
-    multiply(t46, t25, t46)
-    add(t44, t46, t44)
-    add(t58, t44, t58)
-    multiply(t22, t58, t44)
-    subtract(t57, t44, t57)
-    add(t45, t57, t45)
-    multiply(t18, t45, t44)
-    multiply(t55, t19, t46)
-    multiply(t56, t22, t57)
-    add(t46, t57, t46)
-    multiply(t46, t31, t57)
-    subtract(t44, t57, t44)
-    multiply(t30, t54, t57)
-    multiply(t53, t11, t59)
-    multiply(t51, t14, t60)
-    subtract(t59, t60, t59)
-    multiply(t59, t34, t60)
-    add(t57, t60, t57)
-    add(t44, t57, t44)
-    multiply(k4, t44, t44)
-    add(t52, t44, t44)
-    multiply(t18, t54, t57)
-    multiply(t59, t31, t60)
-    subtract(t57, t60, t57)
-    multiply(t30, t45, t45)
-    multiply(t46, t34, t60)
-    add(t45, t60, t45)
-    subtract(t57, t45, t57)
-    multiply(k5, t57, t45)
-    subtract(t44, t45, t45)
-    multiply(qd_0, t45, t60)
-    subtract(t35, t60, t35)
-    subtract(t29, t36, t36)
-    multiply(t36, t48, t60)
-    subtract(t20, t3, t3)
-    multiply(t53, t3, t61)
-    add(t60, t61, t60)
-    add(t45, t49, t49)
-    multiply(t5, t49, t61)
-    multiply(k1, t51, t51)
-    multiply(k0, t53, t62)
-    subtract(t51, t62, t51)
-    multiply(k2, t55, t63)
-    multiply(k3, t59, t64)
-    add(t63, t64, t63)
-    add(t51, t63, t63)
-    multiply(t46, t18, t64)
-    multiply(t59, t30, t65)
-    add(t64, t65, t64)
-    multiply(k4, t64, t64)
-    add(t63, t64, t64)
-    multiply(t59, t18, t65)
-    multiply(t46, t30, t46)
-    subtract(t65, t46, t65)
-    multiply(k5, t65, t46)
-    subtract(t64, t46, t46)
-    add(t46, t62, t62)
-    multiply(t62, t2, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_2, t60, t60)
-    add(t35, t60, t35)
-    subtract(t46, t51, t51)
-    multiply(t51, t24, t60)
-    subtract(t45, t47, t47)
-    multiply(t27, t47, t61)
-    add(t60, t61, t60)
-    subtract(t20, t10, t10)
-    multiply(t56, t10, t61)
-    subtract(t29, t16, t16)
-    multiply(t16, t58, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_3, t60, t60)
-    add(t35, t60, t35)
-    subtract(t29, t37, t37)
-    multiply(t37, t54, t60)
-    subtract(t20, t15, t15)
-    multiply(t59, t15, t61)
-    add(t60, t61, t60)
-    subtract(t46, t63, t63)
-    multiply(t63, t7, t61)
-    subtract(t45, t52, t52)
-    multiply(t33, t52, t66)
-    add(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_4, t60, t60)
-    add(t35, t60, t35)
-    multiply(t19, t24, t60)
-    multiply(t27, t23, t61)
-    subtract(t60, t61, t60)
-    multiply(t22, t13, t13)
-    multiply(t21, t28, t61)
-    add(t13, t61, t13)
-    subtract(t60, t13, t60)
-    multiply(t63, t60, t13)
-    multiply(t27, t19, t61)
-    multiply(t21, t22, t21)
-    subtract(t61, t21, t61)
-    multiply(t61, t52, t21)
-    add(t13, t21, t13)
-    multiply(t56, t19, t21)
-    multiply(t55, t22, t66)
-    subtract(t21, t66, t21)
-    multiply(t21, t15, t66)
-    multiply(t19, t58, t67)
-    multiply(t56, t23, t68)
-    add(t67, t68, t67)
-    multiply(t22, t50, t50)
-    multiply(t55, t28, t55)
-    add(t50, t55, t50)
-    add(t67, t50, t67)
-    multiply(t37, t67, t50)
-    subtract(t66, t50, t66)
-    subtract(t13, t66, t13)
-    multiply(qd_5, t13, t13)
-    add(t35, t13, t35)
-    subtract(t46, t64, t64)
-    multiply(t64, t32, t13)
-    subtract(t45, t44, t44)
-    multiply(t39, t44, t50)
-    add(t13, t50, t13)
-    subtract(t29, t38, t29)
-    multiply(t29, t57, t38)
-    subtract(t20, t26, t26)
-    multiply(t65, t26, t50)
-    add(t38, t50, t38)
-    subtract(t13, t38, t13)
-    multiply(qd_6, t13, t13)
-    add(t35, t13, a_0)
-    multiply(t0, t6, t6)
-    multiply(t1, t42, t13)
-    subtract(t6, t13, t6)
-    multiply(t14, t6, t13)
-    multiply(t0, t1, t1)
-    multiply(t1, t12, t35)
-    add(t13, t35, t13)
-    multiply(t5, t42, t35)
-    multiply(t0, t2, t38)
-    add(t35, t38, t35)
-    multiply(t4, t35, t38)
-    multiply(t0, t5, t50)
-    multiply(t50, t9, t55)
-    add(t38, t55, t38)
-    multiply(t8, t43, t55)
-    multiply(t41, t25, t66)
-    add(t55, t66, t55)
-    add(t38, t55, t38)
-    multiply(t11, t38, t55)
-    multiply(t50, t4, t66)
-    multiply(t41, t8, t68)
-    subtract(t66, t68, t66)
-    multiply(t66, t17, t68)
-    add(t55, t68, t55)
-    subtract(t13, t55, t13)
-    multiply(k2, t13, t55)
-    multiply(t11, t6, t68)
-    multiply(t1, t17, t17)
-    subtract(t68, t17, t68)
-    multiply(t66, t12, t12)
-    multiply(t14, t38, t17)
-    subtract(t12, t17, t12)
-    subtract(t68, t12, t68)
-    multiply(k3, t68, t12)
-    add(t55, t12, t55)
-    multiply(k1, t38, t38)
-    multiply(k0, t6, t12)
-    add(t38, t12, t38)
-    subtract(t55, t38, t55)
-    multiply(t19, t13, t17)
-    multiply(t66, t11, t69)
-    multiply(t1, t14, t70)
-    add(t69, t70, t69)
-    multiply(t69, t23, t70)
-    subtract(t17, t70, t17)
-    multiply(t50, t25, t25)
-    multiply(t8, t35, t35)
-    subtract(t25, t35, t25)
-    multiply(t4, t43, t35)
-    multiply(t41, t9, t9)
-    subtract(t35, t9, t35)
-    add(t25, t35, t25)
-    multiply(t22, t25, t9)
-    multiply(t50, t8, t50)
-    multiply(t41, t4, t4)
-    add(t50, t4, t50)
-    multiply(t50, t28, t4)
-    add(t9, t4, t9)
-    subtract(t17, t9, t17)
-    multiply(t18, t17, t4)
-    multiply(t69, t19, t8)
-    multiply(t50, t22, t9)
-    subtract(t8, t9, t8)
-    multiply(t8, t31, t9)
-    subtract(t4, t9, t4)
-    multiply(t30, t68, t9)
-    multiply(t1, t11, t11)
-    multiply(t66, t14, t14)
-    subtract(t11, t14, t11)
-    multiply(t11, t34, t14)
-    add(t9, t14, t9)
-    add(t4, t9, t4)
-    multiply(k4, t4, t4)
-    add(t55, t4, t4)
-    multiply(t18, t68, t9)
-    multiply(t11, t31, t31)
-    subtract(t9, t31, t9)
-    multiply(t30, t17, t17)
-    multiply(t8, t34, t34)
-    add(t17, t34, t17)
-    subtract(t9, t17, t9)
-    multiply(k5, t9, t14)
-    subtract(t4, t14, t14)
-    multiply(qd_0, t14, t17)
-    multiply(t40, t43, t40)
-    multiply(t41, t20, t20)
-    add(t40, t20, t40)
-    multiply(qd_1, t40, t40)
-    add(t17, t40, t17)
-    add(t14, t12, t12)
-    multiply(t5, t12, t5)
-    multiply(k1, t66, t66)
-    multiply(k0, t1, t20)
-    subtract(t66, t20, t66)
-    multiply(k2, t69, t31)
-    multiply(k3, t11, t34)
-    add(t31, t34, t31)
-    add(t66, t31, t31)
-    multiply(t8, t18, t34)
-    multiply(t11, t30, t35)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    multiply(k2, t21, t30)
+    add(t29, t30, t29)
+    multiply(t7, t19, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t19, t19)
+    add(t32, t19, t32)
+    multiply(k2, t32, t19)
+    multiply(k3, t30, t33)
+    subtract(t19, t33, t19)
+    multiply(t30, t19, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k3, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t27, qd_2, t27)
+    multiply(t3, t24, t24)
+    subtract(t27, t24, t27)
+    multiply(t7, t27, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t11, t20, t36)
+    subtract(t24, t36, t24)
+    multiply(t30, qd_3, t36)
+    add(t24, t36, t24)
+    multiply(k2, t24, t36)
+    multiply(t11, t27, t27)
+    multiply(t7, t20, t37)
+    add(t27, t37, t27)
+    multiply(t32, qd_3, t37)
+    add(t27, t37, t27)
+    multiply(k3, t27, t37)
+    add(t36, t37, t36)
+    multiply(t31, t28, t31)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    multiply(k1, t20, t20)
+    add(t22, t20, t22)
+    subtract(t31, t22, t31)
+    subtract(t36, t31, t36)
+    multiply(t32, t35, t35)
+    multiply(k2, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t36, t35, t36)
+    multiply(t14, t36, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k3, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t19, t19)
+    add(t20, t19, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t19)
+    add(t22, t19, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t19)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t19, t23, t19)
+    multiply(k4, t19, t23)
+    multiply(t19, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k4, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t36, t36)
+    add(t29, t36, t29)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
     add(t34, t35, t34)
-    multiply(k4, t34, t34)
-    add(t31, t34, t34)
-    multiply(t11, t18, t18)
-    multiply(t8, t30, t8)
-    subtract(t18, t8, t18)
-    multiply(k5, t18, t8)
-    subtract(t34, t8, t8)
-    add(t8, t20, t20)
-    multiply(t20, t2, t30)
-    subtract(t5, t30, t5)
-    multiply(t36, t6, t36)
-    multiply(t1, t3, t3)
-    add(t36, t3, t36)
-    subtract(t5, t36, t5)
-    multiply(qd_2, t5, t5)
-    add(t17, t5, t17)
-    subtract(t8, t66, t66)
-    multiply(t66, t24, t3)
-    add(t14, t38, t38)
-    multiply(t27, t38, t27)
-    add(t3, t27, t3)
-    multiply(t16, t25, t16)
-    multiply(t50, t10, t10)
-    add(t16, t10, t16)
-    add(t3, t16, t3)
-    multiply(qd_3, t3, t3)
-    subtract(t17, t3, t17)
-    subtract(t8, t31, t31)
-    multiply(t31, t7, t3)
-    subtract(t14, t55, t55)
-    multiply(t33, t55, t33)
-    add(t3, t33, t3)
-    multiply(t37, t68, t5)
-    multiply(t11, t15, t10)
-    add(t5, t10, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t17, t3, t17)
-    multiply(t31, t60, t3)
-    multiply(t61, t55, t61)
-    add(t3, t61, t3)
-    multiply(t22, t13, t13)
-    multiply(t69, t28, t28)
-    add(t13, t28, t13)
-    multiply(t19, t25, t5)
-    multiply(t50, t23, t23)
-    subtract(t5, t23, t5)
-    add(t13, t5, t13)
-    multiply(t37, t13, t37)
-    multiply(t69, t22, t69)
-    multiply(t50, t19, t19)
-    add(t69, t19, t69)
-    multiply(t69, t15, t15)
-    add(t37, t15, t37)
-    add(t3, t37, t3)
-    multiply(qd_5, t3, t3)
-    subtract(t17, t3, t17)
-    multiply(t29, t9, t29)
-    multiply(t18, t26, t26)
-    add(t29, t26, t29)
-    subtract(t8, t34, t34)
-    multiply(t34, t32, t3)
-    subtract(t14, t4, t4)
-    multiply(t39, t4, t39)
-    add(t3, t39, t3)
-    subtract(t29, t3, t29)
-    multiply(qd_6, t29, t29)
-    add(t17, t29, a_1)
-    multiply(t62, t6, t62)
-    multiply(t1, t49, t1)
-    add(t62, t1, t62)
-    multiply(t20, t48, t20)
-    multiply(t53, t12, t53)
-    add(t20, t53, t20)
-    subtract(t62, t20, t62)
-    multiply(qd_2, t62, t62)
-    multiply(t46, t43, t46)
-    multiply(t41, t45, t41)
-    add(t46, t41, t46)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    multiply(t15, t27, t35)
+    add(t32, t35, t32)
+    multiply(t15, t20, t35)
+    multiply(t4, t30, t30)
+    add(t35, t30, t35)
+    multiply(t35, qd_5, t30)
+    add(t32, t30, t32)
+    multiply(k4, t32, t30)
+    add(t29, t30, t29)
+    multiply(t35, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t15, t34, t34)
+    multiply(t4, t27, t27)
+    subtract(t34, t27, t34)
+    multiply(t19, qd_5, t27)
+    add(t34, t27, t34)
+    multiply(t2, t34, t27)
+    multiply(t12, t21, t21)
+    multiply(t14, t24, t24)
+    subtract(t21, t24, t21)
+    multiply(t20, qd_4, t20)
+    subtract(t21, t20, t21)
+    multiply(t17, t21, t20)
+    add(t27, t20, t27)
+    multiply(t17, t35, t20)
+    multiply(t2, t28, t24)
+    add(t20, t24, t20)
+    multiply(t20, qd_6, t24)
+    add(t27, t24, t27)
+    multiply(k5, t27, t24)
+    subtract(t25, t24, t25)
+    subtract(qd_6, t19, t19)
+    multiply(k5, t20, t24)
+    multiply(t19, t24, t30)
+    add(t25, t30, t25)
+    multiply(t18, t25, t30)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t21, t16)
+    subtract(t34, t16, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t35, t16)
+    subtract(t28, t16, t28)
+    multiply(t28, qd_6, t16)
+    add(t34, t16, t34)
+    multiply(k5, t34, t16)
+    subtract(t29, t16, t29)
+    multiply(k5, t28, t16)
+    multiply(t19, t16, t19)
+    add(t29, t19, t29)
+    multiply(t8, t29, t19)
+    add(t30, t19, t30)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k4, t21, t21)
+    subtract(t26, t21, t26)
+    multiply(t35, t23, t35)
+    add(t26, t35, t26)
+    multiply(t20, t24, t20)
+    multiply(t28, t16, t28)
+    add(t20, t28, t20)
+    add(t26, t20, t26)
+    multiply(t10, t26, t13)
+    add(t30, t13, a_0)
+    multiply(t5, t1, t13)
+    multiply(t13, t3, t16)
+    multiply(t0, t6, t19)
+    add(t16, t19, t16)
+    multiply(t16, t7, t19)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t20)
+    add(t19, t20, t19)
+    multiply(t19, t12, t20)
+    multiply(t0, t3, t0)
+    multiply(t13, t6, t13)
+    subtract(t0, t13, t0)
+    multiply(t0, t14, t13)
+    add(t20, t13, t20)
+    multiply(t20, t15, t13)
+    multiply(t5, t7, t5)
+    multiply(t16, t11, t16)
+    subtract(t5, t16, t5)
+    multiply(t5, t4, t16)
+    add(t13, t16, t13)
+    multiply(t13, t17, t16)
+    multiply(t0, t12, t0)
+    multiply(t19, t14, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t2, t19)
+    subtract(t16, t19, t16)
+    multiply(t16, t25, t19)
+    multiply(t13, t2, t13)
+    multiply(t0, t17, t0)
+    add(t13, t0, t13)
+    multiply(t13, t29, t0)
+    subtract(t19, t0, t19)
+    multiply(t5, t15, t5)
+    multiply(t20, t4, t20)
+    subtract(t5, t20, t5)
+    multiply(t5, t26, t0)
+    add(t19, t0, a_1)
+    multiply(t1, t11, t0)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t12, t19)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t19, t6, t19)
+    multiply(t19, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
     multiply(t0, t14, t0)
-    multiply(t8, t42, t8)
-    subtract(t0, t8, t0)
-    add(t46, t0, t46)
-    multiply(qd_1, t46, t46)
-    subtract(t62, t46, t62)
-    multiply(t51, t25, t51)
-    multiply(t50, t47, t50)
-    add(t51, t50, t51)
-    multiply(t56, t38, t56)
-    multiply(t66, t58, t66)
-    subtract(t56, t66, t56)
-    add(t51, t56, t51)
-    multiply(qd_3, t51, t51)
-    add(t62, t51, t62)
-    multiply(t63, t68, t0)
-    multiply(t11, t52, t11)
-    add(t0, t11, t0)
-    multiply(t31, t54, t1)
-    multiply(t59, t55, t59)
-    add(t1, t59, t1)
-    subtract(t0, t1, t0)
-    multiply(qd_4, t0, t0)
-    add(t62, t0, t62)
-    multiply(t63, t13, t63)
-    multiply(t69, t52, t69)
-    add(t63, t69, t63)
-    multiply(t21, t55, t21)
-    multiply(t31, t67, t31)
-    subtract(t21, t31, t21)
-    add(t63, t21, t63)
-    multiply(qd_5, t63, t63)
-    add(t62, t63, t62)
-    multiply(t34, t57, t34)
-    multiply(t65, t4, t65)
-    add(t34, t65, t34)
-    multiply(t64, t9, t64)
-    multiply(t18, t44, t18)
-    add(t64, t18, t64)
-    subtract(t34, t64, t34)
-    multiply(qd_6, t34, t34)
-    add(t62, t34, a_2)
-    multiply(qd_2, t6, t6)
-    multiply(qd_1, t43, t43)
-    subtract(t6, t43, t6)
-    multiply(qd_3, t25, t25)
-    add(t6, t25, t6)
-    multiply(qd_4, t68, t68)
-    add(t6, t68, t6)
-    multiply(qd_5, t13, t13)
-    add(t6, t13, t6)
-    multiply(qd_6, t9, t9)
-    subtract(t6, t9, a_3)
-    multiply(qd_2, t48, t48)
-    multiply(qd_1, t42, t42)
-    subtract(t48, t42, t48)
-    multiply(qd_3, t58, t58)
-    add(t48, t58, t48)
-    multiply(qd_4, t54, t54)
-    add(t48, t54, t48)
-    multiply(qd_5, t67, t67)
-    add(t48, t67, t48)
-    multiply(qd_6, t57, t57)
-    subtract(t48, t57, a_4)
-    multiply(qd_4, t7, t7)
-    multiply(qd_2, t2, t2)
-    multiply(qd_3, t24, t24)
-    add(t2, t24, t2)
-    subtract(t7, t2, t7)
-    multiply(qd_5, t60, t60)
-    subtract(t7, t60, t7)
-    multiply(qd_6, t32, t32)
-    subtract(t7, t32, a_5)
+    subtract(t9, t0, t9)
+    multiply(t9, t2, t0)
+    subtract(t1, t0, t1)
+    multiply(t1, t25, t25)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(t6, t29, t29)
+    subtract(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t19, t4, t19)
+    subtract(t3, t19, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t18, t34, t18)
+    multiply(t8, t27, t8)
+    subtract(t18, t8, t18)
+    multiply(t10, t32, t10)
+    subtract(t18, t10, a_3)
+    multiply(t16, t34, t16)
+    multiply(t13, t27, t13)
+    add(t16, t13, t16)
+    multiply(t5, t32, t5)
+    subtract(t16, t5, a_4)
+    multiply(t1, t34, t1)
+    multiply(t6, t27, t6)
+    add(t1, t6, t1)
+    multiply(t3, t32, t3)
+    subtract(t1, t3, a_5)
 
 
 def frame_acceleration_panda_link8(q, qd, qdd):
@@ -5475,13 +4069,13 @@ def frame_acceleration_panda_link8(q, qd, qdd):
     in  qd [7]
     in  qdd [7]
     out a [6]
-    671 ops: 374 mul, 285 add, 0 div, 12 trig
+    340 ops: 202 mul, 124 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     qdd = _array(qdd, 7, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_panda_link8_chunk, (q, qd, qdd), 81, ((6,),))
+        return _batch(_frame_acceleration_panda_link8_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -5489,681 +4083,350 @@ def frame_acceleration_panda_link8(q, qd, qdd):
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = cos(q[1])
-    t2 = (-0.316) * t1
-    t2 = 0.333 - t2
-    t3 = sin(q[1])
-    t4 = cos(q[2])
-    t5 = t3 * t4
-    t6 = 0.0825 * t5
-    t6 = t2 - t6
-    t7 = sin(q[3])
-    t8 = t1 * t7
-    t9 = cos(q[3])
-    t10 = t5 * t9
-    t8 = t8 - t10
-    t10 = (-0.0825) * t8
-    t11 = t5 * t7
-    t12 = t1 * t9
-    t11 = t11 + t12
-    t12 = 0.384 * t11
-    t10 = t10 + t12
-    t10 = t6 + t10
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
     t12 = cos(q[4])
     t13 = t8 * t12
-    t14 = sin(q[2])
-    t15 = t3 * t14
-    t16 = sin(q[4])
-    t17 = t15 * t16
-    t13 = t13 + t17
-    t17 = cos(q[5])
-    t18 = t13 * t17
-    t19 = sin(q[5])
-    t20 = t11 * t19
-    t18 = t18 + t20
-    t18 = 0.088 * t18
-    t18 = t10 + t18
-    t20 = t11 * t17
-    t21 = t13 * t19
-    t20 = t20 - t21
-    t21 = 0.107 * t20
-    t21 = t18 - t21
-    t22 = t21 - 0.333
-    t23 = t0 * t22
-    t23 = t23 * qdd[1]
-    t24 = sin(q[0])
-    t25 = t24 * t1
-    t26 = t25 * t4
-    t27 = t0 * t14
-    t26 = t26 + t27
-    t27 = 0.0825 * t26
-    t28 = t24 * t3
-    t29 = (-0.316) * t28
-    t27 = t27 - t29
-    t30 = t26 * t9
-    t31 = t28 * t7
-    t30 = t30 + t31
-    t31 = (-0.0825) * t30
-    t32 = t28 * t9
-    t33 = t26 * t7
-    t32 = t32 - t33
-    t33 = 0.384 * t32
-    t31 = t31 + t33
-    t31 = t27 + t31
-    t33 = t30 * t12
-    t34 = t0 * t4
-    t35 = t25 * t14
-    t34 = t34 - t35
-    t35 = t34 * t16
-    t33 = t33 + t35
-    t35 = t33 * t17
-    t36 = t32 * t19
-    t35 = t35 + t36
-    t35 = 0.088 * t35
-    t35 = t31 + t35
-    t36 = t32 * t17
-    t37 = t33 * t19
-    t36 = t36 - t37
-    t37 = 0.107 * t36
-    t37 = t35 - t37
-    t38 = t37 * qdd[0]
-    t23 = t23 - t38
-    t2 = t21 - t2
-    t38 = t28 * t2
-    t29 = t37 + t29
-    t39 = t1 * t29
-    t38 = t38 - t39
-    t38 = t38 * qdd[2]
-    t23 = t23 + t38
-    t27 = t37 - t27
-    t38 = t15 * t27
-    t6 = t21 - t6
-    t39 = t34 * t6
-    t38 = t38 - t39
-    t38 = t38 * qdd[3]
-    t23 = t23 + t38
-    t10 = t21 - t10
-    t38 = t32 * t10
-    t31 = t37 - t31
-    t39 = t11 * t31
-    t38 = t38 - t39
-    t38 = t38 * qdd[4]
-    t23 = t23 + t38
-    t38 = t15 * t12
-    t39 = t8 * t16
-    t38 = t38 - t39
-    t39 = t38 * t31
-    t40 = t34 * t12
-    t41 = t30 * t16
-    t40 = t40 - t41
-    t41 = t40 * t10
-    t39 = t39 - t41
-    t39 = t39 * qdd[5]
-    t23 = t23 + t39
-    t35 = t37 - t35
-    t39 = t20 * t35
-    t18 = t21 - t18
-    t21 = t36 * t18
-    t21 = t39 - t21
-    t21 = t21 * qdd[6]
-    t21 = t23 + t21
-    t23 = t3 * qd[1]
-    t39 = (-0.316) * t23
-    t41 = t1 * qd[1]
-    t42 = t4 * t41
-    t43 = t14 * qd[2]
-    t44 = t3 * t43
-    t42 = t42 - t44
-    t44 = 0.0825 * t42
-    t44 = t39 - t44
-    t45 = t9 * qd[3]
-    t46 = t1 * t45
-    t47 = t7 * t23
-    t46 = t46 - t47
-    t47 = t9 * t42
-    t48 = t7 * qd[3]
-    t49 = t5 * t48
-    t47 = t47 - t49
-    t46 = t46 - t47
-    t47 = (-0.0825) * t46
-    t42 = t7 * t42
-    t5 = t5 * t45
-    t5 = t42 + t5
-    t42 = t9 * t23
-    t49 = t1 * t48
-    t42 = t42 + t49
-    t5 = t5 - t42
-    t42 = 0.384 * t5
-    t42 = t47 + t42
-    t42 = t44 + t42
-    t47 = t12 * t46
-    t49 = t16 * qd[4]
-    t50 = t8 * t49
-    t47 = t47 - t50
-    t50 = t14 * t41
-    t51 = t4 * qd[2]
-    t52 = t3 * t51
-    t50 = t50 + t52
-    t52 = t16 * t50
-    t53 = t12 * qd[4]
-    t54 = t15 * t53
-    t52 = t52 + t54
-    t47 = t47 + t52
-    t52 = t17 * t47
-    t54 = t19 * qd[5]
-    t55 = t13 * t54
-    t52 = t52 - t55
-    t55 = t19 * t5
-    t56 = t17 * qd[5]
-    t57 = t11 * t56
-    t55 = t55 + t57
-    t52 = t52 + t55
-    t52 = 0.088 * t52
-    t52 = t42 + t52
-    t55 = t17 * t5
-    t57 = t11 * t54
-    t55 = t55 - t57
-    t47 = t19 * t47
-    t13 = t13 * t56
-    t13 = t47 + t13
-    t13 = t55 - t13
-    t47 = 0.107 * t13
-    t47 = t52 - t47
-    t55 = t0 * t47
-    t57 = t24 * qd[0]
-    t58 = t22 * t57
-    t55 = t55 - t58
-    t55 = qd[1] * t55
-    t58 = t0 * qd[0]
-    t59 = t1 * t58
-    t60 = t24 * t23
-    t59 = t59 - t60
-    t60 = t4 * t59
-    t61 = t25 * t43
-    t60 = t60 - t61
-    t61 = t0 * t51
-    t62 = t14 * t57
-    t61 = t61 - t62
-    t60 = t60 + t61
-    t61 = 0.0825 * t60
-    t62 = t3 * t58
-    t63 = t24 * t41
-    t62 = t62 + t63
-    t63 = (-0.316) * t62
-    t61 = t61 - t63
-    t64 = t9 * t60
-    t65 = t26 * t48
-    t64 = t64 - t65
-    t65 = t7 * t62
-    t66 = t28 * t45
-    t65 = t65 + t66
-    t64 = t64 + t65
-    t65 = (-0.0825) * t64
-    t66 = t9 * t62
-    t67 = t28 * t48
-    t66 = t66 - t67
-    t60 = t7 * t60
-    t26 = t26 * t45
-    t26 = t60 + t26
-    t26 = t66 - t26
-    t60 = 0.384 * t26
-    t60 = t65 + t60
-    t60 = t61 + t60
-    t65 = t12 * t64
-    t66 = t30 * t49
-    t65 = t65 - t66
-    t66 = t34 * t53
-    t67 = t4 * t57
-    t68 = t0 * t43
-    t67 = t67 + t68
-    t59 = t14 * t59
-    t25 = t25 * t51
-    t25 = t59 + t25
-    t25 = t67 + t25
-    t59 = t16 * t25
-    t59 = t66 - t59
-    t59 = t65 + t59
-    t65 = t17 * t59
-    t66 = t33 * t54
-    t65 = t65 - t66
-    t66 = t19 * t26
-    t67 = t32 * t56
-    t66 = t66 + t67
-    t65 = t65 + t66
-    t65 = 0.088 * t65
-    t65 = t60 + t65
-    t66 = t17 * t26
-    t67 = t32 * t54
-    t66 = t66 - t67
-    t59 = t19 * t59
-    t33 = t33 * t56
-    t33 = t59 + t33
-    t33 = t66 - t33
-    t59 = 0.107 * t33
-    t59 = t65 - t59
-    t66 = qd[0] * t59
-    t55 = t55 - t66
-    t66 = t2 * t62
-    t39 = t47 - t39
-    t67 = t28 * t39
-    t66 = t66 + t67
-    t63 = t59 + t63
-    t67 = t1 * t63
-    t68 = t29 * t23
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[2] * t66
-    t55 = t55 + t66
-    t66 = t27 * t50
-    t61 = t59 - t61
-    t67 = t15 * t61
-    t66 = t66 + t67
-    t44 = t47 - t44
-    t67 = t34 * t44
-    t68 = t6 * t25
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[3] * t66
-    t55 = t55 + t66
-    t66 = t10 * t26
-    t42 = t47 - t42
-    t67 = t32 * t42
-    t66 = t66 + t67
-    t67 = t31 * t5
-    t60 = t59 - t60
-    t68 = t11 * t60
-    t67 = t67 + t68
-    t66 = t66 - t67
-    t66 = qd[4] * t66
-    t55 = t55 + t66
-    t66 = t12 * t50
-    t67 = t15 * t49
-    t66 = t66 - t67
-    t46 = t16 * t46
-    t8 = t8 * t53
-    t8 = t46 + t8
-    t8 = t66 - t8
-    t46 = t31 * t8
-    t66 = t38 * t60
-    t46 = t46 + t66
-    t66 = t40 * t42
-    t67 = t12 * t25
-    t68 = t34 * t49
-    t67 = t67 + t68
-    t64 = t16 * t64
-    t30 = t30 * t53
-    t30 = t64 + t30
-    t30 = t67 + t30
-    t64 = t10 * t30
-    t64 = t66 - t64
-    t46 = t46 - t64
-    t46 = qd[5] * t46
-    t46 = t55 + t46
-    t55 = t35 * t13
-    t64 = t59 - t65
-    t65 = t20 * t64
-    t55 = t55 + t65
-    t65 = t18 * t33
-    t52 = t47 - t52
-    t66 = t36 * t52
-    t65 = t65 + t66
-    t55 = t55 - t65
-    t55 = qd[6] * t55
-    t46 = t46 + t55
-    t21 = t21 + t46
-    t46 = t0 * t1
-    t55 = t46 * t4
-    t65 = t24 * t14
-    t55 = t55 - t65
-    t65 = 0.0825 * t55
-    t66 = t0 * t3
-    t67 = (-0.316) * t66
-    t65 = t65 - t67
-    t68 = t55 * t9
-    t69 = t66 * t7
-    t68 = t68 + t69
-    t69 = (-0.0825) * t68
-    t70 = t66 * t9
-    t71 = t55 * t7
-    t70 = t70 - t71
-    t71 = 0.384 * t70
-    t69 = t69 + t71
-    t69 = t65 + t69
-    t71 = t68 * t12
-    t72 = t46 * t14
-    t73 = t24 * t4
-    t72 = t72 + t73
-    t73 = t72 * t16
-    t71 = t71 - t73
-    t73 = t71 * t17
-    t74 = t70 * t19
-    t73 = t73 + t74
-    t73 = 0.088 * t73
-    t73 = t69 + t73
-    t74 = t70 * t17
-    t75 = t71 * t19
-    t74 = t74 - t75
-    t75 = 0.107 * t74
-    t75 = t73 - t75
-    t76 = t75 * qdd[0]
-    t77 = t24 * t22
-    t77 = t77 * qdd[1]
-    t76 = t76 + t77
-    t67 = t75 + t67
-    t77 = t1 * t67
-    t78 = t66 * t2
-    t77 = t77 - t78
-    t77 = t77 * qdd[2]
-    t76 = t76 + t77
-    t65 = t75 - t65
-    t77 = t15 * t65
-    t78 = t72 * t6
-    t77 = t77 + t78
-    t77 = t77 * qdd[3]
-    t76 = t76 - t77
-    t69 = t75 - t69
-    t77 = t11 * t69
-    t78 = t70 * t10
-    t77 = t77 - t78
-    t77 = t77 * qdd[4]
-    t76 = t76 + t77
-    t77 = t38 * t69
-    t78 = t68 * t16
-    t79 = t72 * t12
-    t78 = t78 + t79
-    t79 = t78 * t10
-    t77 = t77 + t79
-    t77 = t77 * qdd[5]
-    t76 = t76 - t77
-    t77 = t74 * t18
-    t73 = t75 - t73
-    t79 = t20 * t73
-    t77 = t77 - t79
-    t77 = t77 * qdd[6]
-    t76 = t76 + t77
-    t41 = t0 * t41
-    t3 = t3 * t57
-    t3 = t41 - t3
-    t41 = t7 * t3
-    t77 = t66 * t45
-    t41 = t41 + t77
-    t77 = t1 * t57
-    t79 = t0 * t23
-    t77 = t77 + t79
-    t79 = t4 * t77
-    t80 = t46 * t43
-    t79 = t79 + t80
-    t80 = t14 * t58
-    t81 = t24 * t51
-    t80 = t80 + t81
-    t79 = t79 + t80
-    t80 = t9 * t79
-    t81 = t55 * t48
-    t80 = t80 + t81
-    t41 = t41 - t80
-    t80 = (-0.0825) * t41
-    t9 = t9 * t3
-    t48 = t66 * t48
-    t9 = t9 - t48
-    t45 = t55 * t45
-    t7 = t7 * t79
-    t7 = t45 - t7
-    t7 = t9 - t7
-    t9 = 0.384 * t7
-    t9 = t80 + t9
-    t45 = 0.0825 * t79
-    t48 = (-0.316) * t3
-    t45 = t45 + t48
-    t9 = t9 - t45
-    t55 = t12 * t41
-    t79 = t68 * t49
-    t55 = t55 - t79
-    t46 = t46 * t51
-    t14 = t14 * t77
-    t14 = t46 - t14
-    t4 = t4 * t58
-    t43 = t24 * t43
-    t4 = t4 - t43
-    t4 = t14 + t4
-    t14 = t16 * t4
-    t43 = t72 * t53
-    t14 = t14 + t43
-    t14 = t55 - t14
-    t43 = t17 * t14
-    t46 = t71 * t54
-    t43 = t43 - t46
-    t46 = t19 * t7
-    t51 = t70 * t56
-    t46 = t46 + t51
-    t43 = t43 + t46
-    t43 = 0.088 * t43
-    t43 = t9 + t43
-    t17 = t17 * t7
-    t46 = t70 * t54
-    t17 = t17 - t46
-    t14 = t19 * t14
-    t19 = t71 * t56
-    t14 = t14 + t19
-    t14 = t17 - t14
-    t17 = 0.107 * t14
-    t17 = t43 - t17
-    t19 = qd[0] * t17
-    t22 = t22 * t58
-    t46 = t24 * t47
-    t22 = t22 + t46
-    t22 = qd[1] * t22
-    t19 = t19 + t22
-    t22 = t17 + t48
-    t46 = t1 * t22
-    t47 = t67 * t23
-    t46 = t46 - t47
-    t2 = t2 * t3
-    t39 = t66 * t39
-    t2 = t2 + t39
-    t2 = t46 - t2
-    t2 = qd[2] * t2
-    t2 = t19 + t2
-    t19 = t65 * t50
-    t39 = t17 + t45
-    t45 = t15 * t39
-    t19 = t19 + t45
-    t6 = t6 * t4
-    t44 = t72 * t44
-    t6 = t6 + t44
-    t6 = t19 + t6
-    t6 = qd[3] * t6
-    t2 = t2 - t6
-    t6 = t69 * t5
-    t9 = t17 - t9
-    t19 = t11 * t9
-    t6 = t6 + t19
-    t19 = t10 * t7
-    t44 = t70 * t42
-    t19 = t19 + t44
-    t6 = t6 - t19
-    t6 = qd[4] * t6
-    t2 = t2 + t6
-    t6 = t69 * t8
-    t19 = t38 * t9
-    t6 = t6 + t19
-    t16 = t16 * t41
-    t19 = t68 * t53
-    t16 = t16 + t19
-    t12 = t12 * t4
-    t19 = t72 * t49
-    t12 = t12 - t19
-    t12 = t16 + t12
-    t10 = t10 * t12
-    t16 = t78 * t42
-    t10 = t10 + t16
-    t6 = t6 + t10
-    t6 = qd[5] * t6
-    t2 = t2 - t6
-    t6 = t18 * t14
-    t10 = t74 * t52
-    t6 = t6 + t10
-    t10 = t73 * t13
-    t16 = t17 - t43
-    t18 = t20 * t16
-    t10 = t10 + t18
-    t6 = t6 - t10
-    t6 = qd[6] * t6
-    t2 = t2 + t6
-    t2 = t76 + t2
-    t6 = t66 * t29
-    t10 = t28 * t67
-    t6 = t6 - t10
-    t6 = t6 * qdd[2]
-    t10 = t24 * t37
-    t18 = t0 * t75
-    t10 = t10 + t18
-    t10 = t10 * qdd[1]
-    t6 = t6 - t10
-    t10 = t72 * t27
-    t18 = t34 * t65
-    t10 = t10 + t18
-    t10 = t10 * qdd[3]
-    t6 = t6 + t10
-    t10 = t70 * t31
-    t18 = t32 * t69
-    t10 = t10 - t18
-    t10 = t10 * qdd[4]
-    t6 = t6 + t10
-    t10 = t78 * t31
-    t18 = t40 * t69
-    t10 = t10 + t18
-    t10 = t10 * qdd[5]
-    t6 = t6 + t10
-    t10 = t36 * t73
-    t18 = t74 * t35
-    t10 = t10 - t18
-    t10 = t10 * qdd[6]
-    t6 = t6 + t10
-    t10 = t29 * t3
-    t18 = t66 * t63
-    t10 = t10 + t18
-    t18 = t67 * t62
-    t19 = t28 * t22
-    t18 = t18 + t19
-    t10 = t10 - t18
-    t10 = qd[2] * t10
-    t18 = t37 * t58
-    t19 = t24 * t59
-    t18 = t18 + t19
-    t17 = t0 * t17
-    t19 = t75 * t57
-    t17 = t17 - t19
-    t17 = t18 + t17
-    t17 = qd[1] * t17
-    t10 = t10 - t17
-    t17 = t27 * t4
-    t18 = t72 * t61
-    t17 = t17 + t18
-    t18 = t34 * t39
-    t19 = t65 * t25
-    t18 = t18 - t19
-    t17 = t17 + t18
-    t17 = qd[3] * t17
-    t10 = t10 + t17
-    t17 = t31 * t7
-    t18 = t70 * t60
-    t17 = t17 + t18
-    t18 = t69 * t26
-    t19 = t32 * t9
-    t18 = t18 + t19
-    t17 = t17 - t18
-    t17 = qd[4] * t17
-    t10 = t10 + t17
-    t17 = t31 * t12
-    t18 = t78 * t60
-    t17 = t17 + t18
-    t9 = t40 * t9
-    t18 = t69 * t30
-    t9 = t9 - t18
-    t9 = t17 + t9
-    t9 = qd[5] * t9
-    t9 = t10 + t9
-    t10 = t73 * t33
-    t16 = t36 * t16
-    t10 = t10 + t16
-    t16 = t35 * t14
-    t17 = t74 * t64
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
+    t13 = t13 - t15
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
     t16 = t16 + t17
-    t10 = t10 - t16
-    t10 = qd[6] * t10
-    t9 = t9 + t10
-    t6 = t6 + t9
-    t9 = t66 * qdd[2]
-    t10 = t24 * qdd[1]
-    t9 = t9 - t10
-    t10 = t72 * qdd[3]
-    t9 = t9 + t10
-    t10 = t70 * qdd[4]
-    t9 = t9 + t10
-    t10 = t78 * qdd[5]
-    t9 = t9 + t10
-    t10 = t74 * qdd[6]
-    t9 = t9 - t10
-    t3 = qd[2] * t3
-    t10 = qd[1] * t58
-    t3 = t3 - t10
-    t4 = qd[3] * t4
-    t3 = t3 + t4
-    t4 = qd[4] * t7
-    t3 = t3 + t4
-    t4 = qd[5] * t12
-    t3 = t3 + t4
-    t4 = qd[6] * t14
-    t3 = t3 - t4
-    t3 = t9 + t3
-    t0 = t0 * qdd[1]
-    t4 = t28 * qdd[2]
-    t0 = t0 + t4
-    t4 = t34 * qdd[3]
+    t17 = cos(q[6])
+    t18 = t16 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
+    t18 = t18 + t19
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = (-0.316) * qdd[1]
+    t22 = t22 - t23
+    t23 = t3 * t22
+    t24 = t9 * qdd[0]
+    t25 = t19 * qd[1]
+    t24 = t24 + t25
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
+    t29 = t27 * t28
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t3 * qdd[1]
+    t26 = t26 + t31
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
+    t26 = t26 - t32
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t26 = qdd[3] - t26
+    t30 = 0.384 * t26
+    t29 = t29 - t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t36 = t6 * qdd[1]
+    t24 = t3 * t24
+    t24 = t36 - t24
+    t27 = t27 * qd[2]
+    t24 = t24 + t27
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t1 * qdd[0]
+    t20 = t20 - t36
+    t20 = qdd[2] - t20
+    t36 = t11 * t20
+    t27 = t27 + t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t37 = t7 * t20
+    t24 = t11 * t24
+    t24 = t37 - t24
+    t37 = t19 * qd[3]
+    t24 = t24 - t37
+    t37 = (-0.0825) * t24
+    t36 = t36 - t37
+    t20 = 0.0825 * t20
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = t20 - t22
+    t22 = t31 * t28
+    t20 = t20 + t22
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 + t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
+    t35 = t33 * t34
+    t32 = t32 + t35
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t24 = t24 + qdd[4]
+    t29 = t15 * t24
+    t35 = t12 * t27
+    t36 = t14 * t26
+    t35 = t35 - t36
+    t19 = t19 * qd[4]
+    t19 = t35 - t19
+    t35 = t10 * t19
+    t29 = t29 - t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 - t35
+    t35 = 0.088 * t29
+    t20 = t20 - t35
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t27 = t14 * t27
+    t26 = t12 * t26
+    t26 = t27 + t26
+    t27 = t30 * qd[4]
+    t26 = t26 + t27
+    t26 = t26 + qdd[5]
+    t27 = t17 * t26
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 + t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t24 = t27 - t24
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 - t30
+    t30 = 0.107 * t24
+    t30 = t32 + t30
+    t28 = qd[6] - t28
+    t32 = 0.107 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 + t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.107 * t19
+    t16 = t16 - t23
+    t23 = 0.107 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 + t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
+    t22 = t22 + t23
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = t23 * t30
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 - t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = t7 * t30
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = t3 * t16
+    t6 = t11 - t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 + t2
+    t8 = qdd[6] - t29
+    t4 = t4 * t8
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 - t0
+    t4 = t5 * t8
     t0 = t0 - t4
-    t4 = t32 * qdd[4]
-    t0 = t0 + t4
-    t4 = t40 * qdd[5]
-    t0 = t0 - t4
-    t4 = t36 * qdd[6]
-    t0 = t0 - t4
-    t4 = qd[2] * t62
-    t7 = qd[1] * t57
-    t4 = t4 - t7
-    t7 = qd[3] * t25
-    t4 = t4 + t7
-    t7 = qd[4] * t26
-    t4 = t4 + t7
-    t7 = qd[5] * t30
-    t4 = t4 + t7
-    t7 = qd[6] * t33
-    t4 = t4 - t7
-    t0 = t0 + t4
-    t1 = t1 * qdd[2]
-    t1 = qdd[0] + t1
-    t4 = t15 * qdd[3]
-    t1 = t1 - t4
-    t4 = t11 * qdd[4]
-    t1 = t1 + t4
-    t4 = t38 * qdd[5]
-    t1 = t1 - t4
-    t4 = t20 * qdd[6]
-    t1 = t1 - t4
-    t4 = qd[4] * t5
-    t5 = qd[2] * t23
-    t7 = qd[3] * t50
-    t5 = t5 + t7
-    t4 = t4 - t5
-    t5 = qd[5] * t8
-    t4 = t4 - t5
-    t5 = qd[6] * t13
-    t4 = t4 - t5
-    t1 = t1 + t4
-    _a = (t21, t2, t6, t3, t0, t1)
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 - t3
+    t1 = t1 * t8
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _frame_acceleration_panda_link8_constants = _constants(
-    -0.316, 0.333, 0.0825, -0.0825, 0.384, 0.088, 0.107)
+    -0.316, 0.0825, 0.384, -0.0825, 0.088, 0.107)
 
 
 def _frame_acceleration_panda_link8_chunk(x, t, s, y):
@@ -6173,682 +4436,349 @@ def _frame_acceleration_panda_link8_chunk(x, t, s, y):
     (q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qdd_0, qdd_1, qdd_2,
      qdd_3, qdd_4, qdd_5, qdd_6) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _frame_acceleration_panda_link8_constants
+    k0, k1, k2, k3, k4, k5 = _frame_acceleration_panda_link8_constants
     cos(q_0, t0)
     cos(q_1, t1)
-    multiply(k0, t1, t2)
-    subtract(k1, t2, t2)
-    sin(q_1, t3)
-    cos(q_2, t4)
-    multiply(t3, t4, t5)
-    multiply(k2, t5, t6)
-    subtract(t2, t6, t6)
-    sin(q_3, t7)
-    multiply(t1, t7, t8)
-    cos(q_3, t9)
-    multiply(t5, t9, t10)
-    subtract(t8, t10, t8)
-    multiply(k3, t8, t10)
-    multiply(t5, t7, t11)
-    multiply(t1, t9, t12)
-    add(t11, t12, t11)
-    multiply(k4, t11, t12)
-    add(t10, t12, t10)
-    add(t6, t10, t10)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
     cos(q_4, t12)
     multiply(t8, t12, t13)
-    sin(q_2, t14)
-    multiply(t3, t14, t15)
-    sin(q_4, t16)
-    multiply(t15, t16, t17)
-    add(t13, t17, t13)
-    cos(q_5, t17)
-    multiply(t13, t17, t18)
-    sin(q_5, t19)
-    multiply(t11, t19, t20)
-    add(t18, t20, t18)
-    multiply(k5, t18, t18)
-    add(t10, t18, t18)
-    multiply(t11, t17, t20)
-    multiply(t13, t19, t21)
-    subtract(t20, t21, t20)
-    multiply(k6, t20, t21)
-    subtract(t18, t21, t21)
-    subtract(t21, k1, t22)
-    multiply(t0, t22, t23)
-    multiply(t23, qdd_1, t23)
-    sin(q_0, t24)
-    multiply(t24, t1, t25)
-    multiply(t25, t4, t26)
-    multiply(t0, t14, t27)
-    add(t26, t27, t26)
-    multiply(k2, t26, t27)
-    multiply(t24, t3, t28)
-    multiply(k0, t28, t29)
-    subtract(t27, t29, t27)
-    multiply(t26, t9, t30)
-    multiply(t28, t7, t31)
-    add(t30, t31, t30)
-    multiply(k3, t30, t31)
-    multiply(t28, t9, t32)
-    multiply(t26, t7, t33)
-    subtract(t32, t33, t32)
-    multiply(k4, t32, t33)
-    add(t31, t33, t31)
-    add(t27, t31, t31)
-    multiply(t30, t12, t33)
-    multiply(t0, t4, t34)
-    multiply(t25, t14, t35)
-    subtract(t34, t35, t34)
-    multiply(t34, t16, t35)
-    add(t33, t35, t33)
-    multiply(t33, t17, t35)
-    multiply(t32, t19, t36)
-    add(t35, t36, t35)
-    multiply(k5, t35, t35)
-    add(t31, t35, t35)
-    multiply(t32, t17, t36)
-    multiply(t33, t19, t37)
-    subtract(t36, t37, t36)
-    multiply(k6, t36, t37)
-    subtract(t35, t37, t37)
-    multiply(t37, qdd_0, t38)
-    subtract(t23, t38, t23)
-    subtract(t21, t2, t2)
-    multiply(t28, t2, t38)
-    add(t37, t29, t29)
-    multiply(t1, t29, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_2, t38)
-    add(t23, t38, t23)
-    subtract(t37, t27, t27)
-    multiply(t15, t27, t38)
-    subtract(t21, t6, t6)
-    multiply(t34, t6, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_3, t38)
-    add(t23, t38, t23)
-    subtract(t21, t10, t10)
-    multiply(t32, t10, t38)
-    subtract(t37, t31, t31)
-    multiply(t11, t31, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_4, t38)
-    add(t23, t38, t23)
-    multiply(t15, t12, t38)
-    multiply(t8, t16, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, t31, t39)
-    multiply(t34, t12, t40)
-    multiply(t30, t16, t41)
-    subtract(t40, t41, t40)
-    multiply(t40, t10, t41)
-    subtract(t39, t41, t39)
-    multiply(t39, qdd_5, t39)
-    add(t23, t39, t23)
-    subtract(t37, t35, t35)
-    multiply(t20, t35, t39)
-    subtract(t21, t18, t21)
-    multiply(t36, t21, t18)
-    subtract(t39, t18, t39)
-    multiply(t39, qdd_6, t39)
-    add(t23, t39, t23)
-    multiply(t3, qd_1, t18)
-    multiply(k0, t18, t39)
-    multiply(t1, qd_1, t41)
-    multiply(t4, t41, t42)
-    multiply(t14, qd_2, t43)
-    multiply(t3, t43, t44)
-    subtract(t42, t44, t42)
-    multiply(k2, t42, t44)
-    subtract(t39, t44, t44)
-    multiply(t9, qd_3, t45)
-    multiply(t1, t45, t46)
-    multiply(t7, t18, t47)
-    subtract(t46, t47, t46)
-    multiply(t9, t42, t47)
-    multiply(t7, qd_3, t48)
-    multiply(t5, t48, t49)
-    subtract(t47, t49, t47)
-    subtract(t46, t47, t46)
-    multiply(k3, t46, t47)
-    multiply(t7, t42, t42)
-    multiply(t5, t45, t5)
-    add(t42, t5, t42)
-    multiply(t9, t18, t5)
-    multiply(t1, t48, t49)
-    add(t5, t49, t5)
-    subtract(t42, t5, t42)
-    multiply(k4, t42, t5)
-    add(t47, t5, t47)
-    add(t44, t47, t47)
-    multiply(t12, t46, t5)
-    multiply(t16, qd_4, t49)
-    multiply(t8, t49, t50)
-    subtract(t5, t50, t5)
-    multiply(t14, t41, t50)
-    multiply(t4, qd_2, t51)
-    multiply(t3, t51, t52)
-    add(t50, t52, t50)
-    multiply(t16, t50, t52)
-    multiply(t12, qd_4, t53)
-    multiply(t15, t53, t54)
-    add(t52, t54, t52)
-    add(t5, t52, t5)
-    multiply(t17, t5, t52)
-    multiply(t19, qd_5, t54)
-    multiply(t13, t54, t55)
-    subtract(t52, t55, t52)
-    multiply(t19, t42, t55)
-    multiply(t17, qd_5, t56)
-    multiply(t11, t56, t57)
-    add(t55, t57, t55)
-    add(t52, t55, t52)
-    multiply(k5, t52, t52)
-    add(t47, t52, t52)
-    multiply(t17, t42, t55)
-    multiply(t11, t54, t57)
-    subtract(t55, t57, t55)
-    multiply(t19, t5, t5)
-    multiply(t13, t56, t13)
-    add(t5, t13, t5)
-    subtract(t55, t5, t55)
-    multiply(k6, t55, t5)
-    subtract(t52, t5, t5)
-    multiply(t0, t5, t13)
-    multiply(t24, qd_0, t57)
-    multiply(t22, t57, t58)
-    subtract(t13, t58, t13)
-    multiply(qd_1, t13, t13)
-    multiply(t0, qd_0, t58)
-    multiply(t1, t58, t59)
-    multiply(t24, t18, t60)
-    subtract(t59, t60, t59)
-    multiply(t4, t59, t60)
-    multiply(t25, t43, t61)
-    subtract(t60, t61, t60)
-    multiply(t0, t51, t61)
-    multiply(t14, t57, t62)
-    subtract(t61, t62, t61)
-    add(t60, t61, t60)
-    multiply(k2, t60, t61)
-    multiply(t3, t58, t62)
-    multiply(t24, t41, t63)
-    add(t62, t63, t62)
-    multiply(k0, t62, t63)
-    subtract(t61, t63, t61)
-    multiply(t9, t60, t64)
-    multiply(t26, t48, t65)
-    subtract(t64, t65, t64)
-    multiply(t7, t62, t65)
-    multiply(t28, t45, t66)
-    add(t65, t66, t65)
-    add(t64, t65, t64)
-    multiply(k3, t64, t65)
-    multiply(t9, t62, t66)
-    multiply(t28, t48, t67)
-    subtract(t66, t67, t66)
-    multiply(t7, t60, t60)
-    multiply(t26, t45, t26)
-    add(t60, t26, t60)
-    subtract(t66, t60, t66)
-    multiply(k4, t66, t26)
-    add(t65, t26, t65)
-    add(t61, t65, t65)
-    multiply(t12, t64, t26)
-    multiply(t30, t49, t60)
-    subtract(t26, t60, t26)
-    multiply(t34, t53, t60)
-    multiply(t4, t57, t67)
-    multiply(t0, t43, t68)
-    add(t67, t68, t67)
-    multiply(t14, t59, t59)
-    multiply(t25, t51, t25)
-    add(t59, t25, t59)
-    add(t67, t59, t67)
-    multiply(t16, t67, t25)
-    subtract(t60, t25, t60)
-    add(t26, t60, t26)
-    multiply(t17, t26, t25)
-    multiply(t33, t54, t59)
-    subtract(t25, t59, t25)
-    multiply(t19, t66, t59)
-    multiply(t32, t56, t60)
-    add(t59, t60, t59)
-    add(t25, t59, t25)
-    multiply(k5, t25, t25)
-    add(t65, t25, t25)
-    multiply(t17, t66, t59)
-    multiply(t32, t54, t60)
-    subtract(t59, t60, t59)
-    multiply(t19, t26, t26)
-    multiply(t33, t56, t33)
-    add(t26, t33, t26)
-    subtract(t59, t26, t59)
-    multiply(k6, t59, t26)
-    subtract(t25, t26, t26)
-    multiply(qd_0, t26, t33)
-    subtract(t13, t33, t13)
-    multiply(t2, t62, t33)
-    subtract(t5, t39, t39)
-    multiply(t28, t39, t60)
-    add(t33, t60, t33)
-    add(t26, t63, t63)
-    multiply(t1, t63, t60)
-    multiply(t29, t18, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_2, t33, t33)
-    add(t13, t33, t13)
-    multiply(t27, t50, t33)
-    subtract(t26, t61, t61)
-    multiply(t15, t61, t60)
-    add(t33, t60, t33)
-    subtract(t5, t44, t44)
-    multiply(t34, t44, t60)
-    multiply(t6, t67, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_3, t33, t33)
-    add(t13, t33, t13)
-    multiply(t10, t66, t33)
-    subtract(t5, t47, t47)
-    multiply(t32, t47, t60)
-    add(t33, t60, t33)
-    multiply(t31, t42, t60)
-    subtract(t26, t65, t65)
-    multiply(t11, t65, t68)
-    add(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_4, t33, t33)
-    add(t13, t33, t13)
-    multiply(t12, t50, t33)
-    multiply(t15, t49, t60)
-    subtract(t33, t60, t33)
-    multiply(t16, t46, t46)
-    multiply(t8, t53, t8)
-    add(t46, t8, t46)
-    subtract(t33, t46, t33)
-    multiply(t31, t33, t8)
-    multiply(t38, t65, t46)
-    add(t8, t46, t8)
-    multiply(t40, t47, t46)
-    multiply(t12, t67, t60)
-    multiply(t34, t49, t68)
-    add(t60, t68, t60)
-    multiply(t16, t64, t64)
-    multiply(t30, t53, t30)
-    add(t64, t30, t64)
-    add(t60, t64, t60)
-    multiply(t10, t60, t30)
-    subtract(t46, t30, t46)
-    subtract(t8, t46, t8)
-    multiply(qd_5, t8, t8)
-    add(t13, t8, t13)
-    multiply(t35, t55, t8)
-    subtract(t26, t25, t25)
-    multiply(t20, t25, t30)
-    add(t8, t30, t8)
-    multiply(t21, t59, t30)
-    subtract(t5, t52, t52)
-    multiply(t36, t52, t46)
-    add(t30, t46, t30)
-    subtract(t8, t30, t8)
-    multiply(qd_6, t8, t8)
-    add(t13, t8, t13)
-    add(t23, t13, a_0)
-    multiply(t0, t1, t8)
-    multiply(t8, t4, t13)
-    multiply(t24, t14, t23)
-    subtract(t13, t23, t13)
-    multiply(k2, t13, t23)
-    multiply(t0, t3, t30)
-    multiply(k0, t30, t46)
-    subtract(t23, t46, t23)
-    multiply(t13, t9, t64)
-    multiply(t30, t7, t68)
-    add(t64, t68, t64)
-    multiply(k3, t64, t68)
-    multiply(t30, t9, t69)
-    multiply(t13, t7, t70)
-    subtract(t69, t70, t69)
-    multiply(k4, t69, t70)
-    add(t68, t70, t68)
-    add(t23, t68, t68)
-    multiply(t64, t12, t70)
-    multiply(t8, t14, t71)
-    multiply(t24, t4, t72)
-    add(t71, t72, t71)
-    multiply(t71, t16, t72)
-    subtract(t70, t72, t70)
-    multiply(t70, t17, t72)
-    multiply(t69, t19, t73)
-    add(t72, t73, t72)
-    multiply(k5, t72, t72)
-    add(t68, t72, t72)
-    multiply(t69, t17, t73)
-    multiply(t70, t19, t74)
-    subtract(t73, t74, t73)
-    multiply(k6, t73, t74)
-    subtract(t72, t74, t74)
-    multiply(t74, qdd_0, t75)
-    multiply(t24, t22, t76)
-    multiply(t76, qdd_1, t76)
-    add(t75, t76, t75)
-    add(t74, t46, t46)
-    multiply(t1, t46, t76)
-    multiply(t30, t2, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_2, t76)
-    add(t75, t76, t75)
-    subtract(t74, t23, t23)
-    multiply(t15, t23, t76)
-    multiply(t71, t6, t77)
-    add(t76, t77, t76)
-    multiply(t76, qdd_3, t76)
-    subtract(t75, t76, t75)
-    subtract(t74, t68, t68)
-    multiply(t11, t68, t76)
-    multiply(t69, t10, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_4, t76)
-    add(t75, t76, t75)
-    multiply(t38, t68, t76)
-    multiply(t64, t16, t77)
-    multiply(t71, t12, t78)
-    add(t77, t78, t77)
-    multiply(t77, t10, t78)
-    add(t76, t78, t76)
-    multiply(t76, qdd_5, t76)
-    subtract(t75, t76, t75)
-    multiply(t73, t21, t76)
-    subtract(t74, t72, t72)
-    multiply(t20, t72, t78)
-    subtract(t76, t78, t76)
-    multiply(t76, qdd_6, t76)
-    add(t75, t76, t75)
-    multiply(t0, t41, t41)
-    multiply(t3, t57, t3)
-    subtract(t41, t3, t41)
-    multiply(t7, t41, t3)
-    multiply(t30, t45, t76)
-    add(t3, t76, t3)
-    multiply(t1, t57, t76)
-    multiply(t0, t18, t78)
-    add(t76, t78, t76)
-    multiply(t4, t76, t78)
-    multiply(t8, t43, t79)
-    add(t78, t79, t78)
-    multiply(t14, t58, t79)
-    multiply(t24, t51, t80)
-    add(t79, t80, t79)
-    add(t78, t79, t78)
-    multiply(t9, t78, t79)
-    multiply(t13, t48, t80)
-    add(t79, t80, t79)
-    subtract(t3, t79, t3)
-    multiply(k3, t3, t79)
-    multiply(t9, t41, t9)
-    multiply(t30, t48, t48)
-    subtract(t9, t48, t9)
-    multiply(t13, t45, t13)
-    multiply(t7, t78, t7)
-    subtract(t13, t7, t13)
-    subtract(t9, t13, t9)
-    multiply(k4, t9, t7)
-    add(t79, t7, t79)
-    multiply(k2, t78, t78)
-    multiply(k0, t41, t7)
-    add(t78, t7, t78)
-    subtract(t79, t78, t79)
-    multiply(t12, t3, t13)
-    multiply(t64, t49, t45)
-    subtract(t13, t45, t13)
-    multiply(t8, t51, t8)
-    multiply(t14, t76, t14)
-    subtract(t8, t14, t8)
-    multiply(t4, t58, t4)
-    multiply(t24, t43, t43)
-    subtract(t4, t43, t4)
-    add(t8, t4, t8)
-    multiply(t16, t8, t4)
-    multiply(t71, t53, t14)
-    add(t4, t14, t4)
-    subtract(t13, t4, t13)
-    multiply(t17, t13, t4)
-    multiply(t70, t54, t14)
-    subtract(t4, t14, t4)
-    multiply(t19, t9, t14)
-    multiply(t69, t56, t43)
-    add(t14, t43, t14)
-    add(t4, t14, t4)
-    multiply(k5, t4, t4)
-    add(t79, t4, t4)
-    multiply(t17, t9, t17)
-    multiply(t69, t54, t54)
-    subtract(t17, t54, t17)
-    multiply(t19, t13, t19)
-    multiply(t70, t56, t70)
-    add(t19, t70, t19)
-    subtract(t17, t19, t17)
-    multiply(k6, t17, t13)
-    subtract(t4, t13, t13)
-    multiply(qd_0, t13, t14)
-    multiply(t22, t58, t22)
-    multiply(t24, t5, t5)
-    add(t22, t5, t22)
-    multiply(qd_1, t22, t22)
-    add(t14, t22, t14)
-    add(t13, t7, t7)
-    multiply(t1, t7, t5)
-    multiply(t46, t18, t19)
-    subtract(t5, t19, t5)
-    multiply(t2, t41, t2)
-    multiply(t30, t39, t39)
-    add(t2, t39, t2)
-    subtract(t5, t2, t5)
-    multiply(qd_2, t5, t5)
-    add(t14, t5, t14)
-    multiply(t23, t50, t2)
-    add(t13, t78, t78)
-    multiply(t15, t78, t5)
-    add(t2, t5, t2)
-    multiply(t6, t8, t6)
-    multiply(t71, t44, t44)
-    add(t6, t44, t6)
-    add(t2, t6, t2)
-    multiply(qd_3, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t68, t42, t2)
-    subtract(t13, t79, t79)
-    multiply(t11, t79, t5)
-    add(t2, t5, t2)
-    multiply(t10, t9, t5)
-    multiply(t69, t47, t6)
-    add(t5, t6, t5)
-    subtract(t2, t5, t2)
-    multiply(qd_4, t2, t2)
-    add(t14, t2, t14)
-    multiply(t68, t33, t2)
-    multiply(t38, t79, t5)
-    add(t2, t5, t2)
-    multiply(t16, t3, t16)
-    multiply(t64, t53, t64)
-    add(t16, t64, t16)
-    multiply(t12, t8, t12)
-    multiply(t71, t49, t49)
-    subtract(t12, t49, t12)
-    add(t16, t12, t16)
-    multiply(t10, t16, t10)
-    multiply(t77, t47, t47)
-    add(t10, t47, t10)
-    add(t2, t10, t2)
-    multiply(qd_5, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t21, t17, t21)
-    multiply(t73, t52, t52)
-    add(t21, t52, t21)
-    multiply(t72, t55, t2)
-    subtract(t13, t4, t4)
-    multiply(t20, t4, t3)
-    add(t2, t3, t2)
-    subtract(t21, t2, t21)
-    multiply(qd_6, t21, t21)
-    add(t14, t21, t14)
-    add(t75, t14, a_1)
-    multiply(t30, t29, t2)
-    multiply(t28, t46, t3)
-    subtract(t2, t3, t2)
-    multiply(t2, qdd_2, t2)
-    multiply(t24, t37, t3)
-    multiply(t0, t74, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_1, t3)
-    subtract(t2, t3, t2)
-    multiply(t71, t27, t3)
-    multiply(t34, t23, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_3, t3)
-    add(t2, t3, t2)
-    multiply(t69, t31, t3)
-    multiply(t32, t68, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_4, t3)
-    add(t2, t3, t2)
-    multiply(t77, t31, t3)
-    multiply(t40, t68, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_5, t3)
-    add(t2, t3, t2)
-    multiply(t36, t72, t3)
-    multiply(t73, t35, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_6, t3)
-    add(t2, t3, t2)
-    multiply(t29, t41, t29)
-    multiply(t30, t63, t63)
-    add(t29, t63, t29)
-    multiply(t46, t62, t46)
-    multiply(t28, t7, t7)
-    add(t46, t7, t46)
-    subtract(t29, t46, t29)
-    multiply(qd_2, t29, t29)
-    multiply(t37, t58, t37)
-    multiply(t24, t26, t26)
-    add(t37, t26, t37)
-    multiply(t0, t13, t13)
-    multiply(t74, t57, t74)
-    subtract(t13, t74, t13)
-    add(t37, t13, t37)
-    multiply(qd_1, t37, t37)
-    subtract(t29, t37, t29)
-    multiply(t27, t8, t27)
-    multiply(t71, t61, t61)
-    add(t27, t61, t27)
-    multiply(t34, t78, t78)
-    multiply(t23, t67, t23)
-    subtract(t78, t23, t78)
-    add(t27, t78, t27)
-    multiply(qd_3, t27, t27)
-    add(t29, t27, t29)
-    multiply(t31, t9, t3)
-    multiply(t69, t65, t5)
-    add(t3, t5, t3)
-    multiply(t68, t66, t5)
-    multiply(t32, t79, t6)
-    add(t5, t6, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t29, t3, t29)
-    multiply(t31, t16, t31)
-    multiply(t77, t65, t65)
-    add(t31, t65, t31)
-    multiply(t40, t79, t79)
-    multiply(t68, t60, t68)
-    subtract(t79, t68, t79)
-    add(t31, t79, t31)
-    multiply(qd_5, t31, t31)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
+    subtract(t13, t15, t13)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
+    multiply(t16, t17, t18)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
+    add(t18, t19, t18)
+    multiply(t1, qd_0, t19)
+    multiply(t9, qd_0, t20)
+    multiply(k0, t20, t21)
+    multiply(t19, t21, t22)
+    multiply(k0, qdd_1, t23)
+    subtract(t22, t23, t22)
+    multiply(t3, t22, t23)
+    multiply(t9, qdd_0, t24)
+    multiply(t19, qd_1, t25)
+    add(t24, t25, t24)
+    multiply(k0, t24, t25)
+    multiply(k0, qd_1, t26)
+    multiply(t19, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k1, t27, t28)
+    multiply(t27, t28, t29)
+    add(t19, qd_2, t19)
+    multiply(k1, t19, t30)
+    multiply(t19, t30, t31)
     add(t29, t31, t29)
-    multiply(t72, t59, t72)
-    multiply(t36, t4, t4)
-    add(t72, t4, t72)
-    multiply(t35, t17, t35)
-    multiply(t73, t25, t25)
-    add(t35, t25, t35)
-    subtract(t72, t35, t72)
-    multiply(qd_6, t72, t72)
-    add(t29, t72, t29)
-    add(t2, t29, a_2)
-    multiply(t30, qdd_2, t30)
-    multiply(t24, qdd_1, t24)
-    subtract(t30, t24, t30)
-    multiply(t71, qdd_3, t71)
-    add(t30, t71, t30)
-    multiply(t69, qdd_4, t69)
-    add(t30, t69, t30)
-    multiply(t77, qdd_5, t77)
-    add(t30, t77, t30)
-    multiply(t73, qdd_6, t73)
-    subtract(t30, t73, t30)
-    multiply(qd_2, t41, t41)
-    multiply(qd_1, t58, t58)
-    subtract(t41, t58, t41)
-    multiply(qd_3, t8, t8)
-    add(t41, t8, t41)
-    multiply(qd_4, t9, t9)
-    add(t41, t9, t41)
-    multiply(qd_5, t16, t16)
-    add(t41, t16, t41)
-    multiply(qd_6, t17, t17)
-    subtract(t41, t17, t41)
-    add(t30, t41, a_3)
-    multiply(t0, qdd_1, t0)
-    multiply(t28, qdd_2, t28)
-    add(t0, t28, t0)
-    multiply(t34, qdd_3, t34)
-    subtract(t0, t34, t0)
-    multiply(t32, qdd_4, t32)
-    add(t0, t32, t0)
-    multiply(t40, qdd_5, t40)
-    subtract(t0, t40, t0)
-    multiply(t36, qdd_6, t36)
-    subtract(t0, t36, t0)
-    multiply(qd_2, t62, t62)
-    multiply(qd_1, t57, t57)
-    subtract(t62, t57, t62)
-    multiply(qd_3, t67, t67)
-    add(t62, t67, t62)
-    multiply(qd_4, t66, t66)
-    add(t62, t66, t62)
-    multiply(qd_5, t60, t60)
-    add(t62, t60, t62)
-    multiply(qd_6, t59, t59)
-    subtract(t62, t59, t62)
-    add(t0, t62, a_4)
-    multiply(t1, qdd_2, t1)
-    add(qdd_0, t1, t1)
-    multiply(t15, qdd_3, t15)
-    subtract(t1, t15, t1)
-    multiply(t11, qdd_4, t11)
-    add(t1, t11, t1)
-    multiply(t38, qdd_5, t38)
-    subtract(t1, t38, t1)
-    multiply(t20, qdd_6, t20)
-    subtract(t1, t20, t1)
-    multiply(qd_4, t42, t42)
-    multiply(qd_2, t18, t18)
-    multiply(qd_3, t50, t50)
-    add(t18, t50, t18)
-    subtract(t42, t18, t42)
-    multiply(qd_5, t33, t33)
-    subtract(t42, t33, t42)
-    multiply(qd_6, t55, t55)
-    subtract(t42, t55, t42)
-    add(t1, t42, a_5)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t3, qdd_1, t31)
+    add(t21, t31, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k1, t21, t32)
+    subtract(t26, t32, t26)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    subtract(qdd_3, t21, t21)
+    multiply(k2, t21, t30)
+    subtract(t29, t30, t29)
+    multiply(t7, t19, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t19, t19)
+    add(t32, t19, t32)
+    multiply(k2, t32, t19)
+    multiply(k3, t30, t33)
+    subtract(t19, t33, t19)
+    multiply(t30, t19, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k3, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t6, qdd_1, t36)
+    multiply(t3, t24, t24)
+    subtract(t36, t24, t36)
+    multiply(t27, qd_2, t27)
+    add(t36, t27, t36)
+    multiply(t7, t36, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t1, qdd_0, t27)
+    subtract(t20, t27, t20)
+    subtract(qdd_2, t20, t20)
+    multiply(t11, t20, t27)
+    add(t24, t27, t24)
+    multiply(t30, qd_3, t27)
+    add(t24, t27, t24)
+    multiply(k2, t24, t27)
+    multiply(t7, t20, t37)
+    multiply(t11, t36, t36)
+    subtract(t37, t36, t37)
+    multiply(t32, qd_3, t36)
+    subtract(t37, t36, t37)
+    multiply(k3, t37, t36)
+    subtract(t27, t36, t27)
+    multiply(k1, t20, t20)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    subtract(t20, t22, t20)
+    multiply(t31, t28, t31)
+    add(t20, t31, t20)
+    subtract(t27, t20, t27)
+    multiply(t32, t35, t35)
+    multiply(k2, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t27, t35, t27)
+    multiply(t14, t27, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k3, t21, t23)
+    add(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t19, t19)
+    add(t20, t19, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t19)
+    add(t22, t19, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t19)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t19, t23, t19)
+    multiply(k4, t19, t23)
+    multiply(t19, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k4, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t27, t27)
+    add(t29, t27, t29)
+    add(t37, qdd_4, t37)
+    multiply(t15, t37, t27)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
+    subtract(t34, t35, t34)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    subtract(t27, t32, t27)
+    multiply(t15, t20, t32)
+    multiply(t4, t30, t30)
+    add(t32, t30, t32)
+    multiply(t32, qd_5, t30)
+    subtract(t27, t30, t27)
+    multiply(k4, t27, t30)
+    subtract(t29, t30, t29)
+    multiply(t32, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t14, t24, t24)
+    multiply(t12, t21, t21)
+    add(t24, t21, t24)
+    multiply(t20, qd_4, t20)
+    add(t24, t20, t24)
+    add(t24, qdd_5, t24)
+    multiply(t17, t24, t20)
+    multiply(t15, t34, t34)
+    multiply(t4, t37, t37)
+    add(t34, t37, t34)
+    multiply(t19, qd_5, t21)
+    add(t34, t21, t34)
+    multiply(t2, t34, t21)
+    subtract(t20, t21, t20)
+    multiply(t17, t32, t21)
+    multiply(t2, t28, t30)
+    add(t21, t30, t21)
+    multiply(t21, qd_6, t30)
+    subtract(t20, t30, t20)
+    multiply(k5, t20, t30)
+    add(t25, t30, t25)
+    subtract(qd_6, t19, t19)
+    multiply(k5, t21, t30)
+    multiply(t19, t30, t31)
+    add(t25, t31, t25)
+    multiply(t18, t25, t31)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t24, t16)
+    add(t34, t16, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t32, t16)
+    subtract(t28, t16, t28)
+    multiply(t28, qd_6, t16)
+    add(t34, t16, t34)
+    multiply(k5, t34, t16)
+    subtract(t29, t16, t29)
+    multiply(k5, t28, t16)
+    multiply(t19, t16, t19)
+    add(t29, t19, t29)
+    multiply(t8, t29, t19)
+    add(t31, t19, t31)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k4, t24, t24)
+    add(t26, t24, t26)
+    multiply(t32, t23, t32)
+    add(t26, t32, t26)
+    multiply(t21, t30, t21)
+    multiply(t28, t16, t28)
+    add(t21, t28, t21)
+    add(t26, t21, t26)
+    multiply(t10, t26, t13)
+    add(t31, t13, a_0)
+    multiply(t5, t1, t13)
+    multiply(t13, t3, t16)
+    multiply(t0, t6, t19)
+    add(t16, t19, t16)
+    multiply(t16, t7, t19)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t21)
+    add(t19, t21, t19)
+    multiply(t19, t12, t21)
+    multiply(t0, t3, t0)
+    multiply(t13, t6, t13)
+    subtract(t0, t13, t0)
+    multiply(t0, t14, t13)
+    add(t21, t13, t21)
+    multiply(t21, t15, t13)
+    multiply(t5, t7, t5)
+    multiply(t16, t11, t16)
+    subtract(t5, t16, t5)
+    multiply(t5, t4, t16)
+    add(t13, t16, t13)
+    multiply(t13, t17, t16)
+    multiply(t0, t12, t0)
+    multiply(t19, t14, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t2, t19)
+    subtract(t16, t19, t16)
+    multiply(t16, t25, t19)
+    multiply(t13, t2, t13)
+    multiply(t0, t17, t0)
+    add(t13, t0, t13)
+    multiply(t13, t29, t0)
+    subtract(t19, t0, t19)
+    multiply(t5, t15, t5)
+    multiply(t21, t4, t21)
+    subtract(t5, t21, t5)
+    multiply(t5, t26, t0)
+    add(t19, t0, a_1)
+    multiply(t1, t11, t0)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t12, t19)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t19, t6, t19)
+    multiply(t19, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t0, t14, t0)
+    subtract(t9, t0, t9)
+    multiply(t9, t2, t0)
+    subtract(t1, t0, t1)
+    multiply(t1, t25, t25)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(t6, t29, t29)
+    subtract(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t19, t4, t19)
+    subtract(t3, t19, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t18, t34, t18)
+    multiply(t8, t20, t8)
+    add(t18, t8, t18)
+    subtract(qdd_6, t27, t27)
+    multiply(t10, t27, t10)
+    subtract(t18, t10, a_3)
+    multiply(t16, t34, t16)
+    multiply(t13, t20, t13)
+    subtract(t16, t13, t16)
+    multiply(t5, t27, t5)
+    subtract(t16, t5, a_4)
+    multiply(t1, t34, t1)
+    multiply(t6, t20, t6)
+    subtract(t1, t6, t1)
+    multiply(t3, t27, t3)
+    subtract(t1, t3, a_5)
 
 
 def fk_panda_hand(q):
@@ -7648,568 +5578,384 @@ def jdot_qd_panda_hand(q, qd):
     in  q [7]
     in  qd [7]
     out a [6]
-    546 ops: 303 mul, 231 add, 0 div, 12 trig
+    361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_panda_hand_chunk, (q, qd), 71, ((6,),))
+        return _batch(_jdot_qd_panda_hand_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = sin(q[1])
-    t2 = t1 * qd[1]
-    t3 = (-0.316) * t2
-    t4 = cos(q[2])
-    t5 = cos(q[1])
-    t6 = t5 * qd[1]
-    t7 = t4 * t6
-    t8 = sin(q[2])
-    t9 = t8 * qd[2]
-    t10 = t1 * t9
-    t7 = t7 - t10
-    t10 = 0.0825 * t7
-    t10 = t3 - t10
-    t11 = cos(q[3])
-    t12 = t11 * qd[3]
-    t13 = t5 * t12
-    t14 = sin(q[3])
-    t15 = t14 * t2
+    t1 = cos(q[1])
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
+    t12 = cos(q[4])
+    t13 = t8 * t12
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
     t13 = t13 - t15
-    t15 = t11 * t7
-    t16 = t1 * t4
-    t17 = t14 * qd[3]
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
+    t16 = t16 + t17
+    t17 = cos(q[6])
     t18 = t16 * t17
-    t15 = t15 - t18
-    t13 = t13 - t15
-    t15 = (-0.0825) * t13
-    t7 = t14 * t7
-    t18 = t16 * t12
-    t7 = t7 + t18
-    t18 = t11 * t2
-    t19 = t5 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
     t18 = t18 + t19
-    t7 = t7 - t18
-    t18 = 0.384 * t7
-    t15 = t15 + t18
-    t15 = t10 + t15
-    t18 = cos(q[5])
-    t19 = cos(q[4])
-    t20 = t19 * t13
-    t21 = t5 * t14
-    t22 = t16 * t11
-    t21 = t21 - t22
-    t22 = sin(q[4])
-    t23 = t22 * qd[4]
-    t24 = t21 * t23
-    t20 = t20 - t24
-    t24 = t8 * t6
-    t25 = t4 * qd[2]
-    t26 = t1 * t25
-    t24 = t24 + t26
-    t26 = t22 * t24
-    t27 = t1 * t8
-    t28 = t19 * qd[4]
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = t3 * t22
+    t24 = t19 * qd[1]
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
     t29 = t27 * t28
-    t26 = t26 + t29
-    t20 = t20 + t26
-    t26 = t18 * t20
-    t29 = t21 * t19
-    t30 = t27 * t22
-    t29 = t29 + t30
-    t30 = sin(q[5])
-    t31 = t30 * qd[5]
-    t32 = t29 * t31
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
     t26 = t26 - t32
-    t32 = t30 * t7
-    t33 = t16 * t14
-    t34 = t5 * t11
-    t33 = t33 + t34
-    t34 = t18 * qd[5]
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t30 = 0.384 * t26
+    t29 = t29 + t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t27 = t27 * qd[2]
+    t24 = t3 * t24
+    t24 = t27 - t24
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t11 * t20
+    t27 = t27 - t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t24 = t11 * t24
+    t37 = t7 * t20
+    t24 = t24 + t37
+    t37 = t19 * qd[3]
+    t24 = t24 + t37
+    t37 = (-0.0825) * t24
+    t36 = t36 + t37
+    t28 = t31 * t28
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = 0.0825 * t20
+    t20 = t22 + t20
+    t20 = t28 - t20
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 - t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
     t35 = t33 * t34
     t32 = t32 + t35
-    t26 = t26 + t32
-    t26 = 0.088 * t26
-    t26 = t15 + t26
-    t32 = t18 * t7
-    t35 = t33 * t31
-    t32 = t32 - t35
-    t20 = t30 * t20
-    t35 = t29 * t34
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t29 = t12 * t27
+    t35 = t14 * t26
+    t29 = t29 + t35
+    t19 = t19 * qd[4]
+    t19 = t29 - t19
+    t29 = t10 * t19
+    t35 = t15 * t24
+    t29 = t29 + t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 + t35
+    t35 = 0.088 * t29
     t20 = t20 + t35
-    t20 = t32 - t20
-    t32 = 0.107 * t20
-    t32 = t26 - t32
-    t35 = t0 * t32
-    t36 = (-0.316) * t5
-    t36 = 0.333 - t36
-    t16 = 0.0825 * t16
-    t16 = t36 - t16
-    t37 = (-0.0825) * t21
-    t38 = 0.384 * t33
-    t37 = t37 + t38
-    t37 = t16 + t37
-    t38 = t29 * t18
-    t39 = t33 * t30
-    t38 = t38 + t39
-    t38 = 0.088 * t38
-    t38 = t37 + t38
-    t39 = t33 * t18
-    t29 = t29 * t30
-    t29 = t39 - t29
-    t39 = 0.107 * t29
-    t39 = t38 - t39
-    t40 = t39 - 0.333
-    t41 = sin(q[0])
-    t42 = t41 * qd[0]
-    t43 = t40 * t42
-    t35 = t35 - t43
-    t35 = qd[1] * t35
-    t43 = t0 * qd[0]
-    t44 = t5 * t43
-    t45 = t41 * t2
-    t44 = t44 - t45
-    t45 = t4 * t44
-    t46 = t41 * t5
-    t47 = t46 * t9
-    t45 = t45 - t47
-    t47 = t0 * t25
-    t48 = t8 * t42
-    t47 = t47 - t48
-    t45 = t45 + t47
-    t47 = 0.0825 * t45
-    t48 = t1 * t43
-    t49 = t41 * t6
-    t48 = t48 + t49
-    t49 = (-0.316) * t48
-    t47 = t47 - t49
-    t50 = t11 * t45
-    t51 = t46 * t4
-    t52 = t0 * t8
-    t51 = t51 + t52
-    t52 = t51 * t17
-    t50 = t50 - t52
-    t52 = t14 * t48
-    t53 = t41 * t1
-    t54 = t53 * t12
-    t52 = t52 + t54
-    t50 = t50 + t52
-    t52 = (-0.0825) * t50
-    t54 = t11 * t48
-    t55 = t53 * t17
-    t54 = t54 - t55
-    t45 = t14 * t45
-    t55 = t51 * t12
-    t45 = t45 + t55
-    t45 = t54 - t45
-    t54 = 0.384 * t45
-    t52 = t52 + t54
-    t52 = t47 + t52
-    t54 = t19 * t50
-    t55 = t51 * t11
-    t56 = t53 * t14
-    t55 = t55 + t56
-    t56 = t55 * t23
-    t54 = t54 - t56
-    t56 = t0 * t4
-    t57 = t46 * t8
-    t56 = t56 - t57
-    t57 = t56 * t28
-    t58 = t4 * t42
-    t59 = t0 * t9
-    t58 = t58 + t59
-    t44 = t8 * t44
-    t46 = t46 * t25
-    t44 = t44 + t46
-    t44 = t58 + t44
-    t46 = t22 * t44
-    t46 = t57 - t46
-    t46 = t54 + t46
-    t54 = t18 * t46
-    t57 = t55 * t19
-    t58 = t56 * t22
-    t57 = t57 + t58
-    t58 = t57 * t31
-    t54 = t54 - t58
-    t58 = t30 * t45
-    t59 = t53 * t11
-    t60 = t51 * t14
-    t59 = t59 - t60
-    t60 = t59 * t34
-    t58 = t58 + t60
-    t54 = t54 + t58
-    t54 = 0.088 * t54
-    t54 = t52 + t54
-    t58 = t18 * t45
-    t60 = t59 * t31
-    t58 = t58 - t60
-    t46 = t30 * t46
-    t60 = t57 * t34
-    t46 = t46 + t60
-    t46 = t58 - t46
-    t58 = 0.107 * t46
-    t58 = t54 - t58
-    t60 = qd[0] * t58
-    t35 = t35 - t60
-    t36 = t39 - t36
-    t60 = t36 * t48
-    t3 = t32 - t3
-    t61 = t53 * t3
-    t60 = t60 + t61
-    t49 = t58 + t49
-    t61 = t5 * t49
-    t51 = 0.0825 * t51
-    t62 = (-0.316) * t53
-    t51 = t51 - t62
-    t63 = (-0.0825) * t55
-    t64 = 0.384 * t59
-    t63 = t63 + t64
-    t63 = t51 + t63
-    t64 = t57 * t18
-    t65 = t59 * t30
-    t64 = t64 + t65
-    t64 = 0.088 * t64
-    t64 = t63 + t64
-    t65 = t59 * t18
-    t57 = t57 * t30
-    t57 = t65 - t57
-    t65 = 0.107 * t57
-    t65 = t64 - t65
-    t62 = t65 + t62
-    t66 = t62 * t2
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[2] * t60
-    t35 = t35 + t60
-    t51 = t65 - t51
-    t60 = t51 * t24
-    t47 = t58 - t47
-    t61 = t27 * t47
-    t60 = t60 + t61
-    t10 = t32 - t10
-    t61 = t56 * t10
-    t16 = t39 - t16
-    t66 = t16 * t44
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[3] * t60
-    t35 = t35 + t60
-    t37 = t39 - t37
-    t60 = t37 * t45
-    t15 = t32 - t15
-    t61 = t59 * t15
-    t60 = t60 + t61
-    t61 = t65 - t63
-    t63 = t61 * t7
-    t52 = t58 - t52
-    t66 = t33 * t52
-    t63 = t63 + t66
-    t60 = t60 - t63
-    t60 = qd[4] * t60
-    t35 = t35 + t60
-    t60 = t19 * t24
-    t63 = t27 * t23
-    t60 = t60 - t63
-    t13 = t22 * t13
-    t63 = t21 * t28
-    t13 = t13 + t63
-    t13 = t60 - t13
-    t60 = t61 * t13
-    t63 = t27 * t19
-    t21 = t21 * t22
-    t21 = t63 - t21
-    t63 = t21 * t52
-    t60 = t60 + t63
-    t63 = t56 * t19
-    t66 = t55 * t22
-    t63 = t63 - t66
-    t66 = t63 * t15
-    t67 = t19 * t44
-    t68 = t56 * t23
-    t67 = t67 + t68
-    t50 = t22 * t50
-    t55 = t55 * t28
-    t50 = t50 + t55
-    t50 = t67 + t50
-    t55 = t37 * t50
-    t55 = t66 - t55
-    t55 = t60 - t55
-    t55 = qd[5] * t55
-    t35 = t35 + t55
-    t55 = t65 - t64
-    t60 = t55 * t20
-    t54 = t58 - t54
-    t64 = t29 * t54
-    t60 = t60 + t64
-    t38 = t39 - t38
-    t39 = t38 * t46
-    t26 = t32 - t26
-    t64 = t57 * t26
-    t39 = t39 + t64
-    t39 = t60 - t39
-    t39 = qd[6] * t39
-    t35 = t35 + t39
-    t6 = t0 * t6
-    t39 = t1 * t42
-    t6 = t6 - t39
-    t39 = t14 * t6
-    t1 = t0 * t1
-    t60 = t1 * t12
-    t39 = t39 + t60
-    t60 = t5 * t42
-    t64 = t0 * t2
-    t60 = t60 + t64
-    t64 = t4 * t60
-    t66 = t0 * t5
-    t67 = t66 * t9
-    t64 = t64 + t67
-    t67 = t8 * t43
-    t68 = t41 * t25
-    t67 = t67 + t68
-    t64 = t64 + t67
-    t67 = t11 * t64
-    t68 = t66 * t4
-    t69 = t41 * t8
-    t68 = t68 - t69
-    t69 = t68 * t17
-    t67 = t67 + t69
-    t39 = t39 - t67
-    t67 = (-0.0825) * t39
-    t69 = t11 * t6
-    t17 = t1 * t17
-    t17 = t69 - t17
-    t12 = t68 * t12
-    t69 = t14 * t64
-    t12 = t12 - t69
-    t12 = t17 - t12
-    t17 = 0.384 * t12
-    t17 = t67 + t17
-    t64 = 0.0825 * t64
-    t67 = (-0.316) * t6
-    t64 = t64 + t67
-    t17 = t17 - t64
-    t69 = t19 * t39
-    t70 = t68 * t11
-    t71 = t1 * t14
-    t70 = t70 + t71
-    t71 = t70 * t23
-    t69 = t69 - t71
-    t25 = t66 * t25
-    t60 = t8 * t60
-    t25 = t25 - t60
-    t60 = t4 * t43
-    t9 = t41 * t9
-    t9 = t60 - t9
-    t9 = t25 + t9
-    t25 = t22 * t9
-    t8 = t66 * t8
-    t4 = t41 * t4
-    t4 = t8 + t4
-    t8 = t4 * t28
-    t8 = t25 + t8
-    t8 = t69 - t8
-    t25 = t18 * t8
-    t60 = t70 * t19
-    t66 = t4 * t22
-    t60 = t60 - t66
-    t66 = t60 * t31
-    t25 = t25 - t66
-    t66 = t30 * t12
-    t11 = t1 * t11
-    t14 = t68 * t14
-    t11 = t11 - t14
-    t14 = t11 * t34
-    t14 = t66 + t14
-    t14 = t25 + t14
-    t14 = 0.088 * t14
-    t14 = t17 + t14
-    t25 = t18 * t12
-    t31 = t11 * t31
-    t25 = t25 - t31
-    t8 = t30 * t8
-    t31 = t60 * t34
-    t8 = t8 + t31
-    t8 = t25 - t8
-    t25 = 0.107 * t8
-    t25 = t14 - t25
-    t31 = qd[0] * t25
-    t34 = t40 * t43
-    t32 = t41 * t32
-    t32 = t34 + t32
-    t32 = qd[1] * t32
-    t31 = t31 + t32
-    t32 = t25 + t67
-    t5 = t5 * t32
-    t34 = 0.0825 * t68
-    t40 = (-0.316) * t1
-    t34 = t34 - t40
-    t66 = (-0.0825) * t70
-    t67 = 0.384 * t11
-    t66 = t66 + t67
-    t66 = t34 + t66
-    t67 = t60 * t18
-    t68 = t11 * t30
-    t67 = t67 + t68
-    t67 = 0.088 * t67
-    t67 = t66 + t67
-    t18 = t11 * t18
-    t30 = t60 * t30
-    t18 = t18 - t30
-    t30 = 0.107 * t18
-    t30 = t67 - t30
-    t40 = t30 + t40
-    t60 = t40 * t2
-    t5 = t5 - t60
-    t36 = t36 * t6
-    t3 = t1 * t3
-    t3 = t36 + t3
-    t3 = t5 - t3
-    t3 = qd[2] * t3
-    t3 = t31 + t3
-    t5 = t30 - t34
-    t31 = t5 * t24
-    t34 = t25 + t64
-    t27 = t27 * t34
-    t27 = t31 + t27
-    t16 = t16 * t9
-    t10 = t4 * t10
-    t10 = t16 + t10
-    t10 = t27 + t10
-    t10 = qd[3] * t10
-    t3 = t3 - t10
-    t10 = t30 - t66
-    t16 = t10 * t7
-    t17 = t25 - t17
-    t27 = t33 * t17
-    t16 = t16 + t27
-    t27 = t37 * t12
-    t31 = t11 * t15
-    t27 = t27 + t31
-    t16 = t16 - t27
-    t16 = qd[4] * t16
-    t3 = t3 + t16
-    t16 = t10 * t13
-    t21 = t21 * t17
-    t16 = t16 + t21
-    t21 = t22 * t39
-    t27 = t70 * t28
-    t21 = t21 + t27
-    t27 = t19 * t9
-    t23 = t4 * t23
-    t23 = t27 - t23
-    t21 = t21 + t23
-    t23 = t37 * t21
-    t22 = t70 * t22
-    t19 = t4 * t19
-    t19 = t22 + t19
-    t15 = t19 * t15
-    t15 = t23 + t15
-    t15 = t16 + t15
-    t15 = qd[5] * t15
-    t3 = t3 - t15
-    t15 = t38 * t8
-    t16 = t18 * t26
-    t15 = t15 + t16
-    t16 = t30 - t67
-    t22 = t16 * t20
-    t14 = t25 - t14
-    t23 = t29 * t14
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 - t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t26 = t12 * t26
+    t27 = t14 * t27
+    t26 = t26 - t27
+    t27 = t30 * qd[4]
+    t26 = t26 - t27
+    t27 = t17 * t26
+    t24 = t24 + t27
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 + t30
+    t30 = 0.107 * t24
+    t30 = t32 - t30
+    t28 = qd[6] - t28
+    t32 = 0.107 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 - t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.107 * t19
+    t16 = t16 - t23
+    t23 = 0.107 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 - t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
     t22 = t22 + t23
-    t15 = t15 - t22
-    t15 = qd[6] * t15
-    t3 = t3 + t15
-    t15 = t62 * t6
-    t1 = t1 * t49
-    t1 = t15 + t1
-    t15 = t40 * t48
-    t22 = t53 * t32
-    t15 = t15 + t22
-    t1 = t1 - t15
-    t1 = qd[2] * t1
-    t15 = t65 * t43
-    t22 = t41 * t58
-    t15 = t15 + t22
-    t0 = t0 * t25
-    t22 = t30 * t42
-    t0 = t0 - t22
-    t0 = t15 + t0
-    t0 = qd[1] * t0
-    t0 = t1 - t0
-    t1 = t51 * t9
-    t4 = t4 * t47
-    t1 = t1 + t4
-    t4 = t56 * t34
-    t5 = t5 * t44
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[3] * t1
-    t0 = t0 + t1
-    t1 = t61 * t12
-    t4 = t11 * t52
-    t1 = t1 + t4
-    t4 = t10 * t45
-    t5 = t59 * t17
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[4] * t1
-    t0 = t0 + t1
-    t1 = t61 * t21
-    t4 = t19 * t52
-    t1 = t1 + t4
-    t4 = t63 * t17
-    t5 = t10 * t50
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[5] * t1
-    t0 = t0 + t1
-    t1 = t16 * t46
-    t4 = t57 * t14
-    t1 = t1 + t4
-    t4 = t55 * t8
-    t5 = t18 * t54
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[6] * t1
-    t0 = t0 + t1
-    t1 = qd[2] * t6
-    t4 = qd[1] * t43
-    t1 = t1 - t4
-    t4 = qd[3] * t9
-    t1 = t1 + t4
-    t4 = qd[4] * t12
-    t1 = t1 + t4
-    t4 = qd[5] * t21
-    t1 = t1 + t4
-    t4 = qd[6] * t8
-    t1 = t1 - t4
-    t4 = qd[2] * t48
-    t5 = qd[1] * t42
-    t4 = t4 - t5
-    t5 = qd[3] * t44
-    t4 = t4 + t5
-    t5 = qd[4] * t45
-    t4 = t4 + t5
-    t5 = qd[5] * t50
-    t4 = t4 + t5
-    t5 = qd[6] * t46
-    t4 = t4 - t5
-    t5 = qd[4] * t7
-    t2 = qd[2] * t2
-    t6 = qd[3] * t24
-    t2 = t2 + t6
-    t2 = t5 - t2
-    t5 = qd[5] * t13
-    t2 = t2 - t5
-    t5 = qd[6] * t20
-    t2 = t2 - t5
-    _a = (t35, t3, t0, t1, t4, t2)
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 - t2
+    t4 = t4 * t29
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 - t0
+    t4 = t5 * t29
+    t0 = t0 - t4
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 - t3
+    t1 = t1 * t29
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _jdot_qd_panda_hand_constants = _constants(
-    -0.316, 0.0825, -0.0825, 0.384, 0.088, 0.107, 0.333)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.107)
 
 
 def _jdot_qd_panda_hand_chunk(x, t, s, y):
@@ -8218,557 +5964,370 @@ def _jdot_qd_panda_hand_chunk(x, t, s, y):
     add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _jdot_qd_panda_hand_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _jdot_qd_panda_hand_constants
     cos(q_0, t0)
-    sin(q_1, t1)
-    multiply(t1, qd_1, t2)
-    multiply(k0, t2, t3)
-    cos(q_2, t4)
-    cos(q_1, t5)
-    multiply(t5, qd_1, t6)
-    multiply(t4, t6, t7)
-    sin(q_2, t8)
-    multiply(t8, qd_2, t9)
-    multiply(t1, t9, t10)
-    subtract(t7, t10, t7)
-    multiply(k1, t7, t10)
-    subtract(t3, t10, t10)
-    cos(q_3, t11)
-    multiply(t11, qd_3, t12)
-    multiply(t5, t12, t13)
-    sin(q_3, t14)
-    multiply(t14, t2, t15)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
+    cos(q_4, t12)
+    multiply(t8, t12, t13)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
     subtract(t13, t15, t13)
-    multiply(t11, t7, t15)
-    multiply(t1, t4, t16)
-    multiply(t14, qd_3, t17)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
     multiply(t16, t17, t18)
-    subtract(t15, t18, t15)
-    subtract(t13, t15, t13)
-    multiply(k2, t13, t15)
-    multiply(t14, t7, t7)
-    multiply(t16, t12, t18)
-    add(t7, t18, t7)
-    multiply(t11, t2, t18)
-    multiply(t5, t17, t19)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
     add(t18, t19, t18)
-    subtract(t7, t18, t7)
-    multiply(k3, t7, t18)
-    add(t15, t18, t15)
-    add(t10, t15, t15)
-    cos(q_5, t18)
-    cos(q_4, t19)
-    multiply(t19, t13, t20)
-    multiply(t5, t14, t21)
-    multiply(t16, t11, t22)
-    subtract(t21, t22, t21)
-    sin(q_4, t22)
-    multiply(t22, qd_4, t23)
-    multiply(t21, t23, t24)
-    subtract(t20, t24, t20)
-    multiply(t8, t6, t24)
-    multiply(t4, qd_2, t25)
-    multiply(t1, t25, t26)
-    add(t24, t26, t24)
-    multiply(t22, t24, t26)
-    multiply(t1, t8, t27)
-    multiply(t19, qd_4, t28)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(t3, t22, t23)
+    multiply(t8, qd_1, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
     multiply(t27, t28, t29)
-    add(t26, t29, t26)
-    add(t20, t26, t20)
-    multiply(t18, t20, t26)
-    multiply(t21, t19, t29)
-    multiply(t27, t22, t30)
-    add(t29, t30, t29)
-    sin(q_5, t30)
-    multiply(t30, qd_5, t31)
-    multiply(t29, t31, t32)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
+    add(t29, t31, t29)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
     subtract(t26, t32, t26)
-    multiply(t30, t7, t32)
-    multiply(t16, t14, t33)
-    multiply(t5, t11, t34)
-    add(t33, t34, t33)
-    multiply(t18, qd_5, t34)
-    multiply(t33, t34, t35)
-    add(t32, t35, t32)
-    add(t26, t32, t26)
-    multiply(k4, t26, t26)
-    add(t15, t26, t26)
-    multiply(t18, t7, t32)
-    multiply(t33, t31, t35)
-    subtract(t32, t35, t32)
-    multiply(t30, t20, t20)
-    multiply(t29, t34, t35)
-    add(t20, t35, t20)
-    subtract(t32, t20, t32)
-    multiply(k5, t32, t20)
-    subtract(t26, t20, t20)
-    multiply(t0, t20, t35)
-    multiply(k0, t5, t36)
-    subtract(k6, t36, t36)
-    multiply(k1, t16, t16)
-    subtract(t36, t16, t16)
-    multiply(k2, t21, t37)
-    multiply(k3, t33, t38)
-    add(t37, t38, t37)
-    add(t16, t37, t37)
-    multiply(t29, t18, t38)
-    multiply(t33, t30, t39)
-    add(t38, t39, t38)
-    multiply(k4, t38, t38)
-    add(t37, t38, t38)
-    multiply(t33, t18, t39)
-    multiply(t29, t30, t29)
-    subtract(t39, t29, t39)
-    multiply(k5, t39, t29)
-    subtract(t38, t29, t29)
-    subtract(t29, k6, t40)
-    sin(q_0, t41)
-    multiply(t41, qd_0, t42)
-    multiply(t40, t42, t43)
-    subtract(t35, t43, t35)
-    multiply(qd_1, t35, t35)
-    multiply(t0, qd_0, t43)
-    multiply(t5, t43, t44)
-    multiply(t41, t2, t45)
-    subtract(t44, t45, t44)
-    multiply(t4, t44, t45)
-    multiply(t41, t5, t46)
-    multiply(t46, t9, t47)
-    subtract(t45, t47, t45)
-    multiply(t0, t25, t47)
-    multiply(t8, t42, t48)
-    subtract(t47, t48, t47)
-    add(t45, t47, t45)
-    multiply(k1, t45, t47)
-    multiply(t1, t43, t48)
-    multiply(t41, t6, t49)
-    add(t48, t49, t48)
-    multiply(k0, t48, t49)
-    subtract(t47, t49, t47)
-    multiply(t11, t45, t50)
-    multiply(t46, t4, t51)
-    multiply(t0, t8, t52)
-    add(t51, t52, t51)
-    multiply(t51, t17, t52)
-    subtract(t50, t52, t50)
-    multiply(t14, t48, t52)
-    multiply(t41, t1, t53)
-    multiply(t53, t12, t54)
-    add(t52, t54, t52)
-    add(t50, t52, t50)
-    multiply(k2, t50, t52)
-    multiply(t11, t48, t54)
-    multiply(t53, t17, t55)
-    subtract(t54, t55, t54)
-    multiply(t14, t45, t45)
-    multiply(t51, t12, t55)
-    add(t45, t55, t45)
-    subtract(t54, t45, t54)
-    multiply(k3, t54, t45)
-    add(t52, t45, t52)
-    add(t47, t52, t52)
-    multiply(t19, t50, t45)
-    multiply(t51, t11, t55)
-    multiply(t53, t14, t56)
-    add(t55, t56, t55)
-    multiply(t55, t23, t56)
-    subtract(t45, t56, t45)
-    multiply(t0, t4, t56)
-    multiply(t46, t8, t57)
-    subtract(t56, t57, t56)
-    multiply(t56, t28, t57)
-    multiply(t4, t42, t58)
-    multiply(t0, t9, t59)
-    add(t58, t59, t58)
-    multiply(t8, t44, t44)
-    multiply(t46, t25, t46)
-    add(t44, t46, t44)
-    add(t58, t44, t58)
-    multiply(t22, t58, t44)
-    subtract(t57, t44, t57)
-    add(t45, t57, t45)
-    multiply(t18, t45, t44)
-    multiply(t55, t19, t46)
-    multiply(t56, t22, t57)
-    add(t46, t57, t46)
-    multiply(t46, t31, t57)
-    subtract(t44, t57, t44)
-    multiply(t30, t54, t57)
-    multiply(t53, t11, t59)
-    multiply(t51, t14, t60)
-    subtract(t59, t60, t59)
-    multiply(t59, t34, t60)
-    add(t57, t60, t57)
-    add(t44, t57, t44)
-    multiply(k4, t44, t44)
-    add(t52, t44, t44)
-    multiply(t18, t54, t57)
-    multiply(t59, t31, t60)
-    subtract(t57, t60, t57)
-    multiply(t30, t45, t45)
-    multiply(t46, t34, t60)
-    add(t45, t60, t45)
-    subtract(t57, t45, t57)
-    multiply(k5, t57, t45)
-    subtract(t44, t45, t45)
-    multiply(qd_0, t45, t60)
-    subtract(t35, t60, t35)
-    subtract(t29, t36, t36)
-    multiply(t36, t48, t60)
-    subtract(t20, t3, t3)
-    multiply(t53, t3, t61)
-    add(t60, t61, t60)
-    add(t45, t49, t49)
-    multiply(t5, t49, t61)
-    multiply(k1, t51, t51)
-    multiply(k0, t53, t62)
-    subtract(t51, t62, t51)
-    multiply(k2, t55, t63)
-    multiply(k3, t59, t64)
-    add(t63, t64, t63)
-    add(t51, t63, t63)
-    multiply(t46, t18, t64)
-    multiply(t59, t30, t65)
-    add(t64, t65, t64)
-    multiply(k4, t64, t64)
-    add(t63, t64, t64)
-    multiply(t59, t18, t65)
-    multiply(t46, t30, t46)
-    subtract(t65, t46, t65)
-    multiply(k5, t65, t46)
-    subtract(t64, t46, t46)
-    add(t46, t62, t62)
-    multiply(t62, t2, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_2, t60, t60)
-    add(t35, t60, t35)
-    subtract(t46, t51, t51)
-    multiply(t51, t24, t60)
-    subtract(t45, t47, t47)
-    multiply(t27, t47, t61)
-    add(t60, t61, t60)
-    subtract(t20, t10, t10)
-    multiply(t56, t10, t61)
-    subtract(t29, t16, t16)
-    multiply(t16, t58, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_3, t60, t60)
-    add(t35, t60, t35)
-    subtract(t29, t37, t37)
-    multiply(t37, t54, t60)
-    subtract(t20, t15, t15)
-    multiply(t59, t15, t61)
-    add(t60, t61, t60)
-    subtract(t46, t63, t63)
-    multiply(t63, t7, t61)
-    subtract(t45, t52, t52)
-    multiply(t33, t52, t66)
-    add(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_4, t60, t60)
-    add(t35, t60, t35)
-    multiply(t19, t24, t60)
-    multiply(t27, t23, t61)
-    subtract(t60, t61, t60)
-    multiply(t22, t13, t13)
-    multiply(t21, t28, t61)
-    add(t13, t61, t13)
-    subtract(t60, t13, t60)
-    multiply(t63, t60, t13)
-    multiply(t27, t19, t61)
-    multiply(t21, t22, t21)
-    subtract(t61, t21, t61)
-    multiply(t61, t52, t21)
-    add(t13, t21, t13)
-    multiply(t56, t19, t21)
-    multiply(t55, t22, t66)
-    subtract(t21, t66, t21)
-    multiply(t21, t15, t66)
-    multiply(t19, t58, t67)
-    multiply(t56, t23, t68)
-    add(t67, t68, t67)
-    multiply(t22, t50, t50)
-    multiply(t55, t28, t55)
-    add(t50, t55, t50)
-    add(t67, t50, t67)
-    multiply(t37, t67, t50)
-    subtract(t66, t50, t66)
-    subtract(t13, t66, t13)
-    multiply(qd_5, t13, t13)
-    add(t35, t13, t35)
-    subtract(t46, t64, t64)
-    multiply(t64, t32, t13)
-    subtract(t45, t44, t44)
-    multiply(t39, t44, t50)
-    add(t13, t50, t13)
-    subtract(t29, t38, t29)
-    multiply(t29, t57, t38)
-    subtract(t20, t26, t26)
-    multiply(t65, t26, t50)
-    add(t38, t50, t38)
-    subtract(t13, t38, t13)
-    multiply(qd_6, t13, t13)
-    add(t35, t13, a_0)
-    multiply(t0, t6, t6)
-    multiply(t1, t42, t13)
-    subtract(t6, t13, t6)
-    multiply(t14, t6, t13)
-    multiply(t0, t1, t1)
-    multiply(t1, t12, t35)
-    add(t13, t35, t13)
-    multiply(t5, t42, t35)
-    multiply(t0, t2, t38)
-    add(t35, t38, t35)
-    multiply(t4, t35, t38)
-    multiply(t0, t5, t50)
-    multiply(t50, t9, t55)
-    add(t38, t55, t38)
-    multiply(t8, t43, t55)
-    multiply(t41, t25, t66)
-    add(t55, t66, t55)
-    add(t38, t55, t38)
-    multiply(t11, t38, t55)
-    multiply(t50, t4, t66)
-    multiply(t41, t8, t68)
-    subtract(t66, t68, t66)
-    multiply(t66, t17, t68)
-    add(t55, t68, t55)
-    subtract(t13, t55, t13)
-    multiply(k2, t13, t55)
-    multiply(t11, t6, t68)
-    multiply(t1, t17, t17)
-    subtract(t68, t17, t68)
-    multiply(t66, t12, t12)
-    multiply(t14, t38, t17)
-    subtract(t12, t17, t12)
-    subtract(t68, t12, t68)
-    multiply(k3, t68, t12)
-    add(t55, t12, t55)
-    multiply(k1, t38, t38)
-    multiply(k0, t6, t12)
-    add(t38, t12, t38)
-    subtract(t55, t38, t55)
-    multiply(t19, t13, t17)
-    multiply(t66, t11, t69)
-    multiply(t1, t14, t70)
-    add(t69, t70, t69)
-    multiply(t69, t23, t70)
-    subtract(t17, t70, t17)
-    multiply(t50, t25, t25)
-    multiply(t8, t35, t35)
-    subtract(t25, t35, t25)
-    multiply(t4, t43, t35)
-    multiply(t41, t9, t9)
-    subtract(t35, t9, t35)
-    add(t25, t35, t25)
-    multiply(t22, t25, t9)
-    multiply(t50, t8, t50)
-    multiply(t41, t4, t4)
-    add(t50, t4, t50)
-    multiply(t50, t28, t4)
-    add(t9, t4, t9)
-    subtract(t17, t9, t17)
-    multiply(t18, t17, t4)
-    multiply(t69, t19, t8)
-    multiply(t50, t22, t9)
-    subtract(t8, t9, t8)
-    multiply(t8, t31, t9)
-    subtract(t4, t9, t4)
-    multiply(t30, t68, t9)
-    multiply(t1, t11, t11)
-    multiply(t66, t14, t14)
-    subtract(t11, t14, t11)
-    multiply(t11, t34, t14)
-    add(t9, t14, t9)
-    add(t4, t9, t4)
-    multiply(k4, t4, t4)
-    add(t55, t4, t4)
-    multiply(t18, t68, t9)
-    multiply(t11, t31, t31)
-    subtract(t9, t31, t9)
-    multiply(t30, t17, t17)
-    multiply(t8, t34, t34)
-    add(t17, t34, t17)
-    subtract(t9, t17, t9)
-    multiply(k5, t9, t14)
-    subtract(t4, t14, t14)
-    multiply(qd_0, t14, t17)
-    multiply(t40, t43, t40)
-    multiply(t41, t20, t20)
-    add(t40, t20, t40)
-    multiply(qd_1, t40, t40)
-    add(t17, t40, t17)
-    add(t14, t12, t12)
-    multiply(t5, t12, t5)
-    multiply(k1, t66, t66)
-    multiply(k0, t1, t20)
-    subtract(t66, t20, t66)
-    multiply(k2, t69, t31)
-    multiply(k3, t11, t34)
-    add(t31, t34, t31)
-    add(t66, t31, t31)
-    multiply(t8, t18, t34)
-    multiply(t11, t30, t35)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    multiply(k5, t21, t30)
+    add(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t27, qd_2, t27)
+    multiply(t3, t24, t24)
+    subtract(t27, t24, t27)
+    multiply(t7, t27, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t11, t20, t36)
+    subtract(t24, t36, t24)
+    multiply(t30, qd_3, t36)
+    add(t24, t36, t24)
+    multiply(k5, t24, t36)
+    multiply(t11, t27, t27)
+    multiply(t7, t20, t37)
+    add(t27, t37, t27)
+    multiply(t32, qd_3, t37)
+    add(t27, t37, t27)
+    multiply(k6, t27, t37)
+    add(t36, t37, t36)
+    multiply(t31, t28, t31)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    multiply(k4, t20, t20)
+    add(t22, t20, t22)
+    subtract(t31, t22, t31)
+    subtract(t36, t31, t36)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t36, t35, t36)
+    multiply(t14, t36, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t36, t36)
+    add(t29, t36, t29)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
     add(t34, t35, t34)
-    multiply(k4, t34, t34)
-    add(t31, t34, t34)
-    multiply(t11, t18, t18)
-    multiply(t8, t30, t8)
-    subtract(t18, t8, t18)
-    multiply(k5, t18, t8)
-    subtract(t34, t8, t8)
-    add(t8, t20, t20)
-    multiply(t20, t2, t30)
-    subtract(t5, t30, t5)
-    multiply(t36, t6, t36)
-    multiply(t1, t3, t3)
-    add(t36, t3, t36)
-    subtract(t5, t36, t5)
-    multiply(qd_2, t5, t5)
-    add(t17, t5, t17)
-    subtract(t8, t66, t66)
-    multiply(t66, t24, t3)
-    add(t14, t38, t38)
-    multiply(t27, t38, t27)
-    add(t3, t27, t3)
-    multiply(t16, t25, t16)
-    multiply(t50, t10, t10)
-    add(t16, t10, t16)
-    add(t3, t16, t3)
-    multiply(qd_3, t3, t3)
-    subtract(t17, t3, t17)
-    subtract(t8, t31, t31)
-    multiply(t31, t7, t3)
-    subtract(t14, t55, t55)
-    multiply(t33, t55, t33)
-    add(t3, t33, t3)
-    multiply(t37, t68, t5)
-    multiply(t11, t15, t10)
-    add(t5, t10, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t17, t3, t17)
-    multiply(t31, t60, t3)
-    multiply(t61, t55, t61)
-    add(t3, t61, t3)
-    multiply(t22, t13, t13)
-    multiply(t69, t28, t28)
-    add(t13, t28, t13)
-    multiply(t19, t25, t5)
-    multiply(t50, t23, t23)
-    subtract(t5, t23, t5)
-    add(t13, t5, t13)
-    multiply(t37, t13, t37)
-    multiply(t69, t22, t69)
-    multiply(t50, t19, t19)
-    add(t69, t19, t69)
-    multiply(t69, t15, t15)
-    add(t37, t15, t37)
-    add(t3, t37, t3)
-    multiply(qd_5, t3, t3)
-    subtract(t17, t3, t17)
-    multiply(t29, t9, t29)
-    multiply(t18, t26, t26)
-    add(t29, t26, t29)
-    subtract(t8, t34, t34)
-    multiply(t34, t32, t3)
-    subtract(t14, t4, t4)
-    multiply(t39, t4, t39)
-    add(t3, t39, t3)
-    subtract(t29, t3, t29)
-    multiply(qd_6, t29, t29)
-    add(t17, t29, a_1)
-    multiply(t62, t6, t62)
-    multiply(t1, t49, t1)
-    add(t62, t1, t62)
-    multiply(t20, t48, t20)
-    multiply(t53, t12, t53)
-    add(t20, t53, t20)
-    subtract(t62, t20, t62)
-    multiply(qd_2, t62, t62)
-    multiply(t46, t43, t46)
-    multiply(t41, t45, t41)
-    add(t46, t41, t46)
-    multiply(t0, t14, t0)
-    multiply(t8, t42, t8)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    multiply(t15, t27, t35)
+    add(t32, t35, t32)
+    multiply(t15, t20, t35)
+    multiply(t4, t30, t30)
+    add(t35, t30, t35)
+    multiply(t35, qd_5, t30)
+    add(t32, t30, t32)
+    multiply(k7, t32, t30)
+    add(t29, t30, t29)
+    multiply(t35, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t15, t34, t34)
+    multiply(t4, t27, t27)
+    subtract(t34, t27, t34)
+    multiply(t8, qd_5, t27)
+    add(t34, t27, t34)
+    multiply(t2, t34, t27)
+    multiply(t12, t21, t21)
+    multiply(t14, t24, t24)
+    subtract(t21, t24, t21)
+    multiply(t20, qd_4, t20)
+    subtract(t21, t20, t21)
+    multiply(t17, t21, t20)
+    add(t27, t20, t27)
+    multiply(t17, t35, t20)
+    multiply(t2, t28, t24)
+    add(t20, t24, t20)
+    multiply(t20, qd_6, t24)
+    add(t27, t24, t27)
+    multiply(k8, t27, t24)
+    subtract(t25, t24, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t20, t24)
+    multiply(t8, t24, t30)
+    add(t25, t30, t25)
+    multiply(t16, t25, t30)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t21, t18)
+    subtract(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t35, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t30, t8, t30)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t21, t21)
+    subtract(t26, t21, t26)
+    multiply(t35, t23, t35)
+    add(t26, t35, t26)
+    multiply(t20, t24, t20)
+    multiply(t28, t18, t28)
+    add(t20, t28, t20)
+    add(t26, t20, t26)
+    multiply(t10, t26, t8)
+    add(t30, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t20)
+    add(t18, t20, t18)
+    multiply(t18, t12, t20)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
     subtract(t0, t8, t0)
-    add(t46, t0, t46)
-    multiply(qd_1, t46, t46)
-    subtract(t62, t46, t62)
-    multiply(t51, t25, t51)
-    multiply(t50, t47, t50)
-    add(t51, t50, t51)
-    multiply(t56, t38, t56)
-    multiply(t66, t58, t66)
-    subtract(t56, t66, t56)
-    add(t51, t56, t51)
-    multiply(qd_3, t51, t51)
-    add(t62, t51, t62)
-    multiply(t63, t68, t0)
-    multiply(t11, t52, t11)
-    add(t0, t11, t0)
-    multiply(t31, t54, t1)
-    multiply(t59, t55, t59)
-    add(t1, t59, t1)
-    subtract(t0, t1, t0)
-    multiply(qd_4, t0, t0)
-    add(t62, t0, t62)
-    multiply(t63, t13, t63)
-    multiply(t69, t52, t69)
-    add(t63, t69, t63)
-    multiply(t21, t55, t21)
-    multiply(t31, t67, t31)
-    subtract(t21, t31, t21)
-    add(t63, t21, t63)
-    multiply(qd_5, t63, t63)
-    add(t62, t63, t62)
-    multiply(t34, t57, t34)
-    multiply(t65, t4, t65)
-    add(t34, t65, t34)
-    multiply(t64, t9, t64)
-    multiply(t18, t44, t18)
-    add(t64, t18, t64)
-    subtract(t34, t64, t34)
-    multiply(qd_6, t34, t34)
-    add(t62, t34, a_2)
-    multiply(qd_2, t6, t6)
-    multiply(qd_1, t43, t43)
-    subtract(t6, t43, t6)
-    multiply(qd_3, t25, t25)
-    add(t6, t25, t6)
-    multiply(qd_4, t68, t68)
-    add(t6, t68, t6)
-    multiply(qd_5, t13, t13)
-    add(t6, t13, t6)
-    multiply(qd_6, t9, t9)
-    subtract(t6, t9, a_3)
-    multiply(qd_2, t48, t48)
-    multiply(qd_1, t42, t42)
-    subtract(t48, t42, t48)
-    multiply(qd_3, t58, t58)
-    add(t48, t58, t48)
-    multiply(qd_4, t54, t54)
-    add(t48, t54, t48)
-    multiply(qd_5, t67, t67)
-    add(t48, t67, t48)
-    multiply(qd_6, t57, t57)
-    subtract(t48, t57, a_4)
-    multiply(qd_4, t7, t7)
-    multiply(qd_2, t2, t2)
-    multiply(qd_3, t24, t24)
-    add(t2, t24, t2)
+    multiply(t0, t14, t8)
+    add(t20, t8, t20)
+    multiply(t20, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t20, t4, t20)
+    subtract(t5, t20, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
     subtract(t7, t2, t7)
-    multiply(qd_5, t60, t60)
-    subtract(t7, t60, t7)
-    multiply(qd_6, t32, t32)
-    subtract(t7, t32, a_5)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t27, t19)
+    subtract(t16, t19, t16)
+    multiply(t10, t32, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t27, t18)
+    subtract(t0, t18, t0)
+    multiply(t5, t32, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t27, t7)
+    subtract(t2, t7, t2)
+    multiply(t3, t32, t3)
+    subtract(t2, t3, a_5)
 
 
 def frame_acceleration_panda_hand(q, qd, qdd):
@@ -8778,13 +6337,13 @@ def frame_acceleration_panda_hand(q, qd, qdd):
     in  qd [7]
     in  qdd [7]
     out a [6]
-    671 ops: 374 mul, 285 add, 0 div, 12 trig
+    376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     qdd = _array(qdd, 7, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_panda_hand_chunk, (q, qd, qdd), 81, ((6,),))
+        return _batch(_frame_acceleration_panda_hand_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -8792,681 +6351,387 @@ def frame_acceleration_panda_hand(q, qd, qdd):
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = cos(q[1])
-    t2 = (-0.316) * t1
-    t2 = 0.333 - t2
-    t3 = sin(q[1])
-    t4 = cos(q[2])
-    t5 = t3 * t4
-    t6 = 0.0825 * t5
-    t6 = t2 - t6
-    t7 = sin(q[3])
-    t8 = t1 * t7
-    t9 = cos(q[3])
-    t10 = t5 * t9
-    t8 = t8 - t10
-    t10 = (-0.0825) * t8
-    t11 = t5 * t7
-    t12 = t1 * t9
-    t11 = t11 + t12
-    t12 = 0.384 * t11
-    t10 = t10 + t12
-    t10 = t6 + t10
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
     t12 = cos(q[4])
     t13 = t8 * t12
-    t14 = sin(q[2])
-    t15 = t3 * t14
-    t16 = sin(q[4])
-    t17 = t15 * t16
-    t13 = t13 + t17
-    t17 = cos(q[5])
-    t18 = t13 * t17
-    t19 = sin(q[5])
-    t20 = t11 * t19
-    t18 = t18 + t20
-    t18 = 0.088 * t18
-    t18 = t10 + t18
-    t20 = t11 * t17
-    t21 = t13 * t19
-    t20 = t20 - t21
-    t21 = 0.107 * t20
-    t21 = t18 - t21
-    t22 = t21 - 0.333
-    t23 = t0 * t22
-    t23 = t23 * qdd[1]
-    t24 = sin(q[0])
-    t25 = t24 * t1
-    t26 = t25 * t4
-    t27 = t0 * t14
-    t26 = t26 + t27
-    t27 = 0.0825 * t26
-    t28 = t24 * t3
-    t29 = (-0.316) * t28
-    t27 = t27 - t29
-    t30 = t26 * t9
-    t31 = t28 * t7
-    t30 = t30 + t31
-    t31 = (-0.0825) * t30
-    t32 = t28 * t9
-    t33 = t26 * t7
-    t32 = t32 - t33
-    t33 = 0.384 * t32
-    t31 = t31 + t33
-    t31 = t27 + t31
-    t33 = t30 * t12
-    t34 = t0 * t4
-    t35 = t25 * t14
-    t34 = t34 - t35
-    t35 = t34 * t16
-    t33 = t33 + t35
-    t35 = t33 * t17
-    t36 = t32 * t19
-    t35 = t35 + t36
-    t35 = 0.088 * t35
-    t35 = t31 + t35
-    t36 = t32 * t17
-    t37 = t33 * t19
-    t36 = t36 - t37
-    t37 = 0.107 * t36
-    t37 = t35 - t37
-    t38 = t37 * qdd[0]
-    t23 = t23 - t38
-    t2 = t21 - t2
-    t38 = t28 * t2
-    t29 = t37 + t29
-    t39 = t1 * t29
-    t38 = t38 - t39
-    t38 = t38 * qdd[2]
-    t23 = t23 + t38
-    t27 = t37 - t27
-    t38 = t15 * t27
-    t6 = t21 - t6
-    t39 = t34 * t6
-    t38 = t38 - t39
-    t38 = t38 * qdd[3]
-    t23 = t23 + t38
-    t10 = t21 - t10
-    t38 = t32 * t10
-    t31 = t37 - t31
-    t39 = t11 * t31
-    t38 = t38 - t39
-    t38 = t38 * qdd[4]
-    t23 = t23 + t38
-    t38 = t15 * t12
-    t39 = t8 * t16
-    t38 = t38 - t39
-    t39 = t38 * t31
-    t40 = t34 * t12
-    t41 = t30 * t16
-    t40 = t40 - t41
-    t41 = t40 * t10
-    t39 = t39 - t41
-    t39 = t39 * qdd[5]
-    t23 = t23 + t39
-    t35 = t37 - t35
-    t39 = t20 * t35
-    t18 = t21 - t18
-    t21 = t36 * t18
-    t21 = t39 - t21
-    t21 = t21 * qdd[6]
-    t21 = t23 + t21
-    t23 = t3 * qd[1]
-    t39 = (-0.316) * t23
-    t41 = t1 * qd[1]
-    t42 = t4 * t41
-    t43 = t14 * qd[2]
-    t44 = t3 * t43
-    t42 = t42 - t44
-    t44 = 0.0825 * t42
-    t44 = t39 - t44
-    t45 = t9 * qd[3]
-    t46 = t1 * t45
-    t47 = t7 * t23
-    t46 = t46 - t47
-    t47 = t9 * t42
-    t48 = t7 * qd[3]
-    t49 = t5 * t48
-    t47 = t47 - t49
-    t46 = t46 - t47
-    t47 = (-0.0825) * t46
-    t42 = t7 * t42
-    t5 = t5 * t45
-    t5 = t42 + t5
-    t42 = t9 * t23
-    t49 = t1 * t48
-    t42 = t42 + t49
-    t5 = t5 - t42
-    t42 = 0.384 * t5
-    t42 = t47 + t42
-    t42 = t44 + t42
-    t47 = t12 * t46
-    t49 = t16 * qd[4]
-    t50 = t8 * t49
-    t47 = t47 - t50
-    t50 = t14 * t41
-    t51 = t4 * qd[2]
-    t52 = t3 * t51
-    t50 = t50 + t52
-    t52 = t16 * t50
-    t53 = t12 * qd[4]
-    t54 = t15 * t53
-    t52 = t52 + t54
-    t47 = t47 + t52
-    t52 = t17 * t47
-    t54 = t19 * qd[5]
-    t55 = t13 * t54
-    t52 = t52 - t55
-    t55 = t19 * t5
-    t56 = t17 * qd[5]
-    t57 = t11 * t56
-    t55 = t55 + t57
-    t52 = t52 + t55
-    t52 = 0.088 * t52
-    t52 = t42 + t52
-    t55 = t17 * t5
-    t57 = t11 * t54
-    t55 = t55 - t57
-    t47 = t19 * t47
-    t13 = t13 * t56
-    t13 = t47 + t13
-    t13 = t55 - t13
-    t47 = 0.107 * t13
-    t47 = t52 - t47
-    t55 = t0 * t47
-    t57 = t24 * qd[0]
-    t58 = t22 * t57
-    t55 = t55 - t58
-    t55 = qd[1] * t55
-    t58 = t0 * qd[0]
-    t59 = t1 * t58
-    t60 = t24 * t23
-    t59 = t59 - t60
-    t60 = t4 * t59
-    t61 = t25 * t43
-    t60 = t60 - t61
-    t61 = t0 * t51
-    t62 = t14 * t57
-    t61 = t61 - t62
-    t60 = t60 + t61
-    t61 = 0.0825 * t60
-    t62 = t3 * t58
-    t63 = t24 * t41
-    t62 = t62 + t63
-    t63 = (-0.316) * t62
-    t61 = t61 - t63
-    t64 = t9 * t60
-    t65 = t26 * t48
-    t64 = t64 - t65
-    t65 = t7 * t62
-    t66 = t28 * t45
-    t65 = t65 + t66
-    t64 = t64 + t65
-    t65 = (-0.0825) * t64
-    t66 = t9 * t62
-    t67 = t28 * t48
-    t66 = t66 - t67
-    t60 = t7 * t60
-    t26 = t26 * t45
-    t26 = t60 + t26
-    t26 = t66 - t26
-    t60 = 0.384 * t26
-    t60 = t65 + t60
-    t60 = t61 + t60
-    t65 = t12 * t64
-    t66 = t30 * t49
-    t65 = t65 - t66
-    t66 = t34 * t53
-    t67 = t4 * t57
-    t68 = t0 * t43
-    t67 = t67 + t68
-    t59 = t14 * t59
-    t25 = t25 * t51
-    t25 = t59 + t25
-    t25 = t67 + t25
-    t59 = t16 * t25
-    t59 = t66 - t59
-    t59 = t65 + t59
-    t65 = t17 * t59
-    t66 = t33 * t54
-    t65 = t65 - t66
-    t66 = t19 * t26
-    t67 = t32 * t56
-    t66 = t66 + t67
-    t65 = t65 + t66
-    t65 = 0.088 * t65
-    t65 = t60 + t65
-    t66 = t17 * t26
-    t67 = t32 * t54
-    t66 = t66 - t67
-    t59 = t19 * t59
-    t33 = t33 * t56
-    t33 = t59 + t33
-    t33 = t66 - t33
-    t59 = 0.107 * t33
-    t59 = t65 - t59
-    t66 = qd[0] * t59
-    t55 = t55 - t66
-    t66 = t2 * t62
-    t39 = t47 - t39
-    t67 = t28 * t39
-    t66 = t66 + t67
-    t63 = t59 + t63
-    t67 = t1 * t63
-    t68 = t29 * t23
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[2] * t66
-    t55 = t55 + t66
-    t66 = t27 * t50
-    t61 = t59 - t61
-    t67 = t15 * t61
-    t66 = t66 + t67
-    t44 = t47 - t44
-    t67 = t34 * t44
-    t68 = t6 * t25
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[3] * t66
-    t55 = t55 + t66
-    t66 = t10 * t26
-    t42 = t47 - t42
-    t67 = t32 * t42
-    t66 = t66 + t67
-    t67 = t31 * t5
-    t60 = t59 - t60
-    t68 = t11 * t60
-    t67 = t67 + t68
-    t66 = t66 - t67
-    t66 = qd[4] * t66
-    t55 = t55 + t66
-    t66 = t12 * t50
-    t67 = t15 * t49
-    t66 = t66 - t67
-    t46 = t16 * t46
-    t8 = t8 * t53
-    t8 = t46 + t8
-    t8 = t66 - t8
-    t46 = t31 * t8
-    t66 = t38 * t60
-    t46 = t46 + t66
-    t66 = t40 * t42
-    t67 = t12 * t25
-    t68 = t34 * t49
-    t67 = t67 + t68
-    t64 = t16 * t64
-    t30 = t30 * t53
-    t30 = t64 + t30
-    t30 = t67 + t30
-    t64 = t10 * t30
-    t64 = t66 - t64
-    t46 = t46 - t64
-    t46 = qd[5] * t46
-    t46 = t55 + t46
-    t55 = t35 * t13
-    t64 = t59 - t65
-    t65 = t20 * t64
-    t55 = t55 + t65
-    t65 = t18 * t33
-    t52 = t47 - t52
-    t66 = t36 * t52
-    t65 = t65 + t66
-    t55 = t55 - t65
-    t55 = qd[6] * t55
-    t46 = t46 + t55
-    t21 = t21 + t46
-    t46 = t0 * t1
-    t55 = t46 * t4
-    t65 = t24 * t14
-    t55 = t55 - t65
-    t65 = 0.0825 * t55
-    t66 = t0 * t3
-    t67 = (-0.316) * t66
-    t65 = t65 - t67
-    t68 = t55 * t9
-    t69 = t66 * t7
-    t68 = t68 + t69
-    t69 = (-0.0825) * t68
-    t70 = t66 * t9
-    t71 = t55 * t7
-    t70 = t70 - t71
-    t71 = 0.384 * t70
-    t69 = t69 + t71
-    t69 = t65 + t69
-    t71 = t68 * t12
-    t72 = t46 * t14
-    t73 = t24 * t4
-    t72 = t72 + t73
-    t73 = t72 * t16
-    t71 = t71 - t73
-    t73 = t71 * t17
-    t74 = t70 * t19
-    t73 = t73 + t74
-    t73 = 0.088 * t73
-    t73 = t69 + t73
-    t74 = t70 * t17
-    t75 = t71 * t19
-    t74 = t74 - t75
-    t75 = 0.107 * t74
-    t75 = t73 - t75
-    t76 = t75 * qdd[0]
-    t77 = t24 * t22
-    t77 = t77 * qdd[1]
-    t76 = t76 + t77
-    t67 = t75 + t67
-    t77 = t1 * t67
-    t78 = t66 * t2
-    t77 = t77 - t78
-    t77 = t77 * qdd[2]
-    t76 = t76 + t77
-    t65 = t75 - t65
-    t77 = t15 * t65
-    t78 = t72 * t6
-    t77 = t77 + t78
-    t77 = t77 * qdd[3]
-    t76 = t76 - t77
-    t69 = t75 - t69
-    t77 = t11 * t69
-    t78 = t70 * t10
-    t77 = t77 - t78
-    t77 = t77 * qdd[4]
-    t76 = t76 + t77
-    t77 = t38 * t69
-    t78 = t68 * t16
-    t79 = t72 * t12
-    t78 = t78 + t79
-    t79 = t78 * t10
-    t77 = t77 + t79
-    t77 = t77 * qdd[5]
-    t76 = t76 - t77
-    t77 = t74 * t18
-    t73 = t75 - t73
-    t79 = t20 * t73
-    t77 = t77 - t79
-    t77 = t77 * qdd[6]
-    t76 = t76 + t77
-    t41 = t0 * t41
-    t3 = t3 * t57
-    t3 = t41 - t3
-    t41 = t7 * t3
-    t77 = t66 * t45
-    t41 = t41 + t77
-    t77 = t1 * t57
-    t79 = t0 * t23
-    t77 = t77 + t79
-    t79 = t4 * t77
-    t80 = t46 * t43
-    t79 = t79 + t80
-    t80 = t14 * t58
-    t81 = t24 * t51
-    t80 = t80 + t81
-    t79 = t79 + t80
-    t80 = t9 * t79
-    t81 = t55 * t48
-    t80 = t80 + t81
-    t41 = t41 - t80
-    t80 = (-0.0825) * t41
-    t9 = t9 * t3
-    t48 = t66 * t48
-    t9 = t9 - t48
-    t45 = t55 * t45
-    t7 = t7 * t79
-    t7 = t45 - t7
-    t7 = t9 - t7
-    t9 = 0.384 * t7
-    t9 = t80 + t9
-    t45 = 0.0825 * t79
-    t48 = (-0.316) * t3
-    t45 = t45 + t48
-    t9 = t9 - t45
-    t55 = t12 * t41
-    t79 = t68 * t49
-    t55 = t55 - t79
-    t46 = t46 * t51
-    t14 = t14 * t77
-    t14 = t46 - t14
-    t4 = t4 * t58
-    t43 = t24 * t43
-    t4 = t4 - t43
-    t4 = t14 + t4
-    t14 = t16 * t4
-    t43 = t72 * t53
-    t14 = t14 + t43
-    t14 = t55 - t14
-    t43 = t17 * t14
-    t46 = t71 * t54
-    t43 = t43 - t46
-    t46 = t19 * t7
-    t51 = t70 * t56
-    t46 = t46 + t51
-    t43 = t43 + t46
-    t43 = 0.088 * t43
-    t43 = t9 + t43
-    t17 = t17 * t7
-    t46 = t70 * t54
-    t17 = t17 - t46
-    t14 = t19 * t14
-    t19 = t71 * t56
-    t14 = t14 + t19
-    t14 = t17 - t14
-    t17 = 0.107 * t14
-    t17 = t43 - t17
-    t19 = qd[0] * t17
-    t22 = t22 * t58
-    t46 = t24 * t47
-    t22 = t22 + t46
-    t22 = qd[1] * t22
-    t19 = t19 + t22
-    t22 = t17 + t48
-    t46 = t1 * t22
-    t47 = t67 * t23
-    t46 = t46 - t47
-    t2 = t2 * t3
-    t39 = t66 * t39
-    t2 = t2 + t39
-    t2 = t46 - t2
-    t2 = qd[2] * t2
-    t2 = t19 + t2
-    t19 = t65 * t50
-    t39 = t17 + t45
-    t45 = t15 * t39
-    t19 = t19 + t45
-    t6 = t6 * t4
-    t44 = t72 * t44
-    t6 = t6 + t44
-    t6 = t19 + t6
-    t6 = qd[3] * t6
-    t2 = t2 - t6
-    t6 = t69 * t5
-    t9 = t17 - t9
-    t19 = t11 * t9
-    t6 = t6 + t19
-    t19 = t10 * t7
-    t44 = t70 * t42
-    t19 = t19 + t44
-    t6 = t6 - t19
-    t6 = qd[4] * t6
-    t2 = t2 + t6
-    t6 = t69 * t8
-    t19 = t38 * t9
-    t6 = t6 + t19
-    t16 = t16 * t41
-    t19 = t68 * t53
-    t16 = t16 + t19
-    t12 = t12 * t4
-    t19 = t72 * t49
-    t12 = t12 - t19
-    t12 = t16 + t12
-    t10 = t10 * t12
-    t16 = t78 * t42
-    t10 = t10 + t16
-    t6 = t6 + t10
-    t6 = qd[5] * t6
-    t2 = t2 - t6
-    t6 = t18 * t14
-    t10 = t74 * t52
-    t6 = t6 + t10
-    t10 = t73 * t13
-    t16 = t17 - t43
-    t18 = t20 * t16
-    t10 = t10 + t18
-    t6 = t6 - t10
-    t6 = qd[6] * t6
-    t2 = t2 + t6
-    t2 = t76 + t2
-    t6 = t66 * t29
-    t10 = t28 * t67
-    t6 = t6 - t10
-    t6 = t6 * qdd[2]
-    t10 = t24 * t37
-    t18 = t0 * t75
-    t10 = t10 + t18
-    t10 = t10 * qdd[1]
-    t6 = t6 - t10
-    t10 = t72 * t27
-    t18 = t34 * t65
-    t10 = t10 + t18
-    t10 = t10 * qdd[3]
-    t6 = t6 + t10
-    t10 = t70 * t31
-    t18 = t32 * t69
-    t10 = t10 - t18
-    t10 = t10 * qdd[4]
-    t6 = t6 + t10
-    t10 = t78 * t31
-    t18 = t40 * t69
-    t10 = t10 + t18
-    t10 = t10 * qdd[5]
-    t6 = t6 + t10
-    t10 = t36 * t73
-    t18 = t74 * t35
-    t10 = t10 - t18
-    t10 = t10 * qdd[6]
-    t6 = t6 + t10
-    t10 = t29 * t3
-    t18 = t66 * t63
-    t10 = t10 + t18
-    t18 = t67 * t62
-    t19 = t28 * t22
-    t18 = t18 + t19
-    t10 = t10 - t18
-    t10 = qd[2] * t10
-    t18 = t37 * t58
-    t19 = t24 * t59
-    t18 = t18 + t19
-    t17 = t0 * t17
-    t19 = t75 * t57
-    t17 = t17 - t19
-    t17 = t18 + t17
-    t17 = qd[1] * t17
-    t10 = t10 - t17
-    t17 = t27 * t4
-    t18 = t72 * t61
-    t17 = t17 + t18
-    t18 = t34 * t39
-    t19 = t65 * t25
-    t18 = t18 - t19
-    t17 = t17 + t18
-    t17 = qd[3] * t17
-    t10 = t10 + t17
-    t17 = t31 * t7
-    t18 = t70 * t60
-    t17 = t17 + t18
-    t18 = t69 * t26
-    t19 = t32 * t9
-    t18 = t18 + t19
-    t17 = t17 - t18
-    t17 = qd[4] * t17
-    t10 = t10 + t17
-    t17 = t31 * t12
-    t18 = t78 * t60
-    t17 = t17 + t18
-    t9 = t40 * t9
-    t18 = t69 * t30
-    t9 = t9 - t18
-    t9 = t17 + t9
-    t9 = qd[5] * t9
-    t9 = t10 + t9
-    t10 = t73 * t33
-    t16 = t36 * t16
-    t10 = t10 + t16
-    t16 = t35 * t14
-    t17 = t74 * t64
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
+    t13 = t13 - t15
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
     t16 = t16 + t17
-    t10 = t10 - t16
-    t10 = qd[6] * t10
-    t9 = t9 + t10
-    t6 = t6 + t9
-    t9 = t66 * qdd[2]
-    t10 = t24 * qdd[1]
-    t9 = t9 - t10
-    t10 = t72 * qdd[3]
-    t9 = t9 + t10
-    t10 = t70 * qdd[4]
-    t9 = t9 + t10
-    t10 = t78 * qdd[5]
-    t9 = t9 + t10
-    t10 = t74 * qdd[6]
-    t9 = t9 - t10
-    t3 = qd[2] * t3
-    t10 = qd[1] * t58
-    t3 = t3 - t10
-    t4 = qd[3] * t4
-    t3 = t3 + t4
-    t4 = qd[4] * t7
-    t3 = t3 + t4
-    t4 = qd[5] * t12
-    t3 = t3 + t4
-    t4 = qd[6] * t14
-    t3 = t3 - t4
-    t3 = t9 + t3
-    t0 = t0 * qdd[1]
-    t4 = t28 * qdd[2]
-    t0 = t0 + t4
-    t4 = t34 * qdd[3]
+    t17 = cos(q[6])
+    t18 = t16 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
+    t18 = t18 + t19
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = (-0.316) * qdd[1]
+    t22 = t22 - t23
+    t23 = t3 * t22
+    t24 = t9 * qdd[0]
+    t25 = t19 * qd[1]
+    t24 = t24 + t25
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
+    t29 = t27 * t28
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t3 * qdd[1]
+    t26 = t26 + t31
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
+    t26 = t26 - t32
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t26 = qdd[3] - t26
+    t30 = 0.384 * t26
+    t29 = t29 - t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t36 = t6 * qdd[1]
+    t24 = t3 * t24
+    t24 = t36 - t24
+    t27 = t27 * qd[2]
+    t24 = t24 + t27
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t1 * qdd[0]
+    t20 = t20 - t36
+    t20 = qdd[2] - t20
+    t36 = t11 * t20
+    t27 = t27 + t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t37 = t7 * t20
+    t24 = t11 * t24
+    t24 = t37 - t24
+    t37 = t19 * qd[3]
+    t24 = t24 - t37
+    t37 = (-0.0825) * t24
+    t36 = t36 - t37
+    t20 = 0.0825 * t20
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = t20 - t22
+    t22 = t31 * t28
+    t20 = t20 + t22
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 + t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
+    t35 = t33 * t34
+    t32 = t32 + t35
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t24 = t24 + qdd[4]
+    t29 = t15 * t24
+    t35 = t12 * t27
+    t36 = t14 * t26
+    t35 = t35 - t36
+    t19 = t19 * qd[4]
+    t19 = t35 - t19
+    t35 = t10 * t19
+    t29 = t29 - t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 - t35
+    t35 = 0.088 * t29
+    t20 = t20 - t35
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t27 = t14 * t27
+    t26 = t12 * t26
+    t26 = t27 + t26
+    t27 = t30 * qd[4]
+    t26 = t26 + t27
+    t26 = t26 + qdd[5]
+    t27 = t17 * t26
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 + t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t24 = t27 - t24
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 - t30
+    t30 = 0.107 * t24
+    t30 = t32 + t30
+    t28 = qd[6] - t28
+    t32 = 0.107 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 + t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.107 * t19
+    t16 = t16 - t23
+    t23 = 0.107 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 + t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
+    t22 = t22 + t23
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 + t2
+    t8 = qdd[6] - t29
+    t4 = t4 * t8
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 + t0
+    t4 = t5 * t8
     t0 = t0 - t4
-    t4 = t32 * qdd[4]
-    t0 = t0 + t4
-    t4 = t40 * qdd[5]
-    t0 = t0 - t4
-    t4 = t36 * qdd[6]
-    t0 = t0 - t4
-    t4 = qd[2] * t62
-    t7 = qd[1] * t57
-    t4 = t4 - t7
-    t7 = qd[3] * t25
-    t4 = t4 + t7
-    t7 = qd[4] * t26
-    t4 = t4 + t7
-    t7 = qd[5] * t30
-    t4 = t4 + t7
-    t7 = qd[6] * t33
-    t4 = t4 - t7
-    t0 = t0 + t4
-    t1 = t1 * qdd[2]
-    t1 = qdd[0] + t1
-    t4 = t15 * qdd[3]
-    t1 = t1 - t4
-    t4 = t11 * qdd[4]
-    t1 = t1 + t4
-    t4 = t38 * qdd[5]
-    t1 = t1 - t4
-    t4 = t20 * qdd[6]
-    t1 = t1 - t4
-    t4 = qd[4] * t5
-    t5 = qd[2] * t23
-    t7 = qd[3] * t50
-    t5 = t5 + t7
-    t4 = t4 - t5
-    t5 = qd[5] * t8
-    t4 = t4 - t5
-    t5 = qd[6] * t13
-    t4 = t4 - t5
-    t1 = t1 + t4
-    _a = (t21, t2, t6, t3, t0, t1)
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 + t3
+    t1 = t1 * t8
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _frame_acceleration_panda_hand_constants = _constants(
-    -0.316, 0.333, 0.0825, -0.0825, 0.384, 0.088, 0.107)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.107)
 
 
 def _frame_acceleration_panda_hand_chunk(x, t, s, y):
@@ -9476,682 +6741,385 @@ def _frame_acceleration_panda_hand_chunk(x, t, s, y):
     (q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qdd_0, qdd_1, qdd_2,
      qdd_3, qdd_4, qdd_5, qdd_6) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _frame_acceleration_panda_hand_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _frame_acceleration_panda_hand_constants
     cos(q_0, t0)
     cos(q_1, t1)
-    multiply(k0, t1, t2)
-    subtract(k1, t2, t2)
-    sin(q_1, t3)
-    cos(q_2, t4)
-    multiply(t3, t4, t5)
-    multiply(k2, t5, t6)
-    subtract(t2, t6, t6)
-    sin(q_3, t7)
-    multiply(t1, t7, t8)
-    cos(q_3, t9)
-    multiply(t5, t9, t10)
-    subtract(t8, t10, t8)
-    multiply(k3, t8, t10)
-    multiply(t5, t7, t11)
-    multiply(t1, t9, t12)
-    add(t11, t12, t11)
-    multiply(k4, t11, t12)
-    add(t10, t12, t10)
-    add(t6, t10, t10)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
     cos(q_4, t12)
     multiply(t8, t12, t13)
-    sin(q_2, t14)
-    multiply(t3, t14, t15)
-    sin(q_4, t16)
-    multiply(t15, t16, t17)
-    add(t13, t17, t13)
-    cos(q_5, t17)
-    multiply(t13, t17, t18)
-    sin(q_5, t19)
-    multiply(t11, t19, t20)
-    add(t18, t20, t18)
-    multiply(k5, t18, t18)
-    add(t10, t18, t18)
-    multiply(t11, t17, t20)
-    multiply(t13, t19, t21)
-    subtract(t20, t21, t20)
-    multiply(k6, t20, t21)
-    subtract(t18, t21, t21)
-    subtract(t21, k1, t22)
-    multiply(t0, t22, t23)
-    multiply(t23, qdd_1, t23)
-    sin(q_0, t24)
-    multiply(t24, t1, t25)
-    multiply(t25, t4, t26)
-    multiply(t0, t14, t27)
-    add(t26, t27, t26)
-    multiply(k2, t26, t27)
-    multiply(t24, t3, t28)
-    multiply(k0, t28, t29)
-    subtract(t27, t29, t27)
-    multiply(t26, t9, t30)
-    multiply(t28, t7, t31)
-    add(t30, t31, t30)
-    multiply(k3, t30, t31)
-    multiply(t28, t9, t32)
-    multiply(t26, t7, t33)
-    subtract(t32, t33, t32)
-    multiply(k4, t32, t33)
-    add(t31, t33, t31)
-    add(t27, t31, t31)
-    multiply(t30, t12, t33)
-    multiply(t0, t4, t34)
-    multiply(t25, t14, t35)
-    subtract(t34, t35, t34)
-    multiply(t34, t16, t35)
-    add(t33, t35, t33)
-    multiply(t33, t17, t35)
-    multiply(t32, t19, t36)
-    add(t35, t36, t35)
-    multiply(k5, t35, t35)
-    add(t31, t35, t35)
-    multiply(t32, t17, t36)
-    multiply(t33, t19, t37)
-    subtract(t36, t37, t36)
-    multiply(k6, t36, t37)
-    subtract(t35, t37, t37)
-    multiply(t37, qdd_0, t38)
-    subtract(t23, t38, t23)
-    subtract(t21, t2, t2)
-    multiply(t28, t2, t38)
-    add(t37, t29, t29)
-    multiply(t1, t29, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_2, t38)
-    add(t23, t38, t23)
-    subtract(t37, t27, t27)
-    multiply(t15, t27, t38)
-    subtract(t21, t6, t6)
-    multiply(t34, t6, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_3, t38)
-    add(t23, t38, t23)
-    subtract(t21, t10, t10)
-    multiply(t32, t10, t38)
-    subtract(t37, t31, t31)
-    multiply(t11, t31, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_4, t38)
-    add(t23, t38, t23)
-    multiply(t15, t12, t38)
-    multiply(t8, t16, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, t31, t39)
-    multiply(t34, t12, t40)
-    multiply(t30, t16, t41)
-    subtract(t40, t41, t40)
-    multiply(t40, t10, t41)
-    subtract(t39, t41, t39)
-    multiply(t39, qdd_5, t39)
-    add(t23, t39, t23)
-    subtract(t37, t35, t35)
-    multiply(t20, t35, t39)
-    subtract(t21, t18, t21)
-    multiply(t36, t21, t18)
-    subtract(t39, t18, t39)
-    multiply(t39, qdd_6, t39)
-    add(t23, t39, t23)
-    multiply(t3, qd_1, t18)
-    multiply(k0, t18, t39)
-    multiply(t1, qd_1, t41)
-    multiply(t4, t41, t42)
-    multiply(t14, qd_2, t43)
-    multiply(t3, t43, t44)
-    subtract(t42, t44, t42)
-    multiply(k2, t42, t44)
-    subtract(t39, t44, t44)
-    multiply(t9, qd_3, t45)
-    multiply(t1, t45, t46)
-    multiply(t7, t18, t47)
-    subtract(t46, t47, t46)
-    multiply(t9, t42, t47)
-    multiply(t7, qd_3, t48)
-    multiply(t5, t48, t49)
-    subtract(t47, t49, t47)
-    subtract(t46, t47, t46)
-    multiply(k3, t46, t47)
-    multiply(t7, t42, t42)
-    multiply(t5, t45, t5)
-    add(t42, t5, t42)
-    multiply(t9, t18, t5)
-    multiply(t1, t48, t49)
-    add(t5, t49, t5)
-    subtract(t42, t5, t42)
-    multiply(k4, t42, t5)
-    add(t47, t5, t47)
-    add(t44, t47, t47)
-    multiply(t12, t46, t5)
-    multiply(t16, qd_4, t49)
-    multiply(t8, t49, t50)
-    subtract(t5, t50, t5)
-    multiply(t14, t41, t50)
-    multiply(t4, qd_2, t51)
-    multiply(t3, t51, t52)
-    add(t50, t52, t50)
-    multiply(t16, t50, t52)
-    multiply(t12, qd_4, t53)
-    multiply(t15, t53, t54)
-    add(t52, t54, t52)
-    add(t5, t52, t5)
-    multiply(t17, t5, t52)
-    multiply(t19, qd_5, t54)
-    multiply(t13, t54, t55)
-    subtract(t52, t55, t52)
-    multiply(t19, t42, t55)
-    multiply(t17, qd_5, t56)
-    multiply(t11, t56, t57)
-    add(t55, t57, t55)
-    add(t52, t55, t52)
-    multiply(k5, t52, t52)
-    add(t47, t52, t52)
-    multiply(t17, t42, t55)
-    multiply(t11, t54, t57)
-    subtract(t55, t57, t55)
-    multiply(t19, t5, t5)
-    multiply(t13, t56, t13)
-    add(t5, t13, t5)
-    subtract(t55, t5, t55)
-    multiply(k6, t55, t5)
-    subtract(t52, t5, t5)
-    multiply(t0, t5, t13)
-    multiply(t24, qd_0, t57)
-    multiply(t22, t57, t58)
-    subtract(t13, t58, t13)
-    multiply(qd_1, t13, t13)
-    multiply(t0, qd_0, t58)
-    multiply(t1, t58, t59)
-    multiply(t24, t18, t60)
-    subtract(t59, t60, t59)
-    multiply(t4, t59, t60)
-    multiply(t25, t43, t61)
-    subtract(t60, t61, t60)
-    multiply(t0, t51, t61)
-    multiply(t14, t57, t62)
-    subtract(t61, t62, t61)
-    add(t60, t61, t60)
-    multiply(k2, t60, t61)
-    multiply(t3, t58, t62)
-    multiply(t24, t41, t63)
-    add(t62, t63, t62)
-    multiply(k0, t62, t63)
-    subtract(t61, t63, t61)
-    multiply(t9, t60, t64)
-    multiply(t26, t48, t65)
-    subtract(t64, t65, t64)
-    multiply(t7, t62, t65)
-    multiply(t28, t45, t66)
-    add(t65, t66, t65)
-    add(t64, t65, t64)
-    multiply(k3, t64, t65)
-    multiply(t9, t62, t66)
-    multiply(t28, t48, t67)
-    subtract(t66, t67, t66)
-    multiply(t7, t60, t60)
-    multiply(t26, t45, t26)
-    add(t60, t26, t60)
-    subtract(t66, t60, t66)
-    multiply(k4, t66, t26)
-    add(t65, t26, t65)
-    add(t61, t65, t65)
-    multiply(t12, t64, t26)
-    multiply(t30, t49, t60)
-    subtract(t26, t60, t26)
-    multiply(t34, t53, t60)
-    multiply(t4, t57, t67)
-    multiply(t0, t43, t68)
-    add(t67, t68, t67)
-    multiply(t14, t59, t59)
-    multiply(t25, t51, t25)
-    add(t59, t25, t59)
-    add(t67, t59, t67)
-    multiply(t16, t67, t25)
-    subtract(t60, t25, t60)
-    add(t26, t60, t26)
-    multiply(t17, t26, t25)
-    multiply(t33, t54, t59)
-    subtract(t25, t59, t25)
-    multiply(t19, t66, t59)
-    multiply(t32, t56, t60)
-    add(t59, t60, t59)
-    add(t25, t59, t25)
-    multiply(k5, t25, t25)
-    add(t65, t25, t25)
-    multiply(t17, t66, t59)
-    multiply(t32, t54, t60)
-    subtract(t59, t60, t59)
-    multiply(t19, t26, t26)
-    multiply(t33, t56, t33)
-    add(t26, t33, t26)
-    subtract(t59, t26, t59)
-    multiply(k6, t59, t26)
-    subtract(t25, t26, t26)
-    multiply(qd_0, t26, t33)
-    subtract(t13, t33, t13)
-    multiply(t2, t62, t33)
-    subtract(t5, t39, t39)
-    multiply(t28, t39, t60)
-    add(t33, t60, t33)
-    add(t26, t63, t63)
-    multiply(t1, t63, t60)
-    multiply(t29, t18, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_2, t33, t33)
-    add(t13, t33, t13)
-    multiply(t27, t50, t33)
-    subtract(t26, t61, t61)
-    multiply(t15, t61, t60)
-    add(t33, t60, t33)
-    subtract(t5, t44, t44)
-    multiply(t34, t44, t60)
-    multiply(t6, t67, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_3, t33, t33)
-    add(t13, t33, t13)
-    multiply(t10, t66, t33)
-    subtract(t5, t47, t47)
-    multiply(t32, t47, t60)
-    add(t33, t60, t33)
-    multiply(t31, t42, t60)
-    subtract(t26, t65, t65)
-    multiply(t11, t65, t68)
-    add(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_4, t33, t33)
-    add(t13, t33, t13)
-    multiply(t12, t50, t33)
-    multiply(t15, t49, t60)
-    subtract(t33, t60, t33)
-    multiply(t16, t46, t46)
-    multiply(t8, t53, t8)
-    add(t46, t8, t46)
-    subtract(t33, t46, t33)
-    multiply(t31, t33, t8)
-    multiply(t38, t65, t46)
-    add(t8, t46, t8)
-    multiply(t40, t47, t46)
-    multiply(t12, t67, t60)
-    multiply(t34, t49, t68)
-    add(t60, t68, t60)
-    multiply(t16, t64, t64)
-    multiply(t30, t53, t30)
-    add(t64, t30, t64)
-    add(t60, t64, t60)
-    multiply(t10, t60, t30)
-    subtract(t46, t30, t46)
-    subtract(t8, t46, t8)
-    multiply(qd_5, t8, t8)
-    add(t13, t8, t13)
-    multiply(t35, t55, t8)
-    subtract(t26, t25, t25)
-    multiply(t20, t25, t30)
-    add(t8, t30, t8)
-    multiply(t21, t59, t30)
-    subtract(t5, t52, t52)
-    multiply(t36, t52, t46)
-    add(t30, t46, t30)
-    subtract(t8, t30, t8)
-    multiply(qd_6, t8, t8)
-    add(t13, t8, t13)
-    add(t23, t13, a_0)
-    multiply(t0, t1, t8)
-    multiply(t8, t4, t13)
-    multiply(t24, t14, t23)
-    subtract(t13, t23, t13)
-    multiply(k2, t13, t23)
-    multiply(t0, t3, t30)
-    multiply(k0, t30, t46)
-    subtract(t23, t46, t23)
-    multiply(t13, t9, t64)
-    multiply(t30, t7, t68)
-    add(t64, t68, t64)
-    multiply(k3, t64, t68)
-    multiply(t30, t9, t69)
-    multiply(t13, t7, t70)
-    subtract(t69, t70, t69)
-    multiply(k4, t69, t70)
-    add(t68, t70, t68)
-    add(t23, t68, t68)
-    multiply(t64, t12, t70)
-    multiply(t8, t14, t71)
-    multiply(t24, t4, t72)
-    add(t71, t72, t71)
-    multiply(t71, t16, t72)
-    subtract(t70, t72, t70)
-    multiply(t70, t17, t72)
-    multiply(t69, t19, t73)
-    add(t72, t73, t72)
-    multiply(k5, t72, t72)
-    add(t68, t72, t72)
-    multiply(t69, t17, t73)
-    multiply(t70, t19, t74)
-    subtract(t73, t74, t73)
-    multiply(k6, t73, t74)
-    subtract(t72, t74, t74)
-    multiply(t74, qdd_0, t75)
-    multiply(t24, t22, t76)
-    multiply(t76, qdd_1, t76)
-    add(t75, t76, t75)
-    add(t74, t46, t46)
-    multiply(t1, t46, t76)
-    multiply(t30, t2, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_2, t76)
-    add(t75, t76, t75)
-    subtract(t74, t23, t23)
-    multiply(t15, t23, t76)
-    multiply(t71, t6, t77)
-    add(t76, t77, t76)
-    multiply(t76, qdd_3, t76)
-    subtract(t75, t76, t75)
-    subtract(t74, t68, t68)
-    multiply(t11, t68, t76)
-    multiply(t69, t10, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_4, t76)
-    add(t75, t76, t75)
-    multiply(t38, t68, t76)
-    multiply(t64, t16, t77)
-    multiply(t71, t12, t78)
-    add(t77, t78, t77)
-    multiply(t77, t10, t78)
-    add(t76, t78, t76)
-    multiply(t76, qdd_5, t76)
-    subtract(t75, t76, t75)
-    multiply(t73, t21, t76)
-    subtract(t74, t72, t72)
-    multiply(t20, t72, t78)
-    subtract(t76, t78, t76)
-    multiply(t76, qdd_6, t76)
-    add(t75, t76, t75)
-    multiply(t0, t41, t41)
-    multiply(t3, t57, t3)
-    subtract(t41, t3, t41)
-    multiply(t7, t41, t3)
-    multiply(t30, t45, t76)
-    add(t3, t76, t3)
-    multiply(t1, t57, t76)
-    multiply(t0, t18, t78)
-    add(t76, t78, t76)
-    multiply(t4, t76, t78)
-    multiply(t8, t43, t79)
-    add(t78, t79, t78)
-    multiply(t14, t58, t79)
-    multiply(t24, t51, t80)
-    add(t79, t80, t79)
-    add(t78, t79, t78)
-    multiply(t9, t78, t79)
-    multiply(t13, t48, t80)
-    add(t79, t80, t79)
-    subtract(t3, t79, t3)
-    multiply(k3, t3, t79)
-    multiply(t9, t41, t9)
-    multiply(t30, t48, t48)
-    subtract(t9, t48, t9)
-    multiply(t13, t45, t13)
-    multiply(t7, t78, t7)
-    subtract(t13, t7, t13)
-    subtract(t9, t13, t9)
-    multiply(k4, t9, t7)
-    add(t79, t7, t79)
-    multiply(k2, t78, t78)
-    multiply(k0, t41, t7)
-    add(t78, t7, t78)
-    subtract(t79, t78, t79)
-    multiply(t12, t3, t13)
-    multiply(t64, t49, t45)
-    subtract(t13, t45, t13)
-    multiply(t8, t51, t8)
-    multiply(t14, t76, t14)
-    subtract(t8, t14, t8)
-    multiply(t4, t58, t4)
-    multiply(t24, t43, t43)
-    subtract(t4, t43, t4)
-    add(t8, t4, t8)
-    multiply(t16, t8, t4)
-    multiply(t71, t53, t14)
-    add(t4, t14, t4)
-    subtract(t13, t4, t13)
-    multiply(t17, t13, t4)
-    multiply(t70, t54, t14)
-    subtract(t4, t14, t4)
-    multiply(t19, t9, t14)
-    multiply(t69, t56, t43)
-    add(t14, t43, t14)
-    add(t4, t14, t4)
-    multiply(k5, t4, t4)
-    add(t79, t4, t4)
-    multiply(t17, t9, t17)
-    multiply(t69, t54, t54)
-    subtract(t17, t54, t17)
-    multiply(t19, t13, t19)
-    multiply(t70, t56, t70)
-    add(t19, t70, t19)
-    subtract(t17, t19, t17)
-    multiply(k6, t17, t13)
-    subtract(t4, t13, t13)
-    multiply(qd_0, t13, t14)
-    multiply(t22, t58, t22)
-    multiply(t24, t5, t5)
-    add(t22, t5, t22)
-    multiply(qd_1, t22, t22)
-    add(t14, t22, t14)
-    add(t13, t7, t7)
-    multiply(t1, t7, t5)
-    multiply(t46, t18, t19)
-    subtract(t5, t19, t5)
-    multiply(t2, t41, t2)
-    multiply(t30, t39, t39)
-    add(t2, t39, t2)
-    subtract(t5, t2, t5)
-    multiply(qd_2, t5, t5)
-    add(t14, t5, t14)
-    multiply(t23, t50, t2)
-    add(t13, t78, t78)
-    multiply(t15, t78, t5)
-    add(t2, t5, t2)
-    multiply(t6, t8, t6)
-    multiply(t71, t44, t44)
-    add(t6, t44, t6)
-    add(t2, t6, t2)
-    multiply(qd_3, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t68, t42, t2)
-    subtract(t13, t79, t79)
-    multiply(t11, t79, t5)
-    add(t2, t5, t2)
-    multiply(t10, t9, t5)
-    multiply(t69, t47, t6)
-    add(t5, t6, t5)
-    subtract(t2, t5, t2)
-    multiply(qd_4, t2, t2)
-    add(t14, t2, t14)
-    multiply(t68, t33, t2)
-    multiply(t38, t79, t5)
-    add(t2, t5, t2)
-    multiply(t16, t3, t16)
-    multiply(t64, t53, t64)
-    add(t16, t64, t16)
-    multiply(t12, t8, t12)
-    multiply(t71, t49, t49)
-    subtract(t12, t49, t12)
-    add(t16, t12, t16)
-    multiply(t10, t16, t10)
-    multiply(t77, t47, t47)
-    add(t10, t47, t10)
-    add(t2, t10, t2)
-    multiply(qd_5, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t21, t17, t21)
-    multiply(t73, t52, t52)
-    add(t21, t52, t21)
-    multiply(t72, t55, t2)
-    subtract(t13, t4, t4)
-    multiply(t20, t4, t3)
-    add(t2, t3, t2)
-    subtract(t21, t2, t21)
-    multiply(qd_6, t21, t21)
-    add(t14, t21, t14)
-    add(t75, t14, a_1)
-    multiply(t30, t29, t2)
-    multiply(t28, t46, t3)
-    subtract(t2, t3, t2)
-    multiply(t2, qdd_2, t2)
-    multiply(t24, t37, t3)
-    multiply(t0, t74, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_1, t3)
-    subtract(t2, t3, t2)
-    multiply(t71, t27, t3)
-    multiply(t34, t23, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_3, t3)
-    add(t2, t3, t2)
-    multiply(t69, t31, t3)
-    multiply(t32, t68, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_4, t3)
-    add(t2, t3, t2)
-    multiply(t77, t31, t3)
-    multiply(t40, t68, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_5, t3)
-    add(t2, t3, t2)
-    multiply(t36, t72, t3)
-    multiply(t73, t35, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_6, t3)
-    add(t2, t3, t2)
-    multiply(t29, t41, t29)
-    multiply(t30, t63, t63)
-    add(t29, t63, t29)
-    multiply(t46, t62, t46)
-    multiply(t28, t7, t7)
-    add(t46, t7, t46)
-    subtract(t29, t46, t29)
-    multiply(qd_2, t29, t29)
-    multiply(t37, t58, t37)
-    multiply(t24, t26, t26)
-    add(t37, t26, t37)
-    multiply(t0, t13, t13)
-    multiply(t74, t57, t74)
-    subtract(t13, t74, t13)
-    add(t37, t13, t37)
-    multiply(qd_1, t37, t37)
-    subtract(t29, t37, t29)
-    multiply(t27, t8, t27)
-    multiply(t71, t61, t61)
-    add(t27, t61, t27)
-    multiply(t34, t78, t78)
-    multiply(t23, t67, t23)
-    subtract(t78, t23, t78)
-    add(t27, t78, t27)
-    multiply(qd_3, t27, t27)
-    add(t29, t27, t29)
-    multiply(t31, t9, t3)
-    multiply(t69, t65, t5)
-    add(t3, t5, t3)
-    multiply(t68, t66, t5)
-    multiply(t32, t79, t6)
-    add(t5, t6, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t29, t3, t29)
-    multiply(t31, t16, t31)
-    multiply(t77, t65, t65)
-    add(t31, t65, t31)
-    multiply(t40, t79, t79)
-    multiply(t68, t60, t68)
-    subtract(t79, t68, t79)
-    add(t31, t79, t31)
-    multiply(qd_5, t31, t31)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
+    subtract(t13, t15, t13)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
+    multiply(t16, t17, t18)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
+    add(t18, t19, t18)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(k3, qdd_1, t23)
+    subtract(t22, t23, t22)
+    multiply(t3, t22, t23)
+    multiply(t9, qdd_0, t24)
+    multiply(t8, qd_1, t25)
+    add(t24, t25, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
+    multiply(t27, t28, t29)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
     add(t29, t31, t29)
-    multiply(t72, t59, t72)
-    multiply(t36, t4, t4)
-    add(t72, t4, t72)
-    multiply(t35, t17, t35)
-    multiply(t73, t25, t25)
-    add(t35, t25, t35)
-    subtract(t72, t35, t72)
-    multiply(qd_6, t72, t72)
-    add(t29, t72, t29)
-    add(t2, t29, a_2)
-    multiply(t30, qdd_2, t30)
-    multiply(t24, qdd_1, t24)
-    subtract(t30, t24, t30)
-    multiply(t71, qdd_3, t71)
-    add(t30, t71, t30)
-    multiply(t69, qdd_4, t69)
-    add(t30, t69, t30)
-    multiply(t77, qdd_5, t77)
-    add(t30, t77, t30)
-    multiply(t73, qdd_6, t73)
-    subtract(t30, t73, t30)
-    multiply(qd_2, t41, t41)
-    multiply(qd_1, t58, t58)
-    subtract(t41, t58, t41)
-    multiply(qd_3, t8, t8)
-    add(t41, t8, t41)
-    multiply(qd_4, t9, t9)
-    add(t41, t9, t41)
-    multiply(qd_5, t16, t16)
-    add(t41, t16, t41)
-    multiply(qd_6, t17, t17)
-    subtract(t41, t17, t41)
-    add(t30, t41, a_3)
-    multiply(t0, qdd_1, t0)
-    multiply(t28, qdd_2, t28)
-    add(t0, t28, t0)
-    multiply(t34, qdd_3, t34)
-    subtract(t0, t34, t0)
-    multiply(t32, qdd_4, t32)
-    add(t0, t32, t0)
-    multiply(t40, qdd_5, t40)
-    subtract(t0, t40, t0)
-    multiply(t36, qdd_6, t36)
-    subtract(t0, t36, t0)
-    multiply(qd_2, t62, t62)
-    multiply(qd_1, t57, t57)
-    subtract(t62, t57, t62)
-    multiply(qd_3, t67, t67)
-    add(t62, t67, t62)
-    multiply(qd_4, t66, t66)
-    add(t62, t66, t62)
-    multiply(qd_5, t60, t60)
-    add(t62, t60, t62)
-    multiply(qd_6, t59, t59)
-    subtract(t62, t59, t62)
-    add(t0, t62, a_4)
-    multiply(t1, qdd_2, t1)
-    add(qdd_0, t1, t1)
-    multiply(t15, qdd_3, t15)
-    subtract(t1, t15, t1)
-    multiply(t11, qdd_4, t11)
-    add(t1, t11, t1)
-    multiply(t38, qdd_5, t38)
-    subtract(t1, t38, t1)
-    multiply(t20, qdd_6, t20)
-    subtract(t1, t20, t1)
-    multiply(qd_4, t42, t42)
-    multiply(qd_2, t18, t18)
-    multiply(qd_3, t50, t50)
-    add(t18, t50, t18)
-    subtract(t42, t18, t42)
-    multiply(qd_5, t33, t33)
-    subtract(t42, t33, t42)
-    multiply(qd_6, t55, t55)
-    subtract(t42, t55, t42)
-    add(t1, t42, a_5)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t3, qdd_1, t31)
+    add(t21, t31, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
+    subtract(t26, t32, t26)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    subtract(qdd_3, t21, t21)
+    multiply(k5, t21, t30)
+    subtract(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t6, qdd_1, t36)
+    multiply(t3, t24, t24)
+    subtract(t36, t24, t36)
+    multiply(t27, qd_2, t27)
+    add(t36, t27, t36)
+    multiply(t7, t36, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t1, qdd_0, t27)
+    subtract(t20, t27, t20)
+    subtract(qdd_2, t20, t20)
+    multiply(t11, t20, t27)
+    add(t24, t27, t24)
+    multiply(t30, qd_3, t27)
+    add(t24, t27, t24)
+    multiply(k5, t24, t27)
+    multiply(t7, t20, t37)
+    multiply(t11, t36, t36)
+    subtract(t37, t36, t37)
+    multiply(t32, qd_3, t36)
+    subtract(t37, t36, t37)
+    multiply(k6, t37, t36)
+    subtract(t27, t36, t27)
+    multiply(k4, t20, t20)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    subtract(t20, t22, t20)
+    multiply(t31, t28, t31)
+    add(t20, t31, t20)
+    subtract(t27, t20, t27)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t27, t35, t27)
+    multiply(t14, t27, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    add(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t27, t27)
+    add(t29, t27, t29)
+    add(t37, qdd_4, t37)
+    multiply(t15, t37, t27)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
+    subtract(t34, t35, t34)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    subtract(t27, t32, t27)
+    multiply(t15, t20, t32)
+    multiply(t4, t30, t30)
+    add(t32, t30, t32)
+    multiply(t32, qd_5, t30)
+    subtract(t27, t30, t27)
+    multiply(k7, t27, t30)
+    subtract(t29, t30, t29)
+    multiply(t32, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t14, t24, t24)
+    multiply(t12, t21, t21)
+    add(t24, t21, t24)
+    multiply(t20, qd_4, t20)
+    add(t24, t20, t24)
+    add(t24, qdd_5, t24)
+    multiply(t17, t24, t20)
+    multiply(t15, t34, t34)
+    multiply(t4, t37, t37)
+    add(t34, t37, t34)
+    multiply(t8, qd_5, t21)
+    add(t34, t21, t34)
+    multiply(t2, t34, t21)
+    subtract(t20, t21, t20)
+    multiply(t17, t32, t21)
+    multiply(t2, t28, t30)
+    add(t21, t30, t21)
+    multiply(t21, qd_6, t30)
+    subtract(t20, t30, t20)
+    multiply(k8, t20, t30)
+    add(t25, t30, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t21, t30)
+    multiply(t8, t30, t31)
+    add(t25, t31, t25)
+    multiply(t16, t25, t31)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t24, t18)
+    add(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t32, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t31, t8, t31)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t24, t24)
+    add(t26, t24, t26)
+    multiply(t32, t23, t32)
+    add(t26, t32, t26)
+    multiply(t21, t30, t21)
+    multiply(t28, t18, t28)
+    add(t21, t28, t21)
+    add(t26, t21, t26)
+    multiply(t10, t26, t8)
+    add(t31, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t21)
+    add(t18, t21, t18)
+    multiply(t18, t12, t21)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
+    subtract(t0, t8, t0)
+    multiply(t0, t14, t8)
+    add(t21, t8, t21)
+    multiply(t21, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t21, t4, t21)
+    subtract(t5, t21, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
+    subtract(t7, t2, t7)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t20, t19)
+    add(t16, t19, t16)
+    subtract(qdd_6, t27, t27)
+    multiply(t10, t27, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t20, t18)
+    add(t0, t18, t0)
+    multiply(t5, t27, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t20, t7)
+    add(t2, t7, t2)
+    multiply(t3, t27, t3)
+    subtract(t2, t3, a_5)
 
 
 def fk_panda_leftfinger(q):
@@ -10951,568 +7919,384 @@ def jdot_qd_panda_leftfinger(q, qd):
     in  q [7]
     in  qd [7]
     out a [6]
-    546 ops: 303 mul, 231 add, 0 div, 12 trig
+    361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_panda_leftfinger_chunk, (q, qd), 71, ((6,),))
+        return _batch(_jdot_qd_panda_leftfinger_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = sin(q[1])
-    t2 = t1 * qd[1]
-    t3 = (-0.316) * t2
-    t4 = cos(q[2])
-    t5 = cos(q[1])
-    t6 = t5 * qd[1]
-    t7 = t4 * t6
-    t8 = sin(q[2])
-    t9 = t8 * qd[2]
-    t10 = t1 * t9
-    t7 = t7 - t10
-    t10 = 0.0825 * t7
-    t10 = t3 - t10
-    t11 = cos(q[3])
-    t12 = t11 * qd[3]
-    t13 = t5 * t12
-    t14 = sin(q[3])
-    t15 = t14 * t2
+    t1 = cos(q[1])
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
+    t12 = cos(q[4])
+    t13 = t8 * t12
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
     t13 = t13 - t15
-    t15 = t11 * t7
-    t16 = t1 * t4
-    t17 = t14 * qd[3]
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
+    t16 = t16 + t17
+    t17 = cos(q[6])
     t18 = t16 * t17
-    t15 = t15 - t18
-    t13 = t13 - t15
-    t15 = (-0.0825) * t13
-    t7 = t14 * t7
-    t18 = t16 * t12
-    t7 = t7 + t18
-    t18 = t11 * t2
-    t19 = t5 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
     t18 = t18 + t19
-    t7 = t7 - t18
-    t18 = 0.384 * t7
-    t15 = t15 + t18
-    t15 = t10 + t15
-    t18 = cos(q[5])
-    t19 = cos(q[4])
-    t20 = t19 * t13
-    t21 = t5 * t14
-    t22 = t16 * t11
-    t21 = t21 - t22
-    t22 = sin(q[4])
-    t23 = t22 * qd[4]
-    t24 = t21 * t23
-    t20 = t20 - t24
-    t24 = t8 * t6
-    t25 = t4 * qd[2]
-    t26 = t1 * t25
-    t24 = t24 + t26
-    t26 = t22 * t24
-    t27 = t1 * t8
-    t28 = t19 * qd[4]
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = t3 * t22
+    t24 = t19 * qd[1]
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
     t29 = t27 * t28
-    t26 = t26 + t29
-    t20 = t20 + t26
-    t26 = t18 * t20
-    t29 = t21 * t19
-    t30 = t27 * t22
-    t29 = t29 + t30
-    t30 = sin(q[5])
-    t31 = t30 * qd[5]
-    t32 = t29 * t31
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
     t26 = t26 - t32
-    t32 = t30 * t7
-    t33 = t16 * t14
-    t34 = t5 * t11
-    t33 = t33 + t34
-    t34 = t18 * qd[5]
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t30 = 0.384 * t26
+    t29 = t29 + t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t27 = t27 * qd[2]
+    t24 = t3 * t24
+    t24 = t27 - t24
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t11 * t20
+    t27 = t27 - t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t24 = t11 * t24
+    t37 = t7 * t20
+    t24 = t24 + t37
+    t37 = t19 * qd[3]
+    t24 = t24 + t37
+    t37 = (-0.0825) * t24
+    t36 = t36 + t37
+    t28 = t31 * t28
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = 0.0825 * t20
+    t20 = t22 + t20
+    t20 = t28 - t20
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 - t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
     t35 = t33 * t34
     t32 = t32 + t35
-    t26 = t26 + t32
-    t26 = 0.088 * t26
-    t26 = t15 + t26
-    t32 = t18 * t7
-    t35 = t33 * t31
-    t32 = t32 - t35
-    t20 = t30 * t20
-    t35 = t29 * t34
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t29 = t12 * t27
+    t35 = t14 * t26
+    t29 = t29 + t35
+    t19 = t19 * qd[4]
+    t19 = t29 - t19
+    t29 = t10 * t19
+    t35 = t15 * t24
+    t29 = t29 + t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 + t35
+    t35 = 0.088 * t29
     t20 = t20 + t35
-    t20 = t32 - t20
-    t32 = 0.1654 * t20
-    t32 = t26 - t32
-    t35 = t0 * t32
-    t36 = (-0.316) * t5
-    t36 = 0.333 - t36
-    t16 = 0.0825 * t16
-    t16 = t36 - t16
-    t37 = (-0.0825) * t21
-    t38 = 0.384 * t33
-    t37 = t37 + t38
-    t37 = t16 + t37
-    t38 = t29 * t18
-    t39 = t33 * t30
-    t38 = t38 + t39
-    t38 = 0.088 * t38
-    t38 = t37 + t38
-    t39 = t33 * t18
-    t29 = t29 * t30
-    t29 = t39 - t29
-    t39 = 0.1654 * t29
-    t39 = t38 - t39
-    t40 = t39 - 0.333
-    t41 = sin(q[0])
-    t42 = t41 * qd[0]
-    t43 = t40 * t42
-    t35 = t35 - t43
-    t35 = qd[1] * t35
-    t43 = t0 * qd[0]
-    t44 = t5 * t43
-    t45 = t41 * t2
-    t44 = t44 - t45
-    t45 = t4 * t44
-    t46 = t41 * t5
-    t47 = t46 * t9
-    t45 = t45 - t47
-    t47 = t0 * t25
-    t48 = t8 * t42
-    t47 = t47 - t48
-    t45 = t45 + t47
-    t47 = 0.0825 * t45
-    t48 = t1 * t43
-    t49 = t41 * t6
-    t48 = t48 + t49
-    t49 = (-0.316) * t48
-    t47 = t47 - t49
-    t50 = t11 * t45
-    t51 = t46 * t4
-    t52 = t0 * t8
-    t51 = t51 + t52
-    t52 = t51 * t17
-    t50 = t50 - t52
-    t52 = t14 * t48
-    t53 = t41 * t1
-    t54 = t53 * t12
-    t52 = t52 + t54
-    t50 = t50 + t52
-    t52 = (-0.0825) * t50
-    t54 = t11 * t48
-    t55 = t53 * t17
-    t54 = t54 - t55
-    t45 = t14 * t45
-    t55 = t51 * t12
-    t45 = t45 + t55
-    t45 = t54 - t45
-    t54 = 0.384 * t45
-    t52 = t52 + t54
-    t52 = t47 + t52
-    t54 = t19 * t50
-    t55 = t51 * t11
-    t56 = t53 * t14
-    t55 = t55 + t56
-    t56 = t55 * t23
-    t54 = t54 - t56
-    t56 = t0 * t4
-    t57 = t46 * t8
-    t56 = t56 - t57
-    t57 = t56 * t28
-    t58 = t4 * t42
-    t59 = t0 * t9
-    t58 = t58 + t59
-    t44 = t8 * t44
-    t46 = t46 * t25
-    t44 = t44 + t46
-    t44 = t58 + t44
-    t46 = t22 * t44
-    t46 = t57 - t46
-    t46 = t54 + t46
-    t54 = t18 * t46
-    t57 = t55 * t19
-    t58 = t56 * t22
-    t57 = t57 + t58
-    t58 = t57 * t31
-    t54 = t54 - t58
-    t58 = t30 * t45
-    t59 = t53 * t11
-    t60 = t51 * t14
-    t59 = t59 - t60
-    t60 = t59 * t34
-    t58 = t58 + t60
-    t54 = t54 + t58
-    t54 = 0.088 * t54
-    t54 = t52 + t54
-    t58 = t18 * t45
-    t60 = t59 * t31
-    t58 = t58 - t60
-    t46 = t30 * t46
-    t60 = t57 * t34
-    t46 = t46 + t60
-    t46 = t58 - t46
-    t58 = 0.1654 * t46
-    t58 = t54 - t58
-    t60 = qd[0] * t58
-    t35 = t35 - t60
-    t36 = t39 - t36
-    t60 = t36 * t48
-    t3 = t32 - t3
-    t61 = t53 * t3
-    t60 = t60 + t61
-    t49 = t58 + t49
-    t61 = t5 * t49
-    t51 = 0.0825 * t51
-    t62 = (-0.316) * t53
-    t51 = t51 - t62
-    t63 = (-0.0825) * t55
-    t64 = 0.384 * t59
-    t63 = t63 + t64
-    t63 = t51 + t63
-    t64 = t57 * t18
-    t65 = t59 * t30
-    t64 = t64 + t65
-    t64 = 0.088 * t64
-    t64 = t63 + t64
-    t65 = t59 * t18
-    t57 = t57 * t30
-    t57 = t65 - t57
-    t65 = 0.1654 * t57
-    t65 = t64 - t65
-    t62 = t65 + t62
-    t66 = t62 * t2
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[2] * t60
-    t35 = t35 + t60
-    t51 = t65 - t51
-    t60 = t51 * t24
-    t47 = t58 - t47
-    t61 = t27 * t47
-    t60 = t60 + t61
-    t10 = t32 - t10
-    t61 = t56 * t10
-    t16 = t39 - t16
-    t66 = t16 * t44
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[3] * t60
-    t35 = t35 + t60
-    t37 = t39 - t37
-    t60 = t37 * t45
-    t15 = t32 - t15
-    t61 = t59 * t15
-    t60 = t60 + t61
-    t61 = t65 - t63
-    t63 = t61 * t7
-    t52 = t58 - t52
-    t66 = t33 * t52
-    t63 = t63 + t66
-    t60 = t60 - t63
-    t60 = qd[4] * t60
-    t35 = t35 + t60
-    t60 = t19 * t24
-    t63 = t27 * t23
-    t60 = t60 - t63
-    t13 = t22 * t13
-    t63 = t21 * t28
-    t13 = t13 + t63
-    t13 = t60 - t13
-    t60 = t61 * t13
-    t63 = t27 * t19
-    t21 = t21 * t22
-    t21 = t63 - t21
-    t63 = t21 * t52
-    t60 = t60 + t63
-    t63 = t56 * t19
-    t66 = t55 * t22
-    t63 = t63 - t66
-    t66 = t63 * t15
-    t67 = t19 * t44
-    t68 = t56 * t23
-    t67 = t67 + t68
-    t50 = t22 * t50
-    t55 = t55 * t28
-    t50 = t50 + t55
-    t50 = t67 + t50
-    t55 = t37 * t50
-    t55 = t66 - t55
-    t55 = t60 - t55
-    t55 = qd[5] * t55
-    t35 = t35 + t55
-    t55 = t65 - t64
-    t60 = t55 * t20
-    t54 = t58 - t54
-    t64 = t29 * t54
-    t60 = t60 + t64
-    t38 = t39 - t38
-    t39 = t38 * t46
-    t26 = t32 - t26
-    t64 = t57 * t26
-    t39 = t39 + t64
-    t39 = t60 - t39
-    t39 = qd[6] * t39
-    t35 = t35 + t39
-    t6 = t0 * t6
-    t39 = t1 * t42
-    t6 = t6 - t39
-    t39 = t14 * t6
-    t1 = t0 * t1
-    t60 = t1 * t12
-    t39 = t39 + t60
-    t60 = t5 * t42
-    t64 = t0 * t2
-    t60 = t60 + t64
-    t64 = t4 * t60
-    t66 = t0 * t5
-    t67 = t66 * t9
-    t64 = t64 + t67
-    t67 = t8 * t43
-    t68 = t41 * t25
-    t67 = t67 + t68
-    t64 = t64 + t67
-    t67 = t11 * t64
-    t68 = t66 * t4
-    t69 = t41 * t8
-    t68 = t68 - t69
-    t69 = t68 * t17
-    t67 = t67 + t69
-    t39 = t39 - t67
-    t67 = (-0.0825) * t39
-    t69 = t11 * t6
-    t17 = t1 * t17
-    t17 = t69 - t17
-    t12 = t68 * t12
-    t69 = t14 * t64
-    t12 = t12 - t69
-    t12 = t17 - t12
-    t17 = 0.384 * t12
-    t17 = t67 + t17
-    t64 = 0.0825 * t64
-    t67 = (-0.316) * t6
-    t64 = t64 + t67
-    t17 = t17 - t64
-    t69 = t19 * t39
-    t70 = t68 * t11
-    t71 = t1 * t14
-    t70 = t70 + t71
-    t71 = t70 * t23
-    t69 = t69 - t71
-    t25 = t66 * t25
-    t60 = t8 * t60
-    t25 = t25 - t60
-    t60 = t4 * t43
-    t9 = t41 * t9
-    t9 = t60 - t9
-    t9 = t25 + t9
-    t25 = t22 * t9
-    t8 = t66 * t8
-    t4 = t41 * t4
-    t4 = t8 + t4
-    t8 = t4 * t28
-    t8 = t25 + t8
-    t8 = t69 - t8
-    t25 = t18 * t8
-    t60 = t70 * t19
-    t66 = t4 * t22
-    t60 = t60 - t66
-    t66 = t60 * t31
-    t25 = t25 - t66
-    t66 = t30 * t12
-    t11 = t1 * t11
-    t14 = t68 * t14
-    t11 = t11 - t14
-    t14 = t11 * t34
-    t14 = t66 + t14
-    t14 = t25 + t14
-    t14 = 0.088 * t14
-    t14 = t17 + t14
-    t25 = t18 * t12
-    t31 = t11 * t31
-    t25 = t25 - t31
-    t8 = t30 * t8
-    t31 = t60 * t34
-    t8 = t8 + t31
-    t8 = t25 - t8
-    t25 = 0.1654 * t8
-    t25 = t14 - t25
-    t31 = qd[0] * t25
-    t34 = t40 * t43
-    t32 = t41 * t32
-    t32 = t34 + t32
-    t32 = qd[1] * t32
-    t31 = t31 + t32
-    t32 = t25 + t67
-    t5 = t5 * t32
-    t34 = 0.0825 * t68
-    t40 = (-0.316) * t1
-    t34 = t34 - t40
-    t66 = (-0.0825) * t70
-    t67 = 0.384 * t11
-    t66 = t66 + t67
-    t66 = t34 + t66
-    t67 = t60 * t18
-    t68 = t11 * t30
-    t67 = t67 + t68
-    t67 = 0.088 * t67
-    t67 = t66 + t67
-    t18 = t11 * t18
-    t30 = t60 * t30
-    t18 = t18 - t30
-    t30 = 0.1654 * t18
-    t30 = t67 - t30
-    t40 = t30 + t40
-    t60 = t40 * t2
-    t5 = t5 - t60
-    t36 = t36 * t6
-    t3 = t1 * t3
-    t3 = t36 + t3
-    t3 = t5 - t3
-    t3 = qd[2] * t3
-    t3 = t31 + t3
-    t5 = t30 - t34
-    t31 = t5 * t24
-    t34 = t25 + t64
-    t27 = t27 * t34
-    t27 = t31 + t27
-    t16 = t16 * t9
-    t10 = t4 * t10
-    t10 = t16 + t10
-    t10 = t27 + t10
-    t10 = qd[3] * t10
-    t3 = t3 - t10
-    t10 = t30 - t66
-    t16 = t10 * t7
-    t17 = t25 - t17
-    t27 = t33 * t17
-    t16 = t16 + t27
-    t27 = t37 * t12
-    t31 = t11 * t15
-    t27 = t27 + t31
-    t16 = t16 - t27
-    t16 = qd[4] * t16
-    t3 = t3 + t16
-    t16 = t10 * t13
-    t21 = t21 * t17
-    t16 = t16 + t21
-    t21 = t22 * t39
-    t27 = t70 * t28
-    t21 = t21 + t27
-    t27 = t19 * t9
-    t23 = t4 * t23
-    t23 = t27 - t23
-    t21 = t21 + t23
-    t23 = t37 * t21
-    t22 = t70 * t22
-    t19 = t4 * t19
-    t19 = t22 + t19
-    t15 = t19 * t15
-    t15 = t23 + t15
-    t15 = t16 + t15
-    t15 = qd[5] * t15
-    t3 = t3 - t15
-    t15 = t38 * t8
-    t16 = t18 * t26
-    t15 = t15 + t16
-    t16 = t30 - t67
-    t22 = t16 * t20
-    t14 = t25 - t14
-    t23 = t29 * t14
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 - t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t26 = t12 * t26
+    t27 = t14 * t27
+    t26 = t26 - t27
+    t27 = t30 * qd[4]
+    t26 = t26 - t27
+    t27 = t17 * t26
+    t24 = t24 + t27
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 + t30
+    t30 = 0.1654 * t24
+    t30 = t32 - t30
+    t28 = qd[6] - t28
+    t32 = 0.1654 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 - t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.1654 * t19
+    t16 = t16 - t23
+    t23 = 0.1654 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 - t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
     t22 = t22 + t23
-    t15 = t15 - t22
-    t15 = qd[6] * t15
-    t3 = t3 + t15
-    t15 = t62 * t6
-    t1 = t1 * t49
-    t1 = t15 + t1
-    t15 = t40 * t48
-    t22 = t53 * t32
-    t15 = t15 + t22
-    t1 = t1 - t15
-    t1 = qd[2] * t1
-    t15 = t65 * t43
-    t22 = t41 * t58
-    t15 = t15 + t22
-    t0 = t0 * t25
-    t22 = t30 * t42
-    t0 = t0 - t22
-    t0 = t15 + t0
-    t0 = qd[1] * t0
-    t0 = t1 - t0
-    t1 = t51 * t9
-    t4 = t4 * t47
-    t1 = t1 + t4
-    t4 = t56 * t34
-    t5 = t5 * t44
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[3] * t1
-    t0 = t0 + t1
-    t1 = t61 * t12
-    t4 = t11 * t52
-    t1 = t1 + t4
-    t4 = t10 * t45
-    t5 = t59 * t17
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[4] * t1
-    t0 = t0 + t1
-    t1 = t61 * t21
-    t4 = t19 * t52
-    t1 = t1 + t4
-    t4 = t63 * t17
-    t5 = t10 * t50
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[5] * t1
-    t0 = t0 + t1
-    t1 = t16 * t46
-    t4 = t57 * t14
-    t1 = t1 + t4
-    t4 = t55 * t8
-    t5 = t18 * t54
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[6] * t1
-    t0 = t0 + t1
-    t1 = qd[2] * t6
-    t4 = qd[1] * t43
-    t1 = t1 - t4
-    t4 = qd[3] * t9
-    t1 = t1 + t4
-    t4 = qd[4] * t12
-    t1 = t1 + t4
-    t4 = qd[5] * t21
-    t1 = t1 + t4
-    t4 = qd[6] * t8
-    t1 = t1 - t4
-    t4 = qd[2] * t48
-    t5 = qd[1] * t42
-    t4 = t4 - t5
-    t5 = qd[3] * t44
-    t4 = t4 + t5
-    t5 = qd[4] * t45
-    t4 = t4 + t5
-    t5 = qd[5] * t50
-    t4 = t4 + t5
-    t5 = qd[6] * t46
-    t4 = t4 - t5
-    t5 = qd[4] * t7
-    t2 = qd[2] * t2
-    t6 = qd[3] * t24
-    t2 = t2 + t6
-    t2 = t5 - t2
-    t5 = qd[5] * t13
-    t2 = t2 - t5
-    t5 = qd[6] * t20
-    t2 = t2 - t5
-    _a = (t35, t3, t0, t1, t4, t2)
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 - t2
+    t4 = t4 * t29
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 - t0
+    t4 = t5 * t29
+    t0 = t0 - t4
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 - t3
+    t1 = t1 * t29
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _jdot_qd_panda_leftfinger_constants = _constants(
-    -0.316, 0.0825, -0.0825, 0.384, 0.088, 0.1654, 0.333)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.1654)
 
 
 def _jdot_qd_panda_leftfinger_chunk(x, t, s, y):
@@ -11521,557 +8305,370 @@ def _jdot_qd_panda_leftfinger_chunk(x, t, s, y):
     add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _jdot_qd_panda_leftfinger_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _jdot_qd_panda_leftfinger_constants
     cos(q_0, t0)
-    sin(q_1, t1)
-    multiply(t1, qd_1, t2)
-    multiply(k0, t2, t3)
-    cos(q_2, t4)
-    cos(q_1, t5)
-    multiply(t5, qd_1, t6)
-    multiply(t4, t6, t7)
-    sin(q_2, t8)
-    multiply(t8, qd_2, t9)
-    multiply(t1, t9, t10)
-    subtract(t7, t10, t7)
-    multiply(k1, t7, t10)
-    subtract(t3, t10, t10)
-    cos(q_3, t11)
-    multiply(t11, qd_3, t12)
-    multiply(t5, t12, t13)
-    sin(q_3, t14)
-    multiply(t14, t2, t15)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
+    cos(q_4, t12)
+    multiply(t8, t12, t13)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
     subtract(t13, t15, t13)
-    multiply(t11, t7, t15)
-    multiply(t1, t4, t16)
-    multiply(t14, qd_3, t17)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
     multiply(t16, t17, t18)
-    subtract(t15, t18, t15)
-    subtract(t13, t15, t13)
-    multiply(k2, t13, t15)
-    multiply(t14, t7, t7)
-    multiply(t16, t12, t18)
-    add(t7, t18, t7)
-    multiply(t11, t2, t18)
-    multiply(t5, t17, t19)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
     add(t18, t19, t18)
-    subtract(t7, t18, t7)
-    multiply(k3, t7, t18)
-    add(t15, t18, t15)
-    add(t10, t15, t15)
-    cos(q_5, t18)
-    cos(q_4, t19)
-    multiply(t19, t13, t20)
-    multiply(t5, t14, t21)
-    multiply(t16, t11, t22)
-    subtract(t21, t22, t21)
-    sin(q_4, t22)
-    multiply(t22, qd_4, t23)
-    multiply(t21, t23, t24)
-    subtract(t20, t24, t20)
-    multiply(t8, t6, t24)
-    multiply(t4, qd_2, t25)
-    multiply(t1, t25, t26)
-    add(t24, t26, t24)
-    multiply(t22, t24, t26)
-    multiply(t1, t8, t27)
-    multiply(t19, qd_4, t28)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(t3, t22, t23)
+    multiply(t8, qd_1, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
     multiply(t27, t28, t29)
-    add(t26, t29, t26)
-    add(t20, t26, t20)
-    multiply(t18, t20, t26)
-    multiply(t21, t19, t29)
-    multiply(t27, t22, t30)
-    add(t29, t30, t29)
-    sin(q_5, t30)
-    multiply(t30, qd_5, t31)
-    multiply(t29, t31, t32)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
+    add(t29, t31, t29)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
     subtract(t26, t32, t26)
-    multiply(t30, t7, t32)
-    multiply(t16, t14, t33)
-    multiply(t5, t11, t34)
-    add(t33, t34, t33)
-    multiply(t18, qd_5, t34)
-    multiply(t33, t34, t35)
-    add(t32, t35, t32)
-    add(t26, t32, t26)
-    multiply(k4, t26, t26)
-    add(t15, t26, t26)
-    multiply(t18, t7, t32)
-    multiply(t33, t31, t35)
-    subtract(t32, t35, t32)
-    multiply(t30, t20, t20)
-    multiply(t29, t34, t35)
-    add(t20, t35, t20)
-    subtract(t32, t20, t32)
-    multiply(k5, t32, t20)
-    subtract(t26, t20, t20)
-    multiply(t0, t20, t35)
-    multiply(k0, t5, t36)
-    subtract(k6, t36, t36)
-    multiply(k1, t16, t16)
-    subtract(t36, t16, t16)
-    multiply(k2, t21, t37)
-    multiply(k3, t33, t38)
-    add(t37, t38, t37)
-    add(t16, t37, t37)
-    multiply(t29, t18, t38)
-    multiply(t33, t30, t39)
-    add(t38, t39, t38)
-    multiply(k4, t38, t38)
-    add(t37, t38, t38)
-    multiply(t33, t18, t39)
-    multiply(t29, t30, t29)
-    subtract(t39, t29, t39)
-    multiply(k5, t39, t29)
-    subtract(t38, t29, t29)
-    subtract(t29, k6, t40)
-    sin(q_0, t41)
-    multiply(t41, qd_0, t42)
-    multiply(t40, t42, t43)
-    subtract(t35, t43, t35)
-    multiply(qd_1, t35, t35)
-    multiply(t0, qd_0, t43)
-    multiply(t5, t43, t44)
-    multiply(t41, t2, t45)
-    subtract(t44, t45, t44)
-    multiply(t4, t44, t45)
-    multiply(t41, t5, t46)
-    multiply(t46, t9, t47)
-    subtract(t45, t47, t45)
-    multiply(t0, t25, t47)
-    multiply(t8, t42, t48)
-    subtract(t47, t48, t47)
-    add(t45, t47, t45)
-    multiply(k1, t45, t47)
-    multiply(t1, t43, t48)
-    multiply(t41, t6, t49)
-    add(t48, t49, t48)
-    multiply(k0, t48, t49)
-    subtract(t47, t49, t47)
-    multiply(t11, t45, t50)
-    multiply(t46, t4, t51)
-    multiply(t0, t8, t52)
-    add(t51, t52, t51)
-    multiply(t51, t17, t52)
-    subtract(t50, t52, t50)
-    multiply(t14, t48, t52)
-    multiply(t41, t1, t53)
-    multiply(t53, t12, t54)
-    add(t52, t54, t52)
-    add(t50, t52, t50)
-    multiply(k2, t50, t52)
-    multiply(t11, t48, t54)
-    multiply(t53, t17, t55)
-    subtract(t54, t55, t54)
-    multiply(t14, t45, t45)
-    multiply(t51, t12, t55)
-    add(t45, t55, t45)
-    subtract(t54, t45, t54)
-    multiply(k3, t54, t45)
-    add(t52, t45, t52)
-    add(t47, t52, t52)
-    multiply(t19, t50, t45)
-    multiply(t51, t11, t55)
-    multiply(t53, t14, t56)
-    add(t55, t56, t55)
-    multiply(t55, t23, t56)
-    subtract(t45, t56, t45)
-    multiply(t0, t4, t56)
-    multiply(t46, t8, t57)
-    subtract(t56, t57, t56)
-    multiply(t56, t28, t57)
-    multiply(t4, t42, t58)
-    multiply(t0, t9, t59)
-    add(t58, t59, t58)
-    multiply(t8, t44, t44)
-    multiply(t46, t25, t46)
-    add(t44, t46, t44)
-    add(t58, t44, t58)
-    multiply(t22, t58, t44)
-    subtract(t57, t44, t57)
-    add(t45, t57, t45)
-    multiply(t18, t45, t44)
-    multiply(t55, t19, t46)
-    multiply(t56, t22, t57)
-    add(t46, t57, t46)
-    multiply(t46, t31, t57)
-    subtract(t44, t57, t44)
-    multiply(t30, t54, t57)
-    multiply(t53, t11, t59)
-    multiply(t51, t14, t60)
-    subtract(t59, t60, t59)
-    multiply(t59, t34, t60)
-    add(t57, t60, t57)
-    add(t44, t57, t44)
-    multiply(k4, t44, t44)
-    add(t52, t44, t44)
-    multiply(t18, t54, t57)
-    multiply(t59, t31, t60)
-    subtract(t57, t60, t57)
-    multiply(t30, t45, t45)
-    multiply(t46, t34, t60)
-    add(t45, t60, t45)
-    subtract(t57, t45, t57)
-    multiply(k5, t57, t45)
-    subtract(t44, t45, t45)
-    multiply(qd_0, t45, t60)
-    subtract(t35, t60, t35)
-    subtract(t29, t36, t36)
-    multiply(t36, t48, t60)
-    subtract(t20, t3, t3)
-    multiply(t53, t3, t61)
-    add(t60, t61, t60)
-    add(t45, t49, t49)
-    multiply(t5, t49, t61)
-    multiply(k1, t51, t51)
-    multiply(k0, t53, t62)
-    subtract(t51, t62, t51)
-    multiply(k2, t55, t63)
-    multiply(k3, t59, t64)
-    add(t63, t64, t63)
-    add(t51, t63, t63)
-    multiply(t46, t18, t64)
-    multiply(t59, t30, t65)
-    add(t64, t65, t64)
-    multiply(k4, t64, t64)
-    add(t63, t64, t64)
-    multiply(t59, t18, t65)
-    multiply(t46, t30, t46)
-    subtract(t65, t46, t65)
-    multiply(k5, t65, t46)
-    subtract(t64, t46, t46)
-    add(t46, t62, t62)
-    multiply(t62, t2, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_2, t60, t60)
-    add(t35, t60, t35)
-    subtract(t46, t51, t51)
-    multiply(t51, t24, t60)
-    subtract(t45, t47, t47)
-    multiply(t27, t47, t61)
-    add(t60, t61, t60)
-    subtract(t20, t10, t10)
-    multiply(t56, t10, t61)
-    subtract(t29, t16, t16)
-    multiply(t16, t58, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_3, t60, t60)
-    add(t35, t60, t35)
-    subtract(t29, t37, t37)
-    multiply(t37, t54, t60)
-    subtract(t20, t15, t15)
-    multiply(t59, t15, t61)
-    add(t60, t61, t60)
-    subtract(t46, t63, t63)
-    multiply(t63, t7, t61)
-    subtract(t45, t52, t52)
-    multiply(t33, t52, t66)
-    add(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_4, t60, t60)
-    add(t35, t60, t35)
-    multiply(t19, t24, t60)
-    multiply(t27, t23, t61)
-    subtract(t60, t61, t60)
-    multiply(t22, t13, t13)
-    multiply(t21, t28, t61)
-    add(t13, t61, t13)
-    subtract(t60, t13, t60)
-    multiply(t63, t60, t13)
-    multiply(t27, t19, t61)
-    multiply(t21, t22, t21)
-    subtract(t61, t21, t61)
-    multiply(t61, t52, t21)
-    add(t13, t21, t13)
-    multiply(t56, t19, t21)
-    multiply(t55, t22, t66)
-    subtract(t21, t66, t21)
-    multiply(t21, t15, t66)
-    multiply(t19, t58, t67)
-    multiply(t56, t23, t68)
-    add(t67, t68, t67)
-    multiply(t22, t50, t50)
-    multiply(t55, t28, t55)
-    add(t50, t55, t50)
-    add(t67, t50, t67)
-    multiply(t37, t67, t50)
-    subtract(t66, t50, t66)
-    subtract(t13, t66, t13)
-    multiply(qd_5, t13, t13)
-    add(t35, t13, t35)
-    subtract(t46, t64, t64)
-    multiply(t64, t32, t13)
-    subtract(t45, t44, t44)
-    multiply(t39, t44, t50)
-    add(t13, t50, t13)
-    subtract(t29, t38, t29)
-    multiply(t29, t57, t38)
-    subtract(t20, t26, t26)
-    multiply(t65, t26, t50)
-    add(t38, t50, t38)
-    subtract(t13, t38, t13)
-    multiply(qd_6, t13, t13)
-    add(t35, t13, a_0)
-    multiply(t0, t6, t6)
-    multiply(t1, t42, t13)
-    subtract(t6, t13, t6)
-    multiply(t14, t6, t13)
-    multiply(t0, t1, t1)
-    multiply(t1, t12, t35)
-    add(t13, t35, t13)
-    multiply(t5, t42, t35)
-    multiply(t0, t2, t38)
-    add(t35, t38, t35)
-    multiply(t4, t35, t38)
-    multiply(t0, t5, t50)
-    multiply(t50, t9, t55)
-    add(t38, t55, t38)
-    multiply(t8, t43, t55)
-    multiply(t41, t25, t66)
-    add(t55, t66, t55)
-    add(t38, t55, t38)
-    multiply(t11, t38, t55)
-    multiply(t50, t4, t66)
-    multiply(t41, t8, t68)
-    subtract(t66, t68, t66)
-    multiply(t66, t17, t68)
-    add(t55, t68, t55)
-    subtract(t13, t55, t13)
-    multiply(k2, t13, t55)
-    multiply(t11, t6, t68)
-    multiply(t1, t17, t17)
-    subtract(t68, t17, t68)
-    multiply(t66, t12, t12)
-    multiply(t14, t38, t17)
-    subtract(t12, t17, t12)
-    subtract(t68, t12, t68)
-    multiply(k3, t68, t12)
-    add(t55, t12, t55)
-    multiply(k1, t38, t38)
-    multiply(k0, t6, t12)
-    add(t38, t12, t38)
-    subtract(t55, t38, t55)
-    multiply(t19, t13, t17)
-    multiply(t66, t11, t69)
-    multiply(t1, t14, t70)
-    add(t69, t70, t69)
-    multiply(t69, t23, t70)
-    subtract(t17, t70, t17)
-    multiply(t50, t25, t25)
-    multiply(t8, t35, t35)
-    subtract(t25, t35, t25)
-    multiply(t4, t43, t35)
-    multiply(t41, t9, t9)
-    subtract(t35, t9, t35)
-    add(t25, t35, t25)
-    multiply(t22, t25, t9)
-    multiply(t50, t8, t50)
-    multiply(t41, t4, t4)
-    add(t50, t4, t50)
-    multiply(t50, t28, t4)
-    add(t9, t4, t9)
-    subtract(t17, t9, t17)
-    multiply(t18, t17, t4)
-    multiply(t69, t19, t8)
-    multiply(t50, t22, t9)
-    subtract(t8, t9, t8)
-    multiply(t8, t31, t9)
-    subtract(t4, t9, t4)
-    multiply(t30, t68, t9)
-    multiply(t1, t11, t11)
-    multiply(t66, t14, t14)
-    subtract(t11, t14, t11)
-    multiply(t11, t34, t14)
-    add(t9, t14, t9)
-    add(t4, t9, t4)
-    multiply(k4, t4, t4)
-    add(t55, t4, t4)
-    multiply(t18, t68, t9)
-    multiply(t11, t31, t31)
-    subtract(t9, t31, t9)
-    multiply(t30, t17, t17)
-    multiply(t8, t34, t34)
-    add(t17, t34, t17)
-    subtract(t9, t17, t9)
-    multiply(k5, t9, t14)
-    subtract(t4, t14, t14)
-    multiply(qd_0, t14, t17)
-    multiply(t40, t43, t40)
-    multiply(t41, t20, t20)
-    add(t40, t20, t40)
-    multiply(qd_1, t40, t40)
-    add(t17, t40, t17)
-    add(t14, t12, t12)
-    multiply(t5, t12, t5)
-    multiply(k1, t66, t66)
-    multiply(k0, t1, t20)
-    subtract(t66, t20, t66)
-    multiply(k2, t69, t31)
-    multiply(k3, t11, t34)
-    add(t31, t34, t31)
-    add(t66, t31, t31)
-    multiply(t8, t18, t34)
-    multiply(t11, t30, t35)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    multiply(k5, t21, t30)
+    add(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t27, qd_2, t27)
+    multiply(t3, t24, t24)
+    subtract(t27, t24, t27)
+    multiply(t7, t27, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t11, t20, t36)
+    subtract(t24, t36, t24)
+    multiply(t30, qd_3, t36)
+    add(t24, t36, t24)
+    multiply(k5, t24, t36)
+    multiply(t11, t27, t27)
+    multiply(t7, t20, t37)
+    add(t27, t37, t27)
+    multiply(t32, qd_3, t37)
+    add(t27, t37, t27)
+    multiply(k6, t27, t37)
+    add(t36, t37, t36)
+    multiply(t31, t28, t31)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    multiply(k4, t20, t20)
+    add(t22, t20, t22)
+    subtract(t31, t22, t31)
+    subtract(t36, t31, t36)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t36, t35, t36)
+    multiply(t14, t36, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t36, t36)
+    add(t29, t36, t29)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
     add(t34, t35, t34)
-    multiply(k4, t34, t34)
-    add(t31, t34, t34)
-    multiply(t11, t18, t18)
-    multiply(t8, t30, t8)
-    subtract(t18, t8, t18)
-    multiply(k5, t18, t8)
-    subtract(t34, t8, t8)
-    add(t8, t20, t20)
-    multiply(t20, t2, t30)
-    subtract(t5, t30, t5)
-    multiply(t36, t6, t36)
-    multiply(t1, t3, t3)
-    add(t36, t3, t36)
-    subtract(t5, t36, t5)
-    multiply(qd_2, t5, t5)
-    add(t17, t5, t17)
-    subtract(t8, t66, t66)
-    multiply(t66, t24, t3)
-    add(t14, t38, t38)
-    multiply(t27, t38, t27)
-    add(t3, t27, t3)
-    multiply(t16, t25, t16)
-    multiply(t50, t10, t10)
-    add(t16, t10, t16)
-    add(t3, t16, t3)
-    multiply(qd_3, t3, t3)
-    subtract(t17, t3, t17)
-    subtract(t8, t31, t31)
-    multiply(t31, t7, t3)
-    subtract(t14, t55, t55)
-    multiply(t33, t55, t33)
-    add(t3, t33, t3)
-    multiply(t37, t68, t5)
-    multiply(t11, t15, t10)
-    add(t5, t10, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t17, t3, t17)
-    multiply(t31, t60, t3)
-    multiply(t61, t55, t61)
-    add(t3, t61, t3)
-    multiply(t22, t13, t13)
-    multiply(t69, t28, t28)
-    add(t13, t28, t13)
-    multiply(t19, t25, t5)
-    multiply(t50, t23, t23)
-    subtract(t5, t23, t5)
-    add(t13, t5, t13)
-    multiply(t37, t13, t37)
-    multiply(t69, t22, t69)
-    multiply(t50, t19, t19)
-    add(t69, t19, t69)
-    multiply(t69, t15, t15)
-    add(t37, t15, t37)
-    add(t3, t37, t3)
-    multiply(qd_5, t3, t3)
-    subtract(t17, t3, t17)
-    multiply(t29, t9, t29)
-    multiply(t18, t26, t26)
-    add(t29, t26, t29)
-    subtract(t8, t34, t34)
-    multiply(t34, t32, t3)
-    subtract(t14, t4, t4)
-    multiply(t39, t4, t39)
-    add(t3, t39, t3)
-    subtract(t29, t3, t29)
-    multiply(qd_6, t29, t29)
-    add(t17, t29, a_1)
-    multiply(t62, t6, t62)
-    multiply(t1, t49, t1)
-    add(t62, t1, t62)
-    multiply(t20, t48, t20)
-    multiply(t53, t12, t53)
-    add(t20, t53, t20)
-    subtract(t62, t20, t62)
-    multiply(qd_2, t62, t62)
-    multiply(t46, t43, t46)
-    multiply(t41, t45, t41)
-    add(t46, t41, t46)
-    multiply(t0, t14, t0)
-    multiply(t8, t42, t8)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    multiply(t15, t27, t35)
+    add(t32, t35, t32)
+    multiply(t15, t20, t35)
+    multiply(t4, t30, t30)
+    add(t35, t30, t35)
+    multiply(t35, qd_5, t30)
+    add(t32, t30, t32)
+    multiply(k7, t32, t30)
+    add(t29, t30, t29)
+    multiply(t35, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t15, t34, t34)
+    multiply(t4, t27, t27)
+    subtract(t34, t27, t34)
+    multiply(t8, qd_5, t27)
+    add(t34, t27, t34)
+    multiply(t2, t34, t27)
+    multiply(t12, t21, t21)
+    multiply(t14, t24, t24)
+    subtract(t21, t24, t21)
+    multiply(t20, qd_4, t20)
+    subtract(t21, t20, t21)
+    multiply(t17, t21, t20)
+    add(t27, t20, t27)
+    multiply(t17, t35, t20)
+    multiply(t2, t28, t24)
+    add(t20, t24, t20)
+    multiply(t20, qd_6, t24)
+    add(t27, t24, t27)
+    multiply(k8, t27, t24)
+    subtract(t25, t24, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t20, t24)
+    multiply(t8, t24, t30)
+    add(t25, t30, t25)
+    multiply(t16, t25, t30)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t21, t18)
+    subtract(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t35, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t30, t8, t30)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t21, t21)
+    subtract(t26, t21, t26)
+    multiply(t35, t23, t35)
+    add(t26, t35, t26)
+    multiply(t20, t24, t20)
+    multiply(t28, t18, t28)
+    add(t20, t28, t20)
+    add(t26, t20, t26)
+    multiply(t10, t26, t8)
+    add(t30, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t20)
+    add(t18, t20, t18)
+    multiply(t18, t12, t20)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
     subtract(t0, t8, t0)
-    add(t46, t0, t46)
-    multiply(qd_1, t46, t46)
-    subtract(t62, t46, t62)
-    multiply(t51, t25, t51)
-    multiply(t50, t47, t50)
-    add(t51, t50, t51)
-    multiply(t56, t38, t56)
-    multiply(t66, t58, t66)
-    subtract(t56, t66, t56)
-    add(t51, t56, t51)
-    multiply(qd_3, t51, t51)
-    add(t62, t51, t62)
-    multiply(t63, t68, t0)
-    multiply(t11, t52, t11)
-    add(t0, t11, t0)
-    multiply(t31, t54, t1)
-    multiply(t59, t55, t59)
-    add(t1, t59, t1)
-    subtract(t0, t1, t0)
-    multiply(qd_4, t0, t0)
-    add(t62, t0, t62)
-    multiply(t63, t13, t63)
-    multiply(t69, t52, t69)
-    add(t63, t69, t63)
-    multiply(t21, t55, t21)
-    multiply(t31, t67, t31)
-    subtract(t21, t31, t21)
-    add(t63, t21, t63)
-    multiply(qd_5, t63, t63)
-    add(t62, t63, t62)
-    multiply(t34, t57, t34)
-    multiply(t65, t4, t65)
-    add(t34, t65, t34)
-    multiply(t64, t9, t64)
-    multiply(t18, t44, t18)
-    add(t64, t18, t64)
-    subtract(t34, t64, t34)
-    multiply(qd_6, t34, t34)
-    add(t62, t34, a_2)
-    multiply(qd_2, t6, t6)
-    multiply(qd_1, t43, t43)
-    subtract(t6, t43, t6)
-    multiply(qd_3, t25, t25)
-    add(t6, t25, t6)
-    multiply(qd_4, t68, t68)
-    add(t6, t68, t6)
-    multiply(qd_5, t13, t13)
-    add(t6, t13, t6)
-    multiply(qd_6, t9, t9)
-    subtract(t6, t9, a_3)
-    multiply(qd_2, t48, t48)
-    multiply(qd_1, t42, t42)
-    subtract(t48, t42, t48)
-    multiply(qd_3, t58, t58)
-    add(t48, t58, t48)
-    multiply(qd_4, t54, t54)
-    add(t48, t54, t48)
-    multiply(qd_5, t67, t67)
-    add(t48, t67, t48)
-    multiply(qd_6, t57, t57)
-    subtract(t48, t57, a_4)
-    multiply(qd_4, t7, t7)
-    multiply(qd_2, t2, t2)
-    multiply(qd_3, t24, t24)
-    add(t2, t24, t2)
+    multiply(t0, t14, t8)
+    add(t20, t8, t20)
+    multiply(t20, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t20, t4, t20)
+    subtract(t5, t20, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
     subtract(t7, t2, t7)
-    multiply(qd_5, t60, t60)
-    subtract(t7, t60, t7)
-    multiply(qd_6, t32, t32)
-    subtract(t7, t32, a_5)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t27, t19)
+    subtract(t16, t19, t16)
+    multiply(t10, t32, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t27, t18)
+    subtract(t0, t18, t0)
+    multiply(t5, t32, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t27, t7)
+    subtract(t2, t7, t2)
+    multiply(t3, t32, t3)
+    subtract(t2, t3, a_5)
 
 
 def frame_acceleration_panda_leftfinger(q, qd, qdd):
@@ -12081,13 +8678,13 @@ def frame_acceleration_panda_leftfinger(q, qd, qdd):
     in  qd [7]
     in  qdd [7]
     out a [6]
-    671 ops: 374 mul, 285 add, 0 div, 12 trig
+    376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     qdd = _array(qdd, 7, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_panda_leftfinger_chunk, (q, qd, qdd), 81, ((6,),))
+        return _batch(_frame_acceleration_panda_leftfinger_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -12095,681 +8692,387 @@ def frame_acceleration_panda_leftfinger(q, qd, qdd):
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = cos(q[1])
-    t2 = (-0.316) * t1
-    t2 = 0.333 - t2
-    t3 = sin(q[1])
-    t4 = cos(q[2])
-    t5 = t3 * t4
-    t6 = 0.0825 * t5
-    t6 = t2 - t6
-    t7 = sin(q[3])
-    t8 = t1 * t7
-    t9 = cos(q[3])
-    t10 = t5 * t9
-    t8 = t8 - t10
-    t10 = (-0.0825) * t8
-    t11 = t5 * t7
-    t12 = t1 * t9
-    t11 = t11 + t12
-    t12 = 0.384 * t11
-    t10 = t10 + t12
-    t10 = t6 + t10
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
     t12 = cos(q[4])
     t13 = t8 * t12
-    t14 = sin(q[2])
-    t15 = t3 * t14
-    t16 = sin(q[4])
-    t17 = t15 * t16
-    t13 = t13 + t17
-    t17 = cos(q[5])
-    t18 = t13 * t17
-    t19 = sin(q[5])
-    t20 = t11 * t19
-    t18 = t18 + t20
-    t18 = 0.088 * t18
-    t18 = t10 + t18
-    t20 = t11 * t17
-    t21 = t13 * t19
-    t20 = t20 - t21
-    t21 = 0.1654 * t20
-    t21 = t18 - t21
-    t22 = t21 - 0.333
-    t23 = t0 * t22
-    t23 = t23 * qdd[1]
-    t24 = sin(q[0])
-    t25 = t24 * t1
-    t26 = t25 * t4
-    t27 = t0 * t14
-    t26 = t26 + t27
-    t27 = 0.0825 * t26
-    t28 = t24 * t3
-    t29 = (-0.316) * t28
-    t27 = t27 - t29
-    t30 = t26 * t9
-    t31 = t28 * t7
-    t30 = t30 + t31
-    t31 = (-0.0825) * t30
-    t32 = t28 * t9
-    t33 = t26 * t7
-    t32 = t32 - t33
-    t33 = 0.384 * t32
-    t31 = t31 + t33
-    t31 = t27 + t31
-    t33 = t30 * t12
-    t34 = t0 * t4
-    t35 = t25 * t14
-    t34 = t34 - t35
-    t35 = t34 * t16
-    t33 = t33 + t35
-    t35 = t33 * t17
-    t36 = t32 * t19
-    t35 = t35 + t36
-    t35 = 0.088 * t35
-    t35 = t31 + t35
-    t36 = t32 * t17
-    t37 = t33 * t19
-    t36 = t36 - t37
-    t37 = 0.1654 * t36
-    t37 = t35 - t37
-    t38 = t37 * qdd[0]
-    t23 = t23 - t38
-    t2 = t21 - t2
-    t38 = t28 * t2
-    t29 = t37 + t29
-    t39 = t1 * t29
-    t38 = t38 - t39
-    t38 = t38 * qdd[2]
-    t23 = t23 + t38
-    t27 = t37 - t27
-    t38 = t15 * t27
-    t6 = t21 - t6
-    t39 = t34 * t6
-    t38 = t38 - t39
-    t38 = t38 * qdd[3]
-    t23 = t23 + t38
-    t10 = t21 - t10
-    t38 = t32 * t10
-    t31 = t37 - t31
-    t39 = t11 * t31
-    t38 = t38 - t39
-    t38 = t38 * qdd[4]
-    t23 = t23 + t38
-    t38 = t15 * t12
-    t39 = t8 * t16
-    t38 = t38 - t39
-    t39 = t38 * t31
-    t40 = t34 * t12
-    t41 = t30 * t16
-    t40 = t40 - t41
-    t41 = t40 * t10
-    t39 = t39 - t41
-    t39 = t39 * qdd[5]
-    t23 = t23 + t39
-    t35 = t37 - t35
-    t39 = t20 * t35
-    t18 = t21 - t18
-    t21 = t36 * t18
-    t21 = t39 - t21
-    t21 = t21 * qdd[6]
-    t21 = t23 + t21
-    t23 = t3 * qd[1]
-    t39 = (-0.316) * t23
-    t41 = t1 * qd[1]
-    t42 = t4 * t41
-    t43 = t14 * qd[2]
-    t44 = t3 * t43
-    t42 = t42 - t44
-    t44 = 0.0825 * t42
-    t44 = t39 - t44
-    t45 = t9 * qd[3]
-    t46 = t1 * t45
-    t47 = t7 * t23
-    t46 = t46 - t47
-    t47 = t9 * t42
-    t48 = t7 * qd[3]
-    t49 = t5 * t48
-    t47 = t47 - t49
-    t46 = t46 - t47
-    t47 = (-0.0825) * t46
-    t42 = t7 * t42
-    t5 = t5 * t45
-    t5 = t42 + t5
-    t42 = t9 * t23
-    t49 = t1 * t48
-    t42 = t42 + t49
-    t5 = t5 - t42
-    t42 = 0.384 * t5
-    t42 = t47 + t42
-    t42 = t44 + t42
-    t47 = t12 * t46
-    t49 = t16 * qd[4]
-    t50 = t8 * t49
-    t47 = t47 - t50
-    t50 = t14 * t41
-    t51 = t4 * qd[2]
-    t52 = t3 * t51
-    t50 = t50 + t52
-    t52 = t16 * t50
-    t53 = t12 * qd[4]
-    t54 = t15 * t53
-    t52 = t52 + t54
-    t47 = t47 + t52
-    t52 = t17 * t47
-    t54 = t19 * qd[5]
-    t55 = t13 * t54
-    t52 = t52 - t55
-    t55 = t19 * t5
-    t56 = t17 * qd[5]
-    t57 = t11 * t56
-    t55 = t55 + t57
-    t52 = t52 + t55
-    t52 = 0.088 * t52
-    t52 = t42 + t52
-    t55 = t17 * t5
-    t57 = t11 * t54
-    t55 = t55 - t57
-    t47 = t19 * t47
-    t13 = t13 * t56
-    t13 = t47 + t13
-    t13 = t55 - t13
-    t47 = 0.1654 * t13
-    t47 = t52 - t47
-    t55 = t0 * t47
-    t57 = t24 * qd[0]
-    t58 = t22 * t57
-    t55 = t55 - t58
-    t55 = qd[1] * t55
-    t58 = t0 * qd[0]
-    t59 = t1 * t58
-    t60 = t24 * t23
-    t59 = t59 - t60
-    t60 = t4 * t59
-    t61 = t25 * t43
-    t60 = t60 - t61
-    t61 = t0 * t51
-    t62 = t14 * t57
-    t61 = t61 - t62
-    t60 = t60 + t61
-    t61 = 0.0825 * t60
-    t62 = t3 * t58
-    t63 = t24 * t41
-    t62 = t62 + t63
-    t63 = (-0.316) * t62
-    t61 = t61 - t63
-    t64 = t9 * t60
-    t65 = t26 * t48
-    t64 = t64 - t65
-    t65 = t7 * t62
-    t66 = t28 * t45
-    t65 = t65 + t66
-    t64 = t64 + t65
-    t65 = (-0.0825) * t64
-    t66 = t9 * t62
-    t67 = t28 * t48
-    t66 = t66 - t67
-    t60 = t7 * t60
-    t26 = t26 * t45
-    t26 = t60 + t26
-    t26 = t66 - t26
-    t60 = 0.384 * t26
-    t60 = t65 + t60
-    t60 = t61 + t60
-    t65 = t12 * t64
-    t66 = t30 * t49
-    t65 = t65 - t66
-    t66 = t34 * t53
-    t67 = t4 * t57
-    t68 = t0 * t43
-    t67 = t67 + t68
-    t59 = t14 * t59
-    t25 = t25 * t51
-    t25 = t59 + t25
-    t25 = t67 + t25
-    t59 = t16 * t25
-    t59 = t66 - t59
-    t59 = t65 + t59
-    t65 = t17 * t59
-    t66 = t33 * t54
-    t65 = t65 - t66
-    t66 = t19 * t26
-    t67 = t32 * t56
-    t66 = t66 + t67
-    t65 = t65 + t66
-    t65 = 0.088 * t65
-    t65 = t60 + t65
-    t66 = t17 * t26
-    t67 = t32 * t54
-    t66 = t66 - t67
-    t59 = t19 * t59
-    t33 = t33 * t56
-    t33 = t59 + t33
-    t33 = t66 - t33
-    t59 = 0.1654 * t33
-    t59 = t65 - t59
-    t66 = qd[0] * t59
-    t55 = t55 - t66
-    t66 = t2 * t62
-    t39 = t47 - t39
-    t67 = t28 * t39
-    t66 = t66 + t67
-    t63 = t59 + t63
-    t67 = t1 * t63
-    t68 = t29 * t23
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[2] * t66
-    t55 = t55 + t66
-    t66 = t27 * t50
-    t61 = t59 - t61
-    t67 = t15 * t61
-    t66 = t66 + t67
-    t44 = t47 - t44
-    t67 = t34 * t44
-    t68 = t6 * t25
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[3] * t66
-    t55 = t55 + t66
-    t66 = t10 * t26
-    t42 = t47 - t42
-    t67 = t32 * t42
-    t66 = t66 + t67
-    t67 = t31 * t5
-    t60 = t59 - t60
-    t68 = t11 * t60
-    t67 = t67 + t68
-    t66 = t66 - t67
-    t66 = qd[4] * t66
-    t55 = t55 + t66
-    t66 = t12 * t50
-    t67 = t15 * t49
-    t66 = t66 - t67
-    t46 = t16 * t46
-    t8 = t8 * t53
-    t8 = t46 + t8
-    t8 = t66 - t8
-    t46 = t31 * t8
-    t66 = t38 * t60
-    t46 = t46 + t66
-    t66 = t40 * t42
-    t67 = t12 * t25
-    t68 = t34 * t49
-    t67 = t67 + t68
-    t64 = t16 * t64
-    t30 = t30 * t53
-    t30 = t64 + t30
-    t30 = t67 + t30
-    t64 = t10 * t30
-    t64 = t66 - t64
-    t46 = t46 - t64
-    t46 = qd[5] * t46
-    t46 = t55 + t46
-    t55 = t35 * t13
-    t64 = t59 - t65
-    t65 = t20 * t64
-    t55 = t55 + t65
-    t65 = t18 * t33
-    t52 = t47 - t52
-    t66 = t36 * t52
-    t65 = t65 + t66
-    t55 = t55 - t65
-    t55 = qd[6] * t55
-    t46 = t46 + t55
-    t21 = t21 + t46
-    t46 = t0 * t1
-    t55 = t46 * t4
-    t65 = t24 * t14
-    t55 = t55 - t65
-    t65 = 0.0825 * t55
-    t66 = t0 * t3
-    t67 = (-0.316) * t66
-    t65 = t65 - t67
-    t68 = t55 * t9
-    t69 = t66 * t7
-    t68 = t68 + t69
-    t69 = (-0.0825) * t68
-    t70 = t66 * t9
-    t71 = t55 * t7
-    t70 = t70 - t71
-    t71 = 0.384 * t70
-    t69 = t69 + t71
-    t69 = t65 + t69
-    t71 = t68 * t12
-    t72 = t46 * t14
-    t73 = t24 * t4
-    t72 = t72 + t73
-    t73 = t72 * t16
-    t71 = t71 - t73
-    t73 = t71 * t17
-    t74 = t70 * t19
-    t73 = t73 + t74
-    t73 = 0.088 * t73
-    t73 = t69 + t73
-    t74 = t70 * t17
-    t75 = t71 * t19
-    t74 = t74 - t75
-    t75 = 0.1654 * t74
-    t75 = t73 - t75
-    t76 = t75 * qdd[0]
-    t77 = t24 * t22
-    t77 = t77 * qdd[1]
-    t76 = t76 + t77
-    t67 = t75 + t67
-    t77 = t1 * t67
-    t78 = t66 * t2
-    t77 = t77 - t78
-    t77 = t77 * qdd[2]
-    t76 = t76 + t77
-    t65 = t75 - t65
-    t77 = t15 * t65
-    t78 = t72 * t6
-    t77 = t77 + t78
-    t77 = t77 * qdd[3]
-    t76 = t76 - t77
-    t69 = t75 - t69
-    t77 = t11 * t69
-    t78 = t70 * t10
-    t77 = t77 - t78
-    t77 = t77 * qdd[4]
-    t76 = t76 + t77
-    t77 = t38 * t69
-    t78 = t68 * t16
-    t79 = t72 * t12
-    t78 = t78 + t79
-    t79 = t78 * t10
-    t77 = t77 + t79
-    t77 = t77 * qdd[5]
-    t76 = t76 - t77
-    t77 = t74 * t18
-    t73 = t75 - t73
-    t79 = t20 * t73
-    t77 = t77 - t79
-    t77 = t77 * qdd[6]
-    t76 = t76 + t77
-    t41 = t0 * t41
-    t3 = t3 * t57
-    t3 = t41 - t3
-    t41 = t7 * t3
-    t77 = t66 * t45
-    t41 = t41 + t77
-    t77 = t1 * t57
-    t79 = t0 * t23
-    t77 = t77 + t79
-    t79 = t4 * t77
-    t80 = t46 * t43
-    t79 = t79 + t80
-    t80 = t14 * t58
-    t81 = t24 * t51
-    t80 = t80 + t81
-    t79 = t79 + t80
-    t80 = t9 * t79
-    t81 = t55 * t48
-    t80 = t80 + t81
-    t41 = t41 - t80
-    t80 = (-0.0825) * t41
-    t9 = t9 * t3
-    t48 = t66 * t48
-    t9 = t9 - t48
-    t45 = t55 * t45
-    t7 = t7 * t79
-    t7 = t45 - t7
-    t7 = t9 - t7
-    t9 = 0.384 * t7
-    t9 = t80 + t9
-    t45 = 0.0825 * t79
-    t48 = (-0.316) * t3
-    t45 = t45 + t48
-    t9 = t9 - t45
-    t55 = t12 * t41
-    t79 = t68 * t49
-    t55 = t55 - t79
-    t46 = t46 * t51
-    t14 = t14 * t77
-    t14 = t46 - t14
-    t4 = t4 * t58
-    t43 = t24 * t43
-    t4 = t4 - t43
-    t4 = t14 + t4
-    t14 = t16 * t4
-    t43 = t72 * t53
-    t14 = t14 + t43
-    t14 = t55 - t14
-    t43 = t17 * t14
-    t46 = t71 * t54
-    t43 = t43 - t46
-    t46 = t19 * t7
-    t51 = t70 * t56
-    t46 = t46 + t51
-    t43 = t43 + t46
-    t43 = 0.088 * t43
-    t43 = t9 + t43
-    t17 = t17 * t7
-    t46 = t70 * t54
-    t17 = t17 - t46
-    t14 = t19 * t14
-    t19 = t71 * t56
-    t14 = t14 + t19
-    t14 = t17 - t14
-    t17 = 0.1654 * t14
-    t17 = t43 - t17
-    t19 = qd[0] * t17
-    t22 = t22 * t58
-    t46 = t24 * t47
-    t22 = t22 + t46
-    t22 = qd[1] * t22
-    t19 = t19 + t22
-    t22 = t17 + t48
-    t46 = t1 * t22
-    t47 = t67 * t23
-    t46 = t46 - t47
-    t2 = t2 * t3
-    t39 = t66 * t39
-    t2 = t2 + t39
-    t2 = t46 - t2
-    t2 = qd[2] * t2
-    t2 = t19 + t2
-    t19 = t65 * t50
-    t39 = t17 + t45
-    t45 = t15 * t39
-    t19 = t19 + t45
-    t6 = t6 * t4
-    t44 = t72 * t44
-    t6 = t6 + t44
-    t6 = t19 + t6
-    t6 = qd[3] * t6
-    t2 = t2 - t6
-    t6 = t69 * t5
-    t9 = t17 - t9
-    t19 = t11 * t9
-    t6 = t6 + t19
-    t19 = t10 * t7
-    t44 = t70 * t42
-    t19 = t19 + t44
-    t6 = t6 - t19
-    t6 = qd[4] * t6
-    t2 = t2 + t6
-    t6 = t69 * t8
-    t19 = t38 * t9
-    t6 = t6 + t19
-    t16 = t16 * t41
-    t19 = t68 * t53
-    t16 = t16 + t19
-    t12 = t12 * t4
-    t19 = t72 * t49
-    t12 = t12 - t19
-    t12 = t16 + t12
-    t10 = t10 * t12
-    t16 = t78 * t42
-    t10 = t10 + t16
-    t6 = t6 + t10
-    t6 = qd[5] * t6
-    t2 = t2 - t6
-    t6 = t18 * t14
-    t10 = t74 * t52
-    t6 = t6 + t10
-    t10 = t73 * t13
-    t16 = t17 - t43
-    t18 = t20 * t16
-    t10 = t10 + t18
-    t6 = t6 - t10
-    t6 = qd[6] * t6
-    t2 = t2 + t6
-    t2 = t76 + t2
-    t6 = t66 * t29
-    t10 = t28 * t67
-    t6 = t6 - t10
-    t6 = t6 * qdd[2]
-    t10 = t24 * t37
-    t18 = t0 * t75
-    t10 = t10 + t18
-    t10 = t10 * qdd[1]
-    t6 = t6 - t10
-    t10 = t72 * t27
-    t18 = t34 * t65
-    t10 = t10 + t18
-    t10 = t10 * qdd[3]
-    t6 = t6 + t10
-    t10 = t70 * t31
-    t18 = t32 * t69
-    t10 = t10 - t18
-    t10 = t10 * qdd[4]
-    t6 = t6 + t10
-    t10 = t78 * t31
-    t18 = t40 * t69
-    t10 = t10 + t18
-    t10 = t10 * qdd[5]
-    t6 = t6 + t10
-    t10 = t36 * t73
-    t18 = t74 * t35
-    t10 = t10 - t18
-    t10 = t10 * qdd[6]
-    t6 = t6 + t10
-    t10 = t29 * t3
-    t18 = t66 * t63
-    t10 = t10 + t18
-    t18 = t67 * t62
-    t19 = t28 * t22
-    t18 = t18 + t19
-    t10 = t10 - t18
-    t10 = qd[2] * t10
-    t18 = t37 * t58
-    t19 = t24 * t59
-    t18 = t18 + t19
-    t17 = t0 * t17
-    t19 = t75 * t57
-    t17 = t17 - t19
-    t17 = t18 + t17
-    t17 = qd[1] * t17
-    t10 = t10 - t17
-    t17 = t27 * t4
-    t18 = t72 * t61
-    t17 = t17 + t18
-    t18 = t34 * t39
-    t19 = t65 * t25
-    t18 = t18 - t19
-    t17 = t17 + t18
-    t17 = qd[3] * t17
-    t10 = t10 + t17
-    t17 = t31 * t7
-    t18 = t70 * t60
-    t17 = t17 + t18
-    t18 = t69 * t26
-    t19 = t32 * t9
-    t18 = t18 + t19
-    t17 = t17 - t18
-    t17 = qd[4] * t17
-    t10 = t10 + t17
-    t17 = t31 * t12
-    t18 = t78 * t60
-    t17 = t17 + t18
-    t9 = t40 * t9
-    t18 = t69 * t30
-    t9 = t9 - t18
-    t9 = t17 + t9
-    t9 = qd[5] * t9
-    t9 = t10 + t9
-    t10 = t73 * t33
-    t16 = t36 * t16
-    t10 = t10 + t16
-    t16 = t35 * t14
-    t17 = t74 * t64
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
+    t13 = t13 - t15
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
     t16 = t16 + t17
-    t10 = t10 - t16
-    t10 = qd[6] * t10
-    t9 = t9 + t10
-    t6 = t6 + t9
-    t9 = t66 * qdd[2]
-    t10 = t24 * qdd[1]
-    t9 = t9 - t10
-    t10 = t72 * qdd[3]
-    t9 = t9 + t10
-    t10 = t70 * qdd[4]
-    t9 = t9 + t10
-    t10 = t78 * qdd[5]
-    t9 = t9 + t10
-    t10 = t74 * qdd[6]
-    t9 = t9 - t10
-    t3 = qd[2] * t3
-    t10 = qd[1] * t58
-    t3 = t3 - t10
-    t4 = qd[3] * t4
-    t3 = t3 + t4
-    t4 = qd[4] * t7
-    t3 = t3 + t4
-    t4 = qd[5] * t12
-    t3 = t3 + t4
-    t4 = qd[6] * t14
-    t3 = t3 - t4
-    t3 = t9 + t3
-    t0 = t0 * qdd[1]
-    t4 = t28 * qdd[2]
-    t0 = t0 + t4
-    t4 = t34 * qdd[3]
+    t17 = cos(q[6])
+    t18 = t16 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
+    t18 = t18 + t19
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = (-0.316) * qdd[1]
+    t22 = t22 - t23
+    t23 = t3 * t22
+    t24 = t9 * qdd[0]
+    t25 = t19 * qd[1]
+    t24 = t24 + t25
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
+    t29 = t27 * t28
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t3 * qdd[1]
+    t26 = t26 + t31
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
+    t26 = t26 - t32
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t26 = qdd[3] - t26
+    t30 = 0.384 * t26
+    t29 = t29 - t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t36 = t6 * qdd[1]
+    t24 = t3 * t24
+    t24 = t36 - t24
+    t27 = t27 * qd[2]
+    t24 = t24 + t27
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t1 * qdd[0]
+    t20 = t20 - t36
+    t20 = qdd[2] - t20
+    t36 = t11 * t20
+    t27 = t27 + t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t37 = t7 * t20
+    t24 = t11 * t24
+    t24 = t37 - t24
+    t37 = t19 * qd[3]
+    t24 = t24 - t37
+    t37 = (-0.0825) * t24
+    t36 = t36 - t37
+    t20 = 0.0825 * t20
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = t20 - t22
+    t22 = t31 * t28
+    t20 = t20 + t22
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 + t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
+    t35 = t33 * t34
+    t32 = t32 + t35
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t24 = t24 + qdd[4]
+    t29 = t15 * t24
+    t35 = t12 * t27
+    t36 = t14 * t26
+    t35 = t35 - t36
+    t19 = t19 * qd[4]
+    t19 = t35 - t19
+    t35 = t10 * t19
+    t29 = t29 - t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 - t35
+    t35 = 0.088 * t29
+    t20 = t20 - t35
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t27 = t14 * t27
+    t26 = t12 * t26
+    t26 = t27 + t26
+    t27 = t30 * qd[4]
+    t26 = t26 + t27
+    t26 = t26 + qdd[5]
+    t27 = t17 * t26
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 + t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t24 = t27 - t24
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 - t30
+    t30 = 0.1654 * t24
+    t30 = t32 + t30
+    t28 = qd[6] - t28
+    t32 = 0.1654 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 + t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.1654 * t19
+    t16 = t16 - t23
+    t23 = 0.1654 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 + t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
+    t22 = t22 + t23
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 + t2
+    t8 = qdd[6] - t29
+    t4 = t4 * t8
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 + t0
+    t4 = t5 * t8
     t0 = t0 - t4
-    t4 = t32 * qdd[4]
-    t0 = t0 + t4
-    t4 = t40 * qdd[5]
-    t0 = t0 - t4
-    t4 = t36 * qdd[6]
-    t0 = t0 - t4
-    t4 = qd[2] * t62
-    t7 = qd[1] * t57
-    t4 = t4 - t7
-    t7 = qd[3] * t25
-    t4 = t4 + t7
-    t7 = qd[4] * t26
-    t4 = t4 + t7
-    t7 = qd[5] * t30
-    t4 = t4 + t7
-    t7 = qd[6] * t33
-    t4 = t4 - t7
-    t0 = t0 + t4
-    t1 = t1 * qdd[2]
-    t1 = qdd[0] + t1
-    t4 = t15 * qdd[3]
-    t1 = t1 - t4
-    t4 = t11 * qdd[4]
-    t1 = t1 + t4
-    t4 = t38 * qdd[5]
-    t1 = t1 - t4
-    t4 = t20 * qdd[6]
-    t1 = t1 - t4
-    t4 = qd[4] * t5
-    t5 = qd[2] * t23
-    t7 = qd[3] * t50
-    t5 = t5 + t7
-    t4 = t4 - t5
-    t5 = qd[5] * t8
-    t4 = t4 - t5
-    t5 = qd[6] * t13
-    t4 = t4 - t5
-    t1 = t1 + t4
-    _a = (t21, t2, t6, t3, t0, t1)
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 + t3
+    t1 = t1 * t8
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _frame_acceleration_panda_leftfinger_constants = _constants(
-    -0.316, 0.333, 0.0825, -0.0825, 0.384, 0.088, 0.1654)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.1654)
 
 
 def _frame_acceleration_panda_leftfinger_chunk(x, t, s, y):
@@ -12779,682 +9082,385 @@ def _frame_acceleration_panda_leftfinger_chunk(x, t, s, y):
     (q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qdd_0, qdd_1, qdd_2,
      qdd_3, qdd_4, qdd_5, qdd_6) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _frame_acceleration_panda_leftfinger_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _frame_acceleration_panda_leftfinger_constants
     cos(q_0, t0)
     cos(q_1, t1)
-    multiply(k0, t1, t2)
-    subtract(k1, t2, t2)
-    sin(q_1, t3)
-    cos(q_2, t4)
-    multiply(t3, t4, t5)
-    multiply(k2, t5, t6)
-    subtract(t2, t6, t6)
-    sin(q_3, t7)
-    multiply(t1, t7, t8)
-    cos(q_3, t9)
-    multiply(t5, t9, t10)
-    subtract(t8, t10, t8)
-    multiply(k3, t8, t10)
-    multiply(t5, t7, t11)
-    multiply(t1, t9, t12)
-    add(t11, t12, t11)
-    multiply(k4, t11, t12)
-    add(t10, t12, t10)
-    add(t6, t10, t10)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
     cos(q_4, t12)
     multiply(t8, t12, t13)
-    sin(q_2, t14)
-    multiply(t3, t14, t15)
-    sin(q_4, t16)
-    multiply(t15, t16, t17)
-    add(t13, t17, t13)
-    cos(q_5, t17)
-    multiply(t13, t17, t18)
-    sin(q_5, t19)
-    multiply(t11, t19, t20)
-    add(t18, t20, t18)
-    multiply(k5, t18, t18)
-    add(t10, t18, t18)
-    multiply(t11, t17, t20)
-    multiply(t13, t19, t21)
-    subtract(t20, t21, t20)
-    multiply(k6, t20, t21)
-    subtract(t18, t21, t21)
-    subtract(t21, k1, t22)
-    multiply(t0, t22, t23)
-    multiply(t23, qdd_1, t23)
-    sin(q_0, t24)
-    multiply(t24, t1, t25)
-    multiply(t25, t4, t26)
-    multiply(t0, t14, t27)
-    add(t26, t27, t26)
-    multiply(k2, t26, t27)
-    multiply(t24, t3, t28)
-    multiply(k0, t28, t29)
-    subtract(t27, t29, t27)
-    multiply(t26, t9, t30)
-    multiply(t28, t7, t31)
-    add(t30, t31, t30)
-    multiply(k3, t30, t31)
-    multiply(t28, t9, t32)
-    multiply(t26, t7, t33)
-    subtract(t32, t33, t32)
-    multiply(k4, t32, t33)
-    add(t31, t33, t31)
-    add(t27, t31, t31)
-    multiply(t30, t12, t33)
-    multiply(t0, t4, t34)
-    multiply(t25, t14, t35)
-    subtract(t34, t35, t34)
-    multiply(t34, t16, t35)
-    add(t33, t35, t33)
-    multiply(t33, t17, t35)
-    multiply(t32, t19, t36)
-    add(t35, t36, t35)
-    multiply(k5, t35, t35)
-    add(t31, t35, t35)
-    multiply(t32, t17, t36)
-    multiply(t33, t19, t37)
-    subtract(t36, t37, t36)
-    multiply(k6, t36, t37)
-    subtract(t35, t37, t37)
-    multiply(t37, qdd_0, t38)
-    subtract(t23, t38, t23)
-    subtract(t21, t2, t2)
-    multiply(t28, t2, t38)
-    add(t37, t29, t29)
-    multiply(t1, t29, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_2, t38)
-    add(t23, t38, t23)
-    subtract(t37, t27, t27)
-    multiply(t15, t27, t38)
-    subtract(t21, t6, t6)
-    multiply(t34, t6, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_3, t38)
-    add(t23, t38, t23)
-    subtract(t21, t10, t10)
-    multiply(t32, t10, t38)
-    subtract(t37, t31, t31)
-    multiply(t11, t31, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_4, t38)
-    add(t23, t38, t23)
-    multiply(t15, t12, t38)
-    multiply(t8, t16, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, t31, t39)
-    multiply(t34, t12, t40)
-    multiply(t30, t16, t41)
-    subtract(t40, t41, t40)
-    multiply(t40, t10, t41)
-    subtract(t39, t41, t39)
-    multiply(t39, qdd_5, t39)
-    add(t23, t39, t23)
-    subtract(t37, t35, t35)
-    multiply(t20, t35, t39)
-    subtract(t21, t18, t21)
-    multiply(t36, t21, t18)
-    subtract(t39, t18, t39)
-    multiply(t39, qdd_6, t39)
-    add(t23, t39, t23)
-    multiply(t3, qd_1, t18)
-    multiply(k0, t18, t39)
-    multiply(t1, qd_1, t41)
-    multiply(t4, t41, t42)
-    multiply(t14, qd_2, t43)
-    multiply(t3, t43, t44)
-    subtract(t42, t44, t42)
-    multiply(k2, t42, t44)
-    subtract(t39, t44, t44)
-    multiply(t9, qd_3, t45)
-    multiply(t1, t45, t46)
-    multiply(t7, t18, t47)
-    subtract(t46, t47, t46)
-    multiply(t9, t42, t47)
-    multiply(t7, qd_3, t48)
-    multiply(t5, t48, t49)
-    subtract(t47, t49, t47)
-    subtract(t46, t47, t46)
-    multiply(k3, t46, t47)
-    multiply(t7, t42, t42)
-    multiply(t5, t45, t5)
-    add(t42, t5, t42)
-    multiply(t9, t18, t5)
-    multiply(t1, t48, t49)
-    add(t5, t49, t5)
-    subtract(t42, t5, t42)
-    multiply(k4, t42, t5)
-    add(t47, t5, t47)
-    add(t44, t47, t47)
-    multiply(t12, t46, t5)
-    multiply(t16, qd_4, t49)
-    multiply(t8, t49, t50)
-    subtract(t5, t50, t5)
-    multiply(t14, t41, t50)
-    multiply(t4, qd_2, t51)
-    multiply(t3, t51, t52)
-    add(t50, t52, t50)
-    multiply(t16, t50, t52)
-    multiply(t12, qd_4, t53)
-    multiply(t15, t53, t54)
-    add(t52, t54, t52)
-    add(t5, t52, t5)
-    multiply(t17, t5, t52)
-    multiply(t19, qd_5, t54)
-    multiply(t13, t54, t55)
-    subtract(t52, t55, t52)
-    multiply(t19, t42, t55)
-    multiply(t17, qd_5, t56)
-    multiply(t11, t56, t57)
-    add(t55, t57, t55)
-    add(t52, t55, t52)
-    multiply(k5, t52, t52)
-    add(t47, t52, t52)
-    multiply(t17, t42, t55)
-    multiply(t11, t54, t57)
-    subtract(t55, t57, t55)
-    multiply(t19, t5, t5)
-    multiply(t13, t56, t13)
-    add(t5, t13, t5)
-    subtract(t55, t5, t55)
-    multiply(k6, t55, t5)
-    subtract(t52, t5, t5)
-    multiply(t0, t5, t13)
-    multiply(t24, qd_0, t57)
-    multiply(t22, t57, t58)
-    subtract(t13, t58, t13)
-    multiply(qd_1, t13, t13)
-    multiply(t0, qd_0, t58)
-    multiply(t1, t58, t59)
-    multiply(t24, t18, t60)
-    subtract(t59, t60, t59)
-    multiply(t4, t59, t60)
-    multiply(t25, t43, t61)
-    subtract(t60, t61, t60)
-    multiply(t0, t51, t61)
-    multiply(t14, t57, t62)
-    subtract(t61, t62, t61)
-    add(t60, t61, t60)
-    multiply(k2, t60, t61)
-    multiply(t3, t58, t62)
-    multiply(t24, t41, t63)
-    add(t62, t63, t62)
-    multiply(k0, t62, t63)
-    subtract(t61, t63, t61)
-    multiply(t9, t60, t64)
-    multiply(t26, t48, t65)
-    subtract(t64, t65, t64)
-    multiply(t7, t62, t65)
-    multiply(t28, t45, t66)
-    add(t65, t66, t65)
-    add(t64, t65, t64)
-    multiply(k3, t64, t65)
-    multiply(t9, t62, t66)
-    multiply(t28, t48, t67)
-    subtract(t66, t67, t66)
-    multiply(t7, t60, t60)
-    multiply(t26, t45, t26)
-    add(t60, t26, t60)
-    subtract(t66, t60, t66)
-    multiply(k4, t66, t26)
-    add(t65, t26, t65)
-    add(t61, t65, t65)
-    multiply(t12, t64, t26)
-    multiply(t30, t49, t60)
-    subtract(t26, t60, t26)
-    multiply(t34, t53, t60)
-    multiply(t4, t57, t67)
-    multiply(t0, t43, t68)
-    add(t67, t68, t67)
-    multiply(t14, t59, t59)
-    multiply(t25, t51, t25)
-    add(t59, t25, t59)
-    add(t67, t59, t67)
-    multiply(t16, t67, t25)
-    subtract(t60, t25, t60)
-    add(t26, t60, t26)
-    multiply(t17, t26, t25)
-    multiply(t33, t54, t59)
-    subtract(t25, t59, t25)
-    multiply(t19, t66, t59)
-    multiply(t32, t56, t60)
-    add(t59, t60, t59)
-    add(t25, t59, t25)
-    multiply(k5, t25, t25)
-    add(t65, t25, t25)
-    multiply(t17, t66, t59)
-    multiply(t32, t54, t60)
-    subtract(t59, t60, t59)
-    multiply(t19, t26, t26)
-    multiply(t33, t56, t33)
-    add(t26, t33, t26)
-    subtract(t59, t26, t59)
-    multiply(k6, t59, t26)
-    subtract(t25, t26, t26)
-    multiply(qd_0, t26, t33)
-    subtract(t13, t33, t13)
-    multiply(t2, t62, t33)
-    subtract(t5, t39, t39)
-    multiply(t28, t39, t60)
-    add(t33, t60, t33)
-    add(t26, t63, t63)
-    multiply(t1, t63, t60)
-    multiply(t29, t18, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_2, t33, t33)
-    add(t13, t33, t13)
-    multiply(t27, t50, t33)
-    subtract(t26, t61, t61)
-    multiply(t15, t61, t60)
-    add(t33, t60, t33)
-    subtract(t5, t44, t44)
-    multiply(t34, t44, t60)
-    multiply(t6, t67, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_3, t33, t33)
-    add(t13, t33, t13)
-    multiply(t10, t66, t33)
-    subtract(t5, t47, t47)
-    multiply(t32, t47, t60)
-    add(t33, t60, t33)
-    multiply(t31, t42, t60)
-    subtract(t26, t65, t65)
-    multiply(t11, t65, t68)
-    add(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_4, t33, t33)
-    add(t13, t33, t13)
-    multiply(t12, t50, t33)
-    multiply(t15, t49, t60)
-    subtract(t33, t60, t33)
-    multiply(t16, t46, t46)
-    multiply(t8, t53, t8)
-    add(t46, t8, t46)
-    subtract(t33, t46, t33)
-    multiply(t31, t33, t8)
-    multiply(t38, t65, t46)
-    add(t8, t46, t8)
-    multiply(t40, t47, t46)
-    multiply(t12, t67, t60)
-    multiply(t34, t49, t68)
-    add(t60, t68, t60)
-    multiply(t16, t64, t64)
-    multiply(t30, t53, t30)
-    add(t64, t30, t64)
-    add(t60, t64, t60)
-    multiply(t10, t60, t30)
-    subtract(t46, t30, t46)
-    subtract(t8, t46, t8)
-    multiply(qd_5, t8, t8)
-    add(t13, t8, t13)
-    multiply(t35, t55, t8)
-    subtract(t26, t25, t25)
-    multiply(t20, t25, t30)
-    add(t8, t30, t8)
-    multiply(t21, t59, t30)
-    subtract(t5, t52, t52)
-    multiply(t36, t52, t46)
-    add(t30, t46, t30)
-    subtract(t8, t30, t8)
-    multiply(qd_6, t8, t8)
-    add(t13, t8, t13)
-    add(t23, t13, a_0)
-    multiply(t0, t1, t8)
-    multiply(t8, t4, t13)
-    multiply(t24, t14, t23)
-    subtract(t13, t23, t13)
-    multiply(k2, t13, t23)
-    multiply(t0, t3, t30)
-    multiply(k0, t30, t46)
-    subtract(t23, t46, t23)
-    multiply(t13, t9, t64)
-    multiply(t30, t7, t68)
-    add(t64, t68, t64)
-    multiply(k3, t64, t68)
-    multiply(t30, t9, t69)
-    multiply(t13, t7, t70)
-    subtract(t69, t70, t69)
-    multiply(k4, t69, t70)
-    add(t68, t70, t68)
-    add(t23, t68, t68)
-    multiply(t64, t12, t70)
-    multiply(t8, t14, t71)
-    multiply(t24, t4, t72)
-    add(t71, t72, t71)
-    multiply(t71, t16, t72)
-    subtract(t70, t72, t70)
-    multiply(t70, t17, t72)
-    multiply(t69, t19, t73)
-    add(t72, t73, t72)
-    multiply(k5, t72, t72)
-    add(t68, t72, t72)
-    multiply(t69, t17, t73)
-    multiply(t70, t19, t74)
-    subtract(t73, t74, t73)
-    multiply(k6, t73, t74)
-    subtract(t72, t74, t74)
-    multiply(t74, qdd_0, t75)
-    multiply(t24, t22, t76)
-    multiply(t76, qdd_1, t76)
-    add(t75, t76, t75)
-    add(t74, t46, t46)
-    multiply(t1, t46, t76)
-    multiply(t30, t2, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_2, t76)
-    add(t75, t76, t75)
-    subtract(t74, t23, t23)
-    multiply(t15, t23, t76)
-    multiply(t71, t6, t77)
-    add(t76, t77, t76)
-    multiply(t76, qdd_3, t76)
-    subtract(t75, t76, t75)
-    subtract(t74, t68, t68)
-    multiply(t11, t68, t76)
-    multiply(t69, t10, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_4, t76)
-    add(t75, t76, t75)
-    multiply(t38, t68, t76)
-    multiply(t64, t16, t77)
-    multiply(t71, t12, t78)
-    add(t77, t78, t77)
-    multiply(t77, t10, t78)
-    add(t76, t78, t76)
-    multiply(t76, qdd_5, t76)
-    subtract(t75, t76, t75)
-    multiply(t73, t21, t76)
-    subtract(t74, t72, t72)
-    multiply(t20, t72, t78)
-    subtract(t76, t78, t76)
-    multiply(t76, qdd_6, t76)
-    add(t75, t76, t75)
-    multiply(t0, t41, t41)
-    multiply(t3, t57, t3)
-    subtract(t41, t3, t41)
-    multiply(t7, t41, t3)
-    multiply(t30, t45, t76)
-    add(t3, t76, t3)
-    multiply(t1, t57, t76)
-    multiply(t0, t18, t78)
-    add(t76, t78, t76)
-    multiply(t4, t76, t78)
-    multiply(t8, t43, t79)
-    add(t78, t79, t78)
-    multiply(t14, t58, t79)
-    multiply(t24, t51, t80)
-    add(t79, t80, t79)
-    add(t78, t79, t78)
-    multiply(t9, t78, t79)
-    multiply(t13, t48, t80)
-    add(t79, t80, t79)
-    subtract(t3, t79, t3)
-    multiply(k3, t3, t79)
-    multiply(t9, t41, t9)
-    multiply(t30, t48, t48)
-    subtract(t9, t48, t9)
-    multiply(t13, t45, t13)
-    multiply(t7, t78, t7)
-    subtract(t13, t7, t13)
-    subtract(t9, t13, t9)
-    multiply(k4, t9, t7)
-    add(t79, t7, t79)
-    multiply(k2, t78, t78)
-    multiply(k0, t41, t7)
-    add(t78, t7, t78)
-    subtract(t79, t78, t79)
-    multiply(t12, t3, t13)
-    multiply(t64, t49, t45)
-    subtract(t13, t45, t13)
-    multiply(t8, t51, t8)
-    multiply(t14, t76, t14)
-    subtract(t8, t14, t8)
-    multiply(t4, t58, t4)
-    multiply(t24, t43, t43)
-    subtract(t4, t43, t4)
-    add(t8, t4, t8)
-    multiply(t16, t8, t4)
-    multiply(t71, t53, t14)
-    add(t4, t14, t4)
-    subtract(t13, t4, t13)
-    multiply(t17, t13, t4)
-    multiply(t70, t54, t14)
-    subtract(t4, t14, t4)
-    multiply(t19, t9, t14)
-    multiply(t69, t56, t43)
-    add(t14, t43, t14)
-    add(t4, t14, t4)
-    multiply(k5, t4, t4)
-    add(t79, t4, t4)
-    multiply(t17, t9, t17)
-    multiply(t69, t54, t54)
-    subtract(t17, t54, t17)
-    multiply(t19, t13, t19)
-    multiply(t70, t56, t70)
-    add(t19, t70, t19)
-    subtract(t17, t19, t17)
-    multiply(k6, t17, t13)
-    subtract(t4, t13, t13)
-    multiply(qd_0, t13, t14)
-    multiply(t22, t58, t22)
-    multiply(t24, t5, t5)
-    add(t22, t5, t22)
-    multiply(qd_1, t22, t22)
-    add(t14, t22, t14)
-    add(t13, t7, t7)
-    multiply(t1, t7, t5)
-    multiply(t46, t18, t19)
-    subtract(t5, t19, t5)
-    multiply(t2, t41, t2)
-    multiply(t30, t39, t39)
-    add(t2, t39, t2)
-    subtract(t5, t2, t5)
-    multiply(qd_2, t5, t5)
-    add(t14, t5, t14)
-    multiply(t23, t50, t2)
-    add(t13, t78, t78)
-    multiply(t15, t78, t5)
-    add(t2, t5, t2)
-    multiply(t6, t8, t6)
-    multiply(t71, t44, t44)
-    add(t6, t44, t6)
-    add(t2, t6, t2)
-    multiply(qd_3, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t68, t42, t2)
-    subtract(t13, t79, t79)
-    multiply(t11, t79, t5)
-    add(t2, t5, t2)
-    multiply(t10, t9, t5)
-    multiply(t69, t47, t6)
-    add(t5, t6, t5)
-    subtract(t2, t5, t2)
-    multiply(qd_4, t2, t2)
-    add(t14, t2, t14)
-    multiply(t68, t33, t2)
-    multiply(t38, t79, t5)
-    add(t2, t5, t2)
-    multiply(t16, t3, t16)
-    multiply(t64, t53, t64)
-    add(t16, t64, t16)
-    multiply(t12, t8, t12)
-    multiply(t71, t49, t49)
-    subtract(t12, t49, t12)
-    add(t16, t12, t16)
-    multiply(t10, t16, t10)
-    multiply(t77, t47, t47)
-    add(t10, t47, t10)
-    add(t2, t10, t2)
-    multiply(qd_5, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t21, t17, t21)
-    multiply(t73, t52, t52)
-    add(t21, t52, t21)
-    multiply(t72, t55, t2)
-    subtract(t13, t4, t4)
-    multiply(t20, t4, t3)
-    add(t2, t3, t2)
-    subtract(t21, t2, t21)
-    multiply(qd_6, t21, t21)
-    add(t14, t21, t14)
-    add(t75, t14, a_1)
-    multiply(t30, t29, t2)
-    multiply(t28, t46, t3)
-    subtract(t2, t3, t2)
-    multiply(t2, qdd_2, t2)
-    multiply(t24, t37, t3)
-    multiply(t0, t74, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_1, t3)
-    subtract(t2, t3, t2)
-    multiply(t71, t27, t3)
-    multiply(t34, t23, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_3, t3)
-    add(t2, t3, t2)
-    multiply(t69, t31, t3)
-    multiply(t32, t68, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_4, t3)
-    add(t2, t3, t2)
-    multiply(t77, t31, t3)
-    multiply(t40, t68, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_5, t3)
-    add(t2, t3, t2)
-    multiply(t36, t72, t3)
-    multiply(t73, t35, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_6, t3)
-    add(t2, t3, t2)
-    multiply(t29, t41, t29)
-    multiply(t30, t63, t63)
-    add(t29, t63, t29)
-    multiply(t46, t62, t46)
-    multiply(t28, t7, t7)
-    add(t46, t7, t46)
-    subtract(t29, t46, t29)
-    multiply(qd_2, t29, t29)
-    multiply(t37, t58, t37)
-    multiply(t24, t26, t26)
-    add(t37, t26, t37)
-    multiply(t0, t13, t13)
-    multiply(t74, t57, t74)
-    subtract(t13, t74, t13)
-    add(t37, t13, t37)
-    multiply(qd_1, t37, t37)
-    subtract(t29, t37, t29)
-    multiply(t27, t8, t27)
-    multiply(t71, t61, t61)
-    add(t27, t61, t27)
-    multiply(t34, t78, t78)
-    multiply(t23, t67, t23)
-    subtract(t78, t23, t78)
-    add(t27, t78, t27)
-    multiply(qd_3, t27, t27)
-    add(t29, t27, t29)
-    multiply(t31, t9, t3)
-    multiply(t69, t65, t5)
-    add(t3, t5, t3)
-    multiply(t68, t66, t5)
-    multiply(t32, t79, t6)
-    add(t5, t6, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t29, t3, t29)
-    multiply(t31, t16, t31)
-    multiply(t77, t65, t65)
-    add(t31, t65, t31)
-    multiply(t40, t79, t79)
-    multiply(t68, t60, t68)
-    subtract(t79, t68, t79)
-    add(t31, t79, t31)
-    multiply(qd_5, t31, t31)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
+    subtract(t13, t15, t13)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
+    multiply(t16, t17, t18)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
+    add(t18, t19, t18)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(k3, qdd_1, t23)
+    subtract(t22, t23, t22)
+    multiply(t3, t22, t23)
+    multiply(t9, qdd_0, t24)
+    multiply(t8, qd_1, t25)
+    add(t24, t25, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
+    multiply(t27, t28, t29)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
     add(t29, t31, t29)
-    multiply(t72, t59, t72)
-    multiply(t36, t4, t4)
-    add(t72, t4, t72)
-    multiply(t35, t17, t35)
-    multiply(t73, t25, t25)
-    add(t35, t25, t35)
-    subtract(t72, t35, t72)
-    multiply(qd_6, t72, t72)
-    add(t29, t72, t29)
-    add(t2, t29, a_2)
-    multiply(t30, qdd_2, t30)
-    multiply(t24, qdd_1, t24)
-    subtract(t30, t24, t30)
-    multiply(t71, qdd_3, t71)
-    add(t30, t71, t30)
-    multiply(t69, qdd_4, t69)
-    add(t30, t69, t30)
-    multiply(t77, qdd_5, t77)
-    add(t30, t77, t30)
-    multiply(t73, qdd_6, t73)
-    subtract(t30, t73, t30)
-    multiply(qd_2, t41, t41)
-    multiply(qd_1, t58, t58)
-    subtract(t41, t58, t41)
-    multiply(qd_3, t8, t8)
-    add(t41, t8, t41)
-    multiply(qd_4, t9, t9)
-    add(t41, t9, t41)
-    multiply(qd_5, t16, t16)
-    add(t41, t16, t41)
-    multiply(qd_6, t17, t17)
-    subtract(t41, t17, t41)
-    add(t30, t41, a_3)
-    multiply(t0, qdd_1, t0)
-    multiply(t28, qdd_2, t28)
-    add(t0, t28, t0)
-    multiply(t34, qdd_3, t34)
-    subtract(t0, t34, t0)
-    multiply(t32, qdd_4, t32)
-    add(t0, t32, t0)
-    multiply(t40, qdd_5, t40)
-    subtract(t0, t40, t0)
-    multiply(t36, qdd_6, t36)
-    subtract(t0, t36, t0)
-    multiply(qd_2, t62, t62)
-    multiply(qd_1, t57, t57)
-    subtract(t62, t57, t62)
-    multiply(qd_3, t67, t67)
-    add(t62, t67, t62)
-    multiply(qd_4, t66, t66)
-    add(t62, t66, t62)
-    multiply(qd_5, t60, t60)
-    add(t62, t60, t62)
-    multiply(qd_6, t59, t59)
-    subtract(t62, t59, t62)
-    add(t0, t62, a_4)
-    multiply(t1, qdd_2, t1)
-    add(qdd_0, t1, t1)
-    multiply(t15, qdd_3, t15)
-    subtract(t1, t15, t1)
-    multiply(t11, qdd_4, t11)
-    add(t1, t11, t1)
-    multiply(t38, qdd_5, t38)
-    subtract(t1, t38, t1)
-    multiply(t20, qdd_6, t20)
-    subtract(t1, t20, t1)
-    multiply(qd_4, t42, t42)
-    multiply(qd_2, t18, t18)
-    multiply(qd_3, t50, t50)
-    add(t18, t50, t18)
-    subtract(t42, t18, t42)
-    multiply(qd_5, t33, t33)
-    subtract(t42, t33, t42)
-    multiply(qd_6, t55, t55)
-    subtract(t42, t55, t42)
-    add(t1, t42, a_5)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t3, qdd_1, t31)
+    add(t21, t31, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
+    subtract(t26, t32, t26)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    subtract(qdd_3, t21, t21)
+    multiply(k5, t21, t30)
+    subtract(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t6, qdd_1, t36)
+    multiply(t3, t24, t24)
+    subtract(t36, t24, t36)
+    multiply(t27, qd_2, t27)
+    add(t36, t27, t36)
+    multiply(t7, t36, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t1, qdd_0, t27)
+    subtract(t20, t27, t20)
+    subtract(qdd_2, t20, t20)
+    multiply(t11, t20, t27)
+    add(t24, t27, t24)
+    multiply(t30, qd_3, t27)
+    add(t24, t27, t24)
+    multiply(k5, t24, t27)
+    multiply(t7, t20, t37)
+    multiply(t11, t36, t36)
+    subtract(t37, t36, t37)
+    multiply(t32, qd_3, t36)
+    subtract(t37, t36, t37)
+    multiply(k6, t37, t36)
+    subtract(t27, t36, t27)
+    multiply(k4, t20, t20)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    subtract(t20, t22, t20)
+    multiply(t31, t28, t31)
+    add(t20, t31, t20)
+    subtract(t27, t20, t27)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t27, t35, t27)
+    multiply(t14, t27, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    add(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t27, t27)
+    add(t29, t27, t29)
+    add(t37, qdd_4, t37)
+    multiply(t15, t37, t27)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
+    subtract(t34, t35, t34)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    subtract(t27, t32, t27)
+    multiply(t15, t20, t32)
+    multiply(t4, t30, t30)
+    add(t32, t30, t32)
+    multiply(t32, qd_5, t30)
+    subtract(t27, t30, t27)
+    multiply(k7, t27, t30)
+    subtract(t29, t30, t29)
+    multiply(t32, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t14, t24, t24)
+    multiply(t12, t21, t21)
+    add(t24, t21, t24)
+    multiply(t20, qd_4, t20)
+    add(t24, t20, t24)
+    add(t24, qdd_5, t24)
+    multiply(t17, t24, t20)
+    multiply(t15, t34, t34)
+    multiply(t4, t37, t37)
+    add(t34, t37, t34)
+    multiply(t8, qd_5, t21)
+    add(t34, t21, t34)
+    multiply(t2, t34, t21)
+    subtract(t20, t21, t20)
+    multiply(t17, t32, t21)
+    multiply(t2, t28, t30)
+    add(t21, t30, t21)
+    multiply(t21, qd_6, t30)
+    subtract(t20, t30, t20)
+    multiply(k8, t20, t30)
+    add(t25, t30, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t21, t30)
+    multiply(t8, t30, t31)
+    add(t25, t31, t25)
+    multiply(t16, t25, t31)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t24, t18)
+    add(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t32, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t31, t8, t31)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t24, t24)
+    add(t26, t24, t26)
+    multiply(t32, t23, t32)
+    add(t26, t32, t26)
+    multiply(t21, t30, t21)
+    multiply(t28, t18, t28)
+    add(t21, t28, t21)
+    add(t26, t21, t26)
+    multiply(t10, t26, t8)
+    add(t31, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t21)
+    add(t18, t21, t18)
+    multiply(t18, t12, t21)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
+    subtract(t0, t8, t0)
+    multiply(t0, t14, t8)
+    add(t21, t8, t21)
+    multiply(t21, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t21, t4, t21)
+    subtract(t5, t21, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
+    subtract(t7, t2, t7)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t20, t19)
+    add(t16, t19, t16)
+    subtract(qdd_6, t27, t27)
+    multiply(t10, t27, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t20, t18)
+    add(t0, t18, t0)
+    multiply(t5, t27, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t20, t7)
+    add(t2, t7, t2)
+    multiply(t3, t27, t3)
+    subtract(t2, t3, a_5)
 
 
 def fk_panda_rightfinger(q):
@@ -14254,568 +10260,384 @@ def jdot_qd_panda_rightfinger(q, qd):
     in  q [7]
     in  qd [7]
     out a [6]
-    546 ops: 303 mul, 231 add, 0 div, 12 trig
+    361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_panda_rightfinger_chunk, (q, qd), 71, ((6,),))
+        return _batch(_jdot_qd_panda_rightfinger_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = sin(q[1])
-    t2 = t1 * qd[1]
-    t3 = (-0.316) * t2
-    t4 = cos(q[2])
-    t5 = cos(q[1])
-    t6 = t5 * qd[1]
-    t7 = t4 * t6
-    t8 = sin(q[2])
-    t9 = t8 * qd[2]
-    t10 = t1 * t9
-    t7 = t7 - t10
-    t10 = 0.0825 * t7
-    t10 = t3 - t10
-    t11 = cos(q[3])
-    t12 = t11 * qd[3]
-    t13 = t5 * t12
-    t14 = sin(q[3])
-    t15 = t14 * t2
+    t1 = cos(q[1])
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
+    t12 = cos(q[4])
+    t13 = t8 * t12
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
     t13 = t13 - t15
-    t15 = t11 * t7
-    t16 = t1 * t4
-    t17 = t14 * qd[3]
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
+    t16 = t16 + t17
+    t17 = cos(q[6])
     t18 = t16 * t17
-    t15 = t15 - t18
-    t13 = t13 - t15
-    t15 = (-0.0825) * t13
-    t7 = t14 * t7
-    t18 = t16 * t12
-    t7 = t7 + t18
-    t18 = t11 * t2
-    t19 = t5 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
     t18 = t18 + t19
-    t7 = t7 - t18
-    t18 = 0.384 * t7
-    t15 = t15 + t18
-    t15 = t10 + t15
-    t18 = cos(q[5])
-    t19 = cos(q[4])
-    t20 = t19 * t13
-    t21 = t5 * t14
-    t22 = t16 * t11
-    t21 = t21 - t22
-    t22 = sin(q[4])
-    t23 = t22 * qd[4]
-    t24 = t21 * t23
-    t20 = t20 - t24
-    t24 = t8 * t6
-    t25 = t4 * qd[2]
-    t26 = t1 * t25
-    t24 = t24 + t26
-    t26 = t22 * t24
-    t27 = t1 * t8
-    t28 = t19 * qd[4]
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = t3 * t22
+    t24 = t19 * qd[1]
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
     t29 = t27 * t28
-    t26 = t26 + t29
-    t20 = t20 + t26
-    t26 = t18 * t20
-    t29 = t21 * t19
-    t30 = t27 * t22
-    t29 = t29 + t30
-    t30 = sin(q[5])
-    t31 = t30 * qd[5]
-    t32 = t29 * t31
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
     t26 = t26 - t32
-    t32 = t30 * t7
-    t33 = t16 * t14
-    t34 = t5 * t11
-    t33 = t33 + t34
-    t34 = t18 * qd[5]
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t30 = 0.384 * t26
+    t29 = t29 + t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t27 = t27 * qd[2]
+    t24 = t3 * t24
+    t24 = t27 - t24
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t11 * t20
+    t27 = t27 - t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t24 = t11 * t24
+    t37 = t7 * t20
+    t24 = t24 + t37
+    t37 = t19 * qd[3]
+    t24 = t24 + t37
+    t37 = (-0.0825) * t24
+    t36 = t36 + t37
+    t28 = t31 * t28
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = 0.0825 * t20
+    t20 = t22 + t20
+    t20 = t28 - t20
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 - t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
     t35 = t33 * t34
     t32 = t32 + t35
-    t26 = t26 + t32
-    t26 = 0.088 * t26
-    t26 = t15 + t26
-    t32 = t18 * t7
-    t35 = t33 * t31
-    t32 = t32 - t35
-    t20 = t30 * t20
-    t35 = t29 * t34
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t29 = t12 * t27
+    t35 = t14 * t26
+    t29 = t29 + t35
+    t19 = t19 * qd[4]
+    t19 = t29 - t19
+    t29 = t10 * t19
+    t35 = t15 * t24
+    t29 = t29 + t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 + t35
+    t35 = 0.088 * t29
     t20 = t20 + t35
-    t20 = t32 - t20
-    t32 = 0.1654 * t20
-    t32 = t26 - t32
-    t35 = t0 * t32
-    t36 = (-0.316) * t5
-    t36 = 0.333 - t36
-    t16 = 0.0825 * t16
-    t16 = t36 - t16
-    t37 = (-0.0825) * t21
-    t38 = 0.384 * t33
-    t37 = t37 + t38
-    t37 = t16 + t37
-    t38 = t29 * t18
-    t39 = t33 * t30
-    t38 = t38 + t39
-    t38 = 0.088 * t38
-    t38 = t37 + t38
-    t39 = t33 * t18
-    t29 = t29 * t30
-    t29 = t39 - t29
-    t39 = 0.1654 * t29
-    t39 = t38 - t39
-    t40 = t39 - 0.333
-    t41 = sin(q[0])
-    t42 = t41 * qd[0]
-    t43 = t40 * t42
-    t35 = t35 - t43
-    t35 = qd[1] * t35
-    t43 = t0 * qd[0]
-    t44 = t5 * t43
-    t45 = t41 * t2
-    t44 = t44 - t45
-    t45 = t4 * t44
-    t46 = t41 * t5
-    t47 = t46 * t9
-    t45 = t45 - t47
-    t47 = t0 * t25
-    t48 = t8 * t42
-    t47 = t47 - t48
-    t45 = t45 + t47
-    t47 = 0.0825 * t45
-    t48 = t1 * t43
-    t49 = t41 * t6
-    t48 = t48 + t49
-    t49 = (-0.316) * t48
-    t47 = t47 - t49
-    t50 = t11 * t45
-    t51 = t46 * t4
-    t52 = t0 * t8
-    t51 = t51 + t52
-    t52 = t51 * t17
-    t50 = t50 - t52
-    t52 = t14 * t48
-    t53 = t41 * t1
-    t54 = t53 * t12
-    t52 = t52 + t54
-    t50 = t50 + t52
-    t52 = (-0.0825) * t50
-    t54 = t11 * t48
-    t55 = t53 * t17
-    t54 = t54 - t55
-    t45 = t14 * t45
-    t55 = t51 * t12
-    t45 = t45 + t55
-    t45 = t54 - t45
-    t54 = 0.384 * t45
-    t52 = t52 + t54
-    t52 = t47 + t52
-    t54 = t19 * t50
-    t55 = t51 * t11
-    t56 = t53 * t14
-    t55 = t55 + t56
-    t56 = t55 * t23
-    t54 = t54 - t56
-    t56 = t0 * t4
-    t57 = t46 * t8
-    t56 = t56 - t57
-    t57 = t56 * t28
-    t58 = t4 * t42
-    t59 = t0 * t9
-    t58 = t58 + t59
-    t44 = t8 * t44
-    t46 = t46 * t25
-    t44 = t44 + t46
-    t44 = t58 + t44
-    t46 = t22 * t44
-    t46 = t57 - t46
-    t46 = t54 + t46
-    t54 = t18 * t46
-    t57 = t55 * t19
-    t58 = t56 * t22
-    t57 = t57 + t58
-    t58 = t57 * t31
-    t54 = t54 - t58
-    t58 = t30 * t45
-    t59 = t53 * t11
-    t60 = t51 * t14
-    t59 = t59 - t60
-    t60 = t59 * t34
-    t58 = t58 + t60
-    t54 = t54 + t58
-    t54 = 0.088 * t54
-    t54 = t52 + t54
-    t58 = t18 * t45
-    t60 = t59 * t31
-    t58 = t58 - t60
-    t46 = t30 * t46
-    t60 = t57 * t34
-    t46 = t46 + t60
-    t46 = t58 - t46
-    t58 = 0.1654 * t46
-    t58 = t54 - t58
-    t60 = qd[0] * t58
-    t35 = t35 - t60
-    t36 = t39 - t36
-    t60 = t36 * t48
-    t3 = t32 - t3
-    t61 = t53 * t3
-    t60 = t60 + t61
-    t49 = t58 + t49
-    t61 = t5 * t49
-    t51 = 0.0825 * t51
-    t62 = (-0.316) * t53
-    t51 = t51 - t62
-    t63 = (-0.0825) * t55
-    t64 = 0.384 * t59
-    t63 = t63 + t64
-    t63 = t51 + t63
-    t64 = t57 * t18
-    t65 = t59 * t30
-    t64 = t64 + t65
-    t64 = 0.088 * t64
-    t64 = t63 + t64
-    t65 = t59 * t18
-    t57 = t57 * t30
-    t57 = t65 - t57
-    t65 = 0.1654 * t57
-    t65 = t64 - t65
-    t62 = t65 + t62
-    t66 = t62 * t2
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[2] * t60
-    t35 = t35 + t60
-    t51 = t65 - t51
-    t60 = t51 * t24
-    t47 = t58 - t47
-    t61 = t27 * t47
-    t60 = t60 + t61
-    t10 = t32 - t10
-    t61 = t56 * t10
-    t16 = t39 - t16
-    t66 = t16 * t44
-    t61 = t61 - t66
-    t60 = t60 - t61
-    t60 = qd[3] * t60
-    t35 = t35 + t60
-    t37 = t39 - t37
-    t60 = t37 * t45
-    t15 = t32 - t15
-    t61 = t59 * t15
-    t60 = t60 + t61
-    t61 = t65 - t63
-    t63 = t61 * t7
-    t52 = t58 - t52
-    t66 = t33 * t52
-    t63 = t63 + t66
-    t60 = t60 - t63
-    t60 = qd[4] * t60
-    t35 = t35 + t60
-    t60 = t19 * t24
-    t63 = t27 * t23
-    t60 = t60 - t63
-    t13 = t22 * t13
-    t63 = t21 * t28
-    t13 = t13 + t63
-    t13 = t60 - t13
-    t60 = t61 * t13
-    t63 = t27 * t19
-    t21 = t21 * t22
-    t21 = t63 - t21
-    t63 = t21 * t52
-    t60 = t60 + t63
-    t63 = t56 * t19
-    t66 = t55 * t22
-    t63 = t63 - t66
-    t66 = t63 * t15
-    t67 = t19 * t44
-    t68 = t56 * t23
-    t67 = t67 + t68
-    t50 = t22 * t50
-    t55 = t55 * t28
-    t50 = t50 + t55
-    t50 = t67 + t50
-    t55 = t37 * t50
-    t55 = t66 - t55
-    t55 = t60 - t55
-    t55 = qd[5] * t55
-    t35 = t35 + t55
-    t55 = t65 - t64
-    t60 = t55 * t20
-    t54 = t58 - t54
-    t64 = t29 * t54
-    t60 = t60 + t64
-    t38 = t39 - t38
-    t39 = t38 * t46
-    t26 = t32 - t26
-    t64 = t57 * t26
-    t39 = t39 + t64
-    t39 = t60 - t39
-    t39 = qd[6] * t39
-    t35 = t35 + t39
-    t6 = t0 * t6
-    t39 = t1 * t42
-    t6 = t6 - t39
-    t39 = t14 * t6
-    t1 = t0 * t1
-    t60 = t1 * t12
-    t39 = t39 + t60
-    t60 = t5 * t42
-    t64 = t0 * t2
-    t60 = t60 + t64
-    t64 = t4 * t60
-    t66 = t0 * t5
-    t67 = t66 * t9
-    t64 = t64 + t67
-    t67 = t8 * t43
-    t68 = t41 * t25
-    t67 = t67 + t68
-    t64 = t64 + t67
-    t67 = t11 * t64
-    t68 = t66 * t4
-    t69 = t41 * t8
-    t68 = t68 - t69
-    t69 = t68 * t17
-    t67 = t67 + t69
-    t39 = t39 - t67
-    t67 = (-0.0825) * t39
-    t69 = t11 * t6
-    t17 = t1 * t17
-    t17 = t69 - t17
-    t12 = t68 * t12
-    t69 = t14 * t64
-    t12 = t12 - t69
-    t12 = t17 - t12
-    t17 = 0.384 * t12
-    t17 = t67 + t17
-    t64 = 0.0825 * t64
-    t67 = (-0.316) * t6
-    t64 = t64 + t67
-    t17 = t17 - t64
-    t69 = t19 * t39
-    t70 = t68 * t11
-    t71 = t1 * t14
-    t70 = t70 + t71
-    t71 = t70 * t23
-    t69 = t69 - t71
-    t25 = t66 * t25
-    t60 = t8 * t60
-    t25 = t25 - t60
-    t60 = t4 * t43
-    t9 = t41 * t9
-    t9 = t60 - t9
-    t9 = t25 + t9
-    t25 = t22 * t9
-    t8 = t66 * t8
-    t4 = t41 * t4
-    t4 = t8 + t4
-    t8 = t4 * t28
-    t8 = t25 + t8
-    t8 = t69 - t8
-    t25 = t18 * t8
-    t60 = t70 * t19
-    t66 = t4 * t22
-    t60 = t60 - t66
-    t66 = t60 * t31
-    t25 = t25 - t66
-    t66 = t30 * t12
-    t11 = t1 * t11
-    t14 = t68 * t14
-    t11 = t11 - t14
-    t14 = t11 * t34
-    t14 = t66 + t14
-    t14 = t25 + t14
-    t14 = 0.088 * t14
-    t14 = t17 + t14
-    t25 = t18 * t12
-    t31 = t11 * t31
-    t25 = t25 - t31
-    t8 = t30 * t8
-    t31 = t60 * t34
-    t8 = t8 + t31
-    t8 = t25 - t8
-    t25 = 0.1654 * t8
-    t25 = t14 - t25
-    t31 = qd[0] * t25
-    t34 = t40 * t43
-    t32 = t41 * t32
-    t32 = t34 + t32
-    t32 = qd[1] * t32
-    t31 = t31 + t32
-    t32 = t25 + t67
-    t5 = t5 * t32
-    t34 = 0.0825 * t68
-    t40 = (-0.316) * t1
-    t34 = t34 - t40
-    t66 = (-0.0825) * t70
-    t67 = 0.384 * t11
-    t66 = t66 + t67
-    t66 = t34 + t66
-    t67 = t60 * t18
-    t68 = t11 * t30
-    t67 = t67 + t68
-    t67 = 0.088 * t67
-    t67 = t66 + t67
-    t18 = t11 * t18
-    t30 = t60 * t30
-    t18 = t18 - t30
-    t30 = 0.1654 * t18
-    t30 = t67 - t30
-    t40 = t30 + t40
-    t60 = t40 * t2
-    t5 = t5 - t60
-    t36 = t36 * t6
-    t3 = t1 * t3
-    t3 = t36 + t3
-    t3 = t5 - t3
-    t3 = qd[2] * t3
-    t3 = t31 + t3
-    t5 = t30 - t34
-    t31 = t5 * t24
-    t34 = t25 + t64
-    t27 = t27 * t34
-    t27 = t31 + t27
-    t16 = t16 * t9
-    t10 = t4 * t10
-    t10 = t16 + t10
-    t10 = t27 + t10
-    t10 = qd[3] * t10
-    t3 = t3 - t10
-    t10 = t30 - t66
-    t16 = t10 * t7
-    t17 = t25 - t17
-    t27 = t33 * t17
-    t16 = t16 + t27
-    t27 = t37 * t12
-    t31 = t11 * t15
-    t27 = t27 + t31
-    t16 = t16 - t27
-    t16 = qd[4] * t16
-    t3 = t3 + t16
-    t16 = t10 * t13
-    t21 = t21 * t17
-    t16 = t16 + t21
-    t21 = t22 * t39
-    t27 = t70 * t28
-    t21 = t21 + t27
-    t27 = t19 * t9
-    t23 = t4 * t23
-    t23 = t27 - t23
-    t21 = t21 + t23
-    t23 = t37 * t21
-    t22 = t70 * t22
-    t19 = t4 * t19
-    t19 = t22 + t19
-    t15 = t19 * t15
-    t15 = t23 + t15
-    t15 = t16 + t15
-    t15 = qd[5] * t15
-    t3 = t3 - t15
-    t15 = t38 * t8
-    t16 = t18 * t26
-    t15 = t15 + t16
-    t16 = t30 - t67
-    t22 = t16 * t20
-    t14 = t25 - t14
-    t23 = t29 * t14
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 - t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t26 = t12 * t26
+    t27 = t14 * t27
+    t26 = t26 - t27
+    t27 = t30 * qd[4]
+    t26 = t26 - t27
+    t27 = t17 * t26
+    t24 = t24 + t27
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 + t30
+    t30 = 0.1654 * t24
+    t30 = t32 - t30
+    t28 = qd[6] - t28
+    t32 = 0.1654 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 - t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.1654 * t19
+    t16 = t16 - t23
+    t23 = 0.1654 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 - t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
     t22 = t22 + t23
-    t15 = t15 - t22
-    t15 = qd[6] * t15
-    t3 = t3 + t15
-    t15 = t62 * t6
-    t1 = t1 * t49
-    t1 = t15 + t1
-    t15 = t40 * t48
-    t22 = t53 * t32
-    t15 = t15 + t22
-    t1 = t1 - t15
-    t1 = qd[2] * t1
-    t15 = t65 * t43
-    t22 = t41 * t58
-    t15 = t15 + t22
-    t0 = t0 * t25
-    t22 = t30 * t42
-    t0 = t0 - t22
-    t0 = t15 + t0
-    t0 = qd[1] * t0
-    t0 = t1 - t0
-    t1 = t51 * t9
-    t4 = t4 * t47
-    t1 = t1 + t4
-    t4 = t56 * t34
-    t5 = t5 * t44
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[3] * t1
-    t0 = t0 + t1
-    t1 = t61 * t12
-    t4 = t11 * t52
-    t1 = t1 + t4
-    t4 = t10 * t45
-    t5 = t59 * t17
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[4] * t1
-    t0 = t0 + t1
-    t1 = t61 * t21
-    t4 = t19 * t52
-    t1 = t1 + t4
-    t4 = t63 * t17
-    t5 = t10 * t50
-    t4 = t4 - t5
-    t1 = t1 + t4
-    t1 = qd[5] * t1
-    t0 = t0 + t1
-    t1 = t16 * t46
-    t4 = t57 * t14
-    t1 = t1 + t4
-    t4 = t55 * t8
-    t5 = t18 * t54
-    t4 = t4 + t5
-    t1 = t1 - t4
-    t1 = qd[6] * t1
-    t0 = t0 + t1
-    t1 = qd[2] * t6
-    t4 = qd[1] * t43
-    t1 = t1 - t4
-    t4 = qd[3] * t9
-    t1 = t1 + t4
-    t4 = qd[4] * t12
-    t1 = t1 + t4
-    t4 = qd[5] * t21
-    t1 = t1 + t4
-    t4 = qd[6] * t8
-    t1 = t1 - t4
-    t4 = qd[2] * t48
-    t5 = qd[1] * t42
-    t4 = t4 - t5
-    t5 = qd[3] * t44
-    t4 = t4 + t5
-    t5 = qd[4] * t45
-    t4 = t4 + t5
-    t5 = qd[5] * t50
-    t4 = t4 + t5
-    t5 = qd[6] * t46
-    t4 = t4 - t5
-    t5 = qd[4] * t7
-    t2 = qd[2] * t2
-    t6 = qd[3] * t24
-    t2 = t2 + t6
-    t2 = t5 - t2
-    t5 = qd[5] * t13
-    t2 = t2 - t5
-    t5 = qd[6] * t20
-    t2 = t2 - t5
-    _a = (t35, t3, t0, t1, t4, t2)
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 - t2
+    t4 = t4 * t29
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 - t0
+    t4 = t5 * t29
+    t0 = t0 - t4
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 - t3
+    t1 = t1 * t29
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _jdot_qd_panda_rightfinger_constants = _constants(
-    -0.316, 0.0825, -0.0825, 0.384, 0.088, 0.1654, 0.333)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.1654)
 
 
 def _jdot_qd_panda_rightfinger_chunk(x, t, s, y):
@@ -14824,557 +10646,370 @@ def _jdot_qd_panda_rightfinger_chunk(x, t, s, y):
     add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _jdot_qd_panda_rightfinger_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _jdot_qd_panda_rightfinger_constants
     cos(q_0, t0)
-    sin(q_1, t1)
-    multiply(t1, qd_1, t2)
-    multiply(k0, t2, t3)
-    cos(q_2, t4)
-    cos(q_1, t5)
-    multiply(t5, qd_1, t6)
-    multiply(t4, t6, t7)
-    sin(q_2, t8)
-    multiply(t8, qd_2, t9)
-    multiply(t1, t9, t10)
-    subtract(t7, t10, t7)
-    multiply(k1, t7, t10)
-    subtract(t3, t10, t10)
-    cos(q_3, t11)
-    multiply(t11, qd_3, t12)
-    multiply(t5, t12, t13)
-    sin(q_3, t14)
-    multiply(t14, t2, t15)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
+    cos(q_4, t12)
+    multiply(t8, t12, t13)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
     subtract(t13, t15, t13)
-    multiply(t11, t7, t15)
-    multiply(t1, t4, t16)
-    multiply(t14, qd_3, t17)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
     multiply(t16, t17, t18)
-    subtract(t15, t18, t15)
-    subtract(t13, t15, t13)
-    multiply(k2, t13, t15)
-    multiply(t14, t7, t7)
-    multiply(t16, t12, t18)
-    add(t7, t18, t7)
-    multiply(t11, t2, t18)
-    multiply(t5, t17, t19)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
     add(t18, t19, t18)
-    subtract(t7, t18, t7)
-    multiply(k3, t7, t18)
-    add(t15, t18, t15)
-    add(t10, t15, t15)
-    cos(q_5, t18)
-    cos(q_4, t19)
-    multiply(t19, t13, t20)
-    multiply(t5, t14, t21)
-    multiply(t16, t11, t22)
-    subtract(t21, t22, t21)
-    sin(q_4, t22)
-    multiply(t22, qd_4, t23)
-    multiply(t21, t23, t24)
-    subtract(t20, t24, t20)
-    multiply(t8, t6, t24)
-    multiply(t4, qd_2, t25)
-    multiply(t1, t25, t26)
-    add(t24, t26, t24)
-    multiply(t22, t24, t26)
-    multiply(t1, t8, t27)
-    multiply(t19, qd_4, t28)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(t3, t22, t23)
+    multiply(t8, qd_1, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
     multiply(t27, t28, t29)
-    add(t26, t29, t26)
-    add(t20, t26, t20)
-    multiply(t18, t20, t26)
-    multiply(t21, t19, t29)
-    multiply(t27, t22, t30)
-    add(t29, t30, t29)
-    sin(q_5, t30)
-    multiply(t30, qd_5, t31)
-    multiply(t29, t31, t32)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
+    add(t29, t31, t29)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
     subtract(t26, t32, t26)
-    multiply(t30, t7, t32)
-    multiply(t16, t14, t33)
-    multiply(t5, t11, t34)
-    add(t33, t34, t33)
-    multiply(t18, qd_5, t34)
-    multiply(t33, t34, t35)
-    add(t32, t35, t32)
-    add(t26, t32, t26)
-    multiply(k4, t26, t26)
-    add(t15, t26, t26)
-    multiply(t18, t7, t32)
-    multiply(t33, t31, t35)
-    subtract(t32, t35, t32)
-    multiply(t30, t20, t20)
-    multiply(t29, t34, t35)
-    add(t20, t35, t20)
-    subtract(t32, t20, t32)
-    multiply(k5, t32, t20)
-    subtract(t26, t20, t20)
-    multiply(t0, t20, t35)
-    multiply(k0, t5, t36)
-    subtract(k6, t36, t36)
-    multiply(k1, t16, t16)
-    subtract(t36, t16, t16)
-    multiply(k2, t21, t37)
-    multiply(k3, t33, t38)
-    add(t37, t38, t37)
-    add(t16, t37, t37)
-    multiply(t29, t18, t38)
-    multiply(t33, t30, t39)
-    add(t38, t39, t38)
-    multiply(k4, t38, t38)
-    add(t37, t38, t38)
-    multiply(t33, t18, t39)
-    multiply(t29, t30, t29)
-    subtract(t39, t29, t39)
-    multiply(k5, t39, t29)
-    subtract(t38, t29, t29)
-    subtract(t29, k6, t40)
-    sin(q_0, t41)
-    multiply(t41, qd_0, t42)
-    multiply(t40, t42, t43)
-    subtract(t35, t43, t35)
-    multiply(qd_1, t35, t35)
-    multiply(t0, qd_0, t43)
-    multiply(t5, t43, t44)
-    multiply(t41, t2, t45)
-    subtract(t44, t45, t44)
-    multiply(t4, t44, t45)
-    multiply(t41, t5, t46)
-    multiply(t46, t9, t47)
-    subtract(t45, t47, t45)
-    multiply(t0, t25, t47)
-    multiply(t8, t42, t48)
-    subtract(t47, t48, t47)
-    add(t45, t47, t45)
-    multiply(k1, t45, t47)
-    multiply(t1, t43, t48)
-    multiply(t41, t6, t49)
-    add(t48, t49, t48)
-    multiply(k0, t48, t49)
-    subtract(t47, t49, t47)
-    multiply(t11, t45, t50)
-    multiply(t46, t4, t51)
-    multiply(t0, t8, t52)
-    add(t51, t52, t51)
-    multiply(t51, t17, t52)
-    subtract(t50, t52, t50)
-    multiply(t14, t48, t52)
-    multiply(t41, t1, t53)
-    multiply(t53, t12, t54)
-    add(t52, t54, t52)
-    add(t50, t52, t50)
-    multiply(k2, t50, t52)
-    multiply(t11, t48, t54)
-    multiply(t53, t17, t55)
-    subtract(t54, t55, t54)
-    multiply(t14, t45, t45)
-    multiply(t51, t12, t55)
-    add(t45, t55, t45)
-    subtract(t54, t45, t54)
-    multiply(k3, t54, t45)
-    add(t52, t45, t52)
-    add(t47, t52, t52)
-    multiply(t19, t50, t45)
-    multiply(t51, t11, t55)
-    multiply(t53, t14, t56)
-    add(t55, t56, t55)
-    multiply(t55, t23, t56)
-    subtract(t45, t56, t45)
-    multiply(t0, t4, t56)
-    multiply(t46, t8, t57)
-    subtract(t56, t57, t56)
-    multiply(t56, t28, t57)
-    multiply(t4, t42, t58)
-    multiply(t0, t9, t59)
-    add(t58, t59, t58)
-    multiply(t8, t44, t44)
-    multiply(t46, t25, t46)
-    add(t44, t46, t44)
-    add(t58, t44, t58)
-    multiply(t22, t58, t44)
-    subtract(t57, t44, t57)
-    add(t45, t57, t45)
-    multiply(t18, t45, t44)
-    multiply(t55, t19, t46)
-    multiply(t56, t22, t57)
-    add(t46, t57, t46)
-    multiply(t46, t31, t57)
-    subtract(t44, t57, t44)
-    multiply(t30, t54, t57)
-    multiply(t53, t11, t59)
-    multiply(t51, t14, t60)
-    subtract(t59, t60, t59)
-    multiply(t59, t34, t60)
-    add(t57, t60, t57)
-    add(t44, t57, t44)
-    multiply(k4, t44, t44)
-    add(t52, t44, t44)
-    multiply(t18, t54, t57)
-    multiply(t59, t31, t60)
-    subtract(t57, t60, t57)
-    multiply(t30, t45, t45)
-    multiply(t46, t34, t60)
-    add(t45, t60, t45)
-    subtract(t57, t45, t57)
-    multiply(k5, t57, t45)
-    subtract(t44, t45, t45)
-    multiply(qd_0, t45, t60)
-    subtract(t35, t60, t35)
-    subtract(t29, t36, t36)
-    multiply(t36, t48, t60)
-    subtract(t20, t3, t3)
-    multiply(t53, t3, t61)
-    add(t60, t61, t60)
-    add(t45, t49, t49)
-    multiply(t5, t49, t61)
-    multiply(k1, t51, t51)
-    multiply(k0, t53, t62)
-    subtract(t51, t62, t51)
-    multiply(k2, t55, t63)
-    multiply(k3, t59, t64)
-    add(t63, t64, t63)
-    add(t51, t63, t63)
-    multiply(t46, t18, t64)
-    multiply(t59, t30, t65)
-    add(t64, t65, t64)
-    multiply(k4, t64, t64)
-    add(t63, t64, t64)
-    multiply(t59, t18, t65)
-    multiply(t46, t30, t46)
-    subtract(t65, t46, t65)
-    multiply(k5, t65, t46)
-    subtract(t64, t46, t46)
-    add(t46, t62, t62)
-    multiply(t62, t2, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_2, t60, t60)
-    add(t35, t60, t35)
-    subtract(t46, t51, t51)
-    multiply(t51, t24, t60)
-    subtract(t45, t47, t47)
-    multiply(t27, t47, t61)
-    add(t60, t61, t60)
-    subtract(t20, t10, t10)
-    multiply(t56, t10, t61)
-    subtract(t29, t16, t16)
-    multiply(t16, t58, t66)
-    subtract(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_3, t60, t60)
-    add(t35, t60, t35)
-    subtract(t29, t37, t37)
-    multiply(t37, t54, t60)
-    subtract(t20, t15, t15)
-    multiply(t59, t15, t61)
-    add(t60, t61, t60)
-    subtract(t46, t63, t63)
-    multiply(t63, t7, t61)
-    subtract(t45, t52, t52)
-    multiply(t33, t52, t66)
-    add(t61, t66, t61)
-    subtract(t60, t61, t60)
-    multiply(qd_4, t60, t60)
-    add(t35, t60, t35)
-    multiply(t19, t24, t60)
-    multiply(t27, t23, t61)
-    subtract(t60, t61, t60)
-    multiply(t22, t13, t13)
-    multiply(t21, t28, t61)
-    add(t13, t61, t13)
-    subtract(t60, t13, t60)
-    multiply(t63, t60, t13)
-    multiply(t27, t19, t61)
-    multiply(t21, t22, t21)
-    subtract(t61, t21, t61)
-    multiply(t61, t52, t21)
-    add(t13, t21, t13)
-    multiply(t56, t19, t21)
-    multiply(t55, t22, t66)
-    subtract(t21, t66, t21)
-    multiply(t21, t15, t66)
-    multiply(t19, t58, t67)
-    multiply(t56, t23, t68)
-    add(t67, t68, t67)
-    multiply(t22, t50, t50)
-    multiply(t55, t28, t55)
-    add(t50, t55, t50)
-    add(t67, t50, t67)
-    multiply(t37, t67, t50)
-    subtract(t66, t50, t66)
-    subtract(t13, t66, t13)
-    multiply(qd_5, t13, t13)
-    add(t35, t13, t35)
-    subtract(t46, t64, t64)
-    multiply(t64, t32, t13)
-    subtract(t45, t44, t44)
-    multiply(t39, t44, t50)
-    add(t13, t50, t13)
-    subtract(t29, t38, t29)
-    multiply(t29, t57, t38)
-    subtract(t20, t26, t26)
-    multiply(t65, t26, t50)
-    add(t38, t50, t38)
-    subtract(t13, t38, t13)
-    multiply(qd_6, t13, t13)
-    add(t35, t13, a_0)
-    multiply(t0, t6, t6)
-    multiply(t1, t42, t13)
-    subtract(t6, t13, t6)
-    multiply(t14, t6, t13)
-    multiply(t0, t1, t1)
-    multiply(t1, t12, t35)
-    add(t13, t35, t13)
-    multiply(t5, t42, t35)
-    multiply(t0, t2, t38)
-    add(t35, t38, t35)
-    multiply(t4, t35, t38)
-    multiply(t0, t5, t50)
-    multiply(t50, t9, t55)
-    add(t38, t55, t38)
-    multiply(t8, t43, t55)
-    multiply(t41, t25, t66)
-    add(t55, t66, t55)
-    add(t38, t55, t38)
-    multiply(t11, t38, t55)
-    multiply(t50, t4, t66)
-    multiply(t41, t8, t68)
-    subtract(t66, t68, t66)
-    multiply(t66, t17, t68)
-    add(t55, t68, t55)
-    subtract(t13, t55, t13)
-    multiply(k2, t13, t55)
-    multiply(t11, t6, t68)
-    multiply(t1, t17, t17)
-    subtract(t68, t17, t68)
-    multiply(t66, t12, t12)
-    multiply(t14, t38, t17)
-    subtract(t12, t17, t12)
-    subtract(t68, t12, t68)
-    multiply(k3, t68, t12)
-    add(t55, t12, t55)
-    multiply(k1, t38, t38)
-    multiply(k0, t6, t12)
-    add(t38, t12, t38)
-    subtract(t55, t38, t55)
-    multiply(t19, t13, t17)
-    multiply(t66, t11, t69)
-    multiply(t1, t14, t70)
-    add(t69, t70, t69)
-    multiply(t69, t23, t70)
-    subtract(t17, t70, t17)
-    multiply(t50, t25, t25)
-    multiply(t8, t35, t35)
-    subtract(t25, t35, t25)
-    multiply(t4, t43, t35)
-    multiply(t41, t9, t9)
-    subtract(t35, t9, t35)
-    add(t25, t35, t25)
-    multiply(t22, t25, t9)
-    multiply(t50, t8, t50)
-    multiply(t41, t4, t4)
-    add(t50, t4, t50)
-    multiply(t50, t28, t4)
-    add(t9, t4, t9)
-    subtract(t17, t9, t17)
-    multiply(t18, t17, t4)
-    multiply(t69, t19, t8)
-    multiply(t50, t22, t9)
-    subtract(t8, t9, t8)
-    multiply(t8, t31, t9)
-    subtract(t4, t9, t4)
-    multiply(t30, t68, t9)
-    multiply(t1, t11, t11)
-    multiply(t66, t14, t14)
-    subtract(t11, t14, t11)
-    multiply(t11, t34, t14)
-    add(t9, t14, t9)
-    add(t4, t9, t4)
-    multiply(k4, t4, t4)
-    add(t55, t4, t4)
-    multiply(t18, t68, t9)
-    multiply(t11, t31, t31)
-    subtract(t9, t31, t9)
-    multiply(t30, t17, t17)
-    multiply(t8, t34, t34)
-    add(t17, t34, t17)
-    subtract(t9, t17, t9)
-    multiply(k5, t9, t14)
-    subtract(t4, t14, t14)
-    multiply(qd_0, t14, t17)
-    multiply(t40, t43, t40)
-    multiply(t41, t20, t20)
-    add(t40, t20, t40)
-    multiply(qd_1, t40, t40)
-    add(t17, t40, t17)
-    add(t14, t12, t12)
-    multiply(t5, t12, t5)
-    multiply(k1, t66, t66)
-    multiply(k0, t1, t20)
-    subtract(t66, t20, t66)
-    multiply(k2, t69, t31)
-    multiply(k3, t11, t34)
-    add(t31, t34, t31)
-    add(t66, t31, t31)
-    multiply(t8, t18, t34)
-    multiply(t11, t30, t35)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    multiply(k5, t21, t30)
+    add(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t27, qd_2, t27)
+    multiply(t3, t24, t24)
+    subtract(t27, t24, t27)
+    multiply(t7, t27, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t11, t20, t36)
+    subtract(t24, t36, t24)
+    multiply(t30, qd_3, t36)
+    add(t24, t36, t24)
+    multiply(k5, t24, t36)
+    multiply(t11, t27, t27)
+    multiply(t7, t20, t37)
+    add(t27, t37, t27)
+    multiply(t32, qd_3, t37)
+    add(t27, t37, t27)
+    multiply(k6, t27, t37)
+    add(t36, t37, t36)
+    multiply(t31, t28, t31)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    multiply(k4, t20, t20)
+    add(t22, t20, t22)
+    subtract(t31, t22, t31)
+    subtract(t36, t31, t36)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t36, t35, t36)
+    multiply(t14, t36, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t36, t36)
+    add(t29, t36, t29)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
     add(t34, t35, t34)
-    multiply(k4, t34, t34)
-    add(t31, t34, t34)
-    multiply(t11, t18, t18)
-    multiply(t8, t30, t8)
-    subtract(t18, t8, t18)
-    multiply(k5, t18, t8)
-    subtract(t34, t8, t8)
-    add(t8, t20, t20)
-    multiply(t20, t2, t30)
-    subtract(t5, t30, t5)
-    multiply(t36, t6, t36)
-    multiply(t1, t3, t3)
-    add(t36, t3, t36)
-    subtract(t5, t36, t5)
-    multiply(qd_2, t5, t5)
-    add(t17, t5, t17)
-    subtract(t8, t66, t66)
-    multiply(t66, t24, t3)
-    add(t14, t38, t38)
-    multiply(t27, t38, t27)
-    add(t3, t27, t3)
-    multiply(t16, t25, t16)
-    multiply(t50, t10, t10)
-    add(t16, t10, t16)
-    add(t3, t16, t3)
-    multiply(qd_3, t3, t3)
-    subtract(t17, t3, t17)
-    subtract(t8, t31, t31)
-    multiply(t31, t7, t3)
-    subtract(t14, t55, t55)
-    multiply(t33, t55, t33)
-    add(t3, t33, t3)
-    multiply(t37, t68, t5)
-    multiply(t11, t15, t10)
-    add(t5, t10, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t17, t3, t17)
-    multiply(t31, t60, t3)
-    multiply(t61, t55, t61)
-    add(t3, t61, t3)
-    multiply(t22, t13, t13)
-    multiply(t69, t28, t28)
-    add(t13, t28, t13)
-    multiply(t19, t25, t5)
-    multiply(t50, t23, t23)
-    subtract(t5, t23, t5)
-    add(t13, t5, t13)
-    multiply(t37, t13, t37)
-    multiply(t69, t22, t69)
-    multiply(t50, t19, t19)
-    add(t69, t19, t69)
-    multiply(t69, t15, t15)
-    add(t37, t15, t37)
-    add(t3, t37, t3)
-    multiply(qd_5, t3, t3)
-    subtract(t17, t3, t17)
-    multiply(t29, t9, t29)
-    multiply(t18, t26, t26)
-    add(t29, t26, t29)
-    subtract(t8, t34, t34)
-    multiply(t34, t32, t3)
-    subtract(t14, t4, t4)
-    multiply(t39, t4, t39)
-    add(t3, t39, t3)
-    subtract(t29, t3, t29)
-    multiply(qd_6, t29, t29)
-    add(t17, t29, a_1)
-    multiply(t62, t6, t62)
-    multiply(t1, t49, t1)
-    add(t62, t1, t62)
-    multiply(t20, t48, t20)
-    multiply(t53, t12, t53)
-    add(t20, t53, t20)
-    subtract(t62, t20, t62)
-    multiply(qd_2, t62, t62)
-    multiply(t46, t43, t46)
-    multiply(t41, t45, t41)
-    add(t46, t41, t46)
-    multiply(t0, t14, t0)
-    multiply(t8, t42, t8)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    multiply(t15, t27, t35)
+    add(t32, t35, t32)
+    multiply(t15, t20, t35)
+    multiply(t4, t30, t30)
+    add(t35, t30, t35)
+    multiply(t35, qd_5, t30)
+    add(t32, t30, t32)
+    multiply(k7, t32, t30)
+    add(t29, t30, t29)
+    multiply(t35, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t15, t34, t34)
+    multiply(t4, t27, t27)
+    subtract(t34, t27, t34)
+    multiply(t8, qd_5, t27)
+    add(t34, t27, t34)
+    multiply(t2, t34, t27)
+    multiply(t12, t21, t21)
+    multiply(t14, t24, t24)
+    subtract(t21, t24, t21)
+    multiply(t20, qd_4, t20)
+    subtract(t21, t20, t21)
+    multiply(t17, t21, t20)
+    add(t27, t20, t27)
+    multiply(t17, t35, t20)
+    multiply(t2, t28, t24)
+    add(t20, t24, t20)
+    multiply(t20, qd_6, t24)
+    add(t27, t24, t27)
+    multiply(k8, t27, t24)
+    subtract(t25, t24, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t20, t24)
+    multiply(t8, t24, t30)
+    add(t25, t30, t25)
+    multiply(t16, t25, t30)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t21, t18)
+    subtract(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t35, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t30, t8, t30)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t21, t21)
+    subtract(t26, t21, t26)
+    multiply(t35, t23, t35)
+    add(t26, t35, t26)
+    multiply(t20, t24, t20)
+    multiply(t28, t18, t28)
+    add(t20, t28, t20)
+    add(t26, t20, t26)
+    multiply(t10, t26, t8)
+    add(t30, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t20)
+    add(t18, t20, t18)
+    multiply(t18, t12, t20)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
     subtract(t0, t8, t0)
-    add(t46, t0, t46)
-    multiply(qd_1, t46, t46)
-    subtract(t62, t46, t62)
-    multiply(t51, t25, t51)
-    multiply(t50, t47, t50)
-    add(t51, t50, t51)
-    multiply(t56, t38, t56)
-    multiply(t66, t58, t66)
-    subtract(t56, t66, t56)
-    add(t51, t56, t51)
-    multiply(qd_3, t51, t51)
-    add(t62, t51, t62)
-    multiply(t63, t68, t0)
-    multiply(t11, t52, t11)
-    add(t0, t11, t0)
-    multiply(t31, t54, t1)
-    multiply(t59, t55, t59)
-    add(t1, t59, t1)
-    subtract(t0, t1, t0)
-    multiply(qd_4, t0, t0)
-    add(t62, t0, t62)
-    multiply(t63, t13, t63)
-    multiply(t69, t52, t69)
-    add(t63, t69, t63)
-    multiply(t21, t55, t21)
-    multiply(t31, t67, t31)
-    subtract(t21, t31, t21)
-    add(t63, t21, t63)
-    multiply(qd_5, t63, t63)
-    add(t62, t63, t62)
-    multiply(t34, t57, t34)
-    multiply(t65, t4, t65)
-    add(t34, t65, t34)
-    multiply(t64, t9, t64)
-    multiply(t18, t44, t18)
-    add(t64, t18, t64)
-    subtract(t34, t64, t34)
-    multiply(qd_6, t34, t34)
-    add(t62, t34, a_2)
-    multiply(qd_2, t6, t6)
-    multiply(qd_1, t43, t43)
-    subtract(t6, t43, t6)
-    multiply(qd_3, t25, t25)
-    add(t6, t25, t6)
-    multiply(qd_4, t68, t68)
-    add(t6, t68, t6)
-    multiply(qd_5, t13, t13)
-    add(t6, t13, t6)
-    multiply(qd_6, t9, t9)
-    subtract(t6, t9, a_3)
-    multiply(qd_2, t48, t48)
-    multiply(qd_1, t42, t42)
-    subtract(t48, t42, t48)
-    multiply(qd_3, t58, t58)
-    add(t48, t58, t48)
-    multiply(qd_4, t54, t54)
-    add(t48, t54, t48)
-    multiply(qd_5, t67, t67)
-    add(t48, t67, t48)
-    multiply(qd_6, t57, t57)
-    subtract(t48, t57, a_4)
-    multiply(qd_4, t7, t7)
-    multiply(qd_2, t2, t2)
-    multiply(qd_3, t24, t24)
-    add(t2, t24, t2)
+    multiply(t0, t14, t8)
+    add(t20, t8, t20)
+    multiply(t20, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t20, t4, t20)
+    subtract(t5, t20, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
     subtract(t7, t2, t7)
-    multiply(qd_5, t60, t60)
-    subtract(t7, t60, t7)
-    multiply(qd_6, t32, t32)
-    subtract(t7, t32, a_5)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t27, t19)
+    subtract(t16, t19, t16)
+    multiply(t10, t32, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t27, t18)
+    subtract(t0, t18, t0)
+    multiply(t5, t32, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t27, t7)
+    subtract(t2, t7, t2)
+    multiply(t3, t32, t3)
+    subtract(t2, t3, a_5)
 
 
 def frame_acceleration_panda_rightfinger(q, qd, qdd):
@@ -15384,13 +11019,13 @@ def frame_acceleration_panda_rightfinger(q, qd, qdd):
     in  qd [7]
     in  qdd [7]
     out a [6]
-    671 ops: 374 mul, 285 add, 0 div, 12 trig
+    376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
     q = _array(q, 7, "q")
     qd = _array(qd, 7, "qd")
     qdd = _array(qdd, 7, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_panda_rightfinger_chunk, (q, qd, qdd), 81, ((6,),))
+        return _batch(_frame_acceleration_panda_rightfinger_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -15398,681 +11033,387 @@ def frame_acceleration_panda_rightfinger(q, qd, qdd):
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = cos(q[1])
-    t2 = (-0.316) * t1
-    t2 = 0.333 - t2
-    t3 = sin(q[1])
-    t4 = cos(q[2])
-    t5 = t3 * t4
-    t6 = 0.0825 * t5
-    t6 = t2 - t6
-    t7 = sin(q[3])
-    t8 = t1 * t7
-    t9 = cos(q[3])
-    t10 = t5 * t9
-    t8 = t8 - t10
-    t10 = (-0.0825) * t8
-    t11 = t5 * t7
-    t12 = t1 * t9
-    t11 = t11 + t12
-    t12 = 0.384 * t11
-    t10 = t10 + t12
-    t10 = t6 + t10
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = sin(q[0])
+    t6 = sin(q[2])
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = cos(q[3])
+    t8 = t4 * t7
+    t9 = sin(q[1])
+    t10 = t0 * t9
+    t11 = sin(q[3])
+    t12 = t10 * t11
+    t8 = t8 + t12
     t12 = cos(q[4])
     t13 = t8 * t12
-    t14 = sin(q[2])
-    t15 = t3 * t14
-    t16 = sin(q[4])
-    t17 = t15 * t16
-    t13 = t13 + t17
-    t17 = cos(q[5])
-    t18 = t13 * t17
-    t19 = sin(q[5])
-    t20 = t11 * t19
-    t18 = t18 + t20
-    t18 = 0.088 * t18
-    t18 = t10 + t18
-    t20 = t11 * t17
-    t21 = t13 * t19
-    t20 = t20 - t21
-    t21 = 0.1654 * t20
-    t21 = t18 - t21
-    t22 = t21 - 0.333
-    t23 = t0 * t22
-    t23 = t23 * qdd[1]
-    t24 = sin(q[0])
-    t25 = t24 * t1
-    t26 = t25 * t4
-    t27 = t0 * t14
-    t26 = t26 + t27
-    t27 = 0.0825 * t26
-    t28 = t24 * t3
-    t29 = (-0.316) * t28
-    t27 = t27 - t29
-    t30 = t26 * t9
-    t31 = t28 * t7
-    t30 = t30 + t31
-    t31 = (-0.0825) * t30
-    t32 = t28 * t9
-    t33 = t26 * t7
-    t32 = t32 - t33
-    t33 = 0.384 * t32
-    t31 = t31 + t33
-    t31 = t27 + t31
-    t33 = t30 * t12
-    t34 = t0 * t4
-    t35 = t25 * t14
-    t34 = t34 - t35
-    t35 = t34 * t16
-    t33 = t33 + t35
-    t35 = t33 * t17
-    t36 = t32 * t19
-    t35 = t35 + t36
-    t35 = 0.088 * t35
-    t35 = t31 + t35
-    t36 = t32 * t17
-    t37 = t33 * t19
-    t36 = t36 - t37
-    t37 = 0.1654 * t36
-    t37 = t35 - t37
-    t38 = t37 * qdd[0]
-    t23 = t23 - t38
-    t2 = t21 - t2
-    t38 = t28 * t2
-    t29 = t37 + t29
-    t39 = t1 * t29
-    t38 = t38 - t39
-    t38 = t38 * qdd[2]
-    t23 = t23 + t38
-    t27 = t37 - t27
-    t38 = t15 * t27
-    t6 = t21 - t6
-    t39 = t34 * t6
-    t38 = t38 - t39
-    t38 = t38 * qdd[3]
-    t23 = t23 + t38
-    t10 = t21 - t10
-    t38 = t32 * t10
-    t31 = t37 - t31
-    t39 = t11 * t31
-    t38 = t38 - t39
-    t38 = t38 * qdd[4]
-    t23 = t23 + t38
-    t38 = t15 * t12
-    t39 = t8 * t16
-    t38 = t38 - t39
-    t39 = t38 * t31
-    t40 = t34 * t12
-    t41 = t30 * t16
-    t40 = t40 - t41
-    t41 = t40 * t10
-    t39 = t39 - t41
-    t39 = t39 * qdd[5]
-    t23 = t23 + t39
-    t35 = t37 - t35
-    t39 = t20 * t35
-    t18 = t21 - t18
-    t21 = t36 * t18
-    t21 = t39 - t21
-    t21 = t21 * qdd[6]
-    t21 = t23 + t21
-    t23 = t3 * qd[1]
-    t39 = (-0.316) * t23
-    t41 = t1 * qd[1]
-    t42 = t4 * t41
-    t43 = t14 * qd[2]
-    t44 = t3 * t43
-    t42 = t42 - t44
-    t44 = 0.0825 * t42
-    t44 = t39 - t44
-    t45 = t9 * qd[3]
-    t46 = t1 * t45
-    t47 = t7 * t23
-    t46 = t46 - t47
-    t47 = t9 * t42
-    t48 = t7 * qd[3]
-    t49 = t5 * t48
-    t47 = t47 - t49
-    t46 = t46 - t47
-    t47 = (-0.0825) * t46
-    t42 = t7 * t42
-    t5 = t5 * t45
-    t5 = t42 + t5
-    t42 = t9 * t23
-    t49 = t1 * t48
-    t42 = t42 + t49
-    t5 = t5 - t42
-    t42 = 0.384 * t5
-    t42 = t47 + t42
-    t42 = t44 + t42
-    t47 = t12 * t46
-    t49 = t16 * qd[4]
-    t50 = t8 * t49
-    t47 = t47 - t50
-    t50 = t14 * t41
-    t51 = t4 * qd[2]
-    t52 = t3 * t51
-    t50 = t50 + t52
-    t52 = t16 * t50
-    t53 = t12 * qd[4]
-    t54 = t15 * t53
-    t52 = t52 + t54
-    t47 = t47 + t52
-    t52 = t17 * t47
-    t54 = t19 * qd[5]
-    t55 = t13 * t54
-    t52 = t52 - t55
-    t55 = t19 * t5
-    t56 = t17 * qd[5]
-    t57 = t11 * t56
-    t55 = t55 + t57
-    t52 = t52 + t55
-    t52 = 0.088 * t52
-    t52 = t42 + t52
-    t55 = t17 * t5
-    t57 = t11 * t54
-    t55 = t55 - t57
-    t47 = t19 * t47
-    t13 = t13 * t56
-    t13 = t47 + t13
-    t13 = t55 - t13
-    t47 = 0.1654 * t13
-    t47 = t52 - t47
-    t55 = t0 * t47
-    t57 = t24 * qd[0]
-    t58 = t22 * t57
-    t55 = t55 - t58
-    t55 = qd[1] * t55
-    t58 = t0 * qd[0]
-    t59 = t1 * t58
-    t60 = t24 * t23
-    t59 = t59 - t60
-    t60 = t4 * t59
-    t61 = t25 * t43
-    t60 = t60 - t61
-    t61 = t0 * t51
-    t62 = t14 * t57
-    t61 = t61 - t62
-    t60 = t60 + t61
-    t61 = 0.0825 * t60
-    t62 = t3 * t58
-    t63 = t24 * t41
-    t62 = t62 + t63
-    t63 = (-0.316) * t62
-    t61 = t61 - t63
-    t64 = t9 * t60
-    t65 = t26 * t48
-    t64 = t64 - t65
-    t65 = t7 * t62
-    t66 = t28 * t45
-    t65 = t65 + t66
-    t64 = t64 + t65
-    t65 = (-0.0825) * t64
-    t66 = t9 * t62
-    t67 = t28 * t48
-    t66 = t66 - t67
-    t60 = t7 * t60
-    t26 = t26 * t45
-    t26 = t60 + t26
-    t26 = t66 - t26
-    t60 = 0.384 * t26
-    t60 = t65 + t60
-    t60 = t61 + t60
-    t65 = t12 * t64
-    t66 = t30 * t49
-    t65 = t65 - t66
-    t66 = t34 * t53
-    t67 = t4 * t57
-    t68 = t0 * t43
-    t67 = t67 + t68
-    t59 = t14 * t59
-    t25 = t25 * t51
-    t25 = t59 + t25
-    t25 = t67 + t25
-    t59 = t16 * t25
-    t59 = t66 - t59
-    t59 = t65 + t59
-    t65 = t17 * t59
-    t66 = t33 * t54
-    t65 = t65 - t66
-    t66 = t19 * t26
-    t67 = t32 * t56
-    t66 = t66 + t67
-    t65 = t65 + t66
-    t65 = 0.088 * t65
-    t65 = t60 + t65
-    t66 = t17 * t26
-    t67 = t32 * t54
-    t66 = t66 - t67
-    t59 = t19 * t59
-    t33 = t33 * t56
-    t33 = t59 + t33
-    t33 = t66 - t33
-    t59 = 0.1654 * t33
-    t59 = t65 - t59
-    t66 = qd[0] * t59
-    t55 = t55 - t66
-    t66 = t2 * t62
-    t39 = t47 - t39
-    t67 = t28 * t39
-    t66 = t66 + t67
-    t63 = t59 + t63
-    t67 = t1 * t63
-    t68 = t29 * t23
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[2] * t66
-    t55 = t55 + t66
-    t66 = t27 * t50
-    t61 = t59 - t61
-    t67 = t15 * t61
-    t66 = t66 + t67
-    t44 = t47 - t44
-    t67 = t34 * t44
-    t68 = t6 * t25
-    t67 = t67 - t68
-    t66 = t66 - t67
-    t66 = qd[3] * t66
-    t55 = t55 + t66
-    t66 = t10 * t26
-    t42 = t47 - t42
-    t67 = t32 * t42
-    t66 = t66 + t67
-    t67 = t31 * t5
-    t60 = t59 - t60
-    t68 = t11 * t60
-    t67 = t67 + t68
-    t66 = t66 - t67
-    t66 = qd[4] * t66
-    t55 = t55 + t66
-    t66 = t12 * t50
-    t67 = t15 * t49
-    t66 = t66 - t67
-    t46 = t16 * t46
-    t8 = t8 * t53
-    t8 = t46 + t8
-    t8 = t66 - t8
-    t46 = t31 * t8
-    t66 = t38 * t60
-    t46 = t46 + t66
-    t66 = t40 * t42
-    t67 = t12 * t25
-    t68 = t34 * t49
-    t67 = t67 + t68
-    t64 = t16 * t64
-    t30 = t30 * t53
-    t30 = t64 + t30
-    t30 = t67 + t30
-    t64 = t10 * t30
-    t64 = t66 - t64
-    t46 = t46 - t64
-    t46 = qd[5] * t46
-    t46 = t55 + t46
-    t55 = t35 * t13
-    t64 = t59 - t65
-    t65 = t20 * t64
-    t55 = t55 + t65
-    t65 = t18 * t33
-    t52 = t47 - t52
-    t66 = t36 * t52
-    t65 = t65 + t66
-    t55 = t55 - t65
-    t55 = qd[6] * t55
-    t46 = t46 + t55
-    t21 = t21 + t46
-    t46 = t0 * t1
-    t55 = t46 * t4
-    t65 = t24 * t14
-    t55 = t55 - t65
-    t65 = 0.0825 * t55
-    t66 = t0 * t3
-    t67 = (-0.316) * t66
-    t65 = t65 - t67
-    t68 = t55 * t9
-    t69 = t66 * t7
-    t68 = t68 + t69
-    t69 = (-0.0825) * t68
-    t70 = t66 * t9
-    t71 = t55 * t7
-    t70 = t70 - t71
-    t71 = 0.384 * t70
-    t69 = t69 + t71
-    t69 = t65 + t69
-    t71 = t68 * t12
-    t72 = t46 * t14
-    t73 = t24 * t4
-    t72 = t72 + t73
-    t73 = t72 * t16
-    t71 = t71 - t73
-    t73 = t71 * t17
-    t74 = t70 * t19
-    t73 = t73 + t74
-    t73 = 0.088 * t73
-    t73 = t69 + t73
-    t74 = t70 * t17
-    t75 = t71 * t19
-    t74 = t74 - t75
-    t75 = 0.1654 * t74
-    t75 = t73 - t75
-    t76 = t75 * qdd[0]
-    t77 = t24 * t22
-    t77 = t77 * qdd[1]
-    t76 = t76 + t77
-    t67 = t75 + t67
-    t77 = t1 * t67
-    t78 = t66 * t2
-    t77 = t77 - t78
-    t77 = t77 * qdd[2]
-    t76 = t76 + t77
-    t65 = t75 - t65
-    t77 = t15 * t65
-    t78 = t72 * t6
-    t77 = t77 + t78
-    t77 = t77 * qdd[3]
-    t76 = t76 - t77
-    t69 = t75 - t69
-    t77 = t11 * t69
-    t78 = t70 * t10
-    t77 = t77 - t78
-    t77 = t77 * qdd[4]
-    t76 = t76 + t77
-    t77 = t38 * t69
-    t78 = t68 * t16
-    t79 = t72 * t12
-    t78 = t78 + t79
-    t79 = t78 * t10
-    t77 = t77 + t79
-    t77 = t77 * qdd[5]
-    t76 = t76 - t77
-    t77 = t74 * t18
-    t73 = t75 - t73
-    t79 = t20 * t73
-    t77 = t77 - t79
-    t77 = t77 * qdd[6]
-    t76 = t76 + t77
-    t41 = t0 * t41
-    t3 = t3 * t57
-    t3 = t41 - t3
-    t41 = t7 * t3
-    t77 = t66 * t45
-    t41 = t41 + t77
-    t77 = t1 * t57
-    t79 = t0 * t23
-    t77 = t77 + t79
-    t79 = t4 * t77
-    t80 = t46 * t43
-    t79 = t79 + t80
-    t80 = t14 * t58
-    t81 = t24 * t51
-    t80 = t80 + t81
-    t79 = t79 + t80
-    t80 = t9 * t79
-    t81 = t55 * t48
-    t80 = t80 + t81
-    t41 = t41 - t80
-    t80 = (-0.0825) * t41
-    t9 = t9 * t3
-    t48 = t66 * t48
-    t9 = t9 - t48
-    t45 = t55 * t45
-    t7 = t7 * t79
-    t7 = t45 - t7
-    t7 = t9 - t7
-    t9 = 0.384 * t7
-    t9 = t80 + t9
-    t45 = 0.0825 * t79
-    t48 = (-0.316) * t3
-    t45 = t45 + t48
-    t9 = t9 - t45
-    t55 = t12 * t41
-    t79 = t68 * t49
-    t55 = t55 - t79
-    t46 = t46 * t51
-    t14 = t14 * t77
-    t14 = t46 - t14
-    t4 = t4 * t58
-    t43 = t24 * t43
-    t4 = t4 - t43
-    t4 = t14 + t4
-    t14 = t16 * t4
-    t43 = t72 * t53
-    t14 = t14 + t43
-    t14 = t55 - t14
-    t43 = t17 * t14
-    t46 = t71 * t54
-    t43 = t43 - t46
-    t46 = t19 * t7
-    t51 = t70 * t56
-    t46 = t46 + t51
-    t43 = t43 + t46
-    t43 = 0.088 * t43
-    t43 = t9 + t43
-    t17 = t17 * t7
-    t46 = t70 * t54
-    t17 = t17 - t46
-    t14 = t19 * t14
-    t19 = t71 * t56
-    t14 = t14 + t19
-    t14 = t17 - t14
-    t17 = 0.1654 * t14
-    t17 = t43 - t17
-    t19 = qd[0] * t17
-    t22 = t22 * t58
-    t46 = t24 * t47
-    t22 = t22 + t46
-    t22 = qd[1] * t22
-    t19 = t19 + t22
-    t22 = t17 + t48
-    t46 = t1 * t22
-    t47 = t67 * t23
-    t46 = t46 - t47
-    t2 = t2 * t3
-    t39 = t66 * t39
-    t2 = t2 + t39
-    t2 = t46 - t2
-    t2 = qd[2] * t2
-    t2 = t19 + t2
-    t19 = t65 * t50
-    t39 = t17 + t45
-    t45 = t15 * t39
-    t19 = t19 + t45
-    t6 = t6 * t4
-    t44 = t72 * t44
-    t6 = t6 + t44
-    t6 = t19 + t6
-    t6 = qd[3] * t6
-    t2 = t2 - t6
-    t6 = t69 * t5
-    t9 = t17 - t9
-    t19 = t11 * t9
-    t6 = t6 + t19
-    t19 = t10 * t7
-    t44 = t70 * t42
-    t19 = t19 + t44
-    t6 = t6 - t19
-    t6 = qd[4] * t6
-    t2 = t2 + t6
-    t6 = t69 * t8
-    t19 = t38 * t9
-    t6 = t6 + t19
-    t16 = t16 * t41
-    t19 = t68 * t53
-    t16 = t16 + t19
-    t12 = t12 * t4
-    t19 = t72 * t49
-    t12 = t12 - t19
-    t12 = t16 + t12
-    t10 = t10 * t12
-    t16 = t78 * t42
-    t10 = t10 + t16
-    t6 = t6 + t10
-    t6 = qd[5] * t6
-    t2 = t2 - t6
-    t6 = t18 * t14
-    t10 = t74 * t52
-    t6 = t6 + t10
-    t10 = t73 * t13
-    t16 = t17 - t43
-    t18 = t20 * t16
-    t10 = t10 + t18
-    t6 = t6 - t10
-    t6 = qd[6] * t6
-    t2 = t2 + t6
-    t2 = t76 + t2
-    t6 = t66 * t29
-    t10 = t28 * t67
-    t6 = t6 - t10
-    t6 = t6 * qdd[2]
-    t10 = t24 * t37
-    t18 = t0 * t75
-    t10 = t10 + t18
-    t10 = t10 * qdd[1]
-    t6 = t6 - t10
-    t10 = t72 * t27
-    t18 = t34 * t65
-    t10 = t10 + t18
-    t10 = t10 * qdd[3]
-    t6 = t6 + t10
-    t10 = t70 * t31
-    t18 = t32 * t69
-    t10 = t10 - t18
-    t10 = t10 * qdd[4]
-    t6 = t6 + t10
-    t10 = t78 * t31
-    t18 = t40 * t69
-    t10 = t10 + t18
-    t10 = t10 * qdd[5]
-    t6 = t6 + t10
-    t10 = t36 * t73
-    t18 = t74 * t35
-    t10 = t10 - t18
-    t10 = t10 * qdd[6]
-    t6 = t6 + t10
-    t10 = t29 * t3
-    t18 = t66 * t63
-    t10 = t10 + t18
-    t18 = t67 * t62
-    t19 = t28 * t22
-    t18 = t18 + t19
-    t10 = t10 - t18
-    t10 = qd[2] * t10
-    t18 = t37 * t58
-    t19 = t24 * t59
-    t18 = t18 + t19
-    t17 = t0 * t17
-    t19 = t75 * t57
-    t17 = t17 - t19
-    t17 = t18 + t17
-    t17 = qd[1] * t17
-    t10 = t10 - t17
-    t17 = t27 * t4
-    t18 = t72 * t61
-    t17 = t17 + t18
-    t18 = t34 * t39
-    t19 = t65 * t25
-    t18 = t18 - t19
-    t17 = t17 + t18
-    t17 = qd[3] * t17
-    t10 = t10 + t17
-    t17 = t31 * t7
-    t18 = t70 * t60
-    t17 = t17 + t18
-    t18 = t69 * t26
-    t19 = t32 * t9
-    t18 = t18 + t19
-    t17 = t17 - t18
-    t17 = qd[4] * t17
-    t10 = t10 + t17
-    t17 = t31 * t12
-    t18 = t78 * t60
-    t17 = t17 + t18
-    t9 = t40 * t9
-    t18 = t69 * t30
-    t9 = t9 - t18
-    t9 = t17 + t9
-    t9 = qd[5] * t9
-    t9 = t10 + t9
-    t10 = t73 * t33
-    t16 = t36 * t16
-    t10 = t10 + t16
-    t16 = t35 * t14
-    t17 = t74 * t64
+    t2 = t2 * t6
+    t14 = t5 * t3
+    t2 = t2 + t14
+    t14 = sin(q[4])
+    t15 = t2 * t14
+    t13 = t13 - t15
+    t15 = cos(q[5])
+    t16 = t13 * t15
+    t10 = t10 * t7
+    t4 = t4 * t11
+    t4 = t10 - t4
+    t10 = sin(q[5])
+    t17 = t4 * t10
     t16 = t16 + t17
-    t10 = t10 - t16
-    t10 = qd[6] * t10
-    t9 = t9 + t10
-    t6 = t6 + t9
-    t9 = t66 * qdd[2]
-    t10 = t24 * qdd[1]
-    t9 = t9 - t10
-    t10 = t72 * qdd[3]
-    t9 = t9 + t10
-    t10 = t70 * qdd[4]
-    t9 = t9 + t10
-    t10 = t78 * qdd[5]
-    t9 = t9 + t10
-    t10 = t74 * qdd[6]
-    t9 = t9 - t10
-    t3 = qd[2] * t3
-    t10 = qd[1] * t58
-    t3 = t3 - t10
-    t4 = qd[3] * t4
-    t3 = t3 + t4
-    t4 = qd[4] * t7
-    t3 = t3 + t4
-    t4 = qd[5] * t12
-    t3 = t3 + t4
-    t4 = qd[6] * t14
-    t3 = t3 - t4
-    t3 = t9 + t3
-    t0 = t0 * qdd[1]
-    t4 = t28 * qdd[2]
-    t0 = t0 + t4
-    t4 = t34 * qdd[3]
+    t17 = cos(q[6])
+    t18 = t16 * t17
+    t8 = t8 * t14
+    t2 = t2 * t12
+    t2 = t8 + t2
+    t8 = sin(q[6])
+    t19 = t2 * t8
+    t18 = t18 + t19
+    t19 = 0.7071067811865476 * t18
+    t2 = t2 * t17
+    t16 = t16 * t8
+    t2 = t2 - t16
+    t16 = (-0.7071067811865475) * t2
+    t16 = t19 + t16
+    t19 = 0.7071067811865476 * t16
+    t18 = 0.7071067811865475 * t18
+    t2 = 0.7071067811865476 * t2
+    t2 = t18 + t2
+    t18 = 0.7071067811865475 * t2
+    t18 = t19 + t18
+    t19 = t1 * qd[0]
+    t20 = t9 * qd[0]
+    t21 = (-0.316) * t20
+    t22 = t19 * t21
+    t23 = (-0.316) * qdd[1]
+    t22 = t22 - t23
+    t23 = t3 * t22
+    t24 = t9 * qdd[0]
+    t25 = t19 * qd[1]
+    t24 = t24 + t25
+    t25 = (-0.316) * t24
+    t26 = (-0.316) * qd[1]
+    t27 = t19 * t26
+    t25 = t25 + t27
+    t27 = t6 * t25
+    t23 = t23 - t27
+    t27 = t6 * t20
+    t28 = t3 * qd[1]
+    t27 = t27 + t28
+    t28 = 0.0825 * t27
+    t29 = t27 * t28
+    t19 = t19 + qd[2]
+    t30 = 0.0825 * t19
+    t31 = t19 * t30
+    t29 = t29 + t31
+    t23 = t23 - t29
+    t29 = t7 * t23
+    t26 = qd[1] * t26
+    t21 = t20 * t21
+    t21 = t26 + t21
+    t26 = t6 * t24
+    t31 = t3 * qdd[1]
+    t26 = t26 + t31
+    t31 = t6 * qd[1]
+    t32 = t3 * t20
+    t31 = t31 - t32
+    t32 = t31 * qd[2]
+    t26 = t26 - t32
+    t32 = 0.0825 * t26
+    t21 = t21 - t32
+    t30 = t31 * t30
+    t21 = t21 + t30
+    t30 = t11 * t21
+    t29 = t29 + t30
+    t26 = qdd[3] - t26
+    t30 = 0.384 * t26
+    t29 = t29 - t30
+    t30 = t7 * t19
+    t32 = t11 * t31
+    t30 = t30 - t32
+    t32 = t7 * t31
+    t19 = t11 * t19
+    t19 = t32 + t19
+    t32 = 0.384 * t19
+    t33 = (-0.0825) * t30
+    t32 = t32 - t33
+    t33 = t30 * t32
+    t34 = qd[3] - t27
+    t35 = (-0.0825) * t34
+    t36 = t34 * t35
+    t33 = t33 - t36
+    t29 = t29 + t33
+    t33 = t12 * t29
+    t36 = t6 * qdd[1]
+    t24 = t3 * t24
+    t24 = t36 - t24
+    t27 = t27 * qd[2]
+    t24 = t24 + t27
+    t27 = t7 * t24
+    t20 = t20 * qd[1]
+    t36 = t1 * qdd[0]
+    t20 = t20 - t36
+    t20 = qdd[2] - t20
+    t36 = t11 * t20
+    t27 = t27 + t36
+    t36 = t30 * qd[3]
+    t27 = t27 + t36
+    t36 = 0.384 * t27
+    t37 = t7 * t20
+    t24 = t11 * t24
+    t24 = t37 - t24
+    t37 = t19 * qd[3]
+    t24 = t24 - t37
+    t37 = (-0.0825) * t24
+    t36 = t36 - t37
+    t20 = 0.0825 * t20
+    t22 = t6 * t22
+    t25 = t3 * t25
+    t22 = t22 + t25
+    t20 = t20 - t22
+    t22 = t31 * t28
+    t20 = t20 + t22
+    t20 = t36 - t20
+    t22 = t19 * t35
+    t25 = 0.384 * t34
+    t28 = t30 * t25
+    t22 = t22 + t28
+    t20 = t20 + t22
+    t22 = t14 * t20
+    t22 = t33 - t22
+    t28 = t15 * t22
+    t21 = t7 * t21
+    t23 = t11 * t23
+    t21 = t21 - t23
+    t23 = (-0.0825) * t26
+    t21 = t21 + t23
+    t23 = t34 * t25
+    t25 = t19 * t32
+    t23 = t23 + t25
+    t21 = t21 - t23
+    t23 = t10 * t21
+    t23 = t28 + t23
+    t25 = t30 + qd[4]
+    t28 = t15 * t25
+    t30 = t12 * t19
+    t31 = t14 * t34
+    t30 = t30 - t31
+    t31 = t10 * t30
+    t28 = t28 - t31
+    t31 = 0.088 * t28
+    t32 = t28 * t31
+    t19 = t14 * t19
+    t33 = t12 * t34
+    t19 = t19 + t33
+    t33 = t19 + qd[5]
+    t34 = 0.088 * t33
+    t35 = t33 * t34
+    t32 = t32 + t35
+    t23 = t23 - t32
+    t32 = t17 * t23
+    t29 = t14 * t29
+    t20 = t12 * t20
+    t20 = t29 + t20
+    t24 = t24 + qdd[4]
+    t29 = t15 * t24
+    t35 = t12 * t27
+    t36 = t14 * t26
+    t35 = t35 - t36
+    t19 = t19 * qd[4]
+    t19 = t35 - t19
+    t35 = t10 * t19
+    t29 = t29 - t35
+    t35 = t15 * t30
+    t25 = t10 * t25
+    t25 = t35 + t25
+    t35 = t25 * qd[5]
+    t29 = t29 - t35
+    t35 = 0.088 * t29
+    t20 = t20 - t35
+    t34 = t25 * t34
+    t20 = t20 + t34
+    t34 = t8 * t20
+    t32 = t32 + t34
+    t27 = t14 * t27
+    t26 = t12 * t26
+    t26 = t27 + t26
+    t27 = t30 * qd[4]
+    t26 = t26 + t27
+    t26 = t26 + qdd[5]
+    t27 = t17 * t26
+    t19 = t15 * t19
+    t24 = t10 * t24
+    t19 = t19 + t24
+    t24 = t28 * qd[5]
+    t19 = t19 + t24
+    t24 = t8 * t19
+    t24 = t27 - t24
+    t27 = t17 * t25
+    t30 = t8 * t33
+    t27 = t27 + t30
+    t30 = t27 * qd[6]
+    t24 = t24 - t30
+    t30 = 0.1654 * t24
+    t30 = t32 + t30
+    t28 = qd[6] - t28
+    t32 = 0.1654 * t27
+    t34 = t28 * t32
+    t30 = t30 + t34
+    t34 = t18 * t30
+    t16 = (-0.7071067811865475) * t16
+    t2 = 0.7071067811865476 * t2
+    t2 = t16 + t2
+    t16 = t17 * t20
+    t20 = t8 * t23
+    t16 = t16 - t20
+    t19 = t17 * t19
+    t20 = t8 * t26
+    t19 = t19 + t20
+    t20 = t17 * t33
+    t23 = t8 * t25
+    t20 = t20 - t23
+    t23 = t20 * qd[6]
+    t19 = t19 + t23
+    t23 = 0.1654 * t19
+    t16 = t16 - t23
+    t23 = 0.1654 * t20
+    t28 = t28 * t23
+    t16 = t16 + t28
+    t28 = t2 * t16
+    t28 = t34 + t28
+    t4 = t4 * t15
+    t13 = t13 * t10
+    t4 = t4 - t13
+    t13 = t15 * t21
+    t21 = t10 * t22
+    t13 = t13 - t21
+    t21 = 0.088 * t26
+    t13 = t13 + t21
+    t21 = t25 * t31
+    t13 = t13 + t21
+    t21 = t27 * t32
+    t20 = t20 * t23
+    t20 = t21 + t20
+    t13 = t13 + t20
+    t20 = t4 * t13
+    t20 = t28 + t20
+    t21 = t5 * t1
+    t22 = t21 * t3
+    t23 = t0 * t6
+    t22 = t22 + t23
+    t23 = t22 * t7
+    t5 = t5 * t9
+    t25 = t5 * t11
+    t23 = t23 + t25
+    t25 = t23 * t12
+    t0 = t0 * t3
+    t21 = t21 * t6
+    t0 = t0 - t21
+    t21 = t0 * t14
+    t21 = t25 + t21
+    t25 = t21 * t15
+    t5 = t5 * t7
+    t22 = t22 * t11
+    t5 = t5 - t22
+    t22 = t5 * t10
+    t22 = t25 + t22
+    t25 = t22 * t17
+    t0 = t0 * t12
+    t23 = t23 * t14
+    t0 = t0 - t23
+    t23 = t0 * t8
+    t23 = t25 - t23
+    t25 = 0.7071067811865476 * t23
+    t22 = t22 * t8
+    t0 = t0 * t17
+    t0 = t22 + t0
+    t22 = (-0.7071067811865475) * t0
+    t22 = t25 - t22
+    t25 = 0.7071067811865476 * t22
+    t23 = 0.7071067811865475 * t23
+    t0 = 0.7071067811865476 * t0
+    t0 = t23 - t0
+    t23 = 0.7071067811865475 * t0
+    t23 = t25 + t23
+    t25 = t23 * t30
+    t22 = (-0.7071067811865475) * t22
+    t0 = 0.7071067811865476 * t0
+    t0 = t22 + t0
+    t22 = t0 * t16
+    t22 = t25 + t22
+    t5 = t5 * t15
+    t21 = t21 * t10
+    t5 = t5 - t21
+    t21 = t5 * t13
+    t21 = t22 + t21
+    t22 = t1 * t11
+    t3 = t9 * t3
+    t25 = t3 * t7
+    t22 = t22 - t25
+    t25 = t22 * t12
+    t6 = t9 * t6
+    t9 = t6 * t14
+    t9 = t25 + t9
+    t25 = t9 * t15
+    t3 = t3 * t11
+    t1 = t1 * t7
+    t1 = t3 + t1
+    t3 = t1 * t10
+    t3 = t25 + t3
+    t7 = t3 * t17
+    t6 = t6 * t12
+    t11 = t22 * t14
+    t6 = t6 - t11
+    t11 = t6 * t8
+    t7 = t7 - t11
+    t11 = 0.7071067811865476 * t7
+    t3 = t3 * t8
+    t6 = t6 * t17
+    t3 = t3 + t6
+    t6 = (-0.7071067811865475) * t3
+    t6 = t11 - t6
+    t8 = 0.7071067811865476 * t6
+    t7 = 0.7071067811865475 * t7
+    t3 = 0.7071067811865476 * t3
+    t3 = t7 - t3
+    t7 = 0.7071067811865475 * t3
+    t7 = t8 + t7
+    t8 = t7 * t30
+    t6 = (-0.7071067811865475) * t6
+    t3 = 0.7071067811865476 * t3
+    t3 = t6 + t3
+    t6 = t3 * t16
+    t6 = t8 + t6
+    t1 = t1 * t15
+    t8 = t9 * t10
+    t1 = t1 - t8
+    t8 = t1 * t13
+    t6 = t6 + t8
+    t8 = t18 * t19
+    t2 = t2 * t24
+    t2 = t8 + t2
+    t8 = qdd[6] - t29
+    t4 = t4 * t8
+    t2 = t2 - t4
+    t4 = t23 * t19
+    t0 = t0 * t24
+    t0 = t4 + t0
+    t4 = t5 * t8
     t0 = t0 - t4
-    t4 = t32 * qdd[4]
-    t0 = t0 + t4
-    t4 = t40 * qdd[5]
-    t0 = t0 - t4
-    t4 = t36 * qdd[6]
-    t0 = t0 - t4
-    t4 = qd[2] * t62
-    t7 = qd[1] * t57
-    t4 = t4 - t7
-    t7 = qd[3] * t25
-    t4 = t4 + t7
-    t7 = qd[4] * t26
-    t4 = t4 + t7
-    t7 = qd[5] * t30
-    t4 = t4 + t7
-    t7 = qd[6] * t33
-    t4 = t4 - t7
-    t0 = t0 + t4
-    t1 = t1 * qdd[2]
-    t1 = qdd[0] + t1
-    t4 = t15 * qdd[3]
-    t1 = t1 - t4
-    t4 = t11 * qdd[4]
-    t1 = t1 + t4
-    t4 = t38 * qdd[5]
-    t1 = t1 - t4
-    t4 = t20 * qdd[6]
-    t1 = t1 - t4
-    t4 = qd[4] * t5
-    t5 = qd[2] * t23
-    t7 = qd[3] * t50
-    t5 = t5 + t7
-    t4 = t4 - t5
-    t5 = qd[5] * t8
-    t4 = t4 - t5
-    t5 = qd[6] * t13
-    t4 = t4 - t5
-    t1 = t1 + t4
-    _a = (t21, t2, t6, t3, t0, t1)
+    t4 = t7 * t19
+    t3 = t3 * t24
+    t3 = t4 + t3
+    t1 = t1 * t8
+    t1 = t3 - t1
+    _a = (t20, t21, t6, t2, t0, t1)
     return np.array(_a)
 
 
 _frame_acceleration_panda_rightfinger_constants = _constants(
-    -0.316, 0.333, 0.0825, -0.0825, 0.384, 0.088, 0.1654)
+    0.7071067811865476, -0.7071067811865475, 0.7071067811865475, -0.316, 0.0825, 0.384, -0.0825, 0.088,
+    0.1654)
 
 
 def _frame_acceleration_panda_rightfinger_chunk(x, t, s, y):
@@ -16082,682 +11423,385 @@ def _frame_acceleration_panda_rightfinger_chunk(x, t, s, y):
     (q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qdd_0, qdd_1, qdd_2,
      qdd_3, qdd_4, qdd_5, qdd_6) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6 = _frame_acceleration_panda_rightfinger_constants
+    k0, k1, k2, k3, k4, k5, k6, k7, k8 = _frame_acceleration_panda_rightfinger_constants
     cos(q_0, t0)
     cos(q_1, t1)
-    multiply(k0, t1, t2)
-    subtract(k1, t2, t2)
-    sin(q_1, t3)
-    cos(q_2, t4)
-    multiply(t3, t4, t5)
-    multiply(k2, t5, t6)
-    subtract(t2, t6, t6)
-    sin(q_3, t7)
-    multiply(t1, t7, t8)
-    cos(q_3, t9)
-    multiply(t5, t9, t10)
-    subtract(t8, t10, t8)
-    multiply(k3, t8, t10)
-    multiply(t5, t7, t11)
-    multiply(t1, t9, t12)
-    add(t11, t12, t11)
-    multiply(k4, t11, t12)
-    add(t10, t12, t10)
-    add(t6, t10, t10)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    sin(q_0, t5)
+    sin(q_2, t6)
+    multiply(t5, t6, t7)
+    subtract(t4, t7, t4)
+    cos(q_3, t7)
+    multiply(t4, t7, t8)
+    sin(q_1, t9)
+    multiply(t0, t9, t10)
+    sin(q_3, t11)
+    multiply(t10, t11, t12)
+    add(t8, t12, t8)
     cos(q_4, t12)
     multiply(t8, t12, t13)
-    sin(q_2, t14)
-    multiply(t3, t14, t15)
-    sin(q_4, t16)
-    multiply(t15, t16, t17)
-    add(t13, t17, t13)
-    cos(q_5, t17)
-    multiply(t13, t17, t18)
-    sin(q_5, t19)
-    multiply(t11, t19, t20)
-    add(t18, t20, t18)
-    multiply(k5, t18, t18)
-    add(t10, t18, t18)
-    multiply(t11, t17, t20)
-    multiply(t13, t19, t21)
-    subtract(t20, t21, t20)
-    multiply(k6, t20, t21)
-    subtract(t18, t21, t21)
-    subtract(t21, k1, t22)
-    multiply(t0, t22, t23)
-    multiply(t23, qdd_1, t23)
-    sin(q_0, t24)
-    multiply(t24, t1, t25)
-    multiply(t25, t4, t26)
-    multiply(t0, t14, t27)
-    add(t26, t27, t26)
-    multiply(k2, t26, t27)
-    multiply(t24, t3, t28)
-    multiply(k0, t28, t29)
-    subtract(t27, t29, t27)
-    multiply(t26, t9, t30)
-    multiply(t28, t7, t31)
-    add(t30, t31, t30)
-    multiply(k3, t30, t31)
-    multiply(t28, t9, t32)
-    multiply(t26, t7, t33)
-    subtract(t32, t33, t32)
-    multiply(k4, t32, t33)
-    add(t31, t33, t31)
-    add(t27, t31, t31)
-    multiply(t30, t12, t33)
-    multiply(t0, t4, t34)
-    multiply(t25, t14, t35)
-    subtract(t34, t35, t34)
-    multiply(t34, t16, t35)
-    add(t33, t35, t33)
-    multiply(t33, t17, t35)
-    multiply(t32, t19, t36)
-    add(t35, t36, t35)
-    multiply(k5, t35, t35)
-    add(t31, t35, t35)
-    multiply(t32, t17, t36)
-    multiply(t33, t19, t37)
-    subtract(t36, t37, t36)
-    multiply(k6, t36, t37)
-    subtract(t35, t37, t37)
-    multiply(t37, qdd_0, t38)
-    subtract(t23, t38, t23)
-    subtract(t21, t2, t2)
-    multiply(t28, t2, t38)
-    add(t37, t29, t29)
-    multiply(t1, t29, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_2, t38)
-    add(t23, t38, t23)
-    subtract(t37, t27, t27)
-    multiply(t15, t27, t38)
-    subtract(t21, t6, t6)
-    multiply(t34, t6, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_3, t38)
-    add(t23, t38, t23)
-    subtract(t21, t10, t10)
-    multiply(t32, t10, t38)
-    subtract(t37, t31, t31)
-    multiply(t11, t31, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, qdd_4, t38)
-    add(t23, t38, t23)
-    multiply(t15, t12, t38)
-    multiply(t8, t16, t39)
-    subtract(t38, t39, t38)
-    multiply(t38, t31, t39)
-    multiply(t34, t12, t40)
-    multiply(t30, t16, t41)
-    subtract(t40, t41, t40)
-    multiply(t40, t10, t41)
-    subtract(t39, t41, t39)
-    multiply(t39, qdd_5, t39)
-    add(t23, t39, t23)
-    subtract(t37, t35, t35)
-    multiply(t20, t35, t39)
-    subtract(t21, t18, t21)
-    multiply(t36, t21, t18)
-    subtract(t39, t18, t39)
-    multiply(t39, qdd_6, t39)
-    add(t23, t39, t23)
-    multiply(t3, qd_1, t18)
-    multiply(k0, t18, t39)
-    multiply(t1, qd_1, t41)
-    multiply(t4, t41, t42)
-    multiply(t14, qd_2, t43)
-    multiply(t3, t43, t44)
-    subtract(t42, t44, t42)
-    multiply(k2, t42, t44)
-    subtract(t39, t44, t44)
-    multiply(t9, qd_3, t45)
-    multiply(t1, t45, t46)
-    multiply(t7, t18, t47)
-    subtract(t46, t47, t46)
-    multiply(t9, t42, t47)
-    multiply(t7, qd_3, t48)
-    multiply(t5, t48, t49)
-    subtract(t47, t49, t47)
-    subtract(t46, t47, t46)
-    multiply(k3, t46, t47)
-    multiply(t7, t42, t42)
-    multiply(t5, t45, t5)
-    add(t42, t5, t42)
-    multiply(t9, t18, t5)
-    multiply(t1, t48, t49)
-    add(t5, t49, t5)
-    subtract(t42, t5, t42)
-    multiply(k4, t42, t5)
-    add(t47, t5, t47)
-    add(t44, t47, t47)
-    multiply(t12, t46, t5)
-    multiply(t16, qd_4, t49)
-    multiply(t8, t49, t50)
-    subtract(t5, t50, t5)
-    multiply(t14, t41, t50)
-    multiply(t4, qd_2, t51)
-    multiply(t3, t51, t52)
-    add(t50, t52, t50)
-    multiply(t16, t50, t52)
-    multiply(t12, qd_4, t53)
-    multiply(t15, t53, t54)
-    add(t52, t54, t52)
-    add(t5, t52, t5)
-    multiply(t17, t5, t52)
-    multiply(t19, qd_5, t54)
-    multiply(t13, t54, t55)
-    subtract(t52, t55, t52)
-    multiply(t19, t42, t55)
-    multiply(t17, qd_5, t56)
-    multiply(t11, t56, t57)
-    add(t55, t57, t55)
-    add(t52, t55, t52)
-    multiply(k5, t52, t52)
-    add(t47, t52, t52)
-    multiply(t17, t42, t55)
-    multiply(t11, t54, t57)
-    subtract(t55, t57, t55)
-    multiply(t19, t5, t5)
-    multiply(t13, t56, t13)
-    add(t5, t13, t5)
-    subtract(t55, t5, t55)
-    multiply(k6, t55, t5)
-    subtract(t52, t5, t5)
-    multiply(t0, t5, t13)
-    multiply(t24, qd_0, t57)
-    multiply(t22, t57, t58)
-    subtract(t13, t58, t13)
-    multiply(qd_1, t13, t13)
-    multiply(t0, qd_0, t58)
-    multiply(t1, t58, t59)
-    multiply(t24, t18, t60)
-    subtract(t59, t60, t59)
-    multiply(t4, t59, t60)
-    multiply(t25, t43, t61)
-    subtract(t60, t61, t60)
-    multiply(t0, t51, t61)
-    multiply(t14, t57, t62)
-    subtract(t61, t62, t61)
-    add(t60, t61, t60)
-    multiply(k2, t60, t61)
-    multiply(t3, t58, t62)
-    multiply(t24, t41, t63)
-    add(t62, t63, t62)
-    multiply(k0, t62, t63)
-    subtract(t61, t63, t61)
-    multiply(t9, t60, t64)
-    multiply(t26, t48, t65)
-    subtract(t64, t65, t64)
-    multiply(t7, t62, t65)
-    multiply(t28, t45, t66)
-    add(t65, t66, t65)
-    add(t64, t65, t64)
-    multiply(k3, t64, t65)
-    multiply(t9, t62, t66)
-    multiply(t28, t48, t67)
-    subtract(t66, t67, t66)
-    multiply(t7, t60, t60)
-    multiply(t26, t45, t26)
-    add(t60, t26, t60)
-    subtract(t66, t60, t66)
-    multiply(k4, t66, t26)
-    add(t65, t26, t65)
-    add(t61, t65, t65)
-    multiply(t12, t64, t26)
-    multiply(t30, t49, t60)
-    subtract(t26, t60, t26)
-    multiply(t34, t53, t60)
-    multiply(t4, t57, t67)
-    multiply(t0, t43, t68)
-    add(t67, t68, t67)
-    multiply(t14, t59, t59)
-    multiply(t25, t51, t25)
-    add(t59, t25, t59)
-    add(t67, t59, t67)
-    multiply(t16, t67, t25)
-    subtract(t60, t25, t60)
-    add(t26, t60, t26)
-    multiply(t17, t26, t25)
-    multiply(t33, t54, t59)
-    subtract(t25, t59, t25)
-    multiply(t19, t66, t59)
-    multiply(t32, t56, t60)
-    add(t59, t60, t59)
-    add(t25, t59, t25)
-    multiply(k5, t25, t25)
-    add(t65, t25, t25)
-    multiply(t17, t66, t59)
-    multiply(t32, t54, t60)
-    subtract(t59, t60, t59)
-    multiply(t19, t26, t26)
-    multiply(t33, t56, t33)
-    add(t26, t33, t26)
-    subtract(t59, t26, t59)
-    multiply(k6, t59, t26)
-    subtract(t25, t26, t26)
-    multiply(qd_0, t26, t33)
-    subtract(t13, t33, t13)
-    multiply(t2, t62, t33)
-    subtract(t5, t39, t39)
-    multiply(t28, t39, t60)
-    add(t33, t60, t33)
-    add(t26, t63, t63)
-    multiply(t1, t63, t60)
-    multiply(t29, t18, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_2, t33, t33)
-    add(t13, t33, t13)
-    multiply(t27, t50, t33)
-    subtract(t26, t61, t61)
-    multiply(t15, t61, t60)
-    add(t33, t60, t33)
-    subtract(t5, t44, t44)
-    multiply(t34, t44, t60)
-    multiply(t6, t67, t68)
-    subtract(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_3, t33, t33)
-    add(t13, t33, t13)
-    multiply(t10, t66, t33)
-    subtract(t5, t47, t47)
-    multiply(t32, t47, t60)
-    add(t33, t60, t33)
-    multiply(t31, t42, t60)
-    subtract(t26, t65, t65)
-    multiply(t11, t65, t68)
-    add(t60, t68, t60)
-    subtract(t33, t60, t33)
-    multiply(qd_4, t33, t33)
-    add(t13, t33, t13)
-    multiply(t12, t50, t33)
-    multiply(t15, t49, t60)
-    subtract(t33, t60, t33)
-    multiply(t16, t46, t46)
-    multiply(t8, t53, t8)
-    add(t46, t8, t46)
-    subtract(t33, t46, t33)
-    multiply(t31, t33, t8)
-    multiply(t38, t65, t46)
-    add(t8, t46, t8)
-    multiply(t40, t47, t46)
-    multiply(t12, t67, t60)
-    multiply(t34, t49, t68)
-    add(t60, t68, t60)
-    multiply(t16, t64, t64)
-    multiply(t30, t53, t30)
-    add(t64, t30, t64)
-    add(t60, t64, t60)
-    multiply(t10, t60, t30)
-    subtract(t46, t30, t46)
-    subtract(t8, t46, t8)
-    multiply(qd_5, t8, t8)
-    add(t13, t8, t13)
-    multiply(t35, t55, t8)
-    subtract(t26, t25, t25)
-    multiply(t20, t25, t30)
-    add(t8, t30, t8)
-    multiply(t21, t59, t30)
-    subtract(t5, t52, t52)
-    multiply(t36, t52, t46)
-    add(t30, t46, t30)
-    subtract(t8, t30, t8)
-    multiply(qd_6, t8, t8)
-    add(t13, t8, t13)
-    add(t23, t13, a_0)
-    multiply(t0, t1, t8)
-    multiply(t8, t4, t13)
-    multiply(t24, t14, t23)
-    subtract(t13, t23, t13)
-    multiply(k2, t13, t23)
-    multiply(t0, t3, t30)
-    multiply(k0, t30, t46)
-    subtract(t23, t46, t23)
-    multiply(t13, t9, t64)
-    multiply(t30, t7, t68)
-    add(t64, t68, t64)
-    multiply(k3, t64, t68)
-    multiply(t30, t9, t69)
-    multiply(t13, t7, t70)
-    subtract(t69, t70, t69)
-    multiply(k4, t69, t70)
-    add(t68, t70, t68)
-    add(t23, t68, t68)
-    multiply(t64, t12, t70)
-    multiply(t8, t14, t71)
-    multiply(t24, t4, t72)
-    add(t71, t72, t71)
-    multiply(t71, t16, t72)
-    subtract(t70, t72, t70)
-    multiply(t70, t17, t72)
-    multiply(t69, t19, t73)
-    add(t72, t73, t72)
-    multiply(k5, t72, t72)
-    add(t68, t72, t72)
-    multiply(t69, t17, t73)
-    multiply(t70, t19, t74)
-    subtract(t73, t74, t73)
-    multiply(k6, t73, t74)
-    subtract(t72, t74, t74)
-    multiply(t74, qdd_0, t75)
-    multiply(t24, t22, t76)
-    multiply(t76, qdd_1, t76)
-    add(t75, t76, t75)
-    add(t74, t46, t46)
-    multiply(t1, t46, t76)
-    multiply(t30, t2, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_2, t76)
-    add(t75, t76, t75)
-    subtract(t74, t23, t23)
-    multiply(t15, t23, t76)
-    multiply(t71, t6, t77)
-    add(t76, t77, t76)
-    multiply(t76, qdd_3, t76)
-    subtract(t75, t76, t75)
-    subtract(t74, t68, t68)
-    multiply(t11, t68, t76)
-    multiply(t69, t10, t77)
-    subtract(t76, t77, t76)
-    multiply(t76, qdd_4, t76)
-    add(t75, t76, t75)
-    multiply(t38, t68, t76)
-    multiply(t64, t16, t77)
-    multiply(t71, t12, t78)
-    add(t77, t78, t77)
-    multiply(t77, t10, t78)
-    add(t76, t78, t76)
-    multiply(t76, qdd_5, t76)
-    subtract(t75, t76, t75)
-    multiply(t73, t21, t76)
-    subtract(t74, t72, t72)
-    multiply(t20, t72, t78)
-    subtract(t76, t78, t76)
-    multiply(t76, qdd_6, t76)
-    add(t75, t76, t75)
-    multiply(t0, t41, t41)
-    multiply(t3, t57, t3)
-    subtract(t41, t3, t41)
-    multiply(t7, t41, t3)
-    multiply(t30, t45, t76)
-    add(t3, t76, t3)
-    multiply(t1, t57, t76)
-    multiply(t0, t18, t78)
-    add(t76, t78, t76)
-    multiply(t4, t76, t78)
-    multiply(t8, t43, t79)
-    add(t78, t79, t78)
-    multiply(t14, t58, t79)
-    multiply(t24, t51, t80)
-    add(t79, t80, t79)
-    add(t78, t79, t78)
-    multiply(t9, t78, t79)
-    multiply(t13, t48, t80)
-    add(t79, t80, t79)
-    subtract(t3, t79, t3)
-    multiply(k3, t3, t79)
-    multiply(t9, t41, t9)
-    multiply(t30, t48, t48)
-    subtract(t9, t48, t9)
-    multiply(t13, t45, t13)
-    multiply(t7, t78, t7)
-    subtract(t13, t7, t13)
-    subtract(t9, t13, t9)
-    multiply(k4, t9, t7)
-    add(t79, t7, t79)
-    multiply(k2, t78, t78)
-    multiply(k0, t41, t7)
-    add(t78, t7, t78)
-    subtract(t79, t78, t79)
-    multiply(t12, t3, t13)
-    multiply(t64, t49, t45)
-    subtract(t13, t45, t13)
-    multiply(t8, t51, t8)
-    multiply(t14, t76, t14)
-    subtract(t8, t14, t8)
-    multiply(t4, t58, t4)
-    multiply(t24, t43, t43)
-    subtract(t4, t43, t4)
-    add(t8, t4, t8)
-    multiply(t16, t8, t4)
-    multiply(t71, t53, t14)
-    add(t4, t14, t4)
-    subtract(t13, t4, t13)
-    multiply(t17, t13, t4)
-    multiply(t70, t54, t14)
-    subtract(t4, t14, t4)
-    multiply(t19, t9, t14)
-    multiply(t69, t56, t43)
-    add(t14, t43, t14)
-    add(t4, t14, t4)
-    multiply(k5, t4, t4)
-    add(t79, t4, t4)
-    multiply(t17, t9, t17)
-    multiply(t69, t54, t54)
-    subtract(t17, t54, t17)
-    multiply(t19, t13, t19)
-    multiply(t70, t56, t70)
-    add(t19, t70, t19)
-    subtract(t17, t19, t17)
-    multiply(k6, t17, t13)
-    subtract(t4, t13, t13)
-    multiply(qd_0, t13, t14)
-    multiply(t22, t58, t22)
-    multiply(t24, t5, t5)
-    add(t22, t5, t22)
-    multiply(qd_1, t22, t22)
-    add(t14, t22, t14)
-    add(t13, t7, t7)
-    multiply(t1, t7, t5)
-    multiply(t46, t18, t19)
-    subtract(t5, t19, t5)
-    multiply(t2, t41, t2)
-    multiply(t30, t39, t39)
-    add(t2, t39, t2)
-    subtract(t5, t2, t5)
-    multiply(qd_2, t5, t5)
-    add(t14, t5, t14)
-    multiply(t23, t50, t2)
-    add(t13, t78, t78)
-    multiply(t15, t78, t5)
-    add(t2, t5, t2)
-    multiply(t6, t8, t6)
-    multiply(t71, t44, t44)
-    add(t6, t44, t6)
-    add(t2, t6, t2)
-    multiply(qd_3, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t68, t42, t2)
-    subtract(t13, t79, t79)
-    multiply(t11, t79, t5)
-    add(t2, t5, t2)
-    multiply(t10, t9, t5)
-    multiply(t69, t47, t6)
-    add(t5, t6, t5)
-    subtract(t2, t5, t2)
-    multiply(qd_4, t2, t2)
-    add(t14, t2, t14)
-    multiply(t68, t33, t2)
-    multiply(t38, t79, t5)
-    add(t2, t5, t2)
-    multiply(t16, t3, t16)
-    multiply(t64, t53, t64)
-    add(t16, t64, t16)
-    multiply(t12, t8, t12)
-    multiply(t71, t49, t49)
-    subtract(t12, t49, t12)
-    add(t16, t12, t16)
-    multiply(t10, t16, t10)
-    multiply(t77, t47, t47)
-    add(t10, t47, t10)
-    add(t2, t10, t2)
-    multiply(qd_5, t2, t2)
-    subtract(t14, t2, t14)
-    multiply(t21, t17, t21)
-    multiply(t73, t52, t52)
-    add(t21, t52, t21)
-    multiply(t72, t55, t2)
-    subtract(t13, t4, t4)
-    multiply(t20, t4, t3)
-    add(t2, t3, t2)
-    subtract(t21, t2, t21)
-    multiply(qd_6, t21, t21)
-    add(t14, t21, t14)
-    add(t75, t14, a_1)
-    multiply(t30, t29, t2)
-    multiply(t28, t46, t3)
-    subtract(t2, t3, t2)
-    multiply(t2, qdd_2, t2)
-    multiply(t24, t37, t3)
-    multiply(t0, t74, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_1, t3)
-    subtract(t2, t3, t2)
-    multiply(t71, t27, t3)
-    multiply(t34, t23, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_3, t3)
-    add(t2, t3, t2)
-    multiply(t69, t31, t3)
-    multiply(t32, t68, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_4, t3)
-    add(t2, t3, t2)
-    multiply(t77, t31, t3)
-    multiply(t40, t68, t5)
-    add(t3, t5, t3)
-    multiply(t3, qdd_5, t3)
-    add(t2, t3, t2)
-    multiply(t36, t72, t3)
-    multiply(t73, t35, t5)
-    subtract(t3, t5, t3)
-    multiply(t3, qdd_6, t3)
-    add(t2, t3, t2)
-    multiply(t29, t41, t29)
-    multiply(t30, t63, t63)
-    add(t29, t63, t29)
-    multiply(t46, t62, t46)
-    multiply(t28, t7, t7)
-    add(t46, t7, t46)
-    subtract(t29, t46, t29)
-    multiply(qd_2, t29, t29)
-    multiply(t37, t58, t37)
-    multiply(t24, t26, t26)
-    add(t37, t26, t37)
-    multiply(t0, t13, t13)
-    multiply(t74, t57, t74)
-    subtract(t13, t74, t13)
-    add(t37, t13, t37)
-    multiply(qd_1, t37, t37)
-    subtract(t29, t37, t29)
-    multiply(t27, t8, t27)
-    multiply(t71, t61, t61)
-    add(t27, t61, t27)
-    multiply(t34, t78, t78)
-    multiply(t23, t67, t23)
-    subtract(t78, t23, t78)
-    add(t27, t78, t27)
-    multiply(qd_3, t27, t27)
-    add(t29, t27, t29)
-    multiply(t31, t9, t3)
-    multiply(t69, t65, t5)
-    add(t3, t5, t3)
-    multiply(t68, t66, t5)
-    multiply(t32, t79, t6)
-    add(t5, t6, t5)
-    subtract(t3, t5, t3)
-    multiply(qd_4, t3, t3)
-    add(t29, t3, t29)
-    multiply(t31, t16, t31)
-    multiply(t77, t65, t65)
-    add(t31, t65, t31)
-    multiply(t40, t79, t79)
-    multiply(t68, t60, t68)
-    subtract(t79, t68, t79)
-    add(t31, t79, t31)
-    multiply(qd_5, t31, t31)
+    multiply(t2, t6, t2)
+    multiply(t5, t3, t14)
+    add(t2, t14, t2)
+    sin(q_4, t14)
+    multiply(t2, t14, t15)
+    subtract(t13, t15, t13)
+    cos(q_5, t15)
+    multiply(t13, t15, t16)
+    multiply(t10, t7, t10)
+    multiply(t4, t11, t4)
+    subtract(t10, t4, t10)
+    sin(q_5, t4)
+    multiply(t10, t4, t17)
+    add(t16, t17, t16)
+    cos(q_6, t17)
+    multiply(t16, t17, t18)
+    multiply(t8, t14, t8)
+    multiply(t2, t12, t2)
+    add(t8, t2, t8)
+    sin(q_6, t2)
+    multiply(t8, t2, t19)
+    add(t18, t19, t18)
+    multiply(k0, t18, t19)
+    multiply(t8, t17, t8)
+    multiply(t16, t2, t16)
+    subtract(t8, t16, t8)
+    multiply(k1, t8, t16)
+    add(t19, t16, t19)
+    multiply(k0, t19, t16)
+    multiply(k2, t18, t18)
+    multiply(k0, t8, t8)
+    add(t18, t8, t18)
+    multiply(k2, t18, t8)
+    add(t16, t8, t16)
+    multiply(t1, qd_0, t8)
+    multiply(t9, qd_0, t20)
+    multiply(k3, t20, t21)
+    multiply(t8, t21, t22)
+    multiply(k3, qdd_1, t23)
+    subtract(t22, t23, t22)
+    multiply(t3, t22, t23)
+    multiply(t9, qdd_0, t24)
+    multiply(t8, qd_1, t25)
+    add(t24, t25, t24)
+    multiply(k3, t24, t25)
+    multiply(k3, qd_1, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    multiply(t6, t25, t27)
+    subtract(t23, t27, t23)
+    multiply(t6, t20, t27)
+    multiply(t3, qd_1, t28)
+    add(t27, t28, t27)
+    multiply(k4, t27, t28)
+    multiply(t27, t28, t29)
+    add(t8, qd_2, t8)
+    multiply(k4, t8, t30)
+    multiply(t8, t30, t31)
     add(t29, t31, t29)
-    multiply(t72, t59, t72)
-    multiply(t36, t4, t4)
-    add(t72, t4, t72)
-    multiply(t35, t17, t35)
-    multiply(t73, t25, t25)
-    add(t35, t25, t35)
-    subtract(t72, t35, t72)
-    multiply(qd_6, t72, t72)
-    add(t29, t72, t29)
-    add(t2, t29, a_2)
-    multiply(t30, qdd_2, t30)
-    multiply(t24, qdd_1, t24)
-    subtract(t30, t24, t30)
-    multiply(t71, qdd_3, t71)
-    add(t30, t71, t30)
-    multiply(t69, qdd_4, t69)
-    add(t30, t69, t30)
-    multiply(t77, qdd_5, t77)
-    add(t30, t77, t30)
-    multiply(t73, qdd_6, t73)
-    subtract(t30, t73, t30)
-    multiply(qd_2, t41, t41)
-    multiply(qd_1, t58, t58)
-    subtract(t41, t58, t41)
-    multiply(qd_3, t8, t8)
-    add(t41, t8, t41)
-    multiply(qd_4, t9, t9)
-    add(t41, t9, t41)
-    multiply(qd_5, t16, t16)
-    add(t41, t16, t41)
-    multiply(qd_6, t17, t17)
-    subtract(t41, t17, t41)
-    add(t30, t41, a_3)
-    multiply(t0, qdd_1, t0)
-    multiply(t28, qdd_2, t28)
-    add(t0, t28, t0)
-    multiply(t34, qdd_3, t34)
-    subtract(t0, t34, t0)
-    multiply(t32, qdd_4, t32)
-    add(t0, t32, t0)
-    multiply(t40, qdd_5, t40)
-    subtract(t0, t40, t0)
-    multiply(t36, qdd_6, t36)
-    subtract(t0, t36, t0)
-    multiply(qd_2, t62, t62)
-    multiply(qd_1, t57, t57)
-    subtract(t62, t57, t62)
-    multiply(qd_3, t67, t67)
-    add(t62, t67, t62)
-    multiply(qd_4, t66, t66)
-    add(t62, t66, t62)
-    multiply(qd_5, t60, t60)
-    add(t62, t60, t62)
-    multiply(qd_6, t59, t59)
-    subtract(t62, t59, t62)
-    add(t0, t62, a_4)
-    multiply(t1, qdd_2, t1)
-    add(qdd_0, t1, t1)
-    multiply(t15, qdd_3, t15)
-    subtract(t1, t15, t1)
-    multiply(t11, qdd_4, t11)
-    add(t1, t11, t1)
-    multiply(t38, qdd_5, t38)
-    subtract(t1, t38, t1)
-    multiply(t20, qdd_6, t20)
-    subtract(t1, t20, t1)
-    multiply(qd_4, t42, t42)
-    multiply(qd_2, t18, t18)
-    multiply(qd_3, t50, t50)
-    add(t18, t50, t18)
-    subtract(t42, t18, t42)
-    multiply(qd_5, t33, t33)
-    subtract(t42, t33, t42)
-    multiply(qd_6, t55, t55)
-    subtract(t42, t55, t42)
-    add(t1, t42, a_5)
+    subtract(t23, t29, t23)
+    multiply(t7, t23, t29)
+    multiply(qd_1, t26, t26)
+    multiply(t20, t21, t21)
+    add(t26, t21, t26)
+    multiply(t6, t24, t21)
+    multiply(t3, qdd_1, t31)
+    add(t21, t31, t21)
+    multiply(t6, qd_1, t31)
+    multiply(t3, t20, t32)
+    subtract(t31, t32, t31)
+    multiply(t31, qd_2, t32)
+    subtract(t21, t32, t21)
+    multiply(k4, t21, t32)
+    subtract(t26, t32, t26)
+    multiply(t31, t30, t30)
+    add(t26, t30, t26)
+    multiply(t11, t26, t30)
+    add(t29, t30, t29)
+    subtract(qdd_3, t21, t21)
+    multiply(k5, t21, t30)
+    subtract(t29, t30, t29)
+    multiply(t7, t8, t30)
+    multiply(t11, t31, t32)
+    subtract(t30, t32, t30)
+    multiply(t7, t31, t32)
+    multiply(t11, t8, t8)
+    add(t32, t8, t32)
+    multiply(k5, t32, t8)
+    multiply(k6, t30, t33)
+    subtract(t8, t33, t8)
+    multiply(t30, t8, t33)
+    subtract(qd_3, t27, t34)
+    multiply(k6, t34, t35)
+    multiply(t34, t35, t36)
+    subtract(t33, t36, t33)
+    add(t29, t33, t29)
+    multiply(t12, t29, t33)
+    multiply(t6, qdd_1, t36)
+    multiply(t3, t24, t24)
+    subtract(t36, t24, t36)
+    multiply(t27, qd_2, t27)
+    add(t36, t27, t36)
+    multiply(t7, t36, t24)
+    multiply(t20, qd_1, t20)
+    multiply(t1, qdd_0, t27)
+    subtract(t20, t27, t20)
+    subtract(qdd_2, t20, t20)
+    multiply(t11, t20, t27)
+    add(t24, t27, t24)
+    multiply(t30, qd_3, t27)
+    add(t24, t27, t24)
+    multiply(k5, t24, t27)
+    multiply(t7, t20, t37)
+    multiply(t11, t36, t36)
+    subtract(t37, t36, t37)
+    multiply(t32, qd_3, t36)
+    subtract(t37, t36, t37)
+    multiply(k6, t37, t36)
+    subtract(t27, t36, t27)
+    multiply(k4, t20, t20)
+    multiply(t6, t22, t22)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    subtract(t20, t22, t20)
+    multiply(t31, t28, t31)
+    add(t20, t31, t20)
+    subtract(t27, t20, t27)
+    multiply(t32, t35, t35)
+    multiply(k5, t34, t20)
+    multiply(t30, t20, t22)
+    add(t35, t22, t35)
+    add(t27, t35, t27)
+    multiply(t14, t27, t22)
+    subtract(t33, t22, t33)
+    multiply(t15, t33, t22)
+    multiply(t7, t26, t26)
+    multiply(t11, t23, t23)
+    subtract(t26, t23, t26)
+    multiply(k6, t21, t23)
+    add(t26, t23, t26)
+    multiply(t34, t20, t20)
+    multiply(t32, t8, t8)
+    add(t20, t8, t20)
+    subtract(t26, t20, t26)
+    multiply(t4, t26, t8)
+    add(t22, t8, t22)
+    add(t30, qd_4, t30)
+    multiply(t15, t30, t8)
+    multiply(t12, t32, t20)
+    multiply(t14, t34, t23)
+    subtract(t20, t23, t20)
+    multiply(t4, t20, t23)
+    subtract(t8, t23, t8)
+    multiply(k7, t8, t23)
+    multiply(t8, t23, t25)
+    multiply(t14, t32, t32)
+    multiply(t12, t34, t34)
+    add(t32, t34, t32)
+    add(t32, qd_5, t28)
+    multiply(k7, t28, t31)
+    multiply(t28, t31, t34)
+    add(t25, t34, t25)
+    subtract(t22, t25, t22)
+    multiply(t17, t22, t25)
+    multiply(t14, t29, t29)
+    multiply(t12, t27, t27)
+    add(t29, t27, t29)
+    add(t37, qdd_4, t37)
+    multiply(t15, t37, t27)
+    multiply(t12, t24, t34)
+    multiply(t14, t21, t35)
+    subtract(t34, t35, t34)
+    multiply(t32, qd_4, t32)
+    subtract(t34, t32, t34)
+    multiply(t4, t34, t32)
+    subtract(t27, t32, t27)
+    multiply(t15, t20, t32)
+    multiply(t4, t30, t30)
+    add(t32, t30, t32)
+    multiply(t32, qd_5, t30)
+    subtract(t27, t30, t27)
+    multiply(k7, t27, t30)
+    subtract(t29, t30, t29)
+    multiply(t32, t31, t31)
+    add(t29, t31, t29)
+    multiply(t2, t29, t30)
+    add(t25, t30, t25)
+    multiply(t14, t24, t24)
+    multiply(t12, t21, t21)
+    add(t24, t21, t24)
+    multiply(t20, qd_4, t20)
+    add(t24, t20, t24)
+    add(t24, qdd_5, t24)
+    multiply(t17, t24, t20)
+    multiply(t15, t34, t34)
+    multiply(t4, t37, t37)
+    add(t34, t37, t34)
+    multiply(t8, qd_5, t21)
+    add(t34, t21, t34)
+    multiply(t2, t34, t21)
+    subtract(t20, t21, t20)
+    multiply(t17, t32, t21)
+    multiply(t2, t28, t30)
+    add(t21, t30, t21)
+    multiply(t21, qd_6, t30)
+    subtract(t20, t30, t20)
+    multiply(k8, t20, t30)
+    add(t25, t30, t25)
+    subtract(qd_6, t8, t8)
+    multiply(k8, t21, t30)
+    multiply(t8, t30, t31)
+    add(t25, t31, t25)
+    multiply(t16, t25, t31)
+    multiply(k1, t19, t19)
+    multiply(k0, t18, t18)
+    add(t19, t18, t19)
+    multiply(t17, t29, t29)
+    multiply(t2, t22, t22)
+    subtract(t29, t22, t29)
+    multiply(t17, t34, t34)
+    multiply(t2, t24, t18)
+    add(t34, t18, t34)
+    multiply(t17, t28, t28)
+    multiply(t2, t32, t18)
+    subtract(t28, t18, t28)
+    multiply(t28, qd_6, t18)
+    add(t34, t18, t34)
+    multiply(k8, t34, t18)
+    subtract(t29, t18, t29)
+    multiply(k8, t28, t18)
+    multiply(t8, t18, t8)
+    add(t29, t8, t29)
+    multiply(t19, t29, t8)
+    add(t31, t8, t31)
+    multiply(t10, t15, t10)
+    multiply(t13, t4, t13)
+    subtract(t10, t13, t10)
+    multiply(t15, t26, t26)
+    multiply(t4, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(k7, t24, t24)
+    add(t26, t24, t26)
+    multiply(t32, t23, t32)
+    add(t26, t32, t26)
+    multiply(t21, t30, t21)
+    multiply(t28, t18, t28)
+    add(t21, t28, t21)
+    add(t26, t21, t26)
+    multiply(t10, t26, t8)
+    add(t31, t8, a_0)
+    multiply(t5, t1, t8)
+    multiply(t8, t3, t13)
+    multiply(t0, t6, t18)
+    add(t13, t18, t13)
+    multiply(t13, t7, t18)
+    multiply(t5, t9, t5)
+    multiply(t5, t11, t21)
+    add(t18, t21, t18)
+    multiply(t18, t12, t21)
+    multiply(t0, t3, t0)
+    multiply(t8, t6, t8)
+    subtract(t0, t8, t0)
+    multiply(t0, t14, t8)
+    add(t21, t8, t21)
+    multiply(t21, t15, t8)
+    multiply(t5, t7, t5)
+    multiply(t13, t11, t13)
+    subtract(t5, t13, t5)
+    multiply(t5, t4, t13)
+    add(t8, t13, t8)
+    multiply(t8, t17, t13)
+    multiply(t0, t12, t0)
+    multiply(t18, t14, t18)
+    subtract(t0, t18, t0)
+    multiply(t0, t2, t18)
+    subtract(t13, t18, t13)
+    multiply(k0, t13, t18)
+    multiply(t8, t2, t8)
+    multiply(t0, t17, t0)
+    add(t8, t0, t8)
+    multiply(k1, t8, t0)
+    subtract(t18, t0, t18)
+    multiply(k0, t18, t0)
+    multiply(k2, t13, t13)
+    multiply(k0, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k2, t13, t8)
+    add(t0, t8, t0)
+    multiply(t0, t25, t8)
+    multiply(k1, t18, t18)
+    multiply(k0, t13, t13)
+    add(t18, t13, t18)
+    multiply(t18, t29, t13)
+    add(t8, t13, t8)
+    multiply(t5, t15, t5)
+    multiply(t21, t4, t21)
+    subtract(t5, t21, t5)
+    multiply(t5, t26, t13)
+    add(t8, t13, a_1)
+    multiply(t1, t11, t8)
+    multiply(t9, t3, t3)
+    multiply(t3, t7, t13)
+    subtract(t8, t13, t8)
+    multiply(t8, t12, t13)
+    multiply(t9, t6, t9)
+    multiply(t9, t14, t6)
+    add(t13, t6, t13)
+    multiply(t13, t15, t6)
+    multiply(t3, t11, t3)
+    multiply(t1, t7, t1)
+    add(t3, t1, t3)
+    multiply(t3, t4, t1)
+    add(t6, t1, t6)
+    multiply(t6, t17, t1)
+    multiply(t9, t12, t9)
+    multiply(t8, t14, t8)
+    subtract(t9, t8, t9)
+    multiply(t9, t2, t7)
+    subtract(t1, t7, t1)
+    multiply(k0, t1, t7)
+    multiply(t6, t2, t6)
+    multiply(t9, t17, t9)
+    add(t6, t9, t6)
+    multiply(k1, t6, t2)
+    subtract(t7, t2, t7)
+    multiply(k0, t7, t2)
+    multiply(k2, t1, t1)
+    multiply(k0, t6, t6)
+    subtract(t1, t6, t1)
+    multiply(k2, t1, t6)
+    add(t2, t6, t2)
+    multiply(t2, t25, t25)
+    multiply(k1, t7, t7)
+    multiply(k0, t1, t1)
+    add(t7, t1, t7)
+    multiply(t7, t29, t29)
+    add(t25, t29, t25)
+    multiply(t3, t15, t3)
+    multiply(t13, t4, t13)
+    subtract(t3, t13, t3)
+    multiply(t3, t26, t26)
+    add(t25, t26, a_2)
+    multiply(t16, t34, t16)
+    multiply(t19, t20, t19)
+    add(t16, t19, t16)
+    subtract(qdd_6, t27, t27)
+    multiply(t10, t27, t10)
+    subtract(t16, t10, a_3)
+    multiply(t0, t34, t0)
+    multiply(t18, t20, t18)
+    add(t0, t18, t0)
+    multiply(t5, t27, t5)
+    subtract(t0, t5, a_4)
+    multiply(t2, t34, t2)
+    multiply(t7, t20, t7)
+    add(t2, t7, t2)
+    multiply(t3, t27, t3)
+    subtract(t2, t3, a_5)
 
 
 def fk_jacobian_tcp(q):
@@ -23982,6 +19026,1635 @@ def _gravity_chunk(x, t, s, y):
     add(t1, t2, t1)
     multiply(k27, t1, t1)
     subtract(t6, t1, g_1)
+
+
+def bias(q, qd):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.
+
+    in  q [7]
+    in  qd [7]
+    out h [7]
+    788 ops: 438 mul, 338 add, 0 div, 12 trig
+    """
+    q = _array(q, 7, "q")
+    qd = _array(qd, 7, "qd")
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bias_chunk, (q, qd), 79, ((7,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = sin(q[1])
+    t1 = t0 * qd[0]
+    t2 = t1 * qd[1]
+    t3 = (-0.00398335888393552) * t2
+    t4 = cos(q[1])
+    t5 = t4 * qd[0]
+    t6 = t5 * qd[1]
+    t7 = 0.00850351162402155 * t6
+    t3 = t3 - t7
+    t7 = 0.026534991901690206 * qd[1]
+    t8 = 0.01026110182100817 * t1
+    t9 = 0.0007689361029464 * t5
+    t8 = t8 + t9
+    t7 = t7 - t8
+    t8 = t5 * t7
+    t9 = 0.0007689361029464 * qd[1]
+    t10 = (-0.00398335888393552) * t1
+    t11 = 0.028124284712194955 * t5
+    t10 = t10 + t11
+    t9 = t9 - t10
+    t10 = qd[1] * t9
+    t8 = t8 + t10
+    t3 = t3 - t8
+    t8 = (-0.0221804724897) * t4
+    t3 = t3 - t8
+    t8 = cos(q[2])
+    t10 = sin(q[2])
+    t11 = t10 * t1
+    t12 = t8 * qd[1]
+    t11 = t11 + t12
+    t12 = t11 * qd[2]
+    t13 = t8 * t6
+    t12 = t12 - t13
+    t13 = 0.05649492601407083 * t12
+    t14 = t10 * t6
+    t15 = t10 * qd[1]
+    t16 = t8 * t1
+    t15 = t15 - t16
+    t16 = t15 * qd[2]
+    t14 = t14 - t16
+    t16 = (-0.008248333140675744) * t14
+    t13 = t13 + t16
+    t16 = (-0.005487648106562256) * t2
+    t13 = t13 - t16
+    t16 = (-0.005487648106562256) * t15
+    t17 = (-0.004377257121839584) * t11
+    t16 = t16 + t17
+    t17 = t5 + qd[2]
+    t18 = 0.01824920229252011 * t17
+    t16 = t16 + t18
+    t18 = t11 * t16
+    t19 = (-0.008248333140675744) * t15
+    t20 = 0.05287838199960611 * t11
+    t19 = t19 + t20
+    t20 = (-0.004377257121839584) * t17
+    t19 = t19 + t20
+    t20 = t17 * t19
+    t18 = t18 - t20
+    t13 = t13 + t18
+    t18 = (-9.81) * t0
+    t20 = (-0.316) * t1
+    t21 = t5 * t20
+    t18 = t18 + t21
+    t21 = t10 * t18
+    t22 = (-0.316) * t6
+    t23 = (-0.316) * qd[1]
+    t24 = t5 * t23
+    t22 = t22 + t24
+    t24 = t8 * t22
+    t21 = t21 + t24
+    t24 = (-0.214708623208) * t21
+    t25 = (-9.81) * t4
+    t23 = qd[1] * t23
+    t20 = t1 * t20
+    t20 = t23 + t20
+    t20 = t25 - t20
+    t23 = 0.126729164208 * t20
+    t23 = t24 - t23
+    t13 = t13 + t23
+    t23 = cos(q[3])
+    t24 = t23 * t12
+    t25 = sin(q[3])
+    t26 = t25 * t2
+    t24 = t24 - t26
+    t26 = t23 * t17
+    t27 = t25 * t15
+    t26 = t26 - t27
+    t27 = t26 * qd[3]
+    t24 = t24 + t27
+    t27 = 0.06767727025085991 * t24
+    t28 = t25 * t12
+    t29 = t23 * t2
+    t28 = t28 + t29
+    t29 = t23 * t15
+    t30 = t25 * t17
+    t29 = t29 + t30
+    t30 = t29 * qd[3]
+    t28 = t28 + t30
+    t30 = 0.02771584317362585 * t28
+    t27 = t27 - t30
+    t30 = 0.0039053550262761003 * t14
+    t27 = t27 - t30
+    t30 = 0.0039053550262761003 * t29
+    t31 = (-0.0016444875773692705) * t26
+    t30 = t30 + t31
+    t31 = qd[3] - t11
+    t32 = 0.0775861490525396 * t31
+    t30 = t30 + t32
+    t32 = t26 * t30
+    t33 = 0.02771584317362585 * t29
+    t34 = 0.03239943042445132 * t26
+    t33 = t33 + t34
+    t34 = (-0.0016444875773692705) * t31
+    t33 = t33 + t34
+    t34 = t31 * t33
+    t32 = t32 - t34
+    t27 = t27 + t32
+    t32 = 0.0825 * t11
+    t34 = t15 * t32
+    t35 = 0.0825 * t2
+    t35 = t21 + t35
+    t34 = t34 - t35
+    t35 = 0.374644408005 * t34
+    t36 = 0.0825 * t17
+    t37 = t15 * t36
+    t38 = 0.0825 * t14
+    t38 = t20 + t38
+    t37 = t37 - t38
+    t38 = t23 * t37
+    t18 = t8 * t18
+    t22 = t10 * t22
+    t18 = t18 - t22
+    t22 = t11 * t32
+    t32 = t17 * t36
+    t22 = t22 + t32
+    t22 = t18 - t22
+    t32 = t25 * t22
+    t32 = t38 - t32
+    t36 = 0.09850206933 * t32
+    t35 = t35 + t36
+    t27 = t27 - t35
+    t35 = cos(q[4])
+    t36 = t35 * t24
+    t38 = sin(q[4])
+    t39 = t38 * t14
+    t36 = t36 + t39
+    t39 = t38 * t29
+    t40 = t35 * t31
+    t39 = t39 + t40
+    t40 = t39 * qd[4]
+    t36 = t36 - t40
+    t40 = 0.03942757095803552 * t36
+    t41 = t35 * t14
+    t42 = t38 * t24
+    t41 = t41 - t42
+    t42 = t35 * t29
+    t43 = t38 * t31
+    t42 = t42 - t43
+    t43 = t42 * qd[4]
+    t41 = t41 - t43
+    t43 = (-0.0015152444733270301) * t41
+    t40 = t40 + t43
+    t43 = (-0.004600245517563105) * t28
+    t40 = t40 - t43
+    t43 = (-0.004600245517563105) * t42
+    t44 = 0.0021640520520981297 * t39
+    t43 = t43 - t44
+    t44 = t26 + qd[4]
+    t45 = 0.010869510762828563 * t44
+    t43 = t43 + t45
+    t45 = t39 * t43
+    t46 = (-0.0015152444733270301) * t42
+    t47 = 0.03146037232526039 * t39
+    t46 = t46 - t47
+    t47 = 0.0021640520520981297 * t44
+    t46 = t46 + t47
+    t47 = t44 * t46
+    t45 = t45 + t47
+    t40 = t40 - t45
+    t45 = (-0.0825) * t14
+    t45 = t32 - t45
+    t47 = 0.384 * t31
+    t48 = t31 * t47
+    t49 = 0.384 * t29
+    t50 = (-0.0825) * t26
+    t49 = t49 - t50
+    t50 = t29 * t49
+    t48 = t48 + t50
+    t45 = t45 - t48
+    t48 = 0.05034347249 * t45
+    t22 = t23 * t22
+    t37 = t25 * t37
+    t22 = t22 + t37
+    t37 = 0.384 * t14
+    t37 = t22 + t37
+    t49 = t26 * t49
+    t50 = (-0.0825) * t31
+    t51 = t31 * t50
+    t49 = t49 - t51
+    t37 = t37 + t49
+    t49 = t38 * t37
+    t51 = 0.384 * t24
+    t52 = (-0.0825) * t28
+    t51 = t51 + t52
+    t51 = t51 - t34
+    t50 = t29 * t50
+    t47 = t26 * t47
+    t47 = t50 + t47
+    t47 = t51 + t47
+    t50 = t35 * t47
+    t49 = t49 + t50
+    t50 = (-0.047121686402) * t49
+    t48 = t48 + t50
+    t40 = t40 + t48
+    t48 = cos(q[5])
+    t50 = t48 * t36
+    t51 = sin(q[5])
+    t52 = t51 * t28
+    t50 = t50 - t52
+    t52 = t48 * t44
+    t53 = t51 * t42
+    t52 = t52 - t53
+    t53 = t52 * qd[5]
+    t50 = t50 + t53
+    t53 = 0.00248046035817079 * t50
+    t54 = t51 * t36
+    t55 = t48 * t28
+    t54 = t54 + t55
+    t55 = t48 * t42
+    t56 = t51 * t44
+    t55 = t55 + t56
+    t56 = t55 * qd[5]
+    t54 = t54 + t56
+    t56 = 0.001524110902883315 * t54
+    t53 = t53 - t56
+    t56 = (-0.00010375891721868492) * t41
+    t53 = t53 - t56
+    t56 = (-0.00010375891721868492) * t55
+    t57 = 9.3569097314605e-05 * t52
+    t56 = t56 + t57
+    t57 = t39 + qd[5]
+    t58 = 0.01179456023023895 * t57
+    t56 = t56 + t58
+    t58 = t52 * t56
+    t59 = 0.001524110902883315 * t55
+    t60 = 0.010567766133106952 * t52
+    t59 = t59 + t60
+    t60 = 9.3569097314605e-05 * t57
+    t59 = t59 + t60
+    t60 = t57 * t59
+    t58 = t58 - t60
+    t53 = t53 + t58
+    t58 = (-0.023526756935) * t49
+    t60 = t48 * t45
+    t37 = t35 * t37
+    t47 = t38 * t47
+    t37 = t37 - t47
+    t47 = t51 * t37
+    t47 = t60 - t47
+    t60 = (-0.017527158935000002) * t47
+    t58 = t58 - t60
+    t53 = t53 + t58
+    t58 = cos(q[6])
+    t60 = t58 * t50
+    t61 = sin(q[6])
+    t62 = t61 * t41
+    t60 = t60 - t62
+    t62 = t58 * t57
+    t63 = t61 * t55
+    t62 = t62 - t63
+    t63 = t62 * qd[6]
+    t60 = t60 + t63
+    t63 = 0.03163334319094959 * t60
+    t64 = t61 * t50
+    t65 = t58 * t41
+    t64 = t64 + t65
+    t65 = t58 * t55
+    t66 = t61 * t57
+    t65 = t65 + t66
+    t66 = t65 * qd[6]
+    t64 = t64 + t66
+    t66 = 0.00039139128168424797 * t64
+    t63 = t63 - t66
+    t66 = (-0.0009653051699191116) * t54
+    t63 = t63 + t66
+    t66 = (-0.0009653051699191116) * t65
+    t67 = (-0.001255536598272898) * t62
+    t66 = t66 + t67
+    t67 = qd[6] - t52
+    t68 = 0.006684151967360946 * t67
+    t66 = t66 + t68
+    t68 = t62 * t66
+    t69 = 0.00039139128168424797 * t65
+    t70 = 0.029212399412428355 * t62
+    t69 = t69 + t70
+    t70 = (-0.001255536598272898) * t67
+    t69 = t69 + t70
+    t70 = t67 * t69
+    t68 = t68 - t70
+    t63 = t63 + t68
+    t68 = 0.088 * t41
+    t68 = t47 - t68
+    t70 = 0.088 * t52
+    t71 = t55 * t70
+    t68 = t68 + t71
+    t71 = 0.0020344399586617965 * t68
+    t72 = 0.088 * t54
+    t72 = t49 + t72
+    t73 = 0.088 * t57
+    t74 = t55 * t73
+    t72 = t72 + t74
+    t74 = t58 * t72
+    t75 = t48 * t37
+    t76 = t51 * t45
+    t75 = t75 + t76
+    t70 = t52 * t70
+    t73 = t57 * t73
+    t70 = t70 + t73
+    t70 = t75 - t70
+    t73 = t61 * t70
+    t73 = t74 - t73
+    t74 = 0.150277948634 * t73
+    t71 = t71 + t74
+    t63 = t63 - t71
+    t71 = t58 * t63
+    t74 = 0.00039139128168424797 * t60
+    t76 = 0.029212399412428355 * t64
+    t74 = t74 - t76
+    t76 = (-0.001255536598272898) * t54
+    t74 = t74 + t76
+    t76 = 0.03163334319094959 * t65
+    t77 = 0.00039139128168424797 * t62
+    t76 = t76 + t77
+    t77 = (-0.0009653051699191116) * t67
+    t76 = t76 + t77
+    t77 = t67 * t76
+    t66 = t65 * t66
+    t66 = t77 - t66
+    t66 = t74 + t66
+    t70 = t58 * t70
+    t72 = t61 * t72
+    t70 = t70 + t72
+    t72 = 0.150277948634 * t70
+    t74 = 0.002573605371338202 * t68
+    t72 = t72 + t74
+    t66 = t66 + t72
+    t72 = t61 * t66
+    t71 = t71 - t72
+    t53 = t53 + t71
+    t71 = t48 * t53
+    t72 = 0.001524110902883315 * t50
+    t74 = 0.010567766133106952 * t54
+    t72 = t72 - t74
+    t74 = 9.3569097314605e-05 * t41
+    t72 = t72 - t74
+    t74 = 0.00248046035817079 * t55
+    t77 = 0.001524110902883315 * t52
+    t74 = t74 + t77
+    t77 = (-0.00010375891721868492) * t57
+    t74 = t74 + t77
+    t77 = t57 * t74
+    t56 = t55 * t56
+    t56 = t77 - t56
+    t56 = t72 + t56
+    t72 = (-0.017527158935000002) * t75
+    t77 = 0.10024161669500001 * t49
+    t72 = t72 - t77
+    t56 = t56 + t72
+    t72 = (-0.0009653051699191116) * t60
+    t77 = (-0.001255536598272898) * t64
+    t72 = t72 - t77
+    t77 = 0.006684151967360946 * t54
+    t72 = t72 + t77
+    t69 = t65 * t69
+    t76 = t62 * t76
+    t69 = t69 - t76
+    t69 = t72 + t69
+    t72 = 0.002573605371338202 * t73
+    t76 = 0.0020344399586617965 * t70
+    t72 = t72 - t76
+    t69 = t69 + t72
+    t56 = t56 - t69
+    t70 = 1.495522 * t70
+    t72 = 0.150277948634 * t64
+    t76 = 0.0020344399586617965 * t54
+    t72 = t72 + t76
+    t70 = t70 - t72
+    t72 = 0.0020344399586617965 * t65
+    t76 = 0.002573605371338202 * t62
+    t72 = t72 - t76
+    t76 = t62 * t72
+    t77 = 0.002573605371338202 * t67
+    t78 = 0.150277948634 * t65
+    t77 = t77 - t78
+    t78 = t67 * t77
+    t76 = t76 - t78
+    t70 = t70 + t76
+    t76 = t61 * t70
+    t73 = 1.495522 * t73
+    t78 = 0.002573605371338202 * t54
+    t79 = 0.150277948634 * t60
+    t78 = t78 - t79
+    t73 = t73 + t78
+    t78 = 0.150277948634 * t62
+    t79 = 0.0020344399586617965 * t67
+    t78 = t78 - t79
+    t67 = t67 * t78
+    t72 = t65 * t72
+    t67 = t67 - t72
+    t67 = t73 + t67
+    t72 = t58 * t67
+    t72 = t76 + t72
+    t73 = 0.088 * t72
+    t56 = t56 - t73
+    t73 = t51 * t56
+    t71 = t71 - t73
+    t40 = t40 + t71
+    t71 = t35 * t40
+    t73 = (-0.0015152444733270301) * t36
+    t76 = 0.03146037232526039 * t41
+    t73 = t73 + t76
+    t76 = 0.0021640520520981297 * t28
+    t73 = t73 - t76
+    t76 = 0.03942757095803552 * t42
+    t79 = (-0.0015152444733270301) * t39
+    t76 = t76 - t79
+    t79 = (-0.004600245517563105) * t44
+    t76 = t76 + t79
+    t79 = t44 * t76
+    t43 = t42 * t43
+    t43 = t79 - t43
+    t43 = t73 + t43
+    t73 = (-0.047121686402) * t37
+    t79 = (-0.014653732538) * t45
+    t73 = t73 - t79
+    t43 = t43 + t73
+    t73 = (-0.00010375891721868492) * t50
+    t79 = 9.3569097314605e-05 * t54
+    t73 = t73 - t79
+    t79 = 0.01179456023023895 * t41
+    t73 = t73 - t79
+    t59 = t55 * t59
+    t74 = t52 * t74
+    t59 = t59 - t74
+    t59 = t73 + t59
+    t73 = 0.10024161669500001 * t47
+    t74 = (-0.023526756935) * t75
+    t73 = t73 - t74
+    t59 = t59 + t73
+    t63 = t61 * t63
+    t66 = t58 * t66
+    t63 = t63 + t66
+    t59 = t59 + t63
+    t60 = 0.0020344399586617965 * t60
+    t63 = 0.002573605371338202 * t64
+    t60 = t60 + t63
+    t63 = 1.495522 * t68
+    t60 = t60 - t63
+    t63 = t65 * t77
+    t62 = t62 * t78
+    t62 = t63 - t62
+    t60 = t60 + t62
+    t62 = 0.088 * t60
+    t59 = t59 - t62
+    t43 = t43 - t59
+    t62 = t38 * t43
+    t62 = t71 - t62
+    t27 = t27 + t62
+    t62 = 1.225946 * t37
+    t63 = (-0.047121686402) * t41
+    t64 = 0.05034347249 * t28
+    t63 = t63 + t64
+    t62 = t62 + t63
+    t63 = 0.05034347249 * t42
+    t64 = (-0.014653732538) * t39
+    t63 = t63 + t64
+    t64 = t39 * t63
+    t65 = (-0.014653732538) * t44
+    t66 = (-0.047121686402) * t42
+    t65 = t65 - t66
+    t66 = t44 * t65
+    t64 = t64 + t66
+    t62 = t62 - t64
+    t64 = 1.666555 * t75
+    t66 = (-0.023526756935) * t41
+    t68 = (-0.017527158935000002) * t54
+    t66 = t66 - t68
+    t64 = t64 + t66
+    t66 = (-0.023526756935) * t55
+    t68 = 0.10024161669500001 * t52
+    t66 = t66 - t68
+    t68 = t52 * t66
+    t71 = 0.10024161669500001 * t57
+    t73 = (-0.017527158935000002) * t55
+    t71 = t71 - t73
+    t73 = t57 * t71
+    t68 = t68 - t73
+    t64 = t64 + t68
+    t58 = t58 * t70
+    t61 = t61 * t67
+    t58 = t58 - t61
+    t58 = t64 + t58
+    t61 = t48 * t58
+    t47 = 1.666555 * t47
+    t64 = 0.10024161669500001 * t41
+    t67 = (-0.017527158935000002) * t50
+    t64 = t64 + t67
+    t47 = t47 - t64
+    t64 = (-0.017527158935000002) * t52
+    t67 = (-0.023526756935) * t57
+    t64 = t64 - t67
+    t57 = t57 * t64
+    t66 = t55 * t66
+    t57 = t57 - t66
+    t47 = t47 + t57
+    t47 = t47 - t60
+    t57 = t51 * t47
+    t57 = t61 - t57
+    t57 = t62 + t57
+    t60 = t38 * t57
+    t61 = 1.225946 * t49
+    t62 = (-0.014653732538) * t28
+    t66 = (-0.047121686402) * t36
+    t62 = t62 + t66
+    t61 = t61 + t62
+    t62 = (-0.047121686402) * t39
+    t66 = 0.05034347249 * t44
+    t62 = t62 + t66
+    t44 = t44 * t62
+    t63 = t42 * t63
+    t44 = t44 + t63
+    t44 = t61 + t44
+    t61 = 1.666555 * t49
+    t50 = (-0.023526756935) * t50
+    t54 = 0.10024161669500001 * t54
+    t50 = t50 + t54
+    t50 = t61 + t50
+    t54 = t55 * t71
+    t52 = t52 * t64
+    t52 = t54 - t52
+    t50 = t50 + t52
+    t50 = t50 + t72
+    t44 = t44 + t50
+    t50 = t35 * t44
+    t50 = t60 - t50
+    t52 = 0.384 * t50
+    t27 = t27 - t52
+    t52 = t23 * t27
+    t54 = 0.02771584317362585 * t24
+    t55 = 0.03239943042445132 * t28
+    t54 = t54 - t55
+    t55 = (-0.0016444875773692705) * t14
+    t54 = t54 - t55
+    t55 = 0.06767727025085991 * t29
+    t60 = 0.02771584317362585 * t26
+    t55 = t55 + t60
+    t60 = 0.0039053550262761003 * t31
+    t55 = t55 + t60
+    t60 = t31 * t55
+    t30 = t29 * t30
+    t30 = t60 - t30
+    t30 = t54 + t30
+    t54 = 0.09850206933 * t22
+    t60 = (-0.19076837715) * t34
+    t54 = t54 + t60
+    t30 = t30 + t54
+    t54 = (-0.004600245517563105) * t36
+    t60 = 0.0021640520520981297 * t41
+    t54 = t54 + t60
+    t60 = 0.010869510762828563 * t28
+    t54 = t54 - t60
+    t46 = t42 * t46
+    t60 = t39 * t76
+    t46 = t46 + t60
+    t46 = t54 + t46
+    t49 = (-0.014653732538) * t49
+    t37 = 0.05034347249 * t37
+    t37 = t49 + t37
+    t37 = t46 - t37
+    t46 = t51 * t53
+    t49 = t48 * t56
+    t46 = t46 + t49
+    t37 = t37 + t46
+    t30 = t30 + t37
+    t46 = (-0.0825) * t50
+    t30 = t30 + t46
+    t46 = t25 * t30
+    t46 = t52 - t46
+    t13 = t13 + t46
+    t46 = t8 * t13
+    t49 = (-0.008248333140675744) * t12
+    t52 = 0.05287838199960611 * t14
+    t49 = t49 + t52
+    t52 = (-0.004377257121839584) * t2
+    t49 = t49 - t52
+    t52 = 0.05649492601407083 * t15
+    t53 = (-0.008248333140675744) * t11
+    t52 = t52 + t53
+    t53 = (-0.005487648106562256) * t17
+    t52 = t52 + t53
+    t53 = t17 * t52
+    t16 = t15 * t16
+    t16 = t53 - t16
+    t16 = t49 + t16
+    t49 = (-0.214708623208) * t18
+    t20 = 0.088844724872 * t20
+    t20 = t49 + t20
+    t16 = t16 + t20
+    t20 = 0.0039053550262761003 * t24
+    t49 = (-0.0016444875773692705) * t28
+    t20 = t20 - t49
+    t49 = 0.0775861490525396 * t14
+    t20 = t20 - t49
+    t33 = t29 * t33
+    t49 = t26 * t55
+    t33 = t33 - t49
+    t20 = t20 + t33
+    t33 = (-0.19076837715) * t32
+    t49 = 0.374644408005 * t22
+    t33 = t33 - t49
+    t20 = t20 + t33
+    t33 = t38 * t40
+    t40 = t35 * t43
+    t33 = t33 + t40
+    t20 = t20 - t33
+    t33 = 1.225946 * t45
+    t36 = 0.05034347249 * t36
+    t40 = (-0.014653732538) * t41
+    t36 = t36 - t40
+    t33 = t33 + t36
+    t36 = t42 * t65
+    t39 = t39 * t62
+    t36 = t36 - t39
+    t33 = t33 + t36
+    t36 = t51 * t58
+    t39 = t48 * t47
+    t36 = t36 + t39
+    t33 = t33 + t36
+    t36 = (-0.0825) * t33
+    t35 = t35 * t57
+    t38 = t38 * t44
+    t35 = t35 + t38
+    t38 = 0.384 * t35
+    t36 = t36 - t38
+    t20 = t20 + t36
+    t16 = t16 - t20
+    t22 = 3.587895 * t22
+    t36 = 0.374644408005 * t14
+    t38 = 0.09850206933 * t28
+    t36 = t36 - t38
+    t22 = t22 + t36
+    t36 = 0.374644408005 * t29
+    t38 = (-0.19076837715) * t26
+    t36 = t36 - t38
+    t38 = t26 * t36
+    t39 = (-0.19076837715) * t31
+    t40 = 0.09850206933 * t29
+    t39 = t39 - t40
+    t40 = t31 * t39
+    t38 = t38 - t40
+    t22 = t22 + t38
+    t22 = t22 + t35
+    t35 = t25 * t22
+    t32 = 3.587895 * t32
+    t38 = (-0.19076837715) * t14
+    t40 = 0.09850206933 * t24
+    t38 = t38 + t40
+    t32 = t32 - t38
+    t38 = 0.09850206933 * t26
+    t40 = 0.374644408005 * t31
+    t38 = t38 - t40
+    t31 = t31 * t38
+    t36 = t29 * t36
+    t31 = t31 - t36
+    t31 = t32 + t31
+    t31 = t31 + t33
+    t32 = t23 * t31
+    t32 = t35 + t32
+    t32 = 0.0825 * t32
+    t16 = t16 - t32
+    t32 = t10 * t16
+    t32 = t46 - t32
+    t3 = t3 + t32
+    t32 = 3.228604 * t18
+    t33 = (-0.214708623208) * t14
+    t35 = 0.126729164208 * t2
+    t33 = t33 + t35
+    t32 = t32 + t33
+    t33 = 0.126729164208 * t15
+    t35 = 0.088844724872 * t11
+    t33 = t33 - t35
+    t35 = t11 * t33
+    t36 = 0.088844724872 * t17
+    t40 = (-0.214708623208) * t15
+    t36 = t36 - t40
+    t36 = t17 * t36
+    t35 = t35 - t36
+    t32 = t32 + t35
+    t22 = t23 * t22
+    t31 = t25 * t31
+    t22 = t22 - t31
+    t22 = t32 + t22
+    t31 = t10 * t22
+    t32 = (-0.214708623208) * t11
+    t35 = 0.126729164208 * t17
+    t32 = t32 - t35
+    t17 = t17 * t32
+    t32 = t15 * t33
+    t17 = t17 - t32
+    t32 = 3.228604 * t21
+    t33 = 0.088844724872 * t2
+    t35 = (-0.214708623208) * t12
+    t33 = t33 + t35
+    t32 = t32 + t33
+    t17 = t17 - t32
+    t24 = 0.374644408005 * t24
+    t28 = (-0.19076837715) * t28
+    t24 = t24 + t28
+    t28 = 3.587895 * t34
+    t24 = t24 - t28
+    t28 = t29 * t39
+    t26 = t26 * t38
+    t26 = t28 - t26
+    t24 = t24 + t26
+    t24 = t24 - t50
+    t17 = t17 - t24
+    t26 = t8 * t17
+    t26 = t31 + t26
+    t26 = (-0.316) * t26
+    t3 = t3 + t26
+    t3 = t0 * t3
+    t26 = 0.028124284712194955 * t2
+    t28 = (-0.00398335888393552) * t6
+    t26 = t26 - t28
+    t28 = 0.01026110182100817 * qd[1]
+    t29 = 0.00850351162402155 * t1
+    t31 = (-0.00398335888393552) * t5
+    t29 = t29 + t31
+    t28 = t28 - t29
+    t29 = qd[1] * t28
+    t7 = t1 * t7
+    t7 = t29 + t7
+    t7 = t26 + t7
+    t26 = (-0.0221804724897) * t0
+    t7 = t7 + t26
+    t12 = (-0.005487648106562256) * t12
+    t14 = (-0.004377257121839584) * t14
+    t12 = t12 + t14
+    t14 = 0.01824920229252011 * t2
+    t12 = t12 - t14
+    t14 = t15 * t19
+    t11 = t11 * t52
+    t11 = t14 - t11
+    t11 = t12 + t11
+    t12 = 0.088844724872 * t21
+    t14 = 0.126729164208 * t18
+    t12 = t12 + t14
+    t11 = t11 - t12
+    t12 = t25 * t27
+    t14 = t23 * t30
+    t12 = t12 + t14
+    t11 = t11 + t12
+    t12 = 0.0825 * t24
+    t11 = t11 - t12
+    t7 = t7 - t11
+    t7 = t4 * t7
+    t3 = t3 + t7
+    t3 = -t3
+    t2 = 0.0007689361029464 * t2
+    t6 = 0.01026110182100817 * t6
+    t2 = t2 - t6
+    t5 = t5 * t28
+    t1 = t1 * t9
+    t1 = t5 - t1
+    t1 = t2 + t1
+    t2 = 0.01993386669246 * t4
+    t0 = 0.18226700140319999 * t0
+    t0 = t2 - t0
+    t0 = t1 + t0
+    t1 = t10 * t13
+    t2 = t8 * t16
+    t1 = t1 + t2
+    t0 = t0 + t1
+    t1 = t8 * t22
+    t2 = t10 * t17
+    t1 = t1 - t2
+    t1 = (-0.316) * t1
+    t0 = t0 - t1
+    _h = (t3, t0, t11, t20, t37, t59, t69)
+    return np.array(_h)
+
+
+_bias_constants = _constants(
+    -0.00398335888393552, 0.00850351162402155, 0.026534991901690206, 0.01026110182100817,
+    0.0007689361029464, 0.028124284712194955, -0.0221804724897, 0.05649492601407083,
+    -0.008248333140675744, -0.005487648106562256, -0.004377257121839584, 0.01824920229252011,
+    0.05287838199960611, -9.81, -0.316, -0.214708623208, 0.126729164208, 0.06767727025085991,
+    0.02771584317362585, 0.0039053550262761003, -0.0016444875773692705, 0.0775861490525396,
+    0.03239943042445132, 0.0825, 0.374644408005, 0.09850206933, 0.03942757095803552,
+    -0.0015152444733270301, -0.004600245517563105, 0.0021640520520981297, 0.010869510762828563,
+    0.03146037232526039, -0.0825, 0.384, 0.05034347249, -0.047121686402, 0.00248046035817079,
+    0.001524110902883315, -0.00010375891721868492, 9.3569097314605e-05, 0.01179456023023895,
+    0.010567766133106952, -0.023526756935, -0.017527158935000002, 0.03163334319094959,
+    0.00039139128168424797, -0.0009653051699191116, -0.001255536598272898, 0.006684151967360946,
+    0.029212399412428355, 0.088, 0.0020344399586617965, 0.150277948634, 0.002573605371338202,
+    0.10024161669500001, 1.495522, -0.014653732538, 1.225946, 1.666555, -0.19076837715, 0.088844724872,
+    3.587895, 3.228604, 0.01993386669246, 0.18226700140319999)
+
+
+def _bias_chunk(x, t, s, y):
+    """bias on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
+     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78) = t
+    h_0, h_1, h_2, h_3, h_4, h_5, h_6 = y
+    (k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20, k21,
+     k22, k23, k24, k25, k26, k27, k28, k29, k30, k31, k32, k33, k34, k35, k36, k37, k38, k39, k40, k41,
+     k42, k43, k44, k45, k46, k47, k48, k49, k50, k51, k52, k53, k54, k55, k56, k57, k58, k59, k60, k61,
+     k62, k63, k64) = _bias_constants
+    sin(q_1, t0)
+    multiply(t0, qd_0, t1)
+    multiply(t1, qd_1, t2)
+    multiply(k0, t2, t3)
+    cos(q_1, t4)
+    multiply(t4, qd_0, t5)
+    multiply(t5, qd_1, t6)
+    multiply(k1, t6, t7)
+    subtract(t3, t7, t3)
+    multiply(k2, qd_1, t7)
+    multiply(k3, t1, t8)
+    multiply(k4, t5, t9)
+    add(t8, t9, t8)
+    subtract(t7, t8, t7)
+    multiply(t5, t7, t8)
+    multiply(k4, qd_1, t9)
+    multiply(k0, t1, t10)
+    multiply(k5, t5, t11)
+    add(t10, t11, t10)
+    subtract(t9, t10, t9)
+    multiply(qd_1, t9, t10)
+    add(t8, t10, t8)
+    subtract(t3, t8, t3)
+    multiply(k6, t4, t8)
+    subtract(t3, t8, t3)
+    cos(q_2, t8)
+    sin(q_2, t10)
+    multiply(t10, t1, t11)
+    multiply(t8, qd_1, t12)
+    add(t11, t12, t11)
+    multiply(t11, qd_2, t12)
+    multiply(t8, t6, t13)
+    subtract(t12, t13, t12)
+    multiply(k7, t12, t13)
+    multiply(t10, t6, t14)
+    multiply(t10, qd_1, t15)
+    multiply(t8, t1, t16)
+    subtract(t15, t16, t15)
+    multiply(t15, qd_2, t16)
+    subtract(t14, t16, t14)
+    multiply(k8, t14, t16)
+    add(t13, t16, t13)
+    multiply(k9, t2, t16)
+    subtract(t13, t16, t13)
+    multiply(k9, t15, t16)
+    multiply(k10, t11, t17)
+    add(t16, t17, t16)
+    add(t5, qd_2, t17)
+    multiply(k11, t17, t18)
+    add(t16, t18, t16)
+    multiply(t11, t16, t18)
+    multiply(k8, t15, t19)
+    multiply(k12, t11, t20)
+    add(t19, t20, t19)
+    multiply(k10, t17, t20)
+    add(t19, t20, t19)
+    multiply(t17, t19, t20)
+    subtract(t18, t20, t18)
+    add(t13, t18, t13)
+    multiply(k13, t0, t18)
+    multiply(k14, t1, t20)
+    multiply(t5, t20, t21)
+    add(t18, t21, t18)
+    multiply(t10, t18, t21)
+    multiply(k14, t6, t22)
+    multiply(k14, qd_1, t23)
+    multiply(t5, t23, t24)
+    add(t22, t24, t22)
+    multiply(t8, t22, t24)
+    add(t21, t24, t21)
+    multiply(k15, t21, t24)
+    multiply(k13, t4, t25)
+    multiply(qd_1, t23, t23)
+    multiply(t1, t20, t20)
+    add(t23, t20, t23)
+    subtract(t25, t23, t25)
+    multiply(k16, t25, t20)
+    subtract(t24, t20, t24)
+    add(t13, t24, t13)
+    cos(q_3, t20)
+    multiply(t20, t12, t23)
+    sin(q_3, t24)
+    multiply(t24, t2, t26)
+    subtract(t23, t26, t23)
+    multiply(t20, t17, t26)
+    multiply(t24, t15, t27)
+    subtract(t26, t27, t26)
+    multiply(t26, qd_3, t27)
+    add(t23, t27, t23)
+    multiply(k17, t23, t27)
+    multiply(t24, t12, t28)
+    multiply(t20, t2, t29)
+    add(t28, t29, t28)
+    multiply(t20, t15, t29)
+    multiply(t24, t17, t30)
+    add(t29, t30, t29)
+    multiply(t29, qd_3, t30)
+    add(t28, t30, t28)
+    multiply(k18, t28, t30)
+    subtract(t27, t30, t27)
+    multiply(k19, t14, t30)
+    subtract(t27, t30, t27)
+    multiply(k19, t29, t30)
+    multiply(k20, t26, t31)
+    add(t30, t31, t30)
+    subtract(qd_3, t11, t31)
+    multiply(k21, t31, t32)
+    add(t30, t32, t30)
+    multiply(t26, t30, t32)
+    multiply(k18, t29, t33)
+    multiply(k22, t26, t34)
+    add(t33, t34, t33)
+    multiply(k20, t31, t34)
+    add(t33, t34, t33)
+    multiply(t31, t33, t34)
+    subtract(t32, t34, t32)
+    add(t27, t32, t27)
+    multiply(k23, t11, t32)
+    multiply(t15, t32, t34)
+    multiply(k23, t2, t35)
+    add(t21, t35, t35)
+    subtract(t34, t35, t34)
+    multiply(k24, t34, t35)
+    multiply(k23, t17, t36)
+    multiply(t15, t36, t37)
+    multiply(k23, t14, t38)
+    add(t25, t38, t38)
+    subtract(t37, t38, t37)
+    multiply(t20, t37, t38)
+    multiply(t8, t18, t18)
+    multiply(t10, t22, t22)
+    subtract(t18, t22, t18)
+    multiply(t11, t32, t32)
+    multiply(t17, t36, t36)
+    add(t32, t36, t32)
+    subtract(t18, t32, t32)
+    multiply(t24, t32, t22)
+    subtract(t38, t22, t38)
+    multiply(k25, t38, t22)
+    add(t35, t22, t35)
+    subtract(t27, t35, t27)
+    cos(q_4, t22)
+    multiply(t22, t23, t35)
+    sin(q_4, t36)
+    multiply(t36, t14, t39)
+    add(t35, t39, t35)
+    multiply(t36, t29, t39)
+    multiply(t22, t31, t40)
+    add(t39, t40, t39)
+    multiply(t39, qd_4, t40)
+    subtract(t35, t40, t35)
+    multiply(k26, t35, t40)
+    multiply(t22, t14, t41)
+    multiply(t36, t23, t42)
+    subtract(t41, t42, t41)
+    multiply(t22, t29, t42)
+    multiply(t36, t31, t43)
+    subtract(t42, t43, t42)
+    multiply(t42, qd_4, t43)
+    subtract(t41, t43, t41)
+    multiply(k27, t41, t43)
+    add(t40, t43, t40)
+    multiply(k28, t28, t43)
+    subtract(t40, t43, t40)
+    multiply(k28, t42, t43)
+    multiply(k29, t39, t44)
+    subtract(t43, t44, t43)
+    add(t26, qd_4, t44)
+    multiply(k30, t44, t45)
+    add(t43, t45, t43)
+    multiply(t39, t43, t45)
+    multiply(k27, t42, t46)
+    multiply(k31, t39, t47)
+    subtract(t46, t47, t46)
+    multiply(k29, t44, t47)
+    add(t46, t47, t46)
+    multiply(t44, t46, t47)
+    add(t45, t47, t45)
+    subtract(t40, t45, t40)
+    multiply(k32, t14, t45)
+    subtract(t38, t45, t45)
+    multiply(k33, t31, t47)
+    multiply(t31, t47, t48)
+    multiply(k33, t29, t49)
+    multiply(k32, t26, t50)
+    subtract(t49, t50, t49)
+    multiply(t29, t49, t50)
+    add(t48, t50, t48)
+    subtract(t45, t48, t45)
+    multiply(k34, t45, t48)
+    multiply(t20, t32, t32)
+    multiply(t24, t37, t37)
+    add(t32, t37, t32)
+    multiply(k33, t14, t37)
+    add(t32, t37, t37)
+    multiply(t26, t49, t49)
+    multiply(k32, t31, t50)
+    multiply(t31, t50, t51)
+    subtract(t49, t51, t49)
+    add(t37, t49, t37)
+    multiply(t36, t37, t49)
+    multiply(k33, t23, t51)
+    multiply(k32, t28, t52)
+    add(t51, t52, t51)
+    subtract(t51, t34, t51)
+    multiply(t29, t50, t50)
+    multiply(t26, t47, t47)
+    add(t50, t47, t50)
+    add(t51, t50, t51)
+    multiply(t22, t51, t47)
+    add(t49, t47, t49)
+    multiply(k35, t49, t47)
+    add(t48, t47, t48)
+    add(t40, t48, t40)
+    cos(q_5, t47)
+    multiply(t47, t35, t48)
+    sin(q_5, t50)
+    multiply(t50, t28, t52)
+    subtract(t48, t52, t48)
+    multiply(t47, t44, t52)
+    multiply(t50, t42, t53)
+    subtract(t52, t53, t52)
+    multiply(t52, qd_5, t53)
+    add(t48, t53, t48)
+    multiply(k36, t48, t53)
+    multiply(t50, t35, t54)
+    multiply(t47, t28, t55)
+    add(t54, t55, t54)
+    multiply(t47, t42, t55)
+    multiply(t50, t44, t56)
+    add(t55, t56, t55)
+    multiply(t55, qd_5, t56)
+    add(t54, t56, t54)
+    multiply(k37, t54, t56)
+    subtract(t53, t56, t53)
+    multiply(k38, t41, t56)
+    subtract(t53, t56, t53)
+    multiply(k38, t55, t56)
+    multiply(k39, t52, t57)
+    add(t56, t57, t56)
+    add(t39, qd_5, t57)
+    multiply(k40, t57, t58)
+    add(t56, t58, t56)
+    multiply(t52, t56, t58)
+    multiply(k37, t55, t59)
+    multiply(k41, t52, t60)
+    add(t59, t60, t59)
+    multiply(k39, t57, t60)
+    add(t59, t60, t59)
+    multiply(t57, t59, t60)
+    subtract(t58, t60, t58)
+    add(t53, t58, t53)
+    multiply(k42, t49, t58)
+    multiply(t47, t45, t60)
+    multiply(t22, t37, t37)
+    multiply(t36, t51, t51)
+    subtract(t37, t51, t37)
+    multiply(t50, t37, t51)
+    subtract(t60, t51, t60)
+    multiply(k43, t60, t51)
+    subtract(t58, t51, t58)
+    add(t53, t58, t53)
+    cos(q_6, t51)
+    multiply(t51, t48, t58)
+    sin(q_6, t61)
+    multiply(t61, t41, t62)
+    subtract(t58, t62, t58)
+    multiply(t51, t57, t62)
+    multiply(t61, t55, t63)
+    subtract(t62, t63, t62)
+    multiply(t62, qd_6, t63)
+    add(t58, t63, t58)
+    multiply(k44, t58, t63)
+    multiply(t61, t48, t64)
+    multiply(t51, t41, t65)
+    add(t64, t65, t64)
+    multiply(t51, t55, t65)
+    multiply(t61, t57, t66)
+    add(t65, t66, t65)
+    multiply(t65, qd_6, t66)
+    add(t64, t66, t64)
+    multiply(k45, t64, t66)
+    subtract(t63, t66, t63)
+    multiply(k46, t54, t66)
+    add(t63, t66, t63)
+    multiply(k46, t65, t66)
+    multiply(k47, t62, t67)
+    add(t66, t67, t66)
+    subtract(qd_6, t52, t67)
+    multiply(k48, t67, t68)
+    add(t66, t68, t66)
+    multiply(t62, t66, t68)
+    multiply(k45, t65, t69)
+    multiply(k49, t62, t70)
+    add(t69, t70, t69)
+    multiply(k47, t67, t70)
+    add(t69, t70, t69)
+    multiply(t67, t69, t70)
+    subtract(t68, t70, t68)
+    add(t63, t68, t63)
+    multiply(k50, t41, t68)
+    subtract(t60, t68, t68)
+    multiply(k50, t52, t70)
+    multiply(t55, t70, t71)
+    add(t68, t71, t68)
+    multiply(k51, t68, t71)
+    multiply(k50, t54, t72)
+    add(t49, t72, t72)
+    multiply(k50, t57, t73)
+    multiply(t55, t73, t74)
+    add(t72, t74, t72)
+    multiply(t51, t72, t74)
+    multiply(t47, t37, t75)
+    multiply(t50, t45, t76)
+    add(t75, t76, t75)
+    multiply(t52, t70, t70)
+    multiply(t57, t73, t73)
+    add(t70, t73, t70)
+    subtract(t75, t70, t70)
+    multiply(t61, t70, t73)
+    subtract(t74, t73, t74)
+    multiply(k52, t74, t73)
+    add(t71, t73, t71)
+    subtract(t63, t71, t63)
+    multiply(t51, t63, t71)
+    multiply(k45, t58, t73)
+    multiply(k49, t64, t76)
+    subtract(t73, t76, t73)
+    multiply(k47, t54, t76)
+    add(t73, t76, t73)
+    multiply(k44, t65, t76)
+    multiply(k45, t62, t77)
+    add(t76, t77, t76)
+    multiply(k46, t67, t77)
+    add(t76, t77, t76)
+    multiply(t67, t76, t77)
+    multiply(t65, t66, t66)
+    subtract(t77, t66, t77)
+    add(t73, t77, t73)
+    multiply(t51, t70, t70)
+    multiply(t61, t72, t72)
+    add(t70, t72, t70)
+    multiply(k52, t70, t66)
+    multiply(k53, t68, t72)
+    add(t66, t72, t66)
+    add(t73, t66, t73)
+    multiply(t61, t73, t66)
+    subtract(t71, t66, t71)
+    add(t53, t71, t53)
+    multiply(t47, t53, t66)
+    multiply(k37, t48, t71)
+    multiply(k41, t54, t72)
+    subtract(t71, t72, t71)
+    multiply(k39, t41, t72)
+    subtract(t71, t72, t71)
+    multiply(k36, t55, t72)
+    multiply(k37, t52, t77)
+    add(t72, t77, t72)
+    multiply(k38, t57, t77)
+    add(t72, t77, t72)
+    multiply(t57, t72, t77)
+    multiply(t55, t56, t56)
+    subtract(t77, t56, t77)
+    add(t71, t77, t71)
+    multiply(k43, t75, t56)
+    multiply(k54, t49, t77)
+    subtract(t56, t77, t56)
+    add(t71, t56, t71)
+    multiply(k46, t58, t56)
+    multiply(k47, t64, t77)
+    subtract(t56, t77, t56)
+    multiply(k48, t54, t77)
+    add(t56, t77, t56)
+    multiply(t65, t69, t69)
+    multiply(t62, t76, t76)
+    subtract(t69, t76, t69)
+    add(t56, t69, t56)
+    multiply(k53, t74, t69)
+    multiply(k51, t70, t76)
+    subtract(t69, t76, t69)
+    add(t56, t69, h_6)
+    subtract(t71, h_6, t71)
+    multiply(k55, t70, t70)
+    multiply(k52, t64, t56)
+    multiply(k51, t54, t69)
+    add(t56, t69, t56)
+    subtract(t70, t56, t70)
+    multiply(k51, t65, t56)
+    multiply(k53, t62, t69)
+    subtract(t56, t69, t56)
+    multiply(t62, t56, t69)
+    multiply(k53, t67, t76)
+    multiply(k52, t65, t77)
+    subtract(t76, t77, t76)
+    multiply(t67, t76, t77)
+    subtract(t69, t77, t69)
+    add(t70, t69, t70)
+    multiply(t61, t70, t69)
+    multiply(k55, t74, t74)
+    multiply(k53, t54, t77)
+    multiply(k52, t58, t78)
+    subtract(t77, t78, t77)
+    add(t74, t77, t74)
+    multiply(k52, t62, t77)
+    multiply(k51, t67, t78)
+    subtract(t77, t78, t77)
+    multiply(t67, t77, t67)
+    multiply(t65, t56, t56)
+    subtract(t67, t56, t67)
+    add(t74, t67, t74)
+    multiply(t51, t74, t56)
+    add(t69, t56, t69)
+    multiply(k50, t69, t56)
+    subtract(t71, t56, t71)
+    multiply(t50, t71, t56)
+    subtract(t66, t56, t66)
+    add(t40, t66, t40)
+    multiply(t22, t40, t56)
+    multiply(k27, t35, t66)
+    multiply(k31, t41, t67)
+    add(t66, t67, t66)
+    multiply(k29, t28, t67)
+    subtract(t66, t67, t66)
+    multiply(k26, t42, t67)
+    multiply(k27, t39, t78)
+    subtract(t67, t78, t67)
+    multiply(k28, t44, t78)
+    add(t67, t78, t67)
+    multiply(t44, t67, t78)
+    multiply(t42, t43, t43)
+    subtract(t78, t43, t78)
+    add(t66, t78, t66)
+    multiply(k35, t37, t43)
+    multiply(k56, t45, t78)
+    subtract(t43, t78, t43)
+    add(t66, t43, t66)
+    multiply(k38, t48, t43)
+    multiply(k39, t54, t78)
+    subtract(t43, t78, t43)
+    multiply(k40, t41, t78)
+    subtract(t43, t78, t43)
+    multiply(t55, t59, t59)
+    multiply(t52, t72, t72)
+    subtract(t59, t72, t59)
+    add(t43, t59, t43)
+    multiply(k54, t60, t59)
+    multiply(k42, t75, t72)
+    subtract(t59, t72, t59)
+    add(t43, t59, t43)
+    multiply(t61, t63, t63)
+    multiply(t51, t73, t73)
+    add(t63, t73, t63)
+    add(t43, t63, t43)
+    multiply(k51, t58, t58)
+    multiply(k53, t64, t64)
+    add(t58, t64, t58)
+    multiply(k55, t68, t68)
+    subtract(t58, t68, t58)
+    multiply(t65, t76, t65)
+    multiply(t62, t77, t62)
+    subtract(t65, t62, t65)
+    add(t58, t65, t58)
+    multiply(k50, t58, t59)
+    subtract(t43, t59, h_5)
+    subtract(t66, h_5, t66)
+    multiply(t36, t66, t43)
+    subtract(t56, t43, t56)
+    add(t27, t56, t27)
+    multiply(k57, t37, t43)
+    multiply(k35, t41, t56)
+    multiply(k34, t28, t59)
+    add(t56, t59, t56)
+    add(t43, t56, t43)
+    multiply(k34, t42, t56)
+    multiply(k56, t39, t59)
+    add(t56, t59, t56)
+    multiply(t39, t56, t59)
+    multiply(k56, t44, t62)
+    multiply(k35, t42, t63)
+    subtract(t62, t63, t62)
+    multiply(t44, t62, t63)
+    add(t59, t63, t59)
+    subtract(t43, t59, t43)
+    multiply(k58, t75, t75)
+    multiply(k42, t41, t59)
+    multiply(k43, t54, t63)
+    subtract(t59, t63, t59)
+    add(t75, t59, t75)
+    multiply(k42, t55, t59)
+    multiply(k54, t52, t63)
+    subtract(t59, t63, t59)
+    multiply(t52, t59, t63)
+    multiply(k54, t57, t64)
+    multiply(k43, t55, t65)
+    subtract(t64, t65, t64)
+    multiply(t57, t64, t65)
+    subtract(t63, t65, t63)
+    add(t75, t63, t75)
+    multiply(t51, t70, t51)
+    multiply(t61, t74, t61)
+    subtract(t51, t61, t51)
+    add(t75, t51, t75)
+    multiply(t47, t75, t51)
+    multiply(k58, t60, t60)
+    multiply(k54, t41, t61)
+    multiply(k43, t48, t63)
+    add(t61, t63, t61)
+    subtract(t60, t61, t60)
+    multiply(k43, t52, t61)
+    multiply(k42, t57, t63)
+    subtract(t61, t63, t61)
+    multiply(t57, t61, t57)
+    multiply(t55, t59, t59)
+    subtract(t57, t59, t57)
+    add(t60, t57, t60)
+    subtract(t60, t58, t60)
+    multiply(t50, t60, t57)
+    subtract(t51, t57, t51)
+    add(t43, t51, t43)
+    multiply(t36, t43, t51)
+    multiply(k57, t49, t57)
+    multiply(k56, t28, t58)
+    multiply(k35, t35, t59)
+    add(t58, t59, t58)
+    add(t57, t58, t57)
+    multiply(k35, t39, t58)
+    multiply(k34, t44, t59)
+    add(t58, t59, t58)
+    multiply(t44, t58, t44)
+    multiply(t42, t56, t56)
+    add(t44, t56, t44)
+    add(t57, t44, t57)
+    multiply(k58, t49, t44)
+    multiply(k42, t48, t48)
+    multiply(k54, t54, t54)
+    add(t48, t54, t48)
+    add(t44, t48, t44)
+    multiply(t55, t64, t55)
+    multiply(t52, t61, t52)
+    subtract(t55, t52, t55)
+    add(t44, t55, t44)
+    add(t44, t69, t44)
+    add(t57, t44, t57)
+    multiply(t22, t57, t44)
+    subtract(t51, t44, t51)
+    multiply(k33, t51, t44)
+    subtract(t27, t44, t27)
+    multiply(t20, t27, t44)
+    multiply(k18, t23, t48)
+    multiply(k22, t28, t52)
+    subtract(t48, t52, t48)
+    multiply(k20, t14, t52)
+    subtract(t48, t52, t48)
+    multiply(k17, t29, t52)
+    multiply(k18, t26, t54)
+    add(t52, t54, t52)
+    multiply(k19, t31, t54)
+    add(t52, t54, t52)
+    multiply(t31, t52, t54)
+    multiply(t29, t30, t30)
+    subtract(t54, t30, t54)
+    add(t48, t54, t48)
+    multiply(k25, t32, t30)
+    multiply(k59, t34, t54)
+    add(t30, t54, t30)
+    add(t48, t30, t48)
+    multiply(k28, t35, t30)
+    multiply(k29, t41, t54)
+    add(t30, t54, t30)
+    multiply(k30, t28, t54)
+    subtract(t30, t54, t30)
+    multiply(t42, t46, t46)
+    multiply(t39, t67, t67)
+    add(t46, t67, t46)
+    add(t30, t46, t30)
+    multiply(k56, t49, t49)
+    multiply(k34, t37, t37)
+    add(t49, t37, t49)
+    subtract(t30, t49, t30)
+    multiply(t50, t53, t53)
+    multiply(t47, t71, t71)
+    add(t53, t71, t53)
+    add(t30, t53, h_4)
+    add(t48, h_4, t48)
+    multiply(k32, t51, t30)
+    add(t48, t30, t48)
+    multiply(t24, t48, t30)
+    subtract(t44, t30, t44)
+    add(t13, t44, t13)
+    multiply(t8, t13, t30)
+    multiply(k8, t12, t37)
+    multiply(k12, t14, t44)
+    add(t37, t44, t37)
+    multiply(k10, t2, t44)
+    subtract(t37, t44, t37)
+    multiply(k7, t15, t44)
+    multiply(k8, t11, t46)
+    add(t44, t46, t44)
+    multiply(k9, t17, t46)
+    add(t44, t46, t44)
+    multiply(t17, t44, t46)
+    multiply(t15, t16, t16)
+    subtract(t46, t16, t46)
+    add(t37, t46, t37)
+    multiply(k15, t18, t16)
+    multiply(k60, t25, t25)
+    add(t16, t25, t16)
+    add(t37, t16, t37)
+    multiply(k19, t23, t16)
+    multiply(k20, t28, t25)
+    subtract(t16, t25, t16)
+    multiply(k21, t14, t25)
+    subtract(t16, t25, t16)
+    multiply(t29, t33, t33)
+    multiply(t26, t52, t52)
+    subtract(t33, t52, t33)
+    add(t16, t33, t16)
+    multiply(k59, t38, t25)
+    multiply(k24, t32, t33)
+    subtract(t25, t33, t25)
+    add(t16, t25, t16)
+    multiply(t36, t40, t40)
+    multiply(t22, t66, t66)
+    add(t40, t66, t40)
+    subtract(t16, t40, t16)
+    multiply(k57, t45, t45)
+    multiply(k34, t35, t35)
+    multiply(k56, t41, t41)
+    subtract(t35, t41, t35)
+    add(t45, t35, t45)
+    multiply(t42, t62, t42)
+    multiply(t39, t58, t39)
+    subtract(t42, t39, t42)
+    add(t45, t42, t45)
+    multiply(t50, t75, t50)
+    multiply(t47, t60, t47)
+    add(t50, t47, t50)
+    add(t45, t50, t45)
+    multiply(k32, t45, t25)
+    multiply(t22, t43, t22)
+    multiply(t36, t57, t36)
+    add(t22, t36, t22)
+    multiply(k33, t22, t33)
+    subtract(t25, t33, t25)
+    add(t16, t25, h_3)
+    subtract(t37, h_3, t37)
+    multiply(k61, t32, t32)
+    multiply(k24, t14, t16)
+    multiply(k25, t28, t25)
+    subtract(t16, t25, t16)
+    add(t32, t16, t32)
+    multiply(k24, t29, t16)
+    multiply(k59, t26, t25)
+    subtract(t16, t25, t16)
+    multiply(t26, t16, t25)
+    multiply(k59, t31, t33)
+    multiply(k25, t29, t35)
+    subtract(t33, t35, t33)
+    multiply(t31, t33, t35)
+    subtract(t25, t35, t25)
+    add(t32, t25, t32)
+    add(t32, t22, t32)
+    multiply(t24, t32, t22)
+    multiply(k61, t38, t38)
+    multiply(k59, t14, t25)
+    multiply(k25, t23, t35)
+    add(t25, t35, t25)
+    subtract(t38, t25, t38)
+    multiply(k25, t26, t25)
+    multiply(k24, t31, t35)
+    subtract(t25, t35, t25)
+    multiply(t31, t25, t31)
+    multiply(t29, t16, t16)
+    subtract(t31, t16, t31)
+    add(t38, t31, t38)
+    add(t38, t45, t38)
+    multiply(t20, t38, t16)
+    add(t22, t16, t22)
+    multiply(k23, t22, t22)
+    subtract(t37, t22, t37)
+    multiply(t10, t37, t16)
+    subtract(t30, t16, t30)
+    add(t3, t30, t3)
+    multiply(k62, t18, t16)
+    multiply(k15, t14, t22)
+    multiply(k16, t2, t30)
+    add(t22, t30, t22)
+    add(t16, t22, t16)
+    multiply(k16, t15, t22)
+    multiply(k60, t11, t30)
+    subtract(t22, t30, t22)
+    multiply(t11, t22, t30)
+    multiply(k60, t17, t31)
+    multiply(k15, t15, t35)
+    subtract(t31, t35, t31)
+    multiply(t17, t31, t31)
+    subtract(t30, t31, t30)
+    add(t16, t30, t16)
+    multiply(t20, t32, t32)
+    multiply(t24, t38, t38)
+    subtract(t32, t38, t32)
+    add(t16, t32, t16)
+    multiply(t10, t16, t30)
+    multiply(k15, t11, t31)
+    multiply(k16, t17, t32)
+    subtract(t31, t32, t31)
+    multiply(t17, t31, t17)
+    multiply(t15, t22, t22)
+    subtract(t17, t22, t17)
+    multiply(k62, t21, t22)
+    multiply(k60, t2, t31)
+    multiply(k15, t12, t32)
+    add(t31, t32, t31)
+    add(t22, t31, t22)
+    subtract(t17, t22, t17)
+    multiply(k24, t23, t23)
+    multiply(k59, t28, t28)
+    add(t23, t28, t23)
+    multiply(k61, t34, t34)
+    subtract(t23, t34, t23)
+    multiply(t29, t33, t29)
+    multiply(t26, t25, t26)
+    subtract(t29, t26, t29)
+    add(t23, t29, t23)
+    subtract(t23, t51, t23)
+    subtract(t17, t23, t17)
+    multiply(t8, t17, t22)
+    add(t30, t22, t30)
+    multiply(k14, t30, t30)
+    add(t3, t30, t3)
+    multiply(t0, t3, t3)
+    multiply(k5, t2, t22)
+    multiply(k0, t6, t25)
+    subtract(t22, t25, t22)
+    multiply(k3, qd_1, t25)
+    multiply(k1, t1, t26)
+    multiply(k0, t5, t28)
+    add(t26, t28, t26)
+    subtract(t25, t26, t25)
+    multiply(qd_1, t25, t26)
+    multiply(t1, t7, t7)
+    add(t26, t7, t26)
+    add(t22, t26, t22)
+    multiply(k6, t0, t7)
+    add(t22, t7, t22)
+    multiply(k9, t12, t12)
+    multiply(k10, t14, t14)
+    add(t12, t14, t12)
+    multiply(k11, t2, t7)
+    subtract(t12, t7, t12)
+    multiply(t15, t19, t15)
+    multiply(t11, t44, t11)
+    subtract(t15, t11, t15)
+    add(t12, t15, t12)
+    multiply(k60, t21, t21)
+    multiply(k16, t18, t18)
+    add(t21, t18, t21)
+    subtract(t12, t21, t12)
+    multiply(t24, t27, t24)
+    multiply(t20, t48, t20)
+    add(t24, t20, t24)
+    add(t12, t24, t12)
+    multiply(k23, t23, t23)
+    subtract(t12, t23, h_2)
+    subtract(t22, h_2, t22)
+    multiply(t4, t22, t22)
+    add(t3, t22, t3)
+    negative(t3, h_0)
+    multiply(k4, t2, t2)
+    multiply(k3, t6, t6)
+    subtract(t2, t6, t2)
+    multiply(t5, t25, t5)
+    multiply(t1, t9, t1)
+    subtract(t5, t1, t5)
+    add(t2, t5, t2)
+    multiply(k63, t4, t4)
+    multiply(k64, t0, t0)
+    subtract(t4, t0, t4)
+    add(t2, t4, t2)
+    multiply(t10, t13, t13)
+    multiply(t8, t37, t37)
+    add(t13, t37, t13)
+    add(t2, t13, t2)
+    multiply(t8, t16, t8)
+    multiply(t10, t17, t10)
+    subtract(t8, t10, t8)
+    multiply(k14, t8, t8)
+    subtract(t2, t8, h_1)
 
 
 def inverse_dynamics(q, qd, qdd):
@@ -73104,6 +69777,5639 @@ def _base_regressor_chunk(x, t, s, y):
     copyto(Y_b_367, qd_5)
     copyto(Y_b_431, qdd_6)
     copyto(Y_b_432, qd_6)
+
+
+def bundle_control(q, qd):
+    """Control tick 'control': mass_matrix (7x7), bias (7), fk_tcp (4x4), jacobian_tcp (6x7), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [7]
+    in  qd [7]
+    out mass_matrix [7x7]
+    out bias [7]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x7]
+    out jdot_qd_tcp [6]
+    1573 ops: 859 mul, 700 add, 0 div, 14 trig
+    """
+    q = _array(q, 7, "q")
+    qd = _array(qd, 7, "qd")
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_control_chunk, (q, qd), 85, ((7, 7), (7,), (4, 4), (6, 7), (6,),), fixed=_bundle_control_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = sin(q[1])
+    t1 = cos(q[2])
+    t2 = cos(q[3])
+    t3 = cos(q[4])
+    t4 = cos(q[5])
+    t5 = cos(q[6])
+    t6 = 0.03163334319094959 * t5
+    t7 = sin(q[6])
+    t8 = 0.00039139128168424797 * t7
+    t6 = t6 - t8
+    t6 = t5 * t6
+    t9 = 0.00039139128168424797 * t5
+    t10 = 0.029212399412428355 * t7
+    t10 = t9 - t10
+    t10 = t7 * t10
+    t6 = t6 - t10
+    t6 = 0.00248046035817079 + t6
+    t10 = t4 * t6
+    t11 = sin(q[5])
+    t12 = 0.0009653051699191116 * t5
+    t13 = 0.001255536598272898 * t7
+    t12 = t12 - t13
+    t12 = t12 - (-0.013224459479792)
+    t12 = 0.001524110902883315 + t12
+    t13 = t11 * t12
+    t10 = t10 - t13
+    t10 = t4 * t10
+    t12 = t4 * t12
+    t14 = 0.002573605371338202 * t5
+    t15 = 0.0020344399586617965 * t7
+    t15 = t14 - t15
+    t16 = (-0.088) * t15
+    t17 = 0.006684151967360946 - t16
+    t18 = 0.088 * t15
+    t17 = t17 + t18
+    t17 = t17 - (-0.011581322367999998)
+    t17 = 0.010567766133106952 + t17
+    t19 = t11 * t17
+    t19 = t12 - t19
+    t19 = t11 * t19
+    t10 = t10 - t19
+    t10 = 0.03942757095803552 + t10
+    t19 = t3 * t10
+    t20 = sin(q[4])
+    t21 = (-0.0009653051699191116) * t7
+    t22 = (-0.001255536598272898) * t5
+    t21 = t21 + t22
+    t22 = 9.3569097314605e-05 - t21
+    t23 = t11 * t22
+    t24 = 0.03163334319094959 * t7
+    t9 = t24 + t9
+    t24 = t5 * t9
+    t25 = 0.029212399412428355 * t5
+    t8 = t8 + t25
+    t25 = t7 * t8
+    t24 = t24 - t25
+    t25 = 0.002573605371338202 * t7
+    t26 = 0.0020344399586617965 * t5
+    t26 = t25 + t26
+    t27 = (-0.088) * t26
+    t24 = t24 + t27
+    t24 = (-0.00010375891721868492) + t24
+    t27 = t4 * t24
+    t28 = t23 - t27
+    t28 = (-0.0015152444733270301) + t28
+    t29 = t20 * t28
+    t19 = t19 - t29
+    t19 = t3 * t19
+    t28 = t3 * t28
+    t9 = t7 * t9
+    t8 = t5 * t8
+    t8 = t9 + t8
+    t8 = t8 + t18
+    t8 = t8 - t16
+    t8 = t8 - (-0.011581322367999998)
+    t8 = 0.01179456023023895 + t8
+    t9 = 0.03146037232526039 + t8
+    t16 = t20 * t9
+    t16 = t28 - t16
+    t16 = t20 * t16
+    t16 = t19 - t16
+    t15 = 0.10024161669500001 + t15
+    t15 = t15 + 0.131605936
+    t18 = t11 * t15
+    t19 = (-0.17380470556900002) * t4
+    t19 = t18 + t19
+    t19 = (-0.047121686402) + t19
+    t30 = 0.384 * t19
+    t16 = t16 + t30
+    t31 = (-0.384) * t19
+    t16 = t16 - t31
+    t16 = t16 - (-0.6470403194880001)
+    t16 = 0.06767727025085991 + t16
+    t32 = t2 * t16
+    t33 = sin(q[3])
+    t6 = t11 * t6
+    t6 = t6 + t12
+    t12 = t4 * t6
+    t17 = t4 * t17
+    t13 = t13 + t17
+    t17 = t11 * t13
+    t12 = t12 - t17
+    t12 = (-0.004600245517563105) + t12
+    t17 = t3 * t12
+    t24 = t11 * t24
+    t22 = t4 * t22
+    t22 = t24 + t22
+    t24 = 0.0021640520520981297 - t22
+    t34 = t20 * t24
+    t17 = t17 - t34
+    t15 = t4 * t15
+    t34 = (-0.17380470556900002) * t11
+    t34 = t15 - t34
+    t34 = (-0.014653732538) + t34
+    t35 = t3 * t34
+    t26 = (-0.017527158935000002) + t26
+    t26 = 0.05034347249 - t26
+    t36 = t20 * t26
+    t35 = t35 - t36
+    t36 = 0.384 * t35
+    t17 = t17 - t36
+    t36 = (-0.0825) * t19
+    t36 = t17 - t36
+    t36 = t36 - (-0.13901256864)
+    t36 = 0.02771584317362585 + t36
+    t37 = t33 * t36
+    t32 = t32 - t37
+    t32 = t2 * t32
+    t36 = t2 * t36
+    t6 = t11 * t6
+    t13 = t4 * t13
+    t6 = t6 + t13
+    t6 = 0.010869510762828563 + t6
+    t13 = 0.0825 * t35
+    t38 = t6 - t13
+    t39 = (-0.0825) * t35
+    t38 = t38 + t39
+    t38 = t38 - (-0.029865981543750007)
+    t38 = 0.03239943042445132 + t38
+    t40 = t33 * t38
+    t40 = t36 - t40
+    t40 = t33 * t40
+    t32 = t32 - t40
+    t32 = 0.05649492601407083 + t32
+    t40 = t1 * t32
+    t41 = sin(q[2])
+    t34 = t20 * t34
+    t26 = t3 * t26
+    t42 = t34 + t26
+    t43 = 0.384 * t42
+    t12 = t20 * t12
+    t24 = t3 * t24
+    t12 = t12 + t24
+    t24 = t43 - t12
+    t24 = (-0.0016444875773692705) + t24
+    t43 = t33 * t24
+    t9 = t3 * t9
+    t9 = t29 + t9
+    t29 = t20 * t9
+    t10 = t20 * t10
+    t10 = t10 + t28
+    t28 = t3 * t10
+    t28 = t29 - t28
+    t29 = 0.0825 * t42
+    t28 = t28 - t29
+    t28 = 0.0039053550262761003 + t28
+    t29 = t2 * t28
+    t44 = t43 - t29
+    t42 = 0.09850206933 - t42
+    t45 = 0.0825 * t42
+    t44 = t44 + t45
+    t44 = (-0.008248333140675744) + t44
+    t45 = t41 * t44
+    t40 = t40 - t45
+    t40 = t1 * t40
+    t44 = t1 * t44
+    t10 = t20 * t10
+    t9 = t3 * t9
+    t9 = t10 + t9
+    t10 = t31 - t39
+    t9 = t9 - t10
+    t10 = t13 - t30
+    t9 = t9 - t10
+    t9 = t9 - (-0.6769063010317501)
+    t9 = 0.0775861490525396 + t9
+    t10 = (-0.19076837715) + t35
+    t10 = t10 + (-0.36201189750000007)
+    t30 = t2 * t10
+    t19 = 0.374644408005 + t19
+    t19 = t19 + 1.6850008320000003
+    t31 = t33 * t19
+    t30 = t30 - t31
+    t31 = (-0.0825) * t30
+    t46 = t9 - t31
+    t47 = 0.0825 * t30
+    t46 = t46 + t47
+    t46 = t46 - (-0.054286091887500006)
+    t46 = 0.05287838199960611 + t46
+    t48 = t41 * t46
+    t48 = t44 - t48
+    t48 = t41 * t48
+    t40 = t40 - t48
+    t10 = t33 * t10
+    t19 = t2 * t19
+    t48 = t10 + t19
+    t49 = (-0.214708623208) + t48
+    t50 = (-0.316) * t49
+    t40 = t40 - t50
+    t49 = 0.316 * t49
+    t40 = t40 + t49
+    t40 = t40 - (-1.1188387488320002)
+    t40 = 0.00850351162402155 + t40
+    t40 = t0 * t40
+    t51 = cos(q[1])
+    t28 = t33 * t28
+    t24 = t2 * t24
+    t24 = t28 + t24
+    t28 = (-0.004377257121839584) - t24
+    t52 = t41 * t28
+    t16 = t33 * t16
+    t16 = t16 + t36
+    t36 = t2 * t16
+    t38 = t2 * t38
+    t37 = t37 + t38
+    t38 = t33 * t37
+    t36 = t36 - t38
+    t38 = (-0.0825) * t48
+    t36 = t36 + t38
+    t36 = (-0.005487648106562256) + t36
+    t38 = t1 * t36
+    t48 = t52 - t38
+    t30 = 0.088844724872 + t30
+    t30 = t30 + 0.6580132350000001
+    t53 = t1 * t30
+    t42 = 0.126729164208 - t42
+    t54 = t41 * t42
+    t53 = t53 - t54
+    t53 = (-0.316) * t53
+    t48 = t48 - t53
+    t48 = (-0.00398335888393552) + t48
+    t54 = t51 * t48
+    t40 = t40 + t54
+    t40 = t0 * t40
+    t48 = t0 * t48
+    t16 = t33 * t16
+    t37 = t2 * t37
+    t16 = t16 + t37
+    t16 = t16 + t47
+    t16 = t16 - t31
+    t16 = t16 - (-0.054286091887500006)
+    t16 = 0.01824920229252011 + t16
+    t31 = 0.028124284712194955 + t16
+    t31 = t51 * t31
+    t31 = t48 + t31
+    t31 = t51 * t31
+    t31 = t40 + t31
+    t31 = 0.009213163777211224 + t31
+    t32 = t41 * t32
+    t32 = t32 + t44
+    t37 = t1 * t32
+    t40 = t1 * t46
+    t40 = t45 + t40
+    t44 = t41 * t40
+    t37 = t37 - t44
+    t37 = 0.01026110182100817 + t37
+    t37 = t0 * t37
+    t36 = t41 * t36
+    t28 = t1 * t28
+    t28 = t36 + t28
+    t30 = t41 * t30
+    t36 = t1 * t42
+    t42 = t30 + t36
+    t42 = (-0.316) * t42
+    t42 = t28 + t42
+    t42 = 0.0007689361029464 - t42
+    t42 = t51 * t42
+    t37 = t37 + t42
+    t37 = -t37
+    t38 = t38 - t52
+    t38 = t38 + t53
+    t38 = t0 * t38
+    t42 = t51 * t16
+    t38 = t38 - t42
+    t38 = -t38
+    t29 = t29 - t43
+    t42 = t1 * t29
+    t43 = t9 + t47
+    t44 = t41 * t43
+    t42 = t42 + t44
+    t10 = t19 + t10
+    t19 = t41 * t10
+    t19 = (-0.316) * t19
+    t19 = t42 - t19
+    t19 = t0 * t19
+    t42 = t51 * t24
+    t19 = t19 - t42
+    t19 = -t19
+    t42 = t2 * t17
+    t39 = t6 + t39
+    t44 = t33 * t39
+    t42 = t42 - t44
+    t44 = t1 * t42
+    t26 = t26 + t34
+    t34 = t33 * t26
+    t34 = 0.0825 * t34
+    t45 = 0.384 * t26
+    t12 = t45 - t12
+    t34 = t34 - t12
+    t45 = t41 * t34
+    t44 = t44 - t45
+    t45 = t1 * t35
+    t26 = t2 * t26
+    t46 = t41 * t26
+    t45 = t45 - t46
+    t45 = (-0.316) * t45
+    t44 = t44 + t45
+    t44 = t0 * t44
+    t17 = t33 * t17
+    t39 = t2 * t39
+    t17 = t17 + t39
+    t13 = t17 + t13
+    t17 = t51 * t13
+    t17 = t44 - t17
+    t17 = -t17
+    t23 = t27 - t23
+    t27 = t3 * t23
+    t39 = t20 * t8
+    t27 = t27 + t39
+    t39 = 0.17380470556900002 * t4
+    t18 = t39 - t18
+    t39 = t20 * t18
+    t44 = 0.384 * t39
+    t27 = t27 - t44
+    t44 = t2 * t27
+    t45 = (-0.0825) * t39
+    t45 = t22 + t45
+    t46 = t33 * t45
+    t44 = t44 - t46
+    t46 = t1 * t44
+    t47 = 0.17380470556900002 * t11
+    t15 = t47 + t15
+    t47 = (-0.0825) * t15
+    t18 = t3 * t18
+    t48 = 0.384 * t18
+    t47 = t47 - t48
+    t23 = t20 * t23
+    t48 = t3 * t8
+    t23 = t23 - t48
+    t23 = t47 - t23
+    t47 = t33 * t18
+    t48 = t2 * t15
+    t47 = t47 + t48
+    t47 = 0.0825 * t47
+    t47 = t23 + t47
+    t48 = t41 * t47
+    t46 = t46 + t48
+    t18 = t2 * t18
+    t15 = t33 * t15
+    t15 = t18 - t15
+    t18 = t41 * t15
+    t48 = t1 * t39
+    t18 = t18 + t48
+    t18 = (-0.316) * t18
+    t18 = t46 + t18
+    t18 = t0 * t18
+    t27 = t33 * t27
+    t45 = t2 * t45
+    t27 = t27 + t45
+    t45 = 0.0825 * t39
+    t27 = t27 + t45
+    t45 = t51 * t27
+    t18 = t18 - t45
+    t18 = -t18
+    t45 = (-0.0009653051699191116) * t5
+    t46 = (-0.001255536598272898) * t7
+    t45 = t45 - t46
+    t46 = t4 * t45
+    t48 = (-0.0020344399586617965) * t7
+    t14 = t48 + t14
+    t48 = 0.088 * t14
+    t48 = (-0.006684151967360946) - t48
+    t52 = t11 * t48
+    t46 = t46 - t52
+    t52 = t3 * t46
+    t53 = t20 * t21
+    t52 = t52 + t53
+    t53 = (-0.0020344399586617965) * t5
+    t25 = t53 - t25
+    t53 = t4 * t25
+    t54 = t20 * t53
+    t55 = t3 * t14
+    t54 = t54 - t55
+    t55 = 0.384 * t54
+    t52 = t52 - t55
+    t55 = t2 * t52
+    t45 = t11 * t45
+    t48 = t4 * t48
+    t45 = t45 + t48
+    t48 = (-0.0825) * t54
+    t48 = t45 + t48
+    t56 = t33 * t48
+    t55 = t55 - t56
+    t56 = t1 * t55
+    t25 = t11 * t25
+    t57 = (-0.0825) * t25
+    t53 = t3 * t53
+    t14 = t20 * t14
+    t14 = t53 + t14
+    t53 = 0.384 * t14
+    t53 = t57 - t53
+    t46 = t20 * t46
+    t57 = t3 * t21
+    t46 = t46 - t57
+    t46 = t53 - t46
+    t53 = t33 * t14
+    t57 = t2 * t25
+    t53 = t53 + t57
+    t53 = 0.0825 * t53
+    t53 = t46 + t53
+    t57 = t41 * t53
+    t56 = t56 + t57
+    t14 = t2 * t14
+    t25 = t33 * t25
+    t14 = t14 - t25
+    t25 = t41 * t14
+    t57 = t1 * t54
+    t25 = t25 + t57
+    t25 = (-0.316) * t25
+    t25 = t56 + t25
+    t25 = t0 * t25
+    t52 = t33 * t52
+    t48 = t2 * t48
+    t48 = t52 + t48
+    t52 = 0.0825 * t54
+    t48 = t48 + t52
+    t52 = t51 * t48
+    t25 = t25 - t52
+    t25 = -t25
+    t32 = t41 * t32
+    t40 = t1 * t40
+    t32 = t32 + t40
+    t32 = t32 + t49
+    t32 = t32 - t50
+    t32 = t32 - (-1.1188387488320002)
+    t32 = 0.026534991901690206 + t32
+    t30 = t36 + t30
+    t30 = (-0.316) * t30
+    t28 = t28 + t30
+    t29 = t41 * t29
+    t30 = t1 * t43
+    t29 = t29 - t30
+    t10 = t1 * t10
+    t10 = (-0.316) * t10
+    t10 = t29 + t10
+    t29 = t41 * t42
+    t30 = t1 * t34
+    t29 = t29 + t30
+    t26 = t1 * t26
+    t30 = t41 * t35
+    t26 = t26 + t30
+    t26 = (-0.316) * t26
+    t26 = t29 + t26
+    t29 = t41 * t44
+    t30 = t1 * t47
+    t29 = t29 - t30
+    t15 = t1 * t15
+    t30 = t41 * t39
+    t15 = t15 - t30
+    t15 = (-0.316) * t15
+    t15 = t29 - t15
+    t29 = t41 * t55
+    t30 = t1 * t53
+    t29 = t29 - t30
+    t14 = t1 * t14
+    t30 = t41 * t54
+    t14 = t14 - t30
+    t14 = (-0.316) * t14
+    t14 = t29 - t14
+    t29 = t0 * qd[0]
+    t30 = t29 * qd[1]
+    t34 = (-0.00398335888393552) * t30
+    t35 = t51 * qd[0]
+    t36 = t35 * qd[1]
+    t39 = 0.00850351162402155 * t36
+    t34 = t34 - t39
+    t39 = 0.026534991901690206 * qd[1]
+    t40 = 0.01026110182100817 * t29
+    t42 = 0.0007689361029464 * t35
+    t40 = t40 + t42
+    t39 = t39 - t40
+    t40 = t35 * t39
+    t42 = 0.0007689361029464 * qd[1]
+    t43 = (-0.00398335888393552) * t29
+    t44 = 0.028124284712194955 * t35
+    t43 = t43 + t44
+    t42 = t42 - t43
+    t43 = qd[1] * t42
+    t40 = t40 + t43
+    t34 = t34 - t40
+    t40 = (-0.0221804724897) * t51
+    t34 = t34 - t40
+    t40 = t41 * t29
+    t43 = t1 * qd[1]
+    t40 = t40 + t43
+    t43 = t40 * qd[2]
+    t44 = t1 * t36
+    t43 = t43 - t44
+    t44 = 0.05649492601407083 * t43
+    t47 = t41 * t36
+    t49 = t41 * qd[1]
+    t50 = t1 * t29
+    t49 = t49 - t50
+    t50 = t49 * qd[2]
+    t47 = t47 - t50
+    t50 = (-0.008248333140675744) * t47
+    t44 = t44 + t50
+    t50 = (-0.005487648106562256) * t30
+    t44 = t44 - t50
+    t50 = (-0.005487648106562256) * t49
+    t52 = (-0.004377257121839584) * t40
+    t50 = t50 + t52
+    t52 = t35 + qd[2]
+    t53 = 0.01824920229252011 * t52
+    t50 = t50 + t53
+    t53 = t40 * t50
+    t54 = (-0.008248333140675744) * t49
+    t55 = 0.05287838199960611 * t40
+    t54 = t54 + t55
+    t55 = (-0.004377257121839584) * t52
+    t54 = t54 + t55
+    t55 = t52 * t54
+    t53 = t53 - t55
+    t44 = t44 + t53
+    t53 = (-0.316) * qd[1]
+    t55 = qd[1] * t53
+    t56 = (-0.316) * t29
+    t57 = t29 * t56
+    t55 = t55 + t57
+    t57 = (-9.81) * t51
+    t58 = t55 - t57
+    t59 = 0.126729164208 * t58
+    t56 = t35 * t56
+    t60 = t41 * t56
+    t61 = (-0.316) * t36
+    t53 = t35 * t53
+    t53 = t61 + t53
+    t61 = t1 * t53
+    t60 = t60 + t61
+    t61 = (-9.81) * t0
+    t62 = t41 * t61
+    t63 = t60 + t62
+    t64 = (-0.214708623208) * t63
+    t59 = t59 + t64
+    t44 = t44 + t59
+    t59 = t2 * t43
+    t64 = t33 * t30
+    t59 = t59 - t64
+    t64 = t2 * t52
+    t65 = t33 * t49
+    t64 = t64 - t65
+    t65 = t64 * qd[3]
+    t59 = t59 + t65
+    t65 = 0.06767727025085991 * t59
+    t66 = t33 * t43
+    t67 = t2 * t30
+    t66 = t66 + t67
+    t67 = t2 * t49
+    t68 = t33 * t52
+    t67 = t67 + t68
+    t68 = t67 * qd[3]
+    t66 = t66 + t68
+    t68 = 0.02771584317362585 * t66
+    t65 = t65 - t68
+    t68 = 0.0039053550262761003 * t47
+    t65 = t65 - t68
+    t68 = 0.0039053550262761003 * t67
+    t69 = (-0.0016444875773692705) * t64
+    t68 = t68 + t69
+    t69 = qd[3] - t40
+    t70 = 0.0775861490525396 * t69
+    t68 = t68 + t70
+    t70 = t64 * t68
+    t71 = 0.02771584317362585 * t67
+    t72 = 0.03239943042445132 * t64
+    t71 = t71 + t72
+    t72 = (-0.0016444875773692705) * t69
+    t71 = t71 + t72
+    t72 = t69 * t71
+    t70 = t70 - t72
+    t65 = t65 + t70
+    t70 = 0.0825 * t40
+    t72 = t49 * t70
+    t73 = 0.0825 * t30
+    t60 = t60 + t73
+    t60 = t72 - t60
+    t72 = t62 - t60
+    t73 = 0.374644408005 * t72
+    t74 = 0.0825 * t47
+    t55 = t55 - t74
+    t74 = 0.0825 * t52
+    t75 = t49 * t74
+    t55 = t55 + t75
+    t75 = t2 * t55
+    t56 = t1 * t56
+    t53 = t41 * t53
+    t53 = t56 - t53
+    t56 = t40 * t70
+    t70 = t52 * t74
+    t56 = t56 + t70
+    t56 = t53 - t56
+    t70 = t33 * t56
+    t70 = t75 - t70
+    t61 = t1 * t61
+    t74 = t33 * t61
+    t75 = t2 * t57
+    t74 = t74 + t75
+    t75 = t70 - t74
+    t76 = 0.09850206933 * t75
+    t73 = t73 - t76
+    t65 = t65 + t73
+    t73 = t3 * t59
+    t76 = t20 * t47
+    t73 = t73 + t76
+    t76 = t20 * t67
+    t77 = t3 * t69
+    t76 = t76 + t77
+    t77 = t76 * qd[4]
+    t73 = t73 - t77
+    t77 = 0.03942757095803552 * t73
+    t78 = t3 * t47
+    t79 = t20 * t59
+    t78 = t78 - t79
+    t79 = t3 * t67
+    t80 = t20 * t69
+    t79 = t79 - t80
+    t80 = t79 * qd[4]
+    t78 = t78 - t80
+    t80 = (-0.0015152444733270301) * t78
+    t77 = t77 + t80
+    t80 = (-0.004600245517563105) * t66
+    t77 = t77 - t80
+    t80 = (-0.004600245517563105) * t79
+    t81 = 0.0021640520520981297 * t76
+    t80 = t80 - t81
+    t81 = t64 + qd[4]
+    t82 = 0.010869510762828563 * t81
+    t80 = t80 + t82
+    t82 = t76 * t80
+    t83 = (-0.0015152444733270301) * t79
+    t84 = 0.03146037232526039 * t76
+    t83 = t83 - t84
+    t84 = 0.0021640520520981297 * t81
+    t83 = t83 + t84
+    t84 = t81 * t83
+    t82 = t82 + t84
+    t77 = t77 - t82
+    t82 = (-0.0825) * t47
+    t70 = t70 - t82
+    t82 = 0.384 * t69
+    t84 = t69 * t82
+    t85 = 0.384 * t67
+    t86 = (-0.0825) * t64
+    t85 = t85 - t86
+    t86 = t67 * t85
+    t84 = t84 + t86
+    t70 = t70 - t84
+    t84 = t70 - t74
+    t86 = 0.05034347249 * t84
+    t56 = t2 * t56
+    t55 = t33 * t55
+    t55 = t56 + t55
+    t56 = 0.384 * t47
+    t56 = t55 + t56
+    t85 = t64 * t85
+    t87 = (-0.0825) * t69
+    t88 = t69 * t87
+    t85 = t85 - t88
+    t56 = t56 + t85
+    t85 = t20 * t56
+    t88 = 0.384 * t59
+    t89 = (-0.0825) * t66
+    t88 = t88 + t89
+    t60 = t88 - t60
+    t87 = t67 * t87
+    t82 = t64 * t82
+    t82 = t87 + t82
+    t60 = t60 + t82
+    t82 = t3 * t60
+    t82 = t85 + t82
+    t85 = t2 * t61
+    t57 = t33 * t57
+    t57 = t85 - t57
+    t85 = t20 * t57
+    t87 = t3 * t62
+    t85 = t85 + t87
+    t87 = t82 + t85
+    t88 = (-0.047121686402) * t87
+    t86 = t86 + t88
+    t77 = t77 + t86
+    t86 = t4 * t73
+    t88 = t11 * t66
+    t86 = t86 - t88
+    t88 = t4 * t81
+    t89 = t11 * t79
+    t88 = t88 - t89
+    t89 = t88 * qd[5]
+    t86 = t86 + t89
+    t89 = 0.00248046035817079 * t86
+    t90 = t11 * t73
+    t91 = t4 * t66
+    t90 = t90 + t91
+    t91 = t4 * t79
+    t92 = t11 * t81
+    t91 = t91 + t92
+    t92 = t91 * qd[5]
+    t90 = t90 + t92
+    t92 = 0.001524110902883315 * t90
+    t89 = t89 - t92
+    t92 = (-0.00010375891721868492) * t78
+    t89 = t89 - t92
+    t92 = (-0.00010375891721868492) * t91
+    t93 = 9.3569097314605e-05 * t88
+    t92 = t92 + t93
+    t93 = t76 + qd[5]
+    t94 = 0.01179456023023895 * t93
+    t92 = t92 + t94
+    t94 = t88 * t92
+    t95 = 0.001524110902883315 * t91
+    t96 = 0.010567766133106952 * t88
+    t95 = t95 + t96
+    t96 = 9.3569097314605e-05 * t93
+    t95 = t95 + t96
+    t96 = t93 * t95
+    t94 = t94 - t96
+    t89 = t89 + t94
+    t94 = (-0.023526756935) * t87
+    t96 = t4 * t70
+    t56 = t3 * t56
+    t60 = t20 * t60
+    t56 = t56 - t60
+    t60 = t11 * t56
+    t60 = t96 - t60
+    t96 = t3 * t57
+    t62 = t20 * t62
+    t62 = t96 - t62
+    t96 = t11 * t62
+    t97 = t4 * t74
+    t96 = t96 + t97
+    t97 = t60 - t96
+    t98 = (-0.017527158935000002) * t97
+    t94 = t94 - t98
+    t89 = t89 + t94
+    t94 = t5 * t86
+    t98 = t7 * t78
+    t94 = t94 - t98
+    t98 = t5 * t93
+    t99 = t7 * t91
+    t98 = t98 - t99
+    t99 = t98 * qd[6]
+    t94 = t94 + t99
+    t99 = 0.03163334319094959 * t94
+    t100 = t7 * t86
+    t101 = t5 * t78
+    t100 = t100 + t101
+    t101 = t5 * t91
+    t102 = t7 * t93
+    t101 = t101 + t102
+    t102 = t101 * qd[6]
+    t100 = t100 + t102
+    t102 = 0.00039139128168424797 * t100
+    t99 = t99 - t102
+    t102 = (-0.0009653051699191116) * t90
+    t99 = t99 + t102
+    t102 = (-0.0009653051699191116) * t101
+    t103 = (-0.001255536598272898) * t98
+    t102 = t102 + t103
+    t103 = qd[6] - t88
+    t104 = 0.006684151967360946 * t103
+    t102 = t102 + t104
+    t104 = t98 * t102
+    t105 = 0.00039139128168424797 * t101
+    t106 = 0.029212399412428355 * t98
+    t105 = t105 + t106
+    t106 = (-0.001255536598272898) * t103
+    t105 = t105 + t106
+    t106 = t103 * t105
+    t104 = t104 - t106
+    t99 = t99 + t104
+    t104 = 0.088 * t78
+    t60 = t60 - t104
+    t104 = 0.088 * t88
+    t106 = t91 * t104
+    t60 = t60 + t106
+    t96 = t96 - t60
+    t106 = 0.0020344399586617965 * t96
+    t107 = 0.088 * t90
+    t82 = t82 + t107
+    t107 = 0.088 * t93
+    t108 = t91 * t107
+    t82 = t82 + t108
+    t108 = t5 * t82
+    t109 = t4 * t56
+    t70 = t11 * t70
+    t70 = t109 + t70
+    t104 = t88 * t104
+    t107 = t93 * t107
+    t104 = t104 + t107
+    t104 = t70 - t104
+    t107 = t7 * t104
+    t107 = t108 - t107
+    t108 = t5 * t85
+    t109 = t4 * t62
+    t74 = t11 * t74
+    t74 = t109 - t74
+    t109 = t7 * t74
+    t108 = t108 - t109
+    t108 = t107 + t108
+    t109 = 0.150277948634 * t108
+    t106 = t106 - t109
+    t99 = t99 + t106
+    t106 = t5 * t99
+    t109 = 0.00039139128168424797 * t94
+    t110 = 0.029212399412428355 * t100
+    t109 = t109 - t110
+    t110 = (-0.001255536598272898) * t90
+    t109 = t109 + t110
+    t110 = 0.03163334319094959 * t101
+    t111 = 0.00039139128168424797 * t98
+    t110 = t110 + t111
+    t111 = (-0.0009653051699191116) * t103
+    t110 = t110 + t111
+    t111 = t103 * t110
+    t102 = t101 * t102
+    t102 = t111 - t102
+    t102 = t109 + t102
+    t104 = t5 * t104
+    t82 = t7 * t82
+    t82 = t104 + t82
+    t104 = t5 * t74
+    t85 = t7 * t85
+    t85 = t104 + t85
+    t85 = t82 + t85
+    t104 = 0.150277948634 * t85
+    t109 = 0.002573605371338202 * t96
+    t104 = t104 - t109
+    t102 = t102 + t104
+    t104 = t7 * t102
+    t104 = t106 - t104
+    t89 = t89 + t104
+    t104 = t4 * t89
+    t106 = 0.001524110902883315 * t86
+    t109 = 0.010567766133106952 * t90
+    t106 = t106 - t109
+    t109 = 9.3569097314605e-05 * t78
+    t106 = t106 - t109
+    t109 = 0.00248046035817079 * t91
+    t111 = 0.001524110902883315 * t88
+    t109 = t109 + t111
+    t111 = (-0.00010375891721868492) * t93
+    t109 = t109 + t111
+    t111 = t93 * t109
+    t92 = t91 * t92
+    t92 = t111 - t92
+    t92 = t106 + t92
+    t70 = t70 + t74
+    t74 = (-0.017527158935000002) * t70
+    t106 = 0.10024161669500001 * t87
+    t74 = t74 - t106
+    t74 = t92 + t74
+    t92 = (-0.0009653051699191116) * t94
+    t106 = (-0.001255536598272898) * t100
+    t92 = t92 - t106
+    t106 = 0.006684151967360946 * t90
+    t92 = t92 + t106
+    t105 = t101 * t105
+    t106 = t98 * t110
+    t105 = t105 - t106
+    t92 = t92 + t105
+    t105 = 0.002573605371338202 * t108
+    t106 = 0.0020344399586617965 * t85
+    t105 = t105 - t106
+    t92 = t92 + t105
+    t74 = t74 - t92
+    t85 = 1.495522 * t85
+    t105 = 0.150277948634 * t100
+    t106 = 0.0020344399586617965 * t90
+    t105 = t105 + t106
+    t85 = t85 - t105
+    t105 = 0.0020344399586617965 * t101
+    t106 = 0.002573605371338202 * t98
+    t105 = t105 - t106
+    t106 = t98 * t105
+    t110 = 0.002573605371338202 * t103
+    t111 = 0.150277948634 * t101
+    t110 = t110 - t111
+    t111 = t103 * t110
+    t106 = t106 - t111
+    t85 = t85 + t106
+    t106 = t7 * t85
+    t108 = 1.495522 * t108
+    t111 = 0.002573605371338202 * t90
+    t112 = 0.150277948634 * t94
+    t111 = t111 - t112
+    t108 = t108 + t111
+    t111 = 0.150277948634 * t98
+    t112 = 0.0020344399586617965 * t103
+    t111 = t111 - t112
+    t112 = t103 * t111
+    t105 = t101 * t105
+    t105 = t112 - t105
+    t105 = t108 + t105
+    t108 = t5 * t105
+    t106 = t106 + t108
+    t108 = 0.088 * t106
+    t74 = t74 - t108
+    t108 = t11 * t74
+    t104 = t104 - t108
+    t77 = t77 + t104
+    t104 = t3 * t77
+    t108 = (-0.0015152444733270301) * t73
+    t112 = 0.03146037232526039 * t78
+    t108 = t108 + t112
+    t112 = 0.0021640520520981297 * t66
+    t108 = t108 - t112
+    t112 = 0.03942757095803552 * t79
+    t113 = (-0.0015152444733270301) * t76
+    t112 = t112 - t113
+    t113 = (-0.004600245517563105) * t81
+    t112 = t112 + t113
+    t113 = t81 * t112
+    t80 = t79 * t80
+    t80 = t113 - t80
+    t80 = t108 + t80
+    t56 = t56 + t62
+    t62 = (-0.047121686402) * t56
+    t108 = (-0.014653732538) * t84
+    t62 = t62 - t108
+    t62 = t80 + t62
+    t80 = (-0.00010375891721868492) * t86
+    t108 = 9.3569097314605e-05 * t90
+    t80 = t80 - t108
+    t108 = 0.01179456023023895 * t78
+    t80 = t80 - t108
+    t95 = t91 * t95
+    t108 = t88 * t109
+    t95 = t95 - t108
+    t80 = t80 + t95
+    t95 = 0.10024161669500001 * t97
+    t108 = (-0.023526756935) * t70
+    t95 = t95 - t108
+    t80 = t80 + t95
+    t95 = t7 * t99
+    t99 = t5 * t102
+    t95 = t95 + t99
+    t80 = t80 + t95
+    t95 = 1.495522 * t96
+    t96 = 0.0020344399586617965 * t94
+    t99 = 0.002573605371338202 * t100
+    t96 = t96 + t99
+    t95 = t95 + t96
+    t96 = t101 * t110
+    t99 = t98 * t111
+    t96 = t96 - t99
+    t95 = t95 + t96
+    t96 = 0.088 * t95
+    t80 = t80 - t96
+    t62 = t62 - t80
+    t96 = t20 * t62
+    t96 = t104 - t96
+    t65 = t65 + t96
+    t96 = 1.225946 * t56
+    t99 = (-0.047121686402) * t78
+    t102 = 0.05034347249 * t66
+    t99 = t99 + t102
+    t96 = t96 + t99
+    t99 = 0.05034347249 * t79
+    t102 = (-0.014653732538) * t76
+    t99 = t99 + t102
+    t102 = t76 * t99
+    t104 = (-0.014653732538) * t81
+    t108 = (-0.047121686402) * t79
+    t104 = t104 - t108
+    t108 = t81 * t104
+    t102 = t102 + t108
+    t96 = t96 - t102
+    t70 = 1.666555 * t70
+    t102 = (-0.023526756935) * t78
+    t108 = (-0.017527158935000002) * t90
+    t102 = t102 - t108
+    t70 = t70 + t102
+    t102 = (-0.023526756935) * t91
+    t108 = 0.10024161669500001 * t88
+    t102 = t102 - t108
+    t108 = t88 * t102
+    t109 = 0.10024161669500001 * t93
+    t110 = (-0.017527158935000002) * t91
+    t109 = t109 - t110
+    t110 = t93 * t109
+    t108 = t108 - t110
+    t70 = t70 + t108
+    t85 = t5 * t85
+    t105 = t7 * t105
+    t85 = t85 - t105
+    t70 = t70 + t85
+    t85 = t4 * t70
+    t97 = 1.666555 * t97
+    t105 = 0.10024161669500001 * t78
+    t108 = (-0.017527158935000002) * t86
+    t105 = t105 + t108
+    t97 = t97 - t105
+    t105 = (-0.017527158935000002) * t88
+    t108 = (-0.023526756935) * t93
+    t105 = t105 - t108
+    t93 = t93 * t105
+    t102 = t91 * t102
+    t93 = t93 - t102
+    t93 = t97 + t93
+    t93 = t93 - t95
+    t95 = t11 * t93
+    t85 = t85 - t95
+    t85 = t96 + t85
+    t95 = t20 * t85
+    t96 = 1.225946 * t87
+    t97 = (-0.014653732538) * t66
+    t102 = (-0.047121686402) * t73
+    t97 = t97 + t102
+    t96 = t96 + t97
+    t97 = (-0.047121686402) * t76
+    t102 = 0.05034347249 * t81
+    t97 = t97 + t102
+    t81 = t81 * t97
+    t99 = t79 * t99
+    t81 = t81 + t99
+    t81 = t96 + t81
+    t96 = 1.666555 * t87
+    t86 = (-0.023526756935) * t86
+    t99 = 0.10024161669500001 * t90
+    t86 = t86 + t99
+    t86 = t96 + t86
+    t91 = t91 * t109
+    t88 = t88 * t105
+    t88 = t91 - t88
+    t86 = t86 + t88
+    t86 = t86 + t106
+    t81 = t81 + t86
+    t86 = t3 * t81
+    t86 = t95 - t86
+    t88 = 0.384 * t86
+    t65 = t65 - t88
+    t88 = t2 * t65
+    t91 = 0.02771584317362585 * t59
+    t95 = 0.03239943042445132 * t66
+    t91 = t91 - t95
+    t95 = (-0.0016444875773692705) * t47
+    t91 = t91 - t95
+    t95 = 0.06767727025085991 * t67
+    t96 = 0.02771584317362585 * t64
+    t95 = t95 + t96
+    t96 = 0.0039053550262761003 * t69
+    t95 = t95 + t96
+    t96 = t69 * t95
+    t68 = t67 * t68
+    t68 = t96 - t68
+    t68 = t91 + t68
+    t55 = t55 + t57
+    t57 = 0.09850206933 * t55
+    t91 = (-0.19076837715) * t72
+    t57 = t57 - t91
+    t57 = t68 + t57
+    t68 = (-0.004600245517563105) * t73
+    t91 = 0.0021640520520981297 * t78
+    t68 = t68 + t91
+    t91 = 0.010869510762828563 * t66
+    t68 = t68 - t91
+    t83 = t79 * t83
+    t91 = t76 * t112
+    t83 = t83 + t91
+    t68 = t68 + t83
+    t83 = (-0.014653732538) * t87
+    t56 = 0.05034347249 * t56
+    t56 = t83 + t56
+    t56 = t68 - t56
+    t68 = t11 * t89
+    t74 = t4 * t74
+    t68 = t68 + t74
+    t56 = t56 + t68
+    t57 = t57 + t56
+    t68 = (-0.0825) * t86
+    t57 = t57 + t68
+    t68 = t33 * t57
+    t68 = t88 - t68
+    t44 = t44 + t68
+    t68 = t1 * t44
+    t74 = (-0.008248333140675744) * t43
+    t83 = 0.05287838199960611 * t47
+    t74 = t74 + t83
+    t83 = (-0.004377257121839584) * t30
+    t74 = t74 - t83
+    t83 = 0.05649492601407083 * t49
+    t87 = (-0.008248333140675744) * t40
+    t83 = t83 + t87
+    t87 = (-0.005487648106562256) * t52
+    t83 = t83 + t87
+    t87 = t52 * t83
+    t50 = t49 * t50
+    t50 = t87 - t50
+    t50 = t74 + t50
+    t53 = t53 + t61
+    t61 = (-0.214708623208) * t53
+    t58 = 0.088844724872 * t58
+    t58 = t61 - t58
+    t50 = t50 + t58
+    t58 = 0.0039053550262761003 * t59
+    t61 = (-0.0016444875773692705) * t66
+    t58 = t58 - t61
+    t61 = 0.0775861490525396 * t47
+    t58 = t58 - t61
+    t61 = t67 * t71
+    t71 = t64 * t95
+    t61 = t61 - t71
+    t58 = t58 + t61
+    t61 = (-0.19076837715) * t75
+    t71 = 0.374644408005 * t55
+    t61 = t61 - t71
+    t58 = t58 + t61
+    t61 = t20 * t77
+    t62 = t3 * t62
+    t61 = t61 + t62
+    t58 = t58 - t61
+    t61 = 1.225946 * t84
+    t62 = 0.05034347249 * t73
+    t71 = (-0.014653732538) * t78
+    t62 = t62 - t71
+    t61 = t61 + t62
+    t62 = t79 * t104
+    t71 = t76 * t97
+    t62 = t62 - t71
+    t61 = t61 + t62
+    t62 = t11 * t70
+    t70 = t4 * t93
+    t62 = t62 + t70
+    t61 = t61 + t62
+    t62 = (-0.0825) * t61
+    t70 = t3 * t85
+    t71 = t20 * t81
+    t70 = t70 + t71
+    t71 = 0.384 * t70
+    t62 = t62 - t71
+    t58 = t58 + t62
+    t50 = t50 - t58
+    t55 = 3.587895 * t55
+    t62 = 0.374644408005 * t47
+    t71 = 0.09850206933 * t66
+    t62 = t62 - t71
+    t55 = t55 + t62
+    t62 = 0.374644408005 * t67
+    t71 = (-0.19076837715) * t64
+    t62 = t62 - t71
+    t71 = t64 * t62
+    t73 = (-0.19076837715) * t69
+    t74 = 0.09850206933 * t67
+    t73 = t73 - t74
+    t74 = t69 * t73
+    t71 = t71 - t74
+    t55 = t55 + t71
+    t55 = t55 + t70
+    t70 = t33 * t55
+    t71 = 3.587895 * t75
+    t74 = (-0.19076837715) * t47
+    t75 = 0.09850206933 * t59
+    t74 = t74 + t75
+    t71 = t71 - t74
+    t74 = 0.09850206933 * t64
+    t75 = 0.374644408005 * t69
+    t74 = t74 - t75
+    t69 = t69 * t74
+    t62 = t67 * t62
+    t62 = t69 - t62
+    t62 = t71 + t62
+    t61 = t62 + t61
+    t62 = t2 * t61
+    t62 = t70 + t62
+    t62 = 0.0825 * t62
+    t50 = t50 - t62
+    t62 = t41 * t50
+    t62 = t68 - t62
+    t34 = t34 + t62
+    t62 = 3.228604 * t53
+    t68 = (-0.214708623208) * t47
+    t69 = 0.126729164208 * t30
+    t68 = t68 + t69
+    t62 = t62 + t68
+    t68 = 0.126729164208 * t49
+    t69 = 0.088844724872 * t40
+    t68 = t68 - t69
+    t69 = t40 * t68
+    t70 = 0.088844724872 * t52
+    t71 = (-0.214708623208) * t49
+    t70 = t70 - t71
+    t70 = t52 * t70
+    t69 = t69 - t70
+    t62 = t62 + t69
+    t55 = t2 * t55
+    t61 = t33 * t61
+    t55 = t55 - t61
+    t55 = t62 + t55
+    t61 = t41 * t55
+    t62 = (-0.214708623208) * t40
+    t69 = 0.126729164208 * t52
+    t62 = t62 - t69
+    t52 = t52 * t62
+    t62 = t49 * t68
+    t52 = t52 - t62
+    t62 = 3.228604 * t63
+    t68 = 0.088844724872 * t30
+    t69 = (-0.214708623208) * t43
+    t68 = t68 + t69
+    t62 = t62 + t68
+    t52 = t52 - t62
+    t62 = 3.587895 * t72
+    t59 = 0.374644408005 * t59
+    t66 = (-0.19076837715) * t66
+    t59 = t59 + t66
+    t59 = t62 + t59
+    t62 = t67 * t73
+    t64 = t64 * t74
+    t62 = t62 - t64
+    t59 = t59 + t62
+    t59 = t59 - t86
+    t52 = t52 - t59
+    t62 = t1 * t52
+    t61 = t61 + t62
+    t61 = (-0.316) * t61
+    t34 = t34 + t61
+    t34 = t0 * t34
+    t61 = 0.028124284712194955 * t30
+    t62 = (-0.00398335888393552) * t36
+    t61 = t61 - t62
+    t62 = 0.01026110182100817 * qd[1]
+    t64 = 0.00850351162402155 * t29
+    t66 = (-0.00398335888393552) * t35
+    t64 = t64 + t66
+    t62 = t62 - t64
+    t64 = qd[1] * t62
+    t39 = t29 * t39
+    t39 = t64 + t39
+    t39 = t61 + t39
+    t61 = (-0.0221804724897) * t0
+    t39 = t39 + t61
+    t43 = (-0.005487648106562256) * t43
+    t47 = (-0.004377257121839584) * t47
+    t43 = t43 + t47
+    t47 = 0.01824920229252011 * t30
+    t43 = t43 - t47
+    t47 = t49 * t54
+    t40 = t40 * t83
+    t40 = t47 - t40
+    t40 = t43 + t40
+    t43 = 0.088844724872 * t63
+    t47 = 0.126729164208 * t53
+    t43 = t43 + t47
+    t40 = t40 - t43
+    t43 = t33 * t65
+    t47 = t2 * t57
+    t43 = t43 + t47
+    t40 = t40 + t43
+    t43 = 0.0825 * t59
+    t40 = t40 - t43
+    t39 = t39 - t40
+    t39 = t51 * t39
+    t34 = t34 + t39
+    t34 = -t34
+    t30 = 0.0007689361029464 * t30
+    t36 = 0.01026110182100817 * t36
+    t30 = t30 - t36
+    t35 = t35 * t62
+    t29 = t29 * t42
+    t29 = t35 - t29
+    t29 = t30 + t29
+    t30 = 0.01993386669246 * t51
+    t35 = 0.18226700140319999 * t0
+    t30 = t30 - t35
+    t29 = t29 + t30
+    t30 = t41 * t44
+    t35 = t1 * t50
+    t30 = t30 + t35
+    t29 = t29 + t30
+    t30 = t1 * t55
+    t35 = t41 * t52
+    t30 = t30 - t35
+    t30 = (-0.316) * t30
+    t29 = t29 - t30
+    t30 = cos(q[0])
+    t35 = t30 * t51
+    t36 = t35 * t1
+    t39 = sin(q[0])
+    t42 = t39 * t41
+    t36 = t36 - t42
+    t42 = t36 * t2
+    t43 = t30 * t0
+    t44 = t43 * t33
+    t42 = t42 + t44
+    t44 = t42 * t3
+    t35 = t35 * t41
+    t47 = t39 * t1
+    t35 = t35 + t47
+    t47 = t35 * t20
+    t44 = t44 - t47
+    t47 = t44 * t4
+    t49 = t43 * t2
+    t50 = t36 * t33
+    t49 = t49 - t50
+    t50 = t49 * t11
+    t47 = t47 + t50
+    t50 = t47 * t5
+    t52 = t42 * t20
+    t53 = t35 * t3
+    t52 = t52 + t53
+    t53 = t52 * t7
+    t50 = t50 + t53
+    t53 = 0.7071067811865476 * t50
+    t54 = t52 * t5
+    t55 = t47 * t7
+    t54 = t54 - t55
+    t55 = (-0.7071067811865475) * t54
+    t53 = t53 + t55
+    t55 = t39 * t51
+    t57 = t55 * t1
+    t59 = t30 * t41
+    t57 = t57 + t59
+    t59 = t57 * t2
+    t61 = t39 * t0
+    t62 = t61 * t33
+    t59 = t59 + t62
+    t62 = t59 * t3
+    t63 = t30 * t1
+    t55 = t55 * t41
+    t55 = t63 - t55
+    t63 = t55 * t20
+    t62 = t62 + t63
+    t63 = t62 * t4
+    t64 = t61 * t2
+    t65 = t57 * t33
+    t64 = t64 - t65
+    t65 = t64 * t11
+    t63 = t63 + t65
+    t65 = t63 * t5
+    t66 = t55 * t3
+    t67 = t59 * t20
+    t66 = t66 - t67
+    t67 = t66 * t7
+    t65 = t65 - t67
+    t67 = 0.7071067811865476 * t65
+    t68 = t63 * t7
+    t69 = t66 * t5
+    t68 = t68 + t69
+    t69 = (-0.7071067811865475) * t68
+    t67 = t67 - t69
+    t69 = t51 * t33
+    t1 = t0 * t1
+    t70 = t1 * t2
+    t69 = t69 - t70
+    t70 = t69 * t3
+    t0 = t0 * t41
+    t41 = t0 * t20
+    t41 = t70 + t41
+    t70 = t41 * t4
+    t33 = t1 * t33
+    t2 = t51 * t2
+    t2 = t33 + t2
+    t33 = t2 * t11
+    t33 = t70 + t33
+    t70 = t33 * t5
+    t3 = t0 * t3
+    t20 = t69 * t20
+    t3 = t3 - t20
+    t20 = t3 * t7
+    t20 = t70 - t20
+    t70 = 0.7071067811865476 * t20
+    t7 = t33 * t7
+    t5 = t3 * t5
+    t5 = t7 + t5
+    t7 = (-0.7071067811865475) * t5
+    t7 = t70 - t7
+    t50 = 0.7071067811865475 * t50
+    t54 = 0.7071067811865476 * t54
+    t50 = t50 + t54
+    t54 = 0.7071067811865475 * t65
+    t65 = 0.7071067811865476 * t68
+    t54 = t54 - t65
+    t20 = 0.7071067811865475 * t20
+    t5 = 0.7071067811865476 * t5
+    t5 = t20 - t5
+    t20 = t49 * t4
+    t44 = t44 * t11
+    t20 = t20 - t44
+    t44 = -t20
+    t65 = t64 * t4
+    t62 = t62 * t11
+    t62 = t65 - t62
+    t65 = -t62
+    t4 = t2 * t4
+    t11 = t41 * t11
+    t4 = t4 - t11
+    t11 = -t4
+    t36 = 0.0825 * t36
+    t41 = (-0.316) * t43
+    t36 = t36 - t41
+    t42 = (-0.0825) * t42
+    t68 = 0.384 * t49
+    t42 = t42 + t68
+    t42 = t36 + t42
+    t47 = 0.088 * t47
+    t47 = t42 + t47
+    t68 = 0.2104 * t20
+    t68 = t47 - t68
+    t57 = 0.0825 * t57
+    t70 = (-0.316) * t61
+    t57 = t57 - t70
+    t59 = (-0.0825) * t59
+    t71 = 0.384 * t64
+    t59 = t59 + t71
+    t59 = t57 + t59
+    t63 = 0.088 * t63
+    t63 = t59 + t63
+    t71 = 0.2104 * t62
+    t71 = t63 - t71
+    t72 = (-0.316) * t51
+    t72 = 0.333 - t72
+    t1 = 0.0825 * t1
+    t1 = t72 - t1
+    t69 = (-0.0825) * t69
+    t73 = 0.384 * t2
+    t69 = t69 + t73
+    t69 = t1 + t69
+    t33 = 0.088 * t33
+    t33 = t69 + t33
+    t73 = 0.2104 * t4
+    t73 = t33 - t73
+    t74 = -t71
+    t75 = t73 - 0.333
+    t76 = t30 * t75
+    t75 = t39 * t75
+    t77 = t39 * t71
+    t78 = t30 * t68
+    t77 = t77 + t78
+    t77 = -t77
+    t39 = -t39
+    t72 = t73 - t72
+    t78 = t61 * t72
+    t70 = t71 + t70
+    t79 = t51 * t70
+    t78 = t78 - t79
+    t41 = t68 + t41
+    t79 = t51 * t41
+    t72 = t43 * t72
+    t72 = t79 - t72
+    t70 = t43 * t70
+    t41 = t61 * t41
+    t41 = t70 - t41
+    t57 = t71 - t57
+    t70 = t0 * t57
+    t1 = t73 - t1
+    t79 = t55 * t1
+    t70 = t70 - t79
+    t36 = t68 - t36
+    t79 = t0 * t36
+    t1 = t35 * t1
+    t1 = t79 + t1
+    t1 = -t1
+    t57 = t35 * t57
+    t36 = t55 * t36
+    t36 = t57 + t36
+    t55 = -t55
+    t0 = -t0
+    t57 = t73 - t69
+    t69 = t64 * t57
+    t59 = t71 - t59
+    t79 = t2 * t59
+    t69 = t69 - t79
+    t42 = t68 - t42
+    t79 = t2 * t42
+    t81 = t49 * t57
+    t79 = t79 - t81
+    t81 = t49 * t59
+    t83 = t64 * t42
+    t81 = t81 - t83
+    t83 = t3 * t59
+    t84 = t66 * t57
+    t83 = t83 - t84
+    t84 = t3 * t42
+    t57 = t52 * t57
+    t57 = t84 + t57
+    t57 = -t57
+    t59 = t52 * t59
+    t42 = t66 * t42
+    t42 = t59 + t42
+    t59 = -t66
+    t3 = -t3
+    t63 = t71 - t63
+    t66 = t4 * t63
+    t33 = t73 - t33
+    t84 = t62 * t33
+    t66 = t66 - t84
+    t33 = t20 * t33
+    t47 = t68 - t47
+    t84 = t4 * t47
+    t33 = t33 - t84
+    t47 = t62 * t47
+    t63 = t20 * t63
+    t47 = t47 - t63
+    t63 = 0.7071067811865476 * t53
+    t84 = 0.7071067811865475 * t50
+    t63 = t63 + t84
+    t84 = 0.2104 * t100
+    t82 = t82 - t84
+    t84 = 0.2104 * t101
+    t85 = t103 * t84
+    t82 = t82 + t85
+    t85 = t63 * t82
+    t86 = (-0.7071067811865475) * t53
+    t87 = 0.7071067811865476 * t50
+    t86 = t86 + t87
+    t87 = 0.2104 * t94
+    t87 = t107 - t87
+    t88 = 0.2104 * t98
+    t89 = t103 * t88
+    t87 = t87 + t89
+    t89 = t86 * t87
+    t85 = t85 + t89
+    t84 = t101 * t84
+    t88 = t98 * t88
+    t84 = t84 + t88
+    t60 = t60 + t84
+    t84 = t20 * t60
+    t84 = t85 + t84
+    t85 = 0.7071067811865476 * t67
+    t88 = 0.7071067811865475 * t54
+    t85 = t85 + t88
+    t88 = t85 * t82
+    t89 = (-0.7071067811865475) * t67
+    t91 = 0.7071067811865476 * t54
+    t89 = t89 + t91
+    t91 = t89 * t87
+    t88 = t88 + t91
+    t91 = t62 * t60
+    t88 = t88 + t91
+    t91 = 0.7071067811865476 * t7
+    t93 = 0.7071067811865475 * t5
+    t91 = t91 + t93
+    t82 = t91 * t82
+    t93 = (-0.7071067811865475) * t7
+    t95 = 0.7071067811865476 * t5
+    t93 = t93 + t95
+    t87 = t93 * t87
+    t82 = t82 + t87
+    t60 = t4 * t60
+    t60 = t82 + t60
+    t63 = t63 * t94
+    t82 = t86 * t100
+    t63 = t63 - t82
+    t20 = t20 * t90
+    t20 = t63 - t20
+    t63 = t85 * t94
+    t82 = t89 * t100
+    t63 = t63 - t82
+    t62 = t62 * t90
+    t62 = t63 - t62
+    t63 = t91 * t94
+    t82 = t93 * t100
+    t63 = t63 - t82
+    t4 = t4 * t90
+    t4 = t63 - t4
+    _mass_matrix = (t31, t37, t38, t19, t17, t18, t25,
+                    t37, t32, t28, t10, t26, t15, t14,
+                    t38, t28, t16, t24, t13, t27, t48,
+                    t19, t10, t24, t9, t12, t23, t46,
+                    t17, t26, t13, t12, t6, t22, t45,
+                    t18, t15, t27, t23, t22, t8, t21,
+                    t25, t14, t48, t46, t45, t21, 0.006684151967360946)
+    _bias = (t34, t29, t40, t58, t56, t80, t92)
+    _fk_tcp = (t53, t50, t44, t68,
+               t67, t54, t65, t71,
+               t7, t5, t11, t73,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t74, t76, t78, t70, t69, t83, t66,
+                     t68, t75, t72, t1, t79, t57, t33,
+                     0.0, t77, t41, t36, t81, t42, t47,
+                     0.0, t39, t43, t35, t49, t52, t44,
+                     0.0, t30, t61, t55, t64, t59, t65,
+                     1.0, 0.0, t51, t0, t2, t3, t11)
+    _jdot_qd_tcp = (t84, t88, t60, t20, t62, t4)
+    return np.array(_mass_matrix).reshape(7, 7), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 7), np.array(_jdot_qd_tcp)
+
+
+_bundle_control_constants = _constants(
+    0.03163334319094959, 0.00039139128168424797, 0.029212399412428355, 0.00248046035817079,
+    0.0009653051699191116, 0.001255536598272898, -0.013224459479792, 0.001524110902883315,
+    0.002573605371338202, 0.0020344399586617965, -0.088, 0.006684151967360946, 0.088,
+    -0.011581322367999998, 0.010567766133106952, 0.03942757095803552, -0.0009653051699191116,
+    -0.001255536598272898, 9.3569097314605e-05, -0.00010375891721868492, -0.0015152444733270301,
+    0.01179456023023895, 0.03146037232526039, 0.10024161669500001, 0.131605936, -0.17380470556900002,
+    -0.047121686402, 0.384, -0.384, -0.6470403194880001, 0.06767727025085991, -0.004600245517563105,
+    0.0021640520520981297, -0.014653732538, -0.017527158935000002, 0.05034347249, -0.0825,
+    -0.13901256864, 0.02771584317362585, 0.010869510762828563, 0.0825, -0.029865981543750007,
+    0.03239943042445132, 0.05649492601407083, -0.0016444875773692705, 0.0039053550262761003,
+    0.09850206933, -0.008248333140675744, -0.6769063010317501, 0.0775861490525396, -0.19076837715,
+    -0.36201189750000007, 0.374644408005, 1.6850008320000003, -0.054286091887500006, 0.05287838199960611,
+    -0.214708623208, -0.316, 0.316, -1.1188387488320002, 0.00850351162402155, -0.004377257121839584,
+    -0.005487648106562256, 0.088844724872, 0.6580132350000001, 0.126729164208, -0.00398335888393552,
+    0.01824920229252011, 0.028124284712194955, 0.009213163777211224, 0.01026110182100817,
+    0.0007689361029464, 0.17380470556900002, -0.0020344399586617965, -0.006684151967360946,
+    0.026534991901690206, -0.0221804724897, -9.81, -0.023526756935, 0.150277948634, 1.495522, 1.225946,
+    1.666555, 3.587895, 3.228604, 0.01993386669246, 0.18226700140319999, 0.7071067811865476,
+    -0.7071067811865475, 0.7071067811865475, 0.2104, 0.333)
+
+
+_bundle_control_fixed = (
+    {48: 0.006684151967360946},
+    {},
+    {12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {14: 0.0, 21: 0.0, 28: 0.0, 35: 1.0, 36: 0.0},
+    {},
+)
+"""bundle_control's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_control_chunk(x, t, s, y):
+    """bundle_control on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
+     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80, t81,
+     t82, t83, t84) = t
+    (mass_matrix_0, mass_matrix_1, mass_matrix_2, mass_matrix_3, mass_matrix_4, mass_matrix_5,
+     mass_matrix_6, mass_matrix_7, mass_matrix_8, mass_matrix_9, mass_matrix_10, mass_matrix_11,
+     mass_matrix_12, mass_matrix_13, mass_matrix_14, mass_matrix_15, mass_matrix_16, mass_matrix_17,
+     mass_matrix_18, mass_matrix_19, mass_matrix_20, mass_matrix_21, mass_matrix_22, mass_matrix_23,
+     mass_matrix_24, mass_matrix_25, mass_matrix_26, mass_matrix_27, mass_matrix_28, mass_matrix_29,
+     mass_matrix_30, mass_matrix_31, mass_matrix_32, mass_matrix_33, mass_matrix_34, mass_matrix_35,
+     mass_matrix_36, mass_matrix_37, mass_matrix_38, mass_matrix_39, mass_matrix_40, mass_matrix_41,
+     mass_matrix_42, mass_matrix_43, mass_matrix_44, mass_matrix_45, mass_matrix_46, mass_matrix_47,
+     bias_0, bias_1, bias_2, bias_3, bias_4, bias_5, bias_6, fk_tcp_0, fk_tcp_1, fk_tcp_2, fk_tcp_3,
+     fk_tcp_4, fk_tcp_5, fk_tcp_6, fk_tcp_7, fk_tcp_8, fk_tcp_9, fk_tcp_10, fk_tcp_11, jacobian_tcp_0,
+     jacobian_tcp_1, jacobian_tcp_2, jacobian_tcp_3, jacobian_tcp_4, jacobian_tcp_5, jacobian_tcp_6,
+     jacobian_tcp_7, jacobian_tcp_8, jacobian_tcp_9, jacobian_tcp_10, jacobian_tcp_11, jacobian_tcp_12,
+     jacobian_tcp_13, jacobian_tcp_15, jacobian_tcp_16, jacobian_tcp_17, jacobian_tcp_18, jacobian_tcp_19,
+     jacobian_tcp_20, jacobian_tcp_22, jacobian_tcp_23, jacobian_tcp_24, jacobian_tcp_25, jacobian_tcp_26,
+     jacobian_tcp_27, jacobian_tcp_29, jacobian_tcp_30, jacobian_tcp_31, jacobian_tcp_32, jacobian_tcp_33,
+     jacobian_tcp_34, jacobian_tcp_37, jacobian_tcp_38, jacobian_tcp_39, jacobian_tcp_40, jacobian_tcp_41,
+     jdot_qd_tcp_0, jdot_qd_tcp_1, jdot_qd_tcp_2, jdot_qd_tcp_3, jdot_qd_tcp_4, jdot_qd_tcp_5) = y
+    (k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20, k21,
+     k22, k23, k24, k25, k26, k27, k28, k29, k30, k31, k32, k33, k34, k35, k36, k37, k38, k39, k40, k41,
+     k42, k43, k44, k45, k46, k47, k48, k49, k50, k51, k52, k53, k54, k55, k56, k57, k58, k59, k60, k61,
+     k62, k63, k64, k65, k66, k67, k68, k69, k70, k71, k72, k73, k74, k75, k76, k77, k78, k79, k80, k81,
+     k82, k83, k84, k85, k86, k87, k88, k89, k90, k91) = _bundle_control_constants
+    sin(q_1, t0)
+    cos(q_2, t1)
+    cos(q_3, t2)
+    cos(q_4, t3)
+    cos(q_5, t4)
+    cos(q_6, t5)
+    multiply(k0, t5, t6)
+    sin(q_6, t7)
+    multiply(k1, t7, t8)
+    subtract(t6, t8, t6)
+    multiply(t5, t6, t6)
+    multiply(k1, t5, t9)
+    multiply(k2, t7, t10)
+    subtract(t9, t10, t10)
+    multiply(t7, t10, t10)
+    subtract(t6, t10, t6)
+    add(k3, t6, t6)
+    multiply(t4, t6, t10)
+    sin(q_5, t11)
+    multiply(k4, t5, t12)
+    multiply(k5, t7, t13)
+    subtract(t12, t13, t12)
+    subtract(t12, k6, t12)
+    add(k7, t12, t12)
+    multiply(t11, t12, t13)
+    subtract(t10, t13, t10)
+    multiply(t4, t10, t10)
+    multiply(t4, t12, t12)
+    multiply(k8, t5, t14)
+    multiply(k9, t7, t15)
+    subtract(t14, t15, t15)
+    multiply(k10, t15, t16)
+    subtract(k11, t16, t17)
+    multiply(k12, t15, t18)
+    add(t17, t18, t17)
+    subtract(t17, k13, t17)
+    add(k14, t17, t17)
+    multiply(t11, t17, t19)
+    subtract(t12, t19, t19)
+    multiply(t11, t19, t19)
+    subtract(t10, t19, t10)
+    add(k15, t10, t10)
+    multiply(t3, t10, t19)
+    sin(q_4, t20)
+    multiply(k16, t7, t21)
+    multiply(k17, t5, t22)
+    add(t21, t22, mass_matrix_41)
+    subtract(k18, mass_matrix_41, t21)
+    multiply(t11, t21, t22)
+    multiply(k0, t7, t23)
+    add(t23, t9, t23)
+    multiply(t5, t23, t9)
+    multiply(k2, t5, t24)
+    add(t8, t24, t8)
+    multiply(t7, t8, t24)
+    subtract(t9, t24, t9)
+    multiply(k8, t7, t24)
+    multiply(k9, t5, t25)
+    add(t24, t25, t25)
+    multiply(k10, t25, t26)
+    add(t9, t26, t9)
+    add(k19, t9, t9)
+    multiply(t4, t9, t26)
+    subtract(t22, t26, t27)
+    add(k20, t27, t27)
+    multiply(t20, t27, t28)
+    subtract(t19, t28, t19)
+    multiply(t3, t19, t19)
+    multiply(t3, t27, t27)
+    multiply(t7, t23, t23)
+    multiply(t5, t8, t8)
+    add(t23, t8, t23)
+    add(t23, t18, t23)
+    subtract(t23, t16, t23)
+    subtract(t23, k13, t23)
+    add(k21, t23, mass_matrix_40)
+    add(k22, mass_matrix_40, t8)
+    multiply(t20, t8, t16)
+    subtract(t27, t16, t16)
+    multiply(t20, t16, t16)
+    subtract(t19, t16, t19)
+    add(k23, t15, t15)
+    add(t15, k24, t15)
+    multiply(t11, t15, t16)
+    multiply(k25, t4, t18)
+    add(t16, t18, t18)
+    add(k26, t18, t18)
+    multiply(k27, t18, t23)
+    add(t19, t23, t19)
+    multiply(k28, t18, t29)
+    subtract(t19, t29, t19)
+    subtract(t19, k29, t19)
+    add(k30, t19, t19)
+    multiply(t2, t19, t30)
+    sin(q_3, t31)
+    multiply(t11, t6, t6)
+    add(t6, t12, t6)
+    multiply(t4, t6, t12)
+    multiply(t4, t17, t17)
+    add(t13, t17, t13)
+    multiply(t11, t13, t17)
+    subtract(t12, t17, t12)
+    add(k31, t12, t12)
+    multiply(t3, t12, t17)
+    multiply(t11, t9, t9)
+    multiply(t4, t21, t21)
+    add(t9, t21, mass_matrix_33)
+    subtract(k32, mass_matrix_33, t9)
+    multiply(t20, t9, t21)
+    subtract(t17, t21, t17)
+    multiply(t4, t15, t15)
+    multiply(k25, t11, t21)
+    subtract(t15, t21, t21)
+    add(k33, t21, t21)
+    multiply(t3, t21, t32)
+    add(k34, t25, t25)
+    subtract(k35, t25, t25)
+    multiply(t20, t25, t33)
+    subtract(t32, t33, t32)
+    multiply(k27, t32, t33)
+    subtract(t17, t33, t17)
+    multiply(k36, t18, t33)
+    subtract(t17, t33, t33)
+    subtract(t33, k37, t33)
+    add(k38, t33, t33)
+    multiply(t31, t33, t34)
+    subtract(t30, t34, t30)
+    multiply(t2, t30, t30)
+    multiply(t2, t33, t33)
+    multiply(t11, t6, t6)
+    multiply(t4, t13, t13)
+    add(t6, t13, t6)
+    add(k39, t6, mass_matrix_32)
+    multiply(k40, t32, t6)
+    subtract(mass_matrix_32, t6, t13)
+    multiply(k36, t32, t35)
+    add(t13, t35, t13)
+    subtract(t13, k41, t13)
+    add(k42, t13, t13)
+    multiply(t31, t13, t36)
+    subtract(t33, t36, t36)
+    multiply(t31, t36, t36)
+    subtract(t30, t36, t30)
+    add(k43, t30, t30)
+    multiply(t1, t30, t36)
+    sin(q_2, t37)
+    multiply(t20, t21, t21)
+    multiply(t3, t25, t25)
+    add(t21, t25, t38)
+    multiply(k27, t38, t39)
+    multiply(t20, t12, t12)
+    multiply(t3, t9, t9)
+    add(t12, t9, t12)
+    subtract(t39, t12, t39)
+    add(k44, t39, t39)
+    multiply(t31, t39, t9)
+    multiply(t3, t8, t8)
+    add(t28, t8, t28)
+    multiply(t20, t28, t8)
+    multiply(t20, t10, t10)
+    add(t10, t27, t10)
+    multiply(t3, t10, t27)
+    subtract(t8, t27, t8)
+    multiply(k40, t38, t27)
+    subtract(t8, t27, t8)
+    add(k45, t8, t8)
+    multiply(t2, t8, t27)
+    subtract(t9, t27, t40)
+    subtract(k46, t38, t38)
+    multiply(k40, t38, t41)
+    add(t40, t41, t40)
+    add(k47, t40, t40)
+    multiply(t37, t40, t41)
+    subtract(t36, t41, t36)
+    multiply(t1, t36, t36)
+    multiply(t1, t40, t40)
+    multiply(t20, t10, t10)
+    multiply(t3, t28, t28)
+    add(t10, t28, t10)
+    subtract(t29, t35, t29)
+    subtract(t10, t29, t10)
+    subtract(t6, t23, t23)
+    subtract(t10, t23, t10)
+    subtract(t10, k48, t10)
+    add(k49, t10, mass_matrix_24)
+    add(k50, t32, t10)
+    add(t10, k51, t10)
+    multiply(t2, t10, t23)
+    add(k52, t18, t18)
+    add(t18, k53, t18)
+    multiply(t31, t18, t28)
+    subtract(t23, t28, t23)
+    multiply(k36, t23, t28)
+    subtract(mass_matrix_24, t28, t29)
+    multiply(k40, t23, t42)
+    add(t29, t42, t29)
+    subtract(t29, k54, t29)
+    add(k55, t29, t29)
+    multiply(t37, t29, t43)
+    subtract(t40, t43, t43)
+    multiply(t37, t43, t43)
+    subtract(t36, t43, t36)
+    multiply(t31, t10, t10)
+    multiply(t2, t18, t18)
+    add(t10, t18, t43)
+    add(k56, t43, t44)
+    multiply(k57, t44, t45)
+    subtract(t36, t45, t36)
+    multiply(k58, t44, t44)
+    add(t36, t44, t36)
+    subtract(t36, k59, t36)
+    add(k60, t36, t36)
+    multiply(t0, t36, t36)
+    cos(q_1, jacobian_tcp_37)
+    multiply(t31, t8, t8)
+    multiply(t2, t39, t39)
+    add(t8, t39, mass_matrix_17)
+    subtract(k61, mass_matrix_17, t8)
+    multiply(t37, t8, t39)
+    multiply(t31, t19, t19)
+    add(t19, t33, t19)
+    multiply(t2, t19, t33)
+    multiply(t2, t13, t13)
+    add(t34, t13, t34)
+    multiply(t31, t34, t13)
+    subtract(t33, t13, t33)
+    multiply(k36, t43, t43)
+    add(t33, t43, t33)
+    add(k62, t33, t33)
+    multiply(t1, t33, t13)
+    subtract(t39, t13, t43)
+    add(k63, t23, t23)
+    add(t23, k64, t23)
+    multiply(t1, t23, t46)
+    subtract(k65, t38, t38)
+    multiply(t37, t38, t47)
+    subtract(t46, t47, t46)
+    multiply(k57, t46, t46)
+    subtract(t43, t46, t43)
+    add(k66, t43, t43)
+    multiply(jacobian_tcp_37, t43, t47)
+    add(t36, t47, t36)
+    multiply(t0, t36, t36)
+    multiply(t0, t43, t43)
+    multiply(t31, t19, t19)
+    multiply(t2, t34, t34)
+    add(t19, t34, t19)
+    add(t19, t42, t19)
+    subtract(t19, t28, t19)
+    subtract(t19, k54, t19)
+    add(k67, t19, mass_matrix_16)
+    add(k68, mass_matrix_16, t19)
+    multiply(jacobian_tcp_37, t19, t19)
+    add(t43, t19, t43)
+    multiply(jacobian_tcp_37, t43, t43)
+    add(t36, t43, t36)
+    add(k69, t36, mass_matrix_0)
+    multiply(t37, t30, t30)
+    add(t30, t40, t30)
+    multiply(t1, t30, t19)
+    multiply(t1, t29, t29)
+    add(t41, t29, t41)
+    multiply(t37, t41, t28)
+    subtract(t19, t28, t19)
+    add(k70, t19, t19)
+    multiply(t0, t19, t19)
+    multiply(t37, t33, t33)
+    multiply(t1, t8, t8)
+    add(t33, t8, t33)
+    multiply(t37, t23, t23)
+    multiply(t1, t38, t38)
+    add(t23, t38, t8)
+    multiply(k57, t8, t8)
+    add(t33, t8, t8)
+    subtract(k71, t8, t8)
+    multiply(jacobian_tcp_37, t8, t8)
+    add(t19, t8, t19)
+    negative(t19, mass_matrix_1)
+    subtract(t13, t39, t13)
+    add(t13, t46, t13)
+    multiply(t0, t13, t13)
+    multiply(jacobian_tcp_37, mass_matrix_16, t8)
+    subtract(t13, t8, t13)
+    negative(t13, mass_matrix_2)
+    subtract(t27, t9, t27)
+    multiply(t1, t27, t8)
+    add(mass_matrix_24, t42, t42)
+    multiply(t37, t42, t9)
+    add(t8, t9, t8)
+    add(t18, t10, t18)
+    multiply(t37, t18, t9)
+    multiply(k57, t9, t9)
+    subtract(t8, t9, t8)
+    multiply(t0, t8, t8)
+    multiply(jacobian_tcp_37, mass_matrix_17, t9)
+    subtract(t8, t9, t8)
+    negative(t8, mass_matrix_3)
+    multiply(t2, t17, t8)
+    add(mass_matrix_32, t35, t35)
+    multiply(t31, t35, t9)
+    subtract(t8, t9, t8)
+    multiply(t1, t8, t9)
+    add(t25, t21, t25)
+    multiply(t31, t25, t10)
+    multiply(k40, t10, t10)
+    multiply(k27, t25, t13)
+    subtract(t13, t12, mass_matrix_25)
+    subtract(t10, mass_matrix_25, t10)
+    multiply(t37, t10, t12)
+    subtract(t9, t12, t9)
+    multiply(t1, t32, t12)
+    multiply(t2, t25, t25)
+    multiply(t37, t25, t13)
+    subtract(t12, t13, t12)
+    multiply(k57, t12, t12)
+    add(t9, t12, t9)
+    multiply(t0, t9, t9)
+    multiply(t31, t17, t17)
+    multiply(t2, t35, t35)
+    add(t17, t35, t17)
+    add(t17, t6, mass_matrix_18)
+    multiply(jacobian_tcp_37, mass_matrix_18, t6)
+    subtract(t9, t6, t9)
+    negative(t9, mass_matrix_4)
+    subtract(t26, t22, t26)
+    multiply(t3, t26, t6)
+    multiply(t20, mass_matrix_40, t9)
+    add(t6, t9, t6)
+    multiply(k72, t4, t9)
+    subtract(t9, t16, t9)
+    multiply(t20, t9, t12)
+    multiply(k27, t12, t13)
+    subtract(t6, t13, t6)
+    multiply(t2, t6, t13)
+    multiply(k36, t12, t16)
+    add(mass_matrix_33, t16, t16)
+    multiply(t31, t16, t17)
+    subtract(t13, t17, t13)
+    multiply(t1, t13, t17)
+    multiply(k72, t11, t19)
+    add(t19, t15, t19)
+    multiply(k36, t19, t15)
+    multiply(t3, t9, t9)
+    multiply(k27, t9, t21)
+    subtract(t15, t21, t15)
+    multiply(t20, t26, t26)
+    multiply(t3, mass_matrix_40, t21)
+    subtract(t26, t21, t26)
+    subtract(t15, t26, mass_matrix_26)
+    multiply(t31, t9, t15)
+    multiply(t2, t19, t21)
+    add(t15, t21, t15)
+    multiply(k40, t15, t15)
+    add(mass_matrix_26, t15, t15)
+    multiply(t37, t15, t21)
+    add(t17, t21, t17)
+    multiply(t2, t9, t9)
+    multiply(t31, t19, t19)
+    subtract(t9, t19, t9)
+    multiply(t37, t9, t19)
+    multiply(t1, t12, t21)
+    add(t19, t21, t19)
+    multiply(k57, t19, t19)
+    add(t17, t19, t17)
+    multiply(t0, t17, t17)
+    multiply(t31, t6, t6)
+    multiply(t2, t16, t16)
+    add(t6, t16, t6)
+    multiply(k40, t12, t16)
+    add(t6, t16, mass_matrix_19)
+    multiply(jacobian_tcp_37, mass_matrix_19, t6)
+    subtract(t17, t6, t17)
+    negative(t17, mass_matrix_5)
+    multiply(k16, t5, t6)
+    multiply(k17, t7, t16)
+    subtract(t6, t16, t6)
+    multiply(t4, t6, t16)
+    multiply(k73, t7, t17)
+    add(t17, t14, t17)
+    multiply(k12, t17, t14)
+    subtract(k74, t14, t14)
+    multiply(t11, t14, t19)
+    subtract(t16, t19, t16)
+    multiply(t3, t16, t19)
+    multiply(t20, mass_matrix_41, t21)
+    add(t19, t21, t19)
+    multiply(k73, t5, t21)
+    subtract(t21, t24, t21)
+    multiply(t4, t21, t22)
+    multiply(t20, t22, t24)
+    multiply(t3, t17, t26)
+    subtract(t24, t26, t24)
+    multiply(k27, t24, t26)
+    subtract(t19, t26, t19)
+    multiply(t2, t19, t26)
+    multiply(t11, t6, t6)
+    multiply(t4, t14, t14)
+    add(t6, t14, mass_matrix_34)
+    multiply(k36, t24, t6)
+    add(mass_matrix_34, t6, t6)
+    multiply(t31, t6, t14)
+    subtract(t26, t14, t26)
+    multiply(t1, t26, t14)
+    multiply(t11, t21, t21)
+    multiply(k36, t21, t28)
+    multiply(t3, t22, t22)
+    multiply(t20, t17, t17)
+    add(t22, t17, t22)
+    multiply(k27, t22, t17)
+    subtract(t28, t17, t28)
+    multiply(t20, t16, t16)
+    multiply(t3, mass_matrix_41, t17)
+    subtract(t16, t17, t16)
+    subtract(t28, t16, mass_matrix_27)
+    multiply(t31, t22, t16)
+    multiply(t2, t21, t17)
+    add(t16, t17, t16)
+    multiply(k40, t16, t16)
+    add(mass_matrix_27, t16, t16)
+    multiply(t37, t16, t17)
+    add(t14, t17, t14)
+    multiply(t2, t22, t22)
+    multiply(t31, t21, t21)
+    subtract(t22, t21, t22)
+    multiply(t37, t22, t17)
+    multiply(t1, t24, t21)
+    add(t17, t21, t17)
+    multiply(k57, t17, t17)
+    add(t14, t17, t14)
+    multiply(t0, t14, t14)
+    multiply(t31, t19, t19)
+    multiply(t2, t6, t6)
+    add(t19, t6, t19)
+    multiply(k40, t24, t6)
+    add(t19, t6, mass_matrix_20)
+    multiply(jacobian_tcp_37, mass_matrix_20, t6)
+    subtract(t14, t6, t14)
+    negative(t14, mass_matrix_6)
+    multiply(t37, t30, t30)
+    multiply(t1, t41, t41)
+    add(t30, t41, t30)
+    add(t30, t44, t30)
+    subtract(t30, t45, t30)
+    subtract(t30, k59, t30)
+    add(k75, t30, mass_matrix_8)
+    add(t38, t23, t38)
+    multiply(k57, t38, t38)
+    add(t33, t38, mass_matrix_9)
+    multiply(t37, t27, t27)
+    multiply(t1, t42, t42)
+    subtract(t27, t42, t27)
+    multiply(t1, t18, t18)
+    multiply(k57, t18, t18)
+    add(t27, t18, mass_matrix_10)
+    multiply(t37, t8, t8)
+    multiply(t1, t10, t10)
+    add(t8, t10, t8)
+    multiply(t1, t25, t25)
+    multiply(t37, t32, t32)
+    add(t25, t32, t25)
+    multiply(k57, t25, t25)
+    add(t8, t25, mass_matrix_11)
+    multiply(t37, t13, t13)
+    multiply(t1, t15, t15)
+    subtract(t13, t15, t13)
+    multiply(t1, t9, t9)
+    multiply(t37, t12, t12)
+    subtract(t9, t12, t9)
+    multiply(k57, t9, t9)
+    subtract(t13, t9, mass_matrix_12)
+    multiply(t37, t26, t26)
+    multiply(t1, t16, t16)
+    subtract(t26, t16, t26)
+    multiply(t1, t22, t22)
+    multiply(t37, t24, t24)
+    subtract(t22, t24, t22)
+    multiply(k57, t22, t22)
+    subtract(t26, t22, mass_matrix_13)
+    multiply(t0, qd_0, t6)
+    multiply(t6, qd_1, t8)
+    multiply(k66, t8, t9)
+    multiply(jacobian_tcp_37, qd_0, t10)
+    multiply(t10, qd_1, t12)
+    multiply(k60, t12, t13)
+    subtract(t9, t13, t9)
+    multiply(k75, qd_1, t13)
+    multiply(k70, t6, t14)
+    multiply(k71, t10, t15)
+    add(t14, t15, t14)
+    subtract(t13, t14, t13)
+    multiply(t10, t13, t14)
+    multiply(k71, qd_1, t15)
+    multiply(k66, t6, t16)
+    multiply(k68, t10, t17)
+    add(t16, t17, t16)
+    subtract(t15, t16, t15)
+    multiply(qd_1, t15, t16)
+    add(t14, t16, t14)
+    subtract(t9, t14, t9)
+    multiply(k76, jacobian_tcp_37, t14)
+    subtract(t9, t14, t9)
+    multiply(t37, t6, t14)
+    multiply(t1, qd_1, t16)
+    add(t14, t16, t14)
+    multiply(t14, qd_2, t16)
+    multiply(t1, t12, t17)
+    subtract(t16, t17, t16)
+    multiply(k43, t16, t17)
+    multiply(t37, t12, t18)
+    multiply(t37, qd_1, t19)
+    multiply(t1, t6, t21)
+    subtract(t19, t21, t19)
+    multiply(t19, qd_2, t21)
+    subtract(t18, t21, t18)
+    multiply(k47, t18, t21)
+    add(t17, t21, t17)
+    multiply(k62, t8, t21)
+    subtract(t17, t21, t17)
+    multiply(k62, t19, t21)
+    multiply(k61, t14, t22)
+    add(t21, t22, t21)
+    add(t10, qd_2, t22)
+    multiply(k67, t22, t23)
+    add(t21, t23, t21)
+    multiply(t14, t21, t23)
+    multiply(k47, t19, t24)
+    multiply(k55, t14, t25)
+    add(t24, t25, t24)
+    multiply(k61, t22, t25)
+    add(t24, t25, t24)
+    multiply(t22, t24, t25)
+    subtract(t23, t25, t23)
+    add(t17, t23, t17)
+    multiply(k57, qd_1, t23)
+    multiply(qd_1, t23, t25)
+    multiply(k57, t6, t26)
+    multiply(t6, t26, t27)
+    add(t25, t27, t25)
+    multiply(k77, jacobian_tcp_37, t27)
+    subtract(t25, t27, t28)
+    multiply(k65, t28, t29)
+    multiply(t10, t26, t26)
+    multiply(t37, t26, t30)
+    multiply(k57, t12, t32)
+    multiply(t10, t23, t23)
+    add(t32, t23, t32)
+    multiply(t1, t32, t23)
+    add(t30, t23, t30)
+    multiply(k77, t0, t23)
+    multiply(t37, t23, t33)
+    add(t30, t33, t34)
+    multiply(k56, t34, t35)
+    add(t29, t35, t29)
+    add(t17, t29, t17)
+    multiply(t2, t16, t29)
+    multiply(t31, t8, t35)
+    subtract(t29, t35, t29)
+    multiply(t2, t22, t35)
+    multiply(t31, t19, t36)
+    subtract(t35, t36, t35)
+    multiply(t35, qd_3, t36)
+    add(t29, t36, t29)
+    multiply(k30, t29, t36)
+    multiply(t31, t16, t38)
+    multiply(t2, t8, t39)
+    add(t38, t39, t38)
+    multiply(t2, t19, t39)
+    multiply(t31, t22, t40)
+    add(t39, t40, t39)
+    multiply(t39, qd_3, t40)
+    add(t38, t40, t38)
+    multiply(k38, t38, t40)
+    subtract(t36, t40, t36)
+    multiply(k45, t18, t40)
+    subtract(t36, t40, t36)
+    multiply(k45, t39, t40)
+    multiply(k44, t35, t41)
+    add(t40, t41, t40)
+    subtract(qd_3, t14, t41)
+    multiply(k49, t41, t42)
+    add(t40, t42, t40)
+    multiply(t35, t40, t42)
+    multiply(k38, t39, t43)
+    multiply(k42, t35, t44)
+    add(t43, t44, t43)
+    multiply(k44, t41, t44)
+    add(t43, t44, t43)
+    multiply(t41, t43, t44)
+    subtract(t42, t44, t42)
+    add(t36, t42, t36)
+    multiply(k40, t14, t42)
+    multiply(t19, t42, t44)
+    multiply(k40, t8, t45)
+    add(t30, t45, t30)
+    subtract(t44, t30, t44)
+    subtract(t33, t44, t30)
+    multiply(k52, t30, t45)
+    multiply(k40, t18, t46)
+    subtract(t25, t46, t25)
+    multiply(k40, t22, t46)
+    multiply(t19, t46, t47)
+    add(t25, t47, t25)
+    multiply(t2, t25, t47)
+    multiply(t1, t26, t26)
+    multiply(t37, t32, t32)
+    subtract(t26, t32, t26)
+    multiply(t14, t42, t42)
+    multiply(t22, t46, t46)
+    add(t42, t46, t42)
+    subtract(t26, t42, t42)
+    multiply(t31, t42, t32)
+    subtract(t47, t32, t47)
+    multiply(t1, t23, t23)
+    multiply(t31, t23, t32)
+    multiply(t2, t27, t46)
+    add(t32, t46, t32)
+    subtract(t47, t32, t46)
+    multiply(k46, t46, t48)
+    subtract(t45, t48, t45)
+    add(t36, t45, t36)
+    multiply(t3, t29, t45)
+    multiply(t20, t18, t48)
+    add(t45, t48, t45)
+    multiply(t20, t39, t48)
+    multiply(t3, t41, t49)
+    add(t48, t49, t48)
+    multiply(t48, qd_4, t49)
+    subtract(t45, t49, t45)
+    multiply(k15, t45, t49)
+    multiply(t3, t18, t50)
+    multiply(t20, t29, t51)
+    subtract(t50, t51, t50)
+    multiply(t3, t39, t51)
+    multiply(t20, t41, t52)
+    subtract(t51, t52, t51)
+    multiply(t51, qd_4, t52)
+    subtract(t50, t52, t50)
+    multiply(k20, t50, t52)
+    add(t49, t52, t49)
+    multiply(k31, t38, t52)
+    subtract(t49, t52, t49)
+    multiply(k31, t51, t52)
+    multiply(k32, t48, t53)
+    subtract(t52, t53, t52)
+    add(t35, qd_4, t53)
+    multiply(k39, t53, t54)
+    add(t52, t54, t52)
+    multiply(t48, t52, t54)
+    multiply(k20, t51, t55)
+    multiply(k22, t48, t56)
+    subtract(t55, t56, t55)
+    multiply(k32, t53, t56)
+    add(t55, t56, t55)
+    multiply(t53, t55, t56)
+    add(t54, t56, t54)
+    subtract(t49, t54, t49)
+    multiply(k36, t18, t54)
+    subtract(t47, t54, t47)
+    multiply(k27, t41, t54)
+    multiply(t41, t54, t56)
+    multiply(k27, t39, t57)
+    multiply(k36, t35, t58)
+    subtract(t57, t58, t57)
+    multiply(t39, t57, t58)
+    add(t56, t58, t56)
+    subtract(t47, t56, t47)
+    subtract(t47, t32, t56)
+    multiply(k35, t56, t58)
+    multiply(t2, t42, t42)
+    multiply(t31, t25, t25)
+    add(t42, t25, t42)
+    multiply(k27, t18, t25)
+    add(t42, t25, t25)
+    multiply(t35, t57, t57)
+    multiply(k36, t41, t59)
+    multiply(t41, t59, t60)
+    subtract(t57, t60, t57)
+    add(t25, t57, t25)
+    multiply(t20, t25, t57)
+    multiply(k27, t29, t60)
+    multiply(k36, t38, t61)
+    add(t60, t61, t60)
+    subtract(t60, t44, t60)
+    multiply(t39, t59, t59)
+    multiply(t35, t54, t54)
+    add(t59, t54, t59)
+    add(t60, t59, t60)
+    multiply(t3, t60, t44)
+    add(t57, t44, t57)
+    multiply(t2, t23, t44)
+    multiply(t31, t27, t27)
+    subtract(t44, t27, t44)
+    multiply(t20, t44, t27)
+    multiply(t3, t33, t54)
+    add(t27, t54, t27)
+    add(t57, t27, t54)
+    multiply(k26, t54, t59)
+    add(t58, t59, t58)
+    add(t49, t58, t49)
+    multiply(t4, t45, t58)
+    multiply(t11, t38, t59)
+    subtract(t58, t59, t58)
+    multiply(t4, t53, t59)
+    multiply(t11, t51, t61)
+    subtract(t59, t61, t59)
+    multiply(t59, qd_5, t61)
+    add(t58, t61, t58)
+    multiply(k3, t58, t61)
+    multiply(t11, t45, t62)
+    multiply(t4, t38, t63)
+    add(t62, t63, t62)
+    multiply(t4, t51, t63)
+    multiply(t11, t53, t64)
+    add(t63, t64, t63)
+    multiply(t63, qd_5, t64)
+    add(t62, t64, t62)
+    multiply(k7, t62, t64)
+    subtract(t61, t64, t61)
+    multiply(k19, t50, t64)
+    subtract(t61, t64, t61)
+    multiply(k19, t63, t64)
+    multiply(k18, t59, t65)
+    add(t64, t65, t64)
+    add(t48, qd_5, t65)
+    multiply(k21, t65, t66)
+    add(t64, t66, t64)
+    multiply(t59, t64, t66)
+    multiply(k7, t63, t67)
+    multiply(k14, t59, t68)
+    add(t67, t68, t67)
+    multiply(k18, t65, t68)
+    add(t67, t68, t67)
+    multiply(t65, t67, t68)
+    subtract(t66, t68, t66)
+    add(t61, t66, t61)
+    multiply(k78, t54, t66)
+    multiply(t4, t47, t68)
+    multiply(t3, t25, t25)
+    multiply(t20, t60, t60)
+    subtract(t25, t60, t25)
+    multiply(t11, t25, t60)
+    subtract(t68, t60, t68)
+    multiply(t3, t44, t60)
+    multiply(t20, t33, t33)
+    subtract(t60, t33, t60)
+    multiply(t11, t60, t33)
+    multiply(t4, t32, t69)
+    add(t33, t69, t33)
+    subtract(t68, t33, t69)
+    multiply(k34, t69, t70)
+    subtract(t66, t70, t66)
+    add(t61, t66, t61)
+    multiply(t5, t58, t66)
+    multiply(t7, t50, t70)
+    subtract(t66, t70, t66)
+    multiply(t5, t65, t70)
+    multiply(t7, t63, t71)
+    subtract(t70, t71, t70)
+    multiply(t70, qd_6, t71)
+    add(t66, t71, t66)
+    multiply(k0, t66, t71)
+    multiply(t7, t58, t72)
+    multiply(t5, t50, t73)
+    add(t72, t73, t72)
+    multiply(t5, t63, t73)
+    multiply(t7, t65, t74)
+    add(t73, t74, t73)
+    multiply(t73, qd_6, t74)
+    add(t72, t74, t72)
+    multiply(k1, t72, t74)
+    subtract(t71, t74, t71)
+    multiply(k16, t62, t74)
+    add(t71, t74, t71)
+    multiply(k16, t73, t74)
+    multiply(k17, t70, t75)
+    add(t74, t75, t74)
+    subtract(qd_6, t59, t75)
+    multiply(k11, t75, t76)
+    add(t74, t76, t74)
+    multiply(t70, t74, t76)
+    multiply(k1, t73, t77)
+    multiply(k2, t70, t78)
+    add(t77, t78, t77)
+    multiply(k17, t75, t78)
+    add(t77, t78, t77)
+    multiply(t75, t77, t78)
+    subtract(t76, t78, t76)
+    add(t71, t76, t71)
+    multiply(k12, t50, t76)
+    subtract(t68, t76, t68)
+    multiply(k12, t59, t76)
+    multiply(t63, t76, t78)
+    add(t68, t78, t68)
+    subtract(t33, t68, t33)
+    multiply(k9, t33, t78)
+    multiply(k12, t62, t79)
+    add(t57, t79, t57)
+    multiply(k12, t65, t79)
+    multiply(t63, t79, t80)
+    add(t57, t80, t57)
+    multiply(t5, t57, t80)
+    multiply(t4, t25, t81)
+    multiply(t11, t47, t47)
+    add(t81, t47, t81)
+    multiply(t59, t76, t76)
+    multiply(t65, t79, t79)
+    add(t76, t79, t76)
+    subtract(t81, t76, t76)
+    multiply(t7, t76, t47)
+    subtract(t80, t47, t80)
+    multiply(t5, t27, t47)
+    multiply(t4, t60, t79)
+    multiply(t11, t32, t32)
+    subtract(t79, t32, t79)
+    multiply(t7, t79, t32)
+    subtract(t47, t32, t47)
+    add(t80, t47, t47)
+    multiply(k79, t47, t32)
+    subtract(t78, t32, t78)
+    add(t71, t78, t71)
+    multiply(t5, t71, t32)
+    multiply(k1, t66, t78)
+    multiply(k2, t72, t82)
+    subtract(t78, t82, t78)
+    multiply(k17, t62, t82)
+    add(t78, t82, t78)
+    multiply(k0, t73, t82)
+    multiply(k1, t70, t83)
+    add(t82, t83, t82)
+    multiply(k16, t75, t83)
+    add(t82, t83, t82)
+    multiply(t75, t82, t83)
+    multiply(t73, t74, t74)
+    subtract(t83, t74, t83)
+    add(t78, t83, t78)
+    multiply(t5, t76, t76)
+    multiply(t7, t57, t57)
+    add(t76, t57, t76)
+    multiply(t5, t79, t57)
+    multiply(t7, t27, t27)
+    add(t57, t27, t57)
+    add(t76, t57, t57)
+    multiply(k79, t57, t27)
+    multiply(k8, t33, t74)
+    subtract(t27, t74, t27)
+    add(t78, t27, t78)
+    multiply(t7, t78, t27)
+    subtract(t32, t27, t32)
+    add(t61, t32, t61)
+    multiply(t4, t61, t27)
+    multiply(k7, t58, t32)
+    multiply(k14, t62, t74)
+    subtract(t32, t74, t32)
+    multiply(k18, t50, t74)
+    subtract(t32, t74, t32)
+    multiply(k3, t63, t74)
+    multiply(k7, t59, t83)
+    add(t74, t83, t74)
+    multiply(k19, t65, t83)
+    add(t74, t83, t74)
+    multiply(t65, t74, t83)
+    multiply(t63, t64, t64)
+    subtract(t83, t64, t83)
+    add(t32, t83, t32)
+    add(t81, t79, t81)
+    multiply(k34, t81, t64)
+    multiply(k23, t54, t79)
+    subtract(t64, t79, t64)
+    add(t32, t64, t32)
+    multiply(k16, t66, t64)
+    multiply(k17, t72, t79)
+    subtract(t64, t79, t64)
+    multiply(k11, t62, t79)
+    add(t64, t79, t64)
+    multiply(t73, t77, t77)
+    multiply(t70, t82, t82)
+    subtract(t77, t82, t77)
+    add(t64, t77, t64)
+    multiply(k8, t47, t77)
+    multiply(k9, t57, t79)
+    subtract(t77, t79, t77)
+    add(t64, t77, bias_6)
+    subtract(t32, bias_6, t32)
+    multiply(k80, t57, t57)
+    multiply(k79, t72, t64)
+    multiply(k9, t62, t77)
+    add(t64, t77, t64)
+    subtract(t57, t64, t57)
+    multiply(k9, t73, t64)
+    multiply(k8, t70, t77)
+    subtract(t64, t77, t64)
+    multiply(t70, t64, t77)
+    multiply(k8, t75, t79)
+    multiply(k79, t73, t82)
+    subtract(t79, t82, t79)
+    multiply(t75, t79, t82)
+    subtract(t77, t82, t77)
+    add(t57, t77, t57)
+    multiply(t7, t57, t77)
+    multiply(k80, t47, t47)
+    multiply(k8, t62, t82)
+    multiply(k79, t66, t83)
+    subtract(t82, t83, t82)
+    add(t47, t82, t47)
+    multiply(k79, t70, t82)
+    multiply(k9, t75, t83)
+    subtract(t82, t83, t82)
+    multiply(t75, t82, t83)
+    multiply(t73, t64, t64)
+    subtract(t83, t64, t83)
+    add(t47, t83, t47)
+    multiply(t5, t47, t64)
+    add(t77, t64, t77)
+    multiply(k12, t77, t64)
+    subtract(t32, t64, t32)
+    multiply(t11, t32, t64)
+    subtract(t27, t64, t27)
+    add(t49, t27, t49)
+    multiply(t3, t49, t27)
+    multiply(k20, t45, t64)
+    multiply(k22, t50, t83)
+    add(t64, t83, t64)
+    multiply(k32, t38, t83)
+    subtract(t64, t83, t64)
+    multiply(k15, t51, t83)
+    multiply(k20, t48, t84)
+    subtract(t83, t84, t83)
+    multiply(k31, t53, t84)
+    add(t83, t84, t83)
+    multiply(t53, t83, t84)
+    multiply(t51, t52, t52)
+    subtract(t84, t52, t84)
+    add(t64, t84, t64)
+    add(t25, t60, t25)
+    multiply(k26, t25, t52)
+    multiply(k33, t56, t60)
+    subtract(t52, t60, t52)
+    add(t64, t52, t64)
+    multiply(k19, t58, t52)
+    multiply(k18, t62, t60)
+    subtract(t52, t60, t52)
+    multiply(k21, t50, t60)
+    subtract(t52, t60, t52)
+    multiply(t63, t67, t67)
+    multiply(t59, t74, t74)
+    subtract(t67, t74, t67)
+    add(t52, t67, t52)
+    multiply(k23, t69, t60)
+    multiply(k78, t81, t67)
+    subtract(t60, t67, t60)
+    add(t52, t60, t52)
+    multiply(t7, t71, t71)
+    multiply(t5, t78, t78)
+    add(t71, t78, t71)
+    add(t52, t71, t52)
+    multiply(k80, t33, t33)
+    multiply(k9, t66, t60)
+    multiply(k8, t72, t67)
+    add(t60, t67, t60)
+    add(t33, t60, t33)
+    multiply(t73, t79, t79)
+    multiply(t70, t82, t82)
+    subtract(t79, t82, t79)
+    add(t33, t79, t33)
+    multiply(k12, t33, t60)
+    subtract(t52, t60, bias_5)
+    subtract(t64, bias_5, t64)
+    multiply(t20, t64, t52)
+    subtract(t27, t52, t27)
+    add(t36, t27, t36)
+    multiply(k81, t25, t27)
+    multiply(k26, t50, t52)
+    multiply(k35, t38, t60)
+    add(t52, t60, t52)
+    add(t27, t52, t27)
+    multiply(k35, t51, t52)
+    multiply(k33, t48, t60)
+    add(t52, t60, t52)
+    multiply(t48, t52, t60)
+    multiply(k33, t53, t67)
+    multiply(k26, t51, t71)
+    subtract(t67, t71, t67)
+    multiply(t53, t67, t71)
+    add(t60, t71, t60)
+    subtract(t27, t60, t27)
+    multiply(k82, t81, t81)
+    multiply(k78, t50, t60)
+    multiply(k34, t62, t71)
+    subtract(t60, t71, t60)
+    add(t81, t60, t81)
+    multiply(k78, t63, t60)
+    multiply(k23, t59, t71)
+    subtract(t60, t71, t60)
+    multiply(t59, t60, t71)
+    multiply(k23, t65, t74)
+    multiply(k34, t63, t78)
+    subtract(t74, t78, t74)
+    multiply(t65, t74, t78)
+    subtract(t71, t78, t71)
+    add(t81, t71, t81)
+    multiply(t5, t57, t57)
+    multiply(t7, t47, t47)
+    subtract(t57, t47, t57)
+    add(t81, t57, t81)
+    multiply(t4, t81, t47)
+    multiply(k82, t69, t69)
+    multiply(k23, t50, t57)
+    multiply(k34, t58, t71)
+    add(t57, t71, t57)
+    subtract(t69, t57, t69)
+    multiply(k34, t59, t57)
+    multiply(k78, t65, t71)
+    subtract(t57, t71, t57)
+    multiply(t65, t57, t65)
+    multiply(t63, t60, t60)
+    subtract(t65, t60, t65)
+    add(t69, t65, t69)
+    subtract(t69, t33, t69)
+    multiply(t11, t69, t33)
+    subtract(t47, t33, t47)
+    add(t27, t47, t27)
+    multiply(t20, t27, t33)
+    multiply(k81, t54, t47)
+    multiply(k33, t38, t60)
+    multiply(k26, t45, t65)
+    add(t60, t65, t60)
+    add(t47, t60, t47)
+    multiply(k26, t48, t60)
+    multiply(k35, t53, t65)
+    add(t60, t65, t60)
+    multiply(t53, t60, t53)
+    multiply(t51, t52, t52)
+    add(t53, t52, t53)
+    add(t47, t53, t47)
+    multiply(k82, t54, t52)
+    multiply(k78, t58, t58)
+    multiply(k23, t62, t53)
+    add(t58, t53, t58)
+    add(t52, t58, t52)
+    multiply(t63, t74, t63)
+    multiply(t59, t57, t59)
+    subtract(t63, t59, t63)
+    add(t52, t63, t52)
+    add(t52, t77, t52)
+    add(t47, t52, t47)
+    multiply(t3, t47, t52)
+    subtract(t33, t52, t33)
+    multiply(k27, t33, t52)
+    subtract(t36, t52, t36)
+    multiply(t2, t36, t52)
+    multiply(k38, t29, t53)
+    multiply(k42, t38, t57)
+    subtract(t53, t57, t53)
+    multiply(k44, t18, t57)
+    subtract(t53, t57, t53)
+    multiply(k30, t39, t57)
+    multiply(k38, t35, t58)
+    add(t57, t58, t57)
+    multiply(k45, t41, t58)
+    add(t57, t58, t57)
+    multiply(t41, t57, t58)
+    multiply(t39, t40, t40)
+    subtract(t58, t40, t58)
+    add(t53, t58, t53)
+    add(t42, t44, t42)
+    multiply(k46, t42, t40)
+    multiply(k50, t30, t44)
+    subtract(t40, t44, t40)
+    add(t53, t40, t53)
+    multiply(k31, t45, t40)
+    multiply(k32, t50, t44)
+    add(t40, t44, t40)
+    multiply(k39, t38, t44)
+    subtract(t40, t44, t40)
+    multiply(t51, t55, t55)
+    multiply(t48, t83, t83)
+    add(t55, t83, t55)
+    add(t40, t55, t40)
+    multiply(k33, t54, t54)
+    multiply(k35, t25, t25)
+    add(t54, t25, t54)
+    subtract(t40, t54, t40)
+    multiply(t11, t61, t61)
+    multiply(t4, t32, t32)
+    add(t61, t32, t61)
+    add(t40, t61, bias_4)
+    add(t53, bias_4, t53)
+    multiply(k36, t33, t25)
+    add(t53, t25, t53)
+    multiply(t31, t53, t25)
+    subtract(t52, t25, t52)
+    add(t17, t52, t17)
+    multiply(t1, t17, t25)
+    multiply(k47, t16, t32)
+    multiply(k55, t18, t40)
+    add(t32, t40, t32)
+    multiply(k61, t8, t40)
+    subtract(t32, t40, t32)
+    multiply(k43, t19, t40)
+    multiply(k47, t14, t44)
+    add(t40, t44, t40)
+    multiply(k62, t22, t44)
+    add(t40, t44, t40)
+    multiply(t22, t40, t44)
+    multiply(t19, t21, t21)
+    subtract(t44, t21, t44)
+    add(t32, t44, t32)
+    add(t26, t23, t26)
+    multiply(k56, t26, t21)
+    multiply(k63, t28, t28)
+    subtract(t21, t28, t21)
+    add(t32, t21, t32)
+    multiply(k45, t29, t21)
+    multiply(k44, t38, t23)
+    subtract(t21, t23, t21)
+    multiply(k49, t18, t23)
+    subtract(t21, t23, t21)
+    multiply(t39, t43, t43)
+    multiply(t35, t57, t57)
+    subtract(t43, t57, t43)
+    add(t21, t43, t21)
+    multiply(k50, t46, t23)
+    multiply(k52, t42, t28)
+    subtract(t23, t28, t23)
+    add(t21, t23, t21)
+    multiply(t20, t49, t49)
+    multiply(t3, t64, t64)
+    add(t49, t64, t49)
+    subtract(t21, t49, t21)
+    multiply(k81, t56, t56)
+    multiply(k35, t45, t45)
+    multiply(k33, t50, t50)
+    subtract(t45, t50, t45)
+    add(t56, t45, t56)
+    multiply(t51, t67, t51)
+    multiply(t48, t60, t48)
+    subtract(t51, t48, t51)
+    add(t56, t51, t56)
+    multiply(t11, t81, t81)
+    multiply(t4, t69, t69)
+    add(t81, t69, t81)
+    add(t56, t81, t56)
+    multiply(k36, t56, t23)
+    multiply(t3, t27, t27)
+    multiply(t20, t47, t47)
+    add(t27, t47, t27)
+    multiply(k27, t27, t28)
+    subtract(t23, t28, t23)
+    add(t21, t23, bias_3)
+    subtract(t32, bias_3, t32)
+    multiply(k83, t42, t42)
+    multiply(k52, t18, t21)
+    multiply(k46, t38, t23)
+    subtract(t21, t23, t21)
+    add(t42, t21, t42)
+    multiply(k52, t39, t21)
+    multiply(k50, t35, t23)
+    subtract(t21, t23, t21)
+    multiply(t35, t21, t23)
+    multiply(k50, t41, t28)
+    multiply(k46, t39, t43)
+    subtract(t28, t43, t28)
+    multiply(t41, t28, t43)
+    subtract(t23, t43, t23)
+    add(t42, t23, t42)
+    add(t42, t27, t42)
+    multiply(t31, t42, t23)
+    multiply(k83, t46, t46)
+    multiply(k50, t18, t27)
+    multiply(k46, t29, t43)
+    add(t27, t43, t27)
+    subtract(t46, t27, t46)
+    multiply(k46, t35, t27)
+    multiply(k52, t41, t43)
+    subtract(t27, t43, t27)
+    multiply(t41, t27, t41)
+    multiply(t39, t21, t21)
+    subtract(t41, t21, t41)
+    add(t46, t41, t46)
+    add(t46, t56, t46)
+    multiply(t2, t46, t21)
+    add(t23, t21, t23)
+    multiply(k40, t23, t23)
+    subtract(t32, t23, t32)
+    multiply(t37, t32, t21)
+    subtract(t25, t21, t25)
+    add(t9, t25, t9)
+    multiply(k84, t26, t21)
+    multiply(k56, t18, t23)
+    multiply(k65, t8, t25)
+    add(t23, t25, t23)
+    add(t21, t23, t21)
+    multiply(k65, t19, t23)
+    multiply(k63, t14, t25)
+    subtract(t23, t25, t23)
+    multiply(t14, t23, t25)
+    multiply(k63, t22, t41)
+    multiply(k56, t19, t43)
+    subtract(t41, t43, t41)
+    multiply(t22, t41, t41)
+    subtract(t25, t41, t25)
+    add(t21, t25, t21)
+    multiply(t2, t42, t42)
+    multiply(t31, t46, t46)
+    subtract(t42, t46, t42)
+    add(t21, t42, t21)
+    multiply(t37, t21, t25)
+    multiply(k56, t14, t41)
+    multiply(k65, t22, t42)
+    subtract(t41, t42, t41)
+    multiply(t22, t41, t22)
+    multiply(t19, t23, t23)
+    subtract(t22, t23, t22)
+    multiply(k84, t34, t23)
+    multiply(k63, t8, t41)
+    multiply(k56, t16, t42)
+    add(t41, t42, t41)
+    add(t23, t41, t23)
+    subtract(t22, t23, t22)
+    multiply(k83, t30, t30)
+    multiply(k52, t29, t29)
+    multiply(k50, t38, t38)
+    add(t29, t38, t29)
+    add(t30, t29, t30)
+    multiply(t39, t28, t39)
+    multiply(t35, t27, t35)
+    subtract(t39, t35, t39)
+    add(t30, t39, t30)
+    subtract(t30, t33, t30)
+    subtract(t22, t30, t22)
+    multiply(t1, t22, t23)
+    add(t25, t23, t25)
+    multiply(k57, t25, t25)
+    add(t9, t25, t9)
+    multiply(t0, t9, t9)
+    multiply(k68, t8, t23)
+    multiply(k66, t12, t25)
+    subtract(t23, t25, t23)
+    multiply(k70, qd_1, t25)
+    multiply(k60, t6, t27)
+    multiply(k66, t10, t28)
+    add(t27, t28, t27)
+    subtract(t25, t27, t25)
+    multiply(qd_1, t25, t27)
+    multiply(t6, t13, t13)
+    add(t27, t13, t27)
+    add(t23, t27, t23)
+    multiply(k76, t0, t13)
+    add(t23, t13, t23)
+    multiply(k62, t16, t16)
+    multiply(k61, t18, t18)
+    add(t16, t18, t16)
+    multiply(k67, t8, t13)
+    subtract(t16, t13, t16)
+    multiply(t19, t24, t19)
+    multiply(t14, t40, t14)
+    subtract(t19, t14, t19)
+    add(t16, t19, t16)
+    multiply(k63, t34, t34)
+    multiply(k65, t26, t26)
+    add(t34, t26, t34)
+    subtract(t16, t34, t16)
+    multiply(t31, t36, t36)
+    multiply(t2, t53, t53)
+    add(t36, t53, t36)
+    add(t16, t36, t16)
+    multiply(k40, t30, t30)
+    subtract(t16, t30, bias_2)
+    subtract(t23, bias_2, t23)
+    multiply(jacobian_tcp_37, t23, t23)
+    add(t9, t23, t9)
+    negative(t9, bias_0)
+    multiply(k71, t8, t8)
+    multiply(k70, t12, t12)
+    subtract(t8, t12, t8)
+    multiply(t10, t25, t10)
+    multiply(t6, t15, t6)
+    subtract(t10, t6, t10)
+    add(t8, t10, t8)
+    multiply(k85, jacobian_tcp_37, t6)
+    multiply(k86, t0, t9)
+    subtract(t6, t9, t6)
+    add(t8, t6, t8)
+    multiply(t37, t17, t17)
+    multiply(t1, t32, t32)
+    add(t17, t32, t17)
+    add(t8, t17, t8)
+    multiply(t1, t21, t21)
+    multiply(t37, t22, t22)
+    subtract(t21, t22, t21)
+    multiply(k57, t21, t21)
+    subtract(t8, t21, bias_1)
+    cos(q_0, jacobian_tcp_29)
+    multiply(jacobian_tcp_29, jacobian_tcp_37, t6)
+    multiply(t6, t1, t8)
+    sin(q_0, t9)
+    multiply(t9, t37, t10)
+    subtract(t8, t10, t8)
+    multiply(t8, t2, t10)
+    multiply(jacobian_tcp_29, t0, jacobian_tcp_23)
+    multiply(jacobian_tcp_23, t31, t12)
+    add(t10, t12, t10)
+    multiply(t10, t3, t12)
+    multiply(t6, t37, t6)
+    multiply(t9, t1, t13)
+    add(t6, t13, jacobian_tcp_24)
+    multiply(jacobian_tcp_24, t20, t6)
+    subtract(t12, t6, t12)
+    multiply(t12, t4, t6)
+    multiply(jacobian_tcp_23, t2, t13)
+    multiply(t8, t31, t14)
+    subtract(t13, t14, jacobian_tcp_25)
+    multiply(jacobian_tcp_25, t11, t13)
+    add(t6, t13, t6)
+    multiply(t6, t5, t13)
+    multiply(t10, t20, t14)
+    multiply(jacobian_tcp_24, t3, t15)
+    add(t14, t15, jacobian_tcp_26)
+    multiply(jacobian_tcp_26, t7, t14)
+    add(t13, t14, t13)
+    multiply(k87, t13, t14)
+    multiply(jacobian_tcp_26, t5, t15)
+    multiply(t6, t7, t16)
+    subtract(t15, t16, t15)
+    multiply(k88, t15, t16)
+    add(t14, t16, fk_tcp_0)
+    multiply(t9, jacobian_tcp_37, t14)
+    multiply(t14, t1, t16)
+    multiply(jacobian_tcp_29, t37, t17)
+    add(t16, t17, t16)
+    multiply(t16, t2, t17)
+    multiply(t9, t0, jacobian_tcp_30)
+    multiply(jacobian_tcp_30, t31, t18)
+    add(t17, t18, t17)
+    multiply(t17, t3, t18)
+    multiply(jacobian_tcp_29, t1, t19)
+    multiply(t14, t37, t14)
+    subtract(t19, t14, t19)
+    multiply(t19, t20, t14)
+    add(t18, t14, t18)
+    multiply(t18, t4, t14)
+    multiply(jacobian_tcp_30, t2, t21)
+    multiply(t16, t31, t22)
+    subtract(t21, t22, jacobian_tcp_32)
+    multiply(jacobian_tcp_32, t11, t21)
+    add(t14, t21, t14)
+    multiply(t14, t5, t21)
+    multiply(t19, t3, t22)
+    multiply(t17, t20, t23)
+    subtract(t22, t23, t22)
+    multiply(t22, t7, t23)
+    subtract(t21, t23, t21)
+    multiply(k87, t21, t23)
+    multiply(t14, t7, t24)
+    multiply(t22, t5, t25)
+    add(t24, t25, t24)
+    multiply(k88, t24, t25)
+    subtract(t23, t25, fk_tcp_4)
+    multiply(jacobian_tcp_37, t31, t23)
+    multiply(t0, t1, t1)
+    multiply(t1, t2, t25)
+    subtract(t23, t25, t23)
+    multiply(t23, t3, t25)
+    multiply(t0, t37, t0)
+    multiply(t0, t20, t26)
+    add(t25, t26, t25)
+    multiply(t25, t4, t26)
+    multiply(t1, t31, t31)
+    multiply(jacobian_tcp_37, t2, t2)
+    add(t31, t2, jacobian_tcp_39)
+    multiply(jacobian_tcp_39, t11, t2)
+    add(t26, t2, t26)
+    multiply(t26, t5, t2)
+    multiply(t0, t3, t3)
+    multiply(t23, t20, t20)
+    subtract(t3, t20, t3)
+    multiply(t3, t7, t20)
+    subtract(t2, t20, t2)
+    multiply(k87, t2, t20)
+    multiply(t26, t7, t7)
+    multiply(t3, t5, t5)
+    add(t7, t5, t7)
+    multiply(k88, t7, t5)
+    subtract(t20, t5, fk_tcp_8)
+    multiply(k89, t13, t13)
+    multiply(k87, t15, t15)
+    add(t13, t15, fk_tcp_1)
+    multiply(k89, t21, t21)
+    multiply(k87, t24, t24)
+    subtract(t21, t24, fk_tcp_5)
+    multiply(k89, t2, t2)
+    multiply(k87, t7, t7)
+    subtract(t2, t7, fk_tcp_9)
+    multiply(jacobian_tcp_25, t4, t2)
+    multiply(t12, t11, t12)
+    subtract(t2, t12, t2)
+    negative(t2, fk_tcp_2)
+    multiply(jacobian_tcp_32, t4, t5)
+    multiply(t18, t11, t18)
+    subtract(t5, t18, t5)
+    negative(t5, fk_tcp_6)
+    multiply(jacobian_tcp_39, t4, t4)
+    multiply(t25, t11, t25)
+    subtract(t4, t25, t4)
+    negative(t4, fk_tcp_10)
+    multiply(k40, t8, t8)
+    multiply(k57, jacobian_tcp_23, t7)
+    subtract(t8, t7, t8)
+    multiply(k36, t10, t10)
+    multiply(k27, jacobian_tcp_25, t11)
+    add(t10, t11, t10)
+    add(t8, t10, t10)
+    multiply(k12, t6, t6)
+    add(t10, t6, t6)
+    multiply(k90, t2, t11)
+    subtract(t6, t11, fk_tcp_3)
+    multiply(k40, t16, t16)
+    multiply(k57, jacobian_tcp_30, t11)
+    subtract(t16, t11, t16)
+    multiply(k36, t17, t17)
+    multiply(k27, jacobian_tcp_32, t12)
+    add(t17, t12, t17)
+    add(t16, t17, t17)
+    multiply(k12, t14, t14)
+    add(t17, t14, t14)
+    multiply(k90, t5, t12)
+    subtract(t14, t12, fk_tcp_7)
+    multiply(k57, jacobian_tcp_37, t12)
+    subtract(k91, t12, t12)
+    multiply(k40, t1, t1)
+    subtract(t12, t1, t1)
+    multiply(k36, t23, t23)
+    multiply(k27, jacobian_tcp_39, t13)
+    add(t23, t13, t23)
+    add(t1, t23, t23)
+    multiply(k12, t26, t26)
+    add(t23, t26, t26)
+    multiply(k90, t4, t13)
+    subtract(t26, t13, fk_tcp_11)
+    negative(fk_tcp_7, jacobian_tcp_0)
+    subtract(fk_tcp_11, k91, t13)
+    multiply(jacobian_tcp_29, t13, jacobian_tcp_1)
+    multiply(t9, t13, jacobian_tcp_8)
+    multiply(t9, fk_tcp_7, t13)
+    multiply(jacobian_tcp_29, fk_tcp_3, t15)
+    add(t13, t15, t13)
+    negative(t13, jacobian_tcp_15)
+    negative(t9, jacobian_tcp_22)
+    subtract(fk_tcp_11, t12, t12)
+    multiply(jacobian_tcp_30, t12, t9)
+    add(fk_tcp_7, t11, t11)
+    multiply(jacobian_tcp_37, t11, t13)
+    subtract(t9, t13, jacobian_tcp_2)
+    add(fk_tcp_3, t7, t7)
+    multiply(jacobian_tcp_37, t7, t9)
+    multiply(jacobian_tcp_23, t12, t12)
+    subtract(t9, t12, jacobian_tcp_9)
+    multiply(jacobian_tcp_23, t11, t11)
+    multiply(jacobian_tcp_30, t7, t7)
+    subtract(t11, t7, jacobian_tcp_16)
+    subtract(fk_tcp_7, t16, t16)
+    multiply(t0, t16, t7)
+    subtract(fk_tcp_11, t1, t1)
+    multiply(t19, t1, t9)
+    subtract(t7, t9, jacobian_tcp_3)
+    subtract(fk_tcp_3, t8, t8)
+    multiply(t0, t8, t7)
+    multiply(jacobian_tcp_24, t1, t1)
+    add(t7, t1, t7)
+    negative(t7, jacobian_tcp_10)
+    multiply(jacobian_tcp_24, t16, t16)
+    multiply(t19, t8, t8)
+    add(t16, t8, jacobian_tcp_17)
+    negative(t19, jacobian_tcp_31)
+    negative(t0, jacobian_tcp_38)
+    subtract(fk_tcp_11, t23, t23)
+    multiply(jacobian_tcp_32, t23, t0)
+    subtract(fk_tcp_7, t17, t17)
+    multiply(jacobian_tcp_39, t17, t1)
+    subtract(t0, t1, jacobian_tcp_4)
+    subtract(fk_tcp_3, t10, t10)
+    multiply(jacobian_tcp_39, t10, t0)
+    multiply(jacobian_tcp_25, t23, t1)
+    subtract(t0, t1, jacobian_tcp_11)
+    multiply(jacobian_tcp_25, t17, t0)
+    multiply(jacobian_tcp_32, t10, t1)
+    subtract(t0, t1, jacobian_tcp_18)
+    multiply(t3, t17, t0)
+    multiply(t22, t23, t1)
+    subtract(t0, t1, jacobian_tcp_5)
+    multiply(t3, t10, t0)
+    multiply(jacobian_tcp_26, t23, t23)
+    add(t0, t23, t0)
+    negative(t0, jacobian_tcp_12)
+    multiply(jacobian_tcp_26, t17, t17)
+    multiply(t22, t10, t10)
+    add(t17, t10, jacobian_tcp_19)
+    negative(t22, jacobian_tcp_33)
+    negative(t3, jacobian_tcp_40)
+    subtract(fk_tcp_7, t14, t14)
+    multiply(t4, t14, t0)
+    subtract(fk_tcp_11, t26, t26)
+    multiply(t5, t26, t1)
+    subtract(t0, t1, jacobian_tcp_6)
+    multiply(t2, t26, t26)
+    subtract(fk_tcp_3, t6, t6)
+    multiply(t4, t6, t0)
+    subtract(t26, t0, jacobian_tcp_13)
+    multiply(t5, t6, t6)
+    multiply(t2, t14, t14)
+    subtract(t6, t14, jacobian_tcp_20)
+    multiply(k87, fk_tcp_0, t0)
+    multiply(k89, fk_tcp_1, t1)
+    add(t0, t1, t0)
+    multiply(k90, t72, t1)
+    subtract(t76, t1, t76)
+    multiply(k90, t73, t1)
+    multiply(t75, t1, t3)
+    add(t76, t3, t76)
+    multiply(t0, t76, t3)
+    multiply(k88, fk_tcp_0, t6)
+    multiply(k87, fk_tcp_1, t7)
+    add(t6, t7, t6)
+    multiply(k90, t66, t7)
+    subtract(t80, t7, t80)
+    multiply(k90, t70, t7)
+    multiply(t75, t7, t75)
+    add(t80, t75, t80)
+    multiply(t6, t80, t8)
+    add(t3, t8, t3)
+    multiply(t73, t1, t73)
+    multiply(t70, t7, t70)
+    add(t73, t70, t73)
+    add(t68, t73, t68)
+    multiply(t2, t68, t1)
+    add(t3, t1, jdot_qd_tcp_0)
+    multiply(k87, fk_tcp_4, t1)
+    multiply(k89, fk_tcp_5, t3)
+    add(t1, t3, t1)
+    multiply(t1, t76, t3)
+    multiply(k88, fk_tcp_4, t7)
+    multiply(k87, fk_tcp_5, t8)
+    add(t7, t8, t7)
+    multiply(t7, t80, t8)
+    add(t3, t8, t3)
+    multiply(t5, t68, t8)
+    add(t3, t8, jdot_qd_tcp_1)
+    multiply(k87, fk_tcp_8, t3)
+    multiply(k89, fk_tcp_9, t8)
+    add(t3, t8, t3)
+    multiply(t3, t76, t76)
+    multiply(k88, fk_tcp_8, t8)
+    multiply(k87, fk_tcp_9, t9)
+    add(t8, t9, t8)
+    multiply(t8, t80, t80)
+    add(t76, t80, t76)
+    multiply(t4, t68, t68)
+    add(t76, t68, jdot_qd_tcp_2)
+    multiply(t0, t66, t0)
+    multiply(t6, t72, t6)
+    subtract(t0, t6, t0)
+    multiply(t2, t62, t2)
+    subtract(t0, t2, jdot_qd_tcp_3)
+    multiply(t1, t66, t1)
+    multiply(t7, t72, t7)
+    subtract(t1, t7, t1)
+    multiply(t5, t62, t5)
+    subtract(t1, t5, jdot_qd_tcp_4)
+    multiply(t3, t66, t3)
+    multiply(t8, t72, t8)
+    subtract(t3, t8, t3)
+    multiply(t4, t62, t4)
+    subtract(t3, t4, jdot_qd_tcp_5)
+    copyto(mass_matrix_7, mass_matrix_1)
+    copyto(mass_matrix_14, mass_matrix_2)
+    copyto(mass_matrix_15, mass_matrix_9)
+    copyto(mass_matrix_21, mass_matrix_3)
+    copyto(mass_matrix_22, mass_matrix_10)
+    copyto(mass_matrix_23, mass_matrix_17)
+    copyto(mass_matrix_28, mass_matrix_4)
+    copyto(mass_matrix_29, mass_matrix_11)
+    copyto(mass_matrix_30, mass_matrix_18)
+    copyto(mass_matrix_31, mass_matrix_25)
+    copyto(mass_matrix_35, mass_matrix_5)
+    copyto(mass_matrix_36, mass_matrix_12)
+    copyto(mass_matrix_37, mass_matrix_19)
+    copyto(mass_matrix_38, mass_matrix_26)
+    copyto(mass_matrix_39, mass_matrix_33)
+    copyto(mass_matrix_42, mass_matrix_6)
+    copyto(mass_matrix_43, mass_matrix_13)
+    copyto(mass_matrix_44, mass_matrix_20)
+    copyto(mass_matrix_45, mass_matrix_27)
+    copyto(mass_matrix_46, mass_matrix_34)
+    copyto(mass_matrix_47, mass_matrix_41)
+    copyto(jacobian_tcp_7, fk_tcp_3)
+    copyto(jacobian_tcp_27, fk_tcp_2)
+    copyto(jacobian_tcp_34, fk_tcp_6)
+    copyto(jacobian_tcp_41, fk_tcp_10)
+
+
+def bundle_computed_torque(q, qd, qdd):
+    """Control tick 'computed_torque': inverse_dynamics (7), fk_tcp (4x4), jacobian_tcp (6x7), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [7]
+    in  qd [7]
+    in  qdd [7]
+    out inverse_dynamics [7]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x7]
+    out frame_acceleration_tcp [6]
+    1129 ops: 629 mul, 486 add, 0 div, 14 trig
+    """
+    q = _array(q, 7, "q")
+    qd = _array(qd, 7, "qd")
+    qdd = _array(qdd, 7, "qdd")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_computed_torque_chunk, (q, qd, qdd), 91, ((7,), (4, 4), (6, 7), (6,),), fixed=_bundle_computed_torque_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = 0.009213163777211224 * qdd[0]
+    t1 = sin(q[1])
+    t2 = t1 * qd[0]
+    t3 = t2 * qd[1]
+    t4 = cos(q[1])
+    t5 = t4 * qdd[0]
+    t3 = t3 - t5
+    t5 = (-0.00398335888393552) * t3
+    t6 = t1 * qdd[0]
+    t7 = t4 * qd[0]
+    t8 = t7 * qd[1]
+    t6 = t6 + t8
+    t8 = 0.00850351162402155 * t6
+    t5 = t5 - t8
+    t8 = 0.01026110182100817 * qdd[1]
+    t5 = t5 + t8
+    t8 = 0.026534991901690206 * qd[1]
+    t9 = 0.01026110182100817 * t2
+    t10 = 0.0007689361029464 * t7
+    t9 = t9 + t10
+    t8 = t8 - t9
+    t9 = t7 * t8
+    t10 = 0.0007689361029464 * qd[1]
+    t11 = (-0.00398335888393552) * t2
+    t12 = 0.028124284712194955 * t7
+    t11 = t11 + t12
+    t10 = t10 - t11
+    t11 = qd[1] * t10
+    t9 = t9 + t11
+    t5 = t5 - t9
+    t9 = (-0.0221804724897) * t4
+    t5 = t5 - t9
+    t9 = cos(q[2])
+    t11 = sin(q[2])
+    t12 = t11 * qdd[1]
+    t13 = t9 * t6
+    t12 = t12 - t13
+    t13 = t11 * t2
+    t14 = t9 * qd[1]
+    t13 = t13 + t14
+    t14 = t13 * qd[2]
+    t12 = t12 + t14
+    t14 = 0.05649492601407083 * t12
+    t15 = t11 * t6
+    t16 = t9 * qdd[1]
+    t15 = t15 + t16
+    t16 = t11 * qd[1]
+    t17 = t9 * t2
+    t16 = t16 - t17
+    t17 = t16 * qd[2]
+    t15 = t15 - t17
+    t17 = (-0.008248333140675744) * t15
+    t14 = t14 + t17
+    t17 = qdd[2] - t3
+    t18 = (-0.005487648106562256) * t17
+    t14 = t14 + t18
+    t18 = (-0.005487648106562256) * t16
+    t19 = (-0.004377257121839584) * t13
+    t18 = t18 + t19
+    t19 = t7 + qd[2]
+    t20 = 0.01824920229252011 * t19
+    t18 = t18 + t20
+    t20 = t13 * t18
+    t21 = (-0.008248333140675744) * t16
+    t22 = 0.05287838199960611 * t13
+    t21 = t21 + t22
+    t22 = (-0.004377257121839584) * t19
+    t21 = t21 + t22
+    t22 = t19 * t21
+    t20 = t20 - t22
+    t14 = t14 + t20
+    t20 = (-0.316) * qd[1]
+    t22 = qd[1] * t20
+    t23 = (-0.316) * t2
+    t24 = t2 * t23
+    t22 = t22 + t24
+    t24 = (-9.81) * t4
+    t25 = t22 - t24
+    t26 = 0.126729164208 * t25
+    t23 = t7 * t23
+    t27 = (-0.316) * qdd[1]
+    t23 = t23 - t27
+    t27 = t11 * t23
+    t28 = (-0.316) * t6
+    t20 = t7 * t20
+    t20 = t28 + t20
+    t28 = t9 * t20
+    t27 = t27 + t28
+    t28 = (-9.81) * t1
+    t29 = t11 * t28
+    t30 = t27 + t29
+    t31 = (-0.214708623208) * t30
+    t26 = t26 + t31
+    t14 = t14 + t26
+    t26 = cos(q[3])
+    t31 = t26 * t12
+    t32 = sin(q[3])
+    t33 = t32 * t17
+    t31 = t31 + t33
+    t33 = t26 * t19
+    t34 = t32 * t16
+    t33 = t33 - t34
+    t34 = t33 * qd[3]
+    t31 = t31 + t34
+    t34 = 0.06767727025085991 * t31
+    t35 = t26 * t17
+    t36 = t32 * t12
+    t35 = t35 - t36
+    t36 = t26 * t16
+    t37 = t32 * t19
+    t36 = t36 + t37
+    t37 = t36 * qd[3]
+    t35 = t35 - t37
+    t37 = 0.02771584317362585 * t35
+    t34 = t34 + t37
+    t37 = qdd[3] - t15
+    t38 = 0.0039053550262761003 * t37
+    t34 = t34 + t38
+    t38 = 0.0039053550262761003 * t36
+    t39 = (-0.0016444875773692705) * t33
+    t38 = t38 + t39
+    t39 = qd[3] - t13
+    t40 = 0.0775861490525396 * t39
+    t38 = t38 + t40
+    t40 = t33 * t38
+    t41 = 0.02771584317362585 * t36
+    t42 = 0.03239943042445132 * t33
+    t41 = t41 + t42
+    t42 = (-0.0016444875773692705) * t39
+    t41 = t41 + t42
+    t42 = t39 * t41
+    t40 = t40 - t42
+    t34 = t34 + t40
+    t40 = 0.0825 * t17
+    t27 = t40 - t27
+    t40 = 0.0825 * t13
+    t42 = t16 * t40
+    t27 = t27 + t42
+    t42 = t29 - t27
+    t43 = 0.374644408005 * t42
+    t44 = 0.0825 * t15
+    t22 = t22 - t44
+    t44 = 0.0825 * t19
+    t45 = t16 * t44
+    t22 = t22 + t45
+    t45 = t26 * t22
+    t23 = t9 * t23
+    t20 = t11 * t20
+    t20 = t23 - t20
+    t23 = t13 * t40
+    t40 = t19 * t44
+    t23 = t23 + t40
+    t23 = t20 - t23
+    t40 = t32 * t23
+    t40 = t45 - t40
+    t28 = t9 * t28
+    t44 = t32 * t28
+    t45 = t26 * t24
+    t44 = t44 + t45
+    t45 = t40 - t44
+    t46 = 0.09850206933 * t45
+    t43 = t43 - t46
+    t34 = t34 + t43
+    t43 = cos(q[4])
+    t46 = t43 * t31
+    t47 = sin(q[4])
+    t48 = t47 * t37
+    t46 = t46 - t48
+    t48 = t47 * t36
+    t49 = t43 * t39
+    t48 = t48 + t49
+    t49 = t48 * qd[4]
+    t46 = t46 - t49
+    t49 = 0.03942757095803552 * t46
+    t50 = t47 * t31
+    t51 = t43 * t37
+    t50 = t50 + t51
+    t51 = t43 * t36
+    t52 = t47 * t39
+    t51 = t51 - t52
+    t52 = t51 * qd[4]
+    t50 = t50 + t52
+    t52 = (-0.0015152444733270301) * t50
+    t49 = t49 - t52
+    t52 = t35 + qdd[4]
+    t53 = (-0.004600245517563105) * t52
+    t49 = t49 + t53
+    t53 = (-0.004600245517563105) * t51
+    t54 = 0.0021640520520981297 * t48
+    t53 = t53 - t54
+    t54 = t33 + qd[4]
+    t55 = 0.010869510762828563 * t54
+    t53 = t53 + t55
+    t55 = t48 * t53
+    t56 = (-0.0015152444733270301) * t51
+    t57 = 0.03146037232526039 * t48
+    t56 = t56 - t57
+    t57 = 0.0021640520520981297 * t54
+    t56 = t56 + t57
+    t57 = t54 * t56
+    t55 = t55 + t57
+    t49 = t49 - t55
+    t55 = (-0.0825) * t37
+    t40 = t40 + t55
+    t55 = 0.384 * t39
+    t57 = t39 * t55
+    t58 = 0.384 * t36
+    t59 = (-0.0825) * t33
+    t58 = t58 - t59
+    t59 = t36 * t58
+    t57 = t57 + t59
+    t40 = t40 - t57
+    t57 = t40 - t44
+    t59 = 0.05034347249 * t57
+    t23 = t26 * t23
+    t22 = t32 * t22
+    t22 = t23 + t22
+    t23 = 0.384 * t37
+    t23 = t22 - t23
+    t58 = t33 * t58
+    t60 = (-0.0825) * t39
+    t61 = t39 * t60
+    t58 = t58 - t61
+    t23 = t23 + t58
+    t58 = t47 * t23
+    t61 = 0.384 * t31
+    t62 = (-0.0825) * t35
+    t61 = t61 - t62
+    t27 = t61 - t27
+    t60 = t36 * t60
+    t55 = t33 * t55
+    t55 = t60 + t55
+    t27 = t27 + t55
+    t55 = t43 * t27
+    t55 = t58 + t55
+    t58 = t26 * t28
+    t24 = t32 * t24
+    t24 = t58 - t24
+    t58 = t47 * t24
+    t60 = t43 * t29
+    t58 = t58 + t60
+    t60 = t55 + t58
+    t61 = (-0.047121686402) * t60
+    t59 = t59 + t61
+    t49 = t49 + t59
+    t59 = cos(q[5])
+    t61 = t59 * t46
+    t62 = sin(q[5])
+    t63 = t62 * t52
+    t61 = t61 + t63
+    t63 = t59 * t54
+    t64 = t62 * t51
+    t63 = t63 - t64
+    t64 = t63 * qd[5]
+    t61 = t61 + t64
+    t64 = 0.00248046035817079 * t61
+    t65 = t59 * t52
+    t66 = t62 * t46
+    t65 = t65 - t66
+    t66 = t59 * t51
+    t67 = t62 * t54
+    t66 = t66 + t67
+    t67 = t66 * qd[5]
+    t65 = t65 - t67
+    t67 = 0.001524110902883315 * t65
+    t64 = t64 + t67
+    t67 = t50 + qdd[5]
+    t68 = (-0.00010375891721868492) * t67
+    t64 = t64 + t68
+    t68 = (-0.00010375891721868492) * t66
+    t69 = 9.3569097314605e-05 * t63
+    t68 = t68 + t69
+    t69 = t48 + qd[5]
+    t70 = 0.01179456023023895 * t69
+    t68 = t68 + t70
+    t70 = t63 * t68
+    t71 = 0.001524110902883315 * t66
+    t72 = 0.010567766133106952 * t63
+    t71 = t71 + t72
+    t72 = 9.3569097314605e-05 * t69
+    t71 = t71 + t72
+    t72 = t69 * t71
+    t70 = t70 - t72
+    t64 = t64 + t70
+    t70 = (-0.023526756935) * t60
+    t72 = t59 * t40
+    t23 = t43 * t23
+    t27 = t47 * t27
+    t23 = t23 - t27
+    t27 = t62 * t23
+    t27 = t72 - t27
+    t72 = t43 * t24
+    t29 = t47 * t29
+    t29 = t72 - t29
+    t72 = t62 * t29
+    t73 = t59 * t44
+    t72 = t72 + t73
+    t73 = t27 - t72
+    t74 = (-0.017527158935000002) * t73
+    t70 = t70 - t74
+    t64 = t64 + t70
+    t70 = cos(q[6])
+    t74 = t70 * t61
+    t75 = sin(q[6])
+    t76 = t75 * t67
+    t74 = t74 + t76
+    t76 = t70 * t69
+    t77 = t75 * t66
+    t76 = t76 - t77
+    t77 = t76 * qd[6]
+    t74 = t74 + t77
+    t77 = 0.03163334319094959 * t74
+    t78 = t70 * t67
+    t79 = t75 * t61
+    t78 = t78 - t79
+    t79 = t70 * t66
+    t80 = t75 * t69
+    t79 = t79 + t80
+    t80 = t79 * qd[6]
+    t78 = t78 - t80
+    t80 = 0.00039139128168424797 * t78
+    t77 = t77 + t80
+    t80 = qdd[6] - t65
+    t81 = (-0.0009653051699191116) * t80
+    t77 = t77 + t81
+    t81 = (-0.0009653051699191116) * t79
+    t82 = (-0.001255536598272898) * t76
+    t81 = t81 + t82
+    t82 = qd[6] - t63
+    t83 = 0.006684151967360946 * t82
+    t81 = t81 + t83
+    t83 = t76 * t81
+    t84 = 0.00039139128168424797 * t79
+    t85 = 0.029212399412428355 * t76
+    t84 = t84 + t85
+    t85 = (-0.001255536598272898) * t82
+    t84 = t84 + t85
+    t85 = t82 * t84
+    t83 = t83 - t85
+    t77 = t77 + t83
+    t83 = 0.088 * t67
+    t27 = t27 + t83
+    t83 = 0.088 * t63
+    t85 = t66 * t83
+    t27 = t27 + t85
+    t72 = t72 - t27
+    t85 = 0.0020344399586617965 * t72
+    t86 = 0.088 * t65
+    t55 = t55 - t86
+    t86 = 0.088 * t69
+    t87 = t66 * t86
+    t55 = t55 + t87
+    t87 = t70 * t55
+    t88 = t59 * t23
+    t40 = t62 * t40
+    t40 = t88 + t40
+    t83 = t63 * t83
+    t86 = t69 * t86
+    t83 = t83 + t86
+    t83 = t40 - t83
+    t86 = t75 * t83
+    t86 = t87 - t86
+    t87 = t70 * t58
+    t88 = t59 * t29
+    t44 = t62 * t44
+    t44 = t88 - t44
+    t88 = t75 * t44
+    t87 = t87 - t88
+    t87 = t86 + t87
+    t88 = 0.150277948634 * t87
+    t85 = t85 - t88
+    t77 = t77 + t85
+    t85 = t70 * t77
+    t88 = 0.00039139128168424797 * t74
+    t89 = 0.029212399412428355 * t78
+    t88 = t88 + t89
+    t89 = (-0.001255536598272898) * t80
+    t88 = t88 + t89
+    t89 = 0.03163334319094959 * t79
+    t90 = 0.00039139128168424797 * t76
+    t89 = t89 + t90
+    t90 = (-0.0009653051699191116) * t82
+    t89 = t89 + t90
+    t90 = t82 * t89
+    t81 = t79 * t81
+    t81 = t90 - t81
+    t81 = t88 + t81
+    t83 = t70 * t83
+    t55 = t75 * t55
+    t55 = t83 + t55
+    t83 = t70 * t44
+    t58 = t75 * t58
+    t58 = t83 + t58
+    t58 = t55 + t58
+    t83 = 0.150277948634 * t58
+    t88 = 0.002573605371338202 * t72
+    t83 = t83 - t88
+    t81 = t81 + t83
+    t83 = t75 * t81
+    t83 = t85 - t83
+    t64 = t64 + t83
+    t83 = t59 * t64
+    t85 = 0.001524110902883315 * t61
+    t88 = 0.010567766133106952 * t65
+    t85 = t85 + t88
+    t88 = 9.3569097314605e-05 * t67
+    t85 = t85 + t88
+    t88 = 0.00248046035817079 * t66
+    t90 = 0.001524110902883315 * t63
+    t88 = t88 + t90
+    t90 = (-0.00010375891721868492) * t69
+    t88 = t88 + t90
+    t90 = t69 * t88
+    t68 = t66 * t68
+    t68 = t90 - t68
+    t68 = t85 + t68
+    t40 = t40 + t44
+    t44 = (-0.017527158935000002) * t40
+    t85 = 0.10024161669500001 * t60
+    t44 = t44 - t85
+    t44 = t68 + t44
+    t68 = (-0.0009653051699191116) * t74
+    t85 = (-0.001255536598272898) * t78
+    t68 = t68 + t85
+    t85 = 0.006684151967360946 * t80
+    t68 = t68 + t85
+    t84 = t79 * t84
+    t85 = t76 * t89
+    t84 = t84 - t85
+    t68 = t68 + t84
+    t84 = 0.002573605371338202 * t87
+    t85 = 0.0020344399586617965 * t58
+    t84 = t84 - t85
+    t68 = t68 + t84
+    t44 = t44 - t68
+    t58 = 1.495522 * t58
+    t84 = 0.150277948634 * t78
+    t85 = 0.0020344399586617965 * t80
+    t84 = t84 - t85
+    t58 = t58 + t84
+    t84 = 0.0020344399586617965 * t79
+    t85 = 0.002573605371338202 * t76
+    t84 = t84 - t85
+    t85 = t76 * t84
+    t89 = 0.002573605371338202 * t82
+    t90 = 0.150277948634 * t79
+    t89 = t89 - t90
+    t90 = t82 * t89
+    t85 = t85 - t90
+    t58 = t58 + t85
+    t85 = t75 * t58
+    t87 = 1.495522 * t87
+    t90 = 0.002573605371338202 * t80
+    t91 = 0.150277948634 * t74
+    t90 = t90 - t91
+    t87 = t87 + t90
+    t90 = 0.150277948634 * t76
+    t91 = 0.0020344399586617965 * t82
+    t90 = t90 - t91
+    t91 = t82 * t90
+    t84 = t79 * t84
+    t84 = t91 - t84
+    t84 = t87 + t84
+    t87 = t70 * t84
+    t85 = t85 + t87
+    t87 = 0.088 * t85
+    t44 = t44 - t87
+    t87 = t62 * t44
+    t83 = t83 - t87
+    t49 = t49 + t83
+    t83 = t43 * t49
+    t87 = (-0.0015152444733270301) * t46
+    t91 = 0.03146037232526039 * t50
+    t87 = t87 - t91
+    t91 = 0.0021640520520981297 * t52
+    t87 = t87 + t91
+    t91 = 0.03942757095803552 * t51
+    t92 = (-0.0015152444733270301) * t48
+    t91 = t91 - t92
+    t92 = (-0.004600245517563105) * t54
+    t91 = t91 + t92
+    t92 = t54 * t91
+    t53 = t51 * t53
+    t53 = t92 - t53
+    t53 = t87 + t53
+    t23 = t23 + t29
+    t29 = (-0.047121686402) * t23
+    t87 = (-0.014653732538) * t57
+    t29 = t29 - t87
+    t29 = t53 + t29
+    t53 = (-0.00010375891721868492) * t61
+    t87 = 9.3569097314605e-05 * t65
+    t53 = t53 + t87
+    t87 = 0.01179456023023895 * t67
+    t53 = t53 + t87
+    t71 = t66 * t71
+    t87 = t63 * t88
+    t71 = t71 - t87
+    t53 = t53 + t71
+    t71 = 0.10024161669500001 * t73
+    t87 = (-0.023526756935) * t40
+    t71 = t71 - t87
+    t53 = t53 + t71
+    t71 = t75 * t77
+    t77 = t70 * t81
+    t71 = t71 + t77
+    t53 = t53 + t71
+    t71 = 1.495522 * t72
+    t72 = 0.0020344399586617965 * t74
+    t77 = 0.002573605371338202 * t78
+    t72 = t72 - t77
+    t71 = t71 + t72
+    t72 = t79 * t89
+    t77 = t76 * t90
+    t72 = t72 - t77
+    t71 = t71 + t72
+    t72 = 0.088 * t71
+    t53 = t53 - t72
+    t29 = t29 - t53
+    t72 = t47 * t29
+    t72 = t83 - t72
+    t34 = t34 + t72
+    t72 = 1.225946 * t23
+    t77 = (-0.047121686402) * t50
+    t81 = 0.05034347249 * t52
+    t77 = t77 + t81
+    t72 = t72 - t77
+    t77 = 0.05034347249 * t51
+    t81 = (-0.014653732538) * t48
+    t77 = t77 + t81
+    t81 = t48 * t77
+    t83 = (-0.014653732538) * t54
+    t87 = (-0.047121686402) * t51
+    t83 = t83 - t87
+    t87 = t54 * t83
+    t81 = t81 + t87
+    t72 = t72 - t81
+    t40 = 1.666555 * t40
+    t81 = (-0.017527158935000002) * t65
+    t87 = (-0.023526756935) * t67
+    t81 = t81 - t87
+    t40 = t40 + t81
+    t81 = (-0.023526756935) * t66
+    t87 = 0.10024161669500001 * t63
+    t81 = t81 - t87
+    t87 = t63 * t81
+    t88 = 0.10024161669500001 * t69
+    t89 = (-0.017527158935000002) * t66
+    t88 = t88 - t89
+    t89 = t69 * t88
+    t87 = t87 - t89
+    t40 = t40 + t87
+    t58 = t70 * t58
+    t84 = t75 * t84
+    t58 = t58 - t84
+    t40 = t40 + t58
+    t58 = t59 * t40
+    t73 = 1.666555 * t73
+    t67 = 0.10024161669500001 * t67
+    t84 = (-0.017527158935000002) * t61
+    t67 = t67 - t84
+    t67 = t73 + t67
+    t73 = (-0.017527158935000002) * t63
+    t84 = (-0.023526756935) * t69
+    t73 = t73 - t84
+    t69 = t69 * t73
+    t81 = t66 * t81
+    t69 = t69 - t81
+    t67 = t67 + t69
+    t67 = t67 - t71
+    t69 = t62 * t67
+    t58 = t58 - t69
+    t58 = t72 + t58
+    t69 = t47 * t58
+    t71 = (-0.014653732538) * t52
+    t72 = (-0.047121686402) * t46
+    t71 = t71 - t72
+    t72 = 1.225946 * t60
+    t71 = t71 - t72
+    t72 = (-0.047121686402) * t48
+    t81 = 0.05034347249 * t54
+    t72 = t72 + t81
+    t54 = t54 * t72
+    t77 = t51 * t77
+    t54 = t54 + t77
+    t54 = t71 - t54
+    t71 = 1.666555 * t60
+    t61 = (-0.023526756935) * t61
+    t65 = 0.10024161669500001 * t65
+    t61 = t61 - t65
+    t61 = t71 + t61
+    t65 = t66 * t88
+    t63 = t63 * t73
+    t63 = t65 - t63
+    t61 = t61 + t63
+    t61 = t61 + t85
+    t54 = t54 - t61
+    t61 = t43 * t54
+    t61 = t69 + t61
+    t63 = 0.384 * t61
+    t34 = t34 - t63
+    t63 = t26 * t34
+    t65 = 0.02771584317362585 * t31
+    t66 = 0.03239943042445132 * t35
+    t65 = t65 + t66
+    t66 = (-0.0016444875773692705) * t37
+    t65 = t65 + t66
+    t66 = 0.06767727025085991 * t36
+    t69 = 0.02771584317362585 * t33
+    t66 = t66 + t69
+    t69 = 0.0039053550262761003 * t39
+    t66 = t66 + t69
+    t69 = t39 * t66
+    t38 = t36 * t38
+    t38 = t69 - t38
+    t38 = t65 + t38
+    t22 = t22 + t24
+    t24 = 0.09850206933 * t22
+    t65 = (-0.19076837715) * t42
+    t24 = t24 - t65
+    t24 = t38 + t24
+    t38 = (-0.004600245517563105) * t46
+    t65 = 0.0021640520520981297 * t50
+    t38 = t38 - t65
+    t52 = 0.010869510762828563 * t52
+    t38 = t38 + t52
+    t52 = t51 * t56
+    t56 = t48 * t91
+    t52 = t52 + t56
+    t38 = t38 + t52
+    t52 = (-0.014653732538) * t60
+    t23 = 0.05034347249 * t23
+    t23 = t52 + t23
+    t23 = t38 - t23
+    t38 = t62 * t64
+    t44 = t59 * t44
+    t38 = t38 + t44
+    t23 = t23 + t38
+    t24 = t24 + t23
+    t38 = (-0.0825) * t61
+    t24 = t24 + t38
+    t38 = t32 * t24
+    t38 = t63 - t38
+    t14 = t14 + t38
+    t38 = t9 * t14
+    t44 = (-0.008248333140675744) * t12
+    t52 = 0.05287838199960611 * t15
+    t44 = t44 + t52
+    t52 = (-0.004377257121839584) * t17
+    t44 = t44 + t52
+    t52 = 0.05649492601407083 * t16
+    t56 = (-0.008248333140675744) * t13
+    t52 = t52 + t56
+    t56 = (-0.005487648106562256) * t19
+    t52 = t52 + t56
+    t56 = t19 * t52
+    t18 = t16 * t18
+    t18 = t56 - t18
+    t18 = t44 + t18
+    t20 = t20 + t28
+    t28 = (-0.214708623208) * t20
+    t25 = 0.088844724872 * t25
+    t25 = t28 - t25
+    t18 = t18 + t25
+    t25 = 0.0039053550262761003 * t31
+    t28 = (-0.0016444875773692705) * t35
+    t25 = t25 + t28
+    t28 = 0.0775861490525396 * t37
+    t25 = t25 + t28
+    t28 = t36 * t41
+    t41 = t33 * t66
+    t28 = t28 - t41
+    t25 = t25 + t28
+    t28 = (-0.19076837715) * t45
+    t41 = 0.374644408005 * t22
+    t28 = t28 - t41
+    t25 = t25 + t28
+    t28 = t47 * t49
+    t29 = t43 * t29
+    t28 = t28 + t29
+    t25 = t25 - t28
+    t28 = 1.225946 * t57
+    t29 = 0.05034347249 * t46
+    t41 = (-0.014653732538) * t50
+    t29 = t29 + t41
+    t28 = t28 + t29
+    t29 = t51 * t83
+    t41 = t48 * t72
+    t29 = t29 - t41
+    t28 = t28 + t29
+    t29 = t62 * t40
+    t40 = t59 * t67
+    t29 = t29 + t40
+    t28 = t28 + t29
+    t29 = (-0.0825) * t28
+    t40 = t43 * t58
+    t41 = t47 * t54
+    t40 = t40 - t41
+    t41 = 0.384 * t40
+    t29 = t29 - t41
+    t25 = t25 + t29
+    t18 = t18 - t25
+    t22 = 3.587895 * t22
+    t29 = 0.09850206933 * t35
+    t41 = 0.374644408005 * t37
+    t29 = t29 - t41
+    t22 = t22 + t29
+    t29 = 0.374644408005 * t36
+    t41 = (-0.19076837715) * t33
+    t29 = t29 - t41
+    t41 = t33 * t29
+    t44 = (-0.19076837715) * t39
+    t46 = 0.09850206933 * t36
+    t44 = t44 - t46
+    t46 = t39 * t44
+    t41 = t41 - t46
+    t22 = t22 + t41
+    t22 = t22 + t40
+    t40 = t32 * t22
+    t41 = 3.587895 * t45
+    t37 = (-0.19076837715) * t37
+    t45 = 0.09850206933 * t31
+    t37 = t37 - t45
+    t37 = t41 + t37
+    t41 = 0.09850206933 * t33
+    t45 = 0.374644408005 * t39
+    t41 = t41 - t45
+    t39 = t39 * t41
+    t29 = t36 * t29
+    t29 = t39 - t29
+    t29 = t37 + t29
+    t28 = t29 + t28
+    t29 = t26 * t28
+    t29 = t40 + t29
+    t29 = 0.0825 * t29
+    t18 = t18 - t29
+    t29 = t11 * t18
+    t29 = t38 - t29
+    t5 = t5 + t29
+    t29 = 3.228604 * t20
+    t37 = (-0.214708623208) * t15
+    t38 = 0.126729164208 * t17
+    t37 = t37 - t38
+    t29 = t29 + t37
+    t37 = 0.126729164208 * t16
+    t38 = 0.088844724872 * t13
+    t37 = t37 - t38
+    t38 = t13 * t37
+    t39 = 0.088844724872 * t19
+    t40 = (-0.214708623208) * t16
+    t39 = t39 - t40
+    t39 = t19 * t39
+    t38 = t38 - t39
+    t29 = t29 + t38
+    t22 = t26 * t22
+    t28 = t32 * t28
+    t22 = t22 - t28
+    t22 = t29 + t22
+    t28 = t11 * t22
+    t29 = 0.088844724872 * t17
+    t38 = (-0.214708623208) * t12
+    t29 = t29 - t38
+    t38 = 3.228604 * t30
+    t29 = t29 - t38
+    t38 = (-0.214708623208) * t13
+    t39 = 0.126729164208 * t19
+    t38 = t38 - t39
+    t19 = t19 * t38
+    t37 = t16 * t37
+    t19 = t19 - t37
+    t19 = t29 + t19
+    t29 = 3.587895 * t42
+    t31 = 0.374644408005 * t31
+    t35 = (-0.19076837715) * t35
+    t31 = t31 - t35
+    t29 = t29 + t31
+    t31 = t36 * t44
+    t33 = t33 * t41
+    t31 = t31 - t33
+    t29 = t29 + t31
+    t29 = t29 - t61
+    t19 = t19 - t29
+    t31 = t9 * t19
+    t28 = t28 + t31
+    t28 = (-0.316) * t28
+    t5 = t5 + t28
+    t5 = t1 * t5
+    t28 = 0.028124284712194955 * t3
+    t31 = (-0.00398335888393552) * t6
+    t28 = t28 - t31
+    t31 = 0.0007689361029464 * qdd[1]
+    t28 = t28 + t31
+    t31 = 0.01026110182100817 * qd[1]
+    t33 = 0.00850351162402155 * t2
+    t35 = (-0.00398335888393552) * t7
+    t33 = t33 + t35
+    t31 = t31 - t33
+    t33 = qd[1] * t31
+    t8 = t2 * t8
+    t8 = t33 + t8
+    t8 = t28 + t8
+    t28 = (-0.0221804724897) * t1
+    t8 = t8 + t28
+    t12 = (-0.005487648106562256) * t12
+    t15 = (-0.004377257121839584) * t15
+    t12 = t12 + t15
+    t15 = 0.01824920229252011 * t17
+    t12 = t12 + t15
+    t15 = t16 * t21
+    t13 = t13 * t52
+    t13 = t15 - t13
+    t12 = t12 + t13
+    t13 = 0.088844724872 * t30
+    t15 = 0.126729164208 * t20
+    t13 = t13 + t15
+    t12 = t12 - t13
+    t13 = t32 * t34
+    t15 = t26 * t24
+    t13 = t13 + t15
+    t12 = t12 + t13
+    t13 = 0.0825 * t29
+    t12 = t12 - t13
+    t8 = t8 - t12
+    t8 = t4 * t8
+    t5 = t5 + t8
+    t0 = t0 - t5
+    t3 = 0.0007689361029464 * t3
+    t5 = 0.01026110182100817 * t6
+    t3 = t3 - t5
+    t5 = 0.026534991901690206 * qdd[1]
+    t3 = t3 + t5
+    t5 = t7 * t31
+    t2 = t2 * t10
+    t2 = t5 - t2
+    t2 = t3 + t2
+    t3 = 0.01993386669246 * t4
+    t5 = 0.18226700140319999 * t1
+    t3 = t3 - t5
+    t2 = t2 + t3
+    t3 = t11 * t14
+    t5 = t9 * t18
+    t3 = t3 + t5
+    t2 = t2 + t3
+    t3 = t9 * t22
+    t5 = t11 * t19
+    t3 = t3 - t5
+    t3 = (-0.316) * t3
+    t2 = t2 - t3
+    t3 = cos(q[0])
+    t5 = t3 * t4
+    t6 = t5 * t9
+    t7 = sin(q[0])
+    t8 = t7 * t11
+    t6 = t6 - t8
+    t8 = t6 * t26
+    t10 = t3 * t1
+    t13 = t10 * t32
+    t8 = t8 + t13
+    t13 = t8 * t43
+    t5 = t5 * t11
+    t14 = t7 * t9
+    t5 = t5 + t14
+    t14 = t5 * t47
+    t13 = t13 - t14
+    t14 = t13 * t59
+    t15 = t10 * t26
+    t16 = t6 * t32
+    t15 = t15 - t16
+    t16 = t15 * t62
+    t14 = t14 + t16
+    t16 = t14 * t70
+    t17 = t8 * t47
+    t18 = t5 * t43
+    t17 = t17 + t18
+    t18 = t17 * t75
+    t16 = t16 + t18
+    t18 = 0.7071067811865476 * t16
+    t19 = t17 * t70
+    t20 = t14 * t75
+    t19 = t19 - t20
+    t20 = (-0.7071067811865475) * t19
+    t18 = t18 + t20
+    t20 = t7 * t4
+    t21 = t20 * t9
+    t22 = t3 * t11
+    t21 = t21 + t22
+    t22 = t21 * t26
+    t24 = t7 * t1
+    t28 = t24 * t32
+    t22 = t22 + t28
+    t28 = t22 * t43
+    t29 = t3 * t9
+    t20 = t20 * t11
+    t20 = t29 - t20
+    t29 = t20 * t47
+    t28 = t28 + t29
+    t29 = t28 * t59
+    t30 = t24 * t26
+    t31 = t21 * t32
+    t30 = t30 - t31
+    t31 = t30 * t62
+    t29 = t29 + t31
+    t31 = t29 * t70
+    t33 = t20 * t43
+    t34 = t22 * t47
+    t33 = t33 - t34
+    t34 = t33 * t75
+    t31 = t31 - t34
+    t34 = 0.7071067811865476 * t31
+    t35 = t29 * t75
+    t36 = t33 * t70
+    t35 = t35 + t36
+    t36 = (-0.7071067811865475) * t35
+    t34 = t34 - t36
+    t36 = t4 * t32
+    t9 = t1 * t9
+    t37 = t9 * t26
+    t36 = t36 - t37
+    t37 = t36 * t43
+    t1 = t1 * t11
+    t11 = t1 * t47
+    t11 = t37 + t11
+    t37 = t11 * t59
+    t32 = t9 * t32
+    t26 = t4 * t26
+    t26 = t32 + t26
+    t32 = t26 * t62
+    t32 = t37 + t32
+    t37 = t32 * t70
+    t38 = t1 * t43
+    t39 = t36 * t47
+    t38 = t38 - t39
+    t39 = t38 * t75
+    t37 = t37 - t39
+    t39 = 0.7071067811865476 * t37
+    t40 = t32 * t75
+    t41 = t38 * t70
+    t40 = t40 + t41
+    t41 = (-0.7071067811865475) * t40
+    t39 = t39 - t41
+    t16 = 0.7071067811865475 * t16
+    t19 = 0.7071067811865476 * t19
+    t16 = t16 + t19
+    t19 = 0.7071067811865475 * t31
+    t31 = 0.7071067811865476 * t35
+    t19 = t19 - t31
+    t31 = 0.7071067811865475 * t37
+    t35 = 0.7071067811865476 * t40
+    t31 = t31 - t35
+    t35 = t15 * t59
+    t13 = t13 * t62
+    t13 = t35 - t13
+    t35 = -t13
+    t37 = t30 * t59
+    t28 = t28 * t62
+    t28 = t37 - t28
+    t37 = -t28
+    t40 = t26 * t59
+    t11 = t11 * t62
+    t11 = t40 - t11
+    t40 = -t11
+    t6 = 0.0825 * t6
+    t41 = (-0.316) * t10
+    t6 = t6 - t41
+    t8 = (-0.0825) * t8
+    t42 = 0.384 * t15
+    t8 = t8 + t42
+    t8 = t6 + t8
+    t14 = 0.088 * t14
+    t14 = t8 + t14
+    t42 = 0.2104 * t13
+    t42 = t14 - t42
+    t21 = 0.0825 * t21
+    t43 = (-0.316) * t24
+    t21 = t21 - t43
+    t22 = (-0.0825) * t22
+    t44 = 0.384 * t30
+    t22 = t22 + t44
+    t22 = t21 + t22
+    t29 = 0.088 * t29
+    t29 = t22 + t29
+    t44 = 0.2104 * t28
+    t44 = t29 - t44
+    t45 = (-0.316) * t4
+    t45 = 0.333 - t45
+    t9 = 0.0825 * t9
+    t9 = t45 - t9
+    t36 = (-0.0825) * t36
+    t46 = 0.384 * t26
+    t36 = t36 + t46
+    t36 = t9 + t36
+    t32 = 0.088 * t32
+    t32 = t36 + t32
+    t46 = 0.2104 * t11
+    t46 = t32 - t46
+    t47 = -t44
+    t48 = t46 - 0.333
+    t49 = t3 * t48
+    t48 = t7 * t48
+    t50 = t7 * t44
+    t51 = t3 * t42
+    t50 = t50 + t51
+    t50 = -t50
+    t7 = -t7
+    t45 = t46 - t45
+    t51 = t24 * t45
+    t43 = t44 + t43
+    t52 = t4 * t43
+    t51 = t51 - t52
+    t41 = t42 + t41
+    t52 = t4 * t41
+    t45 = t10 * t45
+    t45 = t52 - t45
+    t43 = t10 * t43
+    t41 = t24 * t41
+    t41 = t43 - t41
+    t21 = t44 - t21
+    t43 = t1 * t21
+    t9 = t46 - t9
+    t52 = t20 * t9
+    t43 = t43 - t52
+    t6 = t42 - t6
+    t52 = t1 * t6
+    t9 = t5 * t9
+    t9 = t52 + t9
+    t9 = -t9
+    t21 = t5 * t21
+    t6 = t20 * t6
+    t6 = t21 + t6
+    t20 = -t20
+    t1 = -t1
+    t21 = t46 - t36
+    t36 = t30 * t21
+    t22 = t44 - t22
+    t52 = t26 * t22
+    t36 = t36 - t52
+    t8 = t42 - t8
+    t52 = t26 * t8
+    t54 = t15 * t21
+    t52 = t52 - t54
+    t54 = t15 * t22
+    t56 = t30 * t8
+    t54 = t54 - t56
+    t56 = t38 * t22
+    t57 = t33 * t21
+    t56 = t56 - t57
+    t57 = t38 * t8
+    t21 = t17 * t21
+    t21 = t57 + t21
+    t21 = -t21
+    t22 = t17 * t22
+    t8 = t33 * t8
+    t8 = t22 + t8
+    t22 = -t33
+    t33 = -t38
+    t29 = t44 - t29
+    t38 = t11 * t29
+    t32 = t46 - t32
+    t57 = t28 * t32
+    t38 = t38 - t57
+    t32 = t13 * t32
+    t14 = t42 - t14
+    t57 = t11 * t14
+    t32 = t32 - t57
+    t14 = t28 * t14
+    t29 = t13 * t29
+    t14 = t14 - t29
+    t29 = 0.7071067811865476 * t18
+    t57 = 0.7071067811865475 * t16
+    t29 = t29 + t57
+    t57 = 0.2104 * t78
+    t55 = t55 + t57
+    t57 = 0.2104 * t79
+    t58 = t82 * t57
+    t55 = t55 + t58
+    t58 = t29 * t55
+    t59 = (-0.7071067811865475) * t18
+    t60 = 0.7071067811865476 * t16
+    t59 = t59 + t60
+    t60 = 0.2104 * t74
+    t60 = t86 - t60
+    t61 = 0.2104 * t76
+    t62 = t82 * t61
+    t60 = t60 + t62
+    t62 = t59 * t60
+    t58 = t58 + t62
+    t57 = t79 * t57
+    t61 = t76 * t61
+    t57 = t57 + t61
+    t27 = t27 + t57
+    t57 = t13 * t27
+    t57 = t58 + t57
+    t58 = 0.7071067811865476 * t34
+    t61 = 0.7071067811865475 * t19
+    t58 = t58 + t61
+    t61 = t58 * t55
+    t62 = (-0.7071067811865475) * t34
+    t63 = 0.7071067811865476 * t19
+    t62 = t62 + t63
+    t63 = t62 * t60
+    t61 = t61 + t63
+    t63 = t28 * t27
+    t61 = t61 + t63
+    t63 = 0.7071067811865476 * t39
+    t64 = 0.7071067811865475 * t31
+    t63 = t63 + t64
+    t55 = t63 * t55
+    t64 = (-0.7071067811865475) * t39
+    t65 = 0.7071067811865476 * t31
+    t64 = t64 + t65
+    t60 = t64 * t60
+    t55 = t55 + t60
+    t27 = t11 * t27
+    t27 = t55 + t27
+    t29 = t29 * t74
+    t55 = t59 * t78
+    t29 = t29 + t55
+    t13 = t13 * t80
+    t13 = t29 - t13
+    t29 = t58 * t74
+    t55 = t62 * t78
+    t29 = t29 + t55
+    t28 = t28 * t80
+    t28 = t29 - t28
+    t29 = t63 * t74
+    t55 = t64 * t78
+    t29 = t29 + t55
+    t11 = t11 * t80
+    t11 = t29 - t11
+    _inverse_dynamics = (t0, t2, t12, t25, t23, t53, t68)
+    _fk_tcp = (t18, t16, t35, t42,
+               t34, t19, t37, t44,
+               t39, t31, t40, t46,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t47, t49, t51, t43, t36, t56, t38,
+                     t42, t48, t45, t9, t52, t21, t32,
+                     0.0, t50, t41, t6, t54, t8, t14,
+                     0.0, t7, t10, t5, t15, t17, t35,
+                     0.0, t3, t24, t20, t30, t22, t37,
+                     1.0, 0.0, t4, t1, t26, t33, t40)
+    _frame_acceleration_tcp = (t57, t61, t27, t13, t28, t11)
+    return np.array(_inverse_dynamics), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 7), np.array(_frame_acceleration_tcp)
+
+
+_bundle_computed_torque_constants = _constants(
+    0.009213163777211224, -0.00398335888393552, 0.00850351162402155, 0.01026110182100817,
+    0.026534991901690206, 0.0007689361029464, 0.028124284712194955, -0.0221804724897,
+    0.05649492601407083, -0.008248333140675744, -0.005487648106562256, -0.004377257121839584,
+    0.01824920229252011, 0.05287838199960611, -0.316, -9.81, 0.126729164208, -0.214708623208,
+    0.06767727025085991, 0.02771584317362585, 0.0039053550262761003, -0.0016444875773692705,
+    0.0775861490525396, 0.03239943042445132, 0.0825, 0.374644408005, 0.09850206933, 0.03942757095803552,
+    -0.0015152444733270301, -0.004600245517563105, 0.0021640520520981297, 0.010869510762828563,
+    0.03146037232526039, -0.0825, 0.384, 0.05034347249, -0.047121686402, 0.00248046035817079,
+    0.001524110902883315, -0.00010375891721868492, 9.3569097314605e-05, 0.01179456023023895,
+    0.010567766133106952, -0.023526756935, -0.017527158935000002, 0.03163334319094959,
+    0.00039139128168424797, -0.0009653051699191116, -0.001255536598272898, 0.006684151967360946,
+    0.029212399412428355, 0.088, 0.0020344399586617965, 0.150277948634, 0.002573605371338202,
+    0.10024161669500001, 1.495522, -0.014653732538, 1.225946, 1.666555, -0.19076837715, 0.088844724872,
+    3.587895, 3.228604, 0.01993386669246, 0.18226700140319999, 0.7071067811865476, -0.7071067811865475,
+    0.7071067811865475, 0.2104, 0.333)
+
+
+_bundle_computed_torque_fixed = (
+    {},
+    {12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {14: 0.0, 21: 0.0, 28: 0.0, 35: 1.0, 36: 0.0},
+    {},
+)
+"""bundle_computed_torque's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_computed_torque_chunk(x, t, s, y):
+    """bundle_computed_torque on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    (q_0, q_1, q_2, q_3, q_4, q_5, q_6, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qd_6, qdd_0, qdd_1, qdd_2,
+     qdd_3, qdd_4, qdd_5, qdd_6) = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
+     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80, t81,
+     t82, t83, t84, t85, t86, t87, t88, t89, t90) = t
+    (inverse_dynamics_0, inverse_dynamics_1, inverse_dynamics_2, inverse_dynamics_3, inverse_dynamics_4,
+     inverse_dynamics_5, inverse_dynamics_6, fk_tcp_0, fk_tcp_1, fk_tcp_2, fk_tcp_3, fk_tcp_4, fk_tcp_5,
+     fk_tcp_6, fk_tcp_7, fk_tcp_8, fk_tcp_9, fk_tcp_10, fk_tcp_11, jacobian_tcp_0, jacobian_tcp_1,
+     jacobian_tcp_2, jacobian_tcp_3, jacobian_tcp_4, jacobian_tcp_5, jacobian_tcp_6, jacobian_tcp_7,
+     jacobian_tcp_8, jacobian_tcp_9, jacobian_tcp_10, jacobian_tcp_11, jacobian_tcp_12, jacobian_tcp_13,
+     jacobian_tcp_15, jacobian_tcp_16, jacobian_tcp_17, jacobian_tcp_18, jacobian_tcp_19, jacobian_tcp_20,
+     jacobian_tcp_22, jacobian_tcp_23, jacobian_tcp_24, jacobian_tcp_25, jacobian_tcp_26, jacobian_tcp_27,
+     jacobian_tcp_29, jacobian_tcp_30, jacobian_tcp_31, jacobian_tcp_32, jacobian_tcp_33, jacobian_tcp_34,
+     jacobian_tcp_37, jacobian_tcp_38, jacobian_tcp_39, jacobian_tcp_40, jacobian_tcp_41,
+     frame_acceleration_tcp_0, frame_acceleration_tcp_1, frame_acceleration_tcp_2,
+     frame_acceleration_tcp_3, frame_acceleration_tcp_4, frame_acceleration_tcp_5) = y
+    (k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20, k21,
+     k22, k23, k24, k25, k26, k27, k28, k29, k30, k31, k32, k33, k34, k35, k36, k37, k38, k39, k40, k41,
+     k42, k43, k44, k45, k46, k47, k48, k49, k50, k51, k52, k53, k54, k55, k56, k57, k58, k59, k60, k61,
+     k62, k63, k64, k65, k66, k67, k68, k69, k70) = _bundle_computed_torque_constants
+    multiply(k0, qdd_0, t0)
+    sin(q_1, t1)
+    multiply(t1, qd_0, t2)
+    multiply(t2, qd_1, t3)
+    cos(q_1, jacobian_tcp_37)
+    multiply(jacobian_tcp_37, qdd_0, t4)
+    subtract(t3, t4, t3)
+    multiply(k1, t3, t4)
+    multiply(t1, qdd_0, t5)
+    multiply(jacobian_tcp_37, qd_0, t6)
+    multiply(t6, qd_1, t7)
+    add(t5, t7, t5)
+    multiply(k2, t5, t7)
+    subtract(t4, t7, t4)
+    multiply(k3, qdd_1, t7)
+    add(t4, t7, t4)
+    multiply(k4, qd_1, t7)
+    multiply(k3, t2, t8)
+    multiply(k5, t6, t9)
+    add(t8, t9, t8)
+    subtract(t7, t8, t7)
+    multiply(t6, t7, t8)
+    multiply(k5, qd_1, t9)
+    multiply(k1, t2, t10)
+    multiply(k6, t6, t11)
+    add(t10, t11, t10)
+    subtract(t9, t10, t9)
+    multiply(qd_1, t9, t10)
+    add(t8, t10, t8)
+    subtract(t4, t8, t4)
+    multiply(k7, jacobian_tcp_37, t8)
+    subtract(t4, t8, t4)
+    cos(q_2, t8)
+    sin(q_2, t10)
+    multiply(t10, qdd_1, t11)
+    multiply(t8, t5, t12)
+    subtract(t11, t12, t11)
+    multiply(t10, t2, t12)
+    multiply(t8, qd_1, t13)
+    add(t12, t13, t12)
+    multiply(t12, qd_2, t13)
+    add(t11, t13, t11)
+    multiply(k8, t11, t13)
+    multiply(t10, t5, t14)
+    multiply(t8, qdd_1, t15)
+    add(t14, t15, t14)
+    multiply(t10, qd_1, t15)
+    multiply(t8, t2, t16)
+    subtract(t15, t16, t15)
+    multiply(t15, qd_2, t16)
+    subtract(t14, t16, t14)
+    multiply(k9, t14, t16)
+    add(t13, t16, t13)
+    subtract(qdd_2, t3, t16)
+    multiply(k10, t16, t17)
+    add(t13, t17, t13)
+    multiply(k10, t15, t17)
+    multiply(k11, t12, t18)
+    add(t17, t18, t17)
+    add(t6, qd_2, t18)
+    multiply(k12, t18, t19)
+    add(t17, t19, t17)
+    multiply(t12, t17, t19)
+    multiply(k9, t15, t20)
+    multiply(k13, t12, t21)
+    add(t20, t21, t20)
+    multiply(k11, t18, t21)
+    add(t20, t21, t20)
+    multiply(t18, t20, t21)
+    subtract(t19, t21, t19)
+    add(t13, t19, t13)
+    multiply(k14, qd_1, t19)
+    multiply(qd_1, t19, t21)
+    multiply(k14, t2, t22)
+    multiply(t2, t22, t23)
+    add(t21, t23, t21)
+    multiply(k15, jacobian_tcp_37, t23)
+    subtract(t21, t23, t24)
+    multiply(k16, t24, t25)
+    multiply(t6, t22, t22)
+    multiply(k14, qdd_1, t26)
+    subtract(t22, t26, t22)
+    multiply(t10, t22, t26)
+    multiply(k14, t5, t27)
+    multiply(t6, t19, t19)
+    add(t27, t19, t27)
+    multiply(t8, t27, t19)
+    add(t26, t19, t26)
+    multiply(k15, t1, t19)
+    multiply(t10, t19, t28)
+    add(t26, t28, t29)
+    multiply(k17, t29, t30)
+    add(t25, t30, t25)
+    add(t13, t25, t13)
+    cos(q_3, t25)
+    multiply(t25, t11, t30)
+    sin(q_3, t31)
+    multiply(t31, t16, t32)
+    add(t30, t32, t30)
+    multiply(t25, t18, t32)
+    multiply(t31, t15, t33)
+    subtract(t32, t33, t32)
+    multiply(t32, qd_3, t33)
+    add(t30, t33, t30)
+    multiply(k18, t30, t33)
+    multiply(t25, t16, t34)
+    multiply(t31, t11, t35)
+    subtract(t34, t35, t34)
+    multiply(t25, t15, t35)
+    multiply(t31, t18, t36)
+    add(t35, t36, t35)
+    multiply(t35, qd_3, t36)
+    subtract(t34, t36, t34)
+    multiply(k19, t34, t36)
+    add(t33, t36, t33)
+    subtract(qdd_3, t14, t36)
+    multiply(k20, t36, t37)
+    add(t33, t37, t33)
+    multiply(k20, t35, t37)
+    multiply(k21, t32, t38)
+    add(t37, t38, t37)
+    subtract(qd_3, t12, t38)
+    multiply(k22, t38, t39)
+    add(t37, t39, t37)
+    multiply(t32, t37, t39)
+    multiply(k19, t35, t40)
+    multiply(k23, t32, t41)
+    add(t40, t41, t40)
+    multiply(k21, t38, t41)
+    add(t40, t41, t40)
+    multiply(t38, t40, t41)
+    subtract(t39, t41, t39)
+    add(t33, t39, t33)
+    multiply(k24, t16, t39)
+    subtract(t39, t26, t39)
+    multiply(k24, t12, t26)
+    multiply(t15, t26, t41)
+    add(t39, t41, t39)
+    subtract(t28, t39, t41)
+    multiply(k25, t41, t42)
+    multiply(k24, t14, t43)
+    subtract(t21, t43, t21)
+    multiply(k24, t18, t43)
+    multiply(t15, t43, t44)
+    add(t21, t44, t21)
+    multiply(t25, t21, t44)
+    multiply(t8, t22, t22)
+    multiply(t10, t27, t27)
+    subtract(t22, t27, t22)
+    multiply(t12, t26, t26)
+    multiply(t18, t43, t43)
+    add(t26, t43, t26)
+    subtract(t22, t26, t26)
+    multiply(t31, t26, t27)
+    subtract(t44, t27, t44)
+    multiply(t8, t19, t19)
+    multiply(t31, t19, t27)
+    multiply(t25, t23, t43)
+    add(t27, t43, t27)
+    subtract(t44, t27, t43)
+    multiply(k26, t43, t45)
+    subtract(t42, t45, t42)
+    add(t33, t42, t33)
+    cos(q_4, t42)
+    multiply(t42, t30, t45)
+    sin(q_4, t46)
+    multiply(t46, t36, t47)
+    subtract(t45, t47, t45)
+    multiply(t46, t35, t47)
+    multiply(t42, t38, t48)
+    add(t47, t48, t47)
+    multiply(t47, qd_4, t48)
+    subtract(t45, t48, t45)
+    multiply(k27, t45, t48)
+    multiply(t46, t30, t49)
+    multiply(t42, t36, t50)
+    add(t49, t50, t49)
+    multiply(t42, t35, t50)
+    multiply(t46, t38, t51)
+    subtract(t50, t51, t50)
+    multiply(t50, qd_4, t51)
+    add(t49, t51, t49)
+    multiply(k28, t49, t51)
+    subtract(t48, t51, t48)
+    add(t34, qdd_4, t51)
+    multiply(k29, t51, t52)
+    add(t48, t52, t48)
+    multiply(k29, t50, t52)
+    multiply(k30, t47, t53)
+    subtract(t52, t53, t52)
+    add(t32, qd_4, t53)
+    multiply(k31, t53, t54)
+    add(t52, t54, t52)
+    multiply(t47, t52, t54)
+    multiply(k28, t50, t55)
+    multiply(k32, t47, t56)
+    subtract(t55, t56, t55)
+    multiply(k30, t53, t56)
+    add(t55, t56, t55)
+    multiply(t53, t55, t56)
+    add(t54, t56, t54)
+    subtract(t48, t54, t48)
+    multiply(k33, t36, t54)
+    add(t44, t54, t44)
+    multiply(k34, t38, t54)
+    multiply(t38, t54, t56)
+    multiply(k34, t35, t57)
+    multiply(k33, t32, t58)
+    subtract(t57, t58, t57)
+    multiply(t35, t57, t58)
+    add(t56, t58, t56)
+    subtract(t44, t56, t44)
+    subtract(t44, t27, t56)
+    multiply(k35, t56, t58)
+    multiply(t25, t26, t26)
+    multiply(t31, t21, t21)
+    add(t26, t21, t26)
+    multiply(k34, t36, t21)
+    subtract(t26, t21, t21)
+    multiply(t32, t57, t57)
+    multiply(k33, t38, t59)
+    multiply(t38, t59, t60)
+    subtract(t57, t60, t57)
+    add(t21, t57, t21)
+    multiply(t46, t21, t57)
+    multiply(k34, t30, t60)
+    multiply(k33, t34, t61)
+    subtract(t60, t61, t60)
+    subtract(t60, t39, t60)
+    multiply(t35, t59, t59)
+    multiply(t32, t54, t54)
+    add(t59, t54, t59)
+    add(t60, t59, t60)
+    multiply(t42, t60, t39)
+    add(t57, t39, t57)
+    multiply(t25, t19, t39)
+    multiply(t31, t23, t23)
+    subtract(t39, t23, t39)
+    multiply(t46, t39, t23)
+    multiply(t42, t28, t54)
+    add(t23, t54, t23)
+    add(t57, t23, t54)
+    multiply(k36, t54, t59)
+    add(t58, t59, t58)
+    add(t48, t58, t48)
+    cos(q_5, t58)
+    multiply(t58, t45, t59)
+    sin(q_5, t61)
+    multiply(t61, t51, t62)
+    add(t59, t62, t59)
+    multiply(t58, t53, t62)
+    multiply(t61, t50, t63)
+    subtract(t62, t63, t62)
+    multiply(t62, qd_5, t63)
+    add(t59, t63, t59)
+    multiply(k37, t59, t63)
+    multiply(t58, t51, t64)
+    multiply(t61, t45, t65)
+    subtract(t64, t65, t64)
+    multiply(t58, t50, t65)
+    multiply(t61, t53, t66)
+    add(t65, t66, t65)
+    multiply(t65, qd_5, t66)
+    subtract(t64, t66, t64)
+    multiply(k38, t64, t66)
+    add(t63, t66, t63)
+    add(t49, qdd_5, t66)
+    multiply(k39, t66, t67)
+    add(t63, t67, t63)
+    multiply(k39, t65, t67)
+    multiply(k40, t62, t68)
+    add(t67, t68, t67)
+    add(t47, qd_5, t68)
+    multiply(k41, t68, t69)
+    add(t67, t69, t67)
+    multiply(t62, t67, t69)
+    multiply(k38, t65, t70)
+    multiply(k42, t62, t71)
+    add(t70, t71, t70)
+    multiply(k40, t68, t71)
+    add(t70, t71, t70)
+    multiply(t68, t70, t71)
+    subtract(t69, t71, t69)
+    add(t63, t69, t63)
+    multiply(k43, t54, t69)
+    multiply(t58, t44, t71)
+    multiply(t42, t21, t21)
+    multiply(t46, t60, t60)
+    subtract(t21, t60, t21)
+    multiply(t61, t21, t60)
+    subtract(t71, t60, t71)
+    multiply(t42, t39, t60)
+    multiply(t46, t28, t28)
+    subtract(t60, t28, t60)
+    multiply(t61, t60, t28)
+    multiply(t58, t27, t72)
+    add(t28, t72, t28)
+    subtract(t71, t28, t72)
+    multiply(k44, t72, t73)
+    subtract(t69, t73, t69)
+    add(t63, t69, t63)
+    cos(q_6, t69)
+    multiply(t69, t59, t73)
+    sin(q_6, t74)
+    multiply(t74, t66, t75)
+    add(t73, t75, t73)
+    multiply(t69, t68, t75)
+    multiply(t74, t65, t76)
+    subtract(t75, t76, t75)
+    multiply(t75, qd_6, t76)
+    add(t73, t76, t73)
+    multiply(k45, t73, t76)
+    multiply(t69, t66, t77)
+    multiply(t74, t59, t78)
+    subtract(t77, t78, t77)
+    multiply(t69, t65, t78)
+    multiply(t74, t68, t79)
+    add(t78, t79, t78)
+    multiply(t78, qd_6, t79)
+    subtract(t77, t79, t77)
+    multiply(k46, t77, t79)
+    add(t76, t79, t76)
+    subtract(qdd_6, t64, t79)
+    multiply(k47, t79, t80)
+    add(t76, t80, t76)
+    multiply(k47, t78, t80)
+    multiply(k48, t75, t81)
+    add(t80, t81, t80)
+    subtract(qd_6, t62, t81)
+    multiply(k49, t81, t82)
+    add(t80, t82, t80)
+    multiply(t75, t80, t82)
+    multiply(k46, t78, t83)
+    multiply(k50, t75, t84)
+    add(t83, t84, t83)
+    multiply(k48, t81, t84)
+    add(t83, t84, t83)
+    multiply(t81, t83, t84)
+    subtract(t82, t84, t82)
+    add(t76, t82, t76)
+    multiply(k51, t66, t82)
+    add(t71, t82, t71)
+    multiply(k51, t62, t82)
+    multiply(t65, t82, t84)
+    add(t71, t84, t71)
+    subtract(t28, t71, t28)
+    multiply(k52, t28, t84)
+    multiply(k51, t64, t85)
+    subtract(t57, t85, t57)
+    multiply(k51, t68, t85)
+    multiply(t65, t85, t86)
+    add(t57, t86, t57)
+    multiply(t69, t57, t86)
+    multiply(t58, t21, t87)
+    multiply(t61, t44, t44)
+    add(t87, t44, t87)
+    multiply(t62, t82, t82)
+    multiply(t68, t85, t85)
+    add(t82, t85, t82)
+    subtract(t87, t82, t82)
+    multiply(t74, t82, t44)
+    subtract(t86, t44, t86)
+    multiply(t69, t23, t44)
+    multiply(t58, t60, t85)
+    multiply(t61, t27, t27)
+    subtract(t85, t27, t85)
+    multiply(t74, t85, t27)
+    subtract(t44, t27, t44)
+    add(t86, t44, t44)
+    multiply(k53, t44, t27)
+    subtract(t84, t27, t84)
+    add(t76, t84, t76)
+    multiply(t69, t76, t27)
+    multiply(k46, t73, t84)
+    multiply(k50, t77, t88)
+    add(t84, t88, t84)
+    multiply(k48, t79, t88)
+    add(t84, t88, t84)
+    multiply(k45, t78, t88)
+    multiply(k46, t75, t89)
+    add(t88, t89, t88)
+    multiply(k47, t81, t89)
+    add(t88, t89, t88)
+    multiply(t81, t88, t89)
+    multiply(t78, t80, t80)
+    subtract(t89, t80, t89)
+    add(t84, t89, t84)
+    multiply(t69, t82, t82)
+    multiply(t74, t57, t57)
+    add(t82, t57, t82)
+    multiply(t69, t85, t57)
+    multiply(t74, t23, t23)
+    add(t57, t23, t57)
+    add(t82, t57, t57)
+    multiply(k53, t57, t23)
+    multiply(k54, t28, t80)
+    subtract(t23, t80, t23)
+    add(t84, t23, t84)
+    multiply(t74, t84, t23)
+    subtract(t27, t23, t27)
+    add(t63, t27, t63)
+    multiply(t58, t63, t23)
+    multiply(k38, t59, t27)
+    multiply(k42, t64, t80)
+    add(t27, t80, t27)
+    multiply(k40, t66, t80)
+    add(t27, t80, t27)
+    multiply(k37, t65, t80)
+    multiply(k38, t62, t89)
+    add(t80, t89, t80)
+    multiply(k39, t68, t89)
+    add(t80, t89, t80)
+    multiply(t68, t80, t89)
+    multiply(t65, t67, t67)
+    subtract(t89, t67, t89)
+    add(t27, t89, t27)
+    add(t87, t85, t87)
+    multiply(k44, t87, t67)
+    multiply(k55, t54, t85)
+    subtract(t67, t85, t67)
+    add(t27, t67, t27)
+    multiply(k47, t73, t67)
+    multiply(k48, t77, t85)
+    add(t67, t85, t67)
+    multiply(k49, t79, t85)
+    add(t67, t85, t67)
+    multiply(t78, t83, t83)
+    multiply(t75, t88, t88)
+    subtract(t83, t88, t83)
+    add(t67, t83, t67)
+    multiply(k54, t44, t83)
+    multiply(k52, t57, t85)
+    subtract(t83, t85, t83)
+    add(t67, t83, inverse_dynamics_6)
+    subtract(t27, inverse_dynamics_6, t27)
+    multiply(k56, t57, t57)
+    multiply(k53, t77, t67)
+    multiply(k52, t79, t83)
+    subtract(t67, t83, t67)
+    add(t57, t67, t57)
+    multiply(k52, t78, t67)
+    multiply(k54, t75, t83)
+    subtract(t67, t83, t67)
+    multiply(t75, t67, t83)
+    multiply(k54, t81, t85)
+    multiply(k53, t78, t88)
+    subtract(t85, t88, t85)
+    multiply(t81, t85, t88)
+    subtract(t83, t88, t83)
+    add(t57, t83, t57)
+    multiply(t74, t57, t83)
+    multiply(k56, t44, t44)
+    multiply(k54, t79, t88)
+    multiply(k53, t73, t89)
+    subtract(t88, t89, t88)
+    add(t44, t88, t44)
+    multiply(k53, t75, t88)
+    multiply(k52, t81, t89)
+    subtract(t88, t89, t88)
+    multiply(t81, t88, t89)
+    multiply(t78, t67, t67)
+    subtract(t89, t67, t89)
+    add(t44, t89, t44)
+    multiply(t69, t44, t67)
+    add(t83, t67, t83)
+    multiply(k51, t83, t67)
+    subtract(t27, t67, t27)
+    multiply(t61, t27, t67)
+    subtract(t23, t67, t23)
+    add(t48, t23, t48)
+    multiply(t42, t48, t23)
+    multiply(k28, t45, t67)
+    multiply(k32, t49, t89)
+    subtract(t67, t89, t67)
+    multiply(k30, t51, t89)
+    add(t67, t89, t67)
+    multiply(k27, t50, t89)
+    multiply(k28, t47, t90)
+    subtract(t89, t90, t89)
+    multiply(k29, t53, t90)
+    add(t89, t90, t89)
+    multiply(t53, t89, t90)
+    multiply(t50, t52, t52)
+    subtract(t90, t52, t90)
+    add(t67, t90, t67)
+    add(t21, t60, t21)
+    multiply(k36, t21, t52)
+    multiply(k57, t56, t60)
+    subtract(t52, t60, t52)
+    add(t67, t52, t67)
+    multiply(k39, t59, t52)
+    multiply(k40, t64, t60)
+    add(t52, t60, t52)
+    multiply(k41, t66, t60)
+    add(t52, t60, t52)
+    multiply(t65, t70, t70)
+    multiply(t62, t80, t80)
+    subtract(t70, t80, t70)
+    add(t52, t70, t52)
+    multiply(k55, t72, t60)
+    multiply(k43, t87, t70)
+    subtract(t60, t70, t60)
+    add(t52, t60, t52)
+    multiply(t74, t76, t76)
+    multiply(t69, t84, t84)
+    add(t76, t84, t76)
+    add(t52, t76, t52)
+    multiply(k56, t28, t28)
+    multiply(k52, t73, t60)
+    multiply(k54, t77, t70)
+    subtract(t60, t70, t60)
+    add(t28, t60, t28)
+    multiply(t78, t85, t85)
+    multiply(t75, t88, t88)
+    subtract(t85, t88, t85)
+    add(t28, t85, t28)
+    multiply(k51, t28, t60)
+    subtract(t52, t60, inverse_dynamics_5)
+    subtract(t67, inverse_dynamics_5, t67)
+    multiply(t46, t67, t52)
+    subtract(t23, t52, t23)
+    add(t33, t23, t33)
+    multiply(k58, t21, t23)
+    multiply(k36, t49, t52)
+    multiply(k35, t51, t60)
+    add(t52, t60, t52)
+    subtract(t23, t52, t23)
+    multiply(k35, t50, t52)
+    multiply(k57, t47, t60)
+    add(t52, t60, t52)
+    multiply(t47, t52, t60)
+    multiply(k57, t53, t70)
+    multiply(k36, t50, t76)
+    subtract(t70, t76, t70)
+    multiply(t53, t70, t76)
+    add(t60, t76, t60)
+    subtract(t23, t60, t23)
+    multiply(k59, t87, t87)
+    multiply(k44, t64, t60)
+    multiply(k43, t66, t76)
+    subtract(t60, t76, t60)
+    add(t87, t60, t87)
+    multiply(k43, t65, t60)
+    multiply(k55, t62, t76)
+    subtract(t60, t76, t60)
+    multiply(t62, t60, t76)
+    multiply(k55, t68, t80)
+    multiply(k44, t65, t84)
+    subtract(t80, t84, t80)
+    multiply(t68, t80, t84)
+    subtract(t76, t84, t76)
+    add(t87, t76, t87)
+    multiply(t69, t57, t57)
+    multiply(t74, t44, t44)
+    subtract(t57, t44, t57)
+    add(t87, t57, t87)
+    multiply(t58, t87, t44)
+    multiply(k59, t72, t72)
+    multiply(k55, t66, t66)
+    multiply(k44, t59, t57)
+    subtract(t66, t57, t66)
+    add(t72, t66, t72)
+    multiply(k44, t62, t57)
+    multiply(k43, t68, t66)
+    subtract(t57, t66, t57)
+    multiply(t68, t57, t68)
+    multiply(t65, t60, t60)
+    subtract(t68, t60, t68)
+    add(t72, t68, t72)
+    subtract(t72, t28, t72)
+    multiply(t61, t72, t28)
+    subtract(t44, t28, t44)
+    add(t23, t44, t23)
+    multiply(t46, t23, t28)
+    multiply(k57, t51, t44)
+    multiply(k36, t45, t60)
+    subtract(t44, t60, t44)
+    multiply(k58, t54, t60)
+    subtract(t44, t60, t44)
+    multiply(k36, t47, t60)
+    multiply(k35, t53, t66)
+    add(t60, t66, t60)
+    multiply(t53, t60, t53)
+    multiply(t50, t52, t52)
+    add(t53, t52, t53)
+    subtract(t44, t53, t44)
+    multiply(k59, t54, t52)
+    multiply(k43, t59, t59)
+    multiply(k55, t64, t64)
+    subtract(t59, t64, t59)
+    add(t52, t59, t52)
+    multiply(t65, t80, t65)
+    multiply(t62, t57, t62)
+    subtract(t65, t62, t65)
+    add(t52, t65, t52)
+    add(t52, t83, t52)
+    subtract(t44, t52, t44)
+    multiply(t42, t44, t52)
+    add(t28, t52, t28)
+    multiply(k34, t28, t52)
+    subtract(t33, t52, t33)
+    multiply(t25, t33, t52)
+    multiply(k19, t30, t53)
+    multiply(k23, t34, t57)
+    add(t53, t57, t53)
+    multiply(k21, t36, t57)
+    add(t53, t57, t53)
+    multiply(k18, t35, t57)
+    multiply(k19, t32, t59)
+    add(t57, t59, t57)
+    multiply(k20, t38, t59)
+    add(t57, t59, t57)
+    multiply(t38, t57, t59)
+    multiply(t35, t37, t37)
+    subtract(t59, t37, t59)
+    add(t53, t59, t53)
+    add(t26, t39, t26)
+    multiply(k26, t26, t37)
+    multiply(k60, t41, t39)
+    subtract(t37, t39, t37)
+    add(t53, t37, t53)
+    multiply(k29, t45, t37)
+    multiply(k30, t49, t39)
+    subtract(t37, t39, t37)
+    multiply(k31, t51, t51)
+    add(t37, t51, t37)
+    multiply(t50, t55, t55)
+    multiply(t47, t89, t89)
+    add(t55, t89, t55)
+    add(t37, t55, t37)
+    multiply(k57, t54, t54)
+    multiply(k35, t21, t21)
+    add(t54, t21, t54)
+    subtract(t37, t54, t37)
+    multiply(t61, t63, t63)
+    multiply(t58, t27, t27)
+    add(t63, t27, t63)
+    add(t37, t63, inverse_dynamics_4)
+    add(t53, inverse_dynamics_4, t53)
+    multiply(k33, t28, t21)
+    add(t53, t21, t53)
+    multiply(t31, t53, t21)
+    subtract(t52, t21, t52)
+    add(t13, t52, t13)
+    multiply(t8, t13, t21)
+    multiply(k9, t11, t27)
+    multiply(k13, t14, t37)
+    add(t27, t37, t27)
+    multiply(k11, t16, t37)
+    add(t27, t37, t27)
+    multiply(k8, t15, t37)
+    multiply(k9, t12, t39)
+    add(t37, t39, t37)
+    multiply(k10, t18, t39)
+    add(t37, t39, t37)
+    multiply(t18, t37, t39)
+    multiply(t15, t17, t17)
+    subtract(t39, t17, t39)
+    add(t27, t39, t27)
+    add(t22, t19, t22)
+    multiply(k17, t22, t17)
+    multiply(k61, t24, t24)
+    subtract(t17, t24, t17)
+    add(t27, t17, t27)
+    multiply(k20, t30, t17)
+    multiply(k21, t34, t19)
+    add(t17, t19, t17)
+    multiply(k22, t36, t19)
+    add(t17, t19, t17)
+    multiply(t35, t40, t40)
+    multiply(t32, t57, t57)
+    subtract(t40, t57, t40)
+    add(t17, t40, t17)
+    multiply(k60, t43, t19)
+    multiply(k25, t26, t24)
+    subtract(t19, t24, t19)
+    add(t17, t19, t17)
+    multiply(t46, t48, t48)
+    multiply(t42, t67, t67)
+    add(t48, t67, t48)
+    subtract(t17, t48, t17)
+    multiply(k58, t56, t56)
+    multiply(k35, t45, t45)
+    multiply(k57, t49, t49)
+    add(t45, t49, t45)
+    add(t56, t45, t56)
+    multiply(t50, t70, t50)
+    multiply(t47, t60, t47)
+    subtract(t50, t47, t50)
+    add(t56, t50, t56)
+    multiply(t61, t87, t87)
+    multiply(t58, t72, t72)
+    add(t87, t72, t87)
+    add(t56, t87, t56)
+    multiply(k33, t56, t19)
+    multiply(t42, t23, t23)
+    multiply(t46, t44, t44)
+    subtract(t23, t44, t23)
+    multiply(k34, t23, t24)
+    subtract(t19, t24, t19)
+    add(t17, t19, inverse_dynamics_3)
+    subtract(t27, inverse_dynamics_3, t27)
+    multiply(k62, t26, t26)
+    multiply(k26, t34, t17)
+    multiply(k25, t36, t19)
+    subtract(t17, t19, t17)
+    add(t26, t17, t26)
+    multiply(k25, t35, t17)
+    multiply(k60, t32, t19)
+    subtract(t17, t19, t17)
+    multiply(t32, t17, t19)
+    multiply(k60, t38, t24)
+    multiply(k26, t35, t39)
+    subtract(t24, t39, t24)
+    multiply(t38, t24, t39)
+    subtract(t19, t39, t19)
+    add(t26, t19, t26)
+    add(t26, t23, t26)
+    multiply(t31, t26, t19)
+    multiply(k62, t43, t43)
+    multiply(k60, t36, t36)
+    multiply(k26, t30, t23)
+    subtract(t36, t23, t36)
+    add(t43, t36, t43)
+    multiply(k26, t32, t23)
+    multiply(k25, t38, t36)
+    subtract(t23, t36, t23)
+    multiply(t38, t23, t38)
+    multiply(t35, t17, t17)
+    subtract(t38, t17, t38)
+    add(t43, t38, t43)
+    add(t43, t56, t43)
+    multiply(t25, t43, t17)
+    add(t19, t17, t19)
+    multiply(k24, t19, t19)
+    subtract(t27, t19, t27)
+    multiply(t10, t27, t17)
+    subtract(t21, t17, t21)
+    add(t4, t21, t4)
+    multiply(k63, t22, t17)
+    multiply(k17, t14, t19)
+    multiply(k16, t16, t21)
+    subtract(t19, t21, t19)
+    add(t17, t19, t17)
+    multiply(k16, t15, t19)
+    multiply(k61, t12, t21)
+    subtract(t19, t21, t19)
+    multiply(t12, t19, t21)
+    multiply(k61, t18, t36)
+    multiply(k17, t15, t38)
+    subtract(t36, t38, t36)
+    multiply(t18, t36, t36)
+    subtract(t21, t36, t21)
+    add(t17, t21, t17)
+    multiply(t25, t26, t26)
+    multiply(t31, t43, t43)
+    subtract(t26, t43, t26)
+    add(t17, t26, t17)
+    multiply(t10, t17, t21)
+    multiply(k61, t16, t26)
+    multiply(k17, t11, t36)
+    subtract(t26, t36, t26)
+    multiply(k63, t29, t36)
+    subtract(t26, t36, t26)
+    multiply(k17, t12, t36)
+    multiply(k16, t18, t38)
+    subtract(t36, t38, t36)
+    multiply(t18, t36, t18)
+    multiply(t15, t19, t19)
+    subtract(t18, t19, t18)
+    add(t26, t18, t26)
+    multiply(k62, t41, t41)
+    multiply(k25, t30, t30)
+    multiply(k60, t34, t34)
+    subtract(t30, t34, t30)
+    add(t41, t30, t41)
+    multiply(t35, t24, t35)
+    multiply(t32, t23, t32)
+    subtract(t35, t32, t35)
+    add(t41, t35, t41)
+    subtract(t41, t28, t41)
+    subtract(t26, t41, t26)
+    multiply(t8, t26, t18)
+    add(t21, t18, t21)
+    multiply(k14, t21, t21)
+    add(t4, t21, t4)
+    multiply(t1, t4, t4)
+    multiply(k6, t3, t18)
+    multiply(k1, t5, t19)
+    subtract(t18, t19, t18)
+    multiply(k5, qdd_1, t19)
+    add(t18, t19, t18)
+    multiply(k3, qd_1, t19)
+    multiply(k2, t2, t21)
+    multiply(k1, t6, t23)
+    add(t21, t23, t21)
+    subtract(t19, t21, t19)
+    multiply(qd_1, t19, t21)
+    multiply(t2, t7, t7)
+    add(t21, t7, t21)
+    add(t18, t21, t18)
+    multiply(k7, t1, t7)
+    add(t18, t7, t18)
+    multiply(k10, t11, t11)
+    multiply(k11, t14, t14)
+    add(t11, t14, t11)
+    multiply(k12, t16, t16)
+    add(t11, t16, t11)
+    multiply(t15, t20, t15)
+    multiply(t12, t37, t12)
+    subtract(t15, t12, t15)
+    add(t11, t15, t11)
+    multiply(k61, t29, t29)
+    multiply(k16, t22, t22)
+    add(t29, t22, t29)
+    subtract(t11, t29, t11)
+    multiply(t31, t33, t33)
+    multiply(t25, t53, t53)
+    add(t33, t53, t33)
+    add(t11, t33, t11)
+    multiply(k24, t41, t41)
+    subtract(t11, t41, inverse_dynamics_2)
+    subtract(t18, inverse_dynamics_2, t18)
+    multiply(jacobian_tcp_37, t18, t18)
+    add(t4, t18, t4)
+    subtract(t0, t4, inverse_dynamics_0)
+    multiply(k5, t3, t3)
+    multiply(k3, t5, t5)
+    subtract(t3, t5, t3)
+    multiply(k4, qdd_1, t0)
+    add(t3, t0, t3)
+    multiply(t6, t19, t6)
+    multiply(t2, t9, t2)
+    subtract(t6, t2, t6)
+    add(t3, t6, t3)
+    multiply(k64, jacobian_tcp_37, t0)
+    multiply(k65, t1, t2)
+    subtract(t0, t2, t0)
+    add(t3, t0, t3)
+    multiply(t10, t13, t13)
+    multiply(t8, t27, t27)
+    add(t13, t27, t13)
+    add(t3, t13, t3)
+    multiply(t8, t17, t17)
+    multiply(t10, t26, t26)
+    subtract(t17, t26, t17)
+    multiply(k14, t17, t17)
+    subtract(t3, t17, inverse_dynamics_1)
+    cos(q_0, jacobian_tcp_29)
+    multiply(jacobian_tcp_29, jacobian_tcp_37, t0)
+    multiply(t0, t8, t2)
+    sin(q_0, t3)
+    multiply(t3, t10, t4)
+    subtract(t2, t4, t2)
+    multiply(t2, t25, t4)
+    multiply(jacobian_tcp_29, t1, jacobian_tcp_23)
+    multiply(jacobian_tcp_23, t31, t5)
+    add(t4, t5, t4)
+    multiply(t4, t42, t5)
+    multiply(t0, t10, t0)
+    multiply(t3, t8, t6)
+    add(t0, t6, jacobian_tcp_24)
+    multiply(jacobian_tcp_24, t46, t0)
+    subtract(t5, t0, t5)
+    multiply(t5, t58, t0)
+    multiply(jacobian_tcp_23, t25, t6)
+    multiply(t2, t31, t7)
+    subtract(t6, t7, jacobian_tcp_25)
+    multiply(jacobian_tcp_25, t61, t6)
+    add(t0, t6, t0)
+    multiply(t0, t69, t6)
+    multiply(t4, t46, t7)
+    multiply(jacobian_tcp_24, t42, t9)
+    add(t7, t9, jacobian_tcp_26)
+    multiply(jacobian_tcp_26, t74, t7)
+    add(t6, t7, t6)
+    multiply(k66, t6, t7)
+    multiply(jacobian_tcp_26, t69, t9)
+    multiply(t0, t74, t11)
+    subtract(t9, t11, t9)
+    multiply(k67, t9, t11)
+    add(t7, t11, fk_tcp_0)
+    multiply(t3, jacobian_tcp_37, t7)
+    multiply(t7, t8, t11)
+    multiply(jacobian_tcp_29, t10, t12)
+    add(t11, t12, t11)
+    multiply(t11, t25, t12)
+    multiply(t3, t1, jacobian_tcp_30)
+    multiply(jacobian_tcp_30, t31, t13)
+    add(t12, t13, t12)
+    multiply(t12, t42, t13)
+    multiply(jacobian_tcp_29, t8, t14)
+    multiply(t7, t10, t7)
+    subtract(t14, t7, t14)
+    multiply(t14, t46, t7)
+    add(t13, t7, t13)
+    multiply(t13, t58, t7)
+    multiply(jacobian_tcp_30, t25, t15)
+    multiply(t11, t31, t16)
+    subtract(t15, t16, jacobian_tcp_32)
+    multiply(jacobian_tcp_32, t61, t15)
+    add(t7, t15, t7)
+    multiply(t7, t69, t15)
+    multiply(t14, t42, t16)
+    multiply(t12, t46, t17)
+    subtract(t16, t17, t16)
+    multiply(t16, t74, t17)
+    subtract(t15, t17, t15)
+    multiply(k66, t15, t17)
+    multiply(t7, t74, t18)
+    multiply(t16, t69, t19)
+    add(t18, t19, t18)
+    multiply(k67, t18, t19)
+    subtract(t17, t19, fk_tcp_4)
+    multiply(jacobian_tcp_37, t31, t17)
+    multiply(t1, t8, t8)
+    multiply(t8, t25, t19)
+    subtract(t17, t19, t17)
+    multiply(t17, t42, t19)
+    multiply(t1, t10, t1)
+    multiply(t1, t46, t10)
+    add(t19, t10, t19)
+    multiply(t19, t58, t10)
+    multiply(t8, t31, t31)
+    multiply(jacobian_tcp_37, t25, t25)
+    add(t31, t25, jacobian_tcp_39)
+    multiply(jacobian_tcp_39, t61, t20)
+    add(t10, t20, t10)
+    multiply(t10, t69, t20)
+    multiply(t1, t42, t42)
+    multiply(t17, t46, t46)
+    subtract(t42, t46, t42)
+    multiply(t42, t74, t21)
+    subtract(t20, t21, t20)
+    multiply(k66, t20, t21)
+    multiply(t10, t74, t74)
+    multiply(t42, t69, t69)
+    add(t74, t69, t74)
+    multiply(k67, t74, t22)
+    subtract(t21, t22, fk_tcp_8)
+    multiply(k68, t6, t6)
+    multiply(k66, t9, t9)
+    add(t6, t9, fk_tcp_1)
+    multiply(k68, t15, t15)
+    multiply(k66, t18, t18)
+    subtract(t15, t18, fk_tcp_5)
+    multiply(k68, t20, t20)
+    multiply(k66, t74, t74)
+    subtract(t20, t74, fk_tcp_9)
+    multiply(jacobian_tcp_25, t58, t6)
+    multiply(t5, t61, t5)
+    subtract(t6, t5, t6)
+    negative(t6, fk_tcp_2)
+    multiply(jacobian_tcp_32, t58, t5)
+    multiply(t13, t61, t13)
+    subtract(t5, t13, t5)
+    negative(t5, fk_tcp_6)
+    multiply(jacobian_tcp_39, t58, t58)
+    multiply(t19, t61, t19)
+    subtract(t58, t19, t58)
+    negative(t58, fk_tcp_10)
+    multiply(k24, t2, t2)
+    multiply(k14, jacobian_tcp_23, t9)
+    subtract(t2, t9, t2)
+    multiply(k33, t4, t4)
+    multiply(k34, jacobian_tcp_25, t13)
+    add(t4, t13, t4)
+    add(t2, t4, t4)
+    multiply(k51, t0, t0)
+    add(t4, t0, t0)
+    multiply(k69, t6, t13)
+    subtract(t0, t13, fk_tcp_3)
+    multiply(k24, t11, t11)
+    multiply(k14, jacobian_tcp_30, t13)
+    subtract(t11, t13, t11)
+    multiply(k33, t12, t12)
+    multiply(k34, jacobian_tcp_32, t15)
+    add(t12, t15, t12)
+    add(t11, t12, t12)
+    multiply(k51, t7, t7)
+    add(t12, t7, t7)
+    multiply(k69, t5, t15)
+    subtract(t7, t15, fk_tcp_7)
+    multiply(k14, jacobian_tcp_37, t15)
+    subtract(k70, t15, t15)
+    multiply(k24, t8, t8)
+    subtract(t15, t8, t8)
+    multiply(k33, t17, t17)
+    multiply(k34, jacobian_tcp_39, t18)
+    add(t17, t18, t17)
+    add(t8, t17, t17)
+    multiply(k51, t10, t10)
+    add(t17, t10, t10)
+    multiply(k69, t58, t18)
+    subtract(t10, t18, fk_tcp_11)
+    negative(fk_tcp_7, jacobian_tcp_0)
+    subtract(fk_tcp_11, k70, t18)
+    multiply(jacobian_tcp_29, t18, jacobian_tcp_1)
+    multiply(t3, t18, jacobian_tcp_8)
+    multiply(t3, fk_tcp_7, t18)
+    multiply(jacobian_tcp_29, fk_tcp_3, t19)
+    add(t18, t19, t18)
+    negative(t18, jacobian_tcp_15)
+    negative(t3, jacobian_tcp_22)
+    subtract(fk_tcp_11, t15, t15)
+    multiply(jacobian_tcp_30, t15, t3)
+    add(fk_tcp_7, t13, t13)
+    multiply(jacobian_tcp_37, t13, t18)
+    subtract(t3, t18, jacobian_tcp_2)
+    add(fk_tcp_3, t9, t9)
+    multiply(jacobian_tcp_37, t9, t3)
+    multiply(jacobian_tcp_23, t15, t15)
+    subtract(t3, t15, jacobian_tcp_9)
+    multiply(jacobian_tcp_23, t13, t13)
+    multiply(jacobian_tcp_30, t9, t9)
+    subtract(t13, t9, jacobian_tcp_16)
+    subtract(fk_tcp_7, t11, t11)
+    multiply(t1, t11, t3)
+    subtract(fk_tcp_11, t8, t8)
+    multiply(t14, t8, t9)
+    subtract(t3, t9, jacobian_tcp_3)
+    subtract(fk_tcp_3, t2, t2)
+    multiply(t1, t2, t3)
+    multiply(jacobian_tcp_24, t8, t8)
+    add(t3, t8, t3)
+    negative(t3, jacobian_tcp_10)
+    multiply(jacobian_tcp_24, t11, t11)
+    multiply(t14, t2, t2)
+    add(t11, t2, jacobian_tcp_17)
+    negative(t14, jacobian_tcp_31)
+    negative(t1, jacobian_tcp_38)
+    subtract(fk_tcp_11, t17, t17)
+    multiply(jacobian_tcp_32, t17, t1)
+    subtract(fk_tcp_7, t12, t12)
+    multiply(jacobian_tcp_39, t12, t2)
+    subtract(t1, t2, jacobian_tcp_4)
+    subtract(fk_tcp_3, t4, t4)
+    multiply(jacobian_tcp_39, t4, t1)
+    multiply(jacobian_tcp_25, t17, t2)
+    subtract(t1, t2, jacobian_tcp_11)
+    multiply(jacobian_tcp_25, t12, t1)
+    multiply(jacobian_tcp_32, t4, t2)
+    subtract(t1, t2, jacobian_tcp_18)
+    multiply(t42, t12, t1)
+    multiply(t16, t17, t2)
+    subtract(t1, t2, jacobian_tcp_5)
+    multiply(t42, t4, t1)
+    multiply(jacobian_tcp_26, t17, t17)
+    add(t1, t17, t1)
+    negative(t1, jacobian_tcp_12)
+    multiply(jacobian_tcp_26, t12, t12)
+    multiply(t16, t4, t4)
+    add(t12, t4, jacobian_tcp_19)
+    negative(t16, jacobian_tcp_33)
+    negative(t42, jacobian_tcp_40)
+    subtract(fk_tcp_7, t7, t7)
+    multiply(t58, t7, t1)
+    subtract(fk_tcp_11, t10, t10)
+    multiply(t5, t10, t2)
+    subtract(t1, t2, jacobian_tcp_6)
+    multiply(t6, t10, t10)
+    subtract(fk_tcp_3, t0, t0)
+    multiply(t58, t0, t1)
+    subtract(t10, t1, jacobian_tcp_13)
+    multiply(t5, t0, t0)
+    multiply(t6, t7, t7)
+    subtract(t0, t7, jacobian_tcp_20)
+    multiply(k66, fk_tcp_0, t0)
+    multiply(k68, fk_tcp_1, t1)
+    add(t0, t1, t0)
+    multiply(k69, t77, t1)
+    add(t82, t1, t82)
+    multiply(k69, t78, t1)
+    multiply(t81, t1, t2)
+    add(t82, t2, t82)
+    multiply(t0, t82, t2)
+    multiply(k67, fk_tcp_0, t3)
+    multiply(k66, fk_tcp_1, t4)
+    add(t3, t4, t3)
+    multiply(k69, t73, t4)
+    subtract(t86, t4, t86)
+    multiply(k69, t75, t4)
+    multiply(t81, t4, t81)
+    add(t86, t81, t86)
+    multiply(t3, t86, t7)
+    add(t2, t7, t2)
+    multiply(t78, t1, t78)
+    multiply(t75, t4, t75)
+    add(t78, t75, t78)
+    add(t71, t78, t71)
+    multiply(t6, t71, t1)
+    add(t2, t1, frame_acceleration_tcp_0)
+    multiply(k66, fk_tcp_4, t1)
+    multiply(k68, fk_tcp_5, t2)
+    add(t1, t2, t1)
+    multiply(t1, t82, t2)
+    multiply(k67, fk_tcp_4, t4)
+    multiply(k66, fk_tcp_5, t7)
+    add(t4, t7, t4)
+    multiply(t4, t86, t7)
+    add(t2, t7, t2)
+    multiply(t5, t71, t7)
+    add(t2, t7, frame_acceleration_tcp_1)
+    multiply(k66, fk_tcp_8, t2)
+    multiply(k68, fk_tcp_9, t7)
+    add(t2, t7, t2)
+    multiply(t2, t82, t82)
+    multiply(k67, fk_tcp_8, t7)
+    multiply(k66, fk_tcp_9, t8)
+    add(t7, t8, t7)
+    multiply(t7, t86, t86)
+    add(t82, t86, t82)
+    multiply(t58, t71, t71)
+    add(t82, t71, frame_acceleration_tcp_2)
+    multiply(t0, t73, t0)
+    multiply(t3, t77, t3)
+    add(t0, t3, t0)
+    multiply(t6, t79, t6)
+    subtract(t0, t6, frame_acceleration_tcp_3)
+    multiply(t1, t73, t1)
+    multiply(t4, t77, t4)
+    add(t1, t4, t1)
+    multiply(t5, t79, t5)
+    subtract(t1, t5, frame_acceleration_tcp_4)
+    multiply(t2, t73, t2)
+    multiply(t7, t77, t7)
+    add(t2, t7, t2)
+    multiply(t58, t79, t58)
+    subtract(t2, t58, frame_acceleration_tcp_5)
+    copyto(jacobian_tcp_7, fk_tcp_3)
+    copyto(jacobian_tcp_27, fk_tcp_2)
+    copyto(jacobian_tcp_34, fk_tcp_6)
+    copyto(jacobian_tcp_41, fk_tcp_10)
 
 
 def rk4_step(x, u, dt):

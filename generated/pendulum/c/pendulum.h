@@ -24,6 +24,7 @@
 #include "pendulum_mass_matrix.h"
 #include "pendulum_coriolis_matrix.h"
 #include "pendulum_gravity.h"
+#include "pendulum_bias.h"
 #include "pendulum_inverse_dynamics.h"
 #include "pendulum_forward_dynamics.h"
 #include "pendulum_inverse_dynamics_fext.h"
@@ -36,6 +37,8 @@
 #include "pendulum_ode_jac_u.h"
 #include "pendulum_regressor.h"
 #include "pendulum_base_regressor.h"
+#include "pendulum_bundle_control.h"
+#include "pendulum_bundle_computed_torque.h"
 #include "pendulum_rk4_step.h"
 #include "pendulum_ik_tcp.h"
 

@@ -6,25 +6,22 @@
 
 DERIVE_FN void pendulum_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *a)
 {
-    /* 14 ops: 10 mul, 2 add, 0 div, 2 trig */
-    DERIVE_REAL w0, w1, w2, w3;
+    /* 11 ops: 7 mul, 2 add, 0 div, 2 trig */
+    DERIVE_REAL w0, w1, w2, w3, w4, w5;
     w0 = DERIVE_SIN(q[0]);
-    w1 = w0 * qd[0];
-    w1 = p[4] * w1;
+    w1 = qd[0] * p[4];
     w1 = qd[0] * w1;
-    w2 = DERIVE_COS(q[0]);
-    w3 = w2 * p[4];
-    w3 = w3 * qdd[0];
-    w1 = w1 - w3;
-    w3 = w0 * p[4];
-    w0 = w3 * qdd[0];
-    w3 = w2 * qd[0];
-    w2 = p[4] * w3;
-    w3 = qd[0] * w2;
-    w2 = w0 + w3;
-    a[0] = w1;
+    w2 = w0 * w1;
+    w3 = DERIVE_COS(q[0]);
+    w4 = qdd[0] * p[4];
+    w5 = w3 * w4;
+    w2 = w2 - w5;
+    w5 = w0 * w4;
+    w0 = w3 * w1;
+    w4 = w5 + w0;
+    a[0] = w2;
     a[1] = DERIVE_LIT(0.0);
-    a[2] = w2;
+    a[2] = w4;
     a[3] = DERIVE_LIT(0.0);
     a[4] = qdd[0];
     a[5] = DERIVE_LIT(0.0);

@@ -19,7 +19,7 @@ extern "C" {
  * in  qdd [1]
  * in  p [6]
  * out a [6]
- * Arrays are row-major. 14 ops: 10 mul, 2 add, 0 div, 2 trig
+ * Arrays are row-major. 11 ops: 7 mul, 2 add, 0 div, 2 trig
  */
 DERIVE_FN void pendulum_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *a);
 

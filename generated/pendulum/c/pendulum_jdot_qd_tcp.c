@@ -6,16 +6,14 @@
 
 DERIVE_FN void pendulum_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *a)
 {
-    /* 8 ops: 6 mul, 0 add, 0 div, 2 trig */
-    DERIVE_REAL w0, w1;
+    /* 6 ops: 4 mul, 0 add, 0 div, 2 trig */
+    DERIVE_REAL w0, w1, w2;
     w0 = DERIVE_SIN(q[0]);
-    w0 = w0 * qd[0];
-    w0 = p[4] * w0;
-    w0 = qd[0] * w0;
-    w1 = DERIVE_COS(q[0]);
-    w1 = w1 * qd[0];
-    w1 = p[4] * w1;
+    w1 = qd[0] * p[4];
     w1 = qd[0] * w1;
+    w0 = w0 * w1;
+    w2 = DERIVE_COS(q[0]);
+    w1 = w2 * w1;
     a[0] = w0;
     a[1] = DERIVE_LIT(0.0);
     a[2] = w1;

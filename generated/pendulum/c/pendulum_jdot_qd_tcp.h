@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [1]
  * in  p [6]
  * out a [6]
- * Arrays are row-major. 8 ops: 6 mul, 0 add, 0 div, 2 trig
+ * Arrays are row-major. 6 ops: 4 mul, 0 add, 0 div, 2 trig
  */
 DERIVE_FN void pendulum_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *a);
 

@@ -104,21 +104,19 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     in  qd [1]
     in  p [6]
     out a [6]
-    8 ops: 6 mul, 0 add, 0 div, 2 trig
+    6 ops: 4 mul, 0 add, 0 div, 2 trig
     """
     q = _input(q, 1, "q")
     qd = _input(qd, 1, "qd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, p)
     t0 = jnp.sin(q[..., 0])
-    t1 = t0 * qd[..., 0]
-    t2 = p[..., 4] * t1
-    t3 = qd[..., 0] * t2
+    t1 = qd[..., 0] * p[..., 4]
+    t2 = qd[..., 0] * t1
+    t3 = t0 * t2
     t4 = jnp.cos(q[..., 0])
-    t5 = t4 * qd[..., 0]
-    t6 = p[..., 4] * t5
-    t7 = qd[..., 0] * t6
-    a = _assemble([t3, 0.0, t7, 0.0, 0.0, 0.0], batch)
+    t5 = t4 * t2
+    a = _assemble([t3, 0.0, t5, 0.0, 0.0, 0.0], batch)
     return a
 
 
@@ -130,7 +128,7 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     in  qdd [1]
     in  p [6]
     out a [6]
-    14 ops: 10 mul, 2 add, 0 div, 2 trig
+    11 ops: 7 mul, 2 add, 0 div, 2 trig
     """
     q = _input(q, 1, "q")
     qd = _input(qd, 1, "qd")
@@ -138,20 +136,17 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, p)
     t0 = jnp.sin(q[..., 0])
-    t1 = t0 * qd[..., 0]
-    t2 = p[..., 4] * t1
-    t3 = qd[..., 0] * t2
+    t1 = qd[..., 0] * p[..., 4]
+    t2 = qd[..., 0] * t1
+    t3 = t0 * t2
     t4 = jnp.cos(q[..., 0])
-    t5 = t4 * p[..., 4]
-    t6 = t5 * qdd[..., 0]
+    t5 = qdd[..., 0] * p[..., 4]
+    t6 = t4 * t5
     t7 = t3 - t6
-    t8 = t0 * p[..., 4]
-    t9 = t8 * qdd[..., 0]
-    t10 = t4 * qd[..., 0]
-    t11 = p[..., 4] * t10
-    t12 = qd[..., 0] * t11
-    t13 = t9 + t12
-    a = _assemble([t7, 0.0, t13, 0.0, qdd[..., 0], 0.0], batch)
+    t8 = t0 * t5
+    t9 = t4 * t2
+    t10 = t8 + t9
+    a = _assemble([t7, 0.0, t10, 0.0, qdd[..., 0], 0.0], batch)
     return a
 
 
@@ -239,6 +234,30 @@ def gravity(q, p=DEFAULT_P):
     t6 = t3 * t5
     g = _assemble([t6], batch)
     return g
+
+
+def bias(q, qd, p=DEFAULT_P):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  p [6]
+    out h [1]
+    7 ops: 4 mul, 1 add, 1 div, 1 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, p)
+    t0 = p[..., 4] / 2.0
+    t1 = p[..., 0] * t0
+    t2 = p[..., 1] * p[..., 4]
+    t3 = t1 + t2
+    t4 = jnp.sin(q[..., 0])
+    t5 = t4 * p[..., 5]
+    t6 = t3 * t5
+    h = _assemble([t6], batch)
+    return h
 
 
 def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
@@ -636,6 +655,111 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t6 = jnp.sign(qd[..., 0])
     Y_b = _assemble([t2, t5, qdd[..., 0], qd[..., 0], t6], batch).reshape(batch + (1, 5))
     return Y_b
+
+
+def bundle_control(q, qd, p=DEFAULT_P):
+    """Control tick 'control': mass_matrix (1), bias (1), fk_tcp (4x4), jacobian_tcp (6), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  p [6]
+    out mass_matrix [1]
+    out bias [1]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6]
+    out jdot_qd_tcp [6]
+    24 ops: 14 mul, 7 add, 1 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, p)
+    t0 = p[..., 4] / 2.0
+    t1 = t0 * t0
+    t2 = p[..., 0] * t1
+    t3 = p[..., 2] + t2
+    t4 = p[..., 4] * p[..., 4]
+    t5 = p[..., 1] * t4
+    t6 = p[..., 3] + t5
+    t7 = t3 + t6
+    t8 = p[..., 0] * t0
+    t9 = p[..., 1] * p[..., 4]
+    t10 = t8 + t9
+    t11 = jnp.sin(q[..., 0])
+    t12 = t11 * p[..., 5]
+    t13 = t10 * t12
+    t14 = jnp.cos(q[..., 0])
+    t15 = -t11
+    t16 = t11 * p[..., 4]
+    t17 = -t16
+    t18 = t14 * p[..., 4]
+    t19 = -t18
+    t20 = qd[..., 0] * p[..., 4]
+    t21 = qd[..., 0] * t20
+    t22 = t11 * t21
+    t23 = t14 * t21
+    mass_matrix = _assemble([t7], batch)
+    bias = _assemble([t13], batch)
+    fk_tcp = _assemble([t14, 0.0, t11, t17, 0.0, 1.0, 0.0, 0.0, t15, 0.0, t14, t19, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([t19, 0.0, t16, 0.0, 1.0, 0.0], batch)
+    jdot_qd_tcp = _assemble([t22, 0.0, t23, 0.0, 0.0, 0.0], batch)
+    return mass_matrix, bias, fk_tcp, jacobian_tcp, jdot_qd_tcp
+
+
+def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
+    """Control tick 'computed_torque': inverse_dynamics (1), fk_tcp (4x4), jacobian_tcp (6), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out inverse_dynamics [1]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6]
+    out frame_acceleration_tcp [6]
+    31 ops: 18 mul, 10 add, 1 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    qdd = _input(qdd, 1, "qdd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = p[..., 4] / 2.0
+    t1 = t0 * t0
+    t2 = p[..., 0] * t1
+    t3 = p[..., 2] + t2
+    t4 = p[..., 4] * p[..., 4]
+    t5 = p[..., 1] * t4
+    t6 = p[..., 3] + t5
+    t7 = t3 + t6
+    t8 = t7 * qdd[..., 0]
+    t9 = p[..., 0] * t0
+    t10 = p[..., 1] * p[..., 4]
+    t11 = t9 + t10
+    t12 = jnp.sin(q[..., 0])
+    t13 = t12 * p[..., 5]
+    t14 = t11 * t13
+    t15 = t8 + t14
+    t16 = jnp.cos(q[..., 0])
+    t17 = -t12
+    t18 = t12 * p[..., 4]
+    t19 = -t18
+    t20 = t16 * p[..., 4]
+    t21 = -t20
+    t22 = qd[..., 0] * p[..., 4]
+    t23 = qd[..., 0] * t22
+    t24 = t12 * t23
+    t25 = qdd[..., 0] * p[..., 4]
+    t26 = t16 * t25
+    t27 = t24 - t26
+    t28 = t12 * t25
+    t29 = t16 * t23
+    t30 = t28 + t29
+    inverse_dynamics = _assemble([t15], batch)
+    fk_tcp = _assemble([t16, 0.0, t12, t19, 0.0, 1.0, 0.0, 0.0, t17, 0.0, t16, t21, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([t21, 0.0, t18, 0.0, 1.0, 0.0], batch)
+    frame_acceleration_tcp = _assemble([t27, 0.0, t30, 0.0, qdd[..., 0], 0.0], batch)
+    return inverse_dynamics, fk_tcp, jacobian_tcp, frame_acceleration_tcp
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

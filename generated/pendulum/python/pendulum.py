@@ -365,26 +365,24 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     in  qd [1]
     in  p [6]
     out a [6]
-    8 ops: 6 mul, 0 add, 0 div, 2 trig
+    6 ops: 4 mul, 0 add, 0 div, 2 trig
     """
     q = _array(q, 1, "q")
     qd = _array(qd, 1, "qd")
     p = _array(p, 6, "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 1, ((6,),), fixed=_jdot_qd_tcp_fixed)
+        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 2, ((6,),), fixed=_jdot_qd_tcp_fixed)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     p = p.tolist()
     cos, sin = math.cos, math.sin
     t0 = sin(q[0])
-    t0 = t0 * qd[0]
-    t0 = p[4] * t0
-    t0 = qd[0] * t0
-    t1 = cos(q[0])
-    t1 = t1 * qd[0]
-    t1 = p[4] * t1
+    t1 = qd[0] * p[4]
     t1 = qd[0] * t1
+    t0 = t0 * t1
+    t2 = cos(q[0])
+    t1 = t2 * t1
     _a = (t0, 0.0, t1, 0.0, 0.0, 0.0)
     return np.array(_a)
 
@@ -400,16 +398,14 @@ def _jdot_qd_tcp_chunk(x, t, s, y):
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
     cos, multiply, sin = np.cos, np.multiply, np.sin
     q_0, qd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
-    t0, = t
+    t0, t1 = t
     a_0, a_2 = y
     sin(q_0, t0)
-    multiply(t0, qd_0, t0)
-    multiply(p_4, t0, t0)
-    multiply(qd_0, t0, a_0)
+    multiply(qd_0, p_4, t1)
+    multiply(qd_0, t1, t1)
+    multiply(t0, t1, a_0)
     cos(q_0, t0)
-    multiply(t0, qd_0, t0)
-    multiply(p_4, t0, t0)
-    multiply(qd_0, t0, a_2)
+    multiply(t0, t1, a_2)
 
 
 def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
@@ -420,14 +416,14 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     in  qdd [1]
     in  p [6]
     out a [6]
-    14 ops: 10 mul, 2 add, 0 div, 2 trig
+    11 ops: 7 mul, 2 add, 0 div, 2 trig
     """
     q = _array(q, 1, "q")
     qd = _array(qd, 1, "qd")
     qdd = _array(qdd, 1, "qdd")
     p = _array(p, 6, "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 4, ((6,),), fixed=_frame_acceleration_tcp_fixed)
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 6, ((6,),), fixed=_frame_acceleration_tcp_fixed)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -435,20 +431,17 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     p = p.tolist()
     cos, sin = math.cos, math.sin
     t0 = sin(q[0])
-    t1 = t0 * qd[0]
-    t1 = p[4] * t1
+    t1 = qd[0] * p[4]
     t1 = qd[0] * t1
-    t2 = cos(q[0])
-    t3 = t2 * p[4]
-    t3 = t3 * qdd[0]
-    t1 = t1 - t3
-    t0 = t0 * p[4]
-    t0 = t0 * qdd[0]
-    t2 = t2 * qd[0]
-    t2 = p[4] * t2
-    t2 = qd[0] * t2
-    t0 = t0 + t2
-    _a = (t1, 0.0, t0, 0.0, qdd[0], 0.0)
+    t2 = t0 * t1
+    t3 = cos(q[0])
+    t4 = qdd[0] * p[4]
+    t5 = t3 * t4
+    t2 = t2 - t5
+    t0 = t0 * t4
+    t1 = t3 * t1
+    t0 = t0 + t1
+    _a = (t2, 0.0, t0, 0.0, qdd[0], 0.0)
     return np.array(_a)
 
 
@@ -463,22 +456,19 @@ def _frame_acceleration_tcp_chunk(x, t, s, y):
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
     add, copyto, cos, multiply, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.sin, np.subtract
     q_0, qd_0, qdd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
-    t0, t1, t2, t3 = t
+    t0, t1, t2, t3, t4, t5 = t
     a_0, a_2, a_4 = y
     sin(q_0, t0)
-    multiply(t0, qd_0, t1)
-    multiply(p_4, t1, t1)
+    multiply(qd_0, p_4, t1)
     multiply(qd_0, t1, t1)
-    cos(q_0, t2)
-    multiply(t2, p_4, t3)
-    multiply(t3, qdd_0, t3)
-    subtract(t1, t3, a_0)
-    multiply(t0, p_4, t0)
-    multiply(t0, qdd_0, t0)
-    multiply(t2, qd_0, t2)
-    multiply(p_4, t2, t2)
-    multiply(qd_0, t2, t2)
-    add(t0, t2, a_2)
+    multiply(t0, t1, t2)
+    cos(q_0, t3)
+    multiply(qdd_0, p_4, t4)
+    multiply(t3, t4, t5)
+    subtract(t2, t5, a_0)
+    multiply(t0, t4, t0)
+    multiply(t3, t1, t3)
+    add(t0, t3, a_2)
     copyto(a_4, qdd_0)
 
 
@@ -670,6 +660,58 @@ def _gravity_chunk(x, t, s, y):
     sin(q_0, t0)
     multiply(t0, p_5, t0)
     multiply(s0, t0, g_0)
+
+
+def bias(q, qd, p=DEFAULT_P):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  p [6]
+    out h [1]
+    7 ops: 4 mul, 1 add, 1 div, 1 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    p = _array(p, 6, "p")
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bias_chunk, (q, qd, p), 1, ((1,),), pure=2)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    sin = math.sin
+    t0 = p[4] / 2.0
+    t0 = p[0] * t0
+    t1 = p[1] * p[4]
+    t0 = t0 + t1
+    t1 = sin(q[0])
+    t1 = t1 * p[5]
+    t0 = t0 * t1
+    _h = (t0,)
+    return np.array(_h)
+
+
+_bias_constants = _constants(
+    2.0)
+
+
+def _bias_chunk(x, t, s, y):
+    """bias on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, divide, multiply, sin = np.add, np.divide, np.multiply, np.sin
+    q_0, qd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1 = s
+    h_0, = y
+    k0, = _bias_constants
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    sin(q_0, t0)
+    multiply(t0, p_5, t0)
+    multiply(s0, t0, h_0)
 
 
 def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
@@ -1537,6 +1579,242 @@ def _base_regressor_chunk(x, t, s, y):
     sign(qd_0, Y_b_4)
     copyto(Y_b_2, qdd_0)
     copyto(Y_b_3, qd_0)
+
+
+def bundle_control(q, qd, p=DEFAULT_P):
+    """Control tick 'control': mass_matrix (1), bias (1), fk_tcp (4x4), jacobian_tcp (6), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  p [6]
+    out mass_matrix [1]
+    out bias [1]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6]
+    out jdot_qd_tcp [6]
+    24 ops: 14 mul, 7 add, 1 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    p = _array(p, 6, "p")
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_control_chunk, (q, qd, p), 1, ((1,), (1,), (4, 4), (6,), (6,),), fixed=_bundle_control_fixed, pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = p[4] / 2.0
+    t1 = t0 * t0
+    t1 = p[0] * t1
+    t1 = p[2] + t1
+    t2 = p[4] * p[4]
+    t2 = p[1] * t2
+    t2 = p[3] + t2
+    t1 = t1 + t2
+    t0 = p[0] * t0
+    t2 = p[1] * p[4]
+    t0 = t0 + t2
+    t2 = sin(q[0])
+    t3 = t2 * p[5]
+    t0 = t0 * t3
+    t3 = cos(q[0])
+    t4 = -t2
+    t5 = t2 * p[4]
+    t6 = -t5
+    t7 = t3 * p[4]
+    t7 = -t7
+    t8 = qd[0] * p[4]
+    t8 = qd[0] * t8
+    t9 = t2 * t8
+    t8 = t3 * t8
+    _mass_matrix = (t1,)
+    _bias = (t0,)
+    _fk_tcp = (t3, 0.0, t2, t6,
+               0.0, 1.0, 0.0, 0.0,
+               t4, 0.0, t3, t7,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t7, 0.0, t5, 0.0, 1.0, 0.0)
+    _jdot_qd_tcp = (t9, 0.0, t8, 0.0, 0.0, 0.0)
+    return np.array(_mass_matrix), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp), np.array(_jdot_qd_tcp)
+
+
+_bundle_control_constants = _constants(
+    2.0)
+
+
+_bundle_control_fixed = (
+    {},
+    {},
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {1: 0.0, 3: 0.0, 4: 1.0, 5: 0.0},
+    {1: 0.0, 3: 0.0, 4: 0.0, 5: 0.0},
+)
+"""bundle_control's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_control_chunk(x, t, s, y):
+    """bundle_control on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sin = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sin
+    q_0, qd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1, s2 = s
+    (mass_matrix_0, bias_0, fk_tcp_0, fk_tcp_2, fk_tcp_3, fk_tcp_8, fk_tcp_10, fk_tcp_11, jacobian_tcp_0,
+     jacobian_tcp_2, jdot_qd_tcp_0, jdot_qd_tcp_2) = y
+    k0, = _bundle_control_constants
+    divide(p_4, k0, s0)
+    multiply(s0, s0, s1)
+    multiply(p_0, s1, s1)
+    add(p_2, s1, s1)
+    multiply(p_4, p_4, s2)
+    multiply(p_1, s2, s2)
+    add(p_3, s2, s2)
+    add(s1, s2, s1)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s2)
+    add(s0, s2, s0)
+    sin(q_0, fk_tcp_2)
+    multiply(fk_tcp_2, p_5, t0)
+    multiply(s0, t0, bias_0)
+    cos(q_0, fk_tcp_0)
+    negative(fk_tcp_2, fk_tcp_8)
+    multiply(fk_tcp_2, p_4, jacobian_tcp_2)
+    negative(jacobian_tcp_2, fk_tcp_3)
+    multiply(fk_tcp_0, p_4, t0)
+    negative(t0, fk_tcp_11)
+    multiply(qd_0, p_4, t0)
+    multiply(qd_0, t0, t0)
+    multiply(fk_tcp_2, t0, jdot_qd_tcp_0)
+    multiply(fk_tcp_0, t0, jdot_qd_tcp_2)
+    copyto(mass_matrix_0, s1)
+    copyto(fk_tcp_10, fk_tcp_0)
+    copyto(jacobian_tcp_0, fk_tcp_11)
+
+
+def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
+    """Control tick 'computed_torque': inverse_dynamics (1), fk_tcp (4x4), jacobian_tcp (6), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out inverse_dynamics [1]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6]
+    out frame_acceleration_tcp [6]
+    31 ops: 18 mul, 10 add, 1 div, 2 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    qdd = _array(qdd, 1, "qdd")
+    p = _array(p, 6, "p")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_computed_torque_chunk, (q, qd, qdd, p), 4, ((1,), (4, 4), (6,), (6,),), fixed=_bundle_computed_torque_fixed, pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = p[4] / 2.0
+    t1 = t0 * t0
+    t1 = p[0] * t1
+    t1 = p[2] + t1
+    t2 = p[4] * p[4]
+    t2 = p[1] * t2
+    t2 = p[3] + t2
+    t1 = t1 + t2
+    t1 = t1 * qdd[0]
+    t0 = p[0] * t0
+    t2 = p[1] * p[4]
+    t0 = t0 + t2
+    t2 = sin(q[0])
+    t3 = t2 * p[5]
+    t0 = t0 * t3
+    t0 = t1 + t0
+    t1 = cos(q[0])
+    t3 = -t2
+    t4 = t2 * p[4]
+    t5 = -t4
+    t6 = t1 * p[4]
+    t6 = -t6
+    t7 = qd[0] * p[4]
+    t7 = qd[0] * t7
+    t8 = t2 * t7
+    t9 = qdd[0] * p[4]
+    t10 = t1 * t9
+    t8 = t8 - t10
+    t9 = t2 * t9
+    t7 = t1 * t7
+    t7 = t9 + t7
+    _inverse_dynamics = (t0,)
+    _fk_tcp = (t1, 0.0, t2, t5,
+               0.0, 1.0, 0.0, 0.0,
+               t3, 0.0, t1, t6,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t6, 0.0, t4, 0.0, 1.0, 0.0)
+    _frame_acceleration_tcp = (t8, 0.0, t7, 0.0, qdd[0], 0.0)
+    return np.array(_inverse_dynamics), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp), np.array(_frame_acceleration_tcp)
+
+
+_bundle_computed_torque_constants = _constants(
+    2.0)
+
+
+_bundle_computed_torque_fixed = (
+    {},
+    {1: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 9: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {1: 0.0, 3: 0.0, 4: 1.0, 5: 0.0},
+    {1: 0.0, 3: 0.0, 5: 0.0},
+)
+"""bundle_computed_torque's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_computed_torque_chunk(x, t, s, y):
+    """bundle_computed_torque on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, qd_0, qdd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, t1, t2, t3 = t
+    s0, s1, s2 = s
+    (inverse_dynamics_0, fk_tcp_0, fk_tcp_2, fk_tcp_3, fk_tcp_8, fk_tcp_10, fk_tcp_11, jacobian_tcp_0,
+     jacobian_tcp_2, frame_acceleration_tcp_0, frame_acceleration_tcp_2, frame_acceleration_tcp_4) = y
+    k0, = _bundle_computed_torque_constants
+    divide(p_4, k0, s0)
+    multiply(s0, s0, s1)
+    multiply(p_0, s1, s1)
+    add(p_2, s1, s1)
+    multiply(p_4, p_4, s2)
+    multiply(p_1, s2, s2)
+    add(p_3, s2, s2)
+    add(s1, s2, s1)
+    multiply(s1, qdd_0, t0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    sin(q_0, fk_tcp_2)
+    multiply(fk_tcp_2, p_5, t1)
+    multiply(s0, t1, t1)
+    add(t0, t1, inverse_dynamics_0)
+    cos(q_0, fk_tcp_0)
+    negative(fk_tcp_2, fk_tcp_8)
+    multiply(fk_tcp_2, p_4, jacobian_tcp_2)
+    negative(jacobian_tcp_2, fk_tcp_3)
+    multiply(fk_tcp_0, p_4, t0)
+    negative(t0, fk_tcp_11)
+    multiply(qd_0, p_4, t0)
+    multiply(qd_0, t0, t0)
+    multiply(fk_tcp_2, t0, t1)
+    multiply(qdd_0, p_4, t2)
+    multiply(fk_tcp_0, t2, t3)
+    subtract(t1, t3, frame_acceleration_tcp_0)
+    multiply(fk_tcp_2, t2, t2)
+    multiply(fk_tcp_0, t0, t0)
+    add(t2, t0, frame_acceleration_tcp_2)
+    copyto(fk_tcp_10, fk_tcp_0)
+    copyto(jacobian_tcp_0, fk_tcp_11)
+    copyto(frame_acceleration_tcp_4, qdd_0)
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

@@ -147,49 +147,39 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     in  qd [2]
     in  p [5]
     out a [6]
-    36 ops: 20 mul, 12 add, 0 div, 4 trig
+    26 ops: 14 mul, 8 add, 0 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     p = _input(p, 5, "p")
     batch = _batch(q, qd, p)
     t0 = jnp.cos(q[..., 0])
-    t1 = t0 * qd[..., 0]
-    t2 = p[..., 0] * t1
-    t3 = jnp.cos(q[..., 1])
-    t4 = t3 * t1
-    t5 = jnp.sin(q[..., 0])
-    t6 = jnp.sin(q[..., 1])
-    t7 = t6 * qd[..., 1]
-    t8 = t5 * t7
-    t9 = t4 - t8
-    t10 = t3 * qd[..., 1]
-    t11 = t0 * t10
-    t12 = t5 * qd[..., 0]
-    t13 = t6 * t12
-    t14 = t11 - t13
-    t15 = t9 + t14
-    t16 = p[..., 1] * t15
-    t17 = t2 + t16
-    t18 = qd[..., 0] * t17
-    t19 = qd[..., 1] * t16
-    t20 = t18 + t19
+    t1 = jnp.cos(q[..., 1])
+    t2 = t0 * t1
+    t3 = jnp.sin(q[..., 0])
+    t4 = jnp.sin(q[..., 1])
+    t5 = t3 * t4
+    t6 = t2 - t5
+    t7 = qd[..., 0] * p[..., 0]
+    t8 = qd[..., 0] * t7
+    t9 = t1 * t8
+    t10 = qd[..., 0] + qd[..., 1]
+    t11 = t10 * p[..., 1]
+    t12 = t10 * t11
+    t13 = t9 + t12
+    t14 = t6 * t13
+    t15 = t0 * t4
+    t16 = t3 * t1
+    t17 = t15 + t16
+    t18 = t4 * t8
+    t19 = t17 * t18
+    t20 = t14 + t19
     t21 = -t20
-    t22 = p[..., 0] * t12
-    t23 = t3 * t12
-    t24 = t0 * t7
-    t25 = t23 + t24
-    t26 = t6 * t1
-    t27 = t5 * t10
-    t28 = t26 + t27
-    t29 = t25 + t28
-    t30 = p[..., 1] * t29
-    t31 = t22 + t30
-    t32 = qd[..., 0] * t31
-    t33 = qd[..., 1] * t30
-    t34 = t32 + t33
-    t35 = -t34
-    a = _assemble([t21, t35, 0.0, 0.0, 0.0, 0.0], batch)
+    t22 = t6 * t18
+    t23 = t16 + t15
+    t24 = t23 * t13
+    t25 = t22 - t24
+    a = _assemble([t21, t25, 0.0, 0.0, 0.0, 0.0], batch)
     return a
 
 
@@ -201,70 +191,47 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     in  qdd [2]
     in  p [5]
     out a [6]
-    56 ops: 32 mul, 20 add, 0 div, 4 trig
+    33 ops: 18 mul, 11 add, 0 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     p = _input(p, 5, "p")
     batch = _batch(q, qd, qdd, p)
-    t0 = jnp.sin(q[..., 0])
-    t1 = t0 * p[..., 0]
-    t2 = jnp.cos(q[..., 1])
-    t3 = t0 * t2
-    t4 = jnp.cos(q[..., 0])
-    t5 = jnp.sin(q[..., 1])
-    t6 = t4 * t5
-    t7 = t3 + t6
-    t8 = t7 * p[..., 1]
-    t9 = t1 + t8
-    t10 = t9 * qdd[..., 0]
-    t11 = t8 * qdd[..., 1]
-    t12 = t10 + t11
-    t13 = t4 * qd[..., 0]
-    t14 = p[..., 0] * t13
-    t15 = t2 * t13
-    t16 = t5 * qd[..., 1]
-    t17 = t0 * t16
-    t18 = t15 - t17
-    t19 = t2 * qd[..., 1]
-    t20 = t4 * t19
-    t21 = t0 * qd[..., 0]
-    t22 = t5 * t21
-    t23 = t20 - t22
-    t24 = t18 + t23
-    t25 = p[..., 1] * t24
-    t26 = t14 + t25
-    t27 = qd[..., 0] * t26
-    t28 = qd[..., 1] * t25
-    t29 = t27 + t28
-    t30 = t12 + t29
-    t31 = -t30
-    t32 = t4 * p[..., 0]
-    t33 = t4 * t2
-    t34 = t0 * t5
-    t35 = t33 - t34
-    t36 = t35 * p[..., 1]
-    t37 = t32 + t36
-    t38 = t37 * qdd[..., 0]
-    t39 = t36 * qdd[..., 1]
-    t40 = t38 + t39
-    t41 = p[..., 0] * t21
-    t42 = t2 * t21
-    t43 = t4 * t16
-    t44 = t42 + t43
-    t45 = t5 * t13
-    t46 = t0 * t19
-    t47 = t45 + t46
-    t48 = t44 + t47
-    t49 = p[..., 1] * t48
-    t50 = t41 + t49
-    t51 = qd[..., 0] * t50
-    t52 = qd[..., 1] * t49
-    t53 = t51 + t52
-    t54 = t40 - t53
-    t55 = qdd[..., 0] + qdd[..., 1]
-    a = _assemble([t31, t54, 0.0, 0.0, 0.0, t55], batch)
+    t0 = jnp.cos(q[..., 0])
+    t1 = jnp.cos(q[..., 1])
+    t2 = t0 * t1
+    t3 = jnp.sin(q[..., 0])
+    t4 = jnp.sin(q[..., 1])
+    t5 = t3 * t4
+    t6 = t2 - t5
+    t7 = qdd[..., 0] * p[..., 0]
+    t8 = t4 * t7
+    t9 = qd[..., 0] * p[..., 0]
+    t10 = qd[..., 0] * t9
+    t11 = t1 * t10
+    t12 = t8 - t11
+    t13 = qd[..., 0] + qd[..., 1]
+    t14 = t13 * p[..., 1]
+    t15 = t13 * t14
+    t16 = t12 - t15
+    t17 = t6 * t16
+    t18 = t0 * t4
+    t19 = t3 * t1
+    t20 = t18 + t19
+    t21 = t4 * t10
+    t22 = t1 * t7
+    t23 = t21 + t22
+    t24 = qdd[..., 0] + qdd[..., 1]
+    t25 = t24 * p[..., 1]
+    t26 = t23 + t25
+    t27 = t20 * t26
+    t28 = t17 - t27
+    t29 = t19 + t18
+    t30 = t29 * t16
+    t31 = t6 * t26
+    t32 = t30 + t31
+    a = _assemble([t28, t32, 0.0, 0.0, 0.0, t24], batch)
     return a
 
 
@@ -415,6 +382,58 @@ def gravity(q, p=DEFAULT_P):
     t27 = t17 + t26
     g = _assemble([t27, t16], batch)
     return g
+
+
+def bias(q, qd, p=DEFAULT_P):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  p [5]
+    out h [2]
+    35 ops: 19 mul, 10 add, 2 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, p)
+    t0 = p[..., 0] / 2.0
+    t1 = p[..., 0] - t0
+    t2 = p[..., 2] * t1
+    t3 = jnp.cos(q[..., 0])
+    t4 = t3 * p[..., 4]
+    t5 = t2 * t4
+    t6 = p[..., 1] / 2.0
+    t7 = p[..., 1] - t6
+    t8 = p[..., 3] * t7
+    t9 = jnp.cos(q[..., 1])
+    t10 = t9 * t4
+    t11 = jnp.sin(q[..., 1])
+    t12 = jnp.sin(q[..., 0])
+    t13 = t12 * p[..., 4]
+    t14 = qd[..., 0] * p[..., 0]
+    t15 = qd[..., 0] * t14
+    t16 = t13 - t15
+    t17 = t11 * t16
+    t18 = t10 - t17
+    t19 = t8 * t18
+    t20 = t5 + t19
+    t21 = t9 * t16
+    t22 = t11 * t4
+    t23 = t21 + t22
+    t24 = p[..., 3] * t23
+    t25 = qd[..., 0] + qd[..., 1]
+    t26 = t25 * t8
+    t27 = t25 * t26
+    t28 = t24 - t27
+    t29 = t11 * t28
+    t30 = p[..., 3] * t18
+    t31 = t9 * t30
+    t32 = t29 + t31
+    t33 = p[..., 0] * t32
+    t34 = t20 + t33
+    h = _assemble([t34, t19], batch)
+    return h
 
 
 def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
@@ -1383,6 +1402,229 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t34 = jnp.sign(qd[..., 1])
     Y_b = _assemble([t1, t4, qdd[..., 0], t23, t31, t16, qd[..., 0], t33, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t14, t32, t16, 0.0, 0.0, qdd[..., 1], qd[..., 1], t34], batch).reshape(batch + (2, 11))
     return Y_b
+
+
+def bundle_control(q, qd, p=DEFAULT_P):
+    """Control tick 'control': mass_matrix (2x2), bias (2), fk_tcp (4x4), jacobian_tcp (6x2), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  p [5]
+    out mass_matrix [2x2]
+    out bias [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out jdot_qd_tcp [6]
+    84 ops: 47 mul, 29 add, 4 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, p)
+    t0 = p[..., 0] * p[..., 0]
+    t1 = p[..., 2] * t0
+    t2 = t1 / 12.0
+    t3 = p[..., 0] / 2.0
+    t4 = p[..., 0] - t3
+    t5 = t4 * t4
+    t6 = p[..., 2] * t5
+    t7 = t2 + t6
+    t8 = p[..., 1] * p[..., 1]
+    t9 = p[..., 3] * t8
+    t10 = t9 / 12.0
+    t11 = p[..., 1] / 2.0
+    t12 = p[..., 1] - t11
+    t13 = t12 * t12
+    t14 = p[..., 3] * t13
+    t15 = t10 + t14
+    t16 = jnp.cos(q[..., 1])
+    t17 = p[..., 3] * t12
+    t18 = t16 * t17
+    t19 = p[..., 0] * t18
+    t20 = t15 + t19
+    t21 = t18 * p[..., 0]
+    t22 = t20 + t21
+    t23 = p[..., 3] * t0
+    t24 = t22 + t23
+    t25 = t7 + t24
+    t26 = p[..., 2] * t4
+    t27 = jnp.cos(q[..., 0])
+    t28 = t27 * p[..., 4]
+    t29 = t26 * t28
+    t30 = jnp.sin(q[..., 1])
+    t31 = qd[..., 0] * p[..., 0]
+    t32 = qd[..., 0] * t31
+    t33 = t30 * t32
+    t34 = t16 * t28
+    t35 = jnp.sin(q[..., 0])
+    t36 = t35 * p[..., 4]
+    t37 = t30 * t36
+    t38 = t34 - t37
+    t39 = t33 + t38
+    t40 = t17 * t39
+    t41 = t29 + t40
+    t42 = t16 * t36
+    t43 = t30 * t28
+    t44 = t42 + t43
+    t45 = t16 * t32
+    t46 = t44 - t45
+    t47 = p[..., 3] * t46
+    t48 = qd[..., 0] + qd[..., 1]
+    t49 = t48 * t17
+    t50 = t48 * t49
+    t51 = t47 - t50
+    t52 = t30 * t51
+    t53 = p[..., 3] * t39
+    t54 = t16 * t53
+    t55 = t52 + t54
+    t56 = p[..., 0] * t55
+    t57 = t41 + t56
+    t58 = t27 * t16
+    t59 = t35 * t30
+    t60 = t58 - t59
+    t61 = t35 * t16
+    t62 = t27 * t30
+    t63 = t61 + t62
+    t64 = t62 + t61
+    t65 = -t64
+    t66 = t27 * p[..., 0]
+    t67 = t60 * p[..., 1]
+    t68 = t66 + t67
+    t69 = t35 * p[..., 0]
+    t70 = t63 * p[..., 1]
+    t71 = t69 + t70
+    t72 = -t71
+    t73 = -t70
+    t74 = t48 * p[..., 1]
+    t75 = t48 * t74
+    t76 = t45 + t75
+    t77 = t60 * t76
+    t78 = t64 * t33
+    t79 = t77 + t78
+    t80 = -t79
+    t81 = t60 * t33
+    t82 = t63 * t76
+    t83 = t81 - t82
+    mass_matrix = _assemble([t25, t20, t20, t15], batch).reshape(batch + (2, 2))
+    bias = _assemble([t57, t40], batch)
+    fk_tcp = _assemble([t60, t65, 0.0, t68, t63, t60, 0.0, t71, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([t72, t73, t68, t67, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
+    jdot_qd_tcp = _assemble([t80, t83, 0.0, 0.0, 0.0, 0.0], batch)
+    return mass_matrix, bias, fk_tcp, jacobian_tcp, jdot_qd_tcp
+
+
+def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
+    """Control tick 'computed_torque': inverse_dynamics (2), fk_tcp (4x4), jacobian_tcp (6x2), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out inverse_dynamics [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out frame_acceleration_tcp [6]
+    89 ops: 50 mul, 31 add, 4 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = p[..., 0] * p[..., 0]
+    t1 = p[..., 2] * t0
+    t2 = t1 / 12.0
+    t3 = p[..., 0] / 2.0
+    t4 = p[..., 0] - t3
+    t5 = t4 * t4
+    t6 = p[..., 2] * t5
+    t7 = t2 + t6
+    t8 = t7 * qdd[..., 0]
+    t9 = p[..., 2] * t4
+    t10 = jnp.cos(q[..., 0])
+    t11 = t10 * p[..., 4]
+    t12 = t9 * t11
+    t13 = t8 + t12
+    t14 = p[..., 1] * p[..., 1]
+    t15 = p[..., 3] * t14
+    t16 = t15 / 12.0
+    t17 = p[..., 1] / 2.0
+    t18 = p[..., 1] - t17
+    t19 = t18 * t18
+    t20 = p[..., 3] * t19
+    t21 = t16 + t20
+    t22 = qdd[..., 0] + qdd[..., 1]
+    t23 = t21 * t22
+    t24 = p[..., 3] * t18
+    t25 = jnp.sin(q[..., 1])
+    t26 = qd[..., 0] * p[..., 0]
+    t27 = qd[..., 0] * t26
+    t28 = t25 * t27
+    t29 = jnp.cos(q[..., 1])
+    t30 = qdd[..., 0] * p[..., 0]
+    t31 = t29 * t30
+    t32 = t28 + t31
+    t33 = t29 * t11
+    t34 = jnp.sin(q[..., 0])
+    t35 = t34 * p[..., 4]
+    t36 = t25 * t35
+    t37 = t33 - t36
+    t38 = t32 + t37
+    t39 = t24 * t38
+    t40 = t23 + t39
+    t41 = t13 + t40
+    t42 = t25 * t30
+    t43 = t29 * t27
+    t44 = t42 - t43
+    t45 = t29 * t35
+    t46 = t25 * t11
+    t47 = t45 + t46
+    t48 = t44 + t47
+    t49 = p[..., 3] * t48
+    t50 = qd[..., 0] + qd[..., 1]
+    t51 = t50 * t24
+    t52 = t50 * t51
+    t53 = t49 - t52
+    t54 = t25 * t53
+    t55 = p[..., 3] * t38
+    t56 = t22 * t24
+    t57 = t55 + t56
+    t58 = t29 * t57
+    t59 = t54 + t58
+    t60 = p[..., 0] * t59
+    t61 = t41 + t60
+    t62 = t10 * t29
+    t63 = t34 * t25
+    t64 = t62 - t63
+    t65 = t34 * t29
+    t66 = t10 * t25
+    t67 = t65 + t66
+    t68 = t66 + t65
+    t69 = -t68
+    t70 = t10 * p[..., 0]
+    t71 = t64 * p[..., 1]
+    t72 = t70 + t71
+    t73 = t34 * p[..., 0]
+    t74 = t67 * p[..., 1]
+    t75 = t73 + t74
+    t76 = -t75
+    t77 = -t74
+    t78 = t50 * p[..., 1]
+    t79 = t50 * t78
+    t80 = t44 - t79
+    t81 = t64 * t80
+    t82 = t22 * p[..., 1]
+    t83 = t32 + t82
+    t84 = t68 * t83
+    t85 = t81 - t84
+    t86 = t67 * t80
+    t87 = t64 * t83
+    t88 = t86 + t87
+    inverse_dynamics = _assemble([t61, t40], batch)
+    fk_tcp = _assemble([t64, t69, 0.0, t72, t67, t64, 0.0, t75, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([t76, t77, t72, t71, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
+    frame_acceleration_tcp = _assemble([t85, t88, 0.0, 0.0, 0.0, t22], batch)
+    return inverse_dynamics, fk_tcp, jacobian_tcp, frame_acceleration_tcp
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

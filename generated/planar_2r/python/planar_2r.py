@@ -436,55 +436,45 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     in  qd [2]
     in  p [5]
     out a [6]
-    36 ops: 20 mul, 12 add, 0 div, 4 trig
+    26 ops: 14 mul, 8 add, 0 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     p = _array(p, 5, "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 12, ((6,),), fixed=_jdot_qd_tcp_fixed)
+        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 9, ((6,),), fixed=_jdot_qd_tcp_fixed)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     p = p.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = t0 * qd[0]
-    t2 = p[0] * t1
-    t3 = cos(q[1])
-    t4 = t3 * t1
-    t5 = sin(q[0])
-    t6 = sin(q[1])
-    t7 = t6 * qd[1]
-    t8 = t5 * t7
-    t4 = t4 - t8
-    t8 = t3 * qd[1]
-    t9 = t0 * t8
-    t10 = t5 * qd[0]
-    t11 = t6 * t10
-    t9 = t9 - t11
-    t4 = t4 + t9
-    t4 = p[1] * t4
-    t2 = t2 + t4
-    t2 = qd[0] * t2
-    t4 = qd[1] * t4
-    t2 = t2 + t4
-    t2 = -t2
-    t4 = p[0] * t10
-    t3 = t3 * t10
-    t0 = t0 * t7
-    t0 = t3 + t0
-    t1 = t6 * t1
-    t3 = t5 * t8
-    t1 = t1 + t3
-    t0 = t0 + t1
-    t0 = p[1] * t0
-    t1 = t4 + t0
-    t1 = qd[0] * t1
-    t0 = qd[1] * t0
+    t1 = cos(q[1])
+    t2 = t0 * t1
+    t3 = sin(q[0])
+    t4 = sin(q[1])
+    t5 = t3 * t4
+    t2 = t2 - t5
+    t5 = qd[0] * p[0]
+    t5 = qd[0] * t5
+    t6 = t1 * t5
+    t7 = qd[0] + qd[1]
+    t8 = t7 * p[1]
+    t7 = t7 * t8
+    t6 = t6 + t7
+    t7 = t2 * t6
+    t0 = t0 * t4
+    t1 = t3 * t1
+    t3 = t0 + t1
+    t4 = t4 * t5
+    t3 = t3 * t4
+    t3 = t7 + t3
+    t3 = -t3
+    t2 = t2 * t4
     t0 = t1 + t0
-    t0 = -t0
-    _a = (t2, t0, 0.0, 0.0, 0.0, 0.0)
+    t0 = t0 * t6
+    t0 = t2 - t0
+    _a = (t3, t0, 0.0, 0.0, 0.0, 0.0)
     return np.array(_a)
 
 
@@ -499,44 +489,34 @@ def _jdot_qd_tcp_chunk(x, t, s, y):
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
     add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
     q_0, q_1, qd_0, qd_1, p_0, p_1, p_2, p_3, p_4 = x
-    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11 = t
+    t0, t1, t2, t3, t4, t5, t6, t7, t8 = t
     a_0, a_1 = y
     cos(q_0, t0)
-    multiply(t0, qd_0, t1)
-    multiply(p_0, t1, t2)
-    cos(q_1, t3)
-    multiply(t3, t1, t4)
-    sin(q_0, t5)
-    sin(q_1, t6)
-    multiply(t6, qd_1, t7)
-    multiply(t5, t7, t8)
-    subtract(t4, t8, t4)
-    multiply(t3, qd_1, t8)
-    multiply(t0, t8, t9)
-    multiply(t5, qd_0, t10)
-    multiply(t6, t10, t11)
-    subtract(t9, t11, t9)
-    add(t4, t9, t4)
-    multiply(p_1, t4, t4)
-    add(t2, t4, t2)
-    multiply(qd_0, t2, t2)
-    multiply(qd_1, t4, t4)
-    add(t2, t4, t2)
-    negative(t2, a_0)
-    multiply(p_0, t10, t2)
-    multiply(t3, t10, t3)
-    multiply(t0, t7, t0)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    sin(q_0, t3)
+    sin(q_1, t4)
+    multiply(t3, t4, t5)
+    subtract(t2, t5, t2)
+    multiply(qd_0, p_0, t5)
+    multiply(qd_0, t5, t5)
+    multiply(t1, t5, t6)
+    add(qd_0, qd_1, t7)
+    multiply(t7, p_1, t8)
+    multiply(t7, t8, t7)
+    add(t6, t7, t6)
+    multiply(t2, t6, t7)
+    multiply(t0, t4, t0)
+    multiply(t3, t1, t3)
+    add(t0, t3, t1)
+    multiply(t4, t5, t4)
+    multiply(t1, t4, t1)
+    add(t7, t1, t7)
+    negative(t7, a_0)
+    multiply(t2, t4, t2)
     add(t3, t0, t3)
-    multiply(t6, t1, t6)
-    multiply(t5, t8, t5)
-    add(t6, t5, t6)
-    add(t3, t6, t3)
-    multiply(p_1, t3, t3)
-    add(t2, t3, t2)
-    multiply(qd_0, t2, t2)
-    multiply(qd_1, t3, t3)
-    add(t2, t3, t2)
-    negative(t2, a_1)
+    multiply(t3, t6, t3)
+    subtract(t2, t3, a_1)
 
 
 def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
@@ -547,77 +527,54 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     in  qdd [2]
     in  p [5]
     out a [6]
-    56 ops: 32 mul, 20 add, 0 div, 4 trig
+    33 ops: 18 mul, 11 add, 0 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
     qdd = _array(qdd, 2, "qdd")
     p = _array(p, 5, "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 13, ((6,),), fixed=_frame_acceleration_tcp_fixed)
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 10, ((6,),), fixed=_frame_acceleration_tcp_fixed)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     qdd = qdd.tolist()
     p = p.tolist()
     cos, sin = math.cos, math.sin
-    t0 = sin(q[0])
-    t1 = t0 * p[0]
-    t2 = cos(q[1])
-    t3 = t0 * t2
-    t4 = cos(q[0])
-    t5 = sin(q[1])
+    t0 = cos(q[0])
+    t1 = cos(q[1])
+    t2 = t0 * t1
+    t3 = sin(q[0])
+    t4 = sin(q[1])
+    t5 = t3 * t4
+    t2 = t2 - t5
+    t5 = qdd[0] * p[0]
     t6 = t4 * t5
-    t3 = t3 + t6
-    t3 = t3 * p[1]
-    t1 = t1 + t3
-    t1 = t1 * qdd[0]
-    t3 = t3 * qdd[1]
-    t1 = t1 + t3
-    t3 = t4 * qd[0]
-    t6 = p[0] * t3
-    t7 = t2 * t3
-    t8 = t5 * qd[1]
-    t9 = t0 * t8
-    t7 = t7 - t9
-    t9 = t2 * qd[1]
-    t10 = t4 * t9
-    t11 = t0 * qd[0]
-    t12 = t5 * t11
-    t10 = t10 - t12
-    t7 = t7 + t10
-    t7 = p[1] * t7
-    t6 = t6 + t7
-    t6 = qd[0] * t6
-    t7 = qd[1] * t7
-    t6 = t6 + t7
-    t1 = t1 + t6
-    t1 = -t1
-    t6 = t4 * p[0]
-    t7 = t4 * t2
-    t10 = t0 * t5
-    t7 = t7 - t10
-    t7 = t7 * p[1]
-    t6 = t6 + t7
-    t6 = t6 * qdd[0]
-    t7 = t7 * qdd[1]
-    t6 = t6 + t7
-    t7 = p[0] * t11
-    t2 = t2 * t11
-    t4 = t4 * t8
-    t2 = t2 + t4
-    t3 = t5 * t3
-    t0 = t0 * t9
+    t7 = qd[0] * p[0]
+    t7 = qd[0] * t7
+    t8 = t1 * t7
+    t6 = t6 - t8
+    t8 = qd[0] + qd[1]
+    t9 = t8 * p[1]
+    t8 = t8 * t9
+    t6 = t6 - t8
+    t8 = t2 * t6
+    t0 = t0 * t4
+    t3 = t3 * t1
+    t9 = t0 + t3
+    t4 = t4 * t7
+    t1 = t1 * t5
+    t1 = t4 + t1
+    t4 = qdd[0] + qdd[1]
+    t5 = t4 * p[1]
+    t1 = t1 + t5
+    t5 = t9 * t1
+    t5 = t8 - t5
     t0 = t3 + t0
-    t0 = t2 + t0
-    t0 = p[1] * t0
-    t2 = t7 + t0
-    t2 = qd[0] * t2
-    t0 = qd[1] * t0
-    t0 = t2 + t0
-    t0 = t6 - t0
-    t2 = qdd[0] + qdd[1]
-    _a = (t1, t0, 0.0, 0.0, 0.0, t2)
+    t0 = t0 * t6
+    t1 = t2 * t1
+    t0 = t0 + t1
+    _a = (t5, t0, 0.0, 0.0, 0.0, t4)
     return np.array(_a)
 
 
@@ -630,66 +587,43 @@ _frame_acceleration_tcp_fixed = (
 def _frame_acceleration_tcp_chunk(x, t, s, y):
     """frame_acceleration_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
-    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, p_0, p_1, p_2, p_3, p_4 = x
-    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12 = t
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9 = t
     a_0, a_1, a_5 = y
-    sin(q_0, t0)
-    multiply(t0, p_0, t1)
-    cos(q_1, t2)
-    multiply(t0, t2, t3)
-    cos(q_0, t4)
-    sin(q_1, t5)
+    cos(q_0, t0)
+    cos(q_1, t1)
+    multiply(t0, t1, t2)
+    sin(q_0, t3)
+    sin(q_1, t4)
+    multiply(t3, t4, t5)
+    subtract(t2, t5, t2)
+    multiply(qdd_0, p_0, t5)
     multiply(t4, t5, t6)
-    add(t3, t6, t3)
-    multiply(t3, p_1, t3)
-    add(t1, t3, t1)
-    multiply(t1, qdd_0, t1)
-    multiply(t3, qdd_1, t3)
-    add(t1, t3, t1)
-    multiply(t4, qd_0, t3)
-    multiply(p_0, t3, t6)
-    multiply(t2, t3, t7)
-    multiply(t5, qd_1, t8)
-    multiply(t0, t8, t9)
-    subtract(t7, t9, t7)
-    multiply(t2, qd_1, t9)
-    multiply(t4, t9, t10)
-    multiply(t0, qd_0, t11)
-    multiply(t5, t11, t12)
-    subtract(t10, t12, t10)
-    add(t7, t10, t7)
-    multiply(p_1, t7, t7)
-    add(t6, t7, t6)
-    multiply(qd_0, t6, t6)
-    multiply(qd_1, t7, t7)
-    add(t6, t7, t6)
-    add(t1, t6, t1)
-    negative(t1, a_0)
-    multiply(t4, p_0, t1)
-    multiply(t4, t2, t6)
-    multiply(t0, t5, t7)
-    subtract(t6, t7, t6)
-    multiply(t6, p_1, t6)
-    add(t1, t6, t1)
-    multiply(t1, qdd_0, t1)
-    multiply(t6, qdd_1, t6)
-    add(t1, t6, t1)
-    multiply(p_0, t11, t6)
-    multiply(t2, t11, t2)
-    multiply(t4, t8, t4)
-    add(t2, t4, t2)
-    multiply(t5, t3, t5)
-    multiply(t0, t9, t0)
-    add(t5, t0, t5)
-    add(t2, t5, t2)
-    multiply(p_1, t2, t2)
-    add(t6, t2, t6)
-    multiply(qd_0, t6, t6)
-    multiply(qd_1, t2, t2)
-    add(t6, t2, t6)
-    subtract(t1, t6, a_1)
+    multiply(qd_0, p_0, t7)
+    multiply(qd_0, t7, t7)
+    multiply(t1, t7, t8)
+    subtract(t6, t8, t6)
+    add(qd_0, qd_1, t8)
+    multiply(t8, p_1, t9)
+    multiply(t8, t9, t8)
+    subtract(t6, t8, t6)
+    multiply(t2, t6, t8)
+    multiply(t0, t4, t0)
+    multiply(t3, t1, t3)
+    add(t0, t3, t9)
+    multiply(t4, t7, t4)
+    multiply(t1, t5, t1)
+    add(t4, t1, t4)
     add(qdd_0, qdd_1, a_5)
+    multiply(a_5, p_1, t1)
+    add(t4, t1, t4)
+    multiply(t9, t4, t9)
+    subtract(t8, t9, a_0)
+    add(t3, t0, t3)
+    multiply(t3, t6, t3)
+    multiply(t2, t4, t2)
+    add(t3, t2, a_1)
 
 
 def fk_jacobian_tcp(q, p=DEFAULT_P):
@@ -1026,6 +960,114 @@ def _gravity_chunk(x, t, s, y):
     add(t4, t2, t4)
     multiply(p_0, t4, t4)
     add(t1, t4, g_0)
+
+
+def bias(q, qd, p=DEFAULT_P):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  p [5]
+    out h [2]
+    35 ops: 19 mul, 10 add, 2 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    p = _array(p, 5, "p")
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bias_chunk, (q, qd, p), 7, ((2,),), pure=1)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = p[0] / 2.0
+    t0 = p[0] - t0
+    t0 = p[2] * t0
+    t1 = cos(q[0])
+    t1 = t1 * p[4]
+    t0 = t0 * t1
+    t2 = p[1] / 2.0
+    t2 = p[1] - t2
+    t2 = p[3] * t2
+    t3 = cos(q[1])
+    t4 = t3 * t1
+    t5 = sin(q[1])
+    t6 = sin(q[0])
+    t6 = t6 * p[4]
+    t7 = qd[0] * p[0]
+    t7 = qd[0] * t7
+    t6 = t6 - t7
+    t7 = t5 * t6
+    t4 = t4 - t7
+    t7 = t2 * t4
+    t0 = t0 + t7
+    t6 = t3 * t6
+    t1 = t5 * t1
+    t1 = t6 + t1
+    t1 = p[3] * t1
+    t6 = qd[0] + qd[1]
+    t2 = t6 * t2
+    t2 = t6 * t2
+    t1 = t1 - t2
+    t1 = t5 * t1
+    t2 = p[3] * t4
+    t2 = t3 * t2
+    t1 = t1 + t2
+    t1 = p[0] * t1
+    t0 = t0 + t1
+    _h = (t0, t7)
+    return np.array(_h)
+
+
+_bias_constants = _constants(
+    2.0)
+
+
+def _bias_chunk(x, t, s, y):
+    """bias on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6 = t
+    s0, = s
+    h_0, h_1 = y
+    k0, = _bias_constants
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s0)
+    cos(q_0, t0)
+    multiply(t0, p_4, t0)
+    multiply(s0, t0, t1)
+    divide(p_1, k0, s0)
+    subtract(p_1, s0, s0)
+    multiply(p_3, s0, s0)
+    cos(q_1, t2)
+    multiply(t2, t0, t3)
+    sin(q_1, t4)
+    sin(q_0, t5)
+    multiply(t5, p_4, t5)
+    multiply(qd_0, p_0, t6)
+    multiply(qd_0, t6, t6)
+    subtract(t5, t6, t5)
+    multiply(t4, t5, t6)
+    subtract(t3, t6, t3)
+    multiply(s0, t3, h_1)
+    add(t1, h_1, t1)
+    multiply(t2, t5, t5)
+    multiply(t4, t0, t0)
+    add(t5, t0, t5)
+    multiply(p_3, t5, t5)
+    add(qd_0, qd_1, t0)
+    multiply(t0, s0, t6)
+    multiply(t0, t6, t0)
+    subtract(t5, t0, t5)
+    multiply(t4, t5, t4)
+    multiply(p_3, t3, t3)
+    multiply(t2, t3, t2)
+    add(t4, t2, t4)
+    multiply(p_0, t4, t4)
+    add(t1, t4, h_0)
 
 
 def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
@@ -3068,6 +3110,491 @@ def _base_regressor_chunk(x, t, s, y):
     copyto(Y_b_16, Y_b_5)
     copyto(Y_b_19, qdd_1)
     copyto(Y_b_20, qd_1)
+
+
+def bundle_control(q, qd, p=DEFAULT_P):
+    """Control tick 'control': mass_matrix (2x2), bias (2), fk_tcp (4x4), jacobian_tcp (6x2), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  p [5]
+    out mass_matrix [2x2]
+    out bias [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out jdot_qd_tcp [6]
+    84 ops: 47 mul, 29 add, 4 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    p = _array(p, 5, "p")
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_control_chunk, (q, qd, p), 11, ((2, 2), (2,), (4, 4), (6, 2), (6,),), fixed=_bundle_control_fixed, pure=6)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = p[0] * p[0]
+    t1 = p[2] * t0
+    t1 = t1 / 12.0
+    t2 = p[0] / 2.0
+    t2 = p[0] - t2
+    t3 = t2 * t2
+    t3 = p[2] * t3
+    t1 = t1 + t3
+    t3 = p[1] * p[1]
+    t3 = p[3] * t3
+    t3 = t3 / 12.0
+    t4 = p[1] / 2.0
+    t4 = p[1] - t4
+    t5 = t4 * t4
+    t5 = p[3] * t5
+    t3 = t3 + t5
+    t5 = cos(q[1])
+    t4 = p[3] * t4
+    t6 = t5 * t4
+    t7 = p[0] * t6
+    t7 = t3 + t7
+    t6 = t6 * p[0]
+    t6 = t7 + t6
+    t0 = p[3] * t0
+    t0 = t6 + t0
+    t0 = t1 + t0
+    t1 = p[2] * t2
+    t2 = cos(q[0])
+    t6 = t2 * p[4]
+    t1 = t1 * t6
+    t8 = sin(q[1])
+    t9 = qd[0] * p[0]
+    t9 = qd[0] * t9
+    t10 = t8 * t9
+    t11 = t5 * t6
+    t12 = sin(q[0])
+    t13 = t12 * p[4]
+    t14 = t8 * t13
+    t11 = t11 - t14
+    t11 = t10 + t11
+    t14 = t4 * t11
+    t1 = t1 + t14
+    t13 = t5 * t13
+    t6 = t8 * t6
+    t6 = t13 + t6
+    t9 = t5 * t9
+    t6 = t6 - t9
+    t6 = p[3] * t6
+    t13 = qd[0] + qd[1]
+    t4 = t13 * t4
+    t4 = t13 * t4
+    t4 = t6 - t4
+    t4 = t8 * t4
+    t6 = p[3] * t11
+    t6 = t5 * t6
+    t4 = t4 + t6
+    t4 = p[0] * t4
+    t1 = t1 + t4
+    t4 = t2 * t5
+    t6 = t12 * t8
+    t4 = t4 - t6
+    t5 = t12 * t5
+    t6 = t2 * t8
+    t8 = t5 + t6
+    t5 = t6 + t5
+    t6 = -t5
+    t2 = t2 * p[0]
+    t11 = t4 * p[1]
+    t2 = t2 + t11
+    t12 = t12 * p[0]
+    t15 = t8 * p[1]
+    t12 = t12 + t15
+    t16 = -t12
+    t15 = -t15
+    t17 = t13 * p[1]
+    t13 = t13 * t17
+    t9 = t9 + t13
+    t13 = t4 * t9
+    t5 = t5 * t10
+    t5 = t13 + t5
+    t5 = -t5
+    t10 = t4 * t10
+    t9 = t8 * t9
+    t9 = t10 - t9
+    _mass_matrix = (t0, t7,
+                    t7, t3)
+    _bias = (t1, t14)
+    _fk_tcp = (t4, t6, 0.0, t2,
+               t8, t4, 0.0, t12,
+               0.0, 0.0, 1.0, 0.0,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t16, t15,
+                     t2, t11,
+                     0.0, 0.0,
+                     0.0, 0.0,
+                     0.0, 0.0,
+                     1.0, 1.0)
+    _jdot_qd_tcp = (t5, t9, 0.0, 0.0, 0.0, 0.0)
+    return np.array(_mass_matrix).reshape(2, 2), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 2), np.array(_jdot_qd_tcp)
+
+
+_bundle_control_constants = _constants(
+    12.0, 2.0)
+
+
+_bundle_control_fixed = (
+    {},
+    {},
+    {2: 0.0, 6: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 1.0},
+    {2: 0.0, 3: 0.0, 4: 0.0, 5: 0.0},
+)
+"""bundle_control's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_control_chunk(x, t, s, y):
+    """bundle_control on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10 = t
+    s0, s1, s2, s3, s4, s5 = s
+    (mass_matrix_0, mass_matrix_1, mass_matrix_2, mass_matrix_3, bias_0, bias_1, fk_tcp_0, fk_tcp_1,
+     fk_tcp_3, fk_tcp_4, fk_tcp_5, fk_tcp_7, jacobian_tcp_0, jacobian_tcp_1, jacobian_tcp_2,
+     jacobian_tcp_3, jdot_qd_tcp_0, jdot_qd_tcp_1) = y
+    k0, k1 = _bundle_control_constants
+    multiply(p_0, p_0, s0)
+    multiply(p_2, s0, s1)
+    divide(s1, k0, s1)
+    divide(p_0, k1, s2)
+    subtract(p_0, s2, s2)
+    multiply(s2, s2, s3)
+    multiply(p_2, s3, s3)
+    add(s1, s3, s1)
+    multiply(p_1, p_1, s3)
+    multiply(p_3, s3, s3)
+    divide(s3, k0, s3)
+    divide(p_1, k1, s4)
+    subtract(p_1, s4, s4)
+    multiply(s4, s4, s5)
+    multiply(p_3, s5, s5)
+    add(s3, s5, s3)
+    cos(q_1, t0)
+    multiply(p_3, s4, s4)
+    multiply(t0, s4, t1)
+    multiply(p_0, t1, t2)
+    add(s3, t2, mass_matrix_1)
+    multiply(t1, p_0, t1)
+    add(mass_matrix_1, t1, t1)
+    multiply(p_3, s0, s0)
+    add(t1, s0, t1)
+    add(s1, t1, mass_matrix_0)
+    multiply(p_2, s2, s2)
+    cos(q_0, t1)
+    multiply(t1, p_4, t2)
+    multiply(s2, t2, t3)
+    sin(q_1, t4)
+    multiply(qd_0, p_0, t5)
+    multiply(qd_0, t5, t5)
+    multiply(t4, t5, t6)
+    multiply(t0, t2, t7)
+    sin(q_0, t8)
+    multiply(t8, p_4, t9)
+    multiply(t4, t9, t10)
+    subtract(t7, t10, t7)
+    add(t6, t7, t7)
+    multiply(s4, t7, bias_1)
+    add(t3, bias_1, t3)
+    multiply(t0, t9, t9)
+    multiply(t4, t2, t2)
+    add(t9, t2, t9)
+    multiply(t0, t5, t5)
+    subtract(t9, t5, t9)
+    multiply(p_3, t9, t9)
+    add(qd_0, qd_1, t2)
+    multiply(t2, s4, t10)
+    multiply(t2, t10, t10)
+    subtract(t9, t10, t9)
+    multiply(t4, t9, t9)
+    multiply(p_3, t7, t7)
+    multiply(t0, t7, t7)
+    add(t9, t7, t9)
+    multiply(p_0, t9, t9)
+    add(t3, t9, bias_0)
+    multiply(t1, t0, t3)
+    multiply(t8, t4, t7)
+    subtract(t3, t7, fk_tcp_0)
+    multiply(t8, t0, t0)
+    multiply(t1, t4, t4)
+    add(t0, t4, fk_tcp_4)
+    add(t4, t0, t4)
+    negative(t4, fk_tcp_1)
+    multiply(t1, p_0, t1)
+    multiply(fk_tcp_0, p_1, jacobian_tcp_3)
+    add(t1, jacobian_tcp_3, fk_tcp_3)
+    multiply(t8, p_0, t8)
+    multiply(fk_tcp_4, p_1, t0)
+    add(t8, t0, fk_tcp_7)
+    negative(fk_tcp_7, jacobian_tcp_0)
+    negative(t0, jacobian_tcp_1)
+    multiply(t2, p_1, t0)
+    multiply(t2, t0, t2)
+    add(t5, t2, t5)
+    multiply(fk_tcp_0, t5, t0)
+    multiply(t4, t6, t4)
+    add(t0, t4, t0)
+    negative(t0, jdot_qd_tcp_0)
+    multiply(fk_tcp_0, t6, t6)
+    multiply(fk_tcp_4, t5, t5)
+    subtract(t6, t5, jdot_qd_tcp_1)
+    copyto(mass_matrix_2, mass_matrix_1)
+    copyto(mass_matrix_3, s3)
+    copyto(fk_tcp_5, fk_tcp_0)
+    copyto(jacobian_tcp_2, fk_tcp_3)
+
+
+def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
+    """Control tick 'computed_torque': inverse_dynamics (2), fk_tcp (4x4), jacobian_tcp (6x2), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out inverse_dynamics [2]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x2]
+    out frame_acceleration_tcp [6]
+    89 ops: 50 mul, 31 add, 4 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    p = _array(p, 5, "p")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_computed_torque_chunk, (q, qd, qdd, p), 13, ((2,), (4, 4), (6, 2), (6,),), fixed=_bundle_computed_torque_fixed, pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = p[0] * p[0]
+    t0 = p[2] * t0
+    t0 = t0 / 12.0
+    t1 = p[0] / 2.0
+    t1 = p[0] - t1
+    t2 = t1 * t1
+    t2 = p[2] * t2
+    t0 = t0 + t2
+    t0 = t0 * qdd[0]
+    t1 = p[2] * t1
+    t2 = cos(q[0])
+    t3 = t2 * p[4]
+    t1 = t1 * t3
+    t0 = t0 + t1
+    t1 = p[1] * p[1]
+    t1 = p[3] * t1
+    t1 = t1 / 12.0
+    t4 = p[1] / 2.0
+    t4 = p[1] - t4
+    t5 = t4 * t4
+    t5 = p[3] * t5
+    t1 = t1 + t5
+    t5 = qdd[0] + qdd[1]
+    t1 = t1 * t5
+    t4 = p[3] * t4
+    t6 = sin(q[1])
+    t7 = qd[0] * p[0]
+    t7 = qd[0] * t7
+    t8 = t6 * t7
+    t9 = cos(q[1])
+    t10 = qdd[0] * p[0]
+    t11 = t9 * t10
+    t8 = t8 + t11
+    t11 = t9 * t3
+    t12 = sin(q[0])
+    t13 = t12 * p[4]
+    t14 = t6 * t13
+    t11 = t11 - t14
+    t11 = t8 + t11
+    t14 = t4 * t11
+    t1 = t1 + t14
+    t0 = t0 + t1
+    t10 = t6 * t10
+    t7 = t9 * t7
+    t7 = t10 - t7
+    t10 = t9 * t13
+    t3 = t6 * t3
+    t3 = t10 + t3
+    t3 = t7 + t3
+    t3 = p[3] * t3
+    t10 = qd[0] + qd[1]
+    t13 = t10 * t4
+    t13 = t10 * t13
+    t3 = t3 - t13
+    t3 = t6 * t3
+    t11 = p[3] * t11
+    t4 = t5 * t4
+    t4 = t11 + t4
+    t4 = t9 * t4
+    t3 = t3 + t4
+    t3 = p[0] * t3
+    t0 = t0 + t3
+    t3 = t2 * t9
+    t4 = t12 * t6
+    t3 = t3 - t4
+    t4 = t12 * t9
+    t6 = t2 * t6
+    t9 = t4 + t6
+    t4 = t6 + t4
+    t6 = -t4
+    t2 = t2 * p[0]
+    t11 = t3 * p[1]
+    t2 = t2 + t11
+    t12 = t12 * p[0]
+    t13 = t9 * p[1]
+    t12 = t12 + t13
+    t14 = -t12
+    t13 = -t13
+    t15 = t10 * p[1]
+    t10 = t10 * t15
+    t7 = t7 - t10
+    t10 = t3 * t7
+    t15 = t5 * p[1]
+    t8 = t8 + t15
+    t4 = t4 * t8
+    t4 = t10 - t4
+    t7 = t9 * t7
+    t8 = t3 * t8
+    t7 = t7 + t8
+    _inverse_dynamics = (t0, t1)
+    _fk_tcp = (t3, t6, 0.0, t2,
+               t9, t3, 0.0, t12,
+               0.0, 0.0, 1.0, 0.0,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t14, t13,
+                     t2, t11,
+                     0.0, 0.0,
+                     0.0, 0.0,
+                     0.0, 0.0,
+                     1.0, 1.0)
+    _frame_acceleration_tcp = (t4, t7, 0.0, 0.0, 0.0, t5)
+    return np.array(_inverse_dynamics), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 2), np.array(_frame_acceleration_tcp)
+
+
+_bundle_computed_torque_constants = _constants(
+    12.0, 2.0)
+
+
+_bundle_computed_torque_fixed = (
+    {},
+    {2: 0.0, 6: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0, 12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 1.0},
+    {2: 0.0, 3: 0.0, 4: 0.0},
+)
+"""bundle_computed_torque's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_computed_torque_chunk(x, t, s, y):
+    """bundle_computed_torque on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12 = t
+    s0, s1, s2 = s
+    (inverse_dynamics_0, inverse_dynamics_1, fk_tcp_0, fk_tcp_1, fk_tcp_3, fk_tcp_4, fk_tcp_5, fk_tcp_7,
+     jacobian_tcp_0, jacobian_tcp_1, jacobian_tcp_2, jacobian_tcp_3, frame_acceleration_tcp_0,
+     frame_acceleration_tcp_1, frame_acceleration_tcp_5) = y
+    k0, k1 = _bundle_computed_torque_constants
+    multiply(p_0, p_0, s0)
+    multiply(p_2, s0, s0)
+    divide(s0, k0, s0)
+    divide(p_0, k1, s1)
+    subtract(p_0, s1, s1)
+    multiply(s1, s1, s2)
+    multiply(p_2, s2, s2)
+    add(s0, s2, s0)
+    multiply(s0, qdd_0, t0)
+    multiply(p_2, s1, s1)
+    cos(q_0, t1)
+    multiply(t1, p_4, t2)
+    multiply(s1, t2, t3)
+    add(t0, t3, t0)
+    multiply(p_1, p_1, s0)
+    multiply(p_3, s0, s0)
+    divide(s0, k0, s0)
+    divide(p_1, k1, s1)
+    subtract(p_1, s1, s1)
+    multiply(s1, s1, s2)
+    multiply(p_3, s2, s2)
+    add(s0, s2, s0)
+    add(qdd_0, qdd_1, frame_acceleration_tcp_5)
+    multiply(s0, frame_acceleration_tcp_5, t3)
+    multiply(p_3, s1, s1)
+    sin(q_1, t4)
+    multiply(qd_0, p_0, t5)
+    multiply(qd_0, t5, t5)
+    multiply(t4, t5, t6)
+    cos(q_1, t7)
+    multiply(qdd_0, p_0, t8)
+    multiply(t7, t8, t9)
+    add(t6, t9, t6)
+    multiply(t7, t2, t9)
+    sin(q_0, t10)
+    multiply(t10, p_4, t11)
+    multiply(t4, t11, t12)
+    subtract(t9, t12, t9)
+    add(t6, t9, t9)
+    multiply(s1, t9, t12)
+    add(t3, t12, inverse_dynamics_1)
+    add(t0, inverse_dynamics_1, t0)
+    multiply(t4, t8, t8)
+    multiply(t7, t5, t5)
+    subtract(t8, t5, t8)
+    multiply(t7, t11, t11)
+    multiply(t4, t2, t2)
+    add(t11, t2, t11)
+    add(t8, t11, t11)
+    multiply(p_3, t11, t11)
+    add(qd_0, qd_1, t2)
+    multiply(t2, s1, t3)
+    multiply(t2, t3, t3)
+    subtract(t11, t3, t11)
+    multiply(t4, t11, t11)
+    multiply(p_3, t9, t9)
+    multiply(frame_acceleration_tcp_5, s1, t3)
+    add(t9, t3, t9)
+    multiply(t7, t9, t9)
+    add(t11, t9, t11)
+    multiply(p_0, t11, t11)
+    add(t0, t11, inverse_dynamics_0)
+    multiply(t1, t7, t0)
+    multiply(t10, t4, t3)
+    subtract(t0, t3, fk_tcp_0)
+    multiply(t10, t7, t7)
+    multiply(t1, t4, t4)
+    add(t7, t4, fk_tcp_4)
+    add(t4, t7, t4)
+    negative(t4, fk_tcp_1)
+    multiply(t1, p_0, t1)
+    multiply(fk_tcp_0, p_1, jacobian_tcp_3)
+    add(t1, jacobian_tcp_3, fk_tcp_3)
+    multiply(t10, p_0, t10)
+    multiply(fk_tcp_4, p_1, t0)
+    add(t10, t0, fk_tcp_7)
+    negative(fk_tcp_7, jacobian_tcp_0)
+    negative(t0, jacobian_tcp_1)
+    multiply(t2, p_1, t0)
+    multiply(t2, t0, t2)
+    subtract(t8, t2, t8)
+    multiply(fk_tcp_0, t8, t0)
+    multiply(frame_acceleration_tcp_5, p_1, t1)
+    add(t6, t1, t6)
+    multiply(t4, t6, t4)
+    subtract(t0, t4, frame_acceleration_tcp_0)
+    multiply(fk_tcp_4, t8, t8)
+    multiply(fk_tcp_0, t6, t6)
+    add(t8, t6, frame_acceleration_tcp_1)
+    copyto(fk_tcp_5, fk_tcp_0)
+    copyto(jacobian_tcp_2, fk_tcp_3)
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

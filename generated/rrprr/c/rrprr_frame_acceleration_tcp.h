@@ -19,7 +19,7 @@ extern "C" {
  * in  qdd [5]
  * in  p [3]
  * out a [6]
- * Arrays are row-major. 251 ops: 145 mul, 100 add, 0 div, 6 trig
+ * Arrays are row-major. 168 ops: 100 mul, 60 add, 0 div, 8 trig
  */
 DERIVE_FN void rrprr_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *a);
 

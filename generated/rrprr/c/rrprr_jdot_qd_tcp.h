@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [5]
  * in  p [3]
  * out a [6]
- * Arrays are row-major. 185 ops: 108 mul, 71 add, 0 div, 6 trig
+ * Arrays are row-major. 155 ops: 95 mul, 52 add, 0 div, 8 trig
  */
 DERIVE_FN void rrprr_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *a);
 

@@ -616,204 +616,174 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     in  qd [5]
     in  p [3]
     out a [6]
-    185 ops: 108 mul, 71 add, 0 div, 6 trig
+    155 ops: 95 mul, 52 add, 0 div, 8 trig
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
     p = _array(p, 3, "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 32, ((6,),))
+        return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 26, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     p = p.tolist()
     cos, sin = math.cos, math.sin
-    t0 = cos(q[0])
-    t1 = t0 * qd[0]
-    t2 = p[0] * t1
-    t3 = q[1] * t1
-    t4 = sin(q[0])
-    t5 = t4 * qd[1]
-    t3 = t3 + t5
-    t2 = t2 + t3
-    t3 = cos(q[3])
-    t5 = t3 * t1
-    t6 = sin(q[3])
-    t7 = t6 * qd[3]
-    t8 = t4 * t7
-    t5 = t5 - t8
-    t8 = cos(q[2])
-    t9 = t0 * t8
-    t10 = t3 * qd[3]
-    t11 = t9 * t10
-    t12 = t4 * qd[0]
-    t13 = t8 * t12
-    t14 = sin(q[2])
-    t15 = t14 * qd[2]
-    t16 = t0 * t15
-    t13 = t13 + t16
-    t13 = t6 * t13
-    t11 = t11 - t13
-    t5 = t5 + t11
-    t11 = p[1] * t5
-    t11 = t2 + t11
-    t13 = p[2] * t5
-    t11 = t11 + t13
-    t2 = t11 - t2
-    t16 = t0 * t2
-    t17 = t4 * p[0]
-    t18 = t4 * q[1]
-    t17 = t17 + t18
-    t18 = t4 * t3
-    t9 = t9 * t6
-    t9 = t18 + t9
-    t18 = t9 * p[1]
-    t18 = t17 + t18
-    t19 = t9 * p[2]
+    t0 = cos(q[2])
+    t1 = cos(q[4])
+    t2 = t0 * t1
+    t3 = sin(q[2])
+    t4 = cos(q[3])
+    t5 = t3 * t4
+    t6 = sin(q[4])
+    t7 = t5 * t6
+    t2 = t2 - t7
+    t7 = t4 * qd[2]
+    t8 = sin(q[3])
+    t9 = t3 * qd[0]
+    t10 = t8 * t9
+    t7 = t7 + t10
+    t10 = t0 * qd[0]
+    t11 = t10 + qd[3]
+    t12 = t11 * p[1]
+    t13 = t7 * t12
+    t14 = qd[0] * qd[1]
+    t14 = t14 + t14
+    t15 = t3 * t14
+    t10 = t10 * qd[2]
+    t16 = t4 * t10
+    t17 = t7 * qd[3]
+    t16 = t16 - t17
+    t17 = t16 * p[1]
+    t15 = t15 + t17
+    t13 = t13 - t15
+    t15 = t1 * t13
+    t17 = p[0] + q[1]
+    t17 = qd[0] * t17
+    t17 = qd[0] * t17
+    t18 = t8 * t17
+    t14 = t0 * t14
+    t19 = t4 * t14
     t18 = t18 + t19
-    t17 = t18 - t17
-    t18 = t17 * t12
-    t16 = t16 - t18
-    t18 = t0 * p[0]
-    t20 = t0 * q[1]
-    t18 = t18 + t20
-    t20 = t0 * t3
-    t21 = t4 * t8
-    t22 = t21 * t6
-    t20 = t20 - t22
-    t22 = t20 * p[1]
-    t22 = t18 + t22
-    t23 = t20 * p[2]
+    t19 = t9 * qd[2]
+    t20 = t19 * p[1]
+    t18 = t18 - t20
+    t9 = t4 * t9
+    t20 = t8 * qd[2]
+    t9 = t9 - t20
+    t20 = t9 * p[1]
+    t21 = t7 * t20
+    t18 = t18 + t21
+    t21 = t6 * t18
+    t15 = t15 - t21
+    t21 = t1 * t16
+    t22 = t6 * t19
+    t21 = t21 - t22
+    t22 = t1 * t11
+    t23 = t6 * t9
+    t22 = t22 - t23
+    t23 = t22 * qd[4]
+    t21 = t21 + t23
+    t23 = t21 * p[2]
+    t15 = t15 - t23
+    t7 = t7 + qd[4]
+    t23 = t22 * p[2]
+    t24 = t7 * t23
+    t15 = t15 + t24
+    t24 = t2 * t15
+    t25 = t3 * t8
+    t14 = t8 * t14
+    t17 = t4 * t17
+    t14 = t14 - t17
+    t17 = t9 * t20
+    t12 = t11 * t12
+    t12 = t17 + t12
+    t12 = t14 - t12
+    t11 = t6 * t11
+    t14 = t1 * t9
+    t11 = t11 + t14
+    t14 = t11 * p[2]
+    t17 = t11 * t14
+    t20 = t22 * t23
+    t17 = t17 + t20
+    t12 = t12 - t17
+    t17 = t25 * t12
+    t17 = t24 + t17
+    t20 = t0 * t6
+    t5 = t5 * t1
+    t5 = t20 + t5
+    t13 = t6 * t13
+    t18 = t1 * t18
+    t13 = t13 + t18
+    t18 = t1 * t19
+    t16 = t6 * t16
+    t16 = t18 + t16
+    t11 = t11 * qd[4]
+    t11 = t16 + t11
+    t16 = t11 * p[2]
+    t13 = t13 - t16
+    t7 = t7 * t14
+    t7 = t13 + t7
+    t13 = t5 * t7
+    t13 = t17 + t13
+    t14 = sin(q[0])
+    t16 = t14 * t3
+    t17 = t16 * t1
+    t18 = cos(q[0])
+    t19 = t18 * t8
+    t20 = t14 * t0
+    t22 = t20 * t4
+    t19 = t19 + t22
+    t22 = t19 * t6
+    t17 = t17 + t22
+    t22 = t17 * t15
+    t23 = t18 * t4
+    t20 = t20 * t8
+    t20 = t23 - t20
+    t23 = t20 * t12
     t22 = t22 + t23
-    t18 = t22 - t18
-    t22 = t18 * t1
-    t24 = t0 * qd[1]
-    t25 = q[1] * t12
-    t24 = t24 - t25
-    t25 = p[0] * t12
-    t24 = t24 - t25
-    t3 = t3 * t12
-    t7 = t0 * t7
-    t3 = t3 + t7
-    t7 = t8 * t1
-    t25 = t4 * t15
-    t7 = t7 - t25
-    t7 = t6 * t7
-    t21 = t21 * t10
-    t7 = t7 + t21
-    t3 = t3 + t7
-    t7 = p[1] * t3
-    t7 = t24 - t7
-    t21 = p[2] * t3
-    t7 = t7 - t21
-    t24 = t7 - t24
-    t25 = t4 * t24
-    t22 = t22 + t25
-    t16 = t16 - t22
-    t16 = qd[2] * t16
-    t22 = t14 * t1
-    t25 = t8 * qd[2]
-    t26 = t4 * t25
-    t22 = t22 + t26
-    t26 = t17 * t22
-    t27 = t4 * t14
-    t28 = t27 * t2
-    t26 = t26 + t28
-    t28 = t0 * t25
-    t29 = t14 * t12
-    t28 = t28 - t29
-    t29 = t18 * t28
-    t30 = t0 * t14
-    t31 = t30 * t24
-    t29 = t29 + t31
-    t26 = t26 + t29
-    t26 = qd[3] * t26
-    t16 = t16 + t26
-    t26 = t20 * t13
-    t29 = t19 * t3
-    t26 = t26 - t29
-    t29 = t23 * t5
-    t31 = t9 * t21
-    t29 = t29 - t31
-    t26 = t26 - t29
-    t26 = qd[4] * t26
-    t16 = t16 + t26
-    t26 = t14 * t6
-    t29 = t26 * p[1]
-    t31 = t26 * p[2]
-    t29 = t29 + t31
-    t32 = t29 * t1
-    t6 = t6 * t25
-    t10 = t14 * t10
-    t6 = t6 + t10
-    t10 = p[1] * t6
-    t14 = p[2] * t6
-    t10 = t10 + t14
-    t4 = t4 * t10
-    t4 = t32 + t4
-    t4 = qd[2] * t4
-    t25 = qd[1] * t12
-    t11 = qd[0] * t11
-    t11 = t25 + t11
-    t4 = t4 - t11
-    t11 = t29 * t28
-    t25 = t30 * t10
-    t11 = t11 + t25
-    t2 = t8 * t2
-    t17 = t17 * t15
-    t2 = t2 - t17
-    t2 = t11 + t2
-    t2 = qd[3] * t2
-    t2 = t4 - t2
-    t4 = t31 * t5
-    t9 = t9 * t14
-    t4 = t4 + t9
-    t9 = t19 * t6
-    t11 = t26 * t13
-    t9 = t9 + t11
-    t4 = t4 - t9
-    t4 = qd[4] * t4
-    t2 = t2 + t4
-    t4 = qd[0] * t7
-    t7 = qd[1] * t1
-    t4 = t4 + t7
-    t0 = t0 * t10
-    t7 = t29 * t12
-    t0 = t0 - t7
-    t0 = qd[2] * t0
-    t0 = t4 - t0
-    t4 = t8 * t24
-    t7 = t18 * t15
-    t4 = t4 - t7
-    t7 = t29 * t22
-    t8 = t27 * t10
-    t7 = t7 + t8
-    t4 = t4 - t7
-    t4 = qd[3] * t4
-    t0 = t0 + t4
-    t4 = t23 * t6
-    t7 = t26 * t21
-    t4 = t4 - t7
-    t7 = t20 * t14
-    t8 = t31 * t3
-    t7 = t7 - t8
-    t4 = t4 - t7
-    t4 = qd[4] * t4
-    t0 = t0 + t4
-    t4 = qd[4] * t6
-    t6 = qd[3] * t15
-    t4 = t4 - t6
-    t6 = qd[3] * t22
-    t7 = qd[2] * t12
-    t6 = t6 - t7
-    t3 = qd[4] * t3
-    t3 = t6 - t3
-    t1 = qd[2] * t1
-    t6 = qd[3] * t28
-    t1 = t1 - t6
-    t5 = qd[4] * t5
-    t1 = t1 + t5
-    _a = (t16, t2, t0, t4, t3, t1)
+    t16 = t16 * t6
+    t19 = t19 * t1
+    t16 = t16 - t19
+    t19 = t16 * t7
+    t19 = t22 + t19
+    t22 = t14 * t4
+    t0 = t18 * t0
+    t23 = t0 * t8
+    t22 = t22 + t23
+    t12 = t22 * t12
+    t3 = t18 * t3
+    t18 = t3 * t1
+    t0 = t0 * t4
+    t4 = t14 * t8
+    t0 = t0 - t4
+    t4 = t0 * t6
+    t4 = t18 + t4
+    t14 = t4 * t15
+    t12 = t12 - t14
+    t0 = t0 * t1
+    t1 = t3 * t6
+    t0 = t0 - t1
+    t1 = t0 * t7
+    t1 = t12 + t1
+    t3 = t8 * t10
+    t6 = t9 * qd[3]
+    t3 = t3 + t6
+    t6 = t25 * t3
+    t2 = t2 * t11
+    t2 = t6 - t2
+    t5 = t5 * t21
+    t2 = t2 + t5
+    t5 = t20 * t3
+    t6 = t17 * t11
+    t5 = t5 - t6
+    t6 = t16 * t21
+    t5 = t5 + t6
+    t4 = t4 * t11
+    t3 = t22 * t3
+    t3 = t4 + t3
+    t0 = t0 * t21
+    t0 = t3 + t0
+    _a = (t13, t19, t1, t2, t5, t0)
     return np.array(_a)
 
 
@@ -823,193 +793,163 @@ def _jdot_qd_tcp_chunk(x, t, s, y):
     add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, p_0, p_1, p_2 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31) = t
+     t22, t23, t24, t25) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    cos(q_0, t0)
-    multiply(t0, qd_0, t1)
-    multiply(p_0, t1, t2)
-    multiply(q_1, t1, t3)
-    sin(q_0, t4)
-    multiply(t4, qd_1, t5)
-    add(t3, t5, t3)
-    add(t2, t3, t2)
-    cos(q_3, t3)
-    multiply(t3, t1, t5)
-    sin(q_3, t6)
-    multiply(t6, qd_3, t7)
-    multiply(t4, t7, t8)
-    subtract(t5, t8, t5)
-    cos(q_2, t8)
-    multiply(t0, t8, t9)
-    multiply(t3, qd_3, t10)
-    multiply(t9, t10, t11)
-    multiply(t4, qd_0, t12)
-    multiply(t8, t12, t13)
-    sin(q_2, t14)
-    multiply(t14, qd_2, t15)
-    multiply(t0, t15, t16)
-    add(t13, t16, t13)
+    cos(q_2, t0)
+    cos(q_4, t1)
+    multiply(t0, t1, t2)
+    sin(q_2, t3)
+    cos(q_3, t4)
+    multiply(t3, t4, t5)
+    sin(q_4, t6)
+    multiply(t5, t6, t7)
+    subtract(t2, t7, t2)
+    multiply(t4, qd_2, t7)
+    sin(q_3, t8)
+    multiply(t3, qd_0, t9)
+    multiply(t8, t9, t10)
+    add(t7, t10, t7)
+    multiply(t0, qd_0, t10)
+    add(t10, qd_3, t11)
+    multiply(t11, p_1, t12)
+    multiply(t7, t12, t13)
+    multiply(qd_0, qd_1, t14)
+    add(t14, t14, t14)
+    multiply(t3, t14, t15)
+    multiply(t10, qd_2, t10)
+    multiply(t4, t10, t16)
+    multiply(t7, qd_3, t17)
+    subtract(t16, t17, t16)
+    multiply(t16, p_1, t17)
+    add(t15, t17, t15)
+    subtract(t13, t15, t13)
+    multiply(t1, t13, t15)
+    add(p_0, q_1, t17)
+    multiply(qd_0, t17, t17)
+    multiply(qd_0, t17, t17)
+    multiply(t8, t17, t18)
+    multiply(t0, t14, t14)
+    multiply(t4, t14, t19)
+    add(t18, t19, t18)
+    multiply(t9, qd_2, t19)
+    multiply(t19, p_1, t20)
+    subtract(t18, t20, t18)
+    multiply(t4, t9, t9)
+    multiply(t8, qd_2, t20)
+    subtract(t9, t20, t9)
+    multiply(t9, p_1, t20)
+    multiply(t7, t20, t21)
+    add(t18, t21, t18)
+    multiply(t6, t18, t21)
+    subtract(t15, t21, t15)
+    multiply(t1, t16, t21)
+    multiply(t6, t19, t22)
+    subtract(t21, t22, t21)
+    multiply(t1, t11, t22)
+    multiply(t6, t9, t23)
+    subtract(t22, t23, t22)
+    multiply(t22, qd_4, t23)
+    add(t21, t23, t21)
+    multiply(t21, p_2, t23)
+    subtract(t15, t23, t15)
+    add(t7, qd_4, t7)
+    multiply(t22, p_2, t23)
+    multiply(t7, t23, t24)
+    add(t15, t24, t15)
+    multiply(t2, t15, t24)
+    multiply(t3, t8, t25)
+    multiply(t8, t14, t14)
+    multiply(t4, t17, t17)
+    subtract(t14, t17, t14)
+    multiply(t9, t20, t20)
+    multiply(t11, t12, t12)
+    add(t20, t12, t20)
+    subtract(t14, t20, t14)
+    multiply(t6, t11, t11)
+    multiply(t1, t9, t12)
+    add(t11, t12, t11)
+    multiply(t11, p_2, t12)
+    multiply(t11, t12, t17)
+    multiply(t22, t23, t22)
+    add(t17, t22, t17)
+    subtract(t14, t17, t14)
+    multiply(t25, t14, t17)
+    add(t24, t17, t24)
+    multiply(t0, t6, t17)
+    multiply(t5, t1, t5)
+    add(t17, t5, t17)
     multiply(t6, t13, t13)
-    subtract(t11, t13, t11)
-    add(t5, t11, t5)
-    multiply(p_1, t5, t11)
-    add(t2, t11, t11)
-    multiply(p_2, t5, t13)
-    add(t11, t13, t11)
-    subtract(t11, t2, t2)
-    multiply(t0, t2, t16)
-    multiply(t4, p_0, t17)
-    multiply(t4, q_1, t18)
-    add(t17, t18, t17)
-    multiply(t4, t3, t18)
-    multiply(t9, t6, t9)
-    add(t18, t9, t18)
-    multiply(t18, p_1, t9)
-    add(t17, t9, t9)
-    multiply(t18, p_2, t19)
-    add(t9, t19, t9)
-    subtract(t9, t17, t9)
-    multiply(t9, t12, t17)
-    subtract(t16, t17, t16)
-    multiply(t0, p_0, t17)
-    multiply(t0, q_1, t20)
-    add(t17, t20, t17)
-    multiply(t0, t3, t20)
-    multiply(t4, t8, t21)
-    multiply(t21, t6, t22)
-    subtract(t20, t22, t20)
-    multiply(t20, p_1, t22)
-    add(t17, t22, t22)
-    multiply(t20, p_2, t23)
-    add(t22, t23, t22)
-    subtract(t22, t17, t22)
-    multiply(t22, t1, t17)
-    multiply(t0, qd_1, t24)
-    multiply(q_1, t12, t25)
-    subtract(t24, t25, t24)
-    multiply(p_0, t12, t25)
-    subtract(t24, t25, t24)
-    multiply(t3, t12, t3)
-    multiply(t0, t7, t7)
-    add(t3, t7, t3)
-    multiply(t8, t1, t7)
-    multiply(t4, t15, t25)
-    subtract(t7, t25, t7)
-    multiply(t6, t7, t7)
-    multiply(t21, t10, t21)
-    add(t7, t21, t7)
-    add(t3, t7, t3)
-    multiply(p_1, t3, t7)
-    subtract(t24, t7, t7)
-    multiply(p_2, t3, t21)
-    subtract(t7, t21, t7)
-    subtract(t7, t24, t24)
-    multiply(t4, t24, t25)
-    add(t17, t25, t17)
-    subtract(t16, t17, t16)
-    multiply(qd_2, t16, t16)
-    multiply(t14, t1, t17)
-    multiply(t8, qd_2, t25)
-    multiply(t4, t25, t26)
-    add(t17, t26, t17)
-    multiply(t9, t17, t26)
-    multiply(t4, t14, t27)
-    multiply(t27, t2, t28)
-    add(t26, t28, t26)
-    multiply(t0, t25, t28)
-    multiply(t14, t12, t29)
-    subtract(t28, t29, t28)
-    multiply(t22, t28, t29)
-    multiply(t0, t14, t30)
-    multiply(t30, t24, t31)
-    add(t29, t31, t29)
-    add(t26, t29, t26)
-    multiply(qd_3, t26, t26)
-    add(t16, t26, t16)
-    multiply(t20, t13, t26)
-    multiply(t19, t3, t29)
-    subtract(t26, t29, t26)
-    multiply(t23, t5, t29)
-    multiply(t18, t21, t31)
-    subtract(t29, t31, t29)
-    subtract(t26, t29, t26)
-    multiply(qd_4, t26, t26)
-    add(t16, t26, a_0)
-    multiply(t14, t6, t16)
-    multiply(t16, p_1, t26)
-    multiply(t16, p_2, t29)
-    add(t26, t29, t26)
-    multiply(t26, t1, t31)
-    multiply(t6, t25, t6)
-    multiply(t14, t10, t14)
-    add(t6, t14, t6)
-    multiply(p_1, t6, t10)
-    multiply(p_2, t6, t14)
-    add(t10, t14, t10)
-    multiply(t4, t10, t4)
-    add(t31, t4, t31)
-    multiply(qd_2, t31, t31)
-    multiply(qd_1, t12, t4)
-    multiply(qd_0, t11, t11)
-    add(t4, t11, t4)
-    subtract(t31, t4, t31)
-    multiply(t26, t28, t4)
-    multiply(t30, t10, t30)
-    add(t4, t30, t4)
-    multiply(t8, t2, t2)
-    multiply(t9, t15, t9)
-    subtract(t2, t9, t2)
-    add(t4, t2, t4)
-    multiply(qd_3, t4, t4)
-    subtract(t31, t4, t31)
-    multiply(t29, t5, t2)
-    multiply(t18, t14, t18)
-    add(t2, t18, t2)
-    multiply(t19, t6, t19)
-    multiply(t16, t13, t13)
-    add(t19, t13, t19)
-    subtract(t2, t19, t2)
-    multiply(qd_4, t2, t2)
-    add(t31, t2, a_1)
-    multiply(qd_0, t7, t7)
-    multiply(qd_1, t1, t2)
-    add(t7, t2, t7)
-    multiply(t0, t10, t0)
-    multiply(t26, t12, t2)
-    subtract(t0, t2, t0)
-    multiply(qd_2, t0, t0)
-    subtract(t7, t0, t7)
-    multiply(t8, t24, t8)
-    multiply(t22, t15, t22)
-    subtract(t8, t22, t8)
-    multiply(t26, t17, t26)
-    multiply(t27, t10, t27)
-    add(t26, t27, t26)
-    subtract(t8, t26, t8)
-    multiply(qd_3, t8, t8)
-    add(t7, t8, t7)
-    multiply(t23, t6, t23)
-    multiply(t16, t21, t16)
-    subtract(t23, t16, t23)
-    multiply(t20, t14, t20)
-    multiply(t29, t3, t29)
-    subtract(t20, t29, t20)
-    subtract(t23, t20, t23)
-    multiply(qd_4, t23, t23)
-    add(t7, t23, a_2)
-    multiply(qd_4, t6, t6)
-    multiply(qd_3, t15, t15)
-    subtract(t6, t15, a_3)
-    multiply(qd_3, t17, t17)
-    multiply(qd_2, t12, t12)
-    subtract(t17, t12, t17)
-    multiply(qd_4, t3, t3)
-    subtract(t17, t3, a_4)
-    multiply(qd_2, t1, t1)
-    multiply(qd_3, t28, t28)
-    subtract(t1, t28, t1)
-    multiply(qd_4, t5, t5)
-    add(t1, t5, a_5)
+    multiply(t1, t18, t18)
+    add(t13, t18, t13)
+    multiply(t1, t19, t19)
+    multiply(t6, t16, t16)
+    add(t19, t16, t19)
+    multiply(t11, qd_4, t11)
+    add(t19, t11, t19)
+    multiply(t19, p_2, t5)
+    subtract(t13, t5, t13)
+    multiply(t7, t12, t7)
+    add(t13, t7, t13)
+    multiply(t17, t13, t5)
+    add(t24, t5, a_0)
+    sin(q_0, t5)
+    multiply(t5, t3, t7)
+    multiply(t7, t1, t11)
+    cos(q_0, t12)
+    multiply(t12, t8, t16)
+    multiply(t5, t0, t18)
+    multiply(t18, t4, t20)
+    add(t16, t20, t16)
+    multiply(t16, t6, t20)
+    add(t11, t20, t11)
+    multiply(t11, t15, t20)
+    multiply(t12, t4, t22)
+    multiply(t18, t8, t18)
+    subtract(t22, t18, t22)
+    multiply(t22, t14, t18)
+    add(t20, t18, t20)
+    multiply(t7, t6, t7)
+    multiply(t16, t1, t16)
+    subtract(t7, t16, t7)
+    multiply(t7, t13, t16)
+    add(t20, t16, a_1)
+    multiply(t5, t4, t16)
+    multiply(t12, t0, t0)
+    multiply(t0, t8, t18)
+    add(t16, t18, t16)
+    multiply(t16, t14, t14)
+    multiply(t12, t3, t12)
+    multiply(t12, t1, t3)
+    multiply(t0, t4, t0)
+    multiply(t5, t8, t5)
+    subtract(t0, t5, t0)
+    multiply(t0, t6, t4)
+    add(t3, t4, t3)
+    multiply(t3, t15, t15)
+    subtract(t14, t15, t14)
+    multiply(t0, t1, t0)
+    multiply(t12, t6, t12)
+    subtract(t0, t12, t0)
+    multiply(t0, t13, t13)
+    add(t14, t13, a_2)
+    multiply(t8, t10, t8)
+    multiply(t9, qd_3, t9)
+    add(t8, t9, t8)
+    multiply(t25, t8, t25)
+    multiply(t2, t19, t2)
+    subtract(t25, t2, t25)
+    multiply(t17, t21, t17)
+    add(t25, t17, a_3)
+    multiply(t22, t8, t22)
+    multiply(t11, t19, t11)
+    subtract(t22, t11, t22)
+    multiply(t7, t21, t7)
+    add(t22, t7, a_4)
+    multiply(t3, t19, t3)
+    multiply(t16, t8, t16)
+    add(t3, t16, t3)
+    multiply(t0, t21, t0)
+    add(t3, t0, a_5)
 
 
 def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
@@ -1020,272 +960,189 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     in  qdd [5]
     in  p [3]
     out a [6]
-    251 ops: 145 mul, 100 add, 0 div, 6 trig
+    168 ops: 100 mul, 60 add, 0 div, 8 trig
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
     qdd = _array(qdd, 5, "qdd")
     p = _array(p, 3, "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 35, ((6,),))
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 26, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     qdd = qdd.tolist()
     p = p.tolist()
     cos, sin = math.cos, math.sin
-    t0 = cos(q[0])
-    t1 = sin(q[0])
-    t2 = t1 * p[0]
-    t3 = t1 * q[1]
-    t2 = t2 + t3
-    t3 = cos(q[3])
-    t4 = t1 * t3
-    t5 = cos(q[2])
-    t6 = t0 * t5
-    t7 = sin(q[3])
-    t8 = t6 * t7
-    t4 = t4 + t8
-    t8 = t4 * p[1]
-    t8 = t2 + t8
-    t9 = t4 * p[2]
-    t8 = t8 + t9
-    t2 = t8 - t2
-    t10 = t0 * t2
-    t11 = t0 * p[0]
-    t12 = t0 * q[1]
-    t11 = t11 + t12
-    t12 = t0 * t3
-    t13 = t1 * t5
-    t14 = t13 * t7
-    t12 = t12 - t14
-    t14 = t12 * p[1]
-    t14 = t11 + t14
-    t15 = t12 * p[2]
-    t14 = t14 + t15
-    t11 = t14 - t11
-    t16 = t1 * t11
-    t10 = t10 - t16
-    t10 = t10 * qdd[2]
-    t16 = sin(q[2])
-    t17 = t1 * t16
-    t18 = t17 * t2
-    t19 = t0 * t16
-    t20 = t19 * t11
+    t0 = cos(q[2])
+    t1 = cos(q[4])
+    t2 = t0 * t1
+    t3 = sin(q[2])
+    t4 = cos(q[3])
+    t5 = t3 * t4
+    t6 = sin(q[4])
+    t7 = t5 * t6
+    t2 = t2 - t7
+    t7 = t4 * qd[2]
+    t8 = sin(q[3])
+    t9 = t3 * qd[0]
+    t10 = t8 * t9
+    t7 = t7 + t10
+    t10 = t0 * qd[0]
+    t11 = t10 + qd[3]
+    t12 = t11 * p[1]
+    t13 = t7 * t12
+    t14 = p[0] + q[1]
+    t15 = qdd[0] * t14
+    t16 = qd[0] * qd[1]
+    t16 = t16 + t16
+    t15 = t15 + t16
+    t16 = t3 * t15
+    t17 = t3 * qdd[0]
+    t10 = t10 * qd[2]
+    t10 = t17 + t10
+    t17 = t4 * t10
+    t18 = t8 * qdd[2]
+    t17 = t17 - t18
+    t18 = t7 * qd[3]
+    t17 = t17 - t18
+    t18 = t17 * p[1]
+    t16 = t16 + t18
+    t13 = t13 - t16
+    t16 = t1 * t13
+    t15 = t0 * t15
+    t18 = t4 * t15
+    t14 = qd[0] * t14
+    t14 = qd[0] * t14
+    t14 = qdd[1] - t14
+    t19 = t8 * t14
+    t18 = t18 - t19
+    t19 = t0 * qdd[0]
+    t20 = t9 * qd[2]
+    t19 = t19 - t20
+    t19 = t19 + qdd[3]
+    t20 = t19 * p[1]
     t18 = t18 + t20
-    t18 = t18 * qdd[3]
-    t10 = t10 + t18
-    t18 = t12 * t9
-    t20 = t4 * t15
-    t18 = t18 - t20
-    t18 = t18 * qdd[4]
-    t10 = t10 + t18
-    t18 = t0 * qd[0]
-    t20 = p[0] * t18
-    t21 = q[1] * t18
-    t22 = t1 * qd[1]
+    t9 = t4 * t9
+    t20 = t8 * qd[2]
+    t9 = t9 - t20
+    t20 = t9 * p[1]
+    t21 = t7 * t20
+    t18 = t18 + t21
+    t21 = t6 * t18
+    t16 = t16 - t21
+    t21 = t6 * t19
+    t22 = t1 * t17
     t21 = t21 + t22
-    t20 = t20 + t21
-    t21 = t3 * t18
-    t22 = t7 * qd[3]
-    t23 = t1 * t22
-    t21 = t21 - t23
-    t23 = t3 * qd[3]
-    t6 = t6 * t23
-    t24 = t1 * qd[0]
-    t25 = t5 * t24
-    t26 = t16 * qd[2]
-    t27 = t0 * t26
-    t25 = t25 + t27
-    t25 = t7 * t25
-    t6 = t6 - t25
-    t6 = t21 + t6
-    t21 = p[1] * t6
-    t21 = t20 + t21
-    t25 = p[2] * t6
-    t21 = t21 + t25
-    t20 = t21 - t20
-    t27 = t0 * t20
-    t28 = t2 * t24
-    t27 = t27 - t28
-    t28 = t11 * t18
-    t29 = t0 * qd[1]
-    t30 = q[1] * t24
-    t29 = t29 - t30
-    t30 = p[0] * t24
-    t29 = t29 - t30
-    t3 = t3 * t24
-    t22 = t0 * t22
-    t3 = t3 + t22
-    t22 = t5 * t18
-    t30 = t1 * t26
-    t22 = t22 - t30
-    t22 = t7 * t22
-    t13 = t13 * t23
-    t13 = t22 + t13
-    t3 = t3 + t13
-    t13 = p[1] * t3
-    t13 = t29 - t13
-    t22 = p[2] * t3
-    t13 = t13 - t22
-    t29 = t13 - t29
-    t30 = t1 * t29
-    t28 = t28 + t30
-    t27 = t27 - t28
-    t27 = qd[2] * t27
-    t28 = t16 * t18
-    t30 = t5 * qd[2]
-    t31 = t1 * t30
-    t28 = t28 + t31
-    t31 = t2 * t28
-    t32 = t17 * t20
-    t31 = t31 + t32
-    t32 = t0 * t30
-    t33 = t16 * t24
-    t32 = t32 - t33
-    t33 = t11 * t32
-    t34 = t19 * t29
-    t33 = t33 + t34
-    t31 = t31 + t33
-    t31 = qd[3] * t31
-    t27 = t27 + t31
-    t31 = t12 * t25
-    t33 = t9 * t3
-    t31 = t31 - t33
-    t33 = t15 * t6
-    t34 = t4 * t22
-    t33 = t33 - t34
-    t31 = t31 - t33
-    t31 = qd[4] * t31
-    t27 = t27 + t31
-    t10 = t10 + t27
-    t27 = t0 * qdd[1]
-    t8 = t8 * qdd[0]
-    t8 = t27 - t8
-    t27 = t16 * t7
-    t31 = t27 * p[1]
-    t33 = t27 * p[2]
-    t31 = t31 + t33
-    t34 = t1 * t31
-    t34 = t34 * qdd[2]
-    t8 = t8 + t34
-    t34 = t19 * t31
-    t35 = t5 * t2
-    t34 = t34 + t35
-    t34 = t34 * qdd[3]
-    t8 = t8 - t34
-    t34 = t4 * t33
-    t35 = t27 * t9
-    t34 = t34 - t35
-    t34 = t34 * qdd[4]
-    t8 = t8 + t34
-    t34 = t31 * t18
-    t7 = t7 * t30
-    t16 = t16 * t23
-    t7 = t7 + t16
-    t16 = p[1] * t7
-    t23 = p[2] * t7
-    t16 = t16 + t23
-    t30 = t1 * t16
-    t30 = t34 + t30
-    t30 = qd[2] * t30
-    t34 = qd[1] * t24
-    t21 = qd[0] * t21
-    t21 = t34 + t21
-    t21 = t30 - t21
-    t30 = t31 * t32
-    t34 = t19 * t16
-    t30 = t30 + t34
-    t20 = t5 * t20
-    t2 = t2 * t26
-    t2 = t20 - t2
-    t2 = t30 + t2
-    t2 = qd[3] * t2
-    t2 = t21 - t2
-    t20 = t33 * t6
-    t21 = t4 * t23
-    t20 = t20 + t21
-    t9 = t9 * t7
-    t21 = t27 * t25
-    t9 = t9 + t21
-    t9 = t20 - t9
-    t9 = qd[4] * t9
-    t2 = t2 + t9
-    t2 = t8 + t2
-    t8 = t14 * qdd[0]
-    t9 = t1 * qdd[1]
-    t8 = t8 + t9
-    t9 = t0 * t31
-    t9 = t9 * qdd[2]
-    t8 = t8 - t9
-    t9 = t5 * t11
-    t14 = t17 * t31
-    t9 = t9 - t14
-    t9 = t9 * qdd[3]
-    t8 = t8 + t9
-    t9 = t27 * t15
-    t14 = t12 * t33
-    t9 = t9 - t14
-    t9 = t9 * qdd[4]
-    t8 = t8 + t9
-    t9 = qd[0] * t13
-    t13 = qd[1] * t18
-    t9 = t9 + t13
-    t13 = t0 * t16
-    t14 = t31 * t24
-    t13 = t13 - t14
-    t13 = qd[2] * t13
-    t9 = t9 - t13
-    t13 = t5 * t29
-    t11 = t11 * t26
-    t11 = t13 - t11
-    t13 = t31 * t28
-    t14 = t17 * t16
-    t13 = t13 + t14
-    t11 = t11 - t13
-    t11 = qd[3] * t11
-    t9 = t9 + t11
-    t11 = t15 * t7
-    t13 = t27 * t22
-    t11 = t11 - t13
-    t13 = t12 * t23
-    t14 = t33 * t3
-    t13 = t13 - t14
-    t11 = t11 - t13
-    t11 = qd[4] * t11
-    t9 = t9 + t11
-    t8 = t8 + t9
-    t5 = t5 * qdd[3]
-    t5 = qdd[0] + t5
-    t9 = t27 * qdd[4]
-    t5 = t5 + t9
-    t7 = qd[4] * t7
-    t9 = qd[3] * t26
-    t7 = t7 - t9
-    t5 = t5 + t7
-    t0 = t0 * qdd[2]
-    t7 = t17 * qdd[3]
-    t0 = t0 + t7
-    t7 = t12 * qdd[4]
-    t0 = t0 + t7
-    t7 = qd[3] * t28
-    t9 = qd[2] * t24
-    t7 = t7 - t9
-    t3 = qd[4] * t3
-    t3 = t7 - t3
-    t0 = t0 + t3
-    t1 = t1 * qdd[2]
-    t3 = t19 * qdd[3]
-    t1 = t1 - t3
-    t3 = t4 * qdd[4]
-    t1 = t1 + t3
-    t3 = qd[2] * t18
-    t4 = qd[3] * t32
-    t3 = t3 - t4
-    t4 = qd[4] * t6
+    t22 = t1 * t11
+    t23 = t6 * t9
+    t22 = t22 - t23
+    t23 = t22 * qd[4]
+    t21 = t21 + t23
+    t23 = t21 * p[2]
+    t16 = t16 - t23
+    t7 = t7 + qd[4]
+    t23 = t22 * p[2]
+    t24 = t7 * t23
+    t16 = t16 + t24
+    t24 = t2 * t16
+    t25 = t3 * t8
+    t14 = t4 * t14
+    t15 = t8 * t15
+    t14 = t14 + t15
+    t15 = t9 * t20
+    t12 = t11 * t12
+    t12 = t15 + t12
+    t12 = t14 - t12
+    t11 = t6 * t11
+    t14 = t1 * t9
+    t11 = t11 + t14
+    t14 = t11 * p[2]
+    t15 = t11 * t14
+    t20 = t22 * t23
+    t15 = t15 + t20
+    t12 = t12 - t15
+    t15 = t25 * t12
+    t15 = t24 + t15
+    t20 = t0 * t6
+    t5 = t5 * t1
+    t5 = t20 + t5
+    t13 = t6 * t13
+    t18 = t1 * t18
+    t13 = t13 + t18
+    t18 = t1 * t19
+    t17 = t6 * t17
+    t17 = t18 - t17
+    t11 = t11 * qd[4]
+    t11 = t17 - t11
+    t17 = t11 * p[2]
+    t13 = t13 + t17
+    t7 = t7 * t14
+    t7 = t13 + t7
+    t13 = t5 * t7
+    t13 = t15 + t13
+    t14 = sin(q[0])
+    t15 = t14 * t3
+    t17 = t15 * t1
+    t18 = cos(q[0])
+    t19 = t18 * t8
+    t20 = t14 * t0
+    t22 = t20 * t4
+    t19 = t19 + t22
+    t22 = t19 * t6
+    t17 = t17 + t22
+    t22 = t17 * t16
+    t23 = t18 * t4
+    t20 = t20 * t8
+    t20 = t23 - t20
+    t23 = t20 * t12
+    t22 = t22 + t23
+    t15 = t15 * t6
+    t19 = t19 * t1
+    t15 = t15 - t19
+    t19 = t15 * t7
+    t19 = t22 + t19
+    t22 = t14 * t4
+    t0 = t18 * t0
+    t23 = t0 * t8
+    t22 = t22 + t23
+    t12 = t22 * t12
+    t3 = t18 * t3
+    t18 = t3 * t1
+    t0 = t0 * t4
+    t14 = t14 * t8
+    t0 = t0 - t14
+    t14 = t0 * t6
+    t14 = t18 + t14
+    t16 = t14 * t16
+    t12 = t12 - t16
+    t0 = t0 * t1
+    t1 = t3 * t6
+    t0 = t0 - t1
+    t1 = t0 * t7
+    t1 = t12 + t1
+    t2 = t2 * t11
+    t3 = t4 * qdd[2]
+    t4 = t8 * t10
     t3 = t3 + t4
-    t1 = t1 + t3
-    _a = (t10, t2, t8, t5, t0, t1)
+    t4 = t9 * qd[3]
+    t3 = t3 + t4
+    t3 = t3 + qdd[4]
+    t4 = t25 * t3
+    t2 = t2 + t4
+    t4 = t5 * t21
+    t2 = t2 + t4
+    t4 = t17 * t11
+    t5 = t20 * t3
+    t4 = t4 + t5
+    t5 = t15 * t21
+    t4 = t4 + t5
+    t3 = t22 * t3
+    t5 = t14 * t11
+    t3 = t3 - t5
+    t0 = t0 * t21
+    t0 = t3 + t0
+    _a = (t13, t19, t1, t2, t4, t0)
     return np.array(_a)
 
 
@@ -1296,259 +1153,176 @@ def _frame_acceleration_tcp_chunk(x, t, s, y):
     (q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, qdd_0, qdd_1, qdd_2, qdd_3, qdd_4, p_0, p_1,
      p_2) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34) = t
+     t22, t23, t24, t25) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    cos(q_0, t0)
-    sin(q_0, t1)
-    multiply(t1, p_0, t2)
-    multiply(t1, q_1, t3)
-    add(t2, t3, t2)
-    cos(q_3, t3)
-    multiply(t1, t3, t4)
-    cos(q_2, t5)
-    multiply(t0, t5, t6)
-    sin(q_3, t7)
-    multiply(t6, t7, t8)
-    add(t4, t8, t4)
-    multiply(t4, p_1, t8)
-    add(t2, t8, t8)
-    multiply(t4, p_2, t9)
-    add(t8, t9, t8)
-    subtract(t8, t2, t2)
-    multiply(t0, t2, t10)
-    multiply(t0, p_0, t11)
-    multiply(t0, q_1, t12)
-    add(t11, t12, t11)
-    multiply(t0, t3, t12)
-    multiply(t1, t5, t13)
-    multiply(t13, t7, t14)
-    subtract(t12, t14, t12)
-    multiply(t12, p_1, t14)
-    add(t11, t14, t14)
-    multiply(t12, p_2, t15)
-    add(t14, t15, t14)
-    subtract(t14, t11, t11)
-    multiply(t1, t11, t16)
-    subtract(t10, t16, t10)
-    multiply(t10, qdd_2, t10)
-    sin(q_2, t16)
-    multiply(t1, t16, t17)
-    multiply(t17, t2, t18)
-    multiply(t0, t16, t19)
-    multiply(t19, t11, t20)
+    cos(q_2, t0)
+    cos(q_4, t1)
+    multiply(t0, t1, t2)
+    sin(q_2, t3)
+    cos(q_3, t4)
+    multiply(t3, t4, t5)
+    sin(q_4, t6)
+    multiply(t5, t6, t7)
+    subtract(t2, t7, t2)
+    multiply(t4, qd_2, t7)
+    sin(q_3, t8)
+    multiply(t3, qd_0, t9)
+    multiply(t8, t9, t10)
+    add(t7, t10, t7)
+    multiply(t0, qd_0, t10)
+    add(t10, qd_3, t11)
+    multiply(t11, p_1, t12)
+    multiply(t7, t12, t13)
+    add(p_0, q_1, t14)
+    multiply(qdd_0, t14, t15)
+    multiply(qd_0, qd_1, t16)
+    add(t16, t16, t16)
+    add(t15, t16, t15)
+    multiply(t3, t15, t16)
+    multiply(t3, qdd_0, t17)
+    multiply(t10, qd_2, t10)
+    add(t17, t10, t17)
+    multiply(t4, t17, t10)
+    multiply(t8, qdd_2, t18)
+    subtract(t10, t18, t10)
+    multiply(t7, qd_3, t18)
+    subtract(t10, t18, t10)
+    multiply(t10, p_1, t18)
+    add(t16, t18, t16)
+    subtract(t13, t16, t13)
+    multiply(t1, t13, t16)
+    multiply(t0, t15, t15)
+    multiply(t4, t15, t18)
+    multiply(qd_0, t14, t14)
+    multiply(qd_0, t14, t14)
+    subtract(qdd_1, t14, t14)
+    multiply(t8, t14, t19)
+    subtract(t18, t19, t18)
+    multiply(t0, qdd_0, t19)
+    multiply(t9, qd_2, t20)
+    subtract(t19, t20, t19)
+    add(t19, qdd_3, t19)
+    multiply(t19, p_1, t20)
     add(t18, t20, t18)
-    multiply(t18, qdd_3, t18)
-    add(t10, t18, t10)
-    multiply(t12, t9, t18)
-    multiply(t4, t15, t20)
-    subtract(t18, t20, t18)
-    multiply(t18, qdd_4, t18)
-    add(t10, t18, t10)
-    multiply(t0, qd_0, t18)
-    multiply(p_0, t18, t20)
-    multiply(q_1, t18, t21)
-    multiply(t1, qd_1, t22)
-    add(t21, t22, t21)
-    add(t20, t21, t20)
-    multiply(t3, t18, t21)
-    multiply(t7, qd_3, t22)
-    multiply(t1, t22, t23)
-    subtract(t21, t23, t21)
-    multiply(t3, qd_3, t23)
-    multiply(t6, t23, t6)
-    multiply(t1, qd_0, t24)
-    multiply(t5, t24, t25)
-    multiply(t16, qd_2, t26)
-    multiply(t0, t26, t27)
-    add(t25, t27, t25)
-    multiply(t7, t25, t25)
-    subtract(t6, t25, t6)
-    add(t21, t6, t21)
-    multiply(p_1, t21, t6)
-    add(t20, t6, t6)
-    multiply(p_2, t21, t25)
-    add(t6, t25, t6)
-    subtract(t6, t20, t20)
-    multiply(t0, t20, t27)
-    multiply(t2, t24, t28)
-    subtract(t27, t28, t27)
-    multiply(t11, t18, t28)
-    multiply(t0, qd_1, t29)
-    multiply(q_1, t24, t30)
-    subtract(t29, t30, t29)
-    multiply(p_0, t24, t30)
-    subtract(t29, t30, t29)
-    multiply(t3, t24, t3)
-    multiply(t0, t22, t22)
-    add(t3, t22, t3)
-    multiply(t5, t18, t22)
-    multiply(t1, t26, t30)
-    subtract(t22, t30, t22)
-    multiply(t7, t22, t22)
-    multiply(t13, t23, t13)
-    add(t22, t13, t22)
-    add(t3, t22, t3)
-    multiply(p_1, t3, t13)
-    subtract(t29, t13, t13)
-    multiply(p_2, t3, t22)
-    subtract(t13, t22, t13)
-    subtract(t13, t29, t29)
-    multiply(t1, t29, t30)
-    add(t28, t30, t28)
-    subtract(t27, t28, t27)
-    multiply(qd_2, t27, t27)
-    multiply(t16, t18, t28)
-    multiply(t5, qd_2, t30)
-    multiply(t1, t30, t31)
-    add(t28, t31, t28)
-    multiply(t2, t28, t31)
-    multiply(t17, t20, t32)
-    add(t31, t32, t31)
-    multiply(t0, t30, t32)
-    multiply(t16, t24, t33)
-    subtract(t32, t33, t32)
-    multiply(t11, t32, t33)
-    multiply(t19, t29, t34)
-    add(t33, t34, t33)
-    add(t31, t33, t31)
-    multiply(qd_3, t31, t31)
-    add(t27, t31, t27)
-    multiply(t12, t25, t31)
-    multiply(t9, t3, t33)
-    subtract(t31, t33, t31)
-    multiply(t15, t21, t33)
-    multiply(t4, t22, t34)
-    subtract(t33, t34, t33)
-    subtract(t31, t33, t31)
-    multiply(qd_4, t31, t31)
-    add(t27, t31, t27)
-    add(t10, t27, a_0)
-    multiply(t0, qdd_1, t10)
-    multiply(t8, qdd_0, t8)
-    subtract(t10, t8, t10)
-    multiply(t16, t7, t8)
-    multiply(t8, p_1, t27)
-    multiply(t8, p_2, t31)
-    add(t27, t31, t27)
-    multiply(t1, t27, t33)
-    multiply(t33, qdd_2, t33)
-    add(t10, t33, t10)
-    multiply(t19, t27, t33)
-    multiply(t5, t2, t34)
-    add(t33, t34, t33)
-    multiply(t33, qdd_3, t33)
-    subtract(t10, t33, t10)
-    multiply(t4, t31, t33)
-    multiply(t8, t9, t34)
-    subtract(t33, t34, t33)
-    multiply(t33, qdd_4, t33)
-    add(t10, t33, t10)
-    multiply(t27, t18, t33)
-    multiply(t7, t30, t7)
-    multiply(t16, t23, t16)
-    add(t7, t16, t7)
-    multiply(p_1, t7, t16)
-    multiply(p_2, t7, t23)
-    add(t16, t23, t16)
-    multiply(t1, t16, t30)
-    add(t33, t30, t33)
-    multiply(qd_2, t33, t33)
-    multiply(qd_1, t24, t30)
-    multiply(qd_0, t6, t6)
-    add(t30, t6, t30)
-    subtract(t33, t30, t33)
-    multiply(t27, t32, t6)
-    multiply(t19, t16, t30)
-    add(t6, t30, t6)
-    multiply(t5, t20, t20)
-    multiply(t2, t26, t2)
-    subtract(t20, t2, t20)
-    add(t6, t20, t6)
-    multiply(qd_3, t6, t6)
-    subtract(t33, t6, t33)
-    multiply(t31, t21, t2)
-    multiply(t4, t23, t6)
-    add(t2, t6, t2)
-    multiply(t9, t7, t9)
-    multiply(t8, t25, t25)
-    add(t9, t25, t9)
-    subtract(t2, t9, t2)
-    multiply(qd_4, t2, t2)
-    add(t33, t2, t33)
-    add(t10, t33, a_1)
-    multiply(t14, qdd_0, t14)
-    multiply(t1, qdd_1, t2)
-    add(t14, t2, t14)
-    multiply(t0, t27, t2)
-    multiply(t2, qdd_2, t2)
-    subtract(t14, t2, t14)
-    multiply(t5, t11, t2)
-    multiply(t17, t27, t6)
-    subtract(t2, t6, t2)
-    multiply(t2, qdd_3, t2)
-    add(t14, t2, t14)
-    multiply(t8, t15, t2)
-    multiply(t12, t31, t6)
-    subtract(t2, t6, t2)
-    multiply(t2, qdd_4, t2)
-    add(t14, t2, t14)
-    multiply(qd_0, t13, t13)
-    multiply(qd_1, t18, t2)
-    add(t13, t2, t13)
-    multiply(t0, t16, t2)
-    multiply(t27, t24, t6)
-    subtract(t2, t6, t2)
-    multiply(qd_2, t2, t2)
-    subtract(t13, t2, t13)
-    multiply(t5, t29, t29)
-    multiply(t11, t26, t11)
-    subtract(t29, t11, t29)
-    multiply(t27, t28, t27)
-    multiply(t17, t16, t16)
-    add(t27, t16, t27)
-    subtract(t29, t27, t29)
-    multiply(qd_3, t29, t29)
-    add(t13, t29, t13)
-    multiply(t15, t7, t15)
-    multiply(t8, t22, t22)
-    subtract(t15, t22, t15)
-    multiply(t12, t23, t23)
-    multiply(t31, t3, t31)
-    subtract(t23, t31, t23)
-    subtract(t15, t23, t15)
-    multiply(qd_4, t15, t15)
-    add(t13, t15, t13)
-    add(t14, t13, a_2)
-    multiply(t5, qdd_3, t5)
-    add(qdd_0, t5, t5)
-    multiply(t8, qdd_4, t8)
-    add(t5, t8, t5)
-    multiply(qd_4, t7, t7)
-    multiply(qd_3, t26, t26)
-    subtract(t7, t26, t7)
-    add(t5, t7, a_3)
-    multiply(t0, qdd_2, t0)
-    multiply(t17, qdd_3, t17)
-    add(t0, t17, t0)
-    multiply(t12, qdd_4, t12)
-    add(t0, t12, t0)
-    multiply(qd_3, t28, t28)
-    multiply(qd_2, t24, t24)
-    subtract(t28, t24, t28)
-    multiply(qd_4, t3, t3)
-    subtract(t28, t3, t28)
-    add(t0, t28, a_4)
-    multiply(t1, qdd_2, t1)
-    multiply(t19, qdd_3, t19)
-    subtract(t1, t19, t1)
-    multiply(t4, qdd_4, t4)
-    add(t1, t4, t1)
-    multiply(qd_2, t18, t18)
-    multiply(qd_3, t32, t32)
-    subtract(t18, t32, t18)
-    multiply(qd_4, t21, t21)
+    multiply(t4, t9, t9)
+    multiply(t8, qd_2, t20)
+    subtract(t9, t20, t9)
+    multiply(t9, p_1, t20)
+    multiply(t7, t20, t21)
     add(t18, t21, t18)
-    add(t1, t18, a_5)
+    multiply(t6, t18, t21)
+    subtract(t16, t21, t16)
+    multiply(t6, t19, t21)
+    multiply(t1, t10, t22)
+    add(t21, t22, t21)
+    multiply(t1, t11, t22)
+    multiply(t6, t9, t23)
+    subtract(t22, t23, t22)
+    multiply(t22, qd_4, t23)
+    add(t21, t23, t21)
+    multiply(t21, p_2, t23)
+    subtract(t16, t23, t16)
+    add(t7, qd_4, t7)
+    multiply(t22, p_2, t23)
+    multiply(t7, t23, t24)
+    add(t16, t24, t16)
+    multiply(t2, t16, t24)
+    multiply(t3, t8, t25)
+    multiply(t4, t14, t14)
+    multiply(t8, t15, t15)
+    add(t14, t15, t14)
+    multiply(t9, t20, t20)
+    multiply(t11, t12, t12)
+    add(t20, t12, t20)
+    subtract(t14, t20, t14)
+    multiply(t6, t11, t11)
+    multiply(t1, t9, t12)
+    add(t11, t12, t11)
+    multiply(t11, p_2, t12)
+    multiply(t11, t12, t15)
+    multiply(t22, t23, t22)
+    add(t15, t22, t15)
+    subtract(t14, t15, t14)
+    multiply(t25, t14, t15)
+    add(t24, t15, t24)
+    multiply(t0, t6, t15)
+    multiply(t5, t1, t5)
+    add(t15, t5, t15)
+    multiply(t6, t13, t13)
+    multiply(t1, t18, t18)
+    add(t13, t18, t13)
+    multiply(t1, t19, t19)
+    multiply(t6, t10, t10)
+    subtract(t19, t10, t19)
+    multiply(t11, qd_4, t11)
+    subtract(t19, t11, t19)
+    multiply(t19, p_2, t5)
+    add(t13, t5, t13)
+    multiply(t7, t12, t7)
+    add(t13, t7, t13)
+    multiply(t15, t13, t5)
+    add(t24, t5, a_0)
+    sin(q_0, t5)
+    multiply(t5, t3, t7)
+    multiply(t7, t1, t10)
+    cos(q_0, t11)
+    multiply(t11, t8, t12)
+    multiply(t5, t0, t18)
+    multiply(t18, t4, t20)
+    add(t12, t20, t12)
+    multiply(t12, t6, t20)
+    add(t10, t20, t10)
+    multiply(t10, t16, t20)
+    multiply(t11, t4, t22)
+    multiply(t18, t8, t18)
+    subtract(t22, t18, t22)
+    multiply(t22, t14, t18)
+    add(t20, t18, t20)
+    multiply(t7, t6, t7)
+    multiply(t12, t1, t12)
+    subtract(t7, t12, t7)
+    multiply(t7, t13, t12)
+    add(t20, t12, a_1)
+    multiply(t5, t4, t12)
+    multiply(t11, t0, t0)
+    multiply(t0, t8, t18)
+    add(t12, t18, t12)
+    multiply(t12, t14, t14)
+    multiply(t11, t3, t11)
+    multiply(t11, t1, t3)
+    multiply(t0, t4, t0)
+    multiply(t5, t8, t5)
+    subtract(t0, t5, t0)
+    multiply(t0, t6, t5)
+    add(t3, t5, t3)
+    multiply(t3, t16, t16)
+    subtract(t14, t16, t14)
+    multiply(t0, t1, t0)
+    multiply(t11, t6, t11)
+    subtract(t0, t11, t0)
+    multiply(t0, t13, t13)
+    add(t14, t13, a_2)
+    multiply(t2, t19, t2)
+    multiply(t4, qdd_2, t4)
+    multiply(t8, t17, t8)
+    add(t4, t8, t4)
+    multiply(t9, qd_3, t9)
+    add(t4, t9, t4)
+    add(t4, qdd_4, t4)
+    multiply(t25, t4, t25)
+    add(t2, t25, t2)
+    multiply(t15, t21, t15)
+    add(t2, t15, a_3)
+    multiply(t10, t19, t10)
+    multiply(t22, t4, t22)
+    add(t10, t22, t10)
+    multiply(t7, t21, t7)
+    add(t10, t7, a_4)
+    multiply(t12, t4, t12)
+    multiply(t3, t19, t3)
+    subtract(t12, t3, t12)
+    multiply(t0, t21, t0)
+    add(t12, t0, a_5)
 
 
 def fk_jacobian_tcp(q, p=DEFAULT_P):
@@ -2883,6 +2657,548 @@ def _gravity_chunk(x, t, s, y):
     multiply(t8, t20, t8)
     add(t5, t8, t5)
     negative(t5, g_2)
+
+
+def bias(q, qd, p=DEFAULT_P):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M. p (3): parameters L1, L2, L_tcp.
+
+    in  q [5]
+    in  qd [5]
+    in  p [3]
+    out h [5]
+    251 ops: 147 mul, 96 add, 0 div, 8 trig
+    """
+    q = _array(q, 5, "q")
+    qd = _array(qd, 5, "qd")
+    p = _array(p, 3, "p")
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bias_chunk, (q, qd, p), 45, ((5,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[0])
+    t1 = 0.9810000000000001 * t0
+    t0 = 9.81 * t0
+    t2 = qd[0] * qd[1]
+    t2 = t2 + t2
+    t0 = t0 + t2
+    t2 = 0.04000000000000001 * t0
+    t3 = cos(q[2])
+    t4 = sin(q[2])
+    t5 = t4 * qd[0]
+    t6 = 0.003 * t5
+    t7 = qd[2] * t6
+    t8 = 0.00424 * qd[2]
+    t9 = t5 * t8
+    t7 = t7 - t9
+    t9 = t5 * qd[2]
+    t10 = 0.00424 * t9
+    t7 = t7 - t10
+    t10 = sin(q[0])
+    t10 = 9.81 * t10
+    t11 = p[0] + q[1]
+    t12 = qd[0] * t11
+    t12 = qd[0] * t12
+    t10 = t10 - t12
+    t12 = 0.012 * t10
+    t7 = t7 - t12
+    t12 = cos(q[3])
+    t13 = t12 * qd[2]
+    t14 = sin(q[3])
+    t15 = t14 * t5
+    t13 = t13 + t15
+    t15 = t12 * t5
+    t16 = t14 * qd[2]
+    t15 = t15 - t16
+    t16 = 0.009000000000000001 * t15
+    t17 = t13 * t16
+    t18 = 0.002 * t13
+    t19 = t15 * t18
+    t17 = t17 - t19
+    t19 = 0.009000000000000001 * t9
+    t17 = t17 - t19
+    t19 = t3 * t0
+    t20 = t12 * t19
+    t21 = t14 * t10
+    t20 = t20 - t21
+    t21 = 0.05 * t20
+    t17 = t17 + t21
+    t21 = cos(q[4])
+    t22 = t13 + qd[4]
+    t23 = sin(q[4])
+    t24 = t3 * qd[0]
+    t25 = t24 + qd[3]
+    t26 = t23 * t25
+    t27 = t21 * t15
+    t26 = t26 + t27
+    t27 = 0.0027500000000000003 * t26
+    t28 = t22 * t27
+    t29 = 0.001 * t22
+    t30 = t26 * t29
+    t28 = t28 - t30
+    t30 = t21 * t9
+    t31 = t24 * qd[2]
+    t32 = t12 * t31
+    t33 = t13 * qd[3]
+    t32 = t32 - t33
+    t33 = t23 * t32
+    t30 = t30 + t33
+    t33 = t26 * qd[4]
+    t30 = t30 + t33
+    t33 = 0.0027500000000000003 * t30
+    t28 = t28 - t33
+    t33 = t25 * p[1]
+    t34 = t13 * t33
+    t35 = t4 * t0
+    t36 = t32 * p[1]
+    t36 = t35 + t36
+    t34 = t34 - t36
+    t36 = t23 * t34
+    t37 = t9 * p[1]
+    t37 = t20 - t37
+    t38 = t15 * p[1]
+    t39 = t13 * t38
+    t37 = t37 + t39
+    t39 = t21 * t37
+    t36 = t36 + t39
+    t39 = 0.015 * t36
+    t28 = t28 + t39
+    t39 = t21 * t28
+    t40 = t21 * t32
+    t41 = t23 * t9
+    t40 = t40 - t41
+    t41 = t21 * t25
+    t42 = t23 * t15
+    t41 = t41 - t42
+    t42 = t41 * qd[4]
+    t40 = t40 + t42
+    t42 = 0.0027500000000000003 * t40
+    t29 = t41 * t29
+    t43 = 0.0027500000000000003 * t41
+    t44 = t22 * t43
+    t29 = t29 - t44
+    t29 = t42 + t29
+    t34 = t21 * t34
+    t37 = t23 * t37
+    t34 = t34 - t37
+    t37 = 0.015 * t34
+    t29 = t29 - t37
+    t37 = t23 * t29
+    t37 = t39 + t37
+    t17 = t17 + t37
+    t36 = 0.3 * t36
+    t30 = 0.015 * t30
+    t30 = t36 - t30
+    t36 = 0.015 * t26
+    t37 = t22 * t36
+    t30 = t30 + t37
+    t37 = t21 * t30
+    t34 = 0.3 * t34
+    t39 = 0.015 * t40
+    t34 = t34 - t39
+    t39 = 0.015 * t41
+    t22 = t22 * t39
+    t22 = t34 + t22
+    t34 = t23 * t22
+    t34 = t37 - t34
+    t37 = p[1] * t34
+    t17 = t17 + t37
+    t7 = t7 + t17
+    t7 = t3 * t7
+    t37 = 0.003 * t31
+    t8 = t24 * t8
+    t40 = 0.00424 * t24
+    t42 = qd[2] * t40
+    t8 = t8 - t42
+    t8 = t37 + t8
+    t31 = t14 * t31
+    t37 = t15 * qd[3]
+    t31 = t31 + t37
+    t37 = 0.002 * t31
+    t42 = 0.009000000000000001 * t25
+    t44 = t15 * t42
+    t16 = t25 * t16
+    t16 = t44 - t16
+    t16 = t37 + t16
+    t31 = 0.001 * t31
+    t37 = t26 * t43
+    t27 = t41 * t27
+    t27 = t37 - t27
+    t27 = t31 + t27
+    t16 = t16 + t27
+    t31 = t14 * t16
+    t37 = 0.009000000000000001 * t32
+    t18 = t25 * t18
+    t42 = t13 * t42
+    t18 = t18 - t42
+    t18 = t37 + t18
+    t37 = 0.05 * t35
+    t18 = t18 + t37
+    t29 = t21 * t29
+    t28 = t23 * t28
+    t28 = t29 - t28
+    t18 = t18 + t28
+    t21 = t21 * t22
+    t22 = t23 * t30
+    t21 = t21 + t22
+    t22 = p[1] * t21
+    t18 = t18 - t22
+    t22 = t12 * t18
+    t22 = t31 + t22
+    t8 = t8 + t22
+    t8 = t4 * t8
+    t7 = t7 + t8
+    t2 = t2 + t7
+    t1 = t1 + t2
+    t0 = 0.8 * t0
+    t2 = 0.6 * t19
+    t7 = 0.012 * t24
+    t8 = t24 * t7
+    t22 = 0.012 * qd[2]
+    t23 = qd[2] * t22
+    t8 = t8 + t23
+    t2 = t2 - t8
+    t8 = t12 * t10
+    t19 = t14 * t19
+    t8 = t8 + t19
+    t19 = 0.5 * t8
+    t23 = 0.05 * t15
+    t28 = t15 * t23
+    t29 = 0.05 * t25
+    t30 = t25 * t29
+    t28 = t28 + t30
+    t19 = t19 - t28
+    t15 = t15 * t38
+    t25 = t25 * t33
+    t15 = t15 + t25
+    t8 = t8 - t15
+    t8 = 0.3 * t8
+    t15 = t26 * t36
+    t25 = t41 * t39
+    t15 = t15 + t25
+    t8 = t8 - t15
+    t8 = t19 + t8
+    t15 = t14 * t8
+    t19 = 0.5 * t20
+    t20 = 0.05 * t9
+    t19 = t19 - t20
+    t20 = t13 * t23
+    t19 = t19 + t20
+    t19 = t19 + t34
+    t20 = t12 * t19
+    t15 = t15 + t20
+    t2 = t2 + t15
+    t2 = t3 * t2
+    t3 = t5 * t7
+    t7 = 0.6 * t35
+    t3 = t3 - t7
+    t7 = t13 * t29
+    t13 = 0.5 * t35
+    t15 = 0.05 * t32
+    t13 = t13 + t15
+    t7 = t7 - t13
+    t7 = t7 + t21
+    t3 = t3 + t7
+    t3 = t4 * t3
+    t2 = t2 - t3
+    t0 = t0 + t2
+    t0 = t11 * t0
+    t0 = t1 + t0
+    t1 = 0.8 * t10
+    t2 = 0.04000000000000001 * qd[0]
+    t2 = qd[0] * t2
+    t1 = t1 - t2
+    t2 = 0.6 * t10
+    t3 = 0.012 * t9
+    t2 = t2 + t3
+    t3 = t5 * t22
+    t2 = t2 + t3
+    t3 = t12 * t8
+    t4 = t14 * t19
+    t3 = t3 - t4
+    t2 = t2 + t3
+    t1 = t1 + t2
+    t2 = t5 * t40
+    t3 = t24 * t6
+    t2 = t2 - t3
+    t3 = 0.012 * t35
+    t2 = t2 - t3
+    t3 = t12 * t16
+    t4 = t14 * t18
+    t3 = t3 - t4
+    t2 = t2 + t3
+    _h = (t0, t1, t2, t17, t27)
+    return np.array(_h)
+
+
+_bias_constants = _constants(
+    0.9810000000000001, 9.81, 0.04000000000000001, 0.003, 0.00424, 0.012, 0.009000000000000001, 0.002,
+    0.05, 0.0027500000000000003, 0.001, 0.015, 0.3, 0.8, 0.6, 0.5)
+
+
+def _bias_chunk(x, t, s, y):
+    """bias on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, p_0, p_1, p_2 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44) = t
+    h_0, h_1, h_2, h_3, h_4 = y
+    k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15 = _bias_constants
+    cos(q_0, t0)
+    multiply(k0, t0, t1)
+    multiply(k1, t0, t0)
+    multiply(qd_0, qd_1, t2)
+    add(t2, t2, t2)
+    add(t0, t2, t0)
+    multiply(k2, t0, t2)
+    cos(q_2, t3)
+    sin(q_2, t4)
+    multiply(t4, qd_0, t5)
+    multiply(k3, t5, t6)
+    multiply(qd_2, t6, t7)
+    multiply(k4, qd_2, t8)
+    multiply(t5, t8, t9)
+    subtract(t7, t9, t7)
+    multiply(t5, qd_2, t9)
+    multiply(k4, t9, t10)
+    subtract(t7, t10, t7)
+    sin(q_0, t10)
+    multiply(k1, t10, t10)
+    add(p_0, q_1, t11)
+    multiply(qd_0, t11, t12)
+    multiply(qd_0, t12, t12)
+    subtract(t10, t12, t10)
+    multiply(k5, t10, t12)
+    subtract(t7, t12, t7)
+    cos(q_3, t12)
+    multiply(t12, qd_2, t13)
+    sin(q_3, t14)
+    multiply(t14, t5, t15)
+    add(t13, t15, t13)
+    multiply(t12, t5, t15)
+    multiply(t14, qd_2, t16)
+    subtract(t15, t16, t15)
+    multiply(k6, t15, t16)
+    multiply(t13, t16, t17)
+    multiply(k7, t13, t18)
+    multiply(t15, t18, t19)
+    subtract(t17, t19, t17)
+    multiply(k6, t9, t19)
+    subtract(t17, t19, t17)
+    multiply(t3, t0, t19)
+    multiply(t12, t19, t20)
+    multiply(t14, t10, t21)
+    subtract(t20, t21, t20)
+    multiply(k8, t20, t21)
+    add(t17, t21, t17)
+    cos(q_4, t21)
+    add(t13, qd_4, t22)
+    sin(q_4, t23)
+    multiply(t3, qd_0, t24)
+    add(t24, qd_3, t25)
+    multiply(t23, t25, t26)
+    multiply(t21, t15, t27)
+    add(t26, t27, t26)
+    multiply(k9, t26, t27)
+    multiply(t22, t27, t28)
+    multiply(k10, t22, t29)
+    multiply(t26, t29, t30)
+    subtract(t28, t30, t28)
+    multiply(t21, t9, t30)
+    multiply(t24, qd_2, t31)
+    multiply(t12, t31, t32)
+    multiply(t13, qd_3, t33)
+    subtract(t32, t33, t32)
+    multiply(t23, t32, t33)
+    add(t30, t33, t30)
+    multiply(t26, qd_4, t33)
+    add(t30, t33, t30)
+    multiply(k9, t30, t33)
+    subtract(t28, t33, t28)
+    multiply(t25, p_1, t33)
+    multiply(t13, t33, t34)
+    multiply(t4, t0, t35)
+    multiply(t32, p_1, t36)
+    add(t35, t36, t36)
+    subtract(t34, t36, t34)
+    multiply(t23, t34, t36)
+    multiply(t9, p_1, t37)
+    subtract(t20, t37, t37)
+    multiply(t15, p_1, t38)
+    multiply(t13, t38, t39)
+    add(t37, t39, t37)
+    multiply(t21, t37, t39)
+    add(t36, t39, t36)
+    multiply(k11, t36, t39)
+    add(t28, t39, t28)
+    multiply(t21, t28, t39)
+    multiply(t21, t32, t40)
+    multiply(t23, t9, t41)
+    subtract(t40, t41, t40)
+    multiply(t21, t25, t41)
+    multiply(t23, t15, t42)
+    subtract(t41, t42, t41)
+    multiply(t41, qd_4, t42)
+    add(t40, t42, t40)
+    multiply(k9, t40, t42)
+    multiply(t41, t29, t29)
+    multiply(k9, t41, t43)
+    multiply(t22, t43, t44)
+    subtract(t29, t44, t29)
+    add(t42, t29, t42)
+    multiply(t21, t34, t34)
+    multiply(t23, t37, t37)
+    subtract(t34, t37, t34)
+    multiply(k11, t34, t29)
+    subtract(t42, t29, t42)
+    multiply(t23, t42, t29)
+    add(t39, t29, t39)
+    add(t17, t39, t17)
+    multiply(k12, t36, t36)
+    multiply(k11, t30, t30)
+    subtract(t36, t30, t36)
+    multiply(k11, t26, t29)
+    multiply(t22, t29, t30)
+    add(t36, t30, t36)
+    multiply(t21, t36, t30)
+    multiply(k12, t34, t34)
+    multiply(k11, t40, t40)
+    subtract(t34, t40, t34)
+    multiply(k11, t41, t37)
+    multiply(t22, t37, t22)
+    add(t34, t22, t34)
+    multiply(t23, t34, t22)
+    subtract(t30, t22, t30)
+    multiply(p_1, t30, t22)
+    add(t17, t22, h_3)
+    add(t7, h_3, t7)
+    multiply(t3, t7, t7)
+    multiply(k3, t31, t17)
+    multiply(t24, t8, t8)
+    multiply(k4, t24, t22)
+    multiply(qd_2, t22, t39)
+    subtract(t8, t39, t8)
+    add(t17, t8, t17)
+    multiply(t14, t31, t31)
+    multiply(t15, qd_3, t8)
+    add(t31, t8, t31)
+    multiply(k7, t31, t8)
+    multiply(k6, t25, t39)
+    multiply(t15, t39, t40)
+    multiply(t25, t16, t16)
+    subtract(t40, t16, t40)
+    add(t8, t40, t8)
+    multiply(k10, t31, t31)
+    multiply(t26, t43, t43)
+    multiply(t41, t27, t27)
+    subtract(t43, t27, t43)
+    add(t31, t43, h_4)
+    add(t8, h_4, t8)
+    multiply(t14, t8, t16)
+    multiply(k6, t32, t27)
+    multiply(t25, t18, t18)
+    multiply(t13, t39, t39)
+    subtract(t18, t39, t18)
+    add(t27, t18, t27)
+    multiply(k8, t35, t18)
+    add(t27, t18, t27)
+    multiply(t21, t42, t42)
+    multiply(t23, t28, t28)
+    subtract(t42, t28, t42)
+    add(t27, t42, t27)
+    multiply(t21, t34, t21)
+    multiply(t23, t36, t23)
+    add(t21, t23, t21)
+    multiply(p_1, t21, t18)
+    subtract(t27, t18, t27)
+    multiply(t12, t27, t18)
+    add(t16, t18, t16)
+    add(t17, t16, t17)
+    multiply(t4, t17, t17)
+    add(t7, t17, t7)
+    add(t2, t7, t2)
+    add(t1, t2, t1)
+    multiply(k13, t0, t0)
+    multiply(k14, t19, t2)
+    multiply(k5, t24, t7)
+    multiply(t24, t7, t16)
+    multiply(k5, qd_2, t17)
+    multiply(qd_2, t17, t18)
+    add(t16, t18, t16)
+    subtract(t2, t16, t2)
+    multiply(t12, t10, t16)
+    multiply(t14, t19, t19)
+    add(t16, t19, t16)
+    multiply(k15, t16, t18)
+    multiply(k8, t15, t19)
+    multiply(t15, t19, t23)
+    multiply(k8, t25, t28)
+    multiply(t25, t28, t31)
+    add(t23, t31, t23)
+    subtract(t18, t23, t18)
+    multiply(t15, t38, t15)
+    multiply(t25, t33, t25)
+    add(t15, t25, t15)
+    subtract(t16, t15, t16)
+    multiply(k12, t16, t16)
+    multiply(t26, t29, t26)
+    multiply(t41, t37, t41)
+    add(t26, t41, t26)
+    subtract(t16, t26, t16)
+    add(t18, t16, t18)
+    multiply(t14, t18, t15)
+    multiply(k15, t20, t20)
+    multiply(k8, t9, t16)
+    subtract(t20, t16, t20)
+    multiply(t13, t19, t19)
+    add(t20, t19, t20)
+    add(t20, t30, t20)
+    multiply(t12, t20, t16)
+    add(t15, t16, t15)
+    add(t2, t15, t2)
+    multiply(t3, t2, t3)
+    multiply(t5, t7, t7)
+    multiply(k14, t35, t2)
+    subtract(t7, t2, t7)
+    multiply(t13, t28, t13)
+    multiply(k15, t35, t2)
+    multiply(k8, t32, t32)
+    add(t2, t32, t2)
+    subtract(t13, t2, t13)
+    add(t13, t21, t13)
+    add(t7, t13, t7)
+    multiply(t4, t7, t4)
+    subtract(t3, t4, t3)
+    add(t0, t3, t0)
+    multiply(t11, t0, t11)
+    add(t1, t11, h_0)
+    multiply(k13, t10, t0)
+    multiply(k2, qd_0, t1)
+    multiply(qd_0, t1, t1)
+    subtract(t0, t1, t0)
+    multiply(k14, t10, t10)
+    multiply(k5, t9, t9)
+    add(t10, t9, t10)
+    multiply(t5, t17, t17)
+    add(t10, t17, t10)
+    multiply(t12, t18, t18)
+    multiply(t14, t20, t20)
+    subtract(t18, t20, t18)
+    add(t10, t18, t10)
+    add(t0, t10, h_1)
+    multiply(t5, t22, t5)
+    multiply(t24, t6, t24)
+    subtract(t5, t24, t5)
+    multiply(k5, t35, t35)
+    subtract(t5, t35, t5)
+    multiply(t12, t8, t12)
+    multiply(t14, t27, t14)
+    subtract(t12, t14, t12)
+    add(t5, t12, h_2)
 
 
 def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
@@ -16889,6 +17205,1983 @@ def _base_regressor_chunk(x, t, s, y):
     copyto(Y_b_155, qd_3)
     copyto(Y_b_197, qdd_4)
     copyto(Y_b_198, qd_4)
+
+
+def bundle_control(q, qd, p=DEFAULT_P):
+    """Control tick 'control': mass_matrix (5x5), bias (5), fk_tcp (4x4), jacobian_tcp (6x5), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (3): parameters L1, L2, L_tcp.
+
+    in  q [5]
+    in  qd [5]
+    in  p [3]
+    out mass_matrix [5x5]
+    out bias [5]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x5]
+    out jdot_qd_tcp [6]
+    480 ops: 281 mul, 191 add, 0 div, 8 trig
+    """
+    q = _array(q, 5, "q")
+    qd = _array(qd, 5, "qd")
+    p = _array(p, 3, "p")
+    if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_control_chunk, (q, qd, p), 52, ((5, 5), (5,), (4, 4), (6, 5), (6,),), fixed=_bundle_control_fixed, pure=3)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[2])
+    t1 = cos(q[4])
+    t2 = 0.0027500000000000003 * t1
+    t3 = t1 * t2
+    t4 = sin(q[4])
+    t5 = 0.0027500000000000003 * t4
+    t6 = t4 * t5
+    t7 = t3 + t6
+    t8 = (-0.015) * p[1]
+    t7 = t7 - t8
+    t9 = 0.015 * p[1]
+    t7 = t7 + t9
+    t10 = p[1] * p[1]
+    t10 = 0.3 * t10
+    t7 = t7 + t10
+    t7 = 0.009000000000000001 + t7
+    t11 = 0.00424 + t7
+    t11 = t0 * t11
+    t12 = sin(q[2])
+    t13 = cos(q[3])
+    t2 = t4 * t2
+    t5 = t1 * t5
+    t2 = t2 - t5
+    t5 = t13 * t2
+    t14 = t12 * t5
+    t11 = t11 + t14
+    t11 = t0 * t11
+    t5 = t0 * t5
+    t15 = sin(q[3])
+    t16 = 0.003 * t15
+    t17 = t15 * t16
+    t3 = t6 + t3
+    t3 = t3 + t9
+    t3 = t3 - t8
+    t3 = t3 + t10
+    t3 = 0.009000000000000001 + t3
+    t6 = t13 * t3
+    t8 = t13 * t6
+    t8 = t17 + t8
+    t8 = 0.003 + t8
+    t8 = t12 * t8
+    t5 = t5 + t8
+    t5 = t12 * t5
+    t5 = t11 + t5
+    t5 = 0.01 + t5
+    t8 = p[0] + q[1]
+    t9 = 0.3 * p[1]
+    t9 = 0.065 + t9
+    t10 = t13 * t9
+    t11 = 0.04000000000000001 + t10
+    t17 = t8 * t11
+    t5 = t5 + t17
+    t11 = t11 * t8
+    t5 = t5 + t11
+    t11 = t8 * t8
+    t11 = 2.2 * t11
+    t5 = t5 + t11
+    t5 = 0.020000000000000004 + t5
+    t9 = t15 * t9
+    t11 = 0.012 + t9
+    t17 = t0 * t11
+    t17 = -t17
+    t16 = t13 * t16
+    t6 = t15 * t6
+    t6 = t16 - t6
+    t6 = t12 * t6
+    t2 = t15 * t2
+    t16 = t0 * t2
+    t6 = t6 - t16
+    t11 = t12 * t11
+    t11 = t8 * t11
+    t6 = t6 - t11
+    t11 = t0 * t7
+    t11 = t11 + t14
+    t10 = t0 * t10
+    t10 = t8 * t10
+    t10 = t11 + t10
+    t11 = 0.001 * t15
+    t11 = t12 * t11
+    t9 = -t9
+    t14 = 0.003 * t13
+    t14 = t13 * t14
+    t3 = t15 * t3
+    t3 = t15 * t3
+    t3 = t14 + t3
+    t3 = 0.00424 + t3
+    t2 = -t2
+    t14 = 0.001 * t13
+    t16 = cos(q[0])
+    t18 = 0.9810000000000001 * t16
+    t19 = qd[0] * qd[1]
+    t19 = t19 + t19
+    t20 = 9.81 * t16
+    t21 = t19 + t20
+    t22 = 0.04000000000000001 * t21
+    t23 = t12 * qd[0]
+    t24 = 0.003 * t23
+    t25 = qd[2] * t24
+    t26 = 0.00424 * qd[2]
+    t27 = t23 * t26
+    t25 = t25 - t27
+    t27 = t23 * qd[2]
+    t28 = 0.00424 * t27
+    t25 = t25 - t28
+    t28 = sin(q[0])
+    t29 = 9.81 * t28
+    t30 = qd[0] * t8
+    t30 = qd[0] * t30
+    t31 = t29 - t30
+    t32 = 0.012 * t31
+    t25 = t25 - t32
+    t32 = t13 * qd[2]
+    t33 = t15 * t23
+    t32 = t32 + t33
+    t33 = t13 * t23
+    t34 = t15 * qd[2]
+    t33 = t33 - t34
+    t34 = 0.009000000000000001 * t33
+    t35 = t32 * t34
+    t36 = 0.002 * t32
+    t37 = t33 * t36
+    t35 = t35 - t37
+    t37 = 0.009000000000000001 * t27
+    t35 = t35 - t37
+    t37 = t15 * t30
+    t38 = t0 * t19
+    t39 = t13 * t38
+    t37 = t37 + t39
+    t39 = t0 * t20
+    t40 = t13 * t39
+    t41 = t15 * t29
+    t40 = t40 - t41
+    t41 = t37 + t40
+    t42 = 0.05 * t41
+    t35 = t35 + t42
+    t42 = t32 + qd[4]
+    t43 = t0 * qd[0]
+    t44 = t43 + qd[3]
+    t45 = t4 * t44
+    t46 = t1 * t33
+    t45 = t45 + t46
+    t46 = 0.0027500000000000003 * t45
+    t47 = t42 * t46
+    t48 = 0.001 * t42
+    t49 = t45 * t48
+    t47 = t47 - t49
+    t49 = t1 * t27
+    t50 = t43 * qd[2]
+    t51 = t13 * t50
+    t52 = t32 * qd[3]
+    t51 = t51 - t52
+    t52 = t4 * t51
+    t49 = t49 + t52
+    t52 = t45 * qd[4]
+    t49 = t49 + t52
+    t52 = 0.0027500000000000003 * t49
+    t47 = t47 - t52
+    t52 = t44 * p[1]
+    t53 = t32 * t52
+    t19 = t12 * t19
+    t54 = t51 * p[1]
+    t54 = t19 + t54
+    t53 = t53 - t54
+    t54 = t4 * t53
+    t55 = t27 * p[1]
+    t37 = t37 - t55
+    t55 = t33 * p[1]
+    t56 = t32 * t55
+    t37 = t37 + t56
+    t56 = t1 * t37
+    t54 = t54 + t56
+    t56 = t1 * t40
+    t20 = t12 * t20
+    t57 = t4 * t20
+    t56 = t56 - t57
+    t56 = t54 + t56
+    t57 = 0.015 * t56
+    t47 = t47 + t57
+    t57 = t1 * t47
+    t58 = t1 * t51
+    t59 = t4 * t27
+    t58 = t58 - t59
+    t59 = t1 * t44
+    t60 = t4 * t33
+    t59 = t59 - t60
+    t60 = t59 * qd[4]
+    t58 = t58 + t60
+    t60 = 0.0027500000000000003 * t58
+    t48 = t59 * t48
+    t61 = 0.0027500000000000003 * t59
+    t62 = t42 * t61
+    t48 = t48 - t62
+    t48 = t60 + t48
+    t53 = t1 * t53
+    t37 = t4 * t37
+    t37 = t53 - t37
+    t53 = t1 * t20
+    t40 = t4 * t40
+    t40 = t53 + t40
+    t40 = t37 - t40
+    t53 = 0.015 * t40
+    t48 = t48 - t53
+    t53 = t4 * t48
+    t53 = t57 + t53
+    t35 = t35 + t53
+    t53 = 0.3 * t56
+    t56 = 0.015 * t49
+    t53 = t53 - t56
+    t56 = 0.015 * t45
+    t57 = t42 * t56
+    t53 = t53 + t57
+    t57 = t1 * t53
+    t40 = 0.3 * t40
+    t60 = 0.015 * t58
+    t40 = t40 - t60
+    t60 = 0.015 * t59
+    t62 = t42 * t60
+    t40 = t40 + t62
+    t62 = t4 * t40
+    t57 = t57 - t62
+    t62 = p[1] * t57
+    t35 = t35 + t62
+    t25 = t25 + t35
+    t25 = t0 * t25
+    t62 = 0.003 * t50
+    t26 = t43 * t26
+    t63 = 0.00424 * t43
+    t64 = qd[2] * t63
+    t26 = t26 - t64
+    t26 = t62 + t26
+    t50 = t15 * t50
+    t62 = t33 * qd[3]
+    t50 = t50 + t62
+    t62 = 0.002 * t50
+    t64 = 0.009000000000000001 * t44
+    t65 = t33 * t64
+    t34 = t44 * t34
+    t34 = t65 - t34
+    t34 = t62 + t34
+    t62 = 0.001 * t50
+    t61 = t45 * t61
+    t46 = t59 * t46
+    t46 = t61 - t46
+    t46 = t62 + t46
+    t34 = t34 + t46
+    t61 = t15 * t34
+    t62 = 0.009000000000000001 * t51
+    t36 = t44 * t36
+    t64 = t32 * t64
+    t36 = t36 - t64
+    t36 = t62 + t36
+    t19 = t19 + t20
+    t20 = 0.05 * t19
+    t20 = t36 + t20
+    t36 = t1 * t48
+    t47 = t4 * t47
+    t36 = t36 - t47
+    t20 = t20 + t36
+    t36 = t1 * t40
+    t40 = t4 * t53
+    t36 = t36 + t40
+    t40 = p[1] * t36
+    t20 = t20 - t40
+    t40 = t13 * t20
+    t40 = t61 + t40
+    t26 = t26 + t40
+    t26 = t12 * t26
+    t25 = t25 + t26
+    t22 = t22 + t25
+    t18 = t18 + t22
+    t21 = 0.8 * t21
+    t22 = t38 + t39
+    t22 = 0.6 * t22
+    t25 = 0.012 * t43
+    t26 = t43 * t25
+    t40 = 0.012 * qd[2]
+    t47 = qd[2] * t40
+    t26 = t26 + t47
+    t22 = t22 - t26
+    t26 = t15 * t38
+    t30 = t13 * t30
+    t26 = t26 - t30
+    t29 = t13 * t29
+    t30 = t15 * t39
+    t29 = t29 + t30
+    t30 = t26 + t29
+    t30 = 0.5 * t30
+    t38 = 0.05 * t33
+    t39 = t33 * t38
+    t47 = 0.05 * t44
+    t48 = t44 * t47
+    t39 = t39 + t48
+    t30 = t30 - t39
+    t33 = t33 * t55
+    t39 = t44 * t52
+    t33 = t33 + t39
+    t26 = t26 - t33
+    t29 = t26 + t29
+    t29 = 0.3 * t29
+    t33 = t45 * t56
+    t39 = t59 * t60
+    t33 = t33 + t39
+    t29 = t29 - t33
+    t29 = t30 + t29
+    t30 = t15 * t29
+    t33 = 0.5 * t41
+    t39 = 0.05 * t27
+    t33 = t33 - t39
+    t38 = t32 * t38
+    t33 = t33 + t38
+    t33 = t33 + t57
+    t38 = t13 * t33
+    t30 = t30 + t38
+    t22 = t22 + t30
+    t22 = t0 * t22
+    t25 = t23 * t25
+    t30 = 0.6 * t19
+    t25 = t25 - t30
+    t30 = t32 * t47
+    t32 = 0.5 * t19
+    t38 = 0.05 * t51
+    t32 = t32 + t38
+    t30 = t30 - t32
+    t30 = t30 + t36
+    t25 = t25 + t30
+    t25 = t12 * t25
+    t22 = t22 - t25
+    t21 = t21 + t22
+    t8 = t8 * t21
+    t8 = t18 + t8
+    t18 = 0.8 * t31
+    t21 = 0.04000000000000001 * qd[0]
+    t21 = qd[0] * t21
+    t18 = t18 - t21
+    t21 = 0.6 * t31
+    t22 = 0.012 * t27
+    t21 = t21 + t22
+    t22 = t23 * t40
+    t21 = t21 + t22
+    t22 = t13 * t29
+    t25 = t15 * t33
+    t22 = t22 - t25
+    t21 = t21 + t22
+    t18 = t18 + t21
+    t21 = t23 * t63
+    t22 = t43 * t24
+    t21 = t21 - t22
+    t19 = 0.012 * t19
+    t19 = t21 - t19
+    t21 = t13 * t34
+    t20 = t15 * t20
+    t20 = t21 - t20
+    t19 = t19 + t20
+    t20 = t0 * t1
+    t21 = t12 * t13
+    t22 = t21 * t4
+    t20 = t20 - t22
+    t22 = t28 * t12
+    t23 = t22 * t1
+    t24 = t16 * t15
+    t25 = t28 * t0
+    t27 = t25 * t13
+    t24 = t24 + t27
+    t27 = t24 * t4
+    t23 = t23 + t27
+    t27 = t16 * t12
+    t29 = t27 * t1
+    t30 = t16 * t0
+    t31 = t30 * t13
+    t32 = t28 * t15
+    t31 = t31 - t32
+    t32 = t31 * t4
+    t29 = t29 + t32
+    t32 = -t29
+    t12 = t12 * t15
+    t33 = t16 * t13
+    t25 = t25 * t15
+    t25 = t33 - t25
+    t13 = t28 * t13
+    t15 = t30 * t15
+    t13 = t13 + t15
+    t15 = t0 * t4
+    t21 = t21 * t1
+    t15 = t15 + t21
+    t21 = t22 * t4
+    t24 = t24 * t1
+    t21 = t21 - t24
+    t1 = t31 * t1
+    t4 = t27 * t4
+    t1 = t1 - t4
+    t4 = t12 * p[1]
+    t24 = t12 * p[2]
+    t4 = t4 + t24
+    t30 = t16 * p[0]
+    t31 = t16 * q[1]
+    t30 = t30 + t31
+    t31 = t25 * p[1]
+    t31 = t30 + t31
+    t33 = t25 * p[2]
+    t31 = t31 + t33
+    t34 = t28 * p[0]
+    t36 = t28 * q[1]
+    t34 = t34 + t36
+    t36 = t13 * p[1]
+    t36 = t34 + t36
+    t38 = t13 * p[2]
+    t36 = t36 + t38
+    t39 = -t36
+    t34 = t36 - t34
+    t40 = t16 * t34
+    t30 = t31 - t30
+    t41 = t28 * t30
+    t40 = t40 - t41
+    t41 = t28 * t4
+    t43 = t16 * t4
+    t43 = -t43
+    t44 = t22 * t34
+    t47 = t27 * t30
+    t44 = t44 + t47
+    t47 = t27 * t4
+    t34 = t0 * t34
+    t34 = t47 + t34
+    t34 = -t34
+    t30 = t0 * t30
+    t47 = t22 * t4
+    t30 = t30 - t47
+    t27 = -t27
+    t47 = t25 * t38
+    t48 = t13 * t33
+    t47 = t47 - t48
+    t48 = t13 * t24
+    t38 = t12 * t38
+    t38 = t48 - t38
+    t33 = t12 * t33
+    t24 = t25 * t24
+    t24 = t33 - t24
+    t33 = t58 * p[2]
+    t33 = t37 - t33
+    t37 = t59 * p[2]
+    t48 = t42 * t37
+    t33 = t33 + t48
+    t48 = t20 * t33
+    t51 = t45 * p[2]
+    t45 = t45 * t51
+    t37 = t59 * t37
+    t37 = t45 + t37
+    t26 = t26 - t37
+    t37 = t12 * t26
+    t37 = t48 + t37
+    t45 = t49 * p[2]
+    t45 = t54 - t45
+    t42 = t42 * t51
+    t42 = t45 + t42
+    t45 = t15 * t42
+    t37 = t37 + t45
+    t45 = t23 * t33
+    t48 = t25 * t26
+    t45 = t45 + t48
+    t48 = t21 * t42
+    t45 = t45 + t48
+    t26 = t13 * t26
+    t33 = t29 * t33
+    t26 = t26 - t33
+    t33 = t1 * t42
+    t26 = t26 + t33
+    t33 = t12 * t50
+    t42 = t20 * t49
+    t33 = t33 - t42
+    t42 = t15 * t58
+    t33 = t33 + t42
+    t42 = t25 * t50
+    t48 = t23 * t49
+    t42 = t42 - t48
+    t48 = t21 * t58
+    t42 = t42 + t48
+    t29 = t29 * t49
+    t48 = t13 * t50
+    t29 = t29 + t48
+    t48 = t1 * t58
+    t29 = t29 + t48
+    _mass_matrix = (t5, t17, t6, t10, t11,
+                    t17, 2.2, 0.0, t9, 0.0,
+                    t6, 0.0, t3, t2, t14,
+                    t10, t9, t2, t7, 0.0,
+                    t11, 0.0, t14, 0.0, 0.001)
+    _bias = (t8, t18, t19, t35, t46)
+    _fk_tcp = (t20, t12, t15, t4,
+               t23, t25, t21, t31,
+               t32, t13, t1, t36,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (0.0, 0.0, t40, t44, t47,
+                     t39, t16, t41, t34, t38,
+                     t31, t28, t43, t30, t24,
+                     1.0, 0.0, 0.0, t0, t12,
+                     0.0, 0.0, t16, t22, t25,
+                     0.0, 0.0, t28, t27, t13)
+    _jdot_qd_tcp = (t37, t45, t26, t33, t42, t29)
+    return np.array(_mass_matrix).reshape(5, 5), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 5), np.array(_jdot_qd_tcp)
+
+
+_bundle_control_constants = _constants(
+    0.0027500000000000003, -0.015, 0.015, 0.3, 0.009000000000000001, 0.00424, 0.003, 0.01, 0.065,
+    0.04000000000000001, 2.2, 0.020000000000000004, 0.012, 0.001, 0.9810000000000001, 9.81, 0.002, 0.05,
+    0.8, 0.6, 0.5)
+
+
+_bundle_control_fixed = (
+    {6: 2.2, 7: 0.0, 9: 0.0, 11: 0.0, 19: 0.0, 21: 0.0, 23: 0.0, 24: 0.001},
+    {},
+    {12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {0: 0.0, 1: 0.0, 15: 1.0, 16: 0.0, 17: 0.0, 20: 0.0, 21: 0.0, 25: 0.0, 26: 0.0},
+    {},
+)
+"""bundle_control's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_control_chunk(x, t, s, y):
+    """bundle_control on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, p_0, p_1, p_2 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51) = t
+    s0, s1, s2 = s
+    (mass_matrix_0, mass_matrix_1, mass_matrix_2, mass_matrix_3, mass_matrix_4, mass_matrix_5,
+     mass_matrix_8, mass_matrix_10, mass_matrix_12, mass_matrix_13, mass_matrix_14, mass_matrix_15,
+     mass_matrix_16, mass_matrix_17, mass_matrix_18, mass_matrix_20, mass_matrix_22, bias_0, bias_1,
+     bias_2, bias_3, bias_4, fk_tcp_0, fk_tcp_1, fk_tcp_2, fk_tcp_3, fk_tcp_4, fk_tcp_5, fk_tcp_6,
+     fk_tcp_7, fk_tcp_8, fk_tcp_9, fk_tcp_10, fk_tcp_11, jacobian_tcp_2, jacobian_tcp_3, jacobian_tcp_4,
+     jacobian_tcp_5, jacobian_tcp_6, jacobian_tcp_7, jacobian_tcp_8, jacobian_tcp_9, jacobian_tcp_10,
+     jacobian_tcp_11, jacobian_tcp_12, jacobian_tcp_13, jacobian_tcp_14, jacobian_tcp_18, jacobian_tcp_19,
+     jacobian_tcp_22, jacobian_tcp_23, jacobian_tcp_24, jacobian_tcp_27, jacobian_tcp_28, jacobian_tcp_29,
+     jdot_qd_tcp_0, jdot_qd_tcp_1, jdot_qd_tcp_2, jdot_qd_tcp_3, jdot_qd_tcp_4, jdot_qd_tcp_5) = y
+    k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20 = _bundle_control_constants
+    cos(q_2, jacobian_tcp_18)
+    cos(q_4, t0)
+    multiply(k0, t0, t1)
+    multiply(t0, t1, t2)
+    sin(q_4, t3)
+    multiply(k0, t3, t4)
+    multiply(t3, t4, t5)
+    add(t2, t5, t6)
+    multiply(k1, p_1, s0)
+    subtract(t6, s0, t6)
+    multiply(k2, p_1, s1)
+    add(t6, s1, t6)
+    multiply(p_1, p_1, s2)
+    multiply(k3, s2, s2)
+    add(t6, s2, t6)
+    add(k4, t6, mass_matrix_18)
+    add(k5, mass_matrix_18, t6)
+    multiply(jacobian_tcp_18, t6, t6)
+    sin(q_2, t7)
+    cos(q_3, t8)
+    multiply(t3, t1, t1)
+    multiply(t0, t4, t4)
+    subtract(t1, t4, t1)
+    multiply(t8, t1, t4)
+    multiply(t7, t4, t9)
+    add(t6, t9, t6)
+    multiply(jacobian_tcp_18, t6, t6)
+    multiply(jacobian_tcp_18, t4, t4)
+    sin(q_3, t10)
+    multiply(k6, t10, t11)
+    multiply(t10, t11, t12)
+    add(t5, t2, t5)
+    add(t5, s1, t5)
+    subtract(t5, s0, t5)
+    add(t5, s2, t5)
+    add(k4, t5, t5)
+    multiply(t8, t5, t2)
+    multiply(t8, t2, t13)
+    add(t12, t13, t12)
+    add(k6, t12, t12)
+    multiply(t7, t12, t12)
+    add(t4, t12, t4)
+    multiply(t7, t4, t4)
+    add(t6, t4, t6)
+    add(k7, t6, t6)
+    add(p_0, q_1, t4)
+    multiply(k3, p_1, s0)
+    add(k8, s0, s0)
+    multiply(t8, s0, t12)
+    add(k9, t12, t13)
+    multiply(t4, t13, t14)
+    add(t6, t14, t6)
+    multiply(t13, t4, t13)
+    add(t6, t13, t6)
+    multiply(t4, t4, t13)
+    multiply(k10, t13, t13)
+    add(t6, t13, t6)
+    add(k11, t6, mass_matrix_0)
+    multiply(t10, s0, t6)
+    add(k12, t6, t13)
+    multiply(jacobian_tcp_18, t13, t14)
+    negative(t14, mass_matrix_1)
+    multiply(t8, t11, t11)
+    multiply(t10, t2, t2)
+    subtract(t11, t2, t11)
+    multiply(t7, t11, t11)
+    multiply(t10, t1, t1)
+    multiply(jacobian_tcp_18, t1, t2)
+    subtract(t11, t2, t11)
+    multiply(t7, t13, t13)
+    multiply(t4, t13, t13)
+    subtract(t11, t13, mass_matrix_2)
+    multiply(jacobian_tcp_18, mass_matrix_18, t2)
+    add(t2, t9, t2)
+    multiply(jacobian_tcp_18, t12, t12)
+    multiply(t4, t12, t12)
+    add(t2, t12, mass_matrix_3)
+    multiply(k13, t10, t2)
+    multiply(t7, t2, mass_matrix_4)
+    negative(t6, mass_matrix_8)
+    multiply(k6, t8, t2)
+    multiply(t8, t2, t2)
+    multiply(t10, t5, t5)
+    multiply(t10, t5, t5)
+    add(t2, t5, t2)
+    add(k5, t2, mass_matrix_12)
+    negative(t1, mass_matrix_13)
+    multiply(k13, t8, mass_matrix_14)
+    cos(q_0, jacobian_tcp_6)
+    multiply(k14, jacobian_tcp_6, t1)
+    multiply(qd_0, qd_1, t2)
+    add(t2, t2, t2)
+    multiply(k15, jacobian_tcp_6, t5)
+    add(t2, t5, t6)
+    multiply(k9, t6, t9)
+    multiply(t7, qd_0, t11)
+    multiply(k6, t11, t12)
+    multiply(qd_2, t12, t13)
+    multiply(k5, qd_2, t14)
+    multiply(t11, t14, t15)
+    subtract(t13, t15, t13)
+    multiply(t11, qd_2, t15)
+    multiply(k5, t15, t16)
+    subtract(t13, t16, t13)
+    sin(q_0, jacobian_tcp_11)
+    multiply(k15, jacobian_tcp_11, t16)
+    multiply(qd_0, t4, t17)
+    multiply(qd_0, t17, t17)
+    subtract(t16, t17, t18)
+    multiply(k12, t18, t19)
+    subtract(t13, t19, t13)
+    multiply(t8, qd_2, t19)
+    multiply(t10, t11, t20)
+    add(t19, t20, t19)
+    multiply(t8, t11, t20)
+    multiply(t10, qd_2, t21)
+    subtract(t20, t21, t20)
+    multiply(k4, t20, t21)
+    multiply(t19, t21, t22)
+    multiply(k16, t19, t23)
+    multiply(t20, t23, t24)
+    subtract(t22, t24, t22)
+    multiply(k4, t15, t24)
+    subtract(t22, t24, t22)
+    multiply(t10, t17, t24)
+    multiply(jacobian_tcp_18, t2, t25)
+    multiply(t8, t25, t26)
+    add(t24, t26, t24)
+    multiply(jacobian_tcp_18, t5, t26)
+    multiply(t8, t26, t27)
+    multiply(t10, t16, t28)
+    subtract(t27, t28, t27)
+    add(t24, t27, t28)
+    multiply(k17, t28, t29)
+    add(t22, t29, t22)
+    add(t19, qd_4, t29)
+    multiply(jacobian_tcp_18, qd_0, t30)
+    add(t30, qd_3, t31)
+    multiply(t3, t31, t32)
+    multiply(t0, t20, t33)
+    add(t32, t33, t32)
+    multiply(k0, t32, t33)
+    multiply(t29, t33, t34)
+    multiply(k13, t29, t35)
+    multiply(t32, t35, t36)
+    subtract(t34, t36, t34)
+    multiply(t0, t15, t36)
+    multiply(t30, qd_2, t37)
+    multiply(t8, t37, t38)
+    multiply(t19, qd_3, t39)
+    subtract(t38, t39, t38)
+    multiply(t3, t38, t39)
+    add(t36, t39, t36)
+    multiply(t32, qd_4, t39)
+    add(t36, t39, t36)
+    multiply(k0, t36, t39)
+    subtract(t34, t39, t34)
+    multiply(t31, p_1, t39)
+    multiply(t19, t39, t40)
+    multiply(t7, t2, t2)
+    multiply(t38, p_1, t41)
+    add(t2, t41, t41)
+    subtract(t40, t41, t40)
+    multiply(t3, t40, t41)
+    multiply(t15, p_1, t42)
+    subtract(t24, t42, t24)
+    multiply(t20, p_1, t42)
+    multiply(t19, t42, t43)
+    add(t24, t43, t24)
+    multiply(t0, t24, t43)
+    add(t41, t43, t41)
+    multiply(t0, t27, t43)
+    multiply(t7, t5, t5)
+    multiply(t3, t5, t44)
+    subtract(t43, t44, t43)
+    add(t41, t43, t43)
+    multiply(k2, t43, t44)
+    add(t34, t44, t34)
+    multiply(t0, t34, t44)
+    multiply(t0, t38, t45)
+    multiply(t3, t15, t46)
+    subtract(t45, t46, t45)
+    multiply(t0, t31, t46)
+    multiply(t3, t20, t47)
+    subtract(t46, t47, t46)
+    multiply(t46, qd_4, t47)
+    add(t45, t47, t45)
+    multiply(k0, t45, t47)
+    multiply(t46, t35, t35)
+    multiply(k0, t46, t48)
+    multiply(t29, t48, t49)
+    subtract(t35, t49, t35)
+    add(t47, t35, t47)
+    multiply(t0, t40, t40)
+    multiply(t3, t24, t24)
+    subtract(t40, t24, t40)
+    multiply(t0, t5, t24)
+    multiply(t3, t27, t27)
+    add(t24, t27, t24)
+    subtract(t40, t24, t24)
+    multiply(k2, t24, t27)
+    subtract(t47, t27, t47)
+    multiply(t3, t47, t27)
+    add(t44, t27, t44)
+    add(t22, t44, t22)
+    multiply(k3, t43, t43)
+    multiply(k2, t36, t27)
+    subtract(t43, t27, t43)
+    multiply(k2, t32, t27)
+    multiply(t29, t27, t35)
+    add(t43, t35, t43)
+    multiply(t0, t43, t35)
+    multiply(k3, t24, t24)
+    multiply(k2, t45, t44)
+    subtract(t24, t44, t24)
+    multiply(k2, t46, t44)
+    multiply(t29, t44, t49)
+    add(t24, t49, t24)
+    multiply(t3, t24, t49)
+    subtract(t35, t49, t35)
+    multiply(p_1, t35, t49)
+    add(t22, t49, bias_3)
+    add(t13, bias_3, t13)
+    multiply(jacobian_tcp_18, t13, t13)
+    multiply(k6, t37, t22)
+    multiply(t30, t14, t14)
+    multiply(k5, t30, t49)
+    multiply(qd_2, t49, t50)
+    subtract(t14, t50, t14)
+    add(t22, t14, t22)
+    multiply(t10, t37, t37)
+    multiply(t20, qd_3, t14)
+    add(t37, t14, t37)
+    multiply(k16, t37, t14)
+    multiply(k4, t31, t50)
+    multiply(t20, t50, t51)
+    multiply(t31, t21, t21)
+    subtract(t51, t21, t51)
+    add(t14, t51, t14)
+    multiply(k13, t37, t21)
+    multiply(t32, t48, t48)
+    multiply(t46, t33, t33)
+    subtract(t48, t33, t48)
+    add(t21, t48, bias_4)
+    add(t14, bias_4, t14)
+    multiply(t10, t14, t21)
+    multiply(k4, t38, t33)
+    multiply(t31, t23, t23)
+    multiply(t19, t50, t50)
+    subtract(t23, t50, t23)
+    add(t33, t23, t33)
+    add(t2, t5, t2)
+    multiply(k17, t2, t5)
+    add(t33, t5, t33)
+    multiply(t0, t47, t47)
+    multiply(t3, t34, t34)
+    subtract(t47, t34, t47)
+    add(t33, t47, t33)
+    multiply(t0, t24, t24)
+    multiply(t3, t43, t43)
+    add(t24, t43, t24)
+    multiply(p_1, t24, t5)
+    subtract(t33, t5, t33)
+    multiply(t8, t33, t5)
+    add(t21, t5, t21)
+    add(t22, t21, t22)
+    multiply(t7, t22, t22)
+    add(t13, t22, t13)
+    add(t9, t13, t9)
+    add(t1, t9, t1)
+    multiply(k18, t6, t6)
+    add(t25, t26, t5)
+    multiply(k19, t5, t5)
+    multiply(k12, t30, t9)
+    multiply(t30, t9, t13)
+    multiply(k12, qd_2, t21)
+    multiply(qd_2, t21, t22)
+    add(t13, t22, t13)
+    subtract(t5, t13, t5)
+    multiply(t10, t25, t25)
+    multiply(t8, t17, t17)
+    subtract(t25, t17, t25)
+    multiply(t8, t16, t16)
+    multiply(t10, t26, t26)
+    add(t16, t26, t16)
+    add(t25, t16, t13)
+    multiply(k20, t13, t13)
+    multiply(k17, t20, t17)
+    multiply(t20, t17, t22)
+    multiply(k17, t31, t23)
+    multiply(t31, t23, t26)
+    add(t22, t26, t22)
+    subtract(t13, t22, t13)
+    multiply(t20, t42, t20)
+    multiply(t31, t39, t31)
+    add(t20, t31, t20)
+    subtract(t25, t20, t25)
+    add(t25, t16, t16)
+    multiply(k3, t16, t16)
+    multiply(t32, t27, t27)
+    multiply(t46, t44, t44)
+    add(t27, t44, t27)
+    subtract(t16, t27, t16)
+    add(t13, t16, t13)
+    multiply(t10, t13, t16)
+    multiply(k20, t28, t28)
+    multiply(k17, t15, t20)
+    subtract(t28, t20, t28)
+    multiply(t19, t17, t17)
+    add(t28, t17, t28)
+    add(t28, t35, t28)
+    multiply(t8, t28, t17)
+    add(t16, t17, t16)
+    add(t5, t16, t5)
+    multiply(jacobian_tcp_18, t5, t5)
+    multiply(t11, t9, t9)
+    multiply(k19, t2, t16)
+    subtract(t9, t16, t9)
+    multiply(t19, t23, t19)
+    multiply(k20, t2, t16)
+    multiply(k17, t38, t38)
+    add(t16, t38, t16)
+    subtract(t19, t16, t19)
+    add(t19, t24, t19)
+    add(t9, t19, t9)
+    multiply(t7, t9, t9)
+    subtract(t5, t9, t5)
+    add(t6, t5, t6)
+    multiply(t4, t6, t4)
+    add(t1, t4, bias_0)
+    multiply(k18, t18, t1)
+    multiply(k9, qd_0, t4)
+    multiply(qd_0, t4, t4)
+    subtract(t1, t4, t1)
+    multiply(k19, t18, t18)
+    multiply(k12, t15, t15)
+    add(t18, t15, t18)
+    multiply(t11, t21, t21)
+    add(t18, t21, t18)
+    multiply(t8, t13, t13)
+    multiply(t10, t28, t28)
+    subtract(t13, t28, t13)
+    add(t18, t13, t18)
+    add(t1, t18, bias_1)
+    multiply(t11, t49, t11)
+    multiply(t30, t12, t30)
+    subtract(t11, t30, t11)
+    multiply(k12, t2, t2)
+    subtract(t11, t2, t11)
+    multiply(t8, t14, t14)
+    multiply(t10, t33, t33)
+    subtract(t14, t33, t14)
+    add(t11, t14, bias_2)
+    multiply(jacobian_tcp_18, t0, t1)
+    multiply(t7, t8, t2)
+    multiply(t2, t3, t4)
+    subtract(t1, t4, fk_tcp_0)
+    multiply(jacobian_tcp_11, t7, jacobian_tcp_23)
+    multiply(jacobian_tcp_23, t0, t1)
+    multiply(jacobian_tcp_6, t10, t4)
+    multiply(jacobian_tcp_11, jacobian_tcp_18, t5)
+    multiply(t5, t8, t6)
+    add(t4, t6, t4)
+    multiply(t4, t3, t6)
+    add(t1, t6, fk_tcp_4)
+    multiply(jacobian_tcp_6, t7, t1)
+    multiply(t1, t0, t6)
+    multiply(jacobian_tcp_6, jacobian_tcp_18, t9)
+    multiply(t9, t8, t11)
+    multiply(jacobian_tcp_11, t10, t12)
+    subtract(t11, t12, t11)
+    multiply(t11, t3, t12)
+    add(t6, t12, t6)
+    negative(t6, fk_tcp_8)
+    multiply(t7, t10, fk_tcp_1)
+    multiply(jacobian_tcp_6, t8, t7)
+    multiply(t5, t10, t5)
+    subtract(t7, t5, fk_tcp_5)
+    multiply(jacobian_tcp_11, t8, t8)
+    multiply(t9, t10, t9)
+    add(t8, t9, fk_tcp_9)
+    multiply(jacobian_tcp_18, t3, t5)
+    multiply(t2, t0, t2)
+    add(t5, t2, fk_tcp_2)
+    multiply(jacobian_tcp_23, t3, t2)
+    multiply(t4, t0, t4)
+    subtract(t2, t4, fk_tcp_6)
+    multiply(t11, t0, t11)
+    multiply(t1, t3, t3)
+    subtract(t11, t3, fk_tcp_10)
+    multiply(fk_tcp_1, p_1, t0)
+    multiply(fk_tcp_1, p_2, t2)
+    add(t0, t2, fk_tcp_3)
+    multiply(jacobian_tcp_6, p_0, t0)
+    multiply(jacobian_tcp_6, q_1, t3)
+    add(t0, t3, t0)
+    multiply(fk_tcp_5, p_1, t3)
+    add(t0, t3, t3)
+    multiply(fk_tcp_5, p_2, t4)
+    add(t3, t4, fk_tcp_7)
+    multiply(jacobian_tcp_11, p_0, t3)
+    multiply(jacobian_tcp_11, q_1, t5)
+    add(t3, t5, t3)
+    multiply(fk_tcp_9, p_1, t5)
+    add(t3, t5, t5)
+    multiply(fk_tcp_9, p_2, t7)
+    add(t5, t7, fk_tcp_11)
+    negative(fk_tcp_11, jacobian_tcp_5)
+    subtract(fk_tcp_11, t3, t3)
+    multiply(jacobian_tcp_6, t3, t5)
+    subtract(fk_tcp_7, t0, t0)
+    multiply(jacobian_tcp_11, t0, t8)
+    subtract(t5, t8, jacobian_tcp_2)
+    multiply(jacobian_tcp_11, fk_tcp_3, jacobian_tcp_7)
+    multiply(jacobian_tcp_6, fk_tcp_3, t5)
+    negative(t5, jacobian_tcp_12)
+    multiply(jacobian_tcp_23, t3, t5)
+    multiply(t1, t0, t8)
+    add(t5, t8, jacobian_tcp_3)
+    multiply(t1, fk_tcp_3, t5)
+    multiply(jacobian_tcp_18, t3, t3)
+    add(t5, t3, t5)
+    negative(t5, jacobian_tcp_8)
+    multiply(jacobian_tcp_18, t0, t0)
+    multiply(jacobian_tcp_23, fk_tcp_3, t3)
+    subtract(t0, t3, jacobian_tcp_13)
+    negative(t1, jacobian_tcp_28)
+    multiply(fk_tcp_5, t7, t0)
+    multiply(fk_tcp_9, t4, t1)
+    subtract(t0, t1, jacobian_tcp_4)
+    multiply(fk_tcp_9, t2, t0)
+    multiply(fk_tcp_1, t7, t7)
+    subtract(t0, t7, jacobian_tcp_9)
+    multiply(fk_tcp_1, t4, t4)
+    multiply(fk_tcp_5, t2, t2)
+    subtract(t4, t2, jacobian_tcp_14)
+    multiply(t45, p_2, t0)
+    subtract(t40, t0, t40)
+    multiply(t46, p_2, t0)
+    multiply(t29, t0, t1)
+    add(t40, t1, t40)
+    multiply(fk_tcp_0, t40, t1)
+    multiply(t32, p_2, t2)
+    multiply(t32, t2, t32)
+    multiply(t46, t0, t46)
+    add(t32, t46, t32)
+    subtract(t25, t32, t25)
+    multiply(fk_tcp_1, t25, t0)
+    add(t1, t0, t1)
+    multiply(t36, p_2, t0)
+    subtract(t41, t0, t41)
+    multiply(t29, t2, t29)
+    add(t41, t29, t41)
+    multiply(fk_tcp_2, t41, t0)
+    add(t1, t0, jdot_qd_tcp_0)
+    multiply(fk_tcp_4, t40, t0)
+    multiply(fk_tcp_5, t25, t1)
+    add(t0, t1, t0)
+    multiply(fk_tcp_6, t41, t1)
+    add(t0, t1, jdot_qd_tcp_1)
+    multiply(fk_tcp_9, t25, t25)
+    multiply(t6, t40, t40)
+    subtract(t25, t40, t25)
+    multiply(fk_tcp_10, t41, t41)
+    add(t25, t41, jdot_qd_tcp_2)
+    multiply(fk_tcp_1, t37, t0)
+    multiply(fk_tcp_0, t36, t1)
+    subtract(t0, t1, t0)
+    multiply(fk_tcp_2, t45, t1)
+    add(t0, t1, jdot_qd_tcp_3)
+    multiply(fk_tcp_5, t37, t0)
+    multiply(fk_tcp_4, t36, t1)
+    subtract(t0, t1, t0)
+    multiply(fk_tcp_6, t45, t1)
+    add(t0, t1, jdot_qd_tcp_4)
+    multiply(t6, t36, t6)
+    multiply(fk_tcp_9, t37, t37)
+    add(t6, t37, t6)
+    multiply(fk_tcp_10, t45, t45)
+    add(t6, t45, jdot_qd_tcp_5)
+    copyto(mass_matrix_5, mass_matrix_1)
+    copyto(mass_matrix_10, mass_matrix_2)
+    copyto(mass_matrix_15, mass_matrix_3)
+    copyto(mass_matrix_16, mass_matrix_8)
+    copyto(mass_matrix_17, mass_matrix_13)
+    copyto(mass_matrix_20, mass_matrix_4)
+    copyto(mass_matrix_22, mass_matrix_14)
+    copyto(jacobian_tcp_10, fk_tcp_7)
+    copyto(jacobian_tcp_19, fk_tcp_1)
+    copyto(jacobian_tcp_22, jacobian_tcp_6)
+    copyto(jacobian_tcp_24, fk_tcp_5)
+    copyto(jacobian_tcp_27, jacobian_tcp_11)
+    copyto(jacobian_tcp_29, fk_tcp_9)
+
+
+def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
+    """Control tick 'computed_torque': inverse_dynamics (5), fk_tcp (4x4), jacobian_tcp (6x5), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name. p (3): parameters L1, L2, L_tcp.
+
+    in  q [5]
+    in  qd [5]
+    in  qdd [5]
+    in  p [3]
+    out inverse_dynamics [5]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x5]
+    out frame_acceleration_tcp [6]
+    422 ops: 245 mul, 169 add, 0 div, 8 trig
+    """
+    q = _array(q, 5, "q")
+    qd = _array(qd, 5, "qd")
+    qdd = _array(qdd, 5, "qdd")
+    p = _array(p, 3, "p")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_computed_torque_chunk, (q, qd, qdd, p), 53, ((5,), (4, 4), (6, 5), (6,),), fixed=_bundle_computed_torque_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = 0.020000000000000004 * qdd[0]
+    t1 = cos(q[0])
+    t2 = 0.9810000000000001 * t1
+    t0 = t0 + t2
+    t2 = 0.01 * qdd[0]
+    t3 = p[0] + q[1]
+    t4 = qdd[0] * t3
+    t5 = qd[0] * qd[1]
+    t5 = t5 + t5
+    t4 = t4 + t5
+    t5 = 9.81 * t1
+    t6 = t4 + t5
+    t7 = 0.04000000000000001 * t6
+    t2 = t2 + t7
+    t7 = cos(q[2])
+    t8 = t7 * qdd[0]
+    t9 = sin(q[2])
+    t10 = t9 * qd[0]
+    t11 = t10 * qd[2]
+    t8 = t8 - t11
+    t11 = 0.00424 * t8
+    t12 = 0.003 * t10
+    t13 = qd[2] * t12
+    t14 = 0.00424 * qd[2]
+    t15 = t10 * t14
+    t13 = t13 - t15
+    t11 = t11 + t13
+    t13 = qd[0] * t3
+    t13 = qd[0] * t13
+    t13 = qdd[1] - t13
+    t15 = sin(q[0])
+    t16 = 9.81 * t15
+    t17 = t13 + t16
+    t18 = 0.012 * t17
+    t11 = t11 - t18
+    t18 = t8 + qdd[3]
+    t19 = 0.009000000000000001 * t18
+    t20 = cos(q[3])
+    t21 = t20 * qd[2]
+    t22 = sin(q[3])
+    t23 = t22 * t10
+    t21 = t21 + t23
+    t23 = t20 * t10
+    t24 = t22 * qd[2]
+    t23 = t23 - t24
+    t24 = 0.009000000000000001 * t23
+    t25 = t21 * t24
+    t26 = 0.002 * t21
+    t27 = t23 * t26
+    t25 = t25 - t27
+    t19 = t19 + t25
+    t25 = t7 * t4
+    t27 = t20 * t25
+    t28 = t22 * t13
+    t27 = t27 - t28
+    t28 = t7 * t5
+    t29 = t20 * t28
+    t30 = t22 * t16
+    t29 = t29 - t30
+    t30 = t27 + t29
+    t31 = 0.05 * t30
+    t19 = t19 + t31
+    t31 = cos(q[4])
+    t32 = t31 * t18
+    t33 = sin(q[4])
+    t34 = t9 * qdd[0]
+    t35 = t7 * qd[0]
+    t36 = t35 * qd[2]
+    t34 = t34 + t36
+    t36 = t20 * t34
+    t37 = t22 * qdd[2]
+    t36 = t36 - t37
+    t37 = t21 * qd[3]
+    t36 = t36 - t37
+    t37 = t33 * t36
+    t32 = t32 - t37
+    t37 = t35 + qd[3]
+    t38 = t33 * t37
+    t39 = t31 * t23
+    t38 = t38 + t39
+    t39 = t38 * qd[4]
+    t32 = t32 - t39
+    t39 = 0.0027500000000000003 * t32
+    t40 = t21 + qd[4]
+    t41 = 0.0027500000000000003 * t38
+    t42 = t40 * t41
+    t43 = 0.001 * t40
+    t44 = t38 * t43
+    t42 = t42 - t44
+    t39 = t39 + t42
+    t42 = t37 * p[1]
+    t44 = t21 * t42
+    t4 = t9 * t4
+    t45 = t36 * p[1]
+    t45 = t4 + t45
+    t44 = t44 - t45
+    t45 = t33 * t44
+    t46 = t18 * p[1]
+    t27 = t27 + t46
+    t46 = t23 * p[1]
+    t47 = t21 * t46
+    t27 = t27 + t47
+    t47 = t31 * t27
+    t45 = t45 + t47
+    t47 = t31 * t29
+    t5 = t9 * t5
+    t48 = t33 * t5
+    t47 = t47 - t48
+    t47 = t45 + t47
+    t48 = 0.015 * t47
+    t39 = t39 + t48
+    t48 = t31 * t39
+    t49 = t33 * t18
+    t50 = t31 * t36
+    t49 = t49 + t50
+    t50 = t31 * t37
+    t51 = t33 * t23
+    t50 = t50 - t51
+    t51 = t50 * qd[4]
+    t49 = t49 + t51
+    t51 = 0.0027500000000000003 * t49
+    t43 = t50 * t43
+    t52 = 0.0027500000000000003 * t50
+    t53 = t40 * t52
+    t43 = t43 - t53
+    t43 = t51 + t43
+    t44 = t31 * t44
+    t27 = t33 * t27
+    t27 = t44 - t27
+    t44 = t31 * t5
+    t29 = t33 * t29
+    t29 = t44 + t29
+    t29 = t27 - t29
+    t44 = 0.015 * t29
+    t43 = t43 - t44
+    t44 = t33 * t43
+    t44 = t48 + t44
+    t19 = t19 + t44
+    t44 = 0.3 * t47
+    t47 = 0.015 * t32
+    t44 = t44 + t47
+    t47 = 0.015 * t38
+    t48 = t40 * t47
+    t44 = t44 + t48
+    t48 = t31 * t44
+    t29 = 0.3 * t29
+    t51 = 0.015 * t49
+    t29 = t29 - t51
+    t51 = 0.015 * t50
+    t53 = t40 * t51
+    t29 = t29 + t53
+    t53 = t33 * t29
+    t48 = t48 - t53
+    t53 = p[1] * t48
+    t19 = t19 + t53
+    t11 = t11 + t19
+    t11 = t7 * t11
+    t53 = 0.003 * t34
+    t14 = t35 * t14
+    t54 = 0.00424 * t35
+    t55 = qd[2] * t54
+    t14 = t14 - t55
+    t14 = t53 + t14
+    t53 = t20 * qdd[2]
+    t34 = t22 * t34
+    t34 = t53 + t34
+    t53 = t23 * qd[3]
+    t34 = t34 + t53
+    t53 = 0.002 * t34
+    t55 = 0.009000000000000001 * t37
+    t56 = t23 * t55
+    t24 = t37 * t24
+    t24 = t56 - t24
+    t24 = t53 + t24
+    t34 = t34 + qdd[4]
+    t53 = 0.001 * t34
+    t52 = t38 * t52
+    t41 = t50 * t41
+    t41 = t52 - t41
+    t41 = t53 + t41
+    t24 = t24 + t41
+    t52 = t22 * t24
+    t53 = 0.009000000000000001 * t36
+    t26 = t37 * t26
+    t55 = t21 * t55
+    t26 = t26 - t55
+    t26 = t53 + t26
+    t4 = t4 + t5
+    t5 = 0.05 * t4
+    t5 = t26 + t5
+    t26 = t31 * t43
+    t39 = t33 * t39
+    t26 = t26 - t39
+    t5 = t5 + t26
+    t26 = t31 * t29
+    t29 = t33 * t44
+    t26 = t26 + t29
+    t29 = p[1] * t26
+    t5 = t5 - t29
+    t29 = t20 * t5
+    t29 = t52 + t29
+    t14 = t14 + t29
+    t14 = t9 * t14
+    t11 = t11 + t14
+    t2 = t2 + t11
+    t0 = t0 + t2
+    t2 = 0.8 * t6
+    t6 = 0.04000000000000001 * qdd[0]
+    t2 = t2 + t6
+    t6 = t25 + t28
+    t6 = 0.6 * t6
+    t11 = 0.012 * t35
+    t14 = t35 * t11
+    t29 = 0.012 * qd[2]
+    t39 = qd[2] * t29
+    t14 = t14 + t39
+    t6 = t6 - t14
+    t13 = t20 * t13
+    t14 = t22 * t25
+    t13 = t13 + t14
+    t14 = t20 * t16
+    t16 = t22 * t28
+    t14 = t14 + t16
+    t16 = t13 + t14
+    t16 = 0.5 * t16
+    t25 = 0.05 * t23
+    t28 = t23 * t25
+    t39 = 0.05 * t37
+    t43 = t37 * t39
+    t28 = t28 + t43
+    t16 = t16 - t28
+    t23 = t23 * t46
+    t28 = t37 * t42
+    t23 = t23 + t28
+    t13 = t13 - t23
+    t14 = t13 + t14
+    t14 = 0.3 * t14
+    t23 = t38 * t47
+    t28 = t50 * t51
+    t23 = t23 + t28
+    t14 = t14 - t23
+    t14 = t16 + t14
+    t16 = t22 * t14
+    t23 = 0.5 * t30
+    t18 = 0.05 * t18
+    t18 = t23 + t18
+    t23 = t21 * t25
+    t18 = t18 + t23
+    t18 = t18 + t48
+    t23 = t20 * t18
+    t16 = t16 + t23
+    t6 = t6 + t16
+    t6 = t7 * t6
+    t16 = 0.012 * qdd[2]
+    t23 = 0.6 * t4
+    t16 = t16 - t23
+    t11 = t10 * t11
+    t11 = t16 + t11
+    t16 = t21 * t39
+    t21 = 0.5 * t4
+    t23 = 0.05 * t36
+    t21 = t21 + t23
+    t16 = t16 - t21
+    t16 = t16 + t26
+    t11 = t11 + t16
+    t11 = t9 * t11
+    t6 = t6 - t11
+    t2 = t2 + t6
+    t2 = t3 * t2
+    t0 = t0 + t2
+    t2 = 0.8 * t17
+    t3 = 0.04000000000000001 * qd[0]
+    t3 = qd[0] * t3
+    t2 = t2 - t3
+    t3 = 0.6 * t17
+    t6 = 0.012 * t8
+    t3 = t3 - t6
+    t6 = t10 * t29
+    t3 = t3 + t6
+    t6 = t20 * t14
+    t8 = t22 * t18
+    t6 = t6 - t8
+    t3 = t3 + t6
+    t2 = t2 + t3
+    t3 = 0.00424 * qdd[2]
+    t6 = t10 * t54
+    t8 = t35 * t12
+    t6 = t6 - t8
+    t3 = t3 + t6
+    t4 = 0.012 * t4
+    t3 = t3 - t4
+    t4 = t20 * t24
+    t5 = t22 * t5
+    t4 = t4 - t5
+    t3 = t3 + t4
+    t4 = t7 * t31
+    t5 = t9 * t20
+    t6 = t5 * t33
+    t4 = t4 - t6
+    t6 = t15 * t9
+    t8 = t6 * t31
+    t10 = t1 * t22
+    t11 = t15 * t7
+    t12 = t11 * t20
+    t10 = t10 + t12
+    t12 = t10 * t33
+    t8 = t8 + t12
+    t12 = t1 * t9
+    t14 = t12 * t31
+    t16 = t1 * t7
+    t17 = t16 * t20
+    t18 = t15 * t22
+    t17 = t17 - t18
+    t18 = t17 * t33
+    t14 = t14 + t18
+    t18 = -t14
+    t9 = t9 * t22
+    t21 = t1 * t20
+    t11 = t11 * t22
+    t11 = t21 - t11
+    t20 = t15 * t20
+    t16 = t16 * t22
+    t16 = t20 + t16
+    t20 = t7 * t33
+    t5 = t5 * t31
+    t5 = t20 + t5
+    t20 = t6 * t33
+    t10 = t10 * t31
+    t10 = t20 - t10
+    t17 = t17 * t31
+    t20 = t12 * t33
+    t17 = t17 - t20
+    t20 = t9 * p[1]
+    t21 = t9 * p[2]
+    t20 = t20 + t21
+    t22 = t1 * p[0]
+    t23 = t1 * q[1]
+    t22 = t22 + t23
+    t23 = t11 * p[1]
+    t23 = t22 + t23
+    t24 = t11 * p[2]
+    t23 = t23 + t24
+    t25 = t15 * p[0]
+    t26 = t15 * q[1]
+    t25 = t25 + t26
+    t26 = t16 * p[1]
+    t26 = t25 + t26
+    t28 = t16 * p[2]
+    t26 = t26 + t28
+    t29 = -t26
+    t25 = t26 - t25
+    t30 = t1 * t25
+    t22 = t23 - t22
+    t31 = t15 * t22
+    t30 = t30 - t31
+    t31 = t15 * t20
+    t33 = t1 * t20
+    t33 = -t33
+    t35 = t6 * t25
+    t36 = t12 * t22
+    t35 = t35 + t36
+    t36 = t12 * t20
+    t25 = t7 * t25
+    t25 = t36 + t25
+    t25 = -t25
+    t22 = t7 * t22
+    t36 = t6 * t20
+    t22 = t22 - t36
+    t12 = -t12
+    t36 = t11 * t28
+    t37 = t16 * t24
+    t36 = t36 - t37
+    t37 = t16 * t21
+    t28 = t9 * t28
+    t28 = t37 - t28
+    t24 = t9 * t24
+    t21 = t11 * t21
+    t21 = t24 - t21
+    t24 = t49 * p[2]
+    t24 = t27 - t24
+    t27 = t50 * p[2]
+    t37 = t40 * t27
+    t24 = t24 + t37
+    t37 = t4 * t24
+    t39 = t38 * p[2]
+    t38 = t38 * t39
+    t27 = t50 * t27
+    t27 = t38 + t27
+    t13 = t13 - t27
+    t27 = t9 * t13
+    t27 = t37 + t27
+    t37 = t32 * p[2]
+    t37 = t45 + t37
+    t38 = t40 * t39
+    t37 = t37 + t38
+    t38 = t5 * t37
+    t27 = t27 + t38
+    t38 = t8 * t24
+    t39 = t11 * t13
+    t38 = t38 + t39
+    t39 = t10 * t37
+    t38 = t38 + t39
+    t13 = t16 * t13
+    t24 = t14 * t24
+    t13 = t13 - t24
+    t24 = t17 * t37
+    t13 = t13 + t24
+    t24 = t4 * t32
+    t37 = t9 * t34
+    t24 = t24 + t37
+    t37 = t5 * t49
+    t24 = t24 + t37
+    t37 = t8 * t32
+    t39 = t11 * t34
+    t37 = t37 + t39
+    t39 = t10 * t49
+    t37 = t37 + t39
+    t34 = t16 * t34
+    t14 = t14 * t32
+    t14 = t34 - t14
+    t32 = t17 * t49
+    t14 = t14 + t32
+    _inverse_dynamics = (t0, t2, t3, t19, t41)
+    _fk_tcp = (t4, t9, t5, t20,
+               t8, t11, t10, t23,
+               t18, t16, t17, t26,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (0.0, 0.0, t30, t35, t36,
+                     t29, t1, t31, t25, t28,
+                     t23, t15, t33, t22, t21,
+                     1.0, 0.0, 0.0, t7, t9,
+                     0.0, 0.0, t1, t6, t11,
+                     0.0, 0.0, t15, t12, t16)
+    _frame_acceleration_tcp = (t27, t38, t13, t24, t37, t14)
+    return np.array(_inverse_dynamics), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 5), np.array(_frame_acceleration_tcp)
+
+
+_bundle_computed_torque_constants = _constants(
+    0.020000000000000004, 0.9810000000000001, 0.01, 9.81, 0.04000000000000001, 0.00424, 0.003, 0.012,
+    0.009000000000000001, 0.002, 0.05, 0.0027500000000000003, 0.001, 0.015, 0.3, 0.8, 0.6, 0.5)
+
+
+_bundle_computed_torque_fixed = (
+    {},
+    {12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {0: 0.0, 1: 0.0, 15: 1.0, 16: 0.0, 17: 0.0, 20: 0.0, 21: 0.0, 25: 0.0, 26: 0.0},
+    {},
+)
+"""bundle_computed_torque's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_computed_torque_chunk(x, t, s, y):
+    """bundle_computed_torque on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    (q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, qdd_0, qdd_1, qdd_2, qdd_3, qdd_4, p_0, p_1,
+     p_2) = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52) = t
+    (inverse_dynamics_0, inverse_dynamics_1, inverse_dynamics_2, inverse_dynamics_3, inverse_dynamics_4,
+     fk_tcp_0, fk_tcp_1, fk_tcp_2, fk_tcp_3, fk_tcp_4, fk_tcp_5, fk_tcp_6, fk_tcp_7, fk_tcp_8, fk_tcp_9,
+     fk_tcp_10, fk_tcp_11, jacobian_tcp_2, jacobian_tcp_3, jacobian_tcp_4, jacobian_tcp_5, jacobian_tcp_6,
+     jacobian_tcp_7, jacobian_tcp_8, jacobian_tcp_9, jacobian_tcp_10, jacobian_tcp_11, jacobian_tcp_12,
+     jacobian_tcp_13, jacobian_tcp_14, jacobian_tcp_18, jacobian_tcp_19, jacobian_tcp_22, jacobian_tcp_23,
+     jacobian_tcp_24, jacobian_tcp_27, jacobian_tcp_28, jacobian_tcp_29, frame_acceleration_tcp_0,
+     frame_acceleration_tcp_1, frame_acceleration_tcp_2, frame_acceleration_tcp_3,
+     frame_acceleration_tcp_4, frame_acceleration_tcp_5) = y
+    k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17 = _bundle_computed_torque_constants
+    multiply(k0, qdd_0, t0)
+    cos(q_0, jacobian_tcp_6)
+    multiply(k1, jacobian_tcp_6, t1)
+    add(t0, t1, t0)
+    multiply(k2, qdd_0, t1)
+    add(p_0, q_1, t2)
+    multiply(qdd_0, t2, t3)
+    multiply(qd_0, qd_1, t4)
+    add(t4, t4, t4)
+    add(t3, t4, t3)
+    multiply(k3, jacobian_tcp_6, t4)
+    add(t3, t4, t5)
+    multiply(k4, t5, t6)
+    add(t1, t6, t1)
+    cos(q_2, jacobian_tcp_18)
+    multiply(jacobian_tcp_18, qdd_0, t6)
+    sin(q_2, t7)
+    multiply(t7, qd_0, t8)
+    multiply(t8, qd_2, t9)
+    subtract(t6, t9, t6)
+    multiply(k5, t6, t9)
+    multiply(k6, t8, t10)
+    multiply(qd_2, t10, t11)
+    multiply(k5, qd_2, t12)
+    multiply(t8, t12, t13)
+    subtract(t11, t13, t11)
+    add(t9, t11, t9)
+    multiply(qd_0, t2, t11)
+    multiply(qd_0, t11, t11)
+    subtract(qdd_1, t11, t11)
+    sin(q_0, jacobian_tcp_11)
+    multiply(k3, jacobian_tcp_11, t13)
+    add(t11, t13, t14)
+    multiply(k7, t14, t15)
+    subtract(t9, t15, t9)
+    add(t6, qdd_3, t15)
+    multiply(k8, t15, t16)
+    cos(q_3, t17)
+    multiply(t17, qd_2, t18)
+    sin(q_3, t19)
+    multiply(t19, t8, t20)
+    add(t18, t20, t18)
+    multiply(t17, t8, t20)
+    multiply(t19, qd_2, t21)
+    subtract(t20, t21, t20)
+    multiply(k8, t20, t21)
+    multiply(t18, t21, t22)
+    multiply(k9, t18, t23)
+    multiply(t20, t23, t24)
+    subtract(t22, t24, t22)
+    add(t16, t22, t16)
+    multiply(jacobian_tcp_18, t3, t22)
+    multiply(t17, t22, t24)
+    multiply(t19, t11, t25)
+    subtract(t24, t25, t24)
+    multiply(jacobian_tcp_18, t4, t25)
+    multiply(t17, t25, t26)
+    multiply(t19, t13, t27)
+    subtract(t26, t27, t26)
+    add(t24, t26, t27)
+    multiply(k10, t27, t28)
+    add(t16, t28, t16)
+    cos(q_4, t28)
+    multiply(t28, t15, t29)
+    sin(q_4, t30)
+    multiply(t7, qdd_0, t31)
+    multiply(jacobian_tcp_18, qd_0, t32)
+    multiply(t32, qd_2, t33)
+    add(t31, t33, t31)
+    multiply(t17, t31, t33)
+    multiply(t19, qdd_2, t34)
+    subtract(t33, t34, t33)
+    multiply(t18, qd_3, t34)
+    subtract(t33, t34, t33)
+    multiply(t30, t33, t34)
+    subtract(t29, t34, t29)
+    add(t32, qd_3, t34)
+    multiply(t30, t34, t35)
+    multiply(t28, t20, t36)
+    add(t35, t36, t35)
+    multiply(t35, qd_4, t36)
+    subtract(t29, t36, t29)
+    multiply(k11, t29, t36)
+    add(t18, qd_4, t37)
+    multiply(k11, t35, t38)
+    multiply(t37, t38, t39)
+    multiply(k12, t37, t40)
+    multiply(t35, t40, t41)
+    subtract(t39, t41, t39)
+    add(t36, t39, t36)
+    multiply(t34, p_1, t39)
+    multiply(t18, t39, t41)
+    multiply(t7, t3, t3)
+    multiply(t33, p_1, t42)
+    add(t3, t42, t42)
+    subtract(t41, t42, t41)
+    multiply(t30, t41, t42)
+    multiply(t15, p_1, t43)
+    add(t24, t43, t24)
+    multiply(t20, p_1, t43)
+    multiply(t18, t43, t44)
+    add(t24, t44, t24)
+    multiply(t28, t24, t44)
+    add(t42, t44, t42)
+    multiply(t28, t26, t44)
+    multiply(t7, t4, t4)
+    multiply(t30, t4, t45)
+    subtract(t44, t45, t44)
+    add(t42, t44, t44)
+    multiply(k13, t44, t45)
+    add(t36, t45, t36)
+    multiply(t28, t36, t45)
+    multiply(t30, t15, t46)
+    multiply(t28, t33, t47)
+    add(t46, t47, t46)
+    multiply(t28, t34, t47)
+    multiply(t30, t20, t48)
+    subtract(t47, t48, t47)
+    multiply(t47, qd_4, t48)
+    add(t46, t48, t46)
+    multiply(k11, t46, t48)
+    multiply(t47, t40, t40)
+    multiply(k11, t47, t49)
+    multiply(t37, t49, t50)
+    subtract(t40, t50, t40)
+    add(t48, t40, t48)
+    multiply(t28, t41, t41)
+    multiply(t30, t24, t24)
+    subtract(t41, t24, t41)
+    multiply(t28, t4, t24)
+    multiply(t30, t26, t26)
+    add(t24, t26, t24)
+    subtract(t41, t24, t24)
+    multiply(k13, t24, t26)
+    subtract(t48, t26, t48)
+    multiply(t30, t48, t26)
+    add(t45, t26, t45)
+    add(t16, t45, t16)
+    multiply(k14, t44, t44)
+    multiply(k13, t29, t26)
+    add(t44, t26, t44)
+    multiply(k13, t35, t26)
+    multiply(t37, t26, t40)
+    add(t44, t40, t44)
+    multiply(t28, t44, t40)
+    multiply(k14, t24, t24)
+    multiply(k13, t46, t45)
+    subtract(t24, t45, t24)
+    multiply(k13, t47, t45)
+    multiply(t37, t45, t50)
+    add(t24, t50, t24)
+    multiply(t30, t24, t50)
+    subtract(t40, t50, t40)
+    multiply(p_1, t40, t50)
+    add(t16, t50, inverse_dynamics_3)
+    add(t9, inverse_dynamics_3, t9)
+    multiply(jacobian_tcp_18, t9, t9)
+    multiply(k6, t31, t16)
+    multiply(t32, t12, t12)
+    multiply(k5, t32, t50)
+    multiply(qd_2, t50, t51)
+    subtract(t12, t51, t12)
+    add(t16, t12, t16)
+    multiply(t17, qdd_2, t12)
+    multiply(t19, t31, t31)
+    add(t12, t31, t12)
+    multiply(t20, qd_3, t31)
+    add(t12, t31, t12)
+    multiply(k9, t12, t31)
+    multiply(k8, t34, t51)
+    multiply(t20, t51, t52)
+    multiply(t34, t21, t21)
+    subtract(t52, t21, t52)
+    add(t31, t52, t31)
+    add(t12, qdd_4, t12)
+    multiply(k12, t12, t21)
+    multiply(t35, t49, t49)
+    multiply(t47, t38, t38)
+    subtract(t49, t38, t49)
+    add(t21, t49, inverse_dynamics_4)
+    add(t31, inverse_dynamics_4, t31)
+    multiply(t19, t31, t21)
+    multiply(k8, t33, t38)
+    multiply(t34, t23, t23)
+    multiply(t18, t51, t51)
+    subtract(t23, t51, t23)
+    add(t38, t23, t38)
+    add(t3, t4, t3)
+    multiply(k10, t3, t4)
+    add(t38, t4, t38)
+    multiply(t28, t48, t48)
+    multiply(t30, t36, t36)
+    subtract(t48, t36, t48)
+    add(t38, t48, t38)
+    multiply(t28, t24, t24)
+    multiply(t30, t44, t44)
+    add(t24, t44, t24)
+    multiply(p_1, t24, t4)
+    subtract(t38, t4, t38)
+    multiply(t17, t38, t4)
+    add(t21, t4, t21)
+    add(t16, t21, t16)
+    multiply(t7, t16, t16)
+    add(t9, t16, t9)
+    add(t1, t9, t1)
+    add(t0, t1, t0)
+    multiply(k15, t5, t5)
+    multiply(k4, qdd_0, t1)
+    add(t5, t1, t5)
+    add(t22, t25, t1)
+    multiply(k16, t1, t1)
+    multiply(k7, t32, t4)
+    multiply(t32, t4, t9)
+    multiply(k7, qd_2, t16)
+    multiply(qd_2, t16, t21)
+    add(t9, t21, t9)
+    subtract(t1, t9, t1)
+    multiply(t17, t11, t11)
+    multiply(t19, t22, t22)
+    add(t11, t22, t11)
+    multiply(t17, t13, t13)
+    multiply(t19, t25, t25)
+    add(t13, t25, t13)
+    add(t11, t13, t9)
+    multiply(k17, t9, t9)
+    multiply(k10, t20, t21)
+    multiply(t20, t21, t22)
+    multiply(k10, t34, t23)
+    multiply(t34, t23, t25)
+    add(t22, t25, t22)
+    subtract(t9, t22, t9)
+    multiply(t20, t43, t20)
+    multiply(t34, t39, t34)
+    add(t20, t34, t20)
+    subtract(t11, t20, t11)
+    add(t11, t13, t13)
+    multiply(k14, t13, t13)
+    multiply(t35, t26, t26)
+    multiply(t47, t45, t45)
+    add(t26, t45, t26)
+    subtract(t13, t26, t13)
+    add(t9, t13, t9)
+    multiply(t19, t9, t13)
+    multiply(k17, t27, t27)
+    multiply(k10, t15, t15)
+    add(t27, t15, t27)
+    multiply(t18, t21, t21)
+    add(t27, t21, t27)
+    add(t27, t40, t27)
+    multiply(t17, t27, t15)
+    add(t13, t15, t13)
+    add(t1, t13, t1)
+    multiply(jacobian_tcp_18, t1, t1)
+    multiply(k7, qdd_2, t13)
+    multiply(k16, t3, t15)
+    subtract(t13, t15, t13)
+    multiply(t8, t4, t4)
+    add(t13, t4, t13)
+    multiply(t18, t23, t18)
+    multiply(k17, t3, t4)
+    multiply(k10, t33, t33)
+    add(t4, t33, t4)
+    subtract(t18, t4, t18)
+    add(t18, t24, t18)
+    add(t13, t18, t13)
+    multiply(t7, t13, t13)
+    subtract(t1, t13, t1)
+    add(t5, t1, t5)
+    multiply(t2, t5, t2)
+    add(t0, t2, inverse_dynamics_0)
+    multiply(k15, t14, t0)
+    multiply(k4, qd_0, t1)
+    multiply(qd_0, t1, t1)
+    subtract(t0, t1, t0)
+    multiply(k16, t14, t14)
+    multiply(k7, t6, t6)
+    subtract(t14, t6, t14)
+    multiply(t8, t16, t16)
+    add(t14, t16, t14)
+    multiply(t17, t9, t9)
+    multiply(t19, t27, t27)
+    subtract(t9, t27, t9)
+    add(t14, t9, t14)
+    add(t0, t14, inverse_dynamics_1)
+    multiply(k5, qdd_2, t0)
+    multiply(t8, t50, t8)
+    multiply(t32, t10, t32)
+    subtract(t8, t32, t8)
+    add(t0, t8, t0)
+    multiply(k7, t3, t3)
+    subtract(t0, t3, t0)
+    multiply(t17, t31, t31)
+    multiply(t19, t38, t38)
+    subtract(t31, t38, t31)
+    add(t0, t31, inverse_dynamics_2)
+    multiply(jacobian_tcp_18, t28, t0)
+    multiply(t7, t17, t1)
+    multiply(t1, t30, t2)
+    subtract(t0, t2, fk_tcp_0)
+    multiply(jacobian_tcp_11, t7, jacobian_tcp_23)
+    multiply(jacobian_tcp_23, t28, t0)
+    multiply(jacobian_tcp_6, t19, t2)
+    multiply(jacobian_tcp_11, jacobian_tcp_18, t3)
+    multiply(t3, t17, t4)
+    add(t2, t4, t2)
+    multiply(t2, t30, t4)
+    add(t0, t4, fk_tcp_4)
+    multiply(jacobian_tcp_6, t7, t0)
+    multiply(t0, t28, t4)
+    multiply(jacobian_tcp_6, jacobian_tcp_18, t5)
+    multiply(t5, t17, t6)
+    multiply(jacobian_tcp_11, t19, t8)
+    subtract(t6, t8, t6)
+    multiply(t6, t30, t8)
+    add(t4, t8, t4)
+    negative(t4, fk_tcp_8)
+    multiply(t7, t19, fk_tcp_1)
+    multiply(jacobian_tcp_6, t17, t7)
+    multiply(t3, t19, t3)
+    subtract(t7, t3, fk_tcp_5)
+    multiply(jacobian_tcp_11, t17, t17)
+    multiply(t5, t19, t5)
+    add(t17, t5, fk_tcp_9)
+    multiply(jacobian_tcp_18, t30, t3)
+    multiply(t1, t28, t1)
+    add(t3, t1, fk_tcp_2)
+    multiply(jacobian_tcp_23, t30, t1)
+    multiply(t2, t28, t2)
+    subtract(t1, t2, fk_tcp_6)
+    multiply(t6, t28, t6)
+    multiply(t0, t30, t30)
+    subtract(t6, t30, fk_tcp_10)
+    multiply(fk_tcp_1, p_1, t1)
+    multiply(fk_tcp_1, p_2, t2)
+    add(t1, t2, fk_tcp_3)
+    multiply(jacobian_tcp_6, p_0, t1)
+    multiply(jacobian_tcp_6, q_1, t3)
+    add(t1, t3, t1)
+    multiply(fk_tcp_5, p_1, t3)
+    add(t1, t3, t3)
+    multiply(fk_tcp_5, p_2, t5)
+    add(t3, t5, fk_tcp_7)
+    multiply(jacobian_tcp_11, p_0, t3)
+    multiply(jacobian_tcp_11, q_1, t6)
+    add(t3, t6, t3)
+    multiply(fk_tcp_9, p_1, t6)
+    add(t3, t6, t6)
+    multiply(fk_tcp_9, p_2, t7)
+    add(t6, t7, fk_tcp_11)
+    negative(fk_tcp_11, jacobian_tcp_5)
+    subtract(fk_tcp_11, t3, t3)
+    multiply(jacobian_tcp_6, t3, t6)
+    subtract(fk_tcp_7, t1, t1)
+    multiply(jacobian_tcp_11, t1, t8)
+    subtract(t6, t8, jacobian_tcp_2)
+    multiply(jacobian_tcp_11, fk_tcp_3, jacobian_tcp_7)
+    multiply(jacobian_tcp_6, fk_tcp_3, t6)
+    negative(t6, jacobian_tcp_12)
+    multiply(jacobian_tcp_23, t3, t6)
+    multiply(t0, t1, t8)
+    add(t6, t8, jacobian_tcp_3)
+    multiply(t0, fk_tcp_3, t6)
+    multiply(jacobian_tcp_18, t3, t3)
+    add(t6, t3, t6)
+    negative(t6, jacobian_tcp_8)
+    multiply(jacobian_tcp_18, t1, t1)
+    multiply(jacobian_tcp_23, fk_tcp_3, t3)
+    subtract(t1, t3, jacobian_tcp_13)
+    negative(t0, jacobian_tcp_28)
+    multiply(fk_tcp_5, t7, t0)
+    multiply(fk_tcp_9, t5, t1)
+    subtract(t0, t1, jacobian_tcp_4)
+    multiply(fk_tcp_9, t2, t0)
+    multiply(fk_tcp_1, t7, t7)
+    subtract(t0, t7, jacobian_tcp_9)
+    multiply(fk_tcp_1, t5, t5)
+    multiply(fk_tcp_5, t2, t2)
+    subtract(t5, t2, jacobian_tcp_14)
+    multiply(t46, p_2, t0)
+    subtract(t41, t0, t41)
+    multiply(t47, p_2, t0)
+    multiply(t37, t0, t1)
+    add(t41, t1, t41)
+    multiply(fk_tcp_0, t41, t1)
+    multiply(t35, p_2, t2)
+    multiply(t35, t2, t35)
+    multiply(t47, t0, t47)
+    add(t35, t47, t35)
+    subtract(t11, t35, t11)
+    multiply(fk_tcp_1, t11, t0)
+    add(t1, t0, t1)
+    multiply(t29, p_2, t0)
+    add(t42, t0, t42)
+    multiply(t37, t2, t37)
+    add(t42, t37, t42)
+    multiply(fk_tcp_2, t42, t0)
+    add(t1, t0, frame_acceleration_tcp_0)
+    multiply(fk_tcp_4, t41, t0)
+    multiply(fk_tcp_5, t11, t1)
+    add(t0, t1, t0)
+    multiply(fk_tcp_6, t42, t1)
+    add(t0, t1, frame_acceleration_tcp_1)
+    multiply(fk_tcp_9, t11, t11)
+    multiply(t4, t41, t41)
+    subtract(t11, t41, t11)
+    multiply(fk_tcp_10, t42, t42)
+    add(t11, t42, frame_acceleration_tcp_2)
+    multiply(fk_tcp_0, t29, t0)
+    multiply(fk_tcp_1, t12, t1)
+    add(t0, t1, t0)
+    multiply(fk_tcp_2, t46, t1)
+    add(t0, t1, frame_acceleration_tcp_3)
+    multiply(fk_tcp_4, t29, t0)
+    multiply(fk_tcp_5, t12, t1)
+    add(t0, t1, t0)
+    multiply(fk_tcp_6, t46, t1)
+    add(t0, t1, frame_acceleration_tcp_4)
+    multiply(fk_tcp_9, t12, t12)
+    multiply(t4, t29, t4)
+    subtract(t12, t4, t12)
+    multiply(fk_tcp_10, t46, t46)
+    add(t12, t46, frame_acceleration_tcp_5)
+    copyto(jacobian_tcp_10, fk_tcp_7)
+    copyto(jacobian_tcp_19, fk_tcp_1)
+    copyto(jacobian_tcp_22, jacobian_tcp_6)
+    copyto(jacobian_tcp_24, fk_tcp_5)
+    copyto(jacobian_tcp_27, jacobian_tcp_11)
+    copyto(jacobian_tcp_29, fk_tcp_9)
 
 
 def rk4_step(x, u, dt, p=DEFAULT_P):

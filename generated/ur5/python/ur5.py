@@ -915,846 +915,599 @@ def jdot_qd_tcp(q, qd):
     in  q [6]
     in  qd [6]
     out a [6]
-    406 ops: 222 mul, 174 add, 0 div, 10 trig
+    283 ops: 172 mul, 99 add, 0 div, 12 trig
     """
     q = _array(q, 6, "q")
     qd = _array(qd, 6, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_tcp_chunk, (q, qd), 55, ((6,),))
+        return _batch(_jdot_qd_tcp_chunk, (q, qd), 35, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = sin(q[3])
-    t2 = cos(q[1])
+    t1 = sin(q[1])
+    t2 = t0 * t1
     t3 = cos(q[2])
-    t4 = t3 * qd[2]
-    t5 = t2 * t4
-    t6 = sin(q[2])
-    t7 = sin(q[1])
-    t8 = t7 * qd[1]
-    t9 = t6 * t8
-    t5 = t5 - t9
-    t9 = t2 * qd[1]
-    t10 = t3 * t9
-    t11 = t6 * qd[2]
-    t12 = t7 * t11
-    t10 = t10 - t12
-    t5 = t5 + t10
-    t10 = t1 * t5
-    t12 = t2 * t6
-    t13 = t7 * t3
-    t12 = t12 + t13
-    t13 = cos(q[3])
-    t14 = t13 * qd[3]
-    t15 = t12 * t14
-    t10 = t10 + t15
-    t15 = t6 * t9
-    t16 = t7 * t4
-    t15 = t15 + t16
-    t16 = t3 * t8
-    t17 = t2 * t11
-    t16 = t16 + t17
-    t15 = t15 + t16
-    t16 = t13 * t15
-    t17 = t7 * t6
-    t18 = t2 * t3
-    t17 = t17 - t18
-    t18 = t1 * qd[3]
-    t19 = t17 * t18
-    t16 = t16 - t19
-    t10 = t10 + t16
-    t16 = 0.09465 * t10
-    t19 = 0.425 * t9
-    t20 = 0.39225 * t5
-    t20 = t19 + t20
-    t16 = t16 - t20
-    t21 = sin(q[4])
-    t5 = t13 * t5
-    t22 = t12 * t18
-    t5 = t5 - t22
-    t15 = t1 * t15
-    t22 = t17 * t14
-    t15 = t15 + t22
-    t5 = t5 - t15
-    t5 = t21 * t5
-    t15 = t12 * t13
-    t22 = t17 * t1
-    t15 = t15 - t22
-    t22 = cos(q[4])
-    t23 = t22 * qd[4]
-    t24 = t15 * t23
-    t5 = t5 + t24
-    t24 = 0.0823 * t5
-    t24 = t16 - t24
-    t25 = t0 * t24
-    t26 = 0.425 * t7
-    t26 = 0.089159 - t26
-    t27 = 0.39225 * t12
-    t27 = t26 - t27
-    t12 = t12 * t1
-    t17 = t17 * t13
-    t12 = t12 + t17
-    t17 = 0.09465 * t12
-    t17 = t27 + t17
-    t15 = t15 * t21
-    t28 = 0.0823 * t15
-    t28 = t17 - t28
-    t29 = t28 - 0.089159
-    t30 = sin(q[0])
-    t31 = t30 * qd[0]
-    t32 = t29 * t31
-    t25 = t25 - t32
-    t25 = qd[1] * t25
-    t32 = t0 * qd[0]
-    t33 = t2 * t32
-    t34 = t30 * t8
-    t33 = t33 - t34
-    t34 = 0.425 * t33
-    t35 = (-0.1197) * t31
-    t34 = t34 - t35
-    t35 = 0.13585 * t31
-    t34 = t34 - t35
-    t36 = t3 * t33
-    t37 = t30 * t2
-    t38 = t37 * t11
-    t36 = t36 - t38
-    t38 = t7 * t32
-    t39 = t30 * t9
-    t38 = t38 + t39
-    t39 = t6 * t38
-    t40 = t30 * t7
-    t41 = t40 * t4
-    t39 = t39 + t41
-    t36 = t36 - t39
-    t39 = 0.39225 * t36
-    t39 = t34 + t39
-    t41 = 0.093 * t31
-    t41 = t39 - t41
-    t42 = t1 * t36
-    t43 = t37 * t3
-    t44 = t40 * t6
-    t43 = t43 - t44
-    t44 = t43 * t14
-    t42 = t42 + t44
-    t38 = t3 * t38
-    t44 = t40 * t11
-    t38 = t38 - t44
-    t33 = t6 * t33
-    t44 = t37 * t4
-    t33 = t33 + t44
-    t33 = t38 + t33
-    t38 = t13 * t33
-    t40 = t40 * t3
-    t44 = t37 * t6
-    t40 = t40 + t44
-    t44 = t40 * t18
-    t38 = t38 - t44
-    t38 = t42 + t38
-    t42 = 0.09465 * t38
-    t42 = t41 - t42
-    t44 = t22 * t31
-    t45 = t21 * qd[4]
-    t46 = t0 * t45
-    t44 = t44 + t46
-    t33 = t1 * t33
-    t46 = t40 * t14
-    t33 = t33 + t46
-    t36 = t13 * t36
-    t46 = t43 * t18
-    t36 = t36 - t46
-    t33 = t33 - t36
-    t33 = t21 * t33
-    t36 = t40 * t1
-    t46 = t43 * t13
-    t36 = t36 - t46
-    t46 = t36 * t23
-    t33 = t33 + t46
-    t33 = t44 + t33
-    t44 = 0.0823 * t33
-    t42 = t42 - t44
-    t46 = qd[0] * t42
-    t25 = t25 - t46
-    t19 = t24 + t19
-    t46 = t0 * t19
-    t26 = t28 - t26
-    t47 = t26 * t31
-    t46 = t46 - t47
-    t46 = qd[2] * t46
-    t25 = t25 + t46
-    t20 = t24 + t20
-    t46 = t0 * t20
-    t27 = t28 - t27
-    t47 = t27 * t31
-    t46 = t46 - t47
-    t46 = qd[3] * t46
-    t25 = t25 + t46
-    t46 = t27 * t38
-    t47 = t43 * t1
-    t40 = t40 * t13
-    t40 = t47 + t40
-    t47 = t40 * t20
-    t46 = t46 + t47
-    t47 = 0.13585 * t0
-    t48 = (-0.1197) * t0
-    t37 = 0.425 * t37
-    t37 = t48 + t37
-    t37 = t47 + t37
-    t43 = 0.39225 * t43
-    t43 = t37 + t43
-    t48 = 0.093 * t0
-    t48 = t43 + t48
-    t49 = 0.09465 * t40
-    t49 = t48 - t49
-    t50 = t0 * t22
-    t36 = t36 * t21
-    t36 = t50 - t36
-    t50 = 0.0823 * t36
-    t49 = t49 + t50
-    t48 = t49 - t48
-    t51 = t48 * t10
-    t41 = t42 - t41
-    t52 = t12 * t41
-    t51 = t51 + t52
-    t46 = t46 + t51
-    t46 = qd[4] * t46
-    t25 = t25 - t46
-    t16 = t24 - t16
-    t46 = t36 * t16
-    t17 = t28 - t17
-    t28 = t17 * t33
-    t28 = t46 - t28
-    t46 = t50 * t5
-    t51 = t15 * t44
-    t46 = t46 - t51
-    t28 = t28 + t46
-    t28 = qd[5] * t28
-    t25 = t25 + t28
-    t28 = t29 * t32
-    t24 = t30 * t24
-    t24 = t28 + t24
-    t24 = qd[1] * t24
-    t28 = t2 * t31
-    t8 = t0 * t8
-    t8 = t28 + t8
-    t28 = 0.425 * t8
-    t29 = (-0.1197) * t32
-    t28 = t28 + t29
-    t29 = 0.13585 * t32
-    t28 = t28 + t29
-    t46 = t3 * t8
-    t2 = t0 * t2
-    t51 = t2 * t11
-    t46 = t46 + t51
-    t9 = t0 * t9
-    t51 = t7 * t31
-    t9 = t9 - t51
-    t51 = t6 * t9
-    t7 = t0 * t7
-    t52 = t7 * t4
-    t51 = t51 + t52
-    t46 = t46 + t51
-    t51 = 0.39225 * t46
-    t51 = t28 + t51
-    t52 = 0.093 * t32
-    t52 = t51 + t52
-    t53 = t2 * t3
-    t54 = t7 * t6
-    t53 = t53 - t54
-    t54 = t53 * t14
-    t55 = t1 * t46
-    t54 = t54 - t55
-    t9 = t3 * t9
-    t11 = t7 * t11
-    t9 = t9 - t11
-    t4 = t2 * t4
-    t8 = t6 * t8
-    t4 = t4 - t8
-    t4 = t9 + t4
-    t8 = t13 * t4
-    t3 = t7 * t3
-    t6 = t2 * t6
-    t3 = t3 + t6
-    t6 = t3 * t18
-    t6 = t8 - t6
-    t6 = t54 + t6
-    t7 = 0.09465 * t6
-    t7 = t52 + t7
-    t4 = t1 * t4
-    t8 = t3 * t14
+    t4 = t2 * t3
+    t5 = cos(q[1])
+    t6 = t0 * t5
+    t7 = sin(q[2])
+    t8 = t6 * t7
     t4 = t4 + t8
-    t8 = t13 * t46
-    t9 = t53 * t18
-    t8 = t8 + t9
-    t4 = t4 + t8
-    t4 = t21 * t4
-    t8 = t3 * t1
-    t9 = t53 * t13
-    t8 = t8 - t9
-    t9 = t8 * t23
-    t4 = t4 + t9
-    t9 = t22 * t32
-    t11 = t30 * t45
-    t9 = t9 - t11
-    t4 = t4 + t9
-    t9 = 0.0823 * t4
-    t7 = t7 + t9
-    t11 = qd[0] * t7
-    t11 = t24 - t11
-    t14 = t26 * t32
-    t18 = t30 * t19
-    t14 = t14 + t18
-    t14 = qd[2] * t14
-    t11 = t11 + t14
-    t14 = t27 * t32
-    t18 = t30 * t20
-    t14 = t14 + t18
-    t14 = qd[3] * t14
-    t11 = t11 + t14
-    t2 = 0.425 * t2
-    t14 = (-0.1197) * t30
-    t2 = t2 - t14
-    t14 = 0.13585 * t30
-    t2 = t2 - t14
-    t18 = 0.39225 * t53
-    t18 = t2 + t18
-    t19 = 0.093 * t30
-    t19 = t18 - t19
-    t1 = t53 * t1
-    t3 = t3 * t13
-    t1 = t1 + t3
-    t3 = 0.09465 * t1
-    t3 = t19 - t3
-    t8 = t8 * t21
-    t13 = t30 * t22
-    t8 = t8 + t13
-    t13 = 0.0823 * t8
-    t13 = t3 - t13
-    t19 = t13 - t19
-    t21 = t19 * t10
-    t22 = t52 - t7
-    t12 = t12 * t22
-    t12 = t21 + t12
-    t21 = t27 * t6
-    t20 = t1 * t20
-    t20 = t21 + t20
-    t12 = t12 + t20
-    t12 = qd[4] * t12
-    t11 = t11 + t12
-    t12 = t17 * t4
+    t8 = sin(q[3])
+    t9 = t4 * t8
+    t6 = t6 * t3
+    t2 = t2 * t7
+    t2 = t6 - t2
+    t6 = cos(q[3])
+    t10 = t2 * t6
+    t9 = t9 - t10
+    t10 = cos(q[4])
+    t11 = t9 * t10
+    t12 = sin(q[0])
+    t13 = sin(q[4])
+    t14 = t12 * t13
+    t11 = t11 - t14
+    t14 = cos(q[5])
+    t15 = t11 * t14
+    t2 = t2 * t8
+    t4 = t4 * t6
+    t2 = t2 + t4
+    t4 = sin(q[5])
+    t16 = t2 * t4
+    t15 = t15 + t16
+    t16 = qd[1] + qd[2]
+    t17 = t16 + qd[3]
+    t18 = t5 * qd[0]
+    t19 = t7 * t18
+    t20 = t1 * qd[0]
+    t21 = t3 * t20
+    t19 = t19 + t21
+    t21 = t6 * t19
+    t22 = t7 * t20
+    t23 = t3 * t18
+    t22 = t22 - t23
+    t23 = t8 * t22
+    t21 = t21 - t23
+    t23 = 0.093 * t21
+    t24 = t17 * t23
+    t25 = t18 * qd[1]
+    t26 = (-0.1197) * t25
+    t27 = 0.425 * t18
+    t28 = t20 * t27
+    t29 = (-0.1197) * t18
+    t30 = qd[1] * t29
+    t28 = t28 - t30
+    t26 = t26 + t28
+    t28 = t7 * t26
+    t30 = t20 * qd[1]
+    t31 = (-0.1197) * t30
+    t27 = t18 * t27
+    t32 = 0.425 * qd[1]
+    t33 = (-0.1197) * t20
+    t32 = t32 + t33
+    t33 = qd[1] * t32
+    t27 = t27 + t33
+    t27 = t31 - t27
+    t31 = t3 * t27
+    t28 = t28 + t31
+    t31 = 0.39225 * t22
+    t33 = t22 * t31
+    t34 = 0.39225 * t16
+    t16 = t16 * t34
+    t16 = t33 + t16
+    t16 = t28 - t16
+    t28 = t6 * t16
+    t26 = t3 * t26
+    t27 = t7 * t27
+    t26 = t26 - t27
+    t27 = t19 * t31
+    t26 = t26 - t27
+    t27 = t8 * t26
+    t27 = t28 + t27
+    t28 = t3 * t30
+    t31 = t7 * t25
+    t28 = t28 + t31
+    t31 = t19 * qd[2]
+    t28 = t28 + t31
+    t31 = t6 * t28
+    t33 = t7 * t30
+    t25 = t3 * t25
+    t25 = t33 - t25
+    t33 = t22 * qd[2]
+    t25 = t25 + t33
+    t33 = t8 * t25
+    t31 = t31 - t33
+    t33 = t21 * qd[3]
+    t31 = t31 + t33
+    t33 = 0.093 * t31
+    t27 = t27 + t33
+    t24 = t24 - t27
+    t27 = t10 * t24
+    t33 = 0.13585 * qd[0]
+    t33 = qd[0] * t33
+    t30 = 0.425 * t30
+    t30 = t33 + t30
+    t20 = t20 * t32
+    t18 = t18 * t29
+    t18 = t20 + t18
+    t18 = t30 + t18
+    t20 = 0.39225 * t28
+    t18 = t18 + t20
+    t20 = t19 * t34
+    t18 = t18 + t20
+    t19 = t8 * t19
+    t20 = t6 * t22
+    t19 = t19 + t20
+    t20 = 0.093 * t19
+    t22 = t19 * t20
+    t23 = t21 * t23
+    t22 = t22 + t23
+    t18 = t18 + t22
+    t22 = t13 * t18
+    t22 = t27 - t22
+    t23 = t6 * t25
+    t25 = t8 * t28
+    t23 = t23 + t25
+    t25 = t19 * qd[3]
+    t23 = t23 + t25
+    t25 = t13 * t23
+    t27 = t10 * t21
+    t28 = t13 * t17
+    t27 = t27 + t28
+    t28 = t27 * qd[4]
+    t25 = t25 - t28
+    t28 = 0.09465 * t25
+    t22 = t22 + t28
+    t19 = t19 + qd[4]
+    t28 = 0.09465 * t27
+    t29 = t19 * t28
+    t22 = t22 + t29
+    t29 = t14 * t22
+    t26 = t6 * t26
     t16 = t8 * t16
-    t12 = t12 + t16
-    t3 = t13 - t3
-    t16 = t3 * t5
-    t15 = t15 * t9
-    t15 = t16 - t15
-    t12 = t12 - t15
-    t12 = qd[5] * t12
-    t11 = t11 + t12
-    t12 = t19 * t38
-    t15 = t40 * t22
-    t12 = t12 + t15
-    t15 = t48 * t6
-    t1 = t1 * t41
-    t1 = t15 + t1
-    t1 = t12 - t1
-    t1 = qd[4] * t1
-    t12 = t49 - t47
-    t12 = t12 * t32
-    t15 = t42 + t35
-    t15 = t30 * t15
-    t12 = t12 + t15
-    t15 = t29 - t7
-    t15 = t0 * t15
-    t14 = t13 + t14
-    t14 = t14 * t31
-    t14 = t15 - t14
-    t12 = t12 + t14
-    t12 = qd[1] * t12
-    t14 = t49 - t37
-    t14 = t14 * t32
-    t15 = t42 - t34
-    t15 = t30 * t15
-    t14 = t14 + t15
-    t15 = t28 - t7
-    t15 = t0 * t15
-    t2 = t13 - t2
-    t2 = t2 * t31
-    t2 = t15 - t2
-    t2 = t14 + t2
-    t2 = qd[2] * t2
-    t2 = t12 + t2
-    t12 = t49 - t43
-    t12 = t12 * t32
-    t14 = t42 - t39
-    t14 = t30 * t14
-    t12 = t12 + t14
-    t7 = t51 - t7
-    t0 = t0 * t7
-    t7 = t13 - t18
-    t7 = t7 * t31
-    t0 = t0 - t7
-    t0 = t12 + t0
-    t0 = qd[3] * t0
-    t0 = t2 + t0
-    t0 = t1 - t0
-    t1 = t50 * t4
-    t2 = t8 * t44
-    t1 = t1 - t2
-    t2 = t3 * t33
-    t3 = t36 * t9
-    t2 = t2 + t3
-    t1 = t1 - t2
-    t1 = qd[5] * t1
-    t0 = t0 - t1
-    t1 = qd[1] * t32
-    t2 = qd[2] * t32
-    t1 = t1 + t2
-    t2 = qd[3] * t32
-    t1 = t1 + t2
-    t2 = qd[4] * t6
-    t1 = t1 + t2
-    t2 = qd[5] * t4
-    t1 = t1 + t2
-    t1 = -t1
-    t2 = qd[1] * t31
-    t3 = qd[2] * t31
-    t2 = t2 + t3
-    t3 = qd[3] * t31
-    t2 = t2 + t3
-    t3 = qd[4] * t38
-    t2 = t2 + t3
-    t3 = qd[5] * t33
-    t2 = t2 + t3
-    t2 = -t2
-    t3 = qd[4] * t10
-    t4 = qd[5] * t5
-    t3 = t3 - t4
-    _a = (t25, t11, t0, t1, t2, t3)
+    t16 = t26 - t16
+    t26 = 0.093 * t23
+    t16 = t16 - t26
+    t20 = t17 * t20
+    t16 = t16 + t20
+    t20 = t27 * t28
+    t17 = t10 * t17
+    t21 = t13 * t21
+    t17 = t17 - t21
+    t21 = 0.09465 * t17
+    t26 = t17 * t21
+    t20 = t20 + t26
+    t16 = t16 - t20
+    t20 = t4 * t16
+    t20 = t29 - t20
+    t26 = t17 * qd[4]
+    t23 = t10 * t23
+    t23 = t26 - t23
+    t26 = t4 * t23
+    t28 = t14 * t31
+    t26 = t26 + t28
+    t28 = t14 * t27
+    t29 = t4 * t19
+    t28 = t28 - t29
+    t29 = t28 * qd[5]
+    t26 = t26 + t29
+    t29 = 0.0823 * t26
+    t20 = t20 - t29
+    t17 = t17 + qd[5]
+    t29 = 0.0823 * t28
+    t30 = t17 * t29
+    t20 = t20 + t30
+    t30 = t15 * t20
+    t9 = t9 * t13
+    t32 = t12 * t10
+    t9 = t9 + t32
+    t21 = t19 * t21
+    t24 = t13 * t24
+    t18 = t10 * t18
+    t18 = t24 + t18
+    t24 = 0.09465 * t23
+    t18 = t18 + t24
+    t18 = t21 - t18
+    t21 = t4 * t27
+    t19 = t14 * t19
+    t19 = t21 + t19
+    t21 = 0.0823 * t19
+    t24 = t19 * t21
+    t27 = t28 * t29
+    t24 = t24 + t27
+    t18 = t18 - t24
+    t24 = t9 * t18
+    t24 = t30 - t24
+    t11 = t11 * t4
+    t2 = t2 * t14
+    t2 = t11 - t2
+    t11 = t4 * t22
+    t16 = t14 * t16
+    t11 = t11 + t16
+    t16 = t14 * t23
+    t22 = t4 * t31
+    t16 = t16 - t22
+    t19 = t19 * qd[5]
+    t16 = t16 - t19
+    t19 = 0.0823 * t16
+    t11 = t11 + t19
+    t17 = t17 * t21
+    t11 = t11 + t17
+    t17 = t2 * t11
+    t17 = t24 + t17
+    t19 = t12 * t1
+    t21 = t19 * t3
+    t12 = t12 * t5
+    t22 = t12 * t7
+    t21 = t21 + t22
+    t22 = t21 * t8
+    t12 = t12 * t3
+    t19 = t19 * t7
+    t12 = t12 - t19
+    t19 = t12 * t6
+    t19 = t22 - t19
+    t22 = t19 * t10
+    t23 = t0 * t13
+    t22 = t22 + t23
+    t23 = t22 * t14
+    t12 = t12 * t8
+    t21 = t21 * t6
+    t12 = t12 + t21
+    t21 = t12 * t4
+    t21 = t23 + t21
+    t23 = t21 * t20
+    t0 = t0 * t10
+    t19 = t19 * t13
+    t0 = t0 - t19
+    t19 = t0 * t18
+    t19 = t23 + t19
+    t22 = t22 * t4
+    t12 = t12 * t14
+    t12 = t22 - t12
+    t22 = t12 * t11
+    t19 = t19 + t22
+    t22 = t5 * t7
+    t23 = t1 * t3
+    t22 = t22 + t23
+    t23 = t22 * t6
+    t1 = t1 * t7
+    t3 = t5 * t3
+    t1 = t1 - t3
+    t3 = t1 * t8
+    t3 = t23 - t3
+    t5 = t3 * t10
+    t7 = t5 * t14
+    t8 = t22 * t8
+    t1 = t1 * t6
+    t1 = t8 + t1
+    t6 = t1 * t4
+    t6 = t7 - t6
+    t7 = t6 * t20
+    t3 = t3 * t13
+    t8 = t3 * t18
+    t7 = t7 - t8
+    t4 = t5 * t4
+    t1 = t1 * t14
+    t1 = t4 + t1
+    t4 = t1 * t11
+    t4 = t7 + t4
+    t5 = t15 * t16
+    t7 = t9 * t25
+    t5 = t5 - t7
+    t2 = t2 * t26
+    t2 = t5 + t2
+    t5 = t21 * t16
+    t0 = t0 * t25
+    t0 = t5 + t0
+    t5 = t12 * t26
+    t0 = t0 + t5
+    t5 = t6 * t16
+    t3 = t3 * t25
+    t3 = t5 - t3
+    t1 = t1 * t26
+    t1 = t3 + t1
+    _a = (t17, t19, t4, t2, t0, t1)
     return np.array(_a)
 
 
 _jdot_qd_tcp_constants = _constants(
-    0.09465, 0.425, 0.39225, 0.0823, 0.089159, -0.1197, 0.13585, 0.093)
+    0.093, -0.1197, 0.425, 0.39225, 0.13585, 0.09465, 0.0823)
 
 
 def _jdot_qd_tcp_chunk(x, t, s, y):
     """jdot_qd_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
-    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, q_5, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6, k7 = _jdot_qd_tcp_constants
+    k0, k1, k2, k3, k4, k5, k6 = _jdot_qd_tcp_constants
     cos(q_0, t0)
-    sin(q_3, t1)
-    cos(q_1, t2)
+    sin(q_1, t1)
+    multiply(t0, t1, t2)
     cos(q_2, t3)
-    multiply(t3, qd_2, t4)
-    multiply(t2, t4, t5)
-    sin(q_2, t6)
-    sin(q_1, t7)
-    multiply(t7, qd_1, t8)
-    multiply(t6, t8, t9)
-    subtract(t5, t9, t5)
-    multiply(t2, qd_1, t9)
-    multiply(t3, t9, t10)
-    multiply(t6, qd_2, t11)
-    multiply(t7, t11, t12)
-    subtract(t10, t12, t10)
-    add(t5, t10, t5)
-    multiply(t1, t5, t10)
-    multiply(t2, t6, t12)
-    multiply(t7, t3, t13)
-    add(t12, t13, t12)
-    cos(q_3, t13)
-    multiply(t13, qd_3, t14)
-    multiply(t12, t14, t15)
-    add(t10, t15, t10)
-    multiply(t6, t9, t15)
-    multiply(t7, t4, t16)
+    multiply(t2, t3, t4)
+    cos(q_1, t5)
+    multiply(t0, t5, t6)
+    sin(q_2, t7)
+    multiply(t6, t7, t8)
+    add(t4, t8, t4)
+    sin(q_3, t8)
+    multiply(t4, t8, t9)
+    multiply(t6, t3, t6)
+    multiply(t2, t7, t2)
+    subtract(t6, t2, t6)
+    cos(q_3, t2)
+    multiply(t6, t2, t10)
+    subtract(t9, t10, t9)
+    cos(q_4, t10)
+    multiply(t9, t10, t11)
+    sin(q_0, t12)
+    sin(q_4, t13)
+    multiply(t12, t13, t14)
+    subtract(t11, t14, t11)
+    cos(q_5, t14)
+    multiply(t11, t14, t15)
+    multiply(t6, t8, t6)
+    multiply(t4, t2, t4)
+    add(t6, t4, t6)
+    sin(q_5, t4)
+    multiply(t6, t4, t16)
     add(t15, t16, t15)
-    multiply(t3, t8, t16)
-    multiply(t2, t11, t17)
-    add(t16, t17, t16)
-    add(t15, t16, t15)
-    multiply(t13, t15, t16)
-    multiply(t7, t6, t17)
-    multiply(t2, t3, t18)
-    subtract(t17, t18, t17)
-    multiply(t1, qd_3, t18)
-    multiply(t17, t18, t19)
-    subtract(t16, t19, t16)
-    add(t10, t16, t10)
-    multiply(k0, t10, t16)
-    multiply(k1, t9, t19)
-    multiply(k2, t5, t20)
-    add(t19, t20, t20)
-    subtract(t16, t20, t16)
-    sin(q_4, t21)
-    multiply(t13, t5, t5)
-    multiply(t12, t18, t22)
-    subtract(t5, t22, t5)
-    multiply(t1, t15, t15)
-    multiply(t17, t14, t22)
-    add(t15, t22, t15)
-    subtract(t5, t15, t5)
-    multiply(t21, t5, t5)
-    multiply(t12, t13, t15)
-    multiply(t17, t1, t22)
-    subtract(t15, t22, t15)
-    cos(q_4, t22)
-    multiply(t22, qd_4, t23)
-    multiply(t15, t23, t24)
-    add(t5, t24, t5)
-    multiply(k3, t5, t24)
-    subtract(t16, t24, t24)
-    multiply(t0, t24, t25)
-    multiply(k1, t7, t26)
-    subtract(k4, t26, t26)
-    multiply(k2, t12, t27)
-    subtract(t26, t27, t27)
-    multiply(t12, t1, t12)
-    multiply(t17, t13, t17)
-    add(t12, t17, t12)
-    multiply(k0, t12, t17)
-    add(t27, t17, t17)
-    multiply(t15, t21, t15)
-    multiply(k3, t15, t28)
-    subtract(t17, t28, t28)
-    subtract(t28, k4, t29)
-    sin(q_0, t30)
-    multiply(t30, qd_0, t31)
-    multiply(t29, t31, t32)
-    subtract(t25, t32, t25)
-    multiply(qd_1, t25, t25)
-    multiply(t0, qd_0, t32)
-    multiply(t2, t32, t33)
-    multiply(t30, t8, t34)
-    subtract(t33, t34, t33)
-    multiply(k1, t33, t34)
-    multiply(k5, t31, t35)
-    subtract(t34, t35, t34)
-    multiply(k6, t31, t35)
-    subtract(t34, t35, t34)
-    multiply(t3, t33, t36)
-    multiply(t30, t2, t37)
-    multiply(t37, t11, t38)
-    subtract(t36, t38, t36)
-    multiply(t7, t32, t38)
-    multiply(t30, t9, t39)
-    add(t38, t39, t38)
-    multiply(t6, t38, t39)
-    multiply(t30, t7, t40)
-    multiply(t40, t4, t41)
-    add(t39, t41, t39)
-    subtract(t36, t39, t36)
-    multiply(k2, t36, t39)
-    add(t34, t39, t39)
-    multiply(k7, t31, t41)
-    subtract(t39, t41, t41)
-    multiply(t1, t36, t42)
-    multiply(t37, t3, t43)
-    multiply(t40, t6, t44)
-    subtract(t43, t44, t43)
-    multiply(t43, t14, t44)
-    add(t42, t44, t42)
-    multiply(t3, t38, t38)
-    multiply(t40, t11, t44)
-    subtract(t38, t44, t38)
-    multiply(t6, t33, t33)
-    multiply(t37, t4, t44)
-    add(t33, t44, t33)
-    add(t38, t33, t38)
-    multiply(t13, t38, t33)
-    multiply(t40, t3, t40)
-    multiply(t37, t6, t44)
-    add(t40, t44, t40)
-    multiply(t40, t18, t44)
-    subtract(t33, t44, t33)
-    add(t42, t33, t42)
-    multiply(k0, t42, t33)
-    subtract(t41, t33, t33)
-    multiply(t22, t31, t44)
-    multiply(t21, qd_4, t45)
-    multiply(t0, t45, t46)
-    add(t44, t46, t44)
-    multiply(t1, t38, t38)
-    multiply(t40, t14, t46)
-    add(t38, t46, t38)
-    multiply(t13, t36, t36)
-    multiply(t43, t18, t46)
-    subtract(t36, t46, t36)
-    subtract(t38, t36, t38)
-    multiply(t21, t38, t38)
-    multiply(t40, t1, t36)
-    multiply(t43, t13, t46)
-    subtract(t36, t46, t36)
-    multiply(t36, t23, t46)
-    add(t38, t46, t38)
-    add(t44, t38, t44)
-    multiply(k3, t44, t38)
-    subtract(t33, t38, t33)
-    multiply(qd_0, t33, t46)
-    subtract(t25, t46, t25)
-    add(t24, t19, t19)
-    multiply(t0, t19, t46)
-    subtract(t28, t26, t26)
-    multiply(t26, t31, t47)
-    subtract(t46, t47, t46)
-    multiply(qd_2, t46, t46)
-    add(t25, t46, t25)
-    add(t24, t20, t20)
-    multiply(t0, t20, t46)
-    subtract(t28, t27, t27)
-    multiply(t27, t31, t47)
-    subtract(t46, t47, t46)
-    multiply(qd_3, t46, t46)
-    add(t25, t46, t25)
-    multiply(t27, t42, t46)
-    multiply(t43, t1, t47)
-    multiply(t40, t13, t40)
-    add(t47, t40, t47)
-    multiply(t47, t20, t40)
-    add(t46, t40, t46)
-    multiply(k6, t0, t40)
-    multiply(k5, t0, t48)
-    multiply(k1, t37, t37)
-    add(t48, t37, t48)
-    add(t40, t48, t48)
-    multiply(k2, t43, t43)
-    add(t48, t43, t43)
-    multiply(k7, t0, t37)
-    add(t43, t37, t37)
-    multiply(k0, t47, t49)
-    subtract(t37, t49, t49)
-    multiply(t0, t22, t50)
-    multiply(t36, t21, t36)
-    subtract(t50, t36, t50)
-    multiply(k3, t50, t36)
-    add(t49, t36, t49)
-    subtract(t49, t37, t37)
-    multiply(t37, t10, t51)
-    subtract(t33, t41, t41)
-    multiply(t12, t41, t52)
-    add(t51, t52, t51)
-    add(t46, t51, t46)
-    multiply(qd_4, t46, t46)
-    subtract(t25, t46, t25)
-    subtract(t24, t16, t16)
-    multiply(t50, t16, t46)
-    subtract(t28, t17, t28)
-    multiply(t28, t44, t17)
-    subtract(t46, t17, t46)
-    multiply(t36, t5, t17)
-    multiply(t15, t38, t51)
-    subtract(t17, t51, t17)
-    add(t46, t17, t46)
-    multiply(qd_5, t46, t46)
-    add(t25, t46, a_0)
-    multiply(t29, t32, t29)
-    multiply(t30, t24, t24)
-    add(t29, t24, t29)
-    multiply(qd_1, t29, t29)
-    multiply(t2, t31, t17)
-    multiply(t0, t8, t8)
-    add(t17, t8, t17)
-    multiply(k1, t17, t8)
-    multiply(k5, t32, t24)
-    add(t8, t24, t8)
-    multiply(k6, t32, t24)
-    add(t8, t24, t8)
-    multiply(t3, t17, t25)
-    multiply(t0, t2, t2)
-    multiply(t2, t11, t46)
-    add(t25, t46, t25)
-    multiply(t0, t9, t9)
-    multiply(t7, t31, t46)
-    subtract(t9, t46, t9)
-    multiply(t6, t9, t46)
-    multiply(t0, t7, t7)
-    multiply(t7, t4, t51)
-    add(t46, t51, t46)
-    add(t25, t46, t25)
-    multiply(k2, t25, t46)
-    add(t8, t46, t46)
-    multiply(k7, t32, t51)
-    add(t46, t51, t51)
-    multiply(t2, t3, t52)
-    multiply(t7, t6, t53)
-    subtract(t52, t53, t52)
-    multiply(t52, t14, t53)
-    multiply(t1, t25, t54)
-    subtract(t53, t54, t53)
-    multiply(t3, t9, t9)
-    multiply(t7, t11, t11)
-    subtract(t9, t11, t9)
-    multiply(t2, t4, t4)
-    multiply(t6, t17, t17)
-    subtract(t4, t17, t4)
-    add(t9, t4, t9)
-    multiply(t13, t9, t4)
-    multiply(t7, t3, t7)
-    multiply(t2, t6, t6)
-    add(t7, t6, t7)
-    multiply(t7, t18, t3)
-    subtract(t4, t3, t4)
-    add(t53, t4, t53)
-    multiply(k0, t53, t3)
-    add(t51, t3, t3)
-    multiply(t1, t9, t9)
-    multiply(t7, t14, t14)
-    add(t9, t14, t9)
-    multiply(t13, t25, t25)
-    multiply(t52, t18, t18)
+    add(qd_1, qd_2, t16)
+    add(t16, qd_3, t17)
+    multiply(t5, qd_0, t18)
+    multiply(t7, t18, t19)
+    multiply(t1, qd_0, t20)
+    multiply(t3, t20, t21)
+    add(t19, t21, t19)
+    multiply(t2, t19, t21)
+    multiply(t7, t20, t22)
+    multiply(t3, t18, t23)
+    subtract(t22, t23, t22)
+    multiply(t8, t22, t23)
+    subtract(t21, t23, t21)
+    multiply(k0, t21, t23)
+    multiply(t17, t23, t24)
+    multiply(t18, qd_1, t25)
+    multiply(k1, t25, t26)
+    multiply(k2, t18, t27)
+    multiply(t20, t27, t28)
+    multiply(k1, t18, t29)
+    multiply(qd_1, t29, t30)
+    subtract(t28, t30, t28)
+    add(t26, t28, t26)
+    multiply(t7, t26, t28)
+    multiply(t20, qd_1, t30)
+    multiply(k1, t30, t31)
+    multiply(t18, t27, t27)
+    multiply(k2, qd_1, t32)
+    multiply(k1, t20, t33)
+    add(t32, t33, t32)
+    multiply(qd_1, t32, t33)
+    add(t27, t33, t27)
+    subtract(t31, t27, t31)
+    multiply(t3, t31, t27)
+    add(t28, t27, t28)
+    multiply(k3, t22, t27)
+    multiply(t22, t27, t33)
+    multiply(k3, t16, t34)
+    multiply(t16, t34, t16)
+    add(t33, t16, t33)
+    subtract(t28, t33, t28)
+    multiply(t2, t28, t16)
+    multiply(t3, t26, t26)
+    multiply(t7, t31, t31)
+    subtract(t26, t31, t26)
+    multiply(t19, t27, t27)
+    subtract(t26, t27, t26)
+    multiply(t8, t26, t27)
+    add(t16, t27, t16)
+    multiply(t3, t30, t27)
+    multiply(t7, t25, t31)
+    add(t27, t31, t27)
+    multiply(t19, qd_2, t31)
+    add(t27, t31, t27)
+    multiply(t2, t27, t31)
+    multiply(t7, t30, t33)
+    multiply(t3, t25, t25)
+    subtract(t33, t25, t33)
+    multiply(t22, qd_2, t25)
+    add(t33, t25, t33)
+    multiply(t8, t33, t25)
+    subtract(t31, t25, t31)
+    multiply(t21, qd_3, t25)
+    add(t31, t25, t31)
+    multiply(k0, t31, t25)
+    add(t16, t25, t16)
+    subtract(t24, t16, t24)
+    multiply(t10, t24, t16)
+    multiply(k4, qd_0, t25)
+    multiply(qd_0, t25, t25)
+    multiply(k2, t30, t30)
+    add(t25, t30, t25)
+    multiply(t20, t32, t20)
+    multiply(t18, t29, t18)
+    add(t20, t18, t20)
+    add(t25, t20, t25)
+    multiply(k3, t27, t18)
     add(t25, t18, t25)
-    add(t9, t25, t9)
-    multiply(t21, t9, t9)
-    multiply(t7, t1, t4)
-    multiply(t52, t13, t6)
-    subtract(t4, t6, t4)
-    multiply(t4, t23, t23)
-    add(t9, t23, t9)
-    multiply(t22, t32, t6)
-    multiply(t30, t45, t45)
-    subtract(t6, t45, t6)
-    add(t9, t6, t9)
-    multiply(k3, t9, t6)
-    add(t3, t6, t3)
-    multiply(qd_0, t3, t11)
-    subtract(t29, t11, t29)
-    multiply(t26, t32, t26)
-    multiply(t30, t19, t19)
-    add(t26, t19, t26)
-    multiply(qd_2, t26, t26)
-    add(t29, t26, t29)
-    multiply(t27, t32, t11)
-    multiply(t30, t20, t14)
-    add(t11, t14, t11)
-    multiply(qd_3, t11, t11)
-    add(t29, t11, t29)
-    multiply(k1, t2, t2)
-    multiply(k5, t30, t11)
-    subtract(t2, t11, t2)
-    multiply(k6, t30, t11)
-    subtract(t2, t11, t2)
-    multiply(k2, t52, t14)
-    add(t2, t14, t14)
-    multiply(k7, t30, t17)
-    subtract(t14, t17, t17)
-    multiply(t52, t1, t52)
-    multiply(t7, t13, t7)
-    add(t52, t7, t52)
-    multiply(k0, t52, t1)
-    subtract(t17, t1, t1)
-    multiply(t4, t21, t4)
-    multiply(t30, t22, t22)
-    add(t4, t22, t4)
-    multiply(k3, t4, t7)
-    subtract(t1, t7, t7)
-    subtract(t7, t17, t17)
-    multiply(t17, t10, t13)
-    subtract(t51, t3, t51)
-    multiply(t12, t51, t12)
-    add(t13, t12, t13)
-    multiply(t27, t53, t27)
-    multiply(t52, t20, t20)
-    add(t27, t20, t27)
-    add(t13, t27, t13)
-    multiply(qd_4, t13, t13)
-    add(t29, t13, t29)
-    multiply(t28, t9, t28)
+    multiply(t19, t34, t34)
+    add(t25, t34, t25)
+    multiply(t8, t19, t19)
+    multiply(t2, t22, t22)
+    add(t19, t22, t19)
+    multiply(k0, t19, t18)
+    multiply(t19, t18, t20)
+    multiply(t21, t23, t23)
+    add(t20, t23, t20)
+    add(t25, t20, t25)
+    multiply(t13, t25, t20)
+    subtract(t16, t20, t16)
+    multiply(t2, t33, t33)
+    multiply(t8, t27, t27)
+    add(t33, t27, t33)
+    multiply(t19, qd_3, t20)
+    add(t33, t20, t33)
+    multiply(t13, t33, t20)
+    multiply(t10, t21, t22)
+    multiply(t13, t17, t23)
+    add(t22, t23, t22)
+    multiply(t22, qd_4, t23)
+    subtract(t20, t23, t20)
+    multiply(k5, t20, t23)
+    add(t16, t23, t16)
+    add(t19, qd_4, t19)
+    multiply(k5, t22, t23)
+    multiply(t19, t23, t27)
+    add(t16, t27, t16)
+    multiply(t14, t16, t27)
+    multiply(t2, t26, t26)
+    multiply(t8, t28, t28)
+    subtract(t26, t28, t26)
+    multiply(k0, t33, t28)
+    subtract(t26, t28, t26)
+    multiply(t17, t18, t18)
+    add(t26, t18, t26)
+    multiply(t22, t23, t23)
+    multiply(t10, t17, t17)
+    multiply(t13, t21, t21)
+    subtract(t17, t21, t17)
+    multiply(k5, t17, t18)
+    multiply(t17, t18, t21)
+    add(t23, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t4, t26, t21)
+    subtract(t27, t21, t27)
+    multiply(t17, qd_4, t21)
+    multiply(t10, t33, t33)
+    subtract(t21, t33, t21)
+    multiply(t4, t21, t23)
+    multiply(t14, t31, t28)
+    add(t23, t28, t23)
+    multiply(t14, t22, t28)
+    multiply(t4, t19, t29)
+    subtract(t28, t29, t28)
+    multiply(t28, qd_5, t29)
+    add(t23, t29, t23)
+    multiply(k6, t23, t29)
+    subtract(t27, t29, t27)
+    add(t17, qd_5, t17)
+    multiply(k6, t28, t29)
+    multiply(t17, t29, t30)
+    add(t27, t30, t27)
+    multiply(t15, t27, t30)
+    multiply(t9, t13, t9)
+    multiply(t12, t10, t32)
+    add(t9, t32, t9)
+    multiply(t19, t18, t18)
+    multiply(t13, t24, t24)
+    multiply(t10, t25, t25)
+    add(t24, t25, t24)
+    multiply(k5, t21, t25)
+    add(t24, t25, t24)
+    subtract(t18, t24, t18)
+    multiply(t4, t22, t22)
+    multiply(t14, t19, t19)
+    add(t22, t19, t22)
+    multiply(k6, t22, t19)
+    multiply(t22, t19, t24)
+    multiply(t28, t29, t28)
+    add(t24, t28, t24)
+    subtract(t18, t24, t18)
+    multiply(t9, t18, t24)
+    subtract(t30, t24, t30)
+    multiply(t11, t4, t11)
+    multiply(t6, t14, t6)
+    subtract(t11, t6, t11)
     multiply(t4, t16, t16)
-    add(t28, t16, t28)
-    subtract(t7, t1, t1)
-    multiply(t1, t5, t12)
-    multiply(t15, t6, t15)
-    subtract(t12, t15, t12)
-    subtract(t28, t12, t28)
-    multiply(qd_5, t28, t28)
-    add(t29, t28, a_1)
-    multiply(t17, t42, t17)
-    multiply(t47, t51, t47)
-    add(t17, t47, t17)
-    multiply(t37, t53, t37)
-    multiply(t52, t41, t52)
-    add(t37, t52, t37)
-    subtract(t17, t37, t17)
-    multiply(qd_4, t17, t17)
-    subtract(t49, t40, t40)
-    multiply(t40, t32, t40)
-    add(t33, t35, t35)
-    multiply(t30, t35, t35)
-    add(t40, t35, t40)
-    subtract(t24, t3, t24)
-    multiply(t0, t24, t24)
-    add(t7, t11, t11)
-    multiply(t11, t31, t11)
-    subtract(t24, t11, t24)
-    add(t40, t24, t40)
-    multiply(qd_1, t40, t40)
-    subtract(t49, t48, t48)
-    multiply(t48, t32, t48)
-    subtract(t33, t34, t34)
-    multiply(t30, t34, t34)
-    add(t48, t34, t48)
-    subtract(t8, t3, t8)
-    multiply(t0, t8, t8)
-    subtract(t7, t2, t2)
-    multiply(t2, t31, t2)
-    subtract(t8, t2, t8)
-    add(t48, t8, t48)
-    multiply(qd_2, t48, t48)
-    add(t40, t48, t40)
-    subtract(t49, t43, t49)
-    multiply(t49, t32, t49)
-    subtract(t33, t39, t33)
-    multiply(t30, t33, t30)
-    add(t49, t30, t49)
-    subtract(t46, t3, t46)
-    multiply(t0, t46, t0)
-    subtract(t7, t14, t7)
-    multiply(t7, t31, t7)
-    subtract(t0, t7, t0)
-    add(t49, t0, t49)
-    multiply(qd_3, t49, t49)
-    add(t40, t49, t40)
-    subtract(t17, t40, t17)
-    multiply(t36, t9, t36)
-    multiply(t4, t38, t4)
-    subtract(t36, t4, t36)
-    multiply(t1, t44, t1)
-    multiply(t50, t6, t50)
-    add(t1, t50, t1)
-    subtract(t36, t1, t36)
-    multiply(qd_5, t36, t36)
-    subtract(t17, t36, a_2)
-    multiply(qd_1, t32, t0)
-    multiply(qd_2, t32, t1)
-    add(t0, t1, t0)
-    multiply(qd_3, t32, t32)
-    add(t0, t32, t0)
-    multiply(qd_4, t53, t53)
-    add(t0, t53, t0)
-    multiply(qd_5, t9, t9)
-    add(t0, t9, t0)
-    negative(t0, a_3)
-    multiply(qd_1, t31, t0)
-    multiply(qd_2, t31, t1)
-    add(t0, t1, t0)
-    multiply(qd_3, t31, t31)
-    add(t0, t31, t0)
-    multiply(qd_4, t42, t42)
-    add(t0, t42, t0)
-    multiply(qd_5, t44, t44)
-    add(t0, t44, t0)
-    negative(t0, a_4)
-    multiply(qd_4, t10, t10)
-    multiply(qd_5, t5, t5)
-    subtract(t10, t5, a_5)
+    multiply(t14, t26, t26)
+    add(t16, t26, t16)
+    multiply(t14, t21, t21)
+    multiply(t4, t31, t31)
+    subtract(t21, t31, t21)
+    multiply(t22, qd_5, t22)
+    subtract(t21, t22, t21)
+    multiply(k6, t21, t6)
+    add(t16, t6, t16)
+    multiply(t17, t19, t17)
+    add(t16, t17, t16)
+    multiply(t11, t16, t6)
+    add(t30, t6, a_0)
+    multiply(t12, t1, t6)
+    multiply(t6, t3, t17)
+    multiply(t12, t5, t12)
+    multiply(t12, t7, t19)
+    add(t17, t19, t17)
+    multiply(t17, t8, t19)
+    multiply(t12, t3, t12)
+    multiply(t6, t7, t6)
+    subtract(t12, t6, t12)
+    multiply(t12, t2, t6)
+    subtract(t19, t6, t19)
+    multiply(t19, t10, t6)
+    multiply(t0, t13, t22)
+    add(t6, t22, t6)
+    multiply(t6, t14, t22)
+    multiply(t12, t8, t12)
+    multiply(t17, t2, t17)
+    add(t12, t17, t12)
+    multiply(t12, t4, t17)
+    add(t22, t17, t22)
+    multiply(t22, t27, t17)
+    multiply(t0, t10, t0)
+    multiply(t19, t13, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t18, t19)
+    add(t17, t19, t17)
+    multiply(t6, t4, t6)
+    multiply(t12, t14, t12)
+    subtract(t6, t12, t6)
+    multiply(t6, t16, t12)
+    add(t17, t12, a_1)
+    multiply(t5, t7, t12)
+    multiply(t1, t3, t17)
+    add(t12, t17, t12)
+    multiply(t12, t2, t17)
+    multiply(t1, t7, t1)
+    multiply(t5, t3, t5)
+    subtract(t1, t5, t1)
+    multiply(t1, t8, t3)
+    subtract(t17, t3, t17)
+    multiply(t17, t10, t10)
+    multiply(t10, t14, t3)
+    multiply(t12, t8, t12)
+    multiply(t1, t2, t1)
+    add(t12, t1, t12)
+    multiply(t12, t4, t1)
+    subtract(t3, t1, t3)
+    multiply(t3, t27, t27)
+    multiply(t17, t13, t17)
+    multiply(t17, t18, t18)
+    subtract(t27, t18, t27)
+    multiply(t10, t4, t10)
+    multiply(t12, t14, t12)
+    add(t10, t12, t10)
+    multiply(t10, t16, t16)
+    add(t27, t16, a_2)
+    multiply(t15, t21, t15)
+    multiply(t9, t20, t9)
+    subtract(t15, t9, t15)
+    multiply(t11, t23, t11)
+    add(t15, t11, a_3)
+    multiply(t22, t21, t22)
+    multiply(t0, t20, t0)
+    add(t22, t0, t22)
+    multiply(t6, t23, t6)
+    add(t22, t6, a_4)
+    multiply(t3, t21, t3)
+    multiply(t17, t20, t17)
+    subtract(t3, t17, t3)
+    multiply(t10, t23, t10)
+    add(t3, t10, a_5)
 
 
 def frame_acceleration_tcp(q, qd, qdd):
@@ -1764,13 +1517,13 @@ def frame_acceleration_tcp(q, qd, qdd):
     in  qd [6]
     in  qdd [6]
     out a [6]
-    497 ops: 275 mul, 212 add, 0 div, 10 trig
+    304 ops: 181 mul, 111 add, 0 div, 12 trig
     """
     q = _array(q, 6, "q")
     qd = _array(qd, 6, "qd")
     qdd = _array(qdd, 6, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 66, ((6,),))
+        return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 36, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -1778,1018 +1531,630 @@ def frame_acceleration_tcp(q, qd, qdd):
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = sin(q[1])
-    t2 = 0.425 * t1
-    t2 = 0.089159 - t2
-    t3 = cos(q[1])
-    t4 = sin(q[2])
-    t5 = t3 * t4
-    t6 = cos(q[2])
-    t7 = t1 * t6
-    t5 = t5 + t7
-    t7 = 0.39225 * t5
-    t7 = t2 - t7
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = cos(q[1])
+    t6 = t0 * t5
+    t7 = sin(q[2])
+    t8 = t6 * t7
+    t4 = t4 + t8
     t8 = sin(q[3])
-    t9 = t5 * t8
-    t10 = t1 * t4
-    t11 = t3 * t6
-    t10 = t10 - t11
-    t11 = cos(q[3])
-    t12 = t10 * t11
-    t9 = t9 + t12
-    t12 = 0.09465 * t9
-    t12 = t7 + t12
-    t13 = t5 * t11
-    t14 = t10 * t8
-    t13 = t13 - t14
-    t14 = sin(q[4])
-    t15 = t13 * t14
-    t16 = 0.0823 * t15
-    t16 = t12 - t16
-    t17 = t16 - 0.089159
-    t18 = t0 * t17
-    t18 = t18 * qdd[1]
-    t19 = 0.13585 * t0
-    t20 = (-0.1197) * t0
-    t21 = sin(q[0])
-    t22 = t21 * t3
-    t23 = 0.425 * t22
-    t20 = t20 + t23
-    t20 = t19 + t20
-    t23 = t22 * t6
-    t24 = t21 * t1
-    t25 = t24 * t4
-    t23 = t23 - t25
-    t25 = 0.39225 * t23
-    t25 = t20 + t25
-    t26 = 0.093 * t0
-    t26 = t25 + t26
-    t27 = t23 * t8
-    t28 = t24 * t6
-    t29 = t22 * t4
-    t28 = t28 + t29
-    t29 = t28 * t11
-    t27 = t27 + t29
-    t29 = 0.09465 * t27
-    t29 = t26 - t29
-    t30 = cos(q[4])
-    t31 = t0 * t30
-    t32 = t28 * t8
-    t33 = t23 * t11
-    t32 = t32 - t33
-    t33 = t32 * t14
-    t31 = t31 - t33
-    t33 = 0.0823 * t31
-    t29 = t29 + t33
-    t34 = t29 * qdd[0]
-    t18 = t18 - t34
-    t2 = t16 - t2
-    t34 = t0 * t2
-    t34 = t34 * qdd[2]
-    t18 = t18 + t34
-    t7 = t16 - t7
-    t34 = t0 * t7
-    t34 = t34 * qdd[3]
-    t18 = t18 + t34
-    t34 = t27 * t7
-    t26 = t29 - t26
-    t35 = t9 * t26
-    t34 = t34 + t35
-    t34 = t34 * qdd[4]
-    t18 = t18 - t34
-    t12 = t16 - t12
-    t16 = t31 * t12
-    t34 = t15 * t33
-    t16 = t16 + t34
-    t16 = t16 * qdd[5]
-    t16 = t18 + t16
-    t18 = t6 * qd[2]
-    t34 = t3 * t18
-    t35 = t1 * qd[1]
-    t36 = t4 * t35
-    t34 = t34 - t36
-    t36 = t3 * qd[1]
-    t37 = t6 * t36
-    t38 = t4 * qd[2]
-    t39 = t1 * t38
-    t37 = t37 - t39
-    t34 = t34 + t37
-    t37 = t8 * t34
-    t39 = t11 * qd[3]
-    t40 = t5 * t39
-    t37 = t37 + t40
-    t40 = t4 * t36
-    t41 = t1 * t18
-    t40 = t40 + t41
-    t41 = t6 * t35
-    t42 = t3 * t38
-    t41 = t41 + t42
-    t40 = t40 + t41
-    t41 = t11 * t40
-    t42 = t8 * qd[3]
-    t43 = t10 * t42
-    t41 = t41 - t43
-    t37 = t37 + t41
-    t41 = 0.09465 * t37
-    t43 = 0.425 * t36
-    t44 = 0.39225 * t34
-    t44 = t43 + t44
-    t41 = t41 - t44
-    t34 = t11 * t34
-    t5 = t5 * t42
-    t5 = t34 - t5
-    t34 = t8 * t40
-    t10 = t10 * t39
-    t10 = t34 + t10
-    t5 = t5 - t10
-    t5 = t14 * t5
-    t10 = t30 * qd[4]
-    t13 = t13 * t10
-    t5 = t5 + t13
-    t13 = 0.0823 * t5
-    t13 = t41 - t13
-    t34 = t0 * t13
-    t40 = t21 * qd[0]
-    t45 = t17 * t40
-    t34 = t34 - t45
-    t34 = qd[1] * t34
-    t45 = t0 * qd[0]
-    t46 = t3 * t45
-    t47 = t21 * t35
-    t46 = t46 - t47
-    t47 = 0.425 * t46
-    t48 = (-0.1197) * t40
-    t47 = t47 - t48
-    t48 = 0.13585 * t40
-    t47 = t47 - t48
-    t49 = t6 * t46
-    t50 = t22 * t38
-    t49 = t49 - t50
-    t50 = t1 * t45
-    t51 = t21 * t36
-    t50 = t50 + t51
-    t51 = t4 * t50
-    t52 = t24 * t18
-    t51 = t51 + t52
-    t49 = t49 - t51
-    t51 = 0.39225 * t49
-    t51 = t47 + t51
-    t52 = 0.093 * t40
-    t52 = t51 - t52
-    t53 = t8 * t49
-    t54 = t23 * t39
-    t53 = t53 + t54
-    t50 = t6 * t50
-    t24 = t24 * t38
-    t24 = t50 - t24
-    t46 = t4 * t46
-    t22 = t22 * t18
-    t22 = t46 + t22
-    t22 = t24 + t22
-    t24 = t11 * t22
-    t46 = t28 * t42
-    t24 = t24 - t46
-    t24 = t53 + t24
-    t46 = 0.09465 * t24
-    t46 = t52 - t46
-    t50 = t30 * t40
-    t53 = t14 * qd[4]
-    t54 = t0 * t53
-    t50 = t50 + t54
-    t22 = t8 * t22
-    t28 = t28 * t39
-    t22 = t22 + t28
-    t28 = t11 * t49
-    t23 = t23 * t42
-    t23 = t28 - t23
-    t22 = t22 - t23
-    t22 = t14 * t22
-    t23 = t32 * t10
-    t22 = t22 + t23
-    t22 = t50 + t22
-    t23 = 0.0823 * t22
-    t28 = t46 - t23
-    t32 = qd[0] * t28
-    t32 = t34 - t32
-    t34 = t13 + t43
-    t43 = t0 * t34
-    t46 = t2 * t40
-    t43 = t43 - t46
-    t43 = qd[2] * t43
-    t32 = t32 + t43
-    t43 = t13 + t44
-    t44 = t0 * t43
-    t46 = t7 * t40
-    t44 = t44 - t46
-    t44 = qd[3] * t44
-    t32 = t32 + t44
-    t44 = t7 * t24
-    t46 = t27 * t43
-    t44 = t44 + t46
-    t46 = t26 * t37
-    t49 = t28 - t52
-    t50 = t9 * t49
-    t46 = t46 + t50
-    t44 = t44 + t46
-    t44 = qd[4] * t44
-    t32 = t32 - t44
-    t41 = t13 - t41
-    t44 = t31 * t41
-    t46 = t12 * t22
-    t44 = t44 - t46
-    t46 = t33 * t5
-    t50 = t15 * t23
-    t46 = t46 - t50
-    t44 = t44 + t46
-    t44 = qd[5] * t44
-    t32 = t32 + t44
-    t16 = t16 + t32
-    t32 = t0 * t3
-    t44 = 0.425 * t32
-    t46 = (-0.1197) * t21
-    t44 = t44 - t46
-    t46 = 0.13585 * t21
-    t44 = t44 - t46
-    t50 = t32 * t6
-    t52 = t0 * t1
-    t54 = t52 * t4
-    t50 = t50 - t54
-    t54 = 0.39225 * t50
-    t54 = t44 + t54
-    t55 = 0.093 * t21
-    t55 = t54 - t55
-    t56 = t50 * t8
-    t57 = t52 * t6
-    t58 = t32 * t4
-    t57 = t57 + t58
-    t58 = t57 * t11
-    t56 = t56 + t58
-    t58 = 0.09465 * t56
-    t58 = t55 - t58
-    t59 = t57 * t8
-    t60 = t50 * t11
-    t59 = t59 - t60
-    t60 = t59 * t14
-    t61 = t21 * t30
-    t60 = t60 + t61
-    t61 = 0.0823 * t60
-    t61 = t58 - t61
-    t62 = t61 * qdd[0]
-    t63 = t21 * t17
-    t63 = t63 * qdd[1]
-    t62 = t62 + t63
-    t63 = t21 * t2
-    t63 = t63 * qdd[2]
-    t62 = t62 + t63
-    t63 = t21 * t7
-    t63 = t63 * qdd[3]
-    t62 = t62 + t63
-    t55 = t61 - t55
-    t63 = t9 * t55
-    t64 = t56 * t7
-    t63 = t63 + t64
-    t63 = t63 * qdd[4]
-    t62 = t62 + t63
-    t63 = t60 * t12
-    t58 = t61 - t58
-    t64 = t15 * t58
-    t63 = t63 - t64
-    t63 = t63 * qdd[5]
-    t62 = t62 + t63
-    t17 = t17 * t45
-    t13 = t21 * t13
-    t13 = t17 + t13
-    t13 = qd[1] * t13
-    t3 = t3 * t40
-    t17 = t0 * t35
-    t3 = t3 + t17
-    t17 = 0.425 * t3
-    t35 = (-0.1197) * t45
-    t17 = t17 + t35
-    t35 = 0.13585 * t45
-    t17 = t17 + t35
-    t63 = t6 * t3
-    t64 = t32 * t38
-    t63 = t63 + t64
-    t36 = t0 * t36
-    t1 = t1 * t40
-    t1 = t36 - t1
-    t36 = t4 * t1
-    t64 = t52 * t18
-    t36 = t36 + t64
-    t36 = t63 + t36
-    t63 = 0.39225 * t36
-    t63 = t17 + t63
-    t64 = 0.093 * t45
-    t64 = t63 + t64
-    t65 = t50 * t39
-    t66 = t8 * t36
-    t65 = t65 - t66
-    t1 = t6 * t1
-    t6 = t52 * t38
-    t1 = t1 - t6
-    t6 = t32 * t18
-    t3 = t4 * t3
-    t3 = t6 - t3
-    t1 = t1 + t3
-    t3 = t11 * t1
-    t4 = t57 * t42
-    t3 = t3 - t4
-    t3 = t65 + t3
-    t4 = 0.09465 * t3
-    t4 = t64 + t4
-    t1 = t8 * t1
-    t6 = t57 * t39
-    t1 = t1 + t6
-    t6 = t11 * t36
-    t8 = t50 * t42
-    t6 = t6 + t8
-    t1 = t1 + t6
-    t1 = t14 * t1
-    t6 = t59 * t10
-    t1 = t1 + t6
-    t6 = t30 * t45
-    t8 = t21 * t53
-    t6 = t6 - t8
-    t1 = t1 + t6
-    t6 = 0.0823 * t1
-    t4 = t4 + t6
-    t8 = qd[0] * t4
-    t8 = t13 - t8
-    t2 = t2 * t45
-    t10 = t21 * t34
-    t2 = t2 + t10
-    t2 = qd[2] * t2
-    t2 = t8 + t2
-    t8 = t7 * t45
-    t10 = t21 * t43
-    t8 = t8 + t10
-    t8 = qd[3] * t8
-    t2 = t2 + t8
-    t8 = t55 * t37
-    t10 = t64 - t4
+    t9 = t4 * t8
+    t6 = t6 * t3
+    t2 = t2 * t7
+    t2 = t6 - t2
+    t6 = cos(q[3])
+    t10 = t2 * t6
+    t9 = t9 - t10
+    t10 = cos(q[4])
     t11 = t9 * t10
-    t8 = t8 + t11
-    t7 = t7 * t3
-    t11 = t56 * t43
-    t7 = t7 + t11
-    t7 = t8 + t7
-    t7 = qd[4] * t7
-    t2 = t2 + t7
-    t7 = t12 * t1
-    t8 = t60 * t41
-    t7 = t7 + t8
-    t8 = t58 * t5
-    t11 = t15 * t6
-    t8 = t8 - t11
-    t7 = t7 - t8
-    t7 = qd[5] * t7
-    t2 = t2 + t7
-    t2 = t62 + t2
-    t7 = t27 * t55
-    t8 = t56 * t26
-    t7 = t7 - t8
-    t7 = t7 * qdd[4]
-    t8 = t29 - t19
-    t11 = t21 * t8
-    t12 = t61 + t46
-    t13 = t0 * t12
-    t11 = t11 + t13
-    t11 = t11 * qdd[1]
-    t13 = t29 - t20
-    t14 = t21 * t13
-    t18 = t61 - t44
+    t12 = sin(q[0])
+    t13 = sin(q[4])
+    t14 = t12 * t13
+    t11 = t11 - t14
+    t14 = cos(q[5])
+    t15 = t11 * t14
+    t2 = t2 * t8
+    t4 = t4 * t6
+    t2 = t2 + t4
+    t4 = sin(q[5])
+    t16 = t2 * t4
+    t15 = t15 + t16
+    t16 = qd[1] + qd[2]
+    t17 = t16 + qd[3]
+    t18 = t5 * qd[0]
+    t19 = t7 * t18
+    t20 = t1 * qd[0]
+    t21 = t3 * t20
+    t19 = t19 + t21
+    t21 = t6 * t19
+    t22 = t7 * t20
+    t23 = t3 * t18
+    t22 = t22 - t23
+    t23 = t8 * t22
+    t21 = t21 - t23
+    t23 = 0.093 * t21
+    t24 = t17 * t23
+    t25 = 0.13585 * qdd[0]
+    t26 = t1 * t25
+    t27 = 0.425 * qdd[1]
+    t28 = t1 * qdd[0]
+    t29 = t18 * qd[1]
+    t28 = t28 + t29
+    t29 = (-0.1197) * t28
+    t27 = t27 + t29
+    t26 = t26 + t27
+    t27 = 0.425 * t18
+    t29 = t20 * t27
+    t30 = (-0.1197) * t18
+    t31 = qd[1] * t30
+    t29 = t29 - t31
+    t26 = t26 + t29
+    t29 = t7 * t26
+    t31 = t20 * qd[1]
+    t32 = t5 * qdd[0]
+    t31 = t31 - t32
+    t32 = (-0.1197) * t31
+    t25 = t5 * t25
+    t25 = t32 - t25
+    t27 = t18 * t27
+    t32 = 0.425 * qd[1]
+    t33 = (-0.1197) * t20
+    t32 = t32 + t33
+    t33 = qd[1] * t32
+    t27 = t27 + t33
+    t25 = t25 - t27
+    t27 = t3 * t25
+    t27 = t29 + t27
+    t29 = 0.39225 * t22
+    t33 = t22 * t29
+    t34 = 0.39225 * t16
+    t16 = t16 * t34
+    t16 = t33 + t16
+    t16 = t27 - t16
+    t27 = t6 * t16
+    t26 = t3 * t26
+    t25 = t7 * t25
+    t25 = t26 - t25
+    t26 = qdd[1] + qdd[2]
+    t33 = 0.39225 * t26
+    t25 = t25 + t33
+    t29 = t19 * t29
+    t25 = t25 - t29
+    t29 = t8 * t25
+    t27 = t27 + t29
+    t29 = t3 * t31
+    t33 = t7 * t28
+    t29 = t29 + t33
+    t33 = t19 * qd[2]
+    t29 = t29 + t33
+    t33 = t6 * t29
+    t35 = t7 * t31
+    t28 = t3 * t28
+    t28 = t35 - t28
+    t35 = t22 * qd[2]
+    t28 = t28 + t35
+    t35 = t8 * t28
+    t33 = t33 - t35
+    t35 = t21 * qd[3]
+    t33 = t33 + t35
+    t35 = 0.093 * t33
+    t27 = t27 + t35
+    t24 = t24 - t27
+    t27 = t10 * t24
+    t35 = 0.13585 * qd[0]
+    t35 = qd[0] * t35
+    t31 = 0.425 * t31
+    t31 = t35 + t31
+    t20 = t20 * t32
+    t18 = t18 * t30
+    t18 = t20 + t18
+    t18 = t31 + t18
+    t20 = 0.39225 * t29
+    t18 = t18 + t20
+    t20 = t19 * t34
+    t18 = t18 + t20
+    t19 = t8 * t19
+    t20 = t6 * t22
+    t19 = t19 + t20
+    t20 = 0.093 * t19
+    t22 = t19 * t20
+    t23 = t21 * t23
+    t22 = t22 + t23
+    t18 = t18 + t22
+    t22 = t13 * t18
+    t22 = t27 - t22
+    t23 = t6 * t28
+    t27 = t8 * t29
+    t23 = t23 + t27
+    t27 = t19 * qd[3]
+    t23 = t23 + t27
+    t27 = t13 * t23
+    t26 = t26 + qdd[3]
+    t28 = t10 * t26
+    t27 = t27 + t28
+    t28 = t10 * t21
+    t29 = t13 * t17
+    t28 = t28 + t29
+    t29 = t28 * qd[4]
+    t27 = t27 - t29
+    t29 = 0.09465 * t27
+    t22 = t22 + t29
+    t19 = t19 + qd[4]
+    t29 = 0.09465 * t28
+    t30 = t19 * t29
+    t22 = t22 + t30
+    t30 = t14 * t22
+    t25 = t6 * t25
+    t16 = t8 * t16
+    t16 = t25 - t16
+    t25 = 0.093 * t23
+    t16 = t16 - t25
+    t20 = t17 * t20
+    t16 = t16 + t20
+    t20 = t28 * t29
+    t17 = t10 * t17
+    t21 = t13 * t21
+    t17 = t17 - t21
+    t21 = 0.09465 * t17
+    t25 = t17 * t21
+    t20 = t20 + t25
+    t16 = t16 - t20
+    t20 = t4 * t16
+    t20 = t30 - t20
+    t25 = t13 * t26
+    t23 = t10 * t23
+    t23 = t25 - t23
+    t25 = t17 * qd[4]
+    t23 = t23 + t25
+    t25 = t4 * t23
+    t26 = t33 + qdd[4]
+    t29 = t14 * t26
+    t25 = t25 + t29
+    t29 = t14 * t28
+    t30 = t4 * t19
+    t29 = t29 - t30
+    t30 = t29 * qd[5]
+    t25 = t25 + t30
+    t30 = 0.0823 * t25
+    t20 = t20 - t30
+    t17 = t17 + qd[5]
+    t30 = 0.0823 * t29
+    t31 = t17 * t30
+    t20 = t20 + t31
+    t31 = t15 * t20
+    t9 = t9 * t13
+    t32 = t12 * t10
+    t9 = t9 + t32
+    t21 = t19 * t21
+    t24 = t13 * t24
+    t18 = t10 * t18
+    t18 = t24 + t18
+    t24 = 0.09465 * t23
+    t18 = t18 + t24
+    t18 = t21 - t18
+    t21 = t4 * t28
+    t19 = t14 * t19
+    t19 = t21 + t19
+    t21 = 0.0823 * t19
+    t24 = t19 * t21
+    t28 = t29 * t30
+    t24 = t24 + t28
+    t18 = t18 - t24
+    t24 = t9 * t18
+    t24 = t31 - t24
+    t11 = t11 * t4
+    t2 = t2 * t14
+    t2 = t11 - t2
+    t11 = t4 * t22
+    t16 = t14 * t16
+    t11 = t11 + t16
+    t16 = t14 * t23
+    t22 = t4 * t26
+    t16 = t16 - t22
+    t19 = t19 * qd[5]
+    t16 = t16 - t19
+    t19 = 0.0823 * t16
+    t11 = t11 + t19
+    t17 = t17 * t21
+    t11 = t11 + t17
+    t17 = t2 * t11
+    t17 = t24 + t17
+    t19 = t12 * t1
+    t21 = t19 * t3
+    t12 = t12 * t5
+    t22 = t12 * t7
+    t21 = t21 + t22
+    t22 = t21 * t8
+    t12 = t12 * t3
+    t19 = t19 * t7
+    t12 = t12 - t19
+    t19 = t12 * t6
+    t19 = t22 - t19
+    t22 = t19 * t10
+    t23 = t0 * t13
+    t22 = t22 + t23
+    t23 = t22 * t14
+    t12 = t12 * t8
+    t21 = t21 * t6
+    t12 = t12 + t21
+    t21 = t12 * t4
+    t21 = t23 + t21
+    t23 = t21 * t20
+    t0 = t0 * t10
+    t19 = t19 * t13
+    t0 = t0 - t19
     t19 = t0 * t18
-    t14 = t14 + t19
-    t14 = t14 * qdd[2]
-    t11 = t11 + t14
-    t14 = t29 - t25
-    t19 = t21 * t14
-    t20 = t61 - t54
-    t25 = t0 * t20
-    t19 = t19 + t25
-    t19 = t19 * qdd[3]
-    t11 = t11 + t19
-    t7 = t7 - t11
-    t11 = t60 * t33
-    t19 = t31 * t58
-    t11 = t11 + t19
-    t11 = t11 * qdd[5]
-    t7 = t7 - t11
-    t11 = t55 * t24
-    t10 = t27 * t10
-    t10 = t11 + t10
-    t11 = t26 * t3
-    t19 = t56 * t49
-    t11 = t11 + t19
-    t10 = t10 - t11
-    t10 = qd[4] * t10
-    t8 = t8 * t45
-    t11 = t28 + t48
-    t11 = t21 * t11
-    t8 = t8 + t11
-    t11 = t35 - t4
-    t11 = t0 * t11
-    t12 = t12 * t40
-    t11 = t11 - t12
-    t8 = t8 + t11
-    t8 = qd[1] * t8
-    t11 = t13 * t45
-    t12 = t28 - t47
-    t12 = t21 * t12
-    t11 = t11 + t12
-    t12 = t17 - t4
-    t12 = t0 * t12
-    t13 = t18 * t40
-    t12 = t12 - t13
-    t11 = t11 + t12
-    t11 = qd[2] * t11
-    t8 = t8 + t11
-    t11 = t14 * t45
-    t12 = t28 - t51
-    t12 = t21 * t12
-    t11 = t11 + t12
-    t4 = t63 - t4
-    t4 = t0 * t4
-    t12 = t20 * t40
-    t4 = t4 - t12
-    t4 = t11 + t4
-    t4 = qd[3] * t4
-    t4 = t8 + t4
-    t4 = t10 - t4
-    t8 = t33 * t1
-    t10 = t60 * t23
-    t8 = t8 - t10
-    t10 = t58 * t22
-    t6 = t31 * t6
-    t6 = t10 + t6
-    t6 = t8 - t6
-    t6 = qd[5] * t6
-    t4 = t4 - t6
+    t19 = t23 + t19
+    t22 = t22 * t4
+    t12 = t12 * t14
+    t12 = t22 - t12
+    t22 = t12 * t11
+    t19 = t19 + t22
+    t22 = t5 * t7
+    t23 = t1 * t3
+    t22 = t22 + t23
+    t23 = t22 * t6
+    t1 = t1 * t7
+    t3 = t5 * t3
+    t1 = t1 - t3
+    t3 = t1 * t8
+    t3 = t23 - t3
+    t5 = t3 * t10
+    t7 = t5 * t14
+    t8 = t22 * t8
+    t1 = t1 * t6
+    t1 = t8 + t1
+    t6 = t1 * t4
+    t6 = t7 - t6
+    t7 = t6 * t20
+    t3 = t3 * t13
+    t8 = t3 * t18
+    t7 = t7 - t8
+    t4 = t5 * t4
+    t1 = t1 * t14
+    t1 = t4 + t1
+    t4 = t1 * t11
     t4 = t7 + t4
-    t6 = t21 * qdd[1]
-    t7 = t21 * qdd[2]
-    t6 = t6 + t7
-    t7 = t21 * qdd[3]
-    t6 = t6 + t7
-    t7 = t56 * qdd[4]
-    t6 = t6 + t7
-    t7 = t60 * qdd[5]
-    t6 = t6 + t7
-    t7 = qd[1] * t45
-    t8 = qd[2] * t45
-    t7 = t7 + t8
-    t8 = qd[3] * t45
-    t7 = t7 + t8
-    t3 = qd[4] * t3
-    t3 = t7 + t3
-    t1 = qd[5] * t1
+    t5 = t15 * t16
+    t7 = t27 + qdd[5]
+    t8 = t9 * t7
+    t5 = t5 - t8
+    t2 = t2 * t25
+    t2 = t5 + t2
+    t5 = t21 * t16
+    t0 = t0 * t7
+    t0 = t5 + t0
+    t5 = t12 * t25
+    t0 = t0 + t5
+    t5 = t6 * t16
+    t3 = t3 * t7
+    t3 = t5 - t3
+    t1 = t1 * t25
     t1 = t3 + t1
-    t1 = t6 + t1
-    t1 = -t1
-    t3 = t0 * qdd[1]
-    t6 = t0 * qdd[2]
-    t3 = t3 + t6
-    t0 = t0 * qdd[3]
-    t0 = t3 + t0
-    t3 = t27 * qdd[4]
-    t0 = t0 - t3
-    t3 = t31 * qdd[5]
-    t0 = t0 + t3
-    t3 = qd[1] * t40
-    t6 = qd[2] * t40
-    t3 = t3 + t6
-    t6 = qd[3] * t40
-    t3 = t3 + t6
-    t6 = qd[4] * t24
-    t3 = t3 + t6
-    t6 = qd[5] * t22
-    t3 = t3 + t6
-    t0 = t0 - t3
-    t3 = t9 * qdd[4]
-    t3 = qdd[0] + t3
-    t6 = t15 * qdd[5]
-    t3 = t3 - t6
-    t6 = qd[4] * t37
-    t5 = qd[5] * t5
-    t5 = t6 - t5
-    t3 = t3 + t5
-    _a = (t16, t2, t4, t1, t0, t3)
+    _a = (t17, t19, t4, t2, t0, t1)
     return np.array(_a)
 
 
 _frame_acceleration_tcp_constants = _constants(
-    0.425, 0.089159, 0.39225, 0.09465, 0.0823, 0.13585, -0.1197, 0.093)
+    0.093, 0.13585, 0.425, -0.1197, 0.39225, 0.09465, 0.0823)
 
 
 def _frame_acceleration_tcp_chunk(x, t, s, y):
     """frame_acceleration_tcp on a chunk of states (see _batch): its one-state body's instructions, in the
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
-    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     (q_0, q_1, q_2, q_3, q_4, q_5, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qdd_0, qdd_1, qdd_2, qdd_3, qdd_4,
      qdd_5) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6, k7 = _frame_acceleration_tcp_constants
+    k0, k1, k2, k3, k4, k5, k6 = _frame_acceleration_tcp_constants
     cos(q_0, t0)
     sin(q_1, t1)
-    multiply(k0, t1, t2)
-    subtract(k1, t2, t2)
-    cos(q_1, t3)
-    sin(q_2, t4)
-    multiply(t3, t4, t5)
-    cos(q_2, t6)
-    multiply(t1, t6, t7)
-    add(t5, t7, t5)
-    multiply(k2, t5, t7)
-    subtract(t2, t7, t7)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    cos(q_1, t5)
+    multiply(t0, t5, t6)
+    sin(q_2, t7)
+    multiply(t6, t7, t8)
+    add(t4, t8, t4)
     sin(q_3, t8)
-    multiply(t5, t8, t9)
-    multiply(t1, t4, t10)
-    multiply(t3, t6, t11)
-    subtract(t10, t11, t10)
-    cos(q_3, t11)
-    multiply(t10, t11, t12)
-    add(t9, t12, t9)
-    multiply(k3, t9, t12)
-    add(t7, t12, t12)
-    multiply(t5, t11, t13)
-    multiply(t10, t8, t14)
-    subtract(t13, t14, t13)
-    sin(q_4, t14)
-    multiply(t13, t14, t15)
-    multiply(k4, t15, t16)
-    subtract(t12, t16, t16)
-    subtract(t16, k1, t17)
-    multiply(t0, t17, t18)
-    multiply(t18, qdd_1, t18)
-    multiply(k5, t0, t19)
-    multiply(k6, t0, t20)
-    sin(q_0, t21)
-    multiply(t21, t3, t22)
-    multiply(k0, t22, t23)
-    add(t20, t23, t20)
-    add(t19, t20, t20)
-    multiply(t22, t6, t23)
-    multiply(t21, t1, t24)
-    multiply(t24, t4, t25)
-    subtract(t23, t25, t23)
-    multiply(k2, t23, t25)
-    add(t20, t25, t25)
-    multiply(k7, t0, t26)
-    add(t25, t26, t26)
-    multiply(t23, t8, t27)
-    multiply(t24, t6, t28)
-    multiply(t22, t4, t29)
-    add(t28, t29, t28)
-    multiply(t28, t11, t29)
-    add(t27, t29, t27)
-    multiply(k3, t27, t29)
-    subtract(t26, t29, t29)
-    cos(q_4, t30)
-    multiply(t0, t30, t31)
-    multiply(t28, t8, t32)
-    multiply(t23, t11, t33)
-    subtract(t32, t33, t32)
-    multiply(t32, t14, t33)
-    subtract(t31, t33, t31)
-    multiply(k4, t31, t33)
-    add(t29, t33, t29)
-    multiply(t29, qdd_0, t34)
-    subtract(t18, t34, t18)
-    subtract(t16, t2, t2)
-    multiply(t0, t2, t34)
-    multiply(t34, qdd_2, t34)
-    add(t18, t34, t18)
-    subtract(t16, t7, t7)
-    multiply(t0, t7, t34)
-    multiply(t34, qdd_3, t34)
-    add(t18, t34, t18)
-    multiply(t27, t7, t34)
-    subtract(t29, t26, t26)
-    multiply(t9, t26, t35)
-    add(t34, t35, t34)
-    multiply(t34, qdd_4, t34)
-    subtract(t18, t34, t18)
-    subtract(t16, t12, t16)
-    multiply(t31, t16, t12)
-    multiply(t15, t33, t34)
-    add(t12, t34, t12)
-    multiply(t12, qdd_5, t12)
-    add(t18, t12, t18)
-    multiply(t6, qd_2, t12)
-    multiply(t3, t12, t34)
-    multiply(t1, qd_1, t35)
-    multiply(t4, t35, t36)
-    subtract(t34, t36, t34)
-    multiply(t3, qd_1, t36)
-    multiply(t6, t36, t37)
-    multiply(t4, qd_2, t38)
-    multiply(t1, t38, t39)
-    subtract(t37, t39, t37)
-    add(t34, t37, t34)
-    multiply(t8, t34, t37)
-    multiply(t11, qd_3, t39)
-    multiply(t5, t39, t40)
-    add(t37, t40, t37)
-    multiply(t4, t36, t40)
-    multiply(t1, t12, t41)
-    add(t40, t41, t40)
-    multiply(t6, t35, t41)
-    multiply(t3, t38, t42)
-    add(t41, t42, t41)
-    add(t40, t41, t40)
-    multiply(t11, t40, t41)
-    multiply(t8, qd_3, t42)
-    multiply(t10, t42, t43)
-    subtract(t41, t43, t41)
-    add(t37, t41, t37)
-    multiply(k3, t37, t41)
-    multiply(k0, t36, t43)
-    multiply(k2, t34, t44)
-    add(t43, t44, t44)
-    subtract(t41, t44, t41)
-    multiply(t11, t34, t34)
-    multiply(t5, t42, t5)
-    subtract(t34, t5, t34)
-    multiply(t8, t40, t40)
-    multiply(t10, t39, t10)
-    add(t40, t10, t40)
-    subtract(t34, t40, t34)
-    multiply(t14, t34, t34)
-    multiply(t30, qd_4, t5)
-    multiply(t13, t5, t13)
-    add(t34, t13, t34)
-    multiply(k4, t34, t10)
-    subtract(t41, t10, t10)
-    multiply(t0, t10, t13)
-    multiply(t21, qd_0, t40)
-    multiply(t17, t40, t45)
-    subtract(t13, t45, t13)
-    multiply(qd_1, t13, t13)
-    multiply(t0, qd_0, t45)
-    multiply(t3, t45, t46)
-    multiply(t21, t35, t47)
-    subtract(t46, t47, t46)
-    multiply(k0, t46, t47)
-    multiply(k6, t40, t48)
-    subtract(t47, t48, t47)
-    multiply(k5, t40, t48)
-    subtract(t47, t48, t47)
-    multiply(t6, t46, t49)
-    multiply(t22, t38, t50)
-    subtract(t49, t50, t49)
-    multiply(t1, t45, t50)
-    multiply(t21, t36, t51)
-    add(t50, t51, t50)
-    multiply(t4, t50, t51)
-    multiply(t24, t12, t52)
-    add(t51, t52, t51)
-    subtract(t49, t51, t49)
-    multiply(k2, t49, t51)
-    add(t47, t51, t51)
-    multiply(k7, t40, t52)
-    subtract(t51, t52, t52)
-    multiply(t8, t49, t53)
-    multiply(t23, t39, t54)
-    add(t53, t54, t53)
-    multiply(t6, t50, t50)
-    multiply(t24, t38, t24)
-    subtract(t50, t24, t50)
-    multiply(t4, t46, t46)
-    multiply(t22, t12, t22)
-    add(t46, t22, t46)
-    add(t50, t46, t50)
-    multiply(t11, t50, t22)
-    multiply(t28, t42, t24)
-    subtract(t22, t24, t22)
-    add(t53, t22, t53)
-    multiply(k3, t53, t22)
-    subtract(t52, t22, t22)
-    multiply(t30, t40, t24)
-    multiply(t14, qd_4, t46)
-    multiply(t0, t46, t54)
-    add(t24, t54, t24)
-    multiply(t8, t50, t50)
-    multiply(t28, t39, t28)
-    add(t50, t28, t50)
-    multiply(t11, t49, t49)
-    multiply(t23, t42, t23)
-    subtract(t49, t23, t49)
-    subtract(t50, t49, t50)
-    multiply(t14, t50, t50)
-    multiply(t32, t5, t32)
-    add(t50, t32, t50)
-    add(t24, t50, t24)
-    multiply(k4, t24, t23)
+    multiply(t4, t8, t9)
+    multiply(t6, t3, t6)
+    multiply(t2, t7, t2)
+    subtract(t6, t2, t6)
+    cos(q_3, t2)
+    multiply(t6, t2, t10)
+    subtract(t9, t10, t9)
+    cos(q_4, t10)
+    multiply(t9, t10, t11)
+    sin(q_0, t12)
+    sin(q_4, t13)
+    multiply(t12, t13, t14)
+    subtract(t11, t14, t11)
+    cos(q_5, t14)
+    multiply(t11, t14, t15)
+    multiply(t6, t8, t6)
+    multiply(t4, t2, t4)
+    add(t6, t4, t6)
+    sin(q_5, t4)
+    multiply(t6, t4, t16)
+    add(t15, t16, t15)
+    add(qd_1, qd_2, t16)
+    add(t16, qd_3, t17)
+    multiply(t5, qd_0, t18)
+    multiply(t7, t18, t19)
+    multiply(t1, qd_0, t20)
+    multiply(t3, t20, t21)
+    add(t19, t21, t19)
+    multiply(t2, t19, t21)
+    multiply(t7, t20, t22)
+    multiply(t3, t18, t23)
     subtract(t22, t23, t22)
-    multiply(qd_0, t22, t28)
-    subtract(t13, t28, t13)
-    add(t10, t43, t43)
-    multiply(t0, t43, t28)
-    multiply(t2, t40, t32)
-    subtract(t28, t32, t28)
-    multiply(qd_2, t28, t28)
-    add(t13, t28, t13)
-    add(t10, t44, t44)
-    multiply(t0, t44, t28)
-    multiply(t7, t40, t32)
-    subtract(t28, t32, t28)
-    multiply(qd_3, t28, t28)
-    add(t13, t28, t13)
-    multiply(t7, t53, t28)
-    multiply(t27, t44, t32)
-    add(t28, t32, t28)
-    multiply(t26, t37, t32)
-    subtract(t22, t52, t52)
-    multiply(t9, t52, t49)
-    add(t32, t49, t32)
-    add(t28, t32, t28)
-    multiply(qd_4, t28, t28)
-    subtract(t13, t28, t13)
-    subtract(t10, t41, t41)
-    multiply(t31, t41, t28)
-    multiply(t16, t24, t32)
-    subtract(t28, t32, t28)
-    multiply(t33, t34, t32)
-    multiply(t15, t23, t49)
-    subtract(t32, t49, t32)
-    add(t28, t32, t28)
-    multiply(qd_5, t28, t28)
-    add(t13, t28, t13)
-    add(t18, t13, a_0)
-    multiply(t0, t3, t13)
-    multiply(k0, t13, t18)
-    multiply(k6, t21, t28)
-    subtract(t18, t28, t18)
-    multiply(k5, t21, t28)
-    subtract(t18, t28, t18)
-    multiply(t13, t6, t32)
-    multiply(t0, t1, t49)
-    multiply(t49, t4, t50)
-    subtract(t32, t50, t32)
-    multiply(k2, t32, t50)
-    add(t18, t50, t50)
-    multiply(k7, t21, t54)
-    subtract(t50, t54, t54)
-    multiply(t32, t8, t55)
-    multiply(t49, t6, t56)
-    multiply(t13, t4, t57)
-    add(t56, t57, t56)
-    multiply(t56, t11, t57)
-    add(t55, t57, t55)
-    multiply(k3, t55, t57)
-    subtract(t54, t57, t57)
-    multiply(t56, t8, t58)
-    multiply(t32, t11, t59)
-    subtract(t58, t59, t58)
-    multiply(t58, t14, t59)
-    multiply(t21, t30, t60)
-    add(t59, t60, t59)
-    multiply(k4, t59, t60)
-    subtract(t57, t60, t60)
-    multiply(t60, qdd_0, t61)
-    multiply(t21, t17, t62)
-    multiply(t62, qdd_1, t62)
-    add(t61, t62, t61)
-    multiply(t21, t2, t62)
-    multiply(t62, qdd_2, t62)
-    add(t61, t62, t61)
-    multiply(t21, t7, t62)
-    multiply(t62, qdd_3, t62)
-    add(t61, t62, t61)
-    subtract(t60, t54, t54)
-    multiply(t9, t54, t62)
-    multiply(t55, t7, t63)
-    add(t62, t63, t62)
-    multiply(t62, qdd_4, t62)
-    add(t61, t62, t61)
-    multiply(t59, t16, t62)
-    subtract(t60, t57, t57)
-    multiply(t15, t57, t63)
-    subtract(t62, t63, t62)
-    multiply(t62, qdd_5, t62)
-    add(t61, t62, t61)
-    multiply(t17, t45, t17)
-    multiply(t21, t10, t10)
-    add(t17, t10, t17)
-    multiply(qd_1, t17, t17)
-    multiply(t3, t40, t3)
-    multiply(t0, t35, t35)
-    add(t3, t35, t3)
-    multiply(k0, t3, t10)
-    multiply(k6, t45, t35)
-    add(t10, t35, t10)
-    multiply(k5, t45, t35)
-    add(t10, t35, t10)
-    multiply(t6, t3, t62)
-    multiply(t13, t38, t63)
-    add(t62, t63, t62)
-    multiply(t0, t36, t36)
-    multiply(t1, t40, t1)
-    subtract(t36, t1, t36)
-    multiply(t4, t36, t1)
-    multiply(t49, t12, t63)
-    add(t1, t63, t1)
-    add(t62, t1, t62)
-    multiply(k2, t62, t1)
-    add(t10, t1, t1)
-    multiply(k7, t45, t63)
-    add(t1, t63, t63)
-    multiply(t32, t39, t64)
-    multiply(t8, t62, t65)
-    subtract(t64, t65, t64)
-    multiply(t6, t36, t6)
-    multiply(t49, t38, t49)
-    subtract(t6, t49, t6)
-    multiply(t13, t12, t13)
-    multiply(t4, t3, t4)
-    subtract(t13, t4, t13)
-    add(t6, t13, t6)
-    multiply(t11, t6, t3)
-    multiply(t56, t42, t4)
-    subtract(t3, t4, t3)
-    add(t64, t3, t64)
-    multiply(k3, t64, t3)
-    add(t63, t3, t3)
-    multiply(t8, t6, t8)
-    multiply(t56, t39, t56)
-    add(t8, t56, t8)
-    multiply(t11, t62, t11)
-    multiply(t32, t42, t32)
-    add(t11, t32, t11)
-    add(t8, t11, t8)
-    multiply(t14, t8, t14)
-    multiply(t58, t5, t58)
-    add(t14, t58, t14)
-    multiply(t30, t45, t30)
-    multiply(t21, t46, t46)
-    subtract(t30, t46, t30)
-    add(t14, t30, t14)
-    multiply(k4, t14, t4)
-    add(t3, t4, t3)
-    multiply(qd_0, t3, t5)
-    subtract(t17, t5, t17)
-    multiply(t2, t45, t2)
-    multiply(t21, t43, t43)
-    add(t2, t43, t2)
-    multiply(qd_2, t2, t2)
-    add(t17, t2, t17)
-    multiply(t7, t45, t2)
-    multiply(t21, t44, t5)
-    add(t2, t5, t2)
-    multiply(qd_3, t2, t2)
-    add(t17, t2, t17)
-    multiply(t54, t37, t2)
-    subtract(t63, t3, t63)
-    multiply(t9, t63, t5)
-    add(t2, t5, t2)
-    multiply(t7, t64, t7)
-    multiply(t55, t44, t44)
-    add(t7, t44, t7)
-    add(t2, t7, t2)
-    multiply(qd_4, t2, t2)
-    add(t17, t2, t17)
-    multiply(t16, t14, t16)
-    multiply(t59, t41, t41)
-    add(t16, t41, t16)
-    multiply(t57, t34, t2)
-    multiply(t15, t4, t5)
-    subtract(t2, t5, t2)
-    subtract(t16, t2, t16)
-    multiply(qd_5, t16, t16)
-    add(t17, t16, t17)
-    add(t61, t17, a_1)
-    multiply(t27, t54, t2)
-    multiply(t55, t26, t5)
-    subtract(t2, t5, t2)
-    multiply(t2, qdd_4, t2)
-    subtract(t29, t19, t19)
-    multiply(t21, t19, t5)
-    add(t60, t28, t28)
-    multiply(t0, t28, t6)
-    add(t5, t6, t5)
-    multiply(t5, qdd_1, t5)
-    subtract(t29, t20, t20)
-    multiply(t21, t20, t6)
-    subtract(t60, t18, t18)
-    multiply(t0, t18, t7)
-    add(t6, t7, t6)
-    multiply(t6, qdd_2, t6)
-    add(t5, t6, t5)
-    subtract(t29, t25, t29)
-    multiply(t21, t29, t6)
-    subtract(t60, t50, t60)
-    multiply(t0, t60, t7)
-    add(t6, t7, t6)
-    multiply(t6, qdd_3, t6)
-    add(t5, t6, t5)
-    subtract(t2, t5, t2)
-    multiply(t59, t33, t5)
-    multiply(t31, t57, t6)
-    add(t5, t6, t5)
-    multiply(t5, qdd_5, t5)
-    subtract(t2, t5, t2)
-    multiply(t54, t53, t54)
-    multiply(t27, t63, t63)
-    add(t54, t63, t54)
-    multiply(t26, t64, t26)
-    multiply(t55, t52, t52)
-    add(t26, t52, t26)
-    subtract(t54, t26, t54)
-    multiply(qd_4, t54, t54)
-    multiply(t19, t45, t19)
-    add(t22, t48, t48)
-    multiply(t21, t48, t48)
-    add(t19, t48, t19)
-    subtract(t35, t3, t35)
-    multiply(t0, t35, t35)
-    multiply(t28, t40, t28)
+    multiply(t8, t22, t23)
+    subtract(t21, t23, t21)
+    multiply(k0, t21, t23)
+    multiply(t17, t23, t24)
+    multiply(k1, qdd_0, t25)
+    multiply(t1, t25, t26)
+    multiply(k2, qdd_1, t27)
+    multiply(t1, qdd_0, t28)
+    multiply(t18, qd_1, t29)
+    add(t28, t29, t28)
+    multiply(k3, t28, t29)
+    add(t27, t29, t27)
+    add(t26, t27, t26)
+    multiply(k2, t18, t27)
+    multiply(t20, t27, t29)
+    multiply(k3, t18, t30)
+    multiply(qd_1, t30, t31)
+    subtract(t29, t31, t29)
+    add(t26, t29, t26)
+    multiply(t7, t26, t29)
+    multiply(t20, qd_1, t31)
+    multiply(t5, qdd_0, t32)
+    subtract(t31, t32, t31)
+    multiply(k3, t31, t32)
+    multiply(t5, t25, t25)
+    subtract(t32, t25, t32)
+    multiply(t18, t27, t27)
+    multiply(k2, qd_1, t25)
+    multiply(k3, t20, t33)
+    add(t25, t33, t25)
+    multiply(qd_1, t25, t33)
+    add(t27, t33, t27)
+    subtract(t32, t27, t32)
+    multiply(t3, t32, t27)
+    add(t29, t27, t29)
+    multiply(k4, t22, t27)
+    multiply(t22, t27, t33)
+    multiply(k4, t16, t34)
+    multiply(t16, t34, t16)
+    add(t33, t16, t33)
+    subtract(t29, t33, t29)
+    multiply(t2, t29, t16)
+    multiply(t3, t26, t26)
+    multiply(t7, t32, t32)
+    subtract(t26, t32, t26)
+    add(qdd_1, qdd_2, t32)
+    multiply(k4, t32, t33)
+    add(t26, t33, t26)
+    multiply(t19, t27, t27)
+    subtract(t26, t27, t26)
+    multiply(t8, t26, t27)
+    add(t16, t27, t16)
+    multiply(t3, t31, t27)
+    multiply(t7, t28, t33)
+    add(t27, t33, t27)
+    multiply(t19, qd_2, t33)
+    add(t27, t33, t27)
+    multiply(t2, t27, t33)
+    multiply(t7, t31, t35)
+    multiply(t3, t28, t28)
     subtract(t35, t28, t35)
-    add(t19, t35, t19)
-    multiply(qd_1, t19, t19)
-    multiply(t20, t45, t20)
-    subtract(t22, t47, t47)
-    multiply(t21, t47, t47)
-    add(t20, t47, t20)
-    subtract(t10, t3, t10)
-    multiply(t0, t10, t10)
-    multiply(t18, t40, t18)
-    subtract(t10, t18, t10)
-    add(t20, t10, t20)
-    multiply(qd_2, t20, t20)
-    add(t19, t20, t19)
-    multiply(t29, t45, t29)
-    subtract(t22, t51, t22)
-    multiply(t21, t22, t22)
-    add(t29, t22, t29)
-    subtract(t1, t3, t1)
-    multiply(t0, t1, t1)
-    multiply(t60, t40, t60)
-    subtract(t1, t60, t1)
-    add(t29, t1, t29)
-    multiply(qd_3, t29, t29)
-    add(t19, t29, t19)
-    subtract(t54, t19, t54)
-    multiply(t33, t14, t33)
-    multiply(t59, t23, t23)
-    subtract(t33, t23, t33)
-    multiply(t57, t24, t57)
-    multiply(t31, t4, t4)
-    add(t57, t4, t57)
-    subtract(t33, t57, t33)
-    multiply(qd_5, t33, t33)
-    subtract(t54, t33, t54)
-    add(t2, t54, a_2)
-    multiply(t21, qdd_1, t1)
-    multiply(t21, qdd_2, t2)
-    add(t1, t2, t1)
-    multiply(t21, qdd_3, t21)
-    add(t1, t21, t1)
-    multiply(t55, qdd_4, t55)
-    add(t1, t55, t1)
-    multiply(t59, qdd_5, t59)
-    add(t1, t59, t1)
-    multiply(qd_1, t45, t2)
-    multiply(qd_2, t45, t3)
-    add(t2, t3, t2)
-    multiply(qd_3, t45, t45)
-    add(t2, t45, t2)
-    multiply(qd_4, t64, t64)
-    add(t2, t64, t2)
-    multiply(qd_5, t14, t14)
-    add(t2, t14, t2)
-    add(t1, t2, t1)
-    negative(t1, a_3)
-    multiply(t0, qdd_1, t1)
-    multiply(t0, qdd_2, t2)
-    add(t1, t2, t1)
-    multiply(t0, qdd_3, t0)
-    add(t1, t0, t1)
-    multiply(t27, qdd_4, t27)
-    subtract(t1, t27, t1)
-    multiply(t31, qdd_5, t31)
-    add(t1, t31, t1)
-    multiply(qd_1, t40, t0)
-    multiply(qd_2, t40, t2)
-    add(t0, t2, t0)
-    multiply(qd_3, t40, t40)
-    add(t0, t40, t0)
-    multiply(qd_4, t53, t53)
-    add(t0, t53, t0)
-    multiply(qd_5, t24, t24)
-    add(t0, t24, t0)
-    subtract(t1, t0, a_4)
-    multiply(t9, qdd_4, t9)
-    add(qdd_0, t9, t9)
-    multiply(t15, qdd_5, t15)
-    subtract(t9, t15, t9)
-    multiply(qd_4, t37, t37)
-    multiply(qd_5, t34, t34)
-    subtract(t37, t34, t37)
-    add(t9, t37, a_5)
+    multiply(t22, qd_2, t28)
+    add(t35, t28, t35)
+    multiply(t8, t35, t28)
+    subtract(t33, t28, t33)
+    multiply(t21, qd_3, t28)
+    add(t33, t28, t33)
+    multiply(k0, t33, t28)
+    add(t16, t28, t16)
+    subtract(t24, t16, t24)
+    multiply(t10, t24, t16)
+    multiply(k1, qd_0, t28)
+    multiply(qd_0, t28, t28)
+    multiply(k2, t31, t31)
+    add(t28, t31, t28)
+    multiply(t20, t25, t20)
+    multiply(t18, t30, t18)
+    add(t20, t18, t20)
+    add(t28, t20, t28)
+    multiply(k4, t27, t18)
+    add(t28, t18, t28)
+    multiply(t19, t34, t34)
+    add(t28, t34, t28)
+    multiply(t8, t19, t19)
+    multiply(t2, t22, t22)
+    add(t19, t22, t19)
+    multiply(k0, t19, t18)
+    multiply(t19, t18, t20)
+    multiply(t21, t23, t23)
+    add(t20, t23, t20)
+    add(t28, t20, t28)
+    multiply(t13, t28, t20)
+    subtract(t16, t20, t16)
+    multiply(t2, t35, t35)
+    multiply(t8, t27, t27)
+    add(t35, t27, t35)
+    multiply(t19, qd_3, t20)
+    add(t35, t20, t35)
+    multiply(t13, t35, t20)
+    add(t32, qdd_3, t32)
+    multiply(t10, t32, t22)
+    add(t20, t22, t20)
+    multiply(t10, t21, t22)
+    multiply(t13, t17, t23)
+    add(t22, t23, t22)
+    multiply(t22, qd_4, t23)
+    subtract(t20, t23, t20)
+    multiply(k5, t20, t23)
+    add(t16, t23, t16)
+    add(t19, qd_4, t19)
+    multiply(k5, t22, t23)
+    multiply(t19, t23, t25)
+    add(t16, t25, t16)
+    multiply(t14, t16, t25)
+    multiply(t2, t26, t26)
+    multiply(t8, t29, t29)
+    subtract(t26, t29, t26)
+    multiply(k0, t35, t27)
+    subtract(t26, t27, t26)
+    multiply(t17, t18, t18)
+    add(t26, t18, t26)
+    multiply(t22, t23, t23)
+    multiply(t10, t17, t17)
+    multiply(t13, t21, t21)
+    subtract(t17, t21, t17)
+    multiply(k5, t17, t18)
+    multiply(t17, t18, t21)
+    add(t23, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t4, t26, t21)
+    subtract(t25, t21, t25)
+    multiply(t13, t32, t32)
+    multiply(t10, t35, t35)
+    subtract(t32, t35, t32)
+    multiply(t17, qd_4, t21)
+    add(t32, t21, t32)
+    multiply(t4, t32, t21)
+    add(t33, qdd_4, t33)
+    multiply(t14, t33, t23)
+    add(t21, t23, t21)
+    multiply(t14, t22, t23)
+    multiply(t4, t19, t27)
+    subtract(t23, t27, t23)
+    multiply(t23, qd_5, t27)
+    add(t21, t27, t21)
+    multiply(k6, t21, t27)
+    subtract(t25, t27, t25)
+    add(t17, qd_5, t17)
+    multiply(k6, t23, t27)
+    multiply(t17, t27, t29)
+    add(t25, t29, t25)
+    multiply(t15, t25, t29)
+    multiply(t9, t13, t9)
+    multiply(t12, t10, t30)
+    add(t9, t30, t9)
+    multiply(t19, t18, t18)
+    multiply(t13, t24, t24)
+    multiply(t10, t28, t28)
+    add(t24, t28, t24)
+    multiply(k5, t32, t28)
+    add(t24, t28, t24)
+    subtract(t18, t24, t18)
+    multiply(t4, t22, t22)
+    multiply(t14, t19, t19)
+    add(t22, t19, t22)
+    multiply(k6, t22, t19)
+    multiply(t22, t19, t24)
+    multiply(t23, t27, t23)
+    add(t24, t23, t24)
+    subtract(t18, t24, t18)
+    multiply(t9, t18, t23)
+    subtract(t29, t23, t29)
+    multiply(t11, t4, t11)
+    multiply(t6, t14, t6)
+    subtract(t11, t6, t11)
+    multiply(t4, t16, t16)
+    multiply(t14, t26, t26)
+    add(t16, t26, t16)
+    multiply(t14, t32, t32)
+    multiply(t4, t33, t33)
+    subtract(t32, t33, t32)
+    multiply(t22, qd_5, t22)
+    subtract(t32, t22, t32)
+    multiply(k6, t32, t6)
+    add(t16, t6, t16)
+    multiply(t17, t19, t17)
+    add(t16, t17, t16)
+    multiply(t11, t16, t6)
+    add(t29, t6, a_0)
+    multiply(t12, t1, t6)
+    multiply(t6, t3, t17)
+    multiply(t12, t5, t12)
+    multiply(t12, t7, t19)
+    add(t17, t19, t17)
+    multiply(t17, t8, t19)
+    multiply(t12, t3, t12)
+    multiply(t6, t7, t6)
+    subtract(t12, t6, t12)
+    multiply(t12, t2, t6)
+    subtract(t19, t6, t19)
+    multiply(t19, t10, t6)
+    multiply(t0, t13, t22)
+    add(t6, t22, t6)
+    multiply(t6, t14, t22)
+    multiply(t12, t8, t12)
+    multiply(t17, t2, t17)
+    add(t12, t17, t12)
+    multiply(t12, t4, t17)
+    add(t22, t17, t22)
+    multiply(t22, t25, t17)
+    multiply(t0, t10, t0)
+    multiply(t19, t13, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t18, t19)
+    add(t17, t19, t17)
+    multiply(t6, t4, t6)
+    multiply(t12, t14, t12)
+    subtract(t6, t12, t6)
+    multiply(t6, t16, t12)
+    add(t17, t12, a_1)
+    multiply(t5, t7, t12)
+    multiply(t1, t3, t17)
+    add(t12, t17, t12)
+    multiply(t12, t2, t17)
+    multiply(t1, t7, t1)
+    multiply(t5, t3, t5)
+    subtract(t1, t5, t1)
+    multiply(t1, t8, t3)
+    subtract(t17, t3, t17)
+    multiply(t17, t10, t10)
+    multiply(t10, t14, t3)
+    multiply(t12, t8, t12)
+    multiply(t1, t2, t1)
+    add(t12, t1, t12)
+    multiply(t12, t4, t1)
+    subtract(t3, t1, t3)
+    multiply(t3, t25, t25)
+    multiply(t17, t13, t17)
+    multiply(t17, t18, t18)
+    subtract(t25, t18, t25)
+    multiply(t10, t4, t10)
+    multiply(t12, t14, t12)
+    add(t10, t12, t10)
+    multiply(t10, t16, t16)
+    add(t25, t16, a_2)
+    multiply(t15, t32, t15)
+    add(t20, qdd_5, t20)
+    multiply(t9, t20, t9)
+    subtract(t15, t9, t15)
+    multiply(t11, t21, t11)
+    add(t15, t11, a_3)
+    multiply(t22, t32, t22)
+    multiply(t0, t20, t0)
+    add(t22, t0, t22)
+    multiply(t6, t21, t6)
+    add(t22, t6, a_4)
+    multiply(t3, t32, t3)
+    multiply(t17, t20, t17)
+    subtract(t3, t17, t3)
+    multiply(t10, t21, t10)
+    add(t3, t10, a_5)
 
 
 def fk_base_link(q):
@@ -3697,846 +3062,599 @@ def jdot_qd_ee_link(q, qd):
     in  q [6]
     in  qd [6]
     out a [6]
-    406 ops: 222 mul, 174 add, 0 div, 10 trig
+    283 ops: 172 mul, 99 add, 0 div, 12 trig
     """
     q = _array(q, 6, "q")
     qd = _array(qd, 6, "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_jdot_qd_ee_link_chunk, (q, qd), 55, ((6,),))
+        return _batch(_jdot_qd_ee_link_chunk, (q, qd), 35, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
-    t1 = sin(q[3])
-    t2 = cos(q[1])
+    t1 = sin(q[1])
+    t2 = t0 * t1
     t3 = cos(q[2])
-    t4 = t3 * qd[2]
-    t5 = t2 * t4
-    t6 = sin(q[2])
-    t7 = sin(q[1])
-    t8 = t7 * qd[1]
-    t9 = t6 * t8
-    t5 = t5 - t9
-    t9 = t2 * qd[1]
-    t10 = t3 * t9
-    t11 = t6 * qd[2]
-    t12 = t7 * t11
-    t10 = t10 - t12
-    t5 = t5 + t10
-    t10 = t1 * t5
-    t12 = t2 * t6
-    t13 = t7 * t3
-    t12 = t12 + t13
-    t13 = cos(q[3])
-    t14 = t13 * qd[3]
-    t15 = t12 * t14
-    t10 = t10 + t15
-    t15 = t6 * t9
-    t16 = t7 * t4
-    t15 = t15 + t16
-    t16 = t3 * t8
-    t17 = t2 * t11
-    t16 = t16 + t17
-    t15 = t15 + t16
-    t16 = t13 * t15
-    t17 = t7 * t6
-    t18 = t2 * t3
-    t17 = t17 - t18
-    t18 = t1 * qd[3]
-    t19 = t17 * t18
-    t16 = t16 - t19
-    t10 = t10 + t16
-    t16 = 0.09465 * t10
-    t19 = 0.425 * t9
-    t20 = 0.39225 * t5
-    t20 = t19 + t20
-    t16 = t16 - t20
-    t21 = sin(q[4])
-    t5 = t13 * t5
-    t22 = t12 * t18
-    t5 = t5 - t22
-    t15 = t1 * t15
-    t22 = t17 * t14
-    t15 = t15 + t22
-    t5 = t5 - t15
-    t5 = t21 * t5
-    t15 = t12 * t13
-    t22 = t17 * t1
-    t15 = t15 - t22
-    t22 = cos(q[4])
-    t23 = t22 * qd[4]
-    t24 = t15 * t23
-    t5 = t5 + t24
-    t24 = 0.0823 * t5
-    t24 = t16 - t24
-    t25 = t0 * t24
-    t26 = 0.425 * t7
-    t26 = 0.089159 - t26
-    t27 = 0.39225 * t12
-    t27 = t26 - t27
-    t12 = t12 * t1
-    t17 = t17 * t13
-    t12 = t12 + t17
-    t17 = 0.09465 * t12
-    t17 = t27 + t17
-    t15 = t15 * t21
-    t28 = 0.0823 * t15
-    t28 = t17 - t28
-    t29 = t28 - 0.089159
-    t30 = sin(q[0])
-    t31 = t30 * qd[0]
-    t32 = t29 * t31
-    t25 = t25 - t32
-    t25 = qd[1] * t25
-    t32 = t0 * qd[0]
-    t33 = t2 * t32
-    t34 = t30 * t8
-    t33 = t33 - t34
-    t34 = 0.425 * t33
-    t35 = (-0.1197) * t31
-    t34 = t34 - t35
-    t35 = 0.13585 * t31
-    t34 = t34 - t35
-    t36 = t3 * t33
-    t37 = t30 * t2
-    t38 = t37 * t11
-    t36 = t36 - t38
-    t38 = t7 * t32
-    t39 = t30 * t9
-    t38 = t38 + t39
-    t39 = t6 * t38
-    t40 = t30 * t7
-    t41 = t40 * t4
-    t39 = t39 + t41
-    t36 = t36 - t39
-    t39 = 0.39225 * t36
-    t39 = t34 + t39
-    t41 = 0.093 * t31
-    t41 = t39 - t41
-    t42 = t1 * t36
-    t43 = t37 * t3
-    t44 = t40 * t6
-    t43 = t43 - t44
-    t44 = t43 * t14
-    t42 = t42 + t44
-    t38 = t3 * t38
-    t44 = t40 * t11
-    t38 = t38 - t44
-    t33 = t6 * t33
-    t44 = t37 * t4
-    t33 = t33 + t44
-    t33 = t38 + t33
-    t38 = t13 * t33
-    t40 = t40 * t3
-    t44 = t37 * t6
-    t40 = t40 + t44
-    t44 = t40 * t18
-    t38 = t38 - t44
-    t38 = t42 + t38
-    t42 = 0.09465 * t38
-    t42 = t41 - t42
-    t44 = t22 * t31
-    t45 = t21 * qd[4]
-    t46 = t0 * t45
-    t44 = t44 + t46
-    t33 = t1 * t33
-    t46 = t40 * t14
-    t33 = t33 + t46
-    t36 = t13 * t36
-    t46 = t43 * t18
-    t36 = t36 - t46
-    t33 = t33 - t36
-    t33 = t21 * t33
-    t36 = t40 * t1
-    t46 = t43 * t13
-    t36 = t36 - t46
-    t46 = t36 * t23
-    t33 = t33 + t46
-    t33 = t44 + t33
-    t44 = 0.0823 * t33
-    t42 = t42 - t44
-    t46 = qd[0] * t42
-    t25 = t25 - t46
-    t19 = t24 + t19
-    t46 = t0 * t19
-    t26 = t28 - t26
-    t47 = t26 * t31
-    t46 = t46 - t47
-    t46 = qd[2] * t46
-    t25 = t25 + t46
-    t20 = t24 + t20
-    t46 = t0 * t20
-    t27 = t28 - t27
-    t47 = t27 * t31
-    t46 = t46 - t47
-    t46 = qd[3] * t46
-    t25 = t25 + t46
-    t46 = t27 * t38
-    t47 = t43 * t1
-    t40 = t40 * t13
-    t40 = t47 + t40
-    t47 = t40 * t20
-    t46 = t46 + t47
-    t47 = 0.13585 * t0
-    t48 = (-0.1197) * t0
-    t37 = 0.425 * t37
-    t37 = t48 + t37
-    t37 = t47 + t37
-    t43 = 0.39225 * t43
-    t43 = t37 + t43
-    t48 = 0.093 * t0
-    t48 = t43 + t48
-    t49 = 0.09465 * t40
-    t49 = t48 - t49
-    t50 = t0 * t22
-    t36 = t36 * t21
-    t36 = t50 - t36
-    t50 = 0.0823 * t36
-    t49 = t49 + t50
-    t48 = t49 - t48
-    t51 = t48 * t10
-    t41 = t42 - t41
-    t52 = t12 * t41
-    t51 = t51 + t52
-    t46 = t46 + t51
-    t46 = qd[4] * t46
-    t25 = t25 - t46
-    t16 = t24 - t16
-    t46 = t36 * t16
-    t17 = t28 - t17
-    t28 = t17 * t33
-    t28 = t46 - t28
-    t46 = t50 * t5
-    t51 = t15 * t44
-    t46 = t46 - t51
-    t28 = t28 + t46
-    t28 = qd[5] * t28
-    t25 = t25 + t28
-    t28 = t29 * t32
-    t24 = t30 * t24
-    t24 = t28 + t24
-    t24 = qd[1] * t24
-    t28 = t2 * t31
-    t8 = t0 * t8
-    t8 = t28 + t8
-    t28 = 0.425 * t8
-    t29 = (-0.1197) * t32
-    t28 = t28 + t29
-    t29 = 0.13585 * t32
-    t28 = t28 + t29
-    t46 = t3 * t8
-    t2 = t0 * t2
-    t51 = t2 * t11
-    t46 = t46 + t51
-    t9 = t0 * t9
-    t51 = t7 * t31
-    t9 = t9 - t51
-    t51 = t6 * t9
-    t7 = t0 * t7
-    t52 = t7 * t4
-    t51 = t51 + t52
-    t46 = t46 + t51
-    t51 = 0.39225 * t46
-    t51 = t28 + t51
-    t52 = 0.093 * t32
-    t52 = t51 + t52
-    t53 = t2 * t3
-    t54 = t7 * t6
-    t53 = t53 - t54
-    t54 = t53 * t14
-    t55 = t1 * t46
-    t54 = t54 - t55
-    t9 = t3 * t9
-    t11 = t7 * t11
-    t9 = t9 - t11
-    t4 = t2 * t4
-    t8 = t6 * t8
-    t4 = t4 - t8
-    t4 = t9 + t4
-    t8 = t13 * t4
-    t3 = t7 * t3
-    t6 = t2 * t6
-    t3 = t3 + t6
-    t6 = t3 * t18
-    t6 = t8 - t6
-    t6 = t54 + t6
-    t7 = 0.09465 * t6
-    t7 = t52 + t7
-    t4 = t1 * t4
-    t8 = t3 * t14
+    t4 = t2 * t3
+    t5 = cos(q[1])
+    t6 = t0 * t5
+    t7 = sin(q[2])
+    t8 = t6 * t7
     t4 = t4 + t8
-    t8 = t13 * t46
-    t9 = t53 * t18
-    t8 = t8 + t9
-    t4 = t4 + t8
-    t4 = t21 * t4
-    t8 = t3 * t1
-    t9 = t53 * t13
-    t8 = t8 - t9
-    t9 = t8 * t23
-    t4 = t4 + t9
-    t9 = t22 * t32
-    t11 = t30 * t45
-    t9 = t9 - t11
-    t4 = t4 + t9
-    t9 = 0.0823 * t4
-    t7 = t7 + t9
-    t11 = qd[0] * t7
-    t11 = t24 - t11
-    t14 = t26 * t32
-    t18 = t30 * t19
-    t14 = t14 + t18
-    t14 = qd[2] * t14
-    t11 = t11 + t14
-    t14 = t27 * t32
-    t18 = t30 * t20
-    t14 = t14 + t18
-    t14 = qd[3] * t14
-    t11 = t11 + t14
-    t2 = 0.425 * t2
-    t14 = (-0.1197) * t30
-    t2 = t2 - t14
-    t14 = 0.13585 * t30
-    t2 = t2 - t14
-    t18 = 0.39225 * t53
-    t18 = t2 + t18
-    t19 = 0.093 * t30
-    t19 = t18 - t19
-    t1 = t53 * t1
-    t3 = t3 * t13
-    t1 = t1 + t3
-    t3 = 0.09465 * t1
-    t3 = t19 - t3
-    t8 = t8 * t21
-    t13 = t30 * t22
-    t8 = t8 + t13
-    t13 = 0.0823 * t8
-    t13 = t3 - t13
-    t19 = t13 - t19
-    t21 = t19 * t10
-    t22 = t52 - t7
-    t12 = t12 * t22
-    t12 = t21 + t12
-    t21 = t27 * t6
-    t20 = t1 * t20
-    t20 = t21 + t20
-    t12 = t12 + t20
-    t12 = qd[4] * t12
-    t11 = t11 + t12
-    t12 = t17 * t4
+    t8 = sin(q[3])
+    t9 = t4 * t8
+    t6 = t6 * t3
+    t2 = t2 * t7
+    t2 = t6 - t2
+    t6 = cos(q[3])
+    t10 = t2 * t6
+    t9 = t9 - t10
+    t10 = cos(q[4])
+    t11 = t9 * t10
+    t12 = sin(q[0])
+    t13 = sin(q[4])
+    t14 = t12 * t13
+    t11 = t11 - t14
+    t14 = cos(q[5])
+    t15 = t11 * t14
+    t2 = t2 * t8
+    t4 = t4 * t6
+    t2 = t2 + t4
+    t4 = sin(q[5])
+    t16 = t2 * t4
+    t15 = t15 + t16
+    t16 = qd[1] + qd[2]
+    t17 = t16 + qd[3]
+    t18 = t5 * qd[0]
+    t19 = t7 * t18
+    t20 = t1 * qd[0]
+    t21 = t3 * t20
+    t19 = t19 + t21
+    t21 = t6 * t19
+    t22 = t7 * t20
+    t23 = t3 * t18
+    t22 = t22 - t23
+    t23 = t8 * t22
+    t21 = t21 - t23
+    t23 = 0.093 * t21
+    t24 = t17 * t23
+    t25 = t18 * qd[1]
+    t26 = (-0.1197) * t25
+    t27 = 0.425 * t18
+    t28 = t20 * t27
+    t29 = (-0.1197) * t18
+    t30 = qd[1] * t29
+    t28 = t28 - t30
+    t26 = t26 + t28
+    t28 = t7 * t26
+    t30 = t20 * qd[1]
+    t31 = (-0.1197) * t30
+    t27 = t18 * t27
+    t32 = 0.425 * qd[1]
+    t33 = (-0.1197) * t20
+    t32 = t32 + t33
+    t33 = qd[1] * t32
+    t27 = t27 + t33
+    t27 = t31 - t27
+    t31 = t3 * t27
+    t28 = t28 + t31
+    t31 = 0.39225 * t22
+    t33 = t22 * t31
+    t34 = 0.39225 * t16
+    t16 = t16 * t34
+    t16 = t33 + t16
+    t16 = t28 - t16
+    t28 = t6 * t16
+    t26 = t3 * t26
+    t27 = t7 * t27
+    t26 = t26 - t27
+    t27 = t19 * t31
+    t26 = t26 - t27
+    t27 = t8 * t26
+    t27 = t28 + t27
+    t28 = t3 * t30
+    t31 = t7 * t25
+    t28 = t28 + t31
+    t31 = t19 * qd[2]
+    t28 = t28 + t31
+    t31 = t6 * t28
+    t33 = t7 * t30
+    t25 = t3 * t25
+    t25 = t33 - t25
+    t33 = t22 * qd[2]
+    t25 = t25 + t33
+    t33 = t8 * t25
+    t31 = t31 - t33
+    t33 = t21 * qd[3]
+    t31 = t31 + t33
+    t33 = 0.093 * t31
+    t27 = t27 + t33
+    t24 = t24 - t27
+    t27 = t10 * t24
+    t33 = 0.13585 * qd[0]
+    t33 = qd[0] * t33
+    t30 = 0.425 * t30
+    t30 = t33 + t30
+    t20 = t20 * t32
+    t18 = t18 * t29
+    t18 = t20 + t18
+    t18 = t30 + t18
+    t20 = 0.39225 * t28
+    t18 = t18 + t20
+    t20 = t19 * t34
+    t18 = t18 + t20
+    t19 = t8 * t19
+    t20 = t6 * t22
+    t19 = t19 + t20
+    t20 = 0.093 * t19
+    t22 = t19 * t20
+    t23 = t21 * t23
+    t22 = t22 + t23
+    t18 = t18 + t22
+    t22 = t13 * t18
+    t22 = t27 - t22
+    t23 = t6 * t25
+    t25 = t8 * t28
+    t23 = t23 + t25
+    t25 = t19 * qd[3]
+    t23 = t23 + t25
+    t25 = t13 * t23
+    t27 = t10 * t21
+    t28 = t13 * t17
+    t27 = t27 + t28
+    t28 = t27 * qd[4]
+    t25 = t25 - t28
+    t28 = 0.09465 * t25
+    t22 = t22 + t28
+    t19 = t19 + qd[4]
+    t28 = 0.09465 * t27
+    t29 = t19 * t28
+    t22 = t22 + t29
+    t29 = t14 * t22
+    t26 = t6 * t26
     t16 = t8 * t16
-    t12 = t12 + t16
-    t3 = t13 - t3
-    t16 = t3 * t5
-    t15 = t15 * t9
-    t15 = t16 - t15
-    t12 = t12 - t15
-    t12 = qd[5] * t12
-    t11 = t11 + t12
-    t12 = t19 * t38
-    t15 = t40 * t22
-    t12 = t12 + t15
-    t15 = t48 * t6
-    t1 = t1 * t41
-    t1 = t15 + t1
-    t1 = t12 - t1
-    t1 = qd[4] * t1
-    t12 = t49 - t47
-    t12 = t12 * t32
-    t15 = t42 + t35
-    t15 = t30 * t15
-    t12 = t12 + t15
-    t15 = t29 - t7
-    t15 = t0 * t15
-    t14 = t13 + t14
-    t14 = t14 * t31
-    t14 = t15 - t14
-    t12 = t12 + t14
-    t12 = qd[1] * t12
-    t14 = t49 - t37
-    t14 = t14 * t32
-    t15 = t42 - t34
-    t15 = t30 * t15
-    t14 = t14 + t15
-    t15 = t28 - t7
-    t15 = t0 * t15
-    t2 = t13 - t2
-    t2 = t2 * t31
-    t2 = t15 - t2
-    t2 = t14 + t2
-    t2 = qd[2] * t2
-    t2 = t12 + t2
-    t12 = t49 - t43
-    t12 = t12 * t32
-    t14 = t42 - t39
-    t14 = t30 * t14
-    t12 = t12 + t14
-    t7 = t51 - t7
-    t0 = t0 * t7
-    t7 = t13 - t18
-    t7 = t7 * t31
-    t0 = t0 - t7
-    t0 = t12 + t0
-    t0 = qd[3] * t0
-    t0 = t2 + t0
-    t0 = t1 - t0
-    t1 = t50 * t4
-    t2 = t8 * t44
-    t1 = t1 - t2
-    t2 = t3 * t33
-    t3 = t36 * t9
-    t2 = t2 + t3
-    t1 = t1 - t2
-    t1 = qd[5] * t1
-    t0 = t0 - t1
-    t1 = qd[1] * t32
-    t2 = qd[2] * t32
-    t1 = t1 + t2
-    t2 = qd[3] * t32
-    t1 = t1 + t2
-    t2 = qd[4] * t6
-    t1 = t1 + t2
-    t2 = qd[5] * t4
-    t1 = t1 + t2
-    t1 = -t1
-    t2 = qd[1] * t31
-    t3 = qd[2] * t31
-    t2 = t2 + t3
-    t3 = qd[3] * t31
-    t2 = t2 + t3
-    t3 = qd[4] * t38
-    t2 = t2 + t3
-    t3 = qd[5] * t33
-    t2 = t2 + t3
-    t2 = -t2
-    t3 = qd[4] * t10
-    t4 = qd[5] * t5
-    t3 = t3 - t4
-    _a = (t25, t11, t0, t1, t2, t3)
+    t16 = t26 - t16
+    t26 = 0.093 * t23
+    t16 = t16 - t26
+    t20 = t17 * t20
+    t16 = t16 + t20
+    t20 = t27 * t28
+    t17 = t10 * t17
+    t21 = t13 * t21
+    t17 = t17 - t21
+    t21 = 0.09465 * t17
+    t26 = t17 * t21
+    t20 = t20 + t26
+    t16 = t16 - t20
+    t20 = t4 * t16
+    t20 = t29 - t20
+    t26 = t17 * qd[4]
+    t23 = t10 * t23
+    t23 = t26 - t23
+    t26 = t4 * t23
+    t28 = t14 * t31
+    t26 = t26 + t28
+    t28 = t14 * t27
+    t29 = t4 * t19
+    t28 = t28 - t29
+    t29 = t28 * qd[5]
+    t26 = t26 + t29
+    t29 = 0.0823 * t26
+    t20 = t20 - t29
+    t17 = t17 + qd[5]
+    t29 = 0.0823 * t28
+    t30 = t17 * t29
+    t20 = t20 + t30
+    t30 = t15 * t20
+    t9 = t9 * t13
+    t32 = t12 * t10
+    t9 = t9 + t32
+    t21 = t19 * t21
+    t24 = t13 * t24
+    t18 = t10 * t18
+    t18 = t24 + t18
+    t24 = 0.09465 * t23
+    t18 = t18 + t24
+    t18 = t21 - t18
+    t21 = t4 * t27
+    t19 = t14 * t19
+    t19 = t21 + t19
+    t21 = 0.0823 * t19
+    t24 = t19 * t21
+    t27 = t28 * t29
+    t24 = t24 + t27
+    t18 = t18 - t24
+    t24 = t9 * t18
+    t24 = t30 - t24
+    t11 = t11 * t4
+    t2 = t2 * t14
+    t2 = t11 - t2
+    t11 = t4 * t22
+    t16 = t14 * t16
+    t11 = t11 + t16
+    t16 = t14 * t23
+    t22 = t4 * t31
+    t16 = t16 - t22
+    t19 = t19 * qd[5]
+    t16 = t16 - t19
+    t19 = 0.0823 * t16
+    t11 = t11 + t19
+    t17 = t17 * t21
+    t11 = t11 + t17
+    t17 = t2 * t11
+    t17 = t24 + t17
+    t19 = t12 * t1
+    t21 = t19 * t3
+    t12 = t12 * t5
+    t22 = t12 * t7
+    t21 = t21 + t22
+    t22 = t21 * t8
+    t12 = t12 * t3
+    t19 = t19 * t7
+    t12 = t12 - t19
+    t19 = t12 * t6
+    t19 = t22 - t19
+    t22 = t19 * t10
+    t23 = t0 * t13
+    t22 = t22 + t23
+    t23 = t22 * t14
+    t12 = t12 * t8
+    t21 = t21 * t6
+    t12 = t12 + t21
+    t21 = t12 * t4
+    t21 = t23 + t21
+    t23 = t21 * t20
+    t0 = t0 * t10
+    t19 = t19 * t13
+    t0 = t0 - t19
+    t19 = t0 * t18
+    t19 = t23 + t19
+    t22 = t22 * t4
+    t12 = t12 * t14
+    t12 = t22 - t12
+    t22 = t12 * t11
+    t19 = t19 + t22
+    t22 = t5 * t7
+    t23 = t1 * t3
+    t22 = t22 + t23
+    t23 = t22 * t6
+    t1 = t1 * t7
+    t3 = t5 * t3
+    t1 = t1 - t3
+    t3 = t1 * t8
+    t3 = t23 - t3
+    t5 = t3 * t10
+    t7 = t5 * t14
+    t8 = t22 * t8
+    t1 = t1 * t6
+    t1 = t8 + t1
+    t6 = t1 * t4
+    t6 = t7 - t6
+    t7 = t6 * t20
+    t3 = t3 * t13
+    t8 = t3 * t18
+    t7 = t7 - t8
+    t4 = t5 * t4
+    t1 = t1 * t14
+    t1 = t4 + t1
+    t4 = t1 * t11
+    t4 = t7 + t4
+    t5 = t15 * t16
+    t7 = t9 * t25
+    t5 = t5 - t7
+    t2 = t2 * t26
+    t2 = t5 + t2
+    t5 = t21 * t16
+    t0 = t0 * t25
+    t0 = t5 + t0
+    t5 = t12 * t26
+    t0 = t0 + t5
+    t5 = t6 * t16
+    t3 = t3 * t25
+    t3 = t5 - t3
+    t1 = t1 * t26
+    t1 = t3 + t1
+    _a = (t17, t19, t4, t2, t0, t1)
     return np.array(_a)
 
 
 _jdot_qd_ee_link_constants = _constants(
-    0.09465, 0.425, 0.39225, 0.0823, 0.089159, -0.1197, 0.13585, 0.093)
+    0.093, -0.1197, 0.425, 0.39225, 0.13585, 0.09465, 0.0823)
 
 
 def _jdot_qd_ee_link_chunk(x, t, s, y):
     """jdot_qd_ee_link on a chunk of states (see _batch): its one-state body's instructions, in the
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
-    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, q_5, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6, k7 = _jdot_qd_ee_link_constants
+    k0, k1, k2, k3, k4, k5, k6 = _jdot_qd_ee_link_constants
     cos(q_0, t0)
-    sin(q_3, t1)
-    cos(q_1, t2)
+    sin(q_1, t1)
+    multiply(t0, t1, t2)
     cos(q_2, t3)
-    multiply(t3, qd_2, t4)
-    multiply(t2, t4, t5)
-    sin(q_2, t6)
-    sin(q_1, t7)
-    multiply(t7, qd_1, t8)
-    multiply(t6, t8, t9)
-    subtract(t5, t9, t5)
-    multiply(t2, qd_1, t9)
-    multiply(t3, t9, t10)
-    multiply(t6, qd_2, t11)
-    multiply(t7, t11, t12)
-    subtract(t10, t12, t10)
-    add(t5, t10, t5)
-    multiply(t1, t5, t10)
-    multiply(t2, t6, t12)
-    multiply(t7, t3, t13)
-    add(t12, t13, t12)
-    cos(q_3, t13)
-    multiply(t13, qd_3, t14)
-    multiply(t12, t14, t15)
-    add(t10, t15, t10)
-    multiply(t6, t9, t15)
-    multiply(t7, t4, t16)
+    multiply(t2, t3, t4)
+    cos(q_1, t5)
+    multiply(t0, t5, t6)
+    sin(q_2, t7)
+    multiply(t6, t7, t8)
+    add(t4, t8, t4)
+    sin(q_3, t8)
+    multiply(t4, t8, t9)
+    multiply(t6, t3, t6)
+    multiply(t2, t7, t2)
+    subtract(t6, t2, t6)
+    cos(q_3, t2)
+    multiply(t6, t2, t10)
+    subtract(t9, t10, t9)
+    cos(q_4, t10)
+    multiply(t9, t10, t11)
+    sin(q_0, t12)
+    sin(q_4, t13)
+    multiply(t12, t13, t14)
+    subtract(t11, t14, t11)
+    cos(q_5, t14)
+    multiply(t11, t14, t15)
+    multiply(t6, t8, t6)
+    multiply(t4, t2, t4)
+    add(t6, t4, t6)
+    sin(q_5, t4)
+    multiply(t6, t4, t16)
     add(t15, t16, t15)
-    multiply(t3, t8, t16)
-    multiply(t2, t11, t17)
-    add(t16, t17, t16)
-    add(t15, t16, t15)
-    multiply(t13, t15, t16)
-    multiply(t7, t6, t17)
-    multiply(t2, t3, t18)
-    subtract(t17, t18, t17)
-    multiply(t1, qd_3, t18)
-    multiply(t17, t18, t19)
-    subtract(t16, t19, t16)
-    add(t10, t16, t10)
-    multiply(k0, t10, t16)
-    multiply(k1, t9, t19)
-    multiply(k2, t5, t20)
-    add(t19, t20, t20)
-    subtract(t16, t20, t16)
-    sin(q_4, t21)
-    multiply(t13, t5, t5)
-    multiply(t12, t18, t22)
-    subtract(t5, t22, t5)
-    multiply(t1, t15, t15)
-    multiply(t17, t14, t22)
-    add(t15, t22, t15)
-    subtract(t5, t15, t5)
-    multiply(t21, t5, t5)
-    multiply(t12, t13, t15)
-    multiply(t17, t1, t22)
-    subtract(t15, t22, t15)
-    cos(q_4, t22)
-    multiply(t22, qd_4, t23)
-    multiply(t15, t23, t24)
-    add(t5, t24, t5)
-    multiply(k3, t5, t24)
-    subtract(t16, t24, t24)
-    multiply(t0, t24, t25)
-    multiply(k1, t7, t26)
-    subtract(k4, t26, t26)
-    multiply(k2, t12, t27)
-    subtract(t26, t27, t27)
-    multiply(t12, t1, t12)
-    multiply(t17, t13, t17)
-    add(t12, t17, t12)
-    multiply(k0, t12, t17)
-    add(t27, t17, t17)
-    multiply(t15, t21, t15)
-    multiply(k3, t15, t28)
-    subtract(t17, t28, t28)
-    subtract(t28, k4, t29)
-    sin(q_0, t30)
-    multiply(t30, qd_0, t31)
-    multiply(t29, t31, t32)
-    subtract(t25, t32, t25)
-    multiply(qd_1, t25, t25)
-    multiply(t0, qd_0, t32)
-    multiply(t2, t32, t33)
-    multiply(t30, t8, t34)
-    subtract(t33, t34, t33)
-    multiply(k1, t33, t34)
-    multiply(k5, t31, t35)
-    subtract(t34, t35, t34)
-    multiply(k6, t31, t35)
-    subtract(t34, t35, t34)
-    multiply(t3, t33, t36)
-    multiply(t30, t2, t37)
-    multiply(t37, t11, t38)
-    subtract(t36, t38, t36)
-    multiply(t7, t32, t38)
-    multiply(t30, t9, t39)
-    add(t38, t39, t38)
-    multiply(t6, t38, t39)
-    multiply(t30, t7, t40)
-    multiply(t40, t4, t41)
-    add(t39, t41, t39)
-    subtract(t36, t39, t36)
-    multiply(k2, t36, t39)
-    add(t34, t39, t39)
-    multiply(k7, t31, t41)
-    subtract(t39, t41, t41)
-    multiply(t1, t36, t42)
-    multiply(t37, t3, t43)
-    multiply(t40, t6, t44)
-    subtract(t43, t44, t43)
-    multiply(t43, t14, t44)
-    add(t42, t44, t42)
-    multiply(t3, t38, t38)
-    multiply(t40, t11, t44)
-    subtract(t38, t44, t38)
-    multiply(t6, t33, t33)
-    multiply(t37, t4, t44)
-    add(t33, t44, t33)
-    add(t38, t33, t38)
-    multiply(t13, t38, t33)
-    multiply(t40, t3, t40)
-    multiply(t37, t6, t44)
-    add(t40, t44, t40)
-    multiply(t40, t18, t44)
-    subtract(t33, t44, t33)
-    add(t42, t33, t42)
-    multiply(k0, t42, t33)
-    subtract(t41, t33, t33)
-    multiply(t22, t31, t44)
-    multiply(t21, qd_4, t45)
-    multiply(t0, t45, t46)
-    add(t44, t46, t44)
-    multiply(t1, t38, t38)
-    multiply(t40, t14, t46)
-    add(t38, t46, t38)
-    multiply(t13, t36, t36)
-    multiply(t43, t18, t46)
-    subtract(t36, t46, t36)
-    subtract(t38, t36, t38)
-    multiply(t21, t38, t38)
-    multiply(t40, t1, t36)
-    multiply(t43, t13, t46)
-    subtract(t36, t46, t36)
-    multiply(t36, t23, t46)
-    add(t38, t46, t38)
-    add(t44, t38, t44)
-    multiply(k3, t44, t38)
-    subtract(t33, t38, t33)
-    multiply(qd_0, t33, t46)
-    subtract(t25, t46, t25)
-    add(t24, t19, t19)
-    multiply(t0, t19, t46)
-    subtract(t28, t26, t26)
-    multiply(t26, t31, t47)
-    subtract(t46, t47, t46)
-    multiply(qd_2, t46, t46)
-    add(t25, t46, t25)
-    add(t24, t20, t20)
-    multiply(t0, t20, t46)
-    subtract(t28, t27, t27)
-    multiply(t27, t31, t47)
-    subtract(t46, t47, t46)
-    multiply(qd_3, t46, t46)
-    add(t25, t46, t25)
-    multiply(t27, t42, t46)
-    multiply(t43, t1, t47)
-    multiply(t40, t13, t40)
-    add(t47, t40, t47)
-    multiply(t47, t20, t40)
-    add(t46, t40, t46)
-    multiply(k6, t0, t40)
-    multiply(k5, t0, t48)
-    multiply(k1, t37, t37)
-    add(t48, t37, t48)
-    add(t40, t48, t48)
-    multiply(k2, t43, t43)
-    add(t48, t43, t43)
-    multiply(k7, t0, t37)
-    add(t43, t37, t37)
-    multiply(k0, t47, t49)
-    subtract(t37, t49, t49)
-    multiply(t0, t22, t50)
-    multiply(t36, t21, t36)
-    subtract(t50, t36, t50)
-    multiply(k3, t50, t36)
-    add(t49, t36, t49)
-    subtract(t49, t37, t37)
-    multiply(t37, t10, t51)
-    subtract(t33, t41, t41)
-    multiply(t12, t41, t52)
-    add(t51, t52, t51)
-    add(t46, t51, t46)
-    multiply(qd_4, t46, t46)
-    subtract(t25, t46, t25)
-    subtract(t24, t16, t16)
-    multiply(t50, t16, t46)
-    subtract(t28, t17, t28)
-    multiply(t28, t44, t17)
-    subtract(t46, t17, t46)
-    multiply(t36, t5, t17)
-    multiply(t15, t38, t51)
-    subtract(t17, t51, t17)
-    add(t46, t17, t46)
-    multiply(qd_5, t46, t46)
-    add(t25, t46, a_0)
-    multiply(t29, t32, t29)
-    multiply(t30, t24, t24)
-    add(t29, t24, t29)
-    multiply(qd_1, t29, t29)
-    multiply(t2, t31, t17)
-    multiply(t0, t8, t8)
-    add(t17, t8, t17)
-    multiply(k1, t17, t8)
-    multiply(k5, t32, t24)
-    add(t8, t24, t8)
-    multiply(k6, t32, t24)
-    add(t8, t24, t8)
-    multiply(t3, t17, t25)
-    multiply(t0, t2, t2)
-    multiply(t2, t11, t46)
-    add(t25, t46, t25)
-    multiply(t0, t9, t9)
-    multiply(t7, t31, t46)
-    subtract(t9, t46, t9)
-    multiply(t6, t9, t46)
-    multiply(t0, t7, t7)
-    multiply(t7, t4, t51)
-    add(t46, t51, t46)
-    add(t25, t46, t25)
-    multiply(k2, t25, t46)
-    add(t8, t46, t46)
-    multiply(k7, t32, t51)
-    add(t46, t51, t51)
-    multiply(t2, t3, t52)
-    multiply(t7, t6, t53)
-    subtract(t52, t53, t52)
-    multiply(t52, t14, t53)
-    multiply(t1, t25, t54)
-    subtract(t53, t54, t53)
-    multiply(t3, t9, t9)
-    multiply(t7, t11, t11)
-    subtract(t9, t11, t9)
-    multiply(t2, t4, t4)
-    multiply(t6, t17, t17)
-    subtract(t4, t17, t4)
-    add(t9, t4, t9)
-    multiply(t13, t9, t4)
-    multiply(t7, t3, t7)
-    multiply(t2, t6, t6)
-    add(t7, t6, t7)
-    multiply(t7, t18, t3)
-    subtract(t4, t3, t4)
-    add(t53, t4, t53)
-    multiply(k0, t53, t3)
-    add(t51, t3, t3)
-    multiply(t1, t9, t9)
-    multiply(t7, t14, t14)
-    add(t9, t14, t9)
-    multiply(t13, t25, t25)
-    multiply(t52, t18, t18)
+    add(qd_1, qd_2, t16)
+    add(t16, qd_3, t17)
+    multiply(t5, qd_0, t18)
+    multiply(t7, t18, t19)
+    multiply(t1, qd_0, t20)
+    multiply(t3, t20, t21)
+    add(t19, t21, t19)
+    multiply(t2, t19, t21)
+    multiply(t7, t20, t22)
+    multiply(t3, t18, t23)
+    subtract(t22, t23, t22)
+    multiply(t8, t22, t23)
+    subtract(t21, t23, t21)
+    multiply(k0, t21, t23)
+    multiply(t17, t23, t24)
+    multiply(t18, qd_1, t25)
+    multiply(k1, t25, t26)
+    multiply(k2, t18, t27)
+    multiply(t20, t27, t28)
+    multiply(k1, t18, t29)
+    multiply(qd_1, t29, t30)
+    subtract(t28, t30, t28)
+    add(t26, t28, t26)
+    multiply(t7, t26, t28)
+    multiply(t20, qd_1, t30)
+    multiply(k1, t30, t31)
+    multiply(t18, t27, t27)
+    multiply(k2, qd_1, t32)
+    multiply(k1, t20, t33)
+    add(t32, t33, t32)
+    multiply(qd_1, t32, t33)
+    add(t27, t33, t27)
+    subtract(t31, t27, t31)
+    multiply(t3, t31, t27)
+    add(t28, t27, t28)
+    multiply(k3, t22, t27)
+    multiply(t22, t27, t33)
+    multiply(k3, t16, t34)
+    multiply(t16, t34, t16)
+    add(t33, t16, t33)
+    subtract(t28, t33, t28)
+    multiply(t2, t28, t16)
+    multiply(t3, t26, t26)
+    multiply(t7, t31, t31)
+    subtract(t26, t31, t26)
+    multiply(t19, t27, t27)
+    subtract(t26, t27, t26)
+    multiply(t8, t26, t27)
+    add(t16, t27, t16)
+    multiply(t3, t30, t27)
+    multiply(t7, t25, t31)
+    add(t27, t31, t27)
+    multiply(t19, qd_2, t31)
+    add(t27, t31, t27)
+    multiply(t2, t27, t31)
+    multiply(t7, t30, t33)
+    multiply(t3, t25, t25)
+    subtract(t33, t25, t33)
+    multiply(t22, qd_2, t25)
+    add(t33, t25, t33)
+    multiply(t8, t33, t25)
+    subtract(t31, t25, t31)
+    multiply(t21, qd_3, t25)
+    add(t31, t25, t31)
+    multiply(k0, t31, t25)
+    add(t16, t25, t16)
+    subtract(t24, t16, t24)
+    multiply(t10, t24, t16)
+    multiply(k4, qd_0, t25)
+    multiply(qd_0, t25, t25)
+    multiply(k2, t30, t30)
+    add(t25, t30, t25)
+    multiply(t20, t32, t20)
+    multiply(t18, t29, t18)
+    add(t20, t18, t20)
+    add(t25, t20, t25)
+    multiply(k3, t27, t18)
     add(t25, t18, t25)
-    add(t9, t25, t9)
-    multiply(t21, t9, t9)
-    multiply(t7, t1, t4)
-    multiply(t52, t13, t6)
-    subtract(t4, t6, t4)
-    multiply(t4, t23, t23)
-    add(t9, t23, t9)
-    multiply(t22, t32, t6)
-    multiply(t30, t45, t45)
-    subtract(t6, t45, t6)
-    add(t9, t6, t9)
-    multiply(k3, t9, t6)
-    add(t3, t6, t3)
-    multiply(qd_0, t3, t11)
-    subtract(t29, t11, t29)
-    multiply(t26, t32, t26)
-    multiply(t30, t19, t19)
-    add(t26, t19, t26)
-    multiply(qd_2, t26, t26)
-    add(t29, t26, t29)
-    multiply(t27, t32, t11)
-    multiply(t30, t20, t14)
-    add(t11, t14, t11)
-    multiply(qd_3, t11, t11)
-    add(t29, t11, t29)
-    multiply(k1, t2, t2)
-    multiply(k5, t30, t11)
-    subtract(t2, t11, t2)
-    multiply(k6, t30, t11)
-    subtract(t2, t11, t2)
-    multiply(k2, t52, t14)
-    add(t2, t14, t14)
-    multiply(k7, t30, t17)
-    subtract(t14, t17, t17)
-    multiply(t52, t1, t52)
-    multiply(t7, t13, t7)
-    add(t52, t7, t52)
-    multiply(k0, t52, t1)
-    subtract(t17, t1, t1)
-    multiply(t4, t21, t4)
-    multiply(t30, t22, t22)
-    add(t4, t22, t4)
-    multiply(k3, t4, t7)
-    subtract(t1, t7, t7)
-    subtract(t7, t17, t17)
-    multiply(t17, t10, t13)
-    subtract(t51, t3, t51)
-    multiply(t12, t51, t12)
-    add(t13, t12, t13)
-    multiply(t27, t53, t27)
-    multiply(t52, t20, t20)
-    add(t27, t20, t27)
-    add(t13, t27, t13)
-    multiply(qd_4, t13, t13)
-    add(t29, t13, t29)
-    multiply(t28, t9, t28)
+    multiply(t19, t34, t34)
+    add(t25, t34, t25)
+    multiply(t8, t19, t19)
+    multiply(t2, t22, t22)
+    add(t19, t22, t19)
+    multiply(k0, t19, t18)
+    multiply(t19, t18, t20)
+    multiply(t21, t23, t23)
+    add(t20, t23, t20)
+    add(t25, t20, t25)
+    multiply(t13, t25, t20)
+    subtract(t16, t20, t16)
+    multiply(t2, t33, t33)
+    multiply(t8, t27, t27)
+    add(t33, t27, t33)
+    multiply(t19, qd_3, t20)
+    add(t33, t20, t33)
+    multiply(t13, t33, t20)
+    multiply(t10, t21, t22)
+    multiply(t13, t17, t23)
+    add(t22, t23, t22)
+    multiply(t22, qd_4, t23)
+    subtract(t20, t23, t20)
+    multiply(k5, t20, t23)
+    add(t16, t23, t16)
+    add(t19, qd_4, t19)
+    multiply(k5, t22, t23)
+    multiply(t19, t23, t27)
+    add(t16, t27, t16)
+    multiply(t14, t16, t27)
+    multiply(t2, t26, t26)
+    multiply(t8, t28, t28)
+    subtract(t26, t28, t26)
+    multiply(k0, t33, t28)
+    subtract(t26, t28, t26)
+    multiply(t17, t18, t18)
+    add(t26, t18, t26)
+    multiply(t22, t23, t23)
+    multiply(t10, t17, t17)
+    multiply(t13, t21, t21)
+    subtract(t17, t21, t17)
+    multiply(k5, t17, t18)
+    multiply(t17, t18, t21)
+    add(t23, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t4, t26, t21)
+    subtract(t27, t21, t27)
+    multiply(t17, qd_4, t21)
+    multiply(t10, t33, t33)
+    subtract(t21, t33, t21)
+    multiply(t4, t21, t23)
+    multiply(t14, t31, t28)
+    add(t23, t28, t23)
+    multiply(t14, t22, t28)
+    multiply(t4, t19, t29)
+    subtract(t28, t29, t28)
+    multiply(t28, qd_5, t29)
+    add(t23, t29, t23)
+    multiply(k6, t23, t29)
+    subtract(t27, t29, t27)
+    add(t17, qd_5, t17)
+    multiply(k6, t28, t29)
+    multiply(t17, t29, t30)
+    add(t27, t30, t27)
+    multiply(t15, t27, t30)
+    multiply(t9, t13, t9)
+    multiply(t12, t10, t32)
+    add(t9, t32, t9)
+    multiply(t19, t18, t18)
+    multiply(t13, t24, t24)
+    multiply(t10, t25, t25)
+    add(t24, t25, t24)
+    multiply(k5, t21, t25)
+    add(t24, t25, t24)
+    subtract(t18, t24, t18)
+    multiply(t4, t22, t22)
+    multiply(t14, t19, t19)
+    add(t22, t19, t22)
+    multiply(k6, t22, t19)
+    multiply(t22, t19, t24)
+    multiply(t28, t29, t28)
+    add(t24, t28, t24)
+    subtract(t18, t24, t18)
+    multiply(t9, t18, t24)
+    subtract(t30, t24, t30)
+    multiply(t11, t4, t11)
+    multiply(t6, t14, t6)
+    subtract(t11, t6, t11)
     multiply(t4, t16, t16)
-    add(t28, t16, t28)
-    subtract(t7, t1, t1)
-    multiply(t1, t5, t12)
-    multiply(t15, t6, t15)
-    subtract(t12, t15, t12)
-    subtract(t28, t12, t28)
-    multiply(qd_5, t28, t28)
-    add(t29, t28, a_1)
-    multiply(t17, t42, t17)
-    multiply(t47, t51, t47)
-    add(t17, t47, t17)
-    multiply(t37, t53, t37)
-    multiply(t52, t41, t52)
-    add(t37, t52, t37)
-    subtract(t17, t37, t17)
-    multiply(qd_4, t17, t17)
-    subtract(t49, t40, t40)
-    multiply(t40, t32, t40)
-    add(t33, t35, t35)
-    multiply(t30, t35, t35)
-    add(t40, t35, t40)
-    subtract(t24, t3, t24)
-    multiply(t0, t24, t24)
-    add(t7, t11, t11)
-    multiply(t11, t31, t11)
-    subtract(t24, t11, t24)
-    add(t40, t24, t40)
-    multiply(qd_1, t40, t40)
-    subtract(t49, t48, t48)
-    multiply(t48, t32, t48)
-    subtract(t33, t34, t34)
-    multiply(t30, t34, t34)
-    add(t48, t34, t48)
-    subtract(t8, t3, t8)
-    multiply(t0, t8, t8)
-    subtract(t7, t2, t2)
-    multiply(t2, t31, t2)
-    subtract(t8, t2, t8)
-    add(t48, t8, t48)
-    multiply(qd_2, t48, t48)
-    add(t40, t48, t40)
-    subtract(t49, t43, t49)
-    multiply(t49, t32, t49)
-    subtract(t33, t39, t33)
-    multiply(t30, t33, t30)
-    add(t49, t30, t49)
-    subtract(t46, t3, t46)
-    multiply(t0, t46, t0)
-    subtract(t7, t14, t7)
-    multiply(t7, t31, t7)
-    subtract(t0, t7, t0)
-    add(t49, t0, t49)
-    multiply(qd_3, t49, t49)
-    add(t40, t49, t40)
-    subtract(t17, t40, t17)
-    multiply(t36, t9, t36)
-    multiply(t4, t38, t4)
-    subtract(t36, t4, t36)
-    multiply(t1, t44, t1)
-    multiply(t50, t6, t50)
-    add(t1, t50, t1)
-    subtract(t36, t1, t36)
-    multiply(qd_5, t36, t36)
-    subtract(t17, t36, a_2)
-    multiply(qd_1, t32, t0)
-    multiply(qd_2, t32, t1)
-    add(t0, t1, t0)
-    multiply(qd_3, t32, t32)
-    add(t0, t32, t0)
-    multiply(qd_4, t53, t53)
-    add(t0, t53, t0)
-    multiply(qd_5, t9, t9)
-    add(t0, t9, t0)
-    negative(t0, a_3)
-    multiply(qd_1, t31, t0)
-    multiply(qd_2, t31, t1)
-    add(t0, t1, t0)
-    multiply(qd_3, t31, t31)
-    add(t0, t31, t0)
-    multiply(qd_4, t42, t42)
-    add(t0, t42, t0)
-    multiply(qd_5, t44, t44)
-    add(t0, t44, t0)
-    negative(t0, a_4)
-    multiply(qd_4, t10, t10)
-    multiply(qd_5, t5, t5)
-    subtract(t10, t5, a_5)
+    multiply(t14, t26, t26)
+    add(t16, t26, t16)
+    multiply(t14, t21, t21)
+    multiply(t4, t31, t31)
+    subtract(t21, t31, t21)
+    multiply(t22, qd_5, t22)
+    subtract(t21, t22, t21)
+    multiply(k6, t21, t6)
+    add(t16, t6, t16)
+    multiply(t17, t19, t17)
+    add(t16, t17, t16)
+    multiply(t11, t16, t6)
+    add(t30, t6, a_0)
+    multiply(t12, t1, t6)
+    multiply(t6, t3, t17)
+    multiply(t12, t5, t12)
+    multiply(t12, t7, t19)
+    add(t17, t19, t17)
+    multiply(t17, t8, t19)
+    multiply(t12, t3, t12)
+    multiply(t6, t7, t6)
+    subtract(t12, t6, t12)
+    multiply(t12, t2, t6)
+    subtract(t19, t6, t19)
+    multiply(t19, t10, t6)
+    multiply(t0, t13, t22)
+    add(t6, t22, t6)
+    multiply(t6, t14, t22)
+    multiply(t12, t8, t12)
+    multiply(t17, t2, t17)
+    add(t12, t17, t12)
+    multiply(t12, t4, t17)
+    add(t22, t17, t22)
+    multiply(t22, t27, t17)
+    multiply(t0, t10, t0)
+    multiply(t19, t13, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t18, t19)
+    add(t17, t19, t17)
+    multiply(t6, t4, t6)
+    multiply(t12, t14, t12)
+    subtract(t6, t12, t6)
+    multiply(t6, t16, t12)
+    add(t17, t12, a_1)
+    multiply(t5, t7, t12)
+    multiply(t1, t3, t17)
+    add(t12, t17, t12)
+    multiply(t12, t2, t17)
+    multiply(t1, t7, t1)
+    multiply(t5, t3, t5)
+    subtract(t1, t5, t1)
+    multiply(t1, t8, t3)
+    subtract(t17, t3, t17)
+    multiply(t17, t10, t10)
+    multiply(t10, t14, t3)
+    multiply(t12, t8, t12)
+    multiply(t1, t2, t1)
+    add(t12, t1, t12)
+    multiply(t12, t4, t1)
+    subtract(t3, t1, t3)
+    multiply(t3, t27, t27)
+    multiply(t17, t13, t17)
+    multiply(t17, t18, t18)
+    subtract(t27, t18, t27)
+    multiply(t10, t4, t10)
+    multiply(t12, t14, t12)
+    add(t10, t12, t10)
+    multiply(t10, t16, t16)
+    add(t27, t16, a_2)
+    multiply(t15, t21, t15)
+    multiply(t9, t20, t9)
+    subtract(t15, t9, t15)
+    multiply(t11, t23, t11)
+    add(t15, t11, a_3)
+    multiply(t22, t21, t22)
+    multiply(t0, t20, t0)
+    add(t22, t0, t22)
+    multiply(t6, t23, t6)
+    add(t22, t6, a_4)
+    multiply(t3, t21, t3)
+    multiply(t17, t20, t17)
+    subtract(t3, t17, t3)
+    multiply(t10, t23, t10)
+    add(t3, t10, a_5)
 
 
 def frame_acceleration_ee_link(q, qd, qdd):
@@ -4546,13 +3664,13 @@ def frame_acceleration_ee_link(q, qd, qdd):
     in  qd [6]
     in  qdd [6]
     out a [6]
-    497 ops: 275 mul, 212 add, 0 div, 10 trig
+    304 ops: 181 mul, 111 add, 0 div, 12 trig
     """
     q = _array(q, 6, "q")
     qd = _array(qd, 6, "qd")
     qdd = _array(qdd, 6, "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_frame_acceleration_ee_link_chunk, (q, qd, qdd), 66, ((6,),))
+        return _batch(_frame_acceleration_ee_link_chunk, (q, qd, qdd), 36, ((6,),))
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -4560,1018 +3678,630 @@ def frame_acceleration_ee_link(q, qd, qdd):
     cos, sin = math.cos, math.sin
     t0 = cos(q[0])
     t1 = sin(q[1])
-    t2 = 0.425 * t1
-    t2 = 0.089159 - t2
-    t3 = cos(q[1])
-    t4 = sin(q[2])
-    t5 = t3 * t4
-    t6 = cos(q[2])
-    t7 = t1 * t6
-    t5 = t5 + t7
-    t7 = 0.39225 * t5
-    t7 = t2 - t7
+    t2 = t0 * t1
+    t3 = cos(q[2])
+    t4 = t2 * t3
+    t5 = cos(q[1])
+    t6 = t0 * t5
+    t7 = sin(q[2])
+    t8 = t6 * t7
+    t4 = t4 + t8
     t8 = sin(q[3])
-    t9 = t5 * t8
-    t10 = t1 * t4
-    t11 = t3 * t6
-    t10 = t10 - t11
-    t11 = cos(q[3])
-    t12 = t10 * t11
-    t9 = t9 + t12
-    t12 = 0.09465 * t9
-    t12 = t7 + t12
-    t13 = t5 * t11
-    t14 = t10 * t8
-    t13 = t13 - t14
-    t14 = sin(q[4])
-    t15 = t13 * t14
-    t16 = 0.0823 * t15
-    t16 = t12 - t16
-    t17 = t16 - 0.089159
-    t18 = t0 * t17
-    t18 = t18 * qdd[1]
-    t19 = 0.13585 * t0
-    t20 = (-0.1197) * t0
-    t21 = sin(q[0])
-    t22 = t21 * t3
-    t23 = 0.425 * t22
-    t20 = t20 + t23
-    t20 = t19 + t20
-    t23 = t22 * t6
-    t24 = t21 * t1
-    t25 = t24 * t4
-    t23 = t23 - t25
-    t25 = 0.39225 * t23
-    t25 = t20 + t25
-    t26 = 0.093 * t0
-    t26 = t25 + t26
-    t27 = t23 * t8
-    t28 = t24 * t6
-    t29 = t22 * t4
-    t28 = t28 + t29
-    t29 = t28 * t11
-    t27 = t27 + t29
-    t29 = 0.09465 * t27
-    t29 = t26 - t29
-    t30 = cos(q[4])
-    t31 = t0 * t30
-    t32 = t28 * t8
-    t33 = t23 * t11
-    t32 = t32 - t33
-    t33 = t32 * t14
-    t31 = t31 - t33
-    t33 = 0.0823 * t31
-    t29 = t29 + t33
-    t34 = t29 * qdd[0]
-    t18 = t18 - t34
-    t2 = t16 - t2
-    t34 = t0 * t2
-    t34 = t34 * qdd[2]
-    t18 = t18 + t34
-    t7 = t16 - t7
-    t34 = t0 * t7
-    t34 = t34 * qdd[3]
-    t18 = t18 + t34
-    t34 = t27 * t7
-    t26 = t29 - t26
-    t35 = t9 * t26
-    t34 = t34 + t35
-    t34 = t34 * qdd[4]
-    t18 = t18 - t34
-    t12 = t16 - t12
-    t16 = t31 * t12
-    t34 = t15 * t33
-    t16 = t16 + t34
-    t16 = t16 * qdd[5]
-    t16 = t18 + t16
-    t18 = t6 * qd[2]
-    t34 = t3 * t18
-    t35 = t1 * qd[1]
-    t36 = t4 * t35
-    t34 = t34 - t36
-    t36 = t3 * qd[1]
-    t37 = t6 * t36
-    t38 = t4 * qd[2]
-    t39 = t1 * t38
-    t37 = t37 - t39
-    t34 = t34 + t37
-    t37 = t8 * t34
-    t39 = t11 * qd[3]
-    t40 = t5 * t39
-    t37 = t37 + t40
-    t40 = t4 * t36
-    t41 = t1 * t18
-    t40 = t40 + t41
-    t41 = t6 * t35
-    t42 = t3 * t38
-    t41 = t41 + t42
-    t40 = t40 + t41
-    t41 = t11 * t40
-    t42 = t8 * qd[3]
-    t43 = t10 * t42
-    t41 = t41 - t43
-    t37 = t37 + t41
-    t41 = 0.09465 * t37
-    t43 = 0.425 * t36
-    t44 = 0.39225 * t34
-    t44 = t43 + t44
-    t41 = t41 - t44
-    t34 = t11 * t34
-    t5 = t5 * t42
-    t5 = t34 - t5
-    t34 = t8 * t40
-    t10 = t10 * t39
-    t10 = t34 + t10
-    t5 = t5 - t10
-    t5 = t14 * t5
-    t10 = t30 * qd[4]
-    t13 = t13 * t10
-    t5 = t5 + t13
-    t13 = 0.0823 * t5
-    t13 = t41 - t13
-    t34 = t0 * t13
-    t40 = t21 * qd[0]
-    t45 = t17 * t40
-    t34 = t34 - t45
-    t34 = qd[1] * t34
-    t45 = t0 * qd[0]
-    t46 = t3 * t45
-    t47 = t21 * t35
-    t46 = t46 - t47
-    t47 = 0.425 * t46
-    t48 = (-0.1197) * t40
-    t47 = t47 - t48
-    t48 = 0.13585 * t40
-    t47 = t47 - t48
-    t49 = t6 * t46
-    t50 = t22 * t38
-    t49 = t49 - t50
-    t50 = t1 * t45
-    t51 = t21 * t36
-    t50 = t50 + t51
-    t51 = t4 * t50
-    t52 = t24 * t18
-    t51 = t51 + t52
-    t49 = t49 - t51
-    t51 = 0.39225 * t49
-    t51 = t47 + t51
-    t52 = 0.093 * t40
-    t52 = t51 - t52
-    t53 = t8 * t49
-    t54 = t23 * t39
-    t53 = t53 + t54
-    t50 = t6 * t50
-    t24 = t24 * t38
-    t24 = t50 - t24
-    t46 = t4 * t46
-    t22 = t22 * t18
-    t22 = t46 + t22
-    t22 = t24 + t22
-    t24 = t11 * t22
-    t46 = t28 * t42
-    t24 = t24 - t46
-    t24 = t53 + t24
-    t46 = 0.09465 * t24
-    t46 = t52 - t46
-    t50 = t30 * t40
-    t53 = t14 * qd[4]
-    t54 = t0 * t53
-    t50 = t50 + t54
-    t22 = t8 * t22
-    t28 = t28 * t39
-    t22 = t22 + t28
-    t28 = t11 * t49
-    t23 = t23 * t42
-    t23 = t28 - t23
-    t22 = t22 - t23
-    t22 = t14 * t22
-    t23 = t32 * t10
-    t22 = t22 + t23
-    t22 = t50 + t22
-    t23 = 0.0823 * t22
-    t28 = t46 - t23
-    t32 = qd[0] * t28
-    t32 = t34 - t32
-    t34 = t13 + t43
-    t43 = t0 * t34
-    t46 = t2 * t40
-    t43 = t43 - t46
-    t43 = qd[2] * t43
-    t32 = t32 + t43
-    t43 = t13 + t44
-    t44 = t0 * t43
-    t46 = t7 * t40
-    t44 = t44 - t46
-    t44 = qd[3] * t44
-    t32 = t32 + t44
-    t44 = t7 * t24
-    t46 = t27 * t43
-    t44 = t44 + t46
-    t46 = t26 * t37
-    t49 = t28 - t52
-    t50 = t9 * t49
-    t46 = t46 + t50
-    t44 = t44 + t46
-    t44 = qd[4] * t44
-    t32 = t32 - t44
-    t41 = t13 - t41
-    t44 = t31 * t41
-    t46 = t12 * t22
-    t44 = t44 - t46
-    t46 = t33 * t5
-    t50 = t15 * t23
-    t46 = t46 - t50
-    t44 = t44 + t46
-    t44 = qd[5] * t44
-    t32 = t32 + t44
-    t16 = t16 + t32
-    t32 = t0 * t3
-    t44 = 0.425 * t32
-    t46 = (-0.1197) * t21
-    t44 = t44 - t46
-    t46 = 0.13585 * t21
-    t44 = t44 - t46
-    t50 = t32 * t6
-    t52 = t0 * t1
-    t54 = t52 * t4
-    t50 = t50 - t54
-    t54 = 0.39225 * t50
-    t54 = t44 + t54
-    t55 = 0.093 * t21
-    t55 = t54 - t55
-    t56 = t50 * t8
-    t57 = t52 * t6
-    t58 = t32 * t4
-    t57 = t57 + t58
-    t58 = t57 * t11
-    t56 = t56 + t58
-    t58 = 0.09465 * t56
-    t58 = t55 - t58
-    t59 = t57 * t8
-    t60 = t50 * t11
-    t59 = t59 - t60
-    t60 = t59 * t14
-    t61 = t21 * t30
-    t60 = t60 + t61
-    t61 = 0.0823 * t60
-    t61 = t58 - t61
-    t62 = t61 * qdd[0]
-    t63 = t21 * t17
-    t63 = t63 * qdd[1]
-    t62 = t62 + t63
-    t63 = t21 * t2
-    t63 = t63 * qdd[2]
-    t62 = t62 + t63
-    t63 = t21 * t7
-    t63 = t63 * qdd[3]
-    t62 = t62 + t63
-    t55 = t61 - t55
-    t63 = t9 * t55
-    t64 = t56 * t7
-    t63 = t63 + t64
-    t63 = t63 * qdd[4]
-    t62 = t62 + t63
-    t63 = t60 * t12
-    t58 = t61 - t58
-    t64 = t15 * t58
-    t63 = t63 - t64
-    t63 = t63 * qdd[5]
-    t62 = t62 + t63
-    t17 = t17 * t45
-    t13 = t21 * t13
-    t13 = t17 + t13
-    t13 = qd[1] * t13
-    t3 = t3 * t40
-    t17 = t0 * t35
-    t3 = t3 + t17
-    t17 = 0.425 * t3
-    t35 = (-0.1197) * t45
-    t17 = t17 + t35
-    t35 = 0.13585 * t45
-    t17 = t17 + t35
-    t63 = t6 * t3
-    t64 = t32 * t38
-    t63 = t63 + t64
-    t36 = t0 * t36
-    t1 = t1 * t40
-    t1 = t36 - t1
-    t36 = t4 * t1
-    t64 = t52 * t18
-    t36 = t36 + t64
-    t36 = t63 + t36
-    t63 = 0.39225 * t36
-    t63 = t17 + t63
-    t64 = 0.093 * t45
-    t64 = t63 + t64
-    t65 = t50 * t39
-    t66 = t8 * t36
-    t65 = t65 - t66
-    t1 = t6 * t1
-    t6 = t52 * t38
-    t1 = t1 - t6
-    t6 = t32 * t18
-    t3 = t4 * t3
-    t3 = t6 - t3
-    t1 = t1 + t3
-    t3 = t11 * t1
-    t4 = t57 * t42
-    t3 = t3 - t4
-    t3 = t65 + t3
-    t4 = 0.09465 * t3
-    t4 = t64 + t4
-    t1 = t8 * t1
-    t6 = t57 * t39
-    t1 = t1 + t6
-    t6 = t11 * t36
-    t8 = t50 * t42
-    t6 = t6 + t8
-    t1 = t1 + t6
-    t1 = t14 * t1
-    t6 = t59 * t10
-    t1 = t1 + t6
-    t6 = t30 * t45
-    t8 = t21 * t53
-    t6 = t6 - t8
-    t1 = t1 + t6
-    t6 = 0.0823 * t1
-    t4 = t4 + t6
-    t8 = qd[0] * t4
-    t8 = t13 - t8
-    t2 = t2 * t45
-    t10 = t21 * t34
-    t2 = t2 + t10
-    t2 = qd[2] * t2
-    t2 = t8 + t2
-    t8 = t7 * t45
-    t10 = t21 * t43
-    t8 = t8 + t10
-    t8 = qd[3] * t8
-    t2 = t2 + t8
-    t8 = t55 * t37
-    t10 = t64 - t4
+    t9 = t4 * t8
+    t6 = t6 * t3
+    t2 = t2 * t7
+    t2 = t6 - t2
+    t6 = cos(q[3])
+    t10 = t2 * t6
+    t9 = t9 - t10
+    t10 = cos(q[4])
     t11 = t9 * t10
-    t8 = t8 + t11
-    t7 = t7 * t3
-    t11 = t56 * t43
-    t7 = t7 + t11
-    t7 = t8 + t7
-    t7 = qd[4] * t7
-    t2 = t2 + t7
-    t7 = t12 * t1
-    t8 = t60 * t41
-    t7 = t7 + t8
-    t8 = t58 * t5
-    t11 = t15 * t6
-    t8 = t8 - t11
-    t7 = t7 - t8
-    t7 = qd[5] * t7
-    t2 = t2 + t7
-    t2 = t62 + t2
-    t7 = t27 * t55
-    t8 = t56 * t26
-    t7 = t7 - t8
-    t7 = t7 * qdd[4]
-    t8 = t29 - t19
-    t11 = t21 * t8
-    t12 = t61 + t46
-    t13 = t0 * t12
-    t11 = t11 + t13
-    t11 = t11 * qdd[1]
-    t13 = t29 - t20
-    t14 = t21 * t13
-    t18 = t61 - t44
+    t12 = sin(q[0])
+    t13 = sin(q[4])
+    t14 = t12 * t13
+    t11 = t11 - t14
+    t14 = cos(q[5])
+    t15 = t11 * t14
+    t2 = t2 * t8
+    t4 = t4 * t6
+    t2 = t2 + t4
+    t4 = sin(q[5])
+    t16 = t2 * t4
+    t15 = t15 + t16
+    t16 = qd[1] + qd[2]
+    t17 = t16 + qd[3]
+    t18 = t5 * qd[0]
+    t19 = t7 * t18
+    t20 = t1 * qd[0]
+    t21 = t3 * t20
+    t19 = t19 + t21
+    t21 = t6 * t19
+    t22 = t7 * t20
+    t23 = t3 * t18
+    t22 = t22 - t23
+    t23 = t8 * t22
+    t21 = t21 - t23
+    t23 = 0.093 * t21
+    t24 = t17 * t23
+    t25 = 0.13585 * qdd[0]
+    t26 = t1 * t25
+    t27 = 0.425 * qdd[1]
+    t28 = t1 * qdd[0]
+    t29 = t18 * qd[1]
+    t28 = t28 + t29
+    t29 = (-0.1197) * t28
+    t27 = t27 + t29
+    t26 = t26 + t27
+    t27 = 0.425 * t18
+    t29 = t20 * t27
+    t30 = (-0.1197) * t18
+    t31 = qd[1] * t30
+    t29 = t29 - t31
+    t26 = t26 + t29
+    t29 = t7 * t26
+    t31 = t20 * qd[1]
+    t32 = t5 * qdd[0]
+    t31 = t31 - t32
+    t32 = (-0.1197) * t31
+    t25 = t5 * t25
+    t25 = t32 - t25
+    t27 = t18 * t27
+    t32 = 0.425 * qd[1]
+    t33 = (-0.1197) * t20
+    t32 = t32 + t33
+    t33 = qd[1] * t32
+    t27 = t27 + t33
+    t25 = t25 - t27
+    t27 = t3 * t25
+    t27 = t29 + t27
+    t29 = 0.39225 * t22
+    t33 = t22 * t29
+    t34 = 0.39225 * t16
+    t16 = t16 * t34
+    t16 = t33 + t16
+    t16 = t27 - t16
+    t27 = t6 * t16
+    t26 = t3 * t26
+    t25 = t7 * t25
+    t25 = t26 - t25
+    t26 = qdd[1] + qdd[2]
+    t33 = 0.39225 * t26
+    t25 = t25 + t33
+    t29 = t19 * t29
+    t25 = t25 - t29
+    t29 = t8 * t25
+    t27 = t27 + t29
+    t29 = t3 * t31
+    t33 = t7 * t28
+    t29 = t29 + t33
+    t33 = t19 * qd[2]
+    t29 = t29 + t33
+    t33 = t6 * t29
+    t35 = t7 * t31
+    t28 = t3 * t28
+    t28 = t35 - t28
+    t35 = t22 * qd[2]
+    t28 = t28 + t35
+    t35 = t8 * t28
+    t33 = t33 - t35
+    t35 = t21 * qd[3]
+    t33 = t33 + t35
+    t35 = 0.093 * t33
+    t27 = t27 + t35
+    t24 = t24 - t27
+    t27 = t10 * t24
+    t35 = 0.13585 * qd[0]
+    t35 = qd[0] * t35
+    t31 = 0.425 * t31
+    t31 = t35 + t31
+    t20 = t20 * t32
+    t18 = t18 * t30
+    t18 = t20 + t18
+    t18 = t31 + t18
+    t20 = 0.39225 * t29
+    t18 = t18 + t20
+    t20 = t19 * t34
+    t18 = t18 + t20
+    t19 = t8 * t19
+    t20 = t6 * t22
+    t19 = t19 + t20
+    t20 = 0.093 * t19
+    t22 = t19 * t20
+    t23 = t21 * t23
+    t22 = t22 + t23
+    t18 = t18 + t22
+    t22 = t13 * t18
+    t22 = t27 - t22
+    t23 = t6 * t28
+    t27 = t8 * t29
+    t23 = t23 + t27
+    t27 = t19 * qd[3]
+    t23 = t23 + t27
+    t27 = t13 * t23
+    t26 = t26 + qdd[3]
+    t28 = t10 * t26
+    t27 = t27 + t28
+    t28 = t10 * t21
+    t29 = t13 * t17
+    t28 = t28 + t29
+    t29 = t28 * qd[4]
+    t27 = t27 - t29
+    t29 = 0.09465 * t27
+    t22 = t22 + t29
+    t19 = t19 + qd[4]
+    t29 = 0.09465 * t28
+    t30 = t19 * t29
+    t22 = t22 + t30
+    t30 = t14 * t22
+    t25 = t6 * t25
+    t16 = t8 * t16
+    t16 = t25 - t16
+    t25 = 0.093 * t23
+    t16 = t16 - t25
+    t20 = t17 * t20
+    t16 = t16 + t20
+    t20 = t28 * t29
+    t17 = t10 * t17
+    t21 = t13 * t21
+    t17 = t17 - t21
+    t21 = 0.09465 * t17
+    t25 = t17 * t21
+    t20 = t20 + t25
+    t16 = t16 - t20
+    t20 = t4 * t16
+    t20 = t30 - t20
+    t25 = t13 * t26
+    t23 = t10 * t23
+    t23 = t25 - t23
+    t25 = t17 * qd[4]
+    t23 = t23 + t25
+    t25 = t4 * t23
+    t26 = t33 + qdd[4]
+    t29 = t14 * t26
+    t25 = t25 + t29
+    t29 = t14 * t28
+    t30 = t4 * t19
+    t29 = t29 - t30
+    t30 = t29 * qd[5]
+    t25 = t25 + t30
+    t30 = 0.0823 * t25
+    t20 = t20 - t30
+    t17 = t17 + qd[5]
+    t30 = 0.0823 * t29
+    t31 = t17 * t30
+    t20 = t20 + t31
+    t31 = t15 * t20
+    t9 = t9 * t13
+    t32 = t12 * t10
+    t9 = t9 + t32
+    t21 = t19 * t21
+    t24 = t13 * t24
+    t18 = t10 * t18
+    t18 = t24 + t18
+    t24 = 0.09465 * t23
+    t18 = t18 + t24
+    t18 = t21 - t18
+    t21 = t4 * t28
+    t19 = t14 * t19
+    t19 = t21 + t19
+    t21 = 0.0823 * t19
+    t24 = t19 * t21
+    t28 = t29 * t30
+    t24 = t24 + t28
+    t18 = t18 - t24
+    t24 = t9 * t18
+    t24 = t31 - t24
+    t11 = t11 * t4
+    t2 = t2 * t14
+    t2 = t11 - t2
+    t11 = t4 * t22
+    t16 = t14 * t16
+    t11 = t11 + t16
+    t16 = t14 * t23
+    t22 = t4 * t26
+    t16 = t16 - t22
+    t19 = t19 * qd[5]
+    t16 = t16 - t19
+    t19 = 0.0823 * t16
+    t11 = t11 + t19
+    t17 = t17 * t21
+    t11 = t11 + t17
+    t17 = t2 * t11
+    t17 = t24 + t17
+    t19 = t12 * t1
+    t21 = t19 * t3
+    t12 = t12 * t5
+    t22 = t12 * t7
+    t21 = t21 + t22
+    t22 = t21 * t8
+    t12 = t12 * t3
+    t19 = t19 * t7
+    t12 = t12 - t19
+    t19 = t12 * t6
+    t19 = t22 - t19
+    t22 = t19 * t10
+    t23 = t0 * t13
+    t22 = t22 + t23
+    t23 = t22 * t14
+    t12 = t12 * t8
+    t21 = t21 * t6
+    t12 = t12 + t21
+    t21 = t12 * t4
+    t21 = t23 + t21
+    t23 = t21 * t20
+    t0 = t0 * t10
+    t19 = t19 * t13
+    t0 = t0 - t19
     t19 = t0 * t18
-    t14 = t14 + t19
-    t14 = t14 * qdd[2]
-    t11 = t11 + t14
-    t14 = t29 - t25
-    t19 = t21 * t14
-    t20 = t61 - t54
-    t25 = t0 * t20
-    t19 = t19 + t25
-    t19 = t19 * qdd[3]
-    t11 = t11 + t19
-    t7 = t7 - t11
-    t11 = t60 * t33
-    t19 = t31 * t58
-    t11 = t11 + t19
-    t11 = t11 * qdd[5]
-    t7 = t7 - t11
-    t11 = t55 * t24
-    t10 = t27 * t10
-    t10 = t11 + t10
-    t11 = t26 * t3
-    t19 = t56 * t49
-    t11 = t11 + t19
-    t10 = t10 - t11
-    t10 = qd[4] * t10
-    t8 = t8 * t45
-    t11 = t28 + t48
-    t11 = t21 * t11
-    t8 = t8 + t11
-    t11 = t35 - t4
-    t11 = t0 * t11
-    t12 = t12 * t40
-    t11 = t11 - t12
-    t8 = t8 + t11
-    t8 = qd[1] * t8
-    t11 = t13 * t45
-    t12 = t28 - t47
-    t12 = t21 * t12
-    t11 = t11 + t12
-    t12 = t17 - t4
-    t12 = t0 * t12
-    t13 = t18 * t40
-    t12 = t12 - t13
-    t11 = t11 + t12
-    t11 = qd[2] * t11
-    t8 = t8 + t11
-    t11 = t14 * t45
-    t12 = t28 - t51
-    t12 = t21 * t12
-    t11 = t11 + t12
-    t4 = t63 - t4
-    t4 = t0 * t4
-    t12 = t20 * t40
-    t4 = t4 - t12
-    t4 = t11 + t4
-    t4 = qd[3] * t4
-    t4 = t8 + t4
-    t4 = t10 - t4
-    t8 = t33 * t1
-    t10 = t60 * t23
-    t8 = t8 - t10
-    t10 = t58 * t22
-    t6 = t31 * t6
-    t6 = t10 + t6
-    t6 = t8 - t6
-    t6 = qd[5] * t6
-    t4 = t4 - t6
+    t19 = t23 + t19
+    t22 = t22 * t4
+    t12 = t12 * t14
+    t12 = t22 - t12
+    t22 = t12 * t11
+    t19 = t19 + t22
+    t22 = t5 * t7
+    t23 = t1 * t3
+    t22 = t22 + t23
+    t23 = t22 * t6
+    t1 = t1 * t7
+    t3 = t5 * t3
+    t1 = t1 - t3
+    t3 = t1 * t8
+    t3 = t23 - t3
+    t5 = t3 * t10
+    t7 = t5 * t14
+    t8 = t22 * t8
+    t1 = t1 * t6
+    t1 = t8 + t1
+    t6 = t1 * t4
+    t6 = t7 - t6
+    t7 = t6 * t20
+    t3 = t3 * t13
+    t8 = t3 * t18
+    t7 = t7 - t8
+    t4 = t5 * t4
+    t1 = t1 * t14
+    t1 = t4 + t1
+    t4 = t1 * t11
     t4 = t7 + t4
-    t6 = t21 * qdd[1]
-    t7 = t21 * qdd[2]
-    t6 = t6 + t7
-    t7 = t21 * qdd[3]
-    t6 = t6 + t7
-    t7 = t56 * qdd[4]
-    t6 = t6 + t7
-    t7 = t60 * qdd[5]
-    t6 = t6 + t7
-    t7 = qd[1] * t45
-    t8 = qd[2] * t45
-    t7 = t7 + t8
-    t8 = qd[3] * t45
-    t7 = t7 + t8
-    t3 = qd[4] * t3
-    t3 = t7 + t3
-    t1 = qd[5] * t1
+    t5 = t15 * t16
+    t7 = t27 + qdd[5]
+    t8 = t9 * t7
+    t5 = t5 - t8
+    t2 = t2 * t25
+    t2 = t5 + t2
+    t5 = t21 * t16
+    t0 = t0 * t7
+    t0 = t5 + t0
+    t5 = t12 * t25
+    t0 = t0 + t5
+    t5 = t6 * t16
+    t3 = t3 * t7
+    t3 = t5 - t3
+    t1 = t1 * t25
     t1 = t3 + t1
-    t1 = t6 + t1
-    t1 = -t1
-    t3 = t0 * qdd[1]
-    t6 = t0 * qdd[2]
-    t3 = t3 + t6
-    t0 = t0 * qdd[3]
-    t0 = t3 + t0
-    t3 = t27 * qdd[4]
-    t0 = t0 - t3
-    t3 = t31 * qdd[5]
-    t0 = t0 + t3
-    t3 = qd[1] * t40
-    t6 = qd[2] * t40
-    t3 = t3 + t6
-    t6 = qd[3] * t40
-    t3 = t3 + t6
-    t6 = qd[4] * t24
-    t3 = t3 + t6
-    t6 = qd[5] * t22
-    t3 = t3 + t6
-    t0 = t0 - t3
-    t3 = t9 * qdd[4]
-    t3 = qdd[0] + t3
-    t6 = t15 * qdd[5]
-    t3 = t3 - t6
-    t6 = qd[4] * t37
-    t5 = qd[5] * t5
-    t5 = t6 - t5
-    t3 = t3 + t5
-    _a = (t16, t2, t4, t1, t0, t3)
+    _a = (t17, t19, t4, t2, t0, t1)
     return np.array(_a)
 
 
 _frame_acceleration_ee_link_constants = _constants(
-    0.425, 0.089159, 0.39225, 0.09465, 0.0823, 0.13585, -0.1197, 0.093)
+    0.093, 0.13585, 0.425, -0.1197, 0.39225, 0.09465, 0.0823)
 
 
 def _frame_acceleration_ee_link_chunk(x, t, s, y):
     """frame_acceleration_ee_link on a chunk of states (see _batch): its one-state body's instructions, in the
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
-    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    add, cos, multiply, sin, subtract = np.add, np.cos, np.multiply, np.sin, np.subtract
     (q_0, q_1, q_2, q_3, q_4, q_5, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qdd_0, qdd_1, qdd_2, qdd_3, qdd_4,
      qdd_5) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
-     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
-     t62, t63, t64, t65) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35) = t
     a_0, a_1, a_2, a_3, a_4, a_5 = y
-    k0, k1, k2, k3, k4, k5, k6, k7 = _frame_acceleration_ee_link_constants
+    k0, k1, k2, k3, k4, k5, k6 = _frame_acceleration_ee_link_constants
     cos(q_0, t0)
     sin(q_1, t1)
-    multiply(k0, t1, t2)
-    subtract(k1, t2, t2)
-    cos(q_1, t3)
-    sin(q_2, t4)
-    multiply(t3, t4, t5)
-    cos(q_2, t6)
-    multiply(t1, t6, t7)
-    add(t5, t7, t5)
-    multiply(k2, t5, t7)
-    subtract(t2, t7, t7)
+    multiply(t0, t1, t2)
+    cos(q_2, t3)
+    multiply(t2, t3, t4)
+    cos(q_1, t5)
+    multiply(t0, t5, t6)
+    sin(q_2, t7)
+    multiply(t6, t7, t8)
+    add(t4, t8, t4)
     sin(q_3, t8)
-    multiply(t5, t8, t9)
-    multiply(t1, t4, t10)
-    multiply(t3, t6, t11)
-    subtract(t10, t11, t10)
-    cos(q_3, t11)
-    multiply(t10, t11, t12)
-    add(t9, t12, t9)
-    multiply(k3, t9, t12)
-    add(t7, t12, t12)
-    multiply(t5, t11, t13)
-    multiply(t10, t8, t14)
-    subtract(t13, t14, t13)
-    sin(q_4, t14)
-    multiply(t13, t14, t15)
-    multiply(k4, t15, t16)
-    subtract(t12, t16, t16)
-    subtract(t16, k1, t17)
-    multiply(t0, t17, t18)
-    multiply(t18, qdd_1, t18)
-    multiply(k5, t0, t19)
-    multiply(k6, t0, t20)
-    sin(q_0, t21)
-    multiply(t21, t3, t22)
-    multiply(k0, t22, t23)
-    add(t20, t23, t20)
-    add(t19, t20, t20)
-    multiply(t22, t6, t23)
-    multiply(t21, t1, t24)
-    multiply(t24, t4, t25)
-    subtract(t23, t25, t23)
-    multiply(k2, t23, t25)
-    add(t20, t25, t25)
-    multiply(k7, t0, t26)
-    add(t25, t26, t26)
-    multiply(t23, t8, t27)
-    multiply(t24, t6, t28)
-    multiply(t22, t4, t29)
-    add(t28, t29, t28)
-    multiply(t28, t11, t29)
-    add(t27, t29, t27)
-    multiply(k3, t27, t29)
-    subtract(t26, t29, t29)
-    cos(q_4, t30)
-    multiply(t0, t30, t31)
-    multiply(t28, t8, t32)
-    multiply(t23, t11, t33)
-    subtract(t32, t33, t32)
-    multiply(t32, t14, t33)
-    subtract(t31, t33, t31)
-    multiply(k4, t31, t33)
-    add(t29, t33, t29)
-    multiply(t29, qdd_0, t34)
-    subtract(t18, t34, t18)
-    subtract(t16, t2, t2)
-    multiply(t0, t2, t34)
-    multiply(t34, qdd_2, t34)
-    add(t18, t34, t18)
-    subtract(t16, t7, t7)
-    multiply(t0, t7, t34)
-    multiply(t34, qdd_3, t34)
-    add(t18, t34, t18)
-    multiply(t27, t7, t34)
-    subtract(t29, t26, t26)
-    multiply(t9, t26, t35)
-    add(t34, t35, t34)
-    multiply(t34, qdd_4, t34)
-    subtract(t18, t34, t18)
-    subtract(t16, t12, t16)
-    multiply(t31, t16, t12)
-    multiply(t15, t33, t34)
-    add(t12, t34, t12)
-    multiply(t12, qdd_5, t12)
-    add(t18, t12, t18)
-    multiply(t6, qd_2, t12)
-    multiply(t3, t12, t34)
-    multiply(t1, qd_1, t35)
-    multiply(t4, t35, t36)
-    subtract(t34, t36, t34)
-    multiply(t3, qd_1, t36)
-    multiply(t6, t36, t37)
-    multiply(t4, qd_2, t38)
-    multiply(t1, t38, t39)
-    subtract(t37, t39, t37)
-    add(t34, t37, t34)
-    multiply(t8, t34, t37)
-    multiply(t11, qd_3, t39)
-    multiply(t5, t39, t40)
-    add(t37, t40, t37)
-    multiply(t4, t36, t40)
-    multiply(t1, t12, t41)
-    add(t40, t41, t40)
-    multiply(t6, t35, t41)
-    multiply(t3, t38, t42)
-    add(t41, t42, t41)
-    add(t40, t41, t40)
-    multiply(t11, t40, t41)
-    multiply(t8, qd_3, t42)
-    multiply(t10, t42, t43)
-    subtract(t41, t43, t41)
-    add(t37, t41, t37)
-    multiply(k3, t37, t41)
-    multiply(k0, t36, t43)
-    multiply(k2, t34, t44)
-    add(t43, t44, t44)
-    subtract(t41, t44, t41)
-    multiply(t11, t34, t34)
-    multiply(t5, t42, t5)
-    subtract(t34, t5, t34)
-    multiply(t8, t40, t40)
-    multiply(t10, t39, t10)
-    add(t40, t10, t40)
-    subtract(t34, t40, t34)
-    multiply(t14, t34, t34)
-    multiply(t30, qd_4, t5)
-    multiply(t13, t5, t13)
-    add(t34, t13, t34)
-    multiply(k4, t34, t10)
-    subtract(t41, t10, t10)
-    multiply(t0, t10, t13)
-    multiply(t21, qd_0, t40)
-    multiply(t17, t40, t45)
-    subtract(t13, t45, t13)
-    multiply(qd_1, t13, t13)
-    multiply(t0, qd_0, t45)
-    multiply(t3, t45, t46)
-    multiply(t21, t35, t47)
-    subtract(t46, t47, t46)
-    multiply(k0, t46, t47)
-    multiply(k6, t40, t48)
-    subtract(t47, t48, t47)
-    multiply(k5, t40, t48)
-    subtract(t47, t48, t47)
-    multiply(t6, t46, t49)
-    multiply(t22, t38, t50)
-    subtract(t49, t50, t49)
-    multiply(t1, t45, t50)
-    multiply(t21, t36, t51)
-    add(t50, t51, t50)
-    multiply(t4, t50, t51)
-    multiply(t24, t12, t52)
-    add(t51, t52, t51)
-    subtract(t49, t51, t49)
-    multiply(k2, t49, t51)
-    add(t47, t51, t51)
-    multiply(k7, t40, t52)
-    subtract(t51, t52, t52)
-    multiply(t8, t49, t53)
-    multiply(t23, t39, t54)
-    add(t53, t54, t53)
-    multiply(t6, t50, t50)
-    multiply(t24, t38, t24)
-    subtract(t50, t24, t50)
-    multiply(t4, t46, t46)
-    multiply(t22, t12, t22)
-    add(t46, t22, t46)
-    add(t50, t46, t50)
-    multiply(t11, t50, t22)
-    multiply(t28, t42, t24)
-    subtract(t22, t24, t22)
-    add(t53, t22, t53)
-    multiply(k3, t53, t22)
-    subtract(t52, t22, t22)
-    multiply(t30, t40, t24)
-    multiply(t14, qd_4, t46)
-    multiply(t0, t46, t54)
-    add(t24, t54, t24)
-    multiply(t8, t50, t50)
-    multiply(t28, t39, t28)
-    add(t50, t28, t50)
-    multiply(t11, t49, t49)
-    multiply(t23, t42, t23)
-    subtract(t49, t23, t49)
-    subtract(t50, t49, t50)
-    multiply(t14, t50, t50)
-    multiply(t32, t5, t32)
-    add(t50, t32, t50)
-    add(t24, t50, t24)
-    multiply(k4, t24, t23)
+    multiply(t4, t8, t9)
+    multiply(t6, t3, t6)
+    multiply(t2, t7, t2)
+    subtract(t6, t2, t6)
+    cos(q_3, t2)
+    multiply(t6, t2, t10)
+    subtract(t9, t10, t9)
+    cos(q_4, t10)
+    multiply(t9, t10, t11)
+    sin(q_0, t12)
+    sin(q_4, t13)
+    multiply(t12, t13, t14)
+    subtract(t11, t14, t11)
+    cos(q_5, t14)
+    multiply(t11, t14, t15)
+    multiply(t6, t8, t6)
+    multiply(t4, t2, t4)
+    add(t6, t4, t6)
+    sin(q_5, t4)
+    multiply(t6, t4, t16)
+    add(t15, t16, t15)
+    add(qd_1, qd_2, t16)
+    add(t16, qd_3, t17)
+    multiply(t5, qd_0, t18)
+    multiply(t7, t18, t19)
+    multiply(t1, qd_0, t20)
+    multiply(t3, t20, t21)
+    add(t19, t21, t19)
+    multiply(t2, t19, t21)
+    multiply(t7, t20, t22)
+    multiply(t3, t18, t23)
     subtract(t22, t23, t22)
-    multiply(qd_0, t22, t28)
-    subtract(t13, t28, t13)
-    add(t10, t43, t43)
-    multiply(t0, t43, t28)
-    multiply(t2, t40, t32)
-    subtract(t28, t32, t28)
-    multiply(qd_2, t28, t28)
-    add(t13, t28, t13)
-    add(t10, t44, t44)
-    multiply(t0, t44, t28)
-    multiply(t7, t40, t32)
-    subtract(t28, t32, t28)
-    multiply(qd_3, t28, t28)
-    add(t13, t28, t13)
-    multiply(t7, t53, t28)
-    multiply(t27, t44, t32)
-    add(t28, t32, t28)
-    multiply(t26, t37, t32)
-    subtract(t22, t52, t52)
-    multiply(t9, t52, t49)
-    add(t32, t49, t32)
-    add(t28, t32, t28)
-    multiply(qd_4, t28, t28)
-    subtract(t13, t28, t13)
-    subtract(t10, t41, t41)
-    multiply(t31, t41, t28)
-    multiply(t16, t24, t32)
-    subtract(t28, t32, t28)
-    multiply(t33, t34, t32)
-    multiply(t15, t23, t49)
-    subtract(t32, t49, t32)
-    add(t28, t32, t28)
-    multiply(qd_5, t28, t28)
-    add(t13, t28, t13)
-    add(t18, t13, a_0)
-    multiply(t0, t3, t13)
-    multiply(k0, t13, t18)
-    multiply(k6, t21, t28)
-    subtract(t18, t28, t18)
-    multiply(k5, t21, t28)
-    subtract(t18, t28, t18)
-    multiply(t13, t6, t32)
-    multiply(t0, t1, t49)
-    multiply(t49, t4, t50)
-    subtract(t32, t50, t32)
-    multiply(k2, t32, t50)
-    add(t18, t50, t50)
-    multiply(k7, t21, t54)
-    subtract(t50, t54, t54)
-    multiply(t32, t8, t55)
-    multiply(t49, t6, t56)
-    multiply(t13, t4, t57)
-    add(t56, t57, t56)
-    multiply(t56, t11, t57)
-    add(t55, t57, t55)
-    multiply(k3, t55, t57)
-    subtract(t54, t57, t57)
-    multiply(t56, t8, t58)
-    multiply(t32, t11, t59)
-    subtract(t58, t59, t58)
-    multiply(t58, t14, t59)
-    multiply(t21, t30, t60)
-    add(t59, t60, t59)
-    multiply(k4, t59, t60)
-    subtract(t57, t60, t60)
-    multiply(t60, qdd_0, t61)
-    multiply(t21, t17, t62)
-    multiply(t62, qdd_1, t62)
-    add(t61, t62, t61)
-    multiply(t21, t2, t62)
-    multiply(t62, qdd_2, t62)
-    add(t61, t62, t61)
-    multiply(t21, t7, t62)
-    multiply(t62, qdd_3, t62)
-    add(t61, t62, t61)
-    subtract(t60, t54, t54)
-    multiply(t9, t54, t62)
-    multiply(t55, t7, t63)
-    add(t62, t63, t62)
-    multiply(t62, qdd_4, t62)
-    add(t61, t62, t61)
-    multiply(t59, t16, t62)
-    subtract(t60, t57, t57)
-    multiply(t15, t57, t63)
-    subtract(t62, t63, t62)
-    multiply(t62, qdd_5, t62)
-    add(t61, t62, t61)
-    multiply(t17, t45, t17)
-    multiply(t21, t10, t10)
-    add(t17, t10, t17)
-    multiply(qd_1, t17, t17)
-    multiply(t3, t40, t3)
-    multiply(t0, t35, t35)
-    add(t3, t35, t3)
-    multiply(k0, t3, t10)
-    multiply(k6, t45, t35)
-    add(t10, t35, t10)
-    multiply(k5, t45, t35)
-    add(t10, t35, t10)
-    multiply(t6, t3, t62)
-    multiply(t13, t38, t63)
-    add(t62, t63, t62)
-    multiply(t0, t36, t36)
-    multiply(t1, t40, t1)
-    subtract(t36, t1, t36)
-    multiply(t4, t36, t1)
-    multiply(t49, t12, t63)
-    add(t1, t63, t1)
-    add(t62, t1, t62)
-    multiply(k2, t62, t1)
-    add(t10, t1, t1)
-    multiply(k7, t45, t63)
-    add(t1, t63, t63)
-    multiply(t32, t39, t64)
-    multiply(t8, t62, t65)
-    subtract(t64, t65, t64)
-    multiply(t6, t36, t6)
-    multiply(t49, t38, t49)
-    subtract(t6, t49, t6)
-    multiply(t13, t12, t13)
-    multiply(t4, t3, t4)
-    subtract(t13, t4, t13)
-    add(t6, t13, t6)
-    multiply(t11, t6, t3)
-    multiply(t56, t42, t4)
-    subtract(t3, t4, t3)
-    add(t64, t3, t64)
-    multiply(k3, t64, t3)
-    add(t63, t3, t3)
-    multiply(t8, t6, t8)
-    multiply(t56, t39, t56)
-    add(t8, t56, t8)
-    multiply(t11, t62, t11)
-    multiply(t32, t42, t32)
-    add(t11, t32, t11)
-    add(t8, t11, t8)
-    multiply(t14, t8, t14)
-    multiply(t58, t5, t58)
-    add(t14, t58, t14)
-    multiply(t30, t45, t30)
-    multiply(t21, t46, t46)
-    subtract(t30, t46, t30)
-    add(t14, t30, t14)
-    multiply(k4, t14, t4)
-    add(t3, t4, t3)
-    multiply(qd_0, t3, t5)
-    subtract(t17, t5, t17)
-    multiply(t2, t45, t2)
-    multiply(t21, t43, t43)
-    add(t2, t43, t2)
-    multiply(qd_2, t2, t2)
-    add(t17, t2, t17)
-    multiply(t7, t45, t2)
-    multiply(t21, t44, t5)
-    add(t2, t5, t2)
-    multiply(qd_3, t2, t2)
-    add(t17, t2, t17)
-    multiply(t54, t37, t2)
-    subtract(t63, t3, t63)
-    multiply(t9, t63, t5)
-    add(t2, t5, t2)
-    multiply(t7, t64, t7)
-    multiply(t55, t44, t44)
-    add(t7, t44, t7)
-    add(t2, t7, t2)
-    multiply(qd_4, t2, t2)
-    add(t17, t2, t17)
-    multiply(t16, t14, t16)
-    multiply(t59, t41, t41)
-    add(t16, t41, t16)
-    multiply(t57, t34, t2)
-    multiply(t15, t4, t5)
-    subtract(t2, t5, t2)
-    subtract(t16, t2, t16)
-    multiply(qd_5, t16, t16)
-    add(t17, t16, t17)
-    add(t61, t17, a_1)
-    multiply(t27, t54, t2)
-    multiply(t55, t26, t5)
-    subtract(t2, t5, t2)
-    multiply(t2, qdd_4, t2)
-    subtract(t29, t19, t19)
-    multiply(t21, t19, t5)
-    add(t60, t28, t28)
-    multiply(t0, t28, t6)
-    add(t5, t6, t5)
-    multiply(t5, qdd_1, t5)
-    subtract(t29, t20, t20)
-    multiply(t21, t20, t6)
-    subtract(t60, t18, t18)
-    multiply(t0, t18, t7)
-    add(t6, t7, t6)
-    multiply(t6, qdd_2, t6)
-    add(t5, t6, t5)
-    subtract(t29, t25, t29)
-    multiply(t21, t29, t6)
-    subtract(t60, t50, t60)
-    multiply(t0, t60, t7)
-    add(t6, t7, t6)
-    multiply(t6, qdd_3, t6)
-    add(t5, t6, t5)
-    subtract(t2, t5, t2)
-    multiply(t59, t33, t5)
-    multiply(t31, t57, t6)
-    add(t5, t6, t5)
-    multiply(t5, qdd_5, t5)
-    subtract(t2, t5, t2)
-    multiply(t54, t53, t54)
-    multiply(t27, t63, t63)
-    add(t54, t63, t54)
-    multiply(t26, t64, t26)
-    multiply(t55, t52, t52)
-    add(t26, t52, t26)
-    subtract(t54, t26, t54)
-    multiply(qd_4, t54, t54)
-    multiply(t19, t45, t19)
-    add(t22, t48, t48)
-    multiply(t21, t48, t48)
-    add(t19, t48, t19)
-    subtract(t35, t3, t35)
-    multiply(t0, t35, t35)
-    multiply(t28, t40, t28)
+    multiply(t8, t22, t23)
+    subtract(t21, t23, t21)
+    multiply(k0, t21, t23)
+    multiply(t17, t23, t24)
+    multiply(k1, qdd_0, t25)
+    multiply(t1, t25, t26)
+    multiply(k2, qdd_1, t27)
+    multiply(t1, qdd_0, t28)
+    multiply(t18, qd_1, t29)
+    add(t28, t29, t28)
+    multiply(k3, t28, t29)
+    add(t27, t29, t27)
+    add(t26, t27, t26)
+    multiply(k2, t18, t27)
+    multiply(t20, t27, t29)
+    multiply(k3, t18, t30)
+    multiply(qd_1, t30, t31)
+    subtract(t29, t31, t29)
+    add(t26, t29, t26)
+    multiply(t7, t26, t29)
+    multiply(t20, qd_1, t31)
+    multiply(t5, qdd_0, t32)
+    subtract(t31, t32, t31)
+    multiply(k3, t31, t32)
+    multiply(t5, t25, t25)
+    subtract(t32, t25, t32)
+    multiply(t18, t27, t27)
+    multiply(k2, qd_1, t25)
+    multiply(k3, t20, t33)
+    add(t25, t33, t25)
+    multiply(qd_1, t25, t33)
+    add(t27, t33, t27)
+    subtract(t32, t27, t32)
+    multiply(t3, t32, t27)
+    add(t29, t27, t29)
+    multiply(k4, t22, t27)
+    multiply(t22, t27, t33)
+    multiply(k4, t16, t34)
+    multiply(t16, t34, t16)
+    add(t33, t16, t33)
+    subtract(t29, t33, t29)
+    multiply(t2, t29, t16)
+    multiply(t3, t26, t26)
+    multiply(t7, t32, t32)
+    subtract(t26, t32, t26)
+    add(qdd_1, qdd_2, t32)
+    multiply(k4, t32, t33)
+    add(t26, t33, t26)
+    multiply(t19, t27, t27)
+    subtract(t26, t27, t26)
+    multiply(t8, t26, t27)
+    add(t16, t27, t16)
+    multiply(t3, t31, t27)
+    multiply(t7, t28, t33)
+    add(t27, t33, t27)
+    multiply(t19, qd_2, t33)
+    add(t27, t33, t27)
+    multiply(t2, t27, t33)
+    multiply(t7, t31, t35)
+    multiply(t3, t28, t28)
     subtract(t35, t28, t35)
-    add(t19, t35, t19)
-    multiply(qd_1, t19, t19)
-    multiply(t20, t45, t20)
-    subtract(t22, t47, t47)
-    multiply(t21, t47, t47)
-    add(t20, t47, t20)
-    subtract(t10, t3, t10)
-    multiply(t0, t10, t10)
-    multiply(t18, t40, t18)
-    subtract(t10, t18, t10)
-    add(t20, t10, t20)
-    multiply(qd_2, t20, t20)
-    add(t19, t20, t19)
-    multiply(t29, t45, t29)
-    subtract(t22, t51, t22)
-    multiply(t21, t22, t22)
-    add(t29, t22, t29)
-    subtract(t1, t3, t1)
-    multiply(t0, t1, t1)
-    multiply(t60, t40, t60)
-    subtract(t1, t60, t1)
-    add(t29, t1, t29)
-    multiply(qd_3, t29, t29)
-    add(t19, t29, t19)
-    subtract(t54, t19, t54)
-    multiply(t33, t14, t33)
-    multiply(t59, t23, t23)
-    subtract(t33, t23, t33)
-    multiply(t57, t24, t57)
-    multiply(t31, t4, t4)
-    add(t57, t4, t57)
-    subtract(t33, t57, t33)
-    multiply(qd_5, t33, t33)
-    subtract(t54, t33, t54)
-    add(t2, t54, a_2)
-    multiply(t21, qdd_1, t1)
-    multiply(t21, qdd_2, t2)
-    add(t1, t2, t1)
-    multiply(t21, qdd_3, t21)
-    add(t1, t21, t1)
-    multiply(t55, qdd_4, t55)
-    add(t1, t55, t1)
-    multiply(t59, qdd_5, t59)
-    add(t1, t59, t1)
-    multiply(qd_1, t45, t2)
-    multiply(qd_2, t45, t3)
-    add(t2, t3, t2)
-    multiply(qd_3, t45, t45)
-    add(t2, t45, t2)
-    multiply(qd_4, t64, t64)
-    add(t2, t64, t2)
-    multiply(qd_5, t14, t14)
-    add(t2, t14, t2)
-    add(t1, t2, t1)
-    negative(t1, a_3)
-    multiply(t0, qdd_1, t1)
-    multiply(t0, qdd_2, t2)
-    add(t1, t2, t1)
-    multiply(t0, qdd_3, t0)
-    add(t1, t0, t1)
-    multiply(t27, qdd_4, t27)
-    subtract(t1, t27, t1)
-    multiply(t31, qdd_5, t31)
-    add(t1, t31, t1)
-    multiply(qd_1, t40, t0)
-    multiply(qd_2, t40, t2)
-    add(t0, t2, t0)
-    multiply(qd_3, t40, t40)
-    add(t0, t40, t0)
-    multiply(qd_4, t53, t53)
-    add(t0, t53, t0)
-    multiply(qd_5, t24, t24)
-    add(t0, t24, t0)
-    subtract(t1, t0, a_4)
-    multiply(t9, qdd_4, t9)
-    add(qdd_0, t9, t9)
-    multiply(t15, qdd_5, t15)
-    subtract(t9, t15, t9)
-    multiply(qd_4, t37, t37)
-    multiply(qd_5, t34, t34)
-    subtract(t37, t34, t37)
-    add(t9, t37, a_5)
+    multiply(t22, qd_2, t28)
+    add(t35, t28, t35)
+    multiply(t8, t35, t28)
+    subtract(t33, t28, t33)
+    multiply(t21, qd_3, t28)
+    add(t33, t28, t33)
+    multiply(k0, t33, t28)
+    add(t16, t28, t16)
+    subtract(t24, t16, t24)
+    multiply(t10, t24, t16)
+    multiply(k1, qd_0, t28)
+    multiply(qd_0, t28, t28)
+    multiply(k2, t31, t31)
+    add(t28, t31, t28)
+    multiply(t20, t25, t20)
+    multiply(t18, t30, t18)
+    add(t20, t18, t20)
+    add(t28, t20, t28)
+    multiply(k4, t27, t18)
+    add(t28, t18, t28)
+    multiply(t19, t34, t34)
+    add(t28, t34, t28)
+    multiply(t8, t19, t19)
+    multiply(t2, t22, t22)
+    add(t19, t22, t19)
+    multiply(k0, t19, t18)
+    multiply(t19, t18, t20)
+    multiply(t21, t23, t23)
+    add(t20, t23, t20)
+    add(t28, t20, t28)
+    multiply(t13, t28, t20)
+    subtract(t16, t20, t16)
+    multiply(t2, t35, t35)
+    multiply(t8, t27, t27)
+    add(t35, t27, t35)
+    multiply(t19, qd_3, t20)
+    add(t35, t20, t35)
+    multiply(t13, t35, t20)
+    add(t32, qdd_3, t32)
+    multiply(t10, t32, t22)
+    add(t20, t22, t20)
+    multiply(t10, t21, t22)
+    multiply(t13, t17, t23)
+    add(t22, t23, t22)
+    multiply(t22, qd_4, t23)
+    subtract(t20, t23, t20)
+    multiply(k5, t20, t23)
+    add(t16, t23, t16)
+    add(t19, qd_4, t19)
+    multiply(k5, t22, t23)
+    multiply(t19, t23, t25)
+    add(t16, t25, t16)
+    multiply(t14, t16, t25)
+    multiply(t2, t26, t26)
+    multiply(t8, t29, t29)
+    subtract(t26, t29, t26)
+    multiply(k0, t35, t27)
+    subtract(t26, t27, t26)
+    multiply(t17, t18, t18)
+    add(t26, t18, t26)
+    multiply(t22, t23, t23)
+    multiply(t10, t17, t17)
+    multiply(t13, t21, t21)
+    subtract(t17, t21, t17)
+    multiply(k5, t17, t18)
+    multiply(t17, t18, t21)
+    add(t23, t21, t23)
+    subtract(t26, t23, t26)
+    multiply(t4, t26, t21)
+    subtract(t25, t21, t25)
+    multiply(t13, t32, t32)
+    multiply(t10, t35, t35)
+    subtract(t32, t35, t32)
+    multiply(t17, qd_4, t21)
+    add(t32, t21, t32)
+    multiply(t4, t32, t21)
+    add(t33, qdd_4, t33)
+    multiply(t14, t33, t23)
+    add(t21, t23, t21)
+    multiply(t14, t22, t23)
+    multiply(t4, t19, t27)
+    subtract(t23, t27, t23)
+    multiply(t23, qd_5, t27)
+    add(t21, t27, t21)
+    multiply(k6, t21, t27)
+    subtract(t25, t27, t25)
+    add(t17, qd_5, t17)
+    multiply(k6, t23, t27)
+    multiply(t17, t27, t29)
+    add(t25, t29, t25)
+    multiply(t15, t25, t29)
+    multiply(t9, t13, t9)
+    multiply(t12, t10, t30)
+    add(t9, t30, t9)
+    multiply(t19, t18, t18)
+    multiply(t13, t24, t24)
+    multiply(t10, t28, t28)
+    add(t24, t28, t24)
+    multiply(k5, t32, t28)
+    add(t24, t28, t24)
+    subtract(t18, t24, t18)
+    multiply(t4, t22, t22)
+    multiply(t14, t19, t19)
+    add(t22, t19, t22)
+    multiply(k6, t22, t19)
+    multiply(t22, t19, t24)
+    multiply(t23, t27, t23)
+    add(t24, t23, t24)
+    subtract(t18, t24, t18)
+    multiply(t9, t18, t23)
+    subtract(t29, t23, t29)
+    multiply(t11, t4, t11)
+    multiply(t6, t14, t6)
+    subtract(t11, t6, t11)
+    multiply(t4, t16, t16)
+    multiply(t14, t26, t26)
+    add(t16, t26, t16)
+    multiply(t14, t32, t32)
+    multiply(t4, t33, t33)
+    subtract(t32, t33, t32)
+    multiply(t22, qd_5, t22)
+    subtract(t32, t22, t32)
+    multiply(k6, t32, t6)
+    add(t16, t6, t16)
+    multiply(t17, t19, t17)
+    add(t16, t17, t16)
+    multiply(t11, t16, t6)
+    add(t29, t6, a_0)
+    multiply(t12, t1, t6)
+    multiply(t6, t3, t17)
+    multiply(t12, t5, t12)
+    multiply(t12, t7, t19)
+    add(t17, t19, t17)
+    multiply(t17, t8, t19)
+    multiply(t12, t3, t12)
+    multiply(t6, t7, t6)
+    subtract(t12, t6, t12)
+    multiply(t12, t2, t6)
+    subtract(t19, t6, t19)
+    multiply(t19, t10, t6)
+    multiply(t0, t13, t22)
+    add(t6, t22, t6)
+    multiply(t6, t14, t22)
+    multiply(t12, t8, t12)
+    multiply(t17, t2, t17)
+    add(t12, t17, t12)
+    multiply(t12, t4, t17)
+    add(t22, t17, t22)
+    multiply(t22, t25, t17)
+    multiply(t0, t10, t0)
+    multiply(t19, t13, t19)
+    subtract(t0, t19, t0)
+    multiply(t0, t18, t19)
+    add(t17, t19, t17)
+    multiply(t6, t4, t6)
+    multiply(t12, t14, t12)
+    subtract(t6, t12, t6)
+    multiply(t6, t16, t12)
+    add(t17, t12, a_1)
+    multiply(t5, t7, t12)
+    multiply(t1, t3, t17)
+    add(t12, t17, t12)
+    multiply(t12, t2, t17)
+    multiply(t1, t7, t1)
+    multiply(t5, t3, t5)
+    subtract(t1, t5, t1)
+    multiply(t1, t8, t3)
+    subtract(t17, t3, t17)
+    multiply(t17, t10, t10)
+    multiply(t10, t14, t3)
+    multiply(t12, t8, t12)
+    multiply(t1, t2, t1)
+    add(t12, t1, t12)
+    multiply(t12, t4, t1)
+    subtract(t3, t1, t3)
+    multiply(t3, t25, t25)
+    multiply(t17, t13, t17)
+    multiply(t17, t18, t18)
+    subtract(t25, t18, t25)
+    multiply(t10, t4, t10)
+    multiply(t12, t14, t12)
+    add(t10, t12, t10)
+    multiply(t10, t16, t16)
+    add(t25, t16, a_2)
+    multiply(t15, t32, t15)
+    add(t20, qdd_5, t20)
+    multiply(t9, t20, t9)
+    subtract(t15, t9, t15)
+    multiply(t11, t21, t11)
+    add(t15, t11, a_3)
+    multiply(t22, t32, t22)
+    multiply(t0, t20, t0)
+    add(t22, t0, t22)
+    multiply(t6, t21, t6)
+    add(t22, t6, a_4)
+    multiply(t3, t32, t3)
+    multiply(t17, t20, t17)
+    subtract(t3, t17, t3)
+    multiply(t10, t21, t10)
+    add(t3, t10, a_5)
 
 
 def fk_jacobian_tcp(q):
@@ -8871,6 +7601,833 @@ def _gravity_chunk(x, t, s, y):
     add(t0, g_2, t0)
     multiply(k5, t1, t1)
     add(t0, t1, g_1)
+
+
+def bias(q, qd):
+    """Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.
+
+    in  q [6]
+    in  qd [6]
+    out h [6]
+    394 ops: 231 mul, 153 add, 0 div, 10 trig
+    """
+    q = _array(q, 6, "q")
+    qd = _array(qd, 6, "qd")
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bias_chunk, (q, qd), 60, ((6,),))
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[1])
+    t1 = sin(q[1])
+    t2 = t1 * qd[0]
+    t3 = t2 * qd[1]
+    t4 = 0.8849018759100001 * t3
+    t5 = 0.8849018759100001 * qd[1]
+    t6 = t2 * t5
+    t7 = 0.0151074 * t2
+    t8 = qd[1] * t7
+    t6 = t6 - t8
+    t4 = t4 + t6
+    t6 = 0.13585 * qd[0]
+    t6 = qd[0] * t6
+    t8 = 2.3500400000000004 * t6
+    t4 = t4 + t8
+    t8 = cos(q[2])
+    t9 = t8 * t3
+    t10 = sin(q[2])
+    t11 = t0 * qd[0]
+    t12 = t11 * qd[1]
+    t13 = t10 * t12
+    t9 = t9 + t13
+    t13 = t10 * t11
+    t14 = t8 * t2
+    t13 = t13 + t14
+    t14 = t13 * qd[2]
+    t9 = t9 + t14
+    t14 = 0.19163081355599998 * t9
+    t15 = qd[1] + qd[2]
+    t16 = 0.19163081355599998 * t15
+    t17 = t13 * t16
+    t18 = 0.004095 * t13
+    t19 = t15 * t18
+    t17 = t17 - t19
+    t14 = t14 + t17
+    t17 = 0.425 * t3
+    t6 = t6 + t17
+    t17 = 0.425 * qd[1]
+    t19 = (-0.1197) * t2
+    t17 = t17 + t19
+    t19 = t2 * t17
+    t20 = (-0.1197) * t11
+    t21 = t11 * t20
+    t19 = t19 + t21
+    t6 = t6 + t19
+    t19 = 0.56875 * t6
+    t14 = t14 + t19
+    t19 = cos(q[3])
+    t21 = t19 * t9
+    t22 = sin(q[3])
+    t23 = t10 * t3
+    t24 = t8 * t12
+    t23 = t23 - t24
+    t24 = t10 * t2
+    t25 = t8 * t11
+    t24 = t24 - t25
+    t25 = t24 * qd[2]
+    t23 = t23 + t25
+    t25 = t22 * t23
+    t21 = t21 - t25
+    t25 = t19 * t13
+    t26 = t22 * t24
+    t25 = t25 - t26
+    t26 = t25 * qd[3]
+    t21 = t21 + t26
+    t26 = 0.21942 * t21
+    t27 = t15 + qd[3]
+    t28 = 0.111172755531 * t27
+    t29 = t25 * t28
+    t30 = 0.111172755531 * t25
+    t31 = t27 * t30
+    t29 = t29 - t31
+    t29 = t26 + t29
+    t31 = cos(q[4])
+    t32 = t31 * t25
+    t33 = sin(q[4])
+    t34 = t33 * t27
+    t32 = t32 + t34
+    t34 = t31 * t27
+    t35 = t33 * t25
+    t34 = t34 - t35
+    t35 = 0.111172755531 * t34
+    t36 = t32 * t35
+    t37 = 0.111172755531 * t32
+    t38 = t34 * t37
+    t36 = t36 - t38
+    t26 = t26 + t36
+    t36 = cos(q[5])
+    t38 = sin(q[5])
+    t39 = t34 * qd[4]
+    t40 = t19 * t23
+    t41 = t22 * t9
+    t40 = t40 + t41
+    t41 = t22 * t13
+    t42 = t19 * t24
+    t41 = t41 + t42
+    t42 = t41 * qd[3]
+    t40 = t40 + t42
+    t42 = t31 * t40
+    t39 = t39 - t42
+    t42 = t38 * t39
+    t43 = t36 * t21
+    t42 = t42 + t43
+    t43 = t36 * t32
+    t44 = t41 + qd[4]
+    t45 = t38 * t44
+    t43 = t43 - t45
+    t45 = t43 * qd[5]
+    t42 = t42 + t45
+    t42 = 0.033822 * t42
+    t45 = t34 + qd[5]
+    t46 = 0.0171364731454 * t45
+    t47 = t43 * t46
+    t48 = 0.0171364731454 * t43
+    t49 = t45 * t48
+    t47 = t47 - t49
+    t42 = t42 + t47
+    t47 = t36 * t42
+    t49 = t36 * t39
+    t50 = t38 * t21
+    t49 = t49 - t50
+    t50 = t38 * t32
+    t51 = t36 * t44
+    t50 = t50 + t51
+    t51 = t50 * qd[5]
+    t49 = t49 - t51
+    t49 = 0.0171364731454 * t49
+    t51 = 0.033822 * t50
+    t45 = t45 * t51
+    t46 = t50 * t46
+    t45 = t45 - t46
+    t45 = t49 + t45
+    t46 = t38 * t45
+    t46 = t47 - t46
+    t26 = t26 + t46
+    t29 = t29 + t26
+    t46 = 0.093 * t25
+    t47 = t27 * t46
+    t49 = (-9.81) * t0
+    t52 = (-0.1197) * t12
+    t49 = t49 + t52
+    t52 = 0.425 * t11
+    t53 = t2 * t52
+    t20 = qd[1] * t20
+    t20 = t53 - t20
+    t20 = t49 + t20
+    t49 = t10 * t20
+    t53 = (-9.81) * t1
+    t3 = (-0.1197) * t3
+    t3 = t53 + t3
+    t52 = t11 * t52
+    t17 = qd[1] * t17
+    t17 = t52 + t17
+    t3 = t3 - t17
+    t17 = t8 * t3
+    t17 = t49 + t17
+    t49 = 0.39225 * t24
+    t52 = t24 * t49
+    t53 = 0.39225 * t15
+    t54 = t15 * t53
+    t52 = t52 + t54
+    t52 = t17 - t52
+    t54 = t19 * t52
+    t20 = t8 * t20
+    t3 = t10 * t3
+    t3 = t20 - t3
+    t20 = t13 * t49
+    t20 = t3 - t20
+    t49 = t22 * t20
+    t49 = t54 + t49
+    t21 = 0.093 * t21
+    t21 = t49 + t21
+    t21 = t47 - t21
+    t47 = t31 * t21
+    t54 = 0.39225 * t9
+    t54 = t6 + t54
+    t53 = t13 * t53
+    t53 = t54 + t53
+    t54 = 0.093 * t41
+    t55 = t41 * t54
+    t46 = t25 * t46
+    t46 = t55 + t46
+    t46 = t53 + t46
+    t55 = t33 * t46
+    t47 = t47 - t55
+    t55 = 1.219 * t47
+    t56 = t33 * t40
+    t57 = t32 * qd[4]
+    t56 = t56 - t57
+    t57 = 0.09465 * t56
+    t47 = t47 + t57
+    t57 = 0.09465 * t32
+    t58 = t44 * t57
+    t47 = t47 + t58
+    t58 = t36 * t47
+    t20 = t19 * t20
+    t52 = t22 * t52
+    t20 = t20 - t52
+    t52 = 0.093 * t40
+    t52 = t20 - t52
+    t54 = t27 * t54
+    t52 = t52 + t54
+    t54 = t32 * t57
+    t57 = 0.09465 * t34
+    t59 = t34 * t57
+    t54 = t54 + t59
+    t54 = t52 - t54
+    t59 = t38 * t54
+    t58 = t58 - t59
+    t58 = 0.1879 * t58
+    t59 = t36 * t58
+    t47 = t38 * t47
+    t54 = t36 * t54
+    t47 = t47 + t54
+    t47 = 0.1879 * t47
+    t54 = t38 * t47
+    t54 = t59 + t54
+    t55 = t55 + t54
+    t59 = t31 * t55
+    t57 = t44 * t57
+    t21 = t33 * t21
+    t46 = t31 * t46
+    t21 = t21 + t46
+    t46 = 0.09465 * t39
+    t46 = t21 + t46
+    t46 = t57 - t46
+    t57 = 0.1879 * t46
+    t21 = 1.219 * t21
+    t21 = t57 - t21
+    t57 = t33 * t21
+    t57 = t59 - t57
+    t59 = 0.093 * t57
+    t29 = t29 - t59
+    t59 = t19 * t29
+    t60 = 0.21942 * t41
+    t27 = t27 * t60
+    t28 = t41 * t28
+    t27 = t27 - t28
+    t28 = 0.111172755531 * t40
+    t27 = t27 - t28
+    t28 = 0.111172755531 * t39
+    t39 = 0.21942 * t44
+    t34 = t34 * t39
+    t35 = t44 * t35
+    t34 = t34 - t35
+    t28 = t28 + t34
+    t34 = t36 * t45
+    t35 = t38 * t42
+    t34 = t34 + t35
+    t28 = t28 + t34
+    t34 = 0.017784735 * t46
+    t28 = t28 - t34
+    t34 = t31 * t28
+    t35 = 0.111172755531 * t56
+    t37 = t44 * t37
+    t32 = t32 * t39
+    t32 = t37 - t32
+    t32 = t35 + t32
+    t35 = 0.0171364731454 * t56
+    t37 = t50 * t48
+    t39 = t43 * t51
+    t37 = t37 - t39
+    t35 = t35 + t37
+    t32 = t32 + t35
+    t37 = 0.09465 * t54
+    t32 = t32 + t37
+    t37 = t33 * t32
+    t34 = t34 - t37
+    t27 = t27 + t34
+    t34 = 1.219 * t52
+    t36 = t36 * t47
+    t37 = t38 * t58
+    t36 = t36 - t37
+    t34 = t34 + t36
+    t36 = 0.093 * t34
+    t27 = t27 + t36
+    t36 = t22 * t27
+    t36 = t59 - t36
+    t14 = t14 + t36
+    t36 = t33 * t55
+    t21 = t31 * t21
+    t21 = t36 + t21
+    t36 = 1.219 * t53
+    t21 = t21 - t36
+    t36 = 0.39225 * t21
+    t14 = t14 - t36
+    t36 = t8 * t14
+    t23 = 0.004095 * t23
+    t16 = t24 * t16
+    t37 = 0.19163081355599998 * t24
+    t38 = t15 * t37
+    t16 = t16 - t38
+    t16 = t23 + t16
+    t23 = t19 * t27
+    t27 = t22 * t29
+    t23 = t23 + t27
+    t16 = t16 - t23
+    t23 = t10 * t16
+    t23 = t36 + t23
+    t4 = t4 + t23
+    t17 = 2.275 * t17
+    t23 = 0.56875 * t24
+    t27 = t24 * t23
+    t29 = 0.56875 * t15
+    t15 = t15 * t29
+    t15 = t27 + t15
+    t15 = t17 - t15
+    t17 = 1.219 * t49
+    t17 = t57 - t17
+    t27 = t19 * t17
+    t20 = 1.219 * t20
+    t20 = t20 + t34
+    t34 = t22 * t20
+    t27 = t27 + t34
+    t15 = t15 - t27
+    t27 = t8 * t15
+    t34 = 2.275 * t3
+    t23 = t13 * t23
+    t23 = t34 - t23
+    t19 = t19 * t20
+    t17 = t22 * t17
+    t17 = t19 - t17
+    t19 = t23 + t17
+    t20 = t10 * t19
+    t20 = t27 - t20
+    t22 = (-0.1197) * t20
+    t6 = 2.275 * t6
+    t9 = 0.56875 * t9
+    t6 = t6 + t9
+    t9 = t13 * t29
+    t6 = t6 + t9
+    t6 = t21 - t6
+    t6 = 0.425 * t6
+    t6 = t22 - t6
+    t4 = t4 + t6
+    t4 = t0 * t4
+    t6 = 0.8849018759100001 * t11
+    t9 = qd[1] * t6
+    t5 = t11 * t5
+    t5 = t9 - t5
+    t9 = 0.0151074 * t12
+    t5 = t5 - t9
+    t9 = t8 * t16
+    t12 = t10 * t14
+    t9 = t9 - t12
+    t5 = t5 + t9
+    t8 = t8 * t19
+    t9 = t10 * t15
+    t8 = t8 + t9
+    t9 = (-0.1197) * t8
+    t5 = t5 - t9
+    t5 = t1 * t5
+    t4 = t4 + t5
+    t5 = (-82.33533000000001) * t1
+    t9 = 2.3500400000000004 * t11
+    t10 = t11 * t9
+    t12 = 2.3500400000000004 * qd[1]
+    t12 = qd[1] * t12
+    t10 = t10 + t12
+    t5 = t5 - t10
+    t5 = t5 + t20
+    t5 = t0 * t5
+    t10 = (-82.33533000000001) * t0
+    t9 = t2 * t9
+    t9 = t10 + t9
+    t9 = t9 + t8
+    t1 = t1 * t9
+    t1 = t5 - t1
+    t1 = 0.13585 * t1
+    t1 = t4 + t1
+    t1 = -t1
+    t2 = t2 * t6
+    t4 = t11 * t7
+    t2 = t2 - t4
+    t0 = (-23.053892400000006) * t0
+    t0 = t2 + t0
+    t2 = t24 * t18
+    t4 = t13 * t37
+    t2 = t2 - t4
+    t3 = 0.56875 * t3
+    t2 = t2 + t3
+    t3 = t41 * t30
+    t4 = t25 * t60
+    t3 = t3 - t4
+    t4 = t33 * t28
+    t5 = t31 * t32
+    t4 = t4 + t5
+    t3 = t3 + t4
+    t2 = t2 + t3
+    t4 = 0.39225 * t17
+    t2 = t2 + t4
+    t0 = t0 + t2
+    t4 = 0.425 * t8
+    t0 = t0 + t4
+    _h = (t1, t0, t2, t3, t26, t35)
+    return np.array(_h)
+
+
+_bias_constants = _constants(
+    0.8849018759100001, 0.0151074, 0.13585, 2.3500400000000004, 0.19163081355599998, 0.004095, 0.425,
+    -0.1197, 0.56875, 0.21942, 0.111172755531, 0.033822, 0.0171364731454, 0.093, -9.81, 0.39225, 1.219,
+    0.09465, 0.1879, 0.017784735, 2.275, -82.33533000000001, -23.053892400000006)
+
+
+def _bias_chunk(x, t, s, y):
+    """bias on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, q_5, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59) = t
+    h_0, h_1, h_2, h_3, h_4, h_5 = y
+    (k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20, k21,
+     k22) = _bias_constants
+    cos(q_1, t0)
+    sin(q_1, t1)
+    multiply(t1, qd_0, t2)
+    multiply(t2, qd_1, t3)
+    multiply(k0, t3, t4)
+    multiply(k0, qd_1, t5)
+    multiply(t2, t5, t6)
+    multiply(k1, t2, t7)
+    multiply(qd_1, t7, t8)
+    subtract(t6, t8, t6)
+    add(t4, t6, t4)
+    multiply(k2, qd_0, t6)
+    multiply(qd_0, t6, t6)
+    multiply(k3, t6, t8)
+    add(t4, t8, t4)
+    cos(q_2, t8)
+    multiply(t8, t3, t9)
+    sin(q_2, t10)
+    multiply(t0, qd_0, t11)
+    multiply(t11, qd_1, t12)
+    multiply(t10, t12, t13)
+    add(t9, t13, t9)
+    multiply(t10, t11, t13)
+    multiply(t8, t2, t14)
+    add(t13, t14, t13)
+    multiply(t13, qd_2, t14)
+    add(t9, t14, t9)
+    multiply(k4, t9, t14)
+    add(qd_1, qd_2, t15)
+    multiply(k4, t15, t16)
+    multiply(t13, t16, t17)
+    multiply(k5, t13, t18)
+    multiply(t15, t18, t19)
+    subtract(t17, t19, t17)
+    add(t14, t17, t14)
+    multiply(k6, t3, t17)
+    add(t6, t17, t6)
+    multiply(k6, qd_1, t17)
+    multiply(k7, t2, t19)
+    add(t17, t19, t17)
+    multiply(t2, t17, t19)
+    multiply(k7, t11, t20)
+    multiply(t11, t20, t21)
+    add(t19, t21, t19)
+    add(t6, t19, t6)
+    multiply(k8, t6, t19)
+    add(t14, t19, t14)
+    cos(q_3, t19)
+    multiply(t19, t9, t21)
+    sin(q_3, t22)
+    multiply(t10, t3, t23)
+    multiply(t8, t12, t24)
+    subtract(t23, t24, t23)
+    multiply(t10, t2, t24)
+    multiply(t8, t11, t25)
+    subtract(t24, t25, t24)
+    multiply(t24, qd_2, t25)
+    add(t23, t25, t23)
+    multiply(t22, t23, t25)
+    subtract(t21, t25, t21)
+    multiply(t19, t13, t25)
+    multiply(t22, t24, t26)
+    subtract(t25, t26, t25)
+    multiply(t25, qd_3, t26)
+    add(t21, t26, t21)
+    multiply(k9, t21, t26)
+    add(t15, qd_3, t27)
+    multiply(k10, t27, t28)
+    multiply(t25, t28, t29)
+    multiply(k10, t25, t30)
+    multiply(t27, t30, t31)
+    subtract(t29, t31, t29)
+    add(t26, t29, t29)
+    cos(q_4, t31)
+    multiply(t31, t25, t32)
+    sin(q_4, t33)
+    multiply(t33, t27, t34)
+    add(t32, t34, t32)
+    multiply(t31, t27, t34)
+    multiply(t33, t25, t35)
+    subtract(t34, t35, t34)
+    multiply(k10, t34, t35)
+    multiply(t32, t35, t36)
+    multiply(k10, t32, t37)
+    multiply(t34, t37, t38)
+    subtract(t36, t38, t36)
+    add(t26, t36, t26)
+    cos(q_5, t36)
+    sin(q_5, t38)
+    multiply(t34, qd_4, t39)
+    multiply(t19, t23, t40)
+    multiply(t22, t9, t41)
+    add(t40, t41, t40)
+    multiply(t22, t13, t41)
+    multiply(t19, t24, t42)
+    add(t41, t42, t41)
+    multiply(t41, qd_3, t42)
+    add(t40, t42, t40)
+    multiply(t31, t40, t42)
+    subtract(t39, t42, t39)
+    multiply(t38, t39, t42)
+    multiply(t36, t21, t43)
+    add(t42, t43, t42)
+    multiply(t36, t32, t43)
+    add(t41, qd_4, t44)
+    multiply(t38, t44, t45)
+    subtract(t43, t45, t43)
+    multiply(t43, qd_5, t45)
+    add(t42, t45, t42)
+    multiply(k11, t42, t42)
+    add(t34, qd_5, t45)
+    multiply(k12, t45, t46)
+    multiply(t43, t46, t47)
+    multiply(k12, t43, t48)
+    multiply(t45, t48, t49)
+    subtract(t47, t49, t47)
+    add(t42, t47, t42)
+    multiply(t36, t42, t47)
+    multiply(t36, t39, t49)
+    multiply(t38, t21, t50)
+    subtract(t49, t50, t49)
+    multiply(t38, t32, t50)
+    multiply(t36, t44, t51)
+    add(t50, t51, t50)
+    multiply(t50, qd_5, t51)
+    subtract(t49, t51, t49)
+    multiply(k12, t49, t49)
+    multiply(k11, t50, t51)
+    multiply(t45, t51, t45)
+    multiply(t50, t46, t46)
+    subtract(t45, t46, t45)
+    add(t49, t45, t49)
+    multiply(t38, t49, t45)
+    subtract(t47, t45, t47)
+    add(t26, t47, h_4)
+    add(t29, h_4, t29)
+    multiply(k13, t25, t26)
+    multiply(t27, t26, t45)
+    multiply(k14, t0, t46)
+    multiply(k7, t12, t47)
+    add(t46, t47, t46)
+    multiply(k6, t11, t47)
+    multiply(t2, t47, t52)
+    multiply(qd_1, t20, t20)
+    subtract(t52, t20, t52)
+    add(t46, t52, t46)
+    multiply(t10, t46, t20)
+    multiply(k14, t1, t52)
+    multiply(k7, t3, t3)
+    add(t52, t3, t52)
+    multiply(t11, t47, t47)
+    multiply(qd_1, t17, t17)
+    add(t47, t17, t47)
+    subtract(t52, t47, t52)
+    multiply(t8, t52, t3)
+    add(t20, t3, t20)
+    multiply(k15, t24, t3)
+    multiply(t24, t3, t17)
+    multiply(k15, t15, t47)
+    multiply(t15, t47, t53)
+    add(t17, t53, t17)
+    subtract(t20, t17, t17)
+    multiply(t19, t17, t53)
+    multiply(t8, t46, t46)
+    multiply(t10, t52, t52)
+    subtract(t46, t52, t46)
+    multiply(t13, t3, t3)
+    subtract(t46, t3, t3)
+    multiply(t22, t3, t52)
+    add(t53, t52, t53)
+    multiply(k13, t21, t21)
+    add(t53, t21, t21)
+    subtract(t45, t21, t45)
+    multiply(t31, t45, t21)
+    multiply(k15, t9, t52)
+    add(t6, t52, t52)
+    multiply(t13, t47, t47)
+    add(t52, t47, t52)
+    multiply(k13, t41, t47)
+    multiply(t41, t47, t54)
+    multiply(t25, t26, t26)
+    add(t54, t26, t54)
+    add(t52, t54, t54)
+    multiply(t33, t54, t26)
+    subtract(t21, t26, t21)
+    multiply(k16, t21, t26)
+    multiply(t33, t40, t55)
+    multiply(t32, qd_4, t56)
+    subtract(t55, t56, t55)
+    multiply(k17, t55, t56)
+    add(t21, t56, t21)
+    multiply(k17, t32, t56)
+    multiply(t44, t56, t57)
+    add(t21, t57, t21)
+    multiply(t36, t21, t57)
+    multiply(t19, t3, t3)
+    multiply(t22, t17, t17)
+    subtract(t3, t17, t3)
+    multiply(k13, t40, t17)
+    subtract(t3, t17, t17)
+    multiply(t27, t47, t47)
+    add(t17, t47, t17)
+    multiply(t32, t56, t56)
+    multiply(k17, t34, t47)
+    multiply(t34, t47, t58)
+    add(t56, t58, t56)
+    subtract(t17, t56, t56)
+    multiply(t38, t56, t58)
+    subtract(t57, t58, t57)
+    multiply(k18, t57, t57)
+    multiply(t36, t57, t58)
+    multiply(t38, t21, t21)
+    multiply(t36, t56, t56)
+    add(t21, t56, t21)
+    multiply(k18, t21, t21)
+    multiply(t38, t21, t56)
+    add(t58, t56, t58)
+    add(t26, t58, t26)
+    multiply(t31, t26, t56)
+    multiply(t44, t47, t47)
+    multiply(t33, t45, t45)
+    multiply(t31, t54, t54)
+    add(t45, t54, t45)
+    multiply(k17, t39, t54)
+    add(t45, t54, t54)
+    subtract(t47, t54, t47)
+    multiply(k18, t47, t54)
+    multiply(k16, t45, t45)
+    subtract(t54, t45, t54)
+    multiply(t33, t54, t45)
+    subtract(t56, t45, t56)
+    multiply(k13, t56, t45)
+    subtract(t29, t45, t29)
+    multiply(t19, t29, t45)
+    multiply(k9, t41, t59)
+    multiply(t27, t59, t27)
+    multiply(t41, t28, t28)
+    subtract(t27, t28, t27)
+    multiply(k10, t40, t40)
+    subtract(t27, t40, t27)
+    multiply(k10, t39, t39)
+    multiply(k9, t44, t28)
+    multiply(t34, t28, t34)
+    multiply(t44, t35, t35)
+    subtract(t34, t35, t34)
+    add(t39, t34, t39)
+    multiply(t36, t49, t49)
+    multiply(t38, t42, t42)
+    add(t49, t42, t49)
+    add(t39, t49, t39)
+    multiply(k19, t47, t47)
+    subtract(t39, t47, t39)
+    multiply(t31, t39, t34)
+    multiply(k10, t55, t35)
+    multiply(t44, t37, t44)
+    multiply(t32, t28, t32)
+    subtract(t44, t32, t44)
+    add(t35, t44, t35)
+    multiply(k12, t55, t55)
+    multiply(t50, t48, t50)
+    multiply(t43, t51, t43)
+    subtract(t50, t43, t50)
+    add(t55, t50, h_5)
+    add(t35, h_5, t35)
+    multiply(k17, t58, t58)
+    add(t35, t58, t35)
+    multiply(t33, t35, t28)
+    subtract(t34, t28, t34)
+    add(t27, t34, t27)
+    multiply(k16, t17, t17)
+    multiply(t36, t21, t36)
+    multiply(t38, t57, t38)
+    subtract(t36, t38, t36)
+    add(t17, t36, t17)
+    multiply(k13, t17, t21)
+    add(t27, t21, t27)
+    multiply(t22, t27, t21)
+    subtract(t45, t21, t45)
+    add(t14, t45, t14)
+    multiply(t33, t26, t26)
+    multiply(t31, t54, t54)
+    add(t26, t54, t26)
+    multiply(k16, t52, t52)
+    subtract(t26, t52, t26)
+    multiply(k15, t26, t21)
+    subtract(t14, t21, t14)
+    multiply(t8, t14, t21)
+    multiply(k5, t23, t23)
+    multiply(t24, t16, t16)
+    multiply(k4, t24, t28)
+    multiply(t15, t28, t32)
+    subtract(t16, t32, t16)
+    add(t23, t16, t23)
+    multiply(t19, t27, t27)
+    multiply(t22, t29, t29)
+    add(t27, t29, t27)
+    subtract(t23, t27, t23)
+    multiply(t10, t23, t16)
+    add(t21, t16, t21)
+    add(t4, t21, t4)
+    multiply(k20, t20, t20)
+    multiply(k8, t24, t16)
+    multiply(t24, t16, t21)
+    multiply(k8, t15, t27)
+    multiply(t15, t27, t15)
+    add(t21, t15, t21)
+    subtract(t20, t21, t20)
+    multiply(k16, t53, t53)
+    subtract(t56, t53, t56)
+    multiply(t19, t56, t15)
+    multiply(k16, t3, t3)
+    add(t3, t17, t3)
+    multiply(t22, t3, t17)
+    add(t15, t17, t15)
+    subtract(t20, t15, t20)
+    multiply(t8, t20, t15)
+    multiply(k20, t46, t17)
+    multiply(t13, t16, t16)
+    subtract(t17, t16, t17)
+    multiply(t19, t3, t19)
+    multiply(t22, t56, t22)
+    subtract(t19, t22, t19)
+    add(t17, t19, t17)
+    multiply(t10, t17, t3)
+    subtract(t15, t3, t15)
+    multiply(k7, t15, t3)
+    multiply(k20, t6, t6)
+    multiply(k8, t9, t9)
+    add(t6, t9, t6)
+    multiply(t13, t27, t27)
+    add(t6, t27, t6)
+    subtract(t26, t6, t26)
+    multiply(k6, t26, t26)
+    subtract(t3, t26, t3)
+    add(t4, t3, t4)
+    multiply(t0, t4, t4)
+    multiply(k0, t11, t3)
+    multiply(qd_1, t3, t6)
+    multiply(t11, t5, t5)
+    subtract(t6, t5, t6)
+    multiply(k1, t12, t12)
+    subtract(t6, t12, t6)
+    multiply(t8, t23, t23)
+    multiply(t10, t14, t14)
+    subtract(t23, t14, t23)
+    add(t6, t23, t6)
+    multiply(t8, t17, t8)
+    multiply(t10, t20, t10)
+    add(t8, t10, t8)
+    multiply(k7, t8, t5)
+    subtract(t6, t5, t6)
+    multiply(t1, t6, t6)
+    add(t4, t6, t4)
+    multiply(k21, t1, t5)
+    multiply(k3, t11, t6)
+    multiply(t11, t6, t9)
+    multiply(k3, qd_1, t10)
+    multiply(qd_1, t10, t10)
+    add(t9, t10, t9)
+    subtract(t5, t9, t5)
+    add(t5, t15, t5)
+    multiply(t0, t5, t5)
+    multiply(k21, t0, t9)
+    multiply(t2, t6, t6)
+    add(t9, t6, t9)
+    add(t9, t8, t9)
+    multiply(t1, t9, t1)
+    subtract(t5, t1, t5)
+    multiply(k2, t5, t5)
+    add(t4, t5, t4)
+    negative(t4, h_0)
+    multiply(t2, t3, t2)
+    multiply(t11, t7, t11)
+    subtract(t2, t11, t2)
+    multiply(k22, t0, t0)
+    add(t2, t0, t2)
+    multiply(t24, t18, t24)
+    multiply(t13, t28, t13)
+    subtract(t24, t13, t24)
+    multiply(k8, t46, t46)
+    add(t24, t46, t24)
+    multiply(t41, t30, t41)
+    multiply(t25, t59, t25)
+    subtract(t41, t25, t41)
+    multiply(t33, t39, t33)
+    multiply(t31, t35, t31)
+    add(t33, t31, t33)
+    add(t41, t33, h_3)
+    add(t24, h_3, t24)
+    multiply(k15, t19, t19)
+    add(t24, t19, h_2)
+    add(t2, h_2, t2)
+    multiply(k6, t8, t8)
+    add(t2, t8, h_1)
 
 
 def inverse_dynamics(q, qd, qdd):
@@ -32423,6 +31980,3252 @@ def _base_regressor_chunk(x, t, s, y):
     copyto(Y_b_255, qd_4)
     copyto(Y_b_309, qdd_5)
     copyto(Y_b_310, qd_5)
+
+
+def bundle_control(q, qd):
+    """Control tick 'control': mass_matrix (6x6), bias (6), fk_tcp (4x4), jacobian_tcp (6x6), jdot_qd_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [6]
+    in  qd [6]
+    out mass_matrix [6x6]
+    out bias [6]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x6]
+    out jdot_qd_tcp [6]
+    855 ops: 478 mul, 365 add, 0 div, 12 trig
+    """
+    q = _array(q, 6, "q")
+    qd = _array(qd, 6, "qd")
+    if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_control_chunk, (q, qd), 70, ((6, 6), (6,), (4, 4), (6, 6), (6,),), fixed=_bundle_control_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[1])
+    t1 = cos(q[2])
+    t2 = cos(q[3])
+    t3 = sin(q[5])
+    t4 = 0.0171364731454 * t3
+    t5 = t3 * t4
+    t6 = cos(q[5])
+    t7 = 0.033822 * t6
+    t8 = t6 * t7
+    t5 = t5 + t8
+    t5 = 0.21942 + t5
+    t8 = t5 - (-0.0121682781)
+    t8 = 0.21942 + t8
+    t9 = t2 * t8
+    t10 = sin(q[3])
+    t11 = cos(q[4])
+    t7 = t3 * t7
+    t4 = t6 * t4
+    t4 = t7 - t4
+    t7 = t11 * t4
+    t12 = t10 * t7
+    t9 = t9 - t12
+    t9 = t2 * t9
+    t7 = t2 * t7
+    t13 = 0.0171364731454 * t6
+    t13 = t6 * t13
+    t14 = 0.033822 * t3
+    t14 = t3 * t14
+    t13 = t13 + t14
+    t13 = t13 - (-0.00168332516775)
+    t13 = 0.111172755531 + t13
+    t14 = t11 * t13
+    t14 = t11 * t14
+    t15 = sin(q[4])
+    t16 = 0.12999255384415 * t15
+    t16 = t15 * t16
+    t14 = t14 + t16
+    t14 = t14 - (-0.0121682781)
+    t14 = 0.111172755531 + t14
+    t16 = t10 * t14
+    t16 = t7 - t16
+    t16 = t10 * t16
+    t9 = t9 - t16
+    t16 = (-0.00697606230375) * t10
+    t9 = t9 + t16
+    t17 = 0.00697606230375 * t10
+    t9 = t9 - t17
+    t9 = t9 - (-0.40402113811874996)
+    t9 = 0.19163081355599998 + t9
+    t18 = t1 * t9
+    t19 = sin(q[2])
+    t14 = t2 * t14
+    t14 = t14 + t12
+    t20 = t10 * t14
+    t8 = t10 * t8
+    t8 = t7 + t8
+    t21 = t2 * t8
+    t20 = t20 - t21
+    t21 = (-0.00697606230375) * t2
+    t20 = t20 + t21
+    t21 = t19 * t20
+    t18 = t18 + t21
+    t18 = t1 * t18
+    t20 = t1 * t20
+    t14 = t2 * t14
+    t8 = t10 * t8
+    t8 = t14 + t8
+    t8 = 0.004095 + t8
+    t14 = t19 * t8
+    t14 = t20 + t14
+    t14 = t19 * t14
+    t14 = t18 + t14
+    t18 = 0.017784735 * t10
+    t22 = 0.56875 - t18
+    t22 = t22 + 1.030009275
+    t23 = t1 * t22
+    t24 = 0.017784735 * t2
+    t25 = t19 * t24
+    t23 = t23 - t25
+    t26 = (-0.425) * t23
+    t27 = t26 + 0.01566175149
+    t14 = t14 - t27
+    t27 = 0.425 * t23
+    t28 = 0.01566175149 - t27
+    t14 = t14 - t28
+    t14 = t14 - (-0.9554455987809999)
+    t14 = 0.8849018759100001 + t14
+    t14 = t0 * t14
+    t28 = sin(q[1])
+    t9 = t19 * t9
+    t9 = t20 - t9
+    t20 = t1 * t9
+    t8 = t1 * t8
+    t8 = t8 - t21
+    t21 = t19 * t8
+    t20 = t20 + t21
+    t21 = t1 * t24
+    t22 = t19 * t22
+    t24 = t21 + t22
+    t29 = (-0.425) * t24
+    t20 = t20 + t29
+    t29 = t28 * t20
+    t14 = t14 + t29
+    t14 = t0 * t14
+    t20 = t0 * t20
+    t8 = t1 * t8
+    t9 = t19 * t9
+    t8 = t8 - t9
+    t8 = t8 - 0.01566175149
+    t8 = t8 - 0.01566175149
+    t8 = t8 - (-0.070220536281)
+    t8 = 0.0151074 + t8
+    t8 = t28 * t8
+    t8 = t20 + t8
+    t8 = t28 * t8
+    t8 = t14 + t8
+    t8 = t8 - 0.061919890675499994
+    t8 = t8 - 0.061919890675499994
+    t8 = t8 - (-0.24534188239275)
+    t8 = 0.00666 + t8
+    t9 = 2.3500400000000004 + t23
+    t9 = t9 + 2.0828824999999997
+    t9 = t28 * t9
+    t14 = t0 * t24
+    t9 = t9 + t14
+    t9 = 0.13585 * t9
+    t4 = t15 * t4
+    t14 = t4 - 0.0016539803549999999
+    t20 = t2 * t14
+    t13 = t15 * t13
+    t29 = t11 * t13
+    t30 = 0.12999255384415 * t11
+    t31 = t15 * t30
+    t29 = t29 - t31
+    t31 = t10 * t29
+    t20 = t20 - t31
+    t31 = t1 * t20
+    t29 = t2 * t29
+    t14 = t10 * t14
+    t14 = t29 + t14
+    t29 = t14 + 0.051322656825
+    t32 = t19 * t29
+    t32 = t31 - t32
+    t24 = (-0.1197) * t24
+    t24 = t32 - t24
+    t24 = t0 * t24
+    t20 = t19 * t20
+    t29 = t1 * t29
+    t29 = t20 + t29
+    t33 = t29 + 0.0556077225
+    t34 = (-0.1197) * t23
+    t33 = t33 + t34
+    t33 = t33 + (-0.24932103525000002)
+    t33 = t28 * t33
+    t24 = t24 - t33
+    t9 = t9 - t24
+    t23 = t28 * t23
+    t22 = t22 + t21
+    t24 = t0 * t22
+    t23 = t23 + t24
+    t23 = 0.13585 * t23
+    t22 = (-0.1197) * t22
+    t22 = t32 - t22
+    t22 = t0 * t22
+    t24 = t29 + t34
+    t24 = t28 * t24
+    t22 = t22 - t24
+    t22 = t23 - t22
+    t23 = t19 * t14
+    t23 = t31 - t23
+    t24 = t19 * t18
+    t21 = t24 - t21
+    t24 = (-0.1197) * t21
+    t23 = t23 + t24
+    t23 = t0 * t23
+    t18 = t1 * t18
+    t18 = t18 + t25
+    t24 = (-0.1197) * t18
+    t14 = t1 * t14
+    t14 = t20 + t14
+    t14 = t24 - t14
+    t14 = t28 * t14
+    t14 = t23 + t14
+    t20 = t28 * t18
+    t21 = t0 * t21
+    t20 = t20 + t21
+    t20 = 0.13585 * t20
+    t14 = t14 + t20
+    t14 = -t14
+    t20 = t2 * t5
+    t12 = t20 - t12
+    t20 = t1 * t12
+    t21 = t10 * t5
+    t7 = t7 + t21
+    t21 = t19 * t7
+    t20 = t20 - t21
+    t20 = t0 * t20
+    t12 = t19 * t12
+    t7 = t1 * t7
+    t7 = t12 + t7
+    t7 = t28 * t7
+    t7 = t20 - t7
+    t7 = -t7
+    t12 = 0.0171364731454 * t15
+    t20 = t10 * t12
+    t21 = t1 * t20
+    t12 = t2 * t12
+    t23 = t19 * t12
+    t21 = t21 + t23
+    t21 = t0 * t21
+    t12 = t1 * t12
+    t20 = t19 * t20
+    t12 = t12 - t20
+    t12 = t28 * t12
+    t12 = t21 + t12
+    t12 = -t12
+    t13 = t15 * t13
+    t20 = t11 * t30
+    t13 = t13 + t20
+    t13 = 0.111172755531 + t13
+    t17 = t13 - t17
+    t16 = t17 + t16
+    t16 = t16 - (-0.40402113811874996)
+    t16 = 0.19163081355599998 + t16
+    t20 = t16 + t27
+    t21 = t20 - t26
+    t21 = t21 - (-0.8852250624999999)
+    t21 = 0.8849018759100001 + t21
+    t18 = 0.425 * t18
+    t18 = t17 - t18
+    t23 = 0.0171364731454 * t11
+    t24 = t28 * qd[0]
+    t25 = t24 * qd[1]
+    t26 = 0.8849018759100001 * t25
+    t27 = 0.8849018759100001 * qd[1]
+    t29 = t24 * t27
+    t30 = 0.0151074 * t24
+    t31 = qd[1] * t30
+    t29 = t29 - t31
+    t26 = t26 + t29
+    t29 = 0.13585 * qd[0]
+    t29 = qd[0] * t29
+    t31 = 2.3500400000000004 * t29
+    t26 = t26 + t31
+    t31 = t1 * t25
+    t32 = t0 * qd[0]
+    t33 = t32 * qd[1]
+    t34 = t19 * t33
+    t31 = t31 + t34
+    t34 = t19 * t32
+    t35 = t1 * t24
+    t34 = t34 + t35
+    t35 = t34 * qd[2]
+    t31 = t31 + t35
+    t35 = 0.19163081355599998 * t31
+    t36 = qd[1] + qd[2]
+    t37 = 0.19163081355599998 * t36
+    t38 = t34 * t37
+    t39 = 0.004095 * t34
+    t40 = t36 * t39
+    t38 = t38 - t40
+    t35 = t35 + t38
+    t38 = 0.425 * t25
+    t29 = t29 + t38
+    t38 = 0.425 * qd[1]
+    t40 = (-0.1197) * t24
+    t38 = t38 + t40
+    t40 = t24 * t38
+    t41 = (-0.1197) * t32
+    t42 = t32 * t41
+    t40 = t40 + t42
+    t29 = t29 + t40
+    t40 = 0.56875 * t29
+    t35 = t35 + t40
+    t40 = t2 * t31
+    t42 = t19 * t25
+    t43 = t1 * t33
+    t42 = t42 - t43
+    t43 = t19 * t24
+    t44 = t1 * t32
+    t43 = t43 - t44
+    t44 = t43 * qd[2]
+    t42 = t42 + t44
+    t44 = t10 * t42
+    t40 = t40 - t44
+    t44 = t2 * t34
+    t45 = t10 * t43
+    t44 = t44 - t45
+    t45 = t44 * qd[3]
+    t40 = t40 + t45
+    t45 = 0.21942 * t40
+    t46 = t36 + qd[3]
+    t47 = 0.111172755531 * t46
+    t48 = t44 * t47
+    t49 = 0.111172755531 * t44
+    t50 = t46 * t49
+    t48 = t48 - t50
+    t48 = t45 + t48
+    t50 = t11 * t44
+    t51 = t15 * t46
+    t50 = t50 + t51
+    t51 = t11 * t46
+    t52 = t15 * t44
+    t51 = t51 - t52
+    t52 = 0.111172755531 * t51
+    t53 = t50 * t52
+    t54 = 0.111172755531 * t50
+    t55 = t51 * t54
+    t53 = t53 - t55
+    t45 = t45 + t53
+    t53 = t51 * qd[4]
+    t55 = t2 * t42
+    t56 = t10 * t31
+    t55 = t55 + t56
+    t56 = t10 * t34
+    t57 = t2 * t43
+    t56 = t56 + t57
+    t57 = t56 * qd[3]
+    t55 = t55 + t57
+    t57 = t11 * t55
+    t53 = t53 - t57
+    t57 = t3 * t53
+    t58 = t6 * t40
+    t57 = t57 + t58
+    t58 = t6 * t50
+    t59 = t56 + qd[4]
+    t60 = t3 * t59
+    t58 = t58 - t60
+    t60 = t58 * qd[5]
+    t57 = t57 + t60
+    t60 = 0.033822 * t57
+    t61 = t51 + qd[5]
+    t62 = 0.0171364731454 * t61
+    t63 = t58 * t62
+    t64 = 0.0171364731454 * t58
+    t65 = t61 * t64
+    t63 = t63 - t65
+    t60 = t60 + t63
+    t63 = t6 * t60
+    t65 = t6 * t53
+    t66 = t3 * t40
+    t65 = t65 - t66
+    t66 = t3 * t50
+    t67 = t6 * t59
+    t66 = t66 + t67
+    t67 = t66 * qd[5]
+    t65 = t65 - t67
+    t67 = 0.0171364731454 * t65
+    t68 = 0.033822 * t66
+    t69 = t61 * t68
+    t62 = t66 * t62
+    t62 = t69 - t62
+    t62 = t67 + t62
+    t67 = t3 * t62
+    t63 = t63 - t67
+    t45 = t45 + t63
+    t48 = t48 + t45
+    t63 = 0.093 * t44
+    t67 = t46 * t63
+    t69 = (-0.1197) * t33
+    t70 = 0.425 * t32
+    t71 = t24 * t70
+    t41 = qd[1] * t41
+    t41 = t71 - t41
+    t41 = t69 + t41
+    t69 = t19 * t41
+    t25 = (-0.1197) * t25
+    t70 = t32 * t70
+    t38 = qd[1] * t38
+    t38 = t70 + t38
+    t25 = t25 - t38
+    t38 = t1 * t25
+    t38 = t69 + t38
+    t69 = 0.39225 * t43
+    t70 = t43 * t69
+    t71 = 0.39225 * t36
+    t72 = t36 * t71
+    t70 = t70 + t72
+    t70 = t38 - t70
+    t72 = t2 * t70
+    t41 = t1 * t41
+    t25 = t19 * t25
+    t25 = t41 - t25
+    t41 = t34 * t69
+    t41 = t25 - t41
+    t69 = t10 * t41
+    t69 = t72 + t69
+    t40 = 0.093 * t40
+    t40 = t69 + t40
+    t40 = t67 - t40
+    t67 = t11 * t40
+    t72 = 0.39225 * t31
+    t72 = t29 + t72
+    t71 = t34 * t71
+    t71 = t72 + t71
+    t72 = 0.093 * t56
+    t73 = t56 * t72
+    t63 = t44 * t63
+    t63 = t73 + t63
+    t63 = t71 + t63
+    t73 = t15 * t63
+    t67 = t67 - t73
+    t73 = (-9.81) * t0
+    t74 = t19 * t73
+    t75 = (-9.81) * t28
+    t76 = t1 * t75
+    t74 = t74 + t76
+    t76 = t2 * t74
+    t73 = t1 * t73
+    t75 = t19 * t75
+    t73 = t73 - t75
+    t75 = t10 * t73
+    t75 = t76 + t75
+    t76 = t11 * t75
+    t77 = t67 - t76
+    t77 = 1.219 * t77
+    t78 = t15 * t55
+    t79 = t50 * qd[4]
+    t78 = t78 - t79
+    t79 = 0.09465 * t78
+    t67 = t67 + t79
+    t79 = 0.09465 * t50
+    t80 = t59 * t79
+    t67 = t67 + t80
+    t80 = t6 * t67
+    t41 = t2 * t41
+    t70 = t10 * t70
+    t41 = t41 - t70
+    t70 = 0.093 * t55
+    t70 = t41 - t70
+    t72 = t46 * t72
+    t70 = t70 + t72
+    t72 = t50 * t79
+    t79 = 0.09465 * t51
+    t81 = t51 * t79
+    t72 = t72 + t81
+    t72 = t70 - t72
+    t81 = t3 * t72
+    t80 = t80 - t81
+    t81 = t6 * t76
+    t82 = t2 * t73
+    t83 = t10 * t74
+    t82 = t82 - t83
+    t83 = t3 * t82
+    t81 = t81 + t83
+    t81 = t80 - t81
+    t81 = 0.1879 * t81
+    t83 = t6 * t81
+    t67 = t3 * t67
+    t72 = t6 * t72
+    t67 = t67 + t72
+    t72 = t6 * t82
+    t76 = t3 * t76
+    t72 = t72 - t76
+    t72 = t67 + t72
+    t72 = 0.1879 * t72
+    t76 = t3 * t72
+    t76 = t83 + t76
+    t77 = t77 + t76
+    t83 = t11 * t77
+    t84 = t15 * t75
+    t40 = t15 * t40
+    t63 = t11 * t63
+    t40 = t40 + t63
+    t63 = t84 - t40
+    t63 = 1.219 * t63
+    t79 = t59 * t79
+    t85 = 0.09465 * t53
+    t40 = t40 + t85
+    t40 = t79 - t40
+    t79 = t40 + t84
+    t84 = 0.1879 * t79
+    t63 = t63 + t84
+    t84 = t15 * t63
+    t83 = t83 - t84
+    t84 = 0.093 * t83
+    t48 = t48 - t84
+    t84 = t2 * t48
+    t85 = 0.21942 * t56
+    t46 = t46 * t85
+    t47 = t56 * t47
+    t46 = t46 - t47
+    t47 = 0.111172755531 * t55
+    t46 = t46 - t47
+    t47 = 0.111172755531 * t53
+    t53 = 0.21942 * t59
+    t51 = t51 * t53
+    t52 = t59 * t52
+    t51 = t51 - t52
+    t47 = t47 + t51
+    t51 = t6 * t62
+    t52 = t3 * t60
+    t51 = t51 + t52
+    t47 = t47 + t51
+    t51 = 0.017784735 * t79
+    t47 = t47 - t51
+    t51 = t11 * t47
+    t52 = 0.111172755531 * t78
+    t54 = t59 * t54
+    t50 = t50 * t53
+    t50 = t54 - t50
+    t50 = t52 + t50
+    t52 = 0.0171364731454 * t78
+    t53 = t66 * t64
+    t54 = t58 * t68
+    t53 = t53 - t54
+    t52 = t52 + t53
+    t50 = t50 + t52
+    t53 = 0.09465 * t76
+    t50 = t50 + t53
+    t53 = t15 * t50
+    t51 = t51 - t53
+    t46 = t46 + t51
+    t51 = t70 + t82
+    t51 = 1.219 * t51
+    t53 = t6 * t72
+    t54 = t3 * t81
+    t53 = t53 - t54
+    t51 = t51 + t53
+    t53 = 0.093 * t51
+    t46 = t46 + t53
+    t53 = t10 * t46
+    t53 = t84 - t53
+    t35 = t35 + t53
+    t53 = t15 * t77
+    t54 = t11 * t63
+    t53 = t53 + t54
+    t54 = 1.219 * t71
+    t53 = t53 - t54
+    t54 = 0.39225 * t53
+    t35 = t35 - t54
+    t54 = t1 * t35
+    t42 = 0.004095 * t42
+    t37 = t43 * t37
+    t55 = 0.19163081355599998 * t43
+    t59 = t36 * t55
+    t37 = t37 - t59
+    t37 = t42 + t37
+    t42 = t2 * t46
+    t46 = t10 * t48
+    t42 = t42 + t46
+    t37 = t37 - t42
+    t42 = t19 * t37
+    t42 = t54 + t42
+    t26 = t26 + t42
+    t38 = t38 + t74
+    t38 = 2.275 * t38
+    t42 = 0.56875 * t43
+    t46 = t43 * t42
+    t48 = 0.56875 * t36
+    t36 = t36 * t48
+    t36 = t46 + t36
+    t36 = t38 - t36
+    t38 = t69 + t75
+    t38 = 1.219 * t38
+    t38 = t83 - t38
+    t46 = t2 * t38
+    t41 = t41 + t82
+    t41 = 1.219 * t41
+    t41 = t41 + t51
+    t51 = t10 * t41
+    t46 = t46 + t51
+    t36 = t36 - t46
+    t46 = t1 * t36
+    t25 = t25 + t73
+    t51 = 2.275 * t25
+    t42 = t34 * t42
+    t42 = t51 - t42
+    t41 = t2 * t41
+    t38 = t10 * t38
+    t38 = t41 - t38
+    t41 = t42 + t38
+    t42 = t19 * t41
+    t42 = t46 - t42
+    t46 = (-0.1197) * t42
+    t29 = 2.275 * t29
+    t31 = 0.56875 * t31
+    t29 = t29 + t31
+    t31 = t34 * t48
+    t29 = t29 + t31
+    t29 = t53 - t29
+    t29 = 0.425 * t29
+    t29 = t46 - t29
+    t26 = t26 + t29
+    t26 = t0 * t26
+    t29 = 0.8849018759100001 * t32
+    t31 = qd[1] * t29
+    t27 = t32 * t27
+    t27 = t31 - t27
+    t31 = 0.0151074 * t33
+    t27 = t27 - t31
+    t31 = t1 * t37
+    t33 = t19 * t35
+    t31 = t31 - t33
+    t27 = t27 + t31
+    t31 = t1 * t41
+    t33 = t19 * t36
+    t31 = t31 + t33
+    t33 = (-0.1197) * t31
+    t27 = t27 - t33
+    t27 = t28 * t27
+    t26 = t26 + t27
+    t27 = (-82.33533000000001) * t28
+    t33 = 2.3500400000000004 * t32
+    t35 = t32 * t33
+    t36 = 2.3500400000000004 * qd[1]
+    t36 = qd[1] * t36
+    t35 = t35 + t36
+    t27 = t27 - t35
+    t27 = t27 + t42
+    t27 = t0 * t27
+    t35 = (-82.33533000000001) * t0
+    t33 = t24 * t33
+    t33 = t35 + t33
+    t33 = t33 + t31
+    t33 = t28 * t33
+    t27 = t27 - t33
+    t27 = 0.13585 * t27
+    t26 = t26 + t27
+    t26 = -t26
+    t24 = t24 * t29
+    t27 = t32 * t30
+    t24 = t24 - t27
+    t27 = (-23.053892400000006) * t0
+    t24 = t24 + t27
+    t27 = t43 * t39
+    t29 = t34 * t55
+    t27 = t27 - t29
+    t25 = 0.56875 * t25
+    t25 = t27 + t25
+    t27 = t56 * t49
+    t29 = t44 * t85
+    t27 = t27 - t29
+    t29 = t15 * t47
+    t30 = t11 * t50
+    t29 = t29 + t30
+    t27 = t27 + t29
+    t25 = t25 + t27
+    t29 = 0.39225 * t38
+    t25 = t25 + t29
+    t24 = t24 + t25
+    t29 = 0.425 * t31
+    t24 = t24 + t29
+    t29 = cos(q[0])
+    t30 = t29 * t28
+    t31 = t30 * t1
+    t32 = t29 * t0
+    t33 = t32 * t19
+    t31 = t31 + t33
+    t33 = t31 * t10
+    t34 = t32 * t1
+    t30 = t30 * t19
+    t30 = t34 - t30
+    t34 = t30 * t2
+    t33 = t33 - t34
+    t34 = t33 * t11
+    t35 = sin(q[0])
+    t36 = t35 * t15
+    t34 = t34 - t36
+    t36 = t34 * t6
+    t37 = t30 * t10
+    t31 = t31 * t2
+    t31 = t37 + t31
+    t37 = t31 * t3
+    t36 = t36 + t37
+    t37 = t35 * t28
+    t38 = t37 * t1
+    t39 = t35 * t0
+    t41 = t39 * t19
+    t38 = t38 + t41
+    t41 = t38 * t10
+    t42 = t39 * t1
+    t37 = t37 * t19
+    t37 = t42 - t37
+    t42 = t37 * t2
+    t41 = t41 - t42
+    t42 = t41 * t11
+    t43 = t29 * t15
+    t42 = t42 + t43
+    t43 = t42 * t6
+    t44 = t37 * t10
+    t38 = t38 * t2
+    t38 = t44 + t38
+    t44 = t38 * t3
+    t43 = t43 + t44
+    t44 = t0 * t19
+    t46 = t28 * t1
+    t44 = t44 + t46
+    t46 = t44 * t2
+    t19 = t28 * t19
+    t0 = t0 * t1
+    t0 = t19 - t0
+    t1 = t0 * t10
+    t1 = t46 - t1
+    t19 = t1 * t11
+    t46 = t19 * t6
+    t10 = t44 * t10
+    t0 = t0 * t2
+    t0 = t10 + t0
+    t2 = t0 * t3
+    t2 = t46 - t2
+    t10 = t34 * t3
+    t34 = t31 * t6
+    t10 = t10 - t34
+    t34 = -t10
+    t42 = t42 * t3
+    t46 = t38 * t6
+    t42 = t42 - t46
+    t46 = -t42
+    t3 = t19 * t3
+    t6 = t0 * t6
+    t3 = t3 + t6
+    t6 = -t3
+    t19 = t33 * t15
+    t33 = t35 * t11
+    t19 = t19 + t33
+    t33 = -t19
+    t11 = t29 * t11
+    t41 = t41 * t15
+    t11 = t11 - t41
+    t1 = t1 * t15
+    t15 = -t1
+    t32 = 0.425 * t32
+    t41 = (-0.1197) * t35
+    t32 = t32 - t41
+    t41 = 0.13585 * t35
+    t32 = t32 - t41
+    t30 = 0.39225 * t30
+    t30 = t32 + t30
+    t47 = 0.093 * t35
+    t47 = t30 - t47
+    t48 = 0.09465 * t31
+    t48 = t47 - t48
+    t49 = 0.0823 * t19
+    t49 = t48 - t49
+    t50 = 0.13585 * t29
+    t51 = (-0.1197) * t29
+    t39 = 0.425 * t39
+    t39 = t51 + t39
+    t39 = t50 + t39
+    t37 = 0.39225 * t37
+    t37 = t39 + t37
+    t51 = 0.093 * t29
+    t51 = t37 + t51
+    t53 = 0.09465 * t38
+    t53 = t51 - t53
+    t54 = 0.0823 * t11
+    t53 = t53 + t54
+    t28 = 0.425 * t28
+    t28 = 0.089159 - t28
+    t44 = 0.39225 * t44
+    t44 = t28 - t44
+    t55 = 0.09465 * t0
+    t55 = t44 + t55
+    t56 = 0.0823 * t1
+    t56 = t55 - t56
+    t59 = -t53
+    t60 = t56 - 0.089159
+    t62 = t29 * t60
+    t60 = t35 * t60
+    t50 = t53 - t50
+    t50 = t35 * t50
+    t41 = t49 + t41
+    t41 = t29 * t41
+    t41 = t50 + t41
+    t41 = -t41
+    t50 = -t35
+    t28 = t56 - t28
+    t63 = t29 * t28
+    t28 = t35 * t28
+    t39 = t53 - t39
+    t39 = t35 * t39
+    t32 = t49 - t32
+    t32 = t29 * t32
+    t32 = t39 + t32
+    t32 = -t32
+    t39 = t56 - t44
+    t44 = t29 * t39
+    t64 = t35 * t39
+    t37 = t53 - t37
+    t35 = t35 * t37
+    t30 = t49 - t30
+    t30 = t29 * t30
+    t30 = t35 + t30
+    t30 = -t30
+    t35 = t38 * t39
+    t37 = t53 - t51
+    t51 = t0 * t37
+    t35 = t35 + t51
+    t35 = -t35
+    t47 = t49 - t47
+    t51 = t0 * t47
+    t39 = t31 * t39
+    t39 = t51 + t39
+    t47 = t38 * t47
+    t37 = t31 * t37
+    t37 = t47 - t37
+    t31 = -t31
+    t38 = -t38
+    t47 = t56 - t55
+    t51 = t11 * t47
+    t55 = t1 * t54
+    t51 = t51 + t55
+    t47 = t19 * t47
+    t48 = t49 - t48
+    t55 = t1 * t48
+    t47 = t47 - t55
+    t54 = t19 * t54
+    t48 = t11 * t48
+    t48 = t54 + t48
+    t48 = -t48
+    t54 = 0.0823 * t57
+    t54 = t80 - t54
+    t55 = 0.0823 * t58
+    t68 = t61 * t55
+    t54 = t54 + t68
+    t68 = t36 * t54
+    t69 = 0.0823 * t66
+    t66 = t66 * t69
+    t55 = t58 * t55
+    t55 = t66 + t55
+    t40 = t40 - t55
+    t55 = t19 * t40
+    t55 = t68 - t55
+    t58 = 0.0823 * t65
+    t58 = t67 + t58
+    t61 = t61 * t69
+    t58 = t58 + t61
+    t61 = t10 * t58
+    t55 = t55 + t61
+    t61 = t43 * t54
+    t66 = t11 * t40
+    t61 = t61 + t66
+    t66 = t42 * t58
+    t61 = t61 + t66
+    t54 = t2 * t54
+    t40 = t1 * t40
+    t40 = t54 - t40
+    t54 = t3 * t58
+    t40 = t40 + t54
+    t54 = t36 * t65
+    t19 = t19 * t78
+    t19 = t54 - t19
+    t10 = t10 * t57
+    t10 = t19 + t10
+    t19 = t43 * t65
+    t54 = t11 * t78
+    t19 = t19 + t54
+    t42 = t42 * t57
+    t19 = t19 + t42
+    t42 = t2 * t65
+    t1 = t1 * t78
+    t1 = t42 - t1
+    t3 = t3 * t57
+    t1 = t1 + t3
+    _mass_matrix = (t8, t9, t22, t14, t7, t12,
+                    t9, t21, t20, t18, t4, t23,
+                    t22, t20, t16, t17, t4, t23,
+                    t14, t18, t17, t13, t4, t23,
+                    t7, t4, t4, t4, t5, 0.0,
+                    t12, t23, t23, t23, 0.0, 0.0171364731454)
+    _bias = (t26, t24, t25, t27, t45, t52)
+    _fk_tcp = (t36, t34, t33, t49,
+               t43, t46, t11, t53,
+               t2, t6, t15, t56,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t59, t62, t63, t44, t35, t51,
+                     t49, t60, t28, t64, t39, t47,
+                     0.0, t41, t32, t30, t37, t48,
+                     0.0, t50, t50, t50, t31, t33,
+                     0.0, t29, t29, t29, t38, t11,
+                     1.0, 0.0, 0.0, 0.0, t0, t15)
+    _jdot_qd_tcp = (t55, t61, t40, t10, t19, t1)
+    return np.array(_mass_matrix).reshape(6, 6), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 6), np.array(_jdot_qd_tcp)
+
+
+_bundle_control_constants = _constants(
+    0.0171364731454, 0.033822, 0.21942, -0.0121682781, -0.00168332516775, 0.111172755531,
+    0.12999255384415, -0.00697606230375, 0.00697606230375, -0.40402113811874996, 0.19163081355599998,
+    0.004095, 0.017784735, 0.56875, 1.030009275, -0.425, 0.01566175149, 0.425, -0.9554455987809999,
+    0.8849018759100001, -0.070220536281, 0.0151074, 0.061919890675499994, -0.24534188239275, 0.00666,
+    2.3500400000000004, 2.0828824999999997, 0.13585, 0.0016539803549999999, 0.051322656825, -0.1197,
+    0.0556077225, -0.24932103525000002, -0.8852250624999999, 0.093, 0.39225, -9.81, 1.219, 0.09465,
+    0.1879, 2.275, -82.33533000000001, -23.053892400000006, 0.0823, 0.089159)
+
+
+_bundle_control_fixed = (
+    {29: 0.0, 34: 0.0, 35: 0.0171364731454},
+    {},
+    {12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {12: 0.0, 18: 0.0, 24: 0.0, 30: 1.0, 31: 0.0, 32: 0.0, 33: 0.0},
+    {},
+)
+"""bundle_control's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_control_chunk(x, t, s, y):
+    """bundle_control on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, q_5, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
+     t62, t63, t64, t65, t66, t67, t68, t69) = t
+    (mass_matrix_0, mass_matrix_1, mass_matrix_2, mass_matrix_3, mass_matrix_4, mass_matrix_5,
+     mass_matrix_6, mass_matrix_7, mass_matrix_8, mass_matrix_9, mass_matrix_10, mass_matrix_11,
+     mass_matrix_12, mass_matrix_13, mass_matrix_14, mass_matrix_15, mass_matrix_16, mass_matrix_17,
+     mass_matrix_18, mass_matrix_19, mass_matrix_20, mass_matrix_21, mass_matrix_22, mass_matrix_23,
+     mass_matrix_24, mass_matrix_25, mass_matrix_26, mass_matrix_27, mass_matrix_28, mass_matrix_30,
+     mass_matrix_31, mass_matrix_32, mass_matrix_33, bias_0, bias_1, bias_2, bias_3, bias_4, bias_5,
+     fk_tcp_0, fk_tcp_1, fk_tcp_2, fk_tcp_3, fk_tcp_4, fk_tcp_5, fk_tcp_6, fk_tcp_7, fk_tcp_8, fk_tcp_9,
+     fk_tcp_10, fk_tcp_11, jacobian_tcp_0, jacobian_tcp_1, jacobian_tcp_2, jacobian_tcp_3, jacobian_tcp_4,
+     jacobian_tcp_5, jacobian_tcp_6, jacobian_tcp_7, jacobian_tcp_8, jacobian_tcp_9, jacobian_tcp_10,
+     jacobian_tcp_11, jacobian_tcp_13, jacobian_tcp_14, jacobian_tcp_15, jacobian_tcp_16, jacobian_tcp_17,
+     jacobian_tcp_19, jacobian_tcp_20, jacobian_tcp_21, jacobian_tcp_22, jacobian_tcp_23, jacobian_tcp_25,
+     jacobian_tcp_26, jacobian_tcp_27, jacobian_tcp_28, jacobian_tcp_29, jacobian_tcp_34, jacobian_tcp_35,
+     jdot_qd_tcp_0, jdot_qd_tcp_1, jdot_qd_tcp_2, jdot_qd_tcp_3, jdot_qd_tcp_4, jdot_qd_tcp_5) = y
+    (k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20, k21,
+     k22, k23, k24, k25, k26, k27, k28, k29, k30, k31, k32, k33, k34, k35, k36, k37, k38, k39, k40, k41,
+     k42, k43, k44) = _bundle_control_constants
+    cos(q_1, t0)
+    cos(q_2, t1)
+    cos(q_3, t2)
+    sin(q_5, t3)
+    multiply(k0, t3, t4)
+    multiply(t3, t4, t5)
+    cos(q_5, t6)
+    multiply(k1, t6, t7)
+    multiply(t6, t7, t8)
+    add(t5, t8, t5)
+    add(k2, t5, mass_matrix_28)
+    subtract(mass_matrix_28, k3, t5)
+    add(k2, t5, t5)
+    multiply(t2, t5, t8)
+    sin(q_3, t9)
+    cos(q_4, t10)
+    multiply(t3, t7, t7)
+    multiply(t6, t4, t4)
+    subtract(t7, t4, t7)
+    multiply(t10, t7, t4)
+    multiply(t9, t4, t11)
+    subtract(t8, t11, t8)
+    multiply(t2, t8, t8)
+    multiply(t2, t4, t4)
+    multiply(k0, t6, t12)
+    multiply(t6, t12, t12)
+    multiply(k1, t3, t13)
+    multiply(t3, t13, t13)
+    add(t12, t13, t12)
+    subtract(t12, k4, t12)
+    add(k5, t12, t12)
+    multiply(t10, t12, t13)
+    multiply(t10, t13, t13)
+    sin(q_4, t14)
+    multiply(k6, t14, t15)
+    multiply(t14, t15, t15)
+    add(t13, t15, t13)
+    subtract(t13, k3, t13)
+    add(k5, t13, t13)
+    multiply(t9, t13, t15)
+    subtract(t4, t15, t15)
+    multiply(t9, t15, t15)
+    subtract(t8, t15, t8)
+    multiply(k7, t9, t15)
+    add(t8, t15, t8)
+    multiply(k8, t9, t16)
+    subtract(t8, t16, t8)
+    subtract(t8, k9, t8)
+    add(k10, t8, t8)
+    multiply(t1, t8, t17)
+    sin(q_2, t18)
+    multiply(t2, t13, t13)
+    add(t13, t11, t13)
+    multiply(t9, t13, t19)
+    multiply(t9, t5, t5)
+    add(t4, t5, t5)
+    multiply(t2, t5, t20)
+    subtract(t19, t20, t19)
+    multiply(k7, t2, t20)
+    add(t19, t20, t19)
+    multiply(t18, t19, t20)
+    add(t17, t20, t17)
+    multiply(t1, t17, t17)
+    multiply(t1, t19, t19)
+    multiply(t2, t13, t13)
+    multiply(t9, t5, t5)
+    add(t13, t5, t13)
+    add(k11, t13, t13)
+    multiply(t18, t13, t5)
+    add(t19, t5, t5)
+    multiply(t18, t5, t5)
+    add(t17, t5, t17)
+    multiply(k12, t9, t5)
+    subtract(k13, t5, t21)
+    add(t21, k14, t21)
+    multiply(t1, t21, t22)
+    multiply(k12, t2, t23)
+    multiply(t18, t23, t24)
+    subtract(t22, t24, t22)
+    multiply(k15, t22, t25)
+    add(t25, k16, t26)
+    subtract(t17, t26, t17)
+    multiply(k17, t22, t26)
+    subtract(k16, t26, t27)
+    subtract(t17, t27, t17)
+    subtract(t17, k18, t17)
+    add(k19, t17, t17)
+    multiply(t0, t17, t17)
+    sin(q_1, t27)
+    multiply(t18, t8, t8)
+    subtract(t19, t8, t19)
+    multiply(t1, t19, t8)
+    multiply(t1, t13, t13)
+    subtract(t13, t20, t13)
+    multiply(t18, t13, t20)
+    add(t8, t20, t8)
+    multiply(t1, t23, t23)
+    multiply(t18, t21, t21)
+    add(t23, t21, t20)
+    multiply(k15, t20, t28)
+    add(t8, t28, t8)
+    multiply(t27, t8, t28)
+    add(t17, t28, t17)
+    multiply(t0, t17, t17)
+    multiply(t0, t8, t8)
+    multiply(t1, t13, t13)
+    multiply(t18, t19, t19)
+    subtract(t13, t19, t13)
+    subtract(t13, k16, t13)
+    subtract(t13, k16, t13)
+    subtract(t13, k20, t13)
+    add(k21, t13, t13)
+    multiply(t27, t13, t13)
+    add(t8, t13, t8)
+    multiply(t27, t8, t8)
+    add(t17, t8, t17)
+    subtract(t17, k22, t17)
+    subtract(t17, k22, t17)
+    subtract(t17, k23, t17)
+    add(k24, t17, mass_matrix_0)
+    add(k25, t22, t8)
+    add(t8, k26, t8)
+    multiply(t27, t8, t8)
+    multiply(t0, t20, t13)
+    add(t8, t13, t8)
+    multiply(k27, t8, t8)
+    multiply(t14, t7, mass_matrix_10)
+    subtract(mass_matrix_10, k28, t7)
+    multiply(t2, t7, t13)
+    multiply(t14, t12, t12)
+    multiply(t10, t12, t17)
+    multiply(k6, t10, t19)
+    multiply(t14, t19, t28)
+    subtract(t17, t28, t17)
+    multiply(t9, t17, t28)
+    subtract(t13, t28, t13)
+    multiply(t1, t13, t28)
+    multiply(t2, t17, t17)
+    multiply(t9, t7, t7)
+    add(t17, t7, t17)
+    add(t17, k29, t7)
+    multiply(t18, t7, t29)
+    subtract(t28, t29, t29)
+    multiply(k30, t20, t20)
+    subtract(t29, t20, t20)
+    multiply(t0, t20, t20)
+    multiply(t18, t13, t13)
+    multiply(t1, t7, t7)
+    add(t13, t7, t7)
+    add(t7, k31, t30)
+    multiply(k30, t22, t31)
+    add(t30, t31, t30)
+    add(t30, k32, t30)
+    multiply(t27, t30, t30)
+    subtract(t20, t30, t20)
+    subtract(t8, t20, mass_matrix_1)
+    multiply(t27, t22, t22)
+    add(t21, t23, t21)
+    multiply(t0, t21, t8)
+    add(t22, t8, t22)
+    multiply(k27, t22, t22)
+    multiply(k30, t21, t21)
+    subtract(t29, t21, t29)
+    multiply(t0, t29, t29)
+    add(t7, t31, t7)
+    multiply(t27, t7, t7)
+    subtract(t29, t7, t29)
+    subtract(t22, t29, mass_matrix_2)
+    multiply(t18, t17, t7)
+    subtract(t28, t7, t28)
+    multiply(t18, t5, t7)
+    subtract(t7, t23, t7)
+    multiply(k30, t7, t8)
+    add(t28, t8, t28)
+    multiply(t0, t28, t28)
+    multiply(t1, t5, t5)
+    add(t5, t24, t5)
+    multiply(k30, t5, t8)
+    multiply(t1, t17, t17)
+    add(t13, t17, t13)
+    subtract(t8, t13, t8)
+    multiply(t27, t8, t8)
+    add(t28, t8, t28)
+    multiply(t27, t5, t8)
+    multiply(t0, t7, t7)
+    add(t8, t7, t8)
+    multiply(k27, t8, t8)
+    add(t28, t8, t28)
+    negative(t28, mass_matrix_3)
+    multiply(t2, mass_matrix_28, t7)
+    subtract(t7, t11, t7)
+    multiply(t1, t7, t8)
+    multiply(t9, mass_matrix_28, t11)
+    add(t4, t11, t4)
+    multiply(t18, t4, t11)
+    subtract(t8, t11, t8)
+    multiply(t0, t8, t8)
+    multiply(t18, t7, t7)
+    multiply(t1, t4, t4)
+    add(t7, t4, t7)
+    multiply(t27, t7, t7)
+    subtract(t8, t7, t8)
+    negative(t8, mass_matrix_4)
+    multiply(k0, t14, t4)
+    multiply(t9, t4, t7)
+    multiply(t1, t7, t8)
+    multiply(t2, t4, t4)
+    multiply(t18, t4, t11)
+    add(t8, t11, t8)
+    multiply(t0, t8, t8)
+    multiply(t1, t4, t4)
+    multiply(t18, t7, t7)
+    subtract(t4, t7, t4)
+    multiply(t27, t4, t4)
+    add(t8, t4, t8)
+    negative(t8, mass_matrix_5)
+    multiply(t14, t12, t12)
+    multiply(t10, t19, t19)
+    add(t12, t19, t12)
+    add(k5, t12, mass_matrix_21)
+    subtract(mass_matrix_21, t16, mass_matrix_15)
+    add(mass_matrix_15, t15, t15)
+    subtract(t15, k9, t15)
+    add(k10, t15, mass_matrix_14)
+    add(mass_matrix_14, t26, mass_matrix_8)
+    subtract(mass_matrix_8, t25, t25)
+    subtract(t25, k33, t25)
+    add(k19, t25, mass_matrix_7)
+    multiply(k17, t5, t5)
+    subtract(mass_matrix_15, t5, mass_matrix_9)
+    multiply(k0, t10, mass_matrix_11)
+    multiply(t27, qd_0, t4)
+    multiply(t4, qd_1, t5)
+    multiply(k19, t5, t7)
+    multiply(k19, qd_1, t8)
+    multiply(t4, t8, t11)
+    multiply(k21, t4, t12)
+    multiply(qd_1, t12, t13)
+    subtract(t11, t13, t11)
+    add(t7, t11, t7)
+    multiply(k27, qd_0, t11)
+    multiply(qd_0, t11, t11)
+    multiply(k25, t11, t13)
+    add(t7, t13, t7)
+    multiply(t1, t5, t13)
+    multiply(t0, qd_0, t15)
+    multiply(t15, qd_1, t16)
+    multiply(t18, t16, t17)
+    add(t13, t17, t13)
+    multiply(t18, t15, t17)
+    multiply(t1, t4, t19)
+    add(t17, t19, t17)
+    multiply(t17, qd_2, t19)
+    add(t13, t19, t13)
+    multiply(k10, t13, t19)
+    add(qd_1, qd_2, t20)
+    multiply(k10, t20, t21)
+    multiply(t17, t21, t22)
+    multiply(k11, t17, t23)
+    multiply(t20, t23, t24)
+    subtract(t22, t24, t22)
+    add(t19, t22, t19)
+    multiply(k17, t5, t22)
+    add(t11, t22, t11)
+    multiply(k17, qd_1, t22)
+    multiply(k30, t4, t24)
+    add(t22, t24, t22)
+    multiply(t4, t22, t24)
+    multiply(k30, t15, t25)
+    multiply(t15, t25, t26)
+    add(t24, t26, t24)
+    add(t11, t24, t11)
+    multiply(k13, t11, t24)
+    add(t19, t24, t19)
+    multiply(t2, t13, t24)
+    multiply(t18, t5, t26)
+    multiply(t1, t16, t28)
+    subtract(t26, t28, t26)
+    multiply(t18, t4, t28)
+    multiply(t1, t15, t29)
+    subtract(t28, t29, t28)
+    multiply(t28, qd_2, t29)
+    add(t26, t29, t26)
+    multiply(t9, t26, t29)
+    subtract(t24, t29, t24)
+    multiply(t2, t17, t29)
+    multiply(t9, t28, t30)
+    subtract(t29, t30, t29)
+    multiply(t29, qd_3, t30)
+    add(t24, t30, t24)
+    multiply(k2, t24, t30)
+    add(t20, qd_3, t31)
+    multiply(k5, t31, t32)
+    multiply(t29, t32, t33)
+    multiply(k5, t29, t34)
+    multiply(t31, t34, t35)
+    subtract(t33, t35, t33)
+    add(t30, t33, t33)
+    multiply(t10, t29, t35)
+    multiply(t14, t31, t36)
+    add(t35, t36, t35)
+    multiply(t10, t31, t36)
+    multiply(t14, t29, t37)
+    subtract(t36, t37, t36)
+    multiply(k5, t36, t37)
+    multiply(t35, t37, t38)
+    multiply(k5, t35, t39)
+    multiply(t36, t39, t40)
+    subtract(t38, t40, t38)
+    add(t30, t38, t30)
+    multiply(t36, qd_4, t38)
+    multiply(t2, t26, t40)
+    multiply(t9, t13, t41)
+    add(t40, t41, t40)
+    multiply(t9, t17, t41)
+    multiply(t2, t28, t42)
+    add(t41, t42, t41)
+    multiply(t41, qd_3, t42)
+    add(t40, t42, t40)
+    multiply(t10, t40, t42)
+    subtract(t38, t42, t38)
+    multiply(t3, t38, t42)
+    multiply(t6, t24, t43)
+    add(t42, t43, t42)
+    multiply(t6, t35, t43)
+    add(t41, qd_4, t44)
+    multiply(t3, t44, t45)
+    subtract(t43, t45, t43)
+    multiply(t43, qd_5, t45)
+    add(t42, t45, t42)
+    multiply(k1, t42, t45)
+    add(t36, qd_5, t46)
+    multiply(k0, t46, t47)
+    multiply(t43, t47, t48)
+    multiply(k0, t43, t49)
+    multiply(t46, t49, t50)
+    subtract(t48, t50, t48)
+    add(t45, t48, t45)
+    multiply(t6, t45, t48)
+    multiply(t6, t38, t50)
+    multiply(t3, t24, t51)
+    subtract(t50, t51, t50)
+    multiply(t3, t35, t51)
+    multiply(t6, t44, t52)
+    add(t51, t52, t51)
+    multiply(t51, qd_5, t52)
+    subtract(t50, t52, t50)
+    multiply(k0, t50, t52)
+    multiply(k1, t51, t53)
+    multiply(t46, t53, t54)
+    multiply(t51, t47, t47)
+    subtract(t54, t47, t54)
+    add(t52, t54, t52)
+    multiply(t3, t52, t47)
+    subtract(t48, t47, t48)
+    add(t30, t48, bias_4)
+    add(t33, bias_4, t33)
+    multiply(k34, t29, t30)
+    multiply(t31, t30, t47)
+    multiply(k30, t16, t48)
+    multiply(k17, t15, t54)
+    multiply(t4, t54, t55)
+    multiply(qd_1, t25, t25)
+    subtract(t55, t25, t55)
+    add(t48, t55, t48)
+    multiply(t18, t48, t25)
+    multiply(k30, t5, t5)
+    multiply(t15, t54, t54)
+    multiply(qd_1, t22, t22)
+    add(t54, t22, t54)
+    subtract(t5, t54, t5)
+    multiply(t1, t5, t22)
+    add(t25, t22, t25)
+    multiply(k35, t28, t22)
+    multiply(t28, t22, t54)
+    multiply(k35, t20, t55)
+    multiply(t20, t55, t56)
+    add(t54, t56, t54)
+    subtract(t25, t54, t54)
+    multiply(t2, t54, t56)
+    multiply(t1, t48, t48)
+    multiply(t18, t5, t5)
+    subtract(t48, t5, t48)
+    multiply(t17, t22, t22)
+    subtract(t48, t22, t22)
+    multiply(t9, t22, t5)
+    add(t56, t5, t56)
+    multiply(k34, t24, t24)
+    add(t56, t24, t24)
+    subtract(t47, t24, t47)
+    multiply(t10, t47, t5)
+    multiply(k35, t13, t24)
+    add(t11, t24, t24)
+    multiply(t17, t55, t55)
+    add(t24, t55, t24)
+    multiply(k34, t41, t55)
+    multiply(t41, t55, t57)
+    multiply(t29, t30, t30)
+    add(t57, t30, t57)
+    add(t24, t57, t57)
+    multiply(t14, t57, t30)
+    subtract(t5, t30, t5)
+    multiply(k36, t0, t30)
+    multiply(t18, t30, t58)
+    multiply(k36, t27, t59)
+    multiply(t1, t59, t60)
+    add(t58, t60, t58)
+    multiply(t2, t58, t60)
+    multiply(t1, t30, t30)
+    multiply(t18, t59, t59)
+    subtract(t30, t59, t30)
+    multiply(t9, t30, t59)
+    add(t60, t59, t60)
+    multiply(t10, t60, t59)
+    subtract(t5, t59, t61)
+    multiply(k37, t61, t61)
+    multiply(t14, t40, t62)
+    multiply(t35, qd_4, t63)
+    subtract(t62, t63, t62)
+    multiply(k38, t62, t63)
+    add(t5, t63, t5)
+    multiply(k38, t35, t63)
+    multiply(t44, t63, t64)
+    add(t5, t64, t5)
+    multiply(t6, t5, t64)
+    multiply(t2, t22, t22)
+    multiply(t9, t54, t54)
+    subtract(t22, t54, t22)
+    multiply(k34, t40, t54)
+    subtract(t22, t54, t54)
+    multiply(t31, t55, t55)
+    add(t54, t55, t54)
+    multiply(t35, t63, t63)
+    multiply(k38, t36, t55)
+    multiply(t36, t55, t65)
+    add(t63, t65, t63)
+    subtract(t54, t63, t63)
+    multiply(t3, t63, t65)
+    subtract(t64, t65, t64)
+    multiply(t6, t59, t65)
+    multiply(t2, t30, t66)
+    multiply(t9, t58, t67)
+    subtract(t66, t67, t66)
+    multiply(t3, t66, t67)
+    add(t65, t67, t65)
+    subtract(t64, t65, t65)
+    multiply(k39, t65, t65)
+    multiply(t6, t65, t67)
+    multiply(t3, t5, t5)
+    multiply(t6, t63, t63)
+    add(t5, t63, t5)
+    multiply(t6, t66, t63)
+    multiply(t3, t59, t59)
+    subtract(t63, t59, t63)
+    add(t5, t63, t63)
+    multiply(k39, t63, t63)
+    multiply(t3, t63, t59)
+    add(t67, t59, t67)
+    add(t61, t67, t61)
+    multiply(t10, t61, t59)
+    multiply(t14, t60, t68)
+    multiply(t14, t47, t47)
+    multiply(t10, t57, t57)
+    add(t47, t57, t47)
+    subtract(t68, t47, t57)
+    multiply(k37, t57, t57)
+    multiply(t44, t55, t55)
+    multiply(k38, t38, t69)
+    add(t47, t69, t47)
+    subtract(t55, t47, t55)
+    add(t55, t68, t68)
+    multiply(k39, t68, t47)
+    add(t57, t47, t57)
+    multiply(t14, t57, t47)
+    subtract(t59, t47, t59)
+    multiply(k34, t59, t47)
+    subtract(t33, t47, t33)
+    multiply(t2, t33, t47)
+    multiply(k2, t41, t69)
+    multiply(t31, t69, t31)
+    multiply(t41, t32, t32)
+    subtract(t31, t32, t31)
+    multiply(k5, t40, t40)
+    subtract(t31, t40, t31)
+    multiply(k5, t38, t38)
+    multiply(k2, t44, t32)
+    multiply(t36, t32, t36)
+    multiply(t44, t37, t37)
+    subtract(t36, t37, t36)
+    add(t38, t36, t38)
+    multiply(t6, t52, t52)
+    multiply(t3, t45, t45)
+    add(t52, t45, t52)
+    add(t38, t52, t38)
+    multiply(k12, t68, t68)
+    subtract(t38, t68, t38)
+    multiply(t10, t38, t36)
+    multiply(k5, t62, t37)
+    multiply(t44, t39, t44)
+    multiply(t35, t32, t35)
+    subtract(t44, t35, t44)
+    add(t37, t44, t37)
+    multiply(k0, t62, t32)
+    multiply(t51, t49, t49)
+    multiply(t43, t53, t53)
+    subtract(t49, t53, t49)
+    add(t32, t49, bias_5)
+    add(t37, bias_5, t37)
+    multiply(k38, t67, t67)
+    add(t37, t67, t37)
+    multiply(t14, t37, t32)
+    subtract(t36, t32, t36)
+    add(t31, t36, t31)
+    add(t54, t66, t54)
+    multiply(k37, t54, t54)
+    multiply(t6, t63, t63)
+    multiply(t3, t65, t65)
+    subtract(t63, t65, t63)
+    add(t54, t63, t54)
+    multiply(k34, t54, t32)
+    add(t31, t32, t31)
+    multiply(t9, t31, t32)
+    subtract(t47, t32, t47)
+    add(t19, t47, t19)
+    multiply(t14, t61, t61)
+    multiply(t10, t57, t57)
+    add(t61, t57, t61)
+    multiply(k37, t24, t24)
+    subtract(t61, t24, t61)
+    multiply(k35, t61, t24)
+    subtract(t19, t24, t19)
+    multiply(t1, t19, t24)
+    multiply(k11, t26, t26)
+    multiply(t28, t21, t21)
+    multiply(k10, t28, t32)
+    multiply(t20, t32, t35)
+    subtract(t21, t35, t21)
+    add(t26, t21, t26)
+    multiply(t2, t31, t31)
+    multiply(t9, t33, t33)
+    add(t31, t33, t31)
+    subtract(t26, t31, t26)
+    multiply(t18, t26, t21)
+    add(t24, t21, t24)
+    add(t7, t24, t7)
+    add(t25, t58, t25)
+    multiply(k40, t25, t25)
+    multiply(k13, t28, t21)
+    multiply(t28, t21, t24)
+    multiply(k13, t20, t31)
+    multiply(t20, t31, t20)
+    add(t24, t20, t24)
+    subtract(t25, t24, t25)
+    add(t56, t60, t56)
+    multiply(k37, t56, t56)
+    subtract(t59, t56, t59)
+    multiply(t2, t59, t20)
+    add(t22, t66, t22)
+    multiply(k37, t22, t22)
+    add(t22, t54, t22)
+    multiply(t9, t22, t24)
+    add(t20, t24, t20)
+    subtract(t25, t20, t25)
+    multiply(t1, t25, t20)
+    add(t48, t30, t48)
+    multiply(k40, t48, t24)
+    multiply(t17, t21, t21)
+    subtract(t24, t21, t24)
+    multiply(t2, t22, t22)
+    multiply(t9, t59, t59)
+    subtract(t22, t59, t22)
+    add(t24, t22, t24)
+    multiply(t18, t24, t21)
+    subtract(t20, t21, t20)
+    multiply(k30, t20, t21)
+    multiply(k40, t11, t11)
+    multiply(k13, t13, t13)
+    add(t11, t13, t11)
+    multiply(t17, t31, t31)
+    add(t11, t31, t11)
+    subtract(t61, t11, t61)
+    multiply(k17, t61, t61)
+    subtract(t21, t61, t21)
+    add(t7, t21, t7)
+    multiply(t0, t7, t7)
+    multiply(k19, t15, t11)
+    multiply(qd_1, t11, t13)
+    multiply(t15, t8, t8)
+    subtract(t13, t8, t13)
+    multiply(k21, t16, t16)
+    subtract(t13, t16, t13)
+    multiply(t1, t26, t26)
+    multiply(t18, t19, t19)
+    subtract(t26, t19, t26)
+    add(t13, t26, t13)
+    multiply(t1, t24, t24)
+    multiply(t18, t25, t25)
+    add(t24, t25, t24)
+    multiply(k30, t24, t8)
+    subtract(t13, t8, t13)
+    multiply(t27, t13, t13)
+    add(t7, t13, t7)
+    multiply(k41, t27, t8)
+    multiply(k25, t15, t13)
+    multiply(t15, t13, t16)
+    multiply(k25, qd_1, t19)
+    multiply(qd_1, t19, t19)
+    add(t16, t19, t16)
+    subtract(t8, t16, t8)
+    add(t8, t20, t8)
+    multiply(t0, t8, t8)
+    multiply(k41, t0, t16)
+    multiply(t4, t13, t13)
+    add(t16, t13, t16)
+    add(t16, t24, t16)
+    multiply(t27, t16, t16)
+    subtract(t8, t16, t8)
+    multiply(k27, t8, t8)
+    add(t7, t8, t7)
+    negative(t7, bias_0)
+    multiply(t4, t11, t4)
+    multiply(t15, t12, t15)
+    subtract(t4, t15, t4)
+    multiply(k42, t0, t7)
+    add(t4, t7, t4)
+    multiply(t28, t23, t28)
+    multiply(t17, t32, t17)
+    subtract(t28, t17, t28)
+    multiply(k13, t48, t48)
+    add(t28, t48, t28)
+    multiply(t41, t34, t41)
+    multiply(t29, t69, t29)
+    subtract(t41, t29, t41)
+    multiply(t14, t38, t38)
+    multiply(t10, t37, t37)
+    add(t38, t37, t38)
+    add(t41, t38, bias_3)
+    add(t28, bias_3, t28)
+    multiply(k35, t22, t22)
+    add(t28, t22, bias_2)
+    add(t4, bias_2, t4)
+    multiply(k17, t24, t24)
+    add(t4, t24, bias_1)
+    cos(q_0, jacobian_tcp_25)
+    multiply(jacobian_tcp_25, t27, t4)
+    multiply(t4, t1, t7)
+    multiply(jacobian_tcp_25, t0, t8)
+    multiply(t8, t18, t11)
+    add(t7, t11, t7)
+    multiply(t7, t9, t11)
+    multiply(t8, t1, t12)
+    multiply(t4, t18, t4)
+    subtract(t12, t4, t12)
+    multiply(t12, t2, t4)
+    subtract(t11, t4, t11)
+    multiply(t11, t10, t4)
+    sin(q_0, t13)
+    multiply(t13, t14, t15)
+    subtract(t4, t15, t4)
+    multiply(t4, t6, t15)
+    multiply(t12, t9, t16)
+    multiply(t7, t2, t7)
+    add(t16, t7, t16)
+    multiply(t16, t3, t7)
+    add(t15, t7, fk_tcp_0)
+    multiply(t13, t27, t7)
+    multiply(t7, t1, t15)
+    multiply(t13, t0, t17)
+    multiply(t17, t18, t19)
+    add(t15, t19, t15)
+    multiply(t15, t9, t19)
+    multiply(t17, t1, t20)
+    multiply(t7, t18, t7)
+    subtract(t20, t7, t20)
+    multiply(t20, t2, t7)
+    subtract(t19, t7, t19)
+    multiply(t19, t10, t7)
+    multiply(jacobian_tcp_25, t14, t21)
+    add(t7, t21, t7)
+    multiply(t7, t6, t21)
+    multiply(t20, t9, t22)
+    multiply(t15, t2, t15)
+    add(t22, t15, t22)
+    multiply(t22, t3, t15)
+    add(t21, t15, fk_tcp_4)
+    multiply(t0, t18, t15)
+    multiply(t27, t1, t21)
+    add(t15, t21, t15)
+    multiply(t15, t2, t21)
+    multiply(t27, t18, t18)
+    multiply(t0, t1, t0)
+    subtract(t18, t0, t18)
+    multiply(t18, t9, t0)
+    subtract(t21, t0, t21)
+    multiply(t21, t10, t0)
+    multiply(t0, t6, t1)
+    multiply(t15, t9, t9)
+    multiply(t18, t2, t18)
+    add(t9, t18, jacobian_tcp_34)
+    multiply(jacobian_tcp_34, t3, t2)
+    subtract(t1, t2, fk_tcp_8)
+    multiply(t4, t3, t4)
+    multiply(t16, t6, t1)
+    subtract(t4, t1, t4)
+    negative(t4, fk_tcp_1)
+    multiply(t7, t3, t7)
+    multiply(t22, t6, t1)
+    subtract(t7, t1, t7)
+    negative(t7, fk_tcp_5)
+    multiply(t0, t3, t0)
+    multiply(jacobian_tcp_34, t6, t6)
+    add(t0, t6, t0)
+    negative(t0, fk_tcp_9)
+    multiply(t11, t14, t11)
+    multiply(t13, t10, t1)
+    add(t11, t1, t11)
+    negative(t11, fk_tcp_2)
+    multiply(jacobian_tcp_25, t10, t10)
+    multiply(t19, t14, t19)
+    subtract(t10, t19, fk_tcp_6)
+    multiply(t21, t14, t21)
+    negative(t21, fk_tcp_10)
+    multiply(k17, t8, t8)
+    multiply(k30, t13, t1)
+    subtract(t8, t1, t8)
+    multiply(k27, t13, t1)
+    subtract(t8, t1, t8)
+    multiply(k35, t12, t12)
+    add(t8, t12, t12)
+    multiply(k34, t13, t2)
+    subtract(t12, t2, t2)
+    multiply(k38, t16, t3)
+    subtract(t2, t3, t3)
+    multiply(k43, t11, t6)
+    subtract(t3, t6, fk_tcp_3)
+    multiply(k27, jacobian_tcp_25, t6)
+    multiply(k30, jacobian_tcp_25, t9)
+    multiply(k17, t17, t17)
+    add(t9, t17, t9)
+    add(t6, t9, t9)
+    multiply(k35, t20, t20)
+    add(t9, t20, t20)
+    multiply(k34, jacobian_tcp_25, t10)
+    add(t20, t10, t10)
+    multiply(k38, t22, t14)
+    subtract(t10, t14, t14)
+    multiply(k43, fk_tcp_6, t17)
+    add(t14, t17, fk_tcp_7)
+    multiply(k17, t27, t27)
+    subtract(k44, t27, t27)
+    multiply(k35, t15, t15)
+    subtract(t27, t15, t15)
+    multiply(k38, jacobian_tcp_34, t14)
+    add(t15, t14, t14)
+    multiply(k43, t21, t18)
+    subtract(t14, t18, fk_tcp_11)
+    negative(fk_tcp_7, jacobian_tcp_0)
+    subtract(fk_tcp_11, k44, t18)
+    multiply(jacobian_tcp_25, t18, jacobian_tcp_1)
+    multiply(t13, t18, jacobian_tcp_7)
+    subtract(fk_tcp_7, t6, t6)
+    multiply(t13, t6, t6)
+    add(fk_tcp_3, t1, t1)
+    multiply(jacobian_tcp_25, t1, t1)
+    add(t6, t1, t6)
+    negative(t6, jacobian_tcp_13)
+    negative(t13, jacobian_tcp_19)
+    subtract(fk_tcp_11, t27, t27)
+    multiply(jacobian_tcp_25, t27, jacobian_tcp_2)
+    multiply(t13, t27, jacobian_tcp_8)
+    subtract(fk_tcp_7, t9, t9)
+    multiply(t13, t9, t9)
+    subtract(fk_tcp_3, t8, t8)
+    multiply(jacobian_tcp_25, t8, t8)
+    add(t9, t8, t9)
+    negative(t9, jacobian_tcp_14)
+    subtract(fk_tcp_11, t15, t15)
+    multiply(jacobian_tcp_25, t15, jacobian_tcp_3)
+    multiply(t13, t15, jacobian_tcp_9)
+    subtract(fk_tcp_7, t20, t20)
+    multiply(t13, t20, t13)
+    subtract(fk_tcp_3, t12, t12)
+    multiply(jacobian_tcp_25, t12, t12)
+    add(t13, t12, t13)
+    negative(t13, jacobian_tcp_15)
+    multiply(t22, t15, t1)
+    subtract(fk_tcp_7, t10, t10)
+    multiply(jacobian_tcp_34, t10, t6)
+    add(t1, t6, t1)
+    negative(t1, jacobian_tcp_4)
+    subtract(fk_tcp_3, t2, t2)
+    multiply(jacobian_tcp_34, t2, t1)
+    multiply(t16, t15, t15)
+    add(t1, t15, jacobian_tcp_10)
+    multiply(t22, t2, t2)
+    multiply(t16, t10, t10)
+    subtract(t2, t10, jacobian_tcp_16)
+    negative(t16, jacobian_tcp_22)
+    negative(t22, jacobian_tcp_28)
+    subtract(fk_tcp_11, t14, t14)
+    multiply(fk_tcp_6, t14, t1)
+    multiply(t21, t17, t2)
+    add(t1, t2, jacobian_tcp_5)
+    multiply(t11, t14, t14)
+    subtract(fk_tcp_3, t3, t3)
+    multiply(t21, t3, t1)
+    subtract(t14, t1, jacobian_tcp_11)
+    multiply(t11, t17, t17)
+    multiply(fk_tcp_6, t3, t3)
+    add(t17, t3, t17)
+    negative(t17, jacobian_tcp_17)
+    multiply(k43, t42, t1)
+    subtract(t64, t1, t64)
+    multiply(k43, t43, t1)
+    multiply(t46, t1, t2)
+    add(t64, t2, t64)
+    multiply(fk_tcp_0, t64, t2)
+    multiply(k43, t51, t3)
+    multiply(t51, t3, t51)
+    multiply(t43, t1, t43)
+    add(t51, t43, t51)
+    subtract(t55, t51, t55)
+    multiply(t11, t55, t1)
+    subtract(t2, t1, t2)
+    multiply(k43, t50, t1)
+    add(t5, t1, t5)
+    multiply(t46, t3, t46)
+    add(t5, t46, t5)
+    multiply(t4, t5, t1)
+    add(t2, t1, jdot_qd_tcp_0)
+    multiply(fk_tcp_4, t64, t1)
+    multiply(fk_tcp_6, t55, t2)
+    add(t1, t2, t1)
+    multiply(t7, t5, t2)
+    add(t1, t2, jdot_qd_tcp_1)
+    multiply(fk_tcp_8, t64, t64)
+    multiply(t21, t55, t55)
+    subtract(t64, t55, t64)
+    multiply(t0, t5, t5)
+    add(t64, t5, jdot_qd_tcp_2)
+    multiply(fk_tcp_0, t50, t1)
+    multiply(t11, t62, t11)
+    subtract(t1, t11, t1)
+    multiply(t4, t42, t4)
+    add(t1, t4, jdot_qd_tcp_3)
+    multiply(fk_tcp_4, t50, t1)
+    multiply(fk_tcp_6, t62, t2)
+    add(t1, t2, t1)
+    multiply(t7, t42, t7)
+    add(t1, t7, jdot_qd_tcp_4)
+    multiply(fk_tcp_8, t50, t50)
+    multiply(t21, t62, t21)
+    subtract(t50, t21, t50)
+    multiply(t0, t42, t0)
+    add(t50, t0, jdot_qd_tcp_5)
+    copyto(mass_matrix_6, mass_matrix_1)
+    copyto(mass_matrix_12, mass_matrix_2)
+    copyto(mass_matrix_13, mass_matrix_8)
+    copyto(mass_matrix_16, mass_matrix_10)
+    copyto(mass_matrix_17, mass_matrix_11)
+    copyto(mass_matrix_18, mass_matrix_3)
+    copyto(mass_matrix_19, mass_matrix_9)
+    copyto(mass_matrix_20, mass_matrix_15)
+    copyto(mass_matrix_22, mass_matrix_10)
+    copyto(mass_matrix_23, mass_matrix_11)
+    copyto(mass_matrix_24, mass_matrix_4)
+    copyto(mass_matrix_25, mass_matrix_10)
+    copyto(mass_matrix_26, mass_matrix_10)
+    copyto(mass_matrix_27, mass_matrix_10)
+    copyto(mass_matrix_30, mass_matrix_5)
+    copyto(mass_matrix_31, mass_matrix_11)
+    copyto(mass_matrix_32, mass_matrix_11)
+    copyto(mass_matrix_33, mass_matrix_11)
+    copyto(jacobian_tcp_6, fk_tcp_3)
+    copyto(jacobian_tcp_20, jacobian_tcp_19)
+    copyto(jacobian_tcp_21, jacobian_tcp_19)
+    copyto(jacobian_tcp_23, fk_tcp_2)
+    copyto(jacobian_tcp_26, jacobian_tcp_25)
+    copyto(jacobian_tcp_27, jacobian_tcp_25)
+    copyto(jacobian_tcp_29, fk_tcp_6)
+    copyto(jacobian_tcp_35, fk_tcp_10)
+
+
+def bundle_computed_torque(q, qd, qdd):
+    """Control tick 'computed_torque': inverse_dynamics (6), fk_tcp (4x4), jacobian_tcp (6x6), frame_acceleration_tcp (6) in one pass that computes every shared transform, sine and cosine once; each output equals the generated function of its name.
+
+    in  q [6]
+    in  qd [6]
+    in  qdd [6]
+    out inverse_dynamics [6]
+    out fk_tcp [4x4]
+    out jacobian_tcp [6x6]
+    out frame_acceleration_tcp [6]
+    669 ops: 379 mul, 278 add, 0 div, 12 trig
+    """
+    q = _array(q, 6, "q")
+    qd = _array(qd, 6, "qd")
+    qdd = _array(qdd, 6, "qdd")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_bundle_computed_torque_chunk, (q, qd, qdd), 77, ((6,), (4, 4), (6, 6), (6,),), fixed=_bundle_computed_torque_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = 0.00666 * qdd[0]
+    t1 = cos(q[1])
+    t2 = sin(q[1])
+    t3 = t2 * qd[0]
+    t4 = t3 * qd[1]
+    t5 = t1 * qdd[0]
+    t4 = t4 - t5
+    t5 = 0.8849018759100001 * t4
+    t6 = 0.8849018759100001 * qd[1]
+    t7 = t3 * t6
+    t8 = 0.0151074 * t3
+    t9 = qd[1] * t8
+    t7 = t7 - t9
+    t5 = t5 + t7
+    t7 = 0.13585 * qd[0]
+    t7 = qd[0] * t7
+    t9 = 2.3500400000000004 * t7
+    t5 = t5 + t9
+    t9 = cos(q[2])
+    t10 = t9 * t4
+    t11 = sin(q[2])
+    t12 = t2 * qdd[0]
+    t13 = t1 * qd[0]
+    t14 = t13 * qd[1]
+    t12 = t12 + t14
+    t14 = t11 * t12
+    t10 = t10 + t14
+    t14 = t11 * t13
+    t15 = t9 * t3
+    t14 = t14 + t15
+    t15 = t14 * qd[2]
+    t10 = t10 + t15
+    t15 = 0.19163081355599998 * t10
+    t16 = qd[1] + qd[2]
+    t17 = 0.19163081355599998 * t16
+    t18 = t14 * t17
+    t19 = 0.004095 * t14
+    t20 = t16 * t19
+    t18 = t18 - t20
+    t15 = t15 + t18
+    t18 = 0.425 * t4
+    t7 = t7 + t18
+    t18 = 0.425 * qd[1]
+    t20 = (-0.1197) * t3
+    t18 = t18 + t20
+    t20 = t3 * t18
+    t21 = (-0.1197) * t13
+    t22 = t13 * t21
+    t20 = t20 + t22
+    t7 = t7 + t20
+    t20 = 0.56875 * t7
+    t15 = t15 + t20
+    t20 = cos(q[3])
+    t22 = t20 * t10
+    t23 = sin(q[3])
+    t24 = t11 * t4
+    t25 = t9 * t12
+    t24 = t24 - t25
+    t25 = t11 * t3
+    t26 = t9 * t13
+    t25 = t25 - t26
+    t26 = t25 * qd[2]
+    t24 = t24 + t26
+    t26 = t23 * t24
+    t22 = t22 - t26
+    t26 = t20 * t14
+    t27 = t23 * t25
+    t26 = t26 - t27
+    t27 = t26 * qd[3]
+    t22 = t22 + t27
+    t27 = 0.21942 * t22
+    t28 = t16 + qd[3]
+    t29 = 0.111172755531 * t28
+    t30 = t26 * t29
+    t31 = 0.111172755531 * t26
+    t32 = t28 * t31
+    t30 = t30 - t32
+    t27 = t27 + t30
+    t30 = t22 + qdd[4]
+    t32 = 0.21942 * t30
+    t33 = cos(q[4])
+    t34 = t33 * t26
+    t35 = sin(q[4])
+    t36 = t35 * t28
+    t34 = t34 + t36
+    t36 = t33 * t28
+    t37 = t35 * t26
+    t36 = t36 - t37
+    t37 = 0.111172755531 * t36
+    t38 = t34 * t37
+    t39 = 0.111172755531 * t34
+    t40 = t36 * t39
+    t38 = t38 - t40
+    t32 = t32 + t38
+    t38 = cos(q[5])
+    t40 = sin(q[5])
+    t41 = qdd[1] + qdd[2]
+    t42 = t41 + qdd[3]
+    t43 = t35 * t42
+    t44 = t20 * t24
+    t45 = t23 * t10
+    t44 = t44 + t45
+    t45 = t23 * t14
+    t46 = t20 * t25
+    t45 = t45 + t46
+    t46 = t45 * qd[3]
+    t44 = t44 + t46
+    t46 = t33 * t44
+    t43 = t43 - t46
+    t46 = t36 * qd[4]
+    t43 = t43 + t46
+    t46 = t40 * t43
+    t47 = t38 * t30
+    t46 = t46 + t47
+    t47 = t38 * t34
+    t48 = t45 + qd[4]
+    t49 = t40 * t48
+    t47 = t47 - t49
+    t49 = t47 * qd[5]
+    t46 = t46 + t49
+    t49 = 0.033822 * t46
+    t50 = t36 + qd[5]
+    t51 = 0.0171364731454 * t50
+    t52 = t47 * t51
+    t53 = 0.0171364731454 * t47
+    t54 = t50 * t53
+    t52 = t52 - t54
+    t49 = t49 + t52
+    t52 = t38 * t49
+    t54 = t38 * t43
+    t30 = t40 * t30
+    t30 = t54 - t30
+    t54 = t40 * t34
+    t55 = t38 * t48
+    t54 = t54 + t55
+    t55 = t54 * qd[5]
+    t30 = t30 - t55
+    t55 = 0.0171364731454 * t30
+    t56 = 0.033822 * t54
+    t57 = t50 * t56
+    t51 = t54 * t51
+    t51 = t57 - t51
+    t51 = t55 + t51
+    t55 = t40 * t51
+    t52 = t52 - t55
+    t32 = t32 + t52
+    t27 = t27 + t32
+    t52 = 0.093 * t26
+    t55 = t28 * t52
+    t57 = 0.13585 * qdd[0]
+    t58 = t2 * t57
+    t59 = 0.425 * qdd[1]
+    t60 = (-0.1197) * t12
+    t59 = t59 + t60
+    t59 = t58 + t59
+    t60 = 0.425 * t13
+    t61 = t3 * t60
+    t21 = qd[1] * t21
+    t21 = t61 - t21
+    t21 = t59 + t21
+    t59 = t11 * t21
+    t4 = (-0.1197) * t4
+    t57 = t1 * t57
+    t4 = t4 - t57
+    t60 = t13 * t60
+    t18 = qd[1] * t18
+    t18 = t60 + t18
+    t4 = t4 - t18
+    t18 = t9 * t4
+    t18 = t59 + t18
+    t59 = 0.39225 * t25
+    t60 = t25 * t59
+    t61 = 0.39225 * t16
+    t62 = t16 * t61
+    t60 = t60 + t62
+    t60 = t18 - t60
+    t62 = t20 * t60
+    t21 = t9 * t21
+    t4 = t11 * t4
+    t4 = t21 - t4
+    t21 = 0.39225 * t41
+    t21 = t4 + t21
+    t59 = t14 * t59
+    t21 = t21 - t59
+    t59 = t23 * t21
+    t59 = t62 + t59
+    t22 = 0.093 * t22
+    t22 = t59 + t22
+    t22 = t55 - t22
+    t55 = t33 * t22
+    t62 = 0.39225 * t10
+    t62 = t7 + t62
+    t61 = t14 * t61
+    t61 = t62 + t61
+    t62 = 0.093 * t45
+    t63 = t45 * t62
+    t52 = t26 * t52
+    t52 = t63 + t52
+    t52 = t61 + t52
+    t63 = t35 * t52
+    t55 = t55 - t63
+    t63 = (-9.81) * t1
+    t64 = t11 * t63
+    t65 = (-9.81) * t2
+    t66 = t9 * t65
+    t64 = t64 + t66
+    t66 = t20 * t64
+    t67 = t9 * t63
+    t68 = t11 * t65
+    t67 = t67 - t68
+    t68 = t23 * t67
+    t66 = t66 + t68
+    t68 = t33 * t66
+    t69 = t55 - t68
+    t69 = 1.219 * t69
+    t70 = t35 * t44
+    t71 = t33 * t42
+    t70 = t70 + t71
+    t71 = t34 * qd[4]
+    t70 = t70 - t71
+    t71 = 0.09465 * t70
+    t55 = t55 + t71
+    t71 = 0.09465 * t34
+    t72 = t48 * t71
+    t55 = t55 + t72
+    t72 = t38 * t55
+    t21 = t20 * t21
+    t60 = t23 * t60
+    t21 = t21 - t60
+    t60 = 0.093 * t44
+    t60 = t21 - t60
+    t62 = t28 * t62
+    t60 = t60 + t62
+    t62 = t34 * t71
+    t71 = 0.09465 * t36
+    t73 = t36 * t71
+    t62 = t62 + t73
+    t62 = t60 - t62
+    t73 = t40 * t62
+    t72 = t72 - t73
+    t73 = t38 * t68
+    t74 = t20 * t67
+    t75 = t23 * t64
+    t74 = t74 - t75
+    t75 = t40 * t74
+    t73 = t73 + t75
+    t73 = t72 - t73
+    t73 = 0.1879 * t73
+    t75 = t38 * t73
+    t55 = t40 * t55
+    t62 = t38 * t62
+    t55 = t55 + t62
+    t62 = t38 * t74
+    t68 = t40 * t68
+    t62 = t62 - t68
+    t62 = t55 + t62
+    t62 = 0.1879 * t62
+    t68 = t40 * t62
+    t68 = t75 + t68
+    t69 = t69 + t68
+    t75 = t33 * t69
+    t76 = t35 * t66
+    t22 = t35 * t22
+    t52 = t33 * t52
+    t22 = t22 + t52
+    t52 = t76 - t22
+    t52 = 1.219 * t52
+    t71 = t48 * t71
+    t77 = 0.09465 * t43
+    t22 = t22 + t77
+    t22 = t71 - t22
+    t71 = t22 + t76
+    t76 = 0.1879 * t71
+    t52 = t52 + t76
+    t76 = t35 * t52
+    t75 = t75 - t76
+    t76 = 0.093 * t75
+    t27 = t27 - t76
+    t76 = t20 * t27
+    t77 = 0.21942 * t45
+    t28 = t28 * t77
+    t29 = t45 * t29
+    t28 = t28 - t29
+    t29 = 0.111172755531 * t44
+    t28 = t28 - t29
+    t29 = 0.111172755531 * t43
+    t43 = 0.21942 * t48
+    t36 = t36 * t43
+    t37 = t48 * t37
+    t36 = t36 - t37
+    t29 = t29 + t36
+    t36 = t38 * t51
+    t37 = t40 * t49
+    t36 = t36 + t37
+    t29 = t29 + t36
+    t36 = 0.017784735 * t71
+    t29 = t29 - t36
+    t36 = t33 * t29
+    t37 = 0.111172755531 * t70
+    t39 = t48 * t39
+    t34 = t34 * t43
+    t34 = t39 - t34
+    t34 = t37 + t34
+    t37 = t70 + qdd[5]
+    t39 = 0.0171364731454 * t37
+    t43 = t54 * t53
+    t44 = t47 * t56
+    t43 = t43 - t44
+    t39 = t39 + t43
+    t34 = t34 + t39
+    t43 = 0.09465 * t68
+    t34 = t34 + t43
+    t43 = t35 * t34
+    t36 = t36 - t43
+    t28 = t28 + t36
+    t36 = t60 + t74
+    t36 = 1.219 * t36
+    t43 = t38 * t62
+    t44 = t40 * t73
+    t43 = t43 - t44
+    t36 = t36 + t43
+    t43 = 0.093 * t36
+    t28 = t28 + t43
+    t43 = t23 * t28
+    t43 = t76 - t43
+    t15 = t15 + t43
+    t43 = t35 * t69
+    t44 = t33 * t52
+    t43 = t43 + t44
+    t44 = 1.219 * t61
+    t43 = t43 - t44
+    t44 = 0.39225 * t43
+    t15 = t15 - t44
+    t44 = t9 * t15
+    t24 = 0.004095 * t24
+    t17 = t25 * t17
+    t48 = 0.19163081355599998 * t25
+    t49 = t16 * t48
+    t17 = t17 - t49
+    t17 = t24 + t17
+    t24 = t20 * t28
+    t27 = t23 * t27
+    t24 = t24 + t27
+    t17 = t17 - t24
+    t24 = t11 * t17
+    t24 = t44 + t24
+    t5 = t5 + t24
+    t18 = t18 + t64
+    t18 = 2.275 * t18
+    t24 = 0.56875 * t25
+    t27 = t25 * t24
+    t28 = 0.56875 * t16
+    t16 = t16 * t28
+    t16 = t27 + t16
+    t16 = t18 - t16
+    t18 = t59 + t66
+    t18 = 1.219 * t18
+    t18 = t75 - t18
+    t27 = t20 * t18
+    t21 = t21 + t74
+    t21 = 1.219 * t21
+    t21 = t21 + t36
+    t36 = t23 * t21
+    t27 = t27 + t36
+    t16 = t16 - t27
+    t27 = t9 * t16
+    t4 = t4 + t67
+    t36 = 2.275 * t4
+    t44 = 0.56875 * t41
+    t36 = t36 + t44
+    t24 = t14 * t24
+    t24 = t36 - t24
+    t21 = t20 * t21
+    t18 = t23 * t18
+    t18 = t21 - t18
+    t21 = t24 + t18
+    t24 = t11 * t21
+    t24 = t27 - t24
+    t27 = (-0.1197) * t24
+    t7 = 2.275 * t7
+    t10 = 0.56875 * t10
+    t7 = t7 + t10
+    t10 = t14 * t28
+    t7 = t7 + t10
+    t7 = t43 - t7
+    t7 = 0.425 * t7
+    t7 = t27 - t7
+    t5 = t5 + t7
+    t5 = t1 * t5
+    t7 = 0.8849018759100001 * t13
+    t10 = qd[1] * t7
+    t6 = t13 * t6
+    t6 = t10 - t6
+    t10 = 0.0151074 * t12
+    t6 = t6 - t10
+    t10 = t9 * t17
+    t12 = t11 * t15
+    t10 = t10 - t12
+    t6 = t6 + t10
+    t10 = t9 * t21
+    t12 = t11 * t16
+    t10 = t10 + t12
+    t12 = (-0.1197) * t10
+    t6 = t6 - t12
+    t6 = t2 * t6
+    t5 = t5 + t6
+    t0 = t0 - t5
+    t5 = t65 - t57
+    t5 = 8.393 * t5
+    t6 = 2.3500400000000004 * t13
+    t12 = t13 * t6
+    t15 = 2.3500400000000004 * qd[1]
+    t15 = qd[1] * t15
+    t12 = t12 + t15
+    t5 = t5 - t12
+    t5 = t5 + t24
+    t5 = t1 * t5
+    t12 = t58 + t63
+    t15 = 8.393 * t12
+    t16 = 2.3500400000000004 * qdd[1]
+    t15 = t15 + t16
+    t6 = t3 * t6
+    t6 = t15 + t6
+    t6 = t6 + t10
+    t6 = t2 * t6
+    t5 = t5 - t6
+    t5 = 0.13585 * t5
+    t0 = t0 - t5
+    t5 = 0.8849018759100001 * qdd[1]
+    t3 = t3 * t7
+    t6 = t13 * t8
+    t3 = t3 - t6
+    t3 = t5 + t3
+    t5 = 2.3500400000000004 * t12
+    t3 = t3 + t5
+    t5 = 0.19163081355599998 * t41
+    t6 = t25 * t19
+    t7 = t14 * t48
+    t6 = t6 - t7
+    t5 = t5 + t6
+    t4 = 0.56875 * t4
+    t4 = t5 + t4
+    t5 = 0.111172755531 * t42
+    t6 = t45 * t31
+    t7 = t26 * t77
+    t6 = t6 - t7
+    t5 = t5 + t6
+    t6 = t35 * t29
+    t7 = t33 * t34
+    t6 = t6 + t7
+    t5 = t5 + t6
+    t4 = t4 + t5
+    t6 = 0.39225 * t18
+    t4 = t4 + t6
+    t3 = t3 + t4
+    t6 = 0.425 * t10
+    t3 = t3 + t6
+    t6 = cos(q[0])
+    t7 = t6 * t2
+    t8 = t7 * t9
+    t10 = t6 * t1
+    t12 = t10 * t11
+    t8 = t8 + t12
+    t12 = t8 * t23
+    t13 = t10 * t9
+    t7 = t7 * t11
+    t7 = t13 - t7
+    t13 = t7 * t20
+    t12 = t12 - t13
+    t13 = t12 * t33
+    t14 = sin(q[0])
+    t15 = t14 * t35
+    t13 = t13 - t15
+    t15 = t13 * t38
+    t16 = t7 * t23
+    t8 = t8 * t20
+    t8 = t16 + t8
+    t16 = t8 * t40
+    t15 = t15 + t16
+    t16 = t14 * t2
+    t17 = t16 * t9
+    t18 = t14 * t1
+    t19 = t18 * t11
+    t17 = t17 + t19
+    t19 = t17 * t23
+    t21 = t18 * t9
+    t16 = t16 * t11
+    t16 = t21 - t16
+    t21 = t16 * t20
+    t19 = t19 - t21
+    t21 = t19 * t33
+    t24 = t6 * t35
+    t21 = t21 + t24
+    t24 = t21 * t38
+    t25 = t16 * t23
+    t17 = t17 * t20
+    t17 = t25 + t17
+    t25 = t17 * t40
+    t24 = t24 + t25
+    t25 = t1 * t11
+    t26 = t2 * t9
+    t25 = t25 + t26
+    t26 = t25 * t20
+    t11 = t2 * t11
+    t1 = t1 * t9
+    t1 = t11 - t1
+    t9 = t1 * t23
+    t9 = t26 - t9
+    t11 = t9 * t33
+    t26 = t11 * t38
+    t23 = t25 * t23
+    t1 = t1 * t20
+    t1 = t23 + t1
+    t20 = t1 * t40
+    t20 = t26 - t20
+    t13 = t13 * t40
+    t23 = t8 * t38
+    t13 = t13 - t23
+    t23 = -t13
+    t21 = t21 * t40
+    t26 = t17 * t38
+    t21 = t21 - t26
+    t26 = -t21
+    t11 = t11 * t40
+    t27 = t1 * t38
+    t11 = t11 + t27
+    t27 = -t11
+    t12 = t12 * t35
+    t28 = t14 * t33
+    t12 = t12 + t28
+    t28 = -t12
+    t29 = t6 * t33
+    t19 = t19 * t35
+    t19 = t29 - t19
+    t9 = t9 * t35
+    t29 = -t9
+    t10 = 0.425 * t10
+    t31 = (-0.1197) * t14
+    t10 = t10 - t31
+    t31 = 0.13585 * t14
+    t10 = t10 - t31
+    t7 = 0.39225 * t7
+    t7 = t10 + t7
+    t33 = 0.093 * t14
+    t33 = t7 - t33
+    t34 = 0.09465 * t8
+    t34 = t33 - t34
+    t35 = 0.0823 * t12
+    t35 = t34 - t35
+    t36 = 0.13585 * t6
+    t38 = (-0.1197) * t6
+    t18 = 0.425 * t18
+    t18 = t38 + t18
+    t18 = t36 + t18
+    t16 = 0.39225 * t16
+    t16 = t18 + t16
+    t38 = 0.093 * t6
+    t38 = t16 + t38
+    t40 = 0.09465 * t17
+    t40 = t38 - t40
+    t41 = 0.0823 * t19
+    t40 = t40 + t41
+    t2 = 0.425 * t2
+    t2 = 0.089159 - t2
+    t25 = 0.39225 * t25
+    t25 = t2 - t25
+    t42 = 0.09465 * t1
+    t42 = t25 + t42
+    t43 = 0.0823 * t9
+    t43 = t42 - t43
+    t44 = -t40
+    t45 = t43 - 0.089159
+    t48 = t6 * t45
+    t45 = t14 * t45
+    t36 = t40 - t36
+    t36 = t14 * t36
+    t31 = t35 + t31
+    t31 = t6 * t31
+    t31 = t36 + t31
+    t31 = -t31
+    t36 = -t14
+    t2 = t43 - t2
+    t49 = t6 * t2
+    t2 = t14 * t2
+    t18 = t40 - t18
+    t18 = t14 * t18
+    t10 = t35 - t10
+    t10 = t6 * t10
+    t10 = t18 + t10
+    t10 = -t10
+    t18 = t43 - t25
+    t25 = t6 * t18
+    t51 = t14 * t18
+    t16 = t40 - t16
+    t14 = t14 * t16
+    t7 = t35 - t7
+    t7 = t6 * t7
+    t7 = t14 + t7
+    t7 = -t7
+    t14 = t17 * t18
+    t16 = t40 - t38
+    t38 = t1 * t16
+    t14 = t14 + t38
+    t14 = -t14
+    t33 = t35 - t33
+    t38 = t1 * t33
+    t18 = t8 * t18
+    t18 = t38 + t18
+    t33 = t17 * t33
+    t16 = t8 * t16
+    t16 = t33 - t16
+    t8 = -t8
+    t17 = -t17
+    t33 = t43 - t42
+    t38 = t19 * t33
+    t42 = t9 * t41
+    t38 = t38 + t42
+    t33 = t12 * t33
+    t34 = t35 - t34
+    t42 = t9 * t34
+    t33 = t33 - t42
+    t41 = t12 * t41
+    t34 = t19 * t34
+    t34 = t41 + t34
+    t34 = -t34
+    t41 = 0.0823 * t46
+    t41 = t72 - t41
+    t42 = 0.0823 * t47
+    t52 = t50 * t42
+    t41 = t41 + t52
+    t52 = t15 * t41
+    t53 = 0.0823 * t54
+    t54 = t54 * t53
+    t42 = t47 * t42
+    t42 = t54 + t42
+    t22 = t22 - t42
+    t42 = t12 * t22
+    t42 = t52 - t42
+    t47 = 0.0823 * t30
+    t47 = t55 + t47
+    t50 = t50 * t53
+    t47 = t47 + t50
+    t50 = t13 * t47
+    t42 = t42 + t50
+    t50 = t24 * t41
+    t52 = t19 * t22
+    t50 = t50 + t52
+    t52 = t21 * t47
+    t50 = t50 + t52
+    t41 = t20 * t41
+    t22 = t9 * t22
+    t22 = t41 - t22
+    t41 = t11 * t47
+    t22 = t22 + t41
+    t41 = t15 * t30
+    t12 = t12 * t37
+    t12 = t41 - t12
+    t13 = t13 * t46
+    t12 = t12 + t13
+    t13 = t24 * t30
+    t41 = t19 * t37
+    t13 = t13 + t41
+    t21 = t21 * t46
+    t13 = t13 + t21
+    t21 = t20 * t30
+    t9 = t9 * t37
+    t9 = t21 - t9
+    t11 = t11 * t46
+    t9 = t9 + t11
+    _inverse_dynamics = (t0, t3, t4, t5, t32, t39)
+    _fk_tcp = (t15, t23, t28, t35,
+               t24, t26, t19, t40,
+               t20, t27, t29, t43,
+               0.0, 0.0, 0.0, 1.0)
+    _jacobian_tcp = (t44, t48, t49, t25, t14, t38,
+                     t35, t45, t2, t51, t18, t33,
+                     0.0, t31, t10, t7, t16, t34,
+                     0.0, t36, t36, t36, t8, t28,
+                     0.0, t6, t6, t6, t17, t19,
+                     1.0, 0.0, 0.0, 0.0, t1, t29)
+    _frame_acceleration_tcp = (t42, t50, t22, t12, t13, t9)
+    return np.array(_inverse_dynamics), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 6), np.array(_frame_acceleration_tcp)
+
+
+_bundle_computed_torque_constants = _constants(
+    0.00666, 0.8849018759100001, 0.0151074, 0.13585, 2.3500400000000004, 0.19163081355599998, 0.004095,
+    0.425, -0.1197, 0.56875, 0.21942, 0.111172755531, 0.033822, 0.0171364731454, 0.093, 0.39225, -9.81,
+    1.219, 0.09465, 0.1879, 0.017784735, 2.275, 8.393, 0.0823, 0.089159)
+
+
+_bundle_computed_torque_fixed = (
+    {},
+    {12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0},
+    {12: 0.0, 18: 0.0, 24: 0.0, 30: 1.0, 31: 0.0, 32: 0.0, 33: 0.0},
+    {},
+)
+"""bundle_computed_torque's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _bundle_computed_torque_chunk(x, t, s, y):
+    """bundle_computed_torque on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    (q_0, q_1, q_2, q_3, q_4, q_5, qd_0, qd_1, qd_2, qd_3, qd_4, qd_5, qdd_0, qdd_1, qdd_2, qdd_3, qdd_4,
+     qdd_5) = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
+     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76) = t
+    (inverse_dynamics_0, inverse_dynamics_1, inverse_dynamics_2, inverse_dynamics_3, inverse_dynamics_4,
+     inverse_dynamics_5, fk_tcp_0, fk_tcp_1, fk_tcp_2, fk_tcp_3, fk_tcp_4, fk_tcp_5, fk_tcp_6, fk_tcp_7,
+     fk_tcp_8, fk_tcp_9, fk_tcp_10, fk_tcp_11, jacobian_tcp_0, jacobian_tcp_1, jacobian_tcp_2,
+     jacobian_tcp_3, jacobian_tcp_4, jacobian_tcp_5, jacobian_tcp_6, jacobian_tcp_7, jacobian_tcp_8,
+     jacobian_tcp_9, jacobian_tcp_10, jacobian_tcp_11, jacobian_tcp_13, jacobian_tcp_14, jacobian_tcp_15,
+     jacobian_tcp_16, jacobian_tcp_17, jacobian_tcp_19, jacobian_tcp_20, jacobian_tcp_21, jacobian_tcp_22,
+     jacobian_tcp_23, jacobian_tcp_25, jacobian_tcp_26, jacobian_tcp_27, jacobian_tcp_28, jacobian_tcp_29,
+     jacobian_tcp_34, jacobian_tcp_35, frame_acceleration_tcp_0, frame_acceleration_tcp_1,
+     frame_acceleration_tcp_2, frame_acceleration_tcp_3, frame_acceleration_tcp_4,
+     frame_acceleration_tcp_5) = y
+    (k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20, k21,
+     k22, k23, k24) = _bundle_computed_torque_constants
+    multiply(k0, qdd_0, t0)
+    cos(q_1, t1)
+    sin(q_1, t2)
+    multiply(t2, qd_0, t3)
+    multiply(t3, qd_1, t4)
+    multiply(t1, qdd_0, t5)
+    subtract(t4, t5, t4)
+    multiply(k1, t4, t5)
+    multiply(k1, qd_1, t6)
+    multiply(t3, t6, t7)
+    multiply(k2, t3, t8)
+    multiply(qd_1, t8, t9)
+    subtract(t7, t9, t7)
+    add(t5, t7, t5)
+    multiply(k3, qd_0, t7)
+    multiply(qd_0, t7, t7)
+    multiply(k4, t7, t9)
+    add(t5, t9, t5)
+    cos(q_2, t9)
+    multiply(t9, t4, t10)
+    sin(q_2, t11)
+    multiply(t2, qdd_0, t12)
+    multiply(t1, qd_0, t13)
+    multiply(t13, qd_1, t14)
+    add(t12, t14, t12)
+    multiply(t11, t12, t14)
+    add(t10, t14, t10)
+    multiply(t11, t13, t14)
+    multiply(t9, t3, t15)
+    add(t14, t15, t14)
+    multiply(t14, qd_2, t15)
+    add(t10, t15, t10)
+    multiply(k5, t10, t15)
+    add(qd_1, qd_2, t16)
+    multiply(k5, t16, t17)
+    multiply(t14, t17, t18)
+    multiply(k6, t14, t19)
+    multiply(t16, t19, t20)
+    subtract(t18, t20, t18)
+    add(t15, t18, t15)
+    multiply(k7, t4, t18)
+    add(t7, t18, t7)
+    multiply(k7, qd_1, t18)
+    multiply(k8, t3, t20)
+    add(t18, t20, t18)
+    multiply(t3, t18, t20)
+    multiply(k8, t13, t21)
+    multiply(t13, t21, t22)
+    add(t20, t22, t20)
+    add(t7, t20, t7)
+    multiply(k9, t7, t20)
+    add(t15, t20, t15)
+    cos(q_3, t20)
+    multiply(t20, t10, t22)
+    sin(q_3, t23)
+    multiply(t11, t4, t24)
+    multiply(t9, t12, t25)
+    subtract(t24, t25, t24)
+    multiply(t11, t3, t25)
+    multiply(t9, t13, t26)
+    subtract(t25, t26, t25)
+    multiply(t25, qd_2, t26)
+    add(t24, t26, t24)
+    multiply(t23, t24, t26)
+    subtract(t22, t26, t22)
+    multiply(t20, t14, t26)
+    multiply(t23, t25, t27)
+    subtract(t26, t27, t26)
+    multiply(t26, qd_3, t27)
+    add(t22, t27, t22)
+    multiply(k10, t22, t27)
+    add(t16, qd_3, t28)
+    multiply(k11, t28, t29)
+    multiply(t26, t29, t30)
+    multiply(k11, t26, t31)
+    multiply(t28, t31, t32)
+    subtract(t30, t32, t30)
+    add(t27, t30, t27)
+    add(t22, qdd_4, t30)
+    multiply(k10, t30, t32)
+    cos(q_4, t33)
+    multiply(t33, t26, t34)
+    sin(q_4, t35)
+    multiply(t35, t28, t36)
+    add(t34, t36, t34)
+    multiply(t33, t28, t36)
+    multiply(t35, t26, t37)
+    subtract(t36, t37, t36)
+    multiply(k11, t36, t37)
+    multiply(t34, t37, t38)
+    multiply(k11, t34, t39)
+    multiply(t36, t39, t40)
+    subtract(t38, t40, t38)
+    add(t32, t38, t32)
+    cos(q_5, t38)
+    sin(q_5, t40)
+    add(qdd_1, qdd_2, t41)
+    add(t41, qdd_3, t42)
+    multiply(t35, t42, t43)
+    multiply(t20, t24, t44)
+    multiply(t23, t10, t45)
+    add(t44, t45, t44)
+    multiply(t23, t14, t45)
+    multiply(t20, t25, t46)
+    add(t45, t46, t45)
+    multiply(t45, qd_3, t46)
+    add(t44, t46, t44)
+    multiply(t33, t44, t46)
+    subtract(t43, t46, t43)
+    multiply(t36, qd_4, t46)
+    add(t43, t46, t43)
+    multiply(t40, t43, t46)
+    multiply(t38, t30, t47)
+    add(t46, t47, t46)
+    multiply(t38, t34, t47)
+    add(t45, qd_4, t48)
+    multiply(t40, t48, t49)
+    subtract(t47, t49, t47)
+    multiply(t47, qd_5, t49)
+    add(t46, t49, t46)
+    multiply(k12, t46, t49)
+    add(t36, qd_5, t50)
+    multiply(k13, t50, t51)
+    multiply(t47, t51, t52)
+    multiply(k13, t47, t53)
+    multiply(t50, t53, t54)
+    subtract(t52, t54, t52)
+    add(t49, t52, t49)
+    multiply(t38, t49, t52)
+    multiply(t38, t43, t54)
+    multiply(t40, t30, t30)
+    subtract(t54, t30, t54)
+    multiply(t40, t34, t30)
+    multiply(t38, t48, t55)
+    add(t30, t55, t30)
+    multiply(t30, qd_5, t55)
+    subtract(t54, t55, t54)
+    multiply(k13, t54, t55)
+    multiply(k12, t30, t56)
+    multiply(t50, t56, t57)
+    multiply(t30, t51, t51)
+    subtract(t57, t51, t57)
+    add(t55, t57, t55)
+    multiply(t40, t55, t51)
+    subtract(t52, t51, t52)
+    add(t32, t52, inverse_dynamics_4)
+    add(t27, inverse_dynamics_4, t27)
+    multiply(k14, t26, t32)
+    multiply(t28, t32, t51)
+    multiply(k3, qdd_0, t52)
+    multiply(t2, t52, t57)
+    multiply(k7, qdd_1, t58)
+    multiply(k8, t12, t59)
+    add(t58, t59, t58)
+    add(t57, t58, t58)
+    multiply(k7, t13, t59)
+    multiply(t3, t59, t60)
+    multiply(qd_1, t21, t21)
+    subtract(t60, t21, t60)
+    add(t58, t60, t58)
+    multiply(t11, t58, t21)
+    multiply(k8, t4, t4)
+    multiply(t1, t52, t52)
+    subtract(t4, t52, t4)
+    multiply(t13, t59, t59)
+    multiply(qd_1, t18, t18)
+    add(t59, t18, t59)
+    subtract(t4, t59, t4)
+    multiply(t9, t4, t18)
+    add(t21, t18, t21)
+    multiply(k15, t25, t18)
+    multiply(t25, t18, t59)
+    multiply(k15, t16, t60)
+    multiply(t16, t60, t61)
+    add(t59, t61, t59)
+    subtract(t21, t59, t59)
+    multiply(t20, t59, t61)
+    multiply(t9, t58, t58)
+    multiply(t11, t4, t4)
+    subtract(t58, t4, t58)
+    multiply(k15, t41, t4)
+    add(t58, t4, t4)
+    multiply(t14, t18, t18)
+    subtract(t4, t18, t4)
+    multiply(t23, t4, t18)
+    add(t61, t18, t61)
+    multiply(k14, t22, t22)
+    add(t61, t22, t22)
+    subtract(t51, t22, t51)
+    multiply(t33, t51, t18)
+    multiply(k15, t10, t22)
+    add(t7, t22, t22)
+    multiply(t14, t60, t60)
+    add(t22, t60, t22)
+    multiply(k14, t45, t60)
+    multiply(t45, t60, t62)
+    multiply(t26, t32, t32)
+    add(t62, t32, t62)
+    add(t22, t62, t62)
+    multiply(t35, t62, t32)
+    subtract(t18, t32, t18)
+    multiply(k16, t1, t32)
+    multiply(t11, t32, t63)
+    multiply(k16, t2, t64)
+    multiply(t9, t64, t65)
+    add(t63, t65, t63)
+    multiply(t20, t63, t65)
+    multiply(t9, t32, t66)
+    multiply(t11, t64, t67)
+    subtract(t66, t67, t66)
+    multiply(t23, t66, t67)
+    add(t65, t67, t65)
+    multiply(t33, t65, t67)
+    subtract(t18, t67, t68)
+    multiply(k17, t68, t68)
+    multiply(t35, t44, t69)
+    multiply(t33, t42, t70)
+    add(t69, t70, t69)
+    multiply(t34, qd_4, t70)
+    subtract(t69, t70, t69)
+    multiply(k18, t69, t70)
+    add(t18, t70, t18)
+    multiply(k18, t34, t70)
+    multiply(t48, t70, t71)
+    add(t18, t71, t18)
+    multiply(t38, t18, t71)
+    multiply(t20, t4, t4)
+    multiply(t23, t59, t59)
+    subtract(t4, t59, t4)
+    multiply(k14, t44, t59)
+    subtract(t4, t59, t59)
+    multiply(t28, t60, t60)
+    add(t59, t60, t59)
+    multiply(t34, t70, t70)
+    multiply(k18, t36, t60)
+    multiply(t36, t60, t72)
+    add(t70, t72, t70)
+    subtract(t59, t70, t70)
+    multiply(t40, t70, t72)
+    subtract(t71, t72, t71)
+    multiply(t38, t67, t72)
+    multiply(t20, t66, t73)
+    multiply(t23, t63, t74)
+    subtract(t73, t74, t73)
+    multiply(t40, t73, t74)
+    add(t72, t74, t72)
+    subtract(t71, t72, t72)
+    multiply(k19, t72, t72)
+    multiply(t38, t72, t74)
+    multiply(t40, t18, t18)
+    multiply(t38, t70, t70)
+    add(t18, t70, t18)
+    multiply(t38, t73, t70)
+    multiply(t40, t67, t67)
+    subtract(t70, t67, t70)
+    add(t18, t70, t70)
+    multiply(k19, t70, t70)
+    multiply(t40, t70, t67)
+    add(t74, t67, t74)
+    add(t68, t74, t68)
+    multiply(t33, t68, t67)
+    multiply(t35, t65, t75)
+    multiply(t35, t51, t51)
+    multiply(t33, t62, t62)
+    add(t51, t62, t51)
+    subtract(t75, t51, t62)
+    multiply(k17, t62, t62)
+    multiply(t48, t60, t60)
+    multiply(k18, t43, t76)
+    add(t51, t76, t51)
+    subtract(t60, t51, t60)
+    add(t60, t75, t75)
+    multiply(k19, t75, t51)
+    add(t62, t51, t62)
+    multiply(t35, t62, t51)
+    subtract(t67, t51, t67)
+    multiply(k14, t67, t51)
+    subtract(t27, t51, t27)
+    multiply(t20, t27, t51)
+    multiply(k10, t45, t76)
+    multiply(t28, t76, t28)
+    multiply(t45, t29, t29)
+    subtract(t28, t29, t28)
+    multiply(k11, t44, t44)
+    subtract(t28, t44, t28)
+    multiply(k11, t43, t43)
+    multiply(k10, t48, t29)
+    multiply(t36, t29, t36)
+    multiply(t48, t37, t37)
+    subtract(t36, t37, t36)
+    add(t43, t36, t43)
+    multiply(t38, t55, t55)
+    multiply(t40, t49, t49)
+    add(t55, t49, t55)
+    add(t43, t55, t43)
+    multiply(k20, t75, t75)
+    subtract(t43, t75, t43)
+    multiply(t33, t43, t36)
+    multiply(k11, t69, t37)
+    multiply(t48, t39, t48)
+    multiply(t34, t29, t34)
+    subtract(t48, t34, t48)
+    add(t37, t48, t37)
+    add(t69, qdd_5, t69)
+    multiply(k13, t69, t29)
+    multiply(t30, t53, t53)
+    multiply(t47, t56, t56)
+    subtract(t53, t56, t53)
+    add(t29, t53, inverse_dynamics_5)
+    add(t37, inverse_dynamics_5, t37)
+    multiply(k18, t74, t74)
+    add(t37, t74, t37)
+    multiply(t35, t37, t29)
+    subtract(t36, t29, t36)
+    add(t28, t36, t28)
+    add(t59, t73, t59)
+    multiply(k17, t59, t59)
+    multiply(t38, t70, t70)
+    multiply(t40, t72, t72)
+    subtract(t70, t72, t70)
+    add(t59, t70, t59)
+    multiply(k14, t59, t29)
+    add(t28, t29, t28)
+    multiply(t23, t28, t29)
+    subtract(t51, t29, t51)
+    add(t15, t51, t15)
+    multiply(t35, t68, t68)
+    multiply(t33, t62, t62)
+    add(t68, t62, t68)
+    multiply(k17, t22, t22)
+    subtract(t68, t22, t68)
+    multiply(k15, t68, t22)
+    subtract(t15, t22, t15)
+    multiply(t9, t15, t22)
+    multiply(k6, t24, t24)
+    multiply(t25, t17, t17)
+    multiply(k5, t25, t29)
+    multiply(t16, t29, t34)
+    subtract(t17, t34, t17)
+    add(t24, t17, t24)
+    multiply(t20, t28, t28)
+    multiply(t23, t27, t27)
+    add(t28, t27, t28)
+    subtract(t24, t28, t24)
+    multiply(t11, t24, t17)
+    add(t22, t17, t22)
+    add(t5, t22, t5)
+    add(t21, t63, t21)
+    multiply(k21, t21, t21)
+    multiply(k9, t25, t17)
+    multiply(t25, t17, t22)
+    multiply(k9, t16, t27)
+    multiply(t16, t27, t16)
+    add(t22, t16, t22)
+    subtract(t21, t22, t21)
+    add(t61, t65, t61)
+    multiply(k17, t61, t61)
+    subtract(t67, t61, t67)
+    multiply(t20, t67, t16)
+    add(t4, t73, t4)
+    multiply(k17, t4, t4)
+    add(t4, t59, t4)
+    multiply(t23, t4, t22)
+    add(t16, t22, t16)
+    subtract(t21, t16, t21)
+    multiply(t9, t21, t16)
+    add(t58, t66, t58)
+    multiply(k21, t58, t22)
+    multiply(k9, t41, t28)
+    add(t22, t28, t22)
+    multiply(t14, t17, t17)
+    subtract(t22, t17, t22)
+    multiply(t20, t4, t4)
+    multiply(t23, t67, t67)
+    subtract(t4, t67, t4)
+    add(t22, t4, t22)
+    multiply(t11, t22, t17)
+    subtract(t16, t17, t16)
+    multiply(k8, t16, t17)
+    multiply(k21, t7, t7)
+    multiply(k9, t10, t10)
+    add(t7, t10, t7)
+    multiply(t14, t27, t27)
+    add(t7, t27, t7)
+    subtract(t68, t7, t68)
+    multiply(k7, t68, t68)
+    subtract(t17, t68, t17)
+    add(t5, t17, t5)
+    multiply(t1, t5, t5)
+    multiply(k1, t13, t7)
+    multiply(qd_1, t7, t10)
+    multiply(t13, t6, t6)
+    subtract(t10, t6, t10)
+    multiply(k2, t12, t12)
+    subtract(t10, t12, t10)
+    multiply(t9, t24, t24)
+    multiply(t11, t15, t15)
+    subtract(t24, t15, t24)
+    add(t10, t24, t10)
+    multiply(t9, t22, t22)
+    multiply(t11, t21, t21)
+    add(t22, t21, t22)
+    multiply(k8, t22, t6)
+    subtract(t10, t6, t10)
+    multiply(t2, t10, t10)
+    add(t5, t10, t5)
+    subtract(t0, t5, t0)
+    subtract(t64, t52, t64)
+    multiply(k22, t64, t64)
+    multiply(k4, t13, t5)
+    multiply(t13, t5, t6)
+    multiply(k4, qd_1, t10)
+    multiply(qd_1, t10, t10)
+    add(t6, t10, t6)
+    subtract(t64, t6, t64)
+    add(t64, t16, t64)
+    multiply(t1, t64, t64)
+    add(t57, t32, t57)
+    multiply(k22, t57, t6)
+    multiply(k4, qdd_1, t10)
+    add(t6, t10, t6)
+    multiply(t3, t5, t5)
+    add(t6, t5, t6)
+    add(t6, t22, t6)
+    multiply(t2, t6, t6)
+    subtract(t64, t6, t64)
+    multiply(k3, t64, t64)
+    subtract(t0, t64, inverse_dynamics_0)
+    multiply(k1, qdd_1, t0)
+    multiply(t3, t7, t3)
+    multiply(t13, t8, t13)
+    subtract(t3, t13, t3)
+    add(t0, t3, t0)
+    multiply(k4, t57, t57)
+    add(t0, t57, t0)
+    multiply(k5, t41, t41)
+    multiply(t25, t19, t25)
+    multiply(t14, t29, t14)
+    subtract(t25, t14, t25)
+    add(t41, t25, t41)
+    multiply(k9, t58, t58)
+    add(t41, t58, t41)
+    multiply(k11, t42, t42)
+    multiply(t45, t31, t45)
+    multiply(t26, t76, t26)
+    subtract(t45, t26, t45)
+    add(t42, t45, t42)
+    multiply(t35, t43, t43)
+    multiply(t33, t37, t37)
+    add(t43, t37, t43)
+    add(t42, t43, inverse_dynamics_3)
+    add(t41, inverse_dynamics_3, t41)
+    multiply(k15, t4, t4)
+    add(t41, t4, inverse_dynamics_2)
+    add(t0, inverse_dynamics_2, t0)
+    multiply(k7, t22, t22)
+    add(t0, t22, inverse_dynamics_1)
+    cos(q_0, jacobian_tcp_25)
+    multiply(jacobian_tcp_25, t2, t0)
+    multiply(t0, t9, t3)
+    multiply(jacobian_tcp_25, t1, t4)
+    multiply(t4, t11, t5)
+    add(t3, t5, t3)
+    multiply(t3, t23, t5)
+    multiply(t4, t9, t6)
+    multiply(t0, t11, t0)
+    subtract(t6, t0, t6)
+    multiply(t6, t20, t0)
+    subtract(t5, t0, t5)
+    multiply(t5, t33, t0)
+    sin(q_0, t7)
+    multiply(t7, t35, t8)
+    subtract(t0, t8, t0)
+    multiply(t0, t38, t8)
+    multiply(t6, t23, t10)
+    multiply(t3, t20, t3)
+    add(t10, t3, t10)
+    multiply(t10, t40, t3)
+    add(t8, t3, fk_tcp_0)
+    multiply(t7, t2, t3)
+    multiply(t3, t9, t8)
+    multiply(t7, t1, t12)
+    multiply(t12, t11, t13)
+    add(t8, t13, t8)
+    multiply(t8, t23, t13)
+    multiply(t12, t9, t14)
+    multiply(t3, t11, t3)
+    subtract(t14, t3, t14)
+    multiply(t14, t20, t3)
+    subtract(t13, t3, t13)
+    multiply(t13, t33, t3)
+    multiply(jacobian_tcp_25, t35, t15)
+    add(t3, t15, t3)
+    multiply(t3, t38, t15)
+    multiply(t14, t23, t16)
+    multiply(t8, t20, t8)
+    add(t16, t8, t16)
+    multiply(t16, t40, t8)
+    add(t15, t8, fk_tcp_4)
+    multiply(t1, t11, t8)
+    multiply(t2, t9, t15)
+    add(t8, t15, t8)
+    multiply(t8, t20, t15)
+    multiply(t2, t11, t11)
+    multiply(t1, t9, t1)
+    subtract(t11, t1, t11)
+    multiply(t11, t23, t1)
+    subtract(t15, t1, t15)
+    multiply(t15, t33, t1)
+    multiply(t1, t38, t9)
+    multiply(t8, t23, t23)
+    multiply(t11, t20, t11)
+    add(t23, t11, jacobian_tcp_34)
+    multiply(jacobian_tcp_34, t40, t11)
+    subtract(t9, t11, fk_tcp_8)
+    multiply(t0, t40, t0)
+    multiply(t10, t38, t9)
+    subtract(t0, t9, t0)
+    negative(t0, fk_tcp_1)
+    multiply(t3, t40, t3)
+    multiply(t16, t38, t9)
+    subtract(t3, t9, t3)
+    negative(t3, fk_tcp_5)
+    multiply(t1, t40, t1)
+    multiply(jacobian_tcp_34, t38, t38)
+    add(t1, t38, t1)
+    negative(t1, fk_tcp_9)
+    multiply(t5, t35, t5)
+    multiply(t7, t33, t9)
+    add(t5, t9, t5)
+    negative(t5, fk_tcp_2)
+    multiply(jacobian_tcp_25, t33, t33)
+    multiply(t13, t35, t13)
+    subtract(t33, t13, fk_tcp_6)
+    multiply(t15, t35, t15)
+    negative(t15, fk_tcp_10)
+    multiply(k7, t4, t4)
+    multiply(k8, t7, t9)
+    subtract(t4, t9, t4)
+    multiply(k3, t7, t9)
+    subtract(t4, t9, t4)
+    multiply(k15, t6, t6)
+    add(t4, t6, t6)
+    multiply(k14, t7, t11)
+    subtract(t6, t11, t11)
+    multiply(k18, t10, t13)
+    subtract(t11, t13, t13)
+    multiply(k23, t5, t17)
+    subtract(t13, t17, fk_tcp_3)
+    multiply(k3, jacobian_tcp_25, t17)
+    multiply(k8, jacobian_tcp_25, t19)
+    multiply(k7, t12, t12)
+    add(t19, t12, t19)
+    add(t17, t19, t19)
+    multiply(k15, t14, t14)
+    add(t19, t14, t14)
+    multiply(k14, jacobian_tcp_25, t12)
+    add(t14, t12, t12)
+    multiply(k18, t16, t20)
+    subtract(t12, t20, t20)
+    multiply(k23, fk_tcp_6, t21)
+    add(t20, t21, fk_tcp_7)
+    multiply(k7, t2, t2)
+    subtract(k24, t2, t2)
+    multiply(k15, t8, t8)
+    subtract(t2, t8, t8)
+    multiply(k18, jacobian_tcp_34, t20)
+    add(t8, t20, t20)
+    multiply(k23, t15, t22)
+    subtract(t20, t22, fk_tcp_11)
+    negative(fk_tcp_7, jacobian_tcp_0)
+    subtract(fk_tcp_11, k24, t22)
+    multiply(jacobian_tcp_25, t22, jacobian_tcp_1)
+    multiply(t7, t22, jacobian_tcp_7)
+    subtract(fk_tcp_7, t17, t17)
+    multiply(t7, t17, t17)
+    add(fk_tcp_3, t9, t9)
+    multiply(jacobian_tcp_25, t9, t9)
+    add(t17, t9, t17)
+    negative(t17, jacobian_tcp_13)
+    negative(t7, jacobian_tcp_19)
+    subtract(fk_tcp_11, t2, t2)
+    multiply(jacobian_tcp_25, t2, jacobian_tcp_2)
+    multiply(t7, t2, jacobian_tcp_8)
+    subtract(fk_tcp_7, t19, t19)
+    multiply(t7, t19, t19)
+    subtract(fk_tcp_3, t4, t4)
+    multiply(jacobian_tcp_25, t4, t4)
+    add(t19, t4, t19)
+    negative(t19, jacobian_tcp_14)
+    subtract(fk_tcp_11, t8, t8)
+    multiply(jacobian_tcp_25, t8, jacobian_tcp_3)
+    multiply(t7, t8, jacobian_tcp_9)
+    subtract(fk_tcp_7, t14, t14)
+    multiply(t7, t14, t7)
+    subtract(fk_tcp_3, t6, t6)
+    multiply(jacobian_tcp_25, t6, t6)
+    add(t7, t6, t7)
+    negative(t7, jacobian_tcp_15)
+    multiply(t16, t8, t2)
+    subtract(fk_tcp_7, t12, t12)
+    multiply(jacobian_tcp_34, t12, t4)
+    add(t2, t4, t2)
+    negative(t2, jacobian_tcp_4)
+    subtract(fk_tcp_3, t11, t11)
+    multiply(jacobian_tcp_34, t11, t2)
+    multiply(t10, t8, t8)
+    add(t2, t8, jacobian_tcp_10)
+    multiply(t16, t11, t11)
+    multiply(t10, t12, t12)
+    subtract(t11, t12, jacobian_tcp_16)
+    negative(t10, jacobian_tcp_22)
+    negative(t16, jacobian_tcp_28)
+    subtract(fk_tcp_11, t20, t20)
+    multiply(fk_tcp_6, t20, t2)
+    multiply(t15, t21, t4)
+    add(t2, t4, jacobian_tcp_5)
+    multiply(t5, t20, t20)
+    subtract(fk_tcp_3, t13, t13)
+    multiply(t15, t13, t2)
+    subtract(t20, t2, jacobian_tcp_11)
+    multiply(t5, t21, t21)
+    multiply(fk_tcp_6, t13, t13)
+    add(t21, t13, t21)
+    negative(t21, jacobian_tcp_17)
+    multiply(k23, t46, t2)
+    subtract(t71, t2, t71)
+    multiply(k23, t47, t2)
+    multiply(t50, t2, t4)
+    add(t71, t4, t71)
+    multiply(fk_tcp_0, t71, t4)
+    multiply(k23, t30, t6)
+    multiply(t30, t6, t30)
+    multiply(t47, t2, t47)
+    add(t30, t47, t30)
+    subtract(t60, t30, t60)
+    multiply(t5, t60, t2)
+    subtract(t4, t2, t4)
+    multiply(k23, t54, t2)
+    add(t18, t2, t18)
+    multiply(t50, t6, t50)
+    add(t18, t50, t18)
+    multiply(t0, t18, t2)
+    add(t4, t2, frame_acceleration_tcp_0)
+    multiply(fk_tcp_4, t71, t2)
+    multiply(fk_tcp_6, t60, t4)
+    add(t2, t4, t2)
+    multiply(t3, t18, t4)
+    add(t2, t4, frame_acceleration_tcp_1)
+    multiply(fk_tcp_8, t71, t71)
+    multiply(t15, t60, t60)
+    subtract(t71, t60, t71)
+    multiply(t1, t18, t18)
+    add(t71, t18, frame_acceleration_tcp_2)
+    multiply(fk_tcp_0, t54, t2)
+    multiply(t5, t69, t5)
+    subtract(t2, t5, t2)
+    multiply(t0, t46, t0)
+    add(t2, t0, frame_acceleration_tcp_3)
+    multiply(fk_tcp_4, t54, t0)
+    multiply(fk_tcp_6, t69, t2)
+    add(t0, t2, t0)
+    multiply(t3, t46, t3)
+    add(t0, t3, frame_acceleration_tcp_4)
+    multiply(fk_tcp_8, t54, t54)
+    multiply(t15, t69, t15)
+    subtract(t54, t15, t54)
+    multiply(t1, t46, t1)
+    add(t54, t1, frame_acceleration_tcp_5)
+    copyto(jacobian_tcp_6, fk_tcp_3)
+    copyto(jacobian_tcp_20, jacobian_tcp_19)
+    copyto(jacobian_tcp_21, jacobian_tcp_19)
+    copyto(jacobian_tcp_23, fk_tcp_2)
+    copyto(jacobian_tcp_26, jacobian_tcp_25)
+    copyto(jacobian_tcp_27, jacobian_tcp_25)
+    copyto(jacobian_tcp_29, fk_tcp_6)
+    copyto(jacobian_tcp_35, fk_tcp_10)
 
 
 def rk4_step(x, u, dt):
