@@ -23,6 +23,18 @@
 #endif
 #endif
 
+/*
+ * DERIVE_NOINLINE keeps the parts of a large generated function apart (compilers inline a static
+ * function called once, which would rebuild the one function the split avoids).
+ */
+#ifndef DERIVE_NOINLINE
+#if defined(__GNUC__) || defined(__clang__)
+#define DERIVE_NOINLINE __attribute__((noinline))
+#else
+#define DERIVE_NOINLINE
+#endif
+#endif
+
 #ifdef DERIVE_FLOAT
 #define DERIVE_REAL float
 #define DERIVE_LIT(x) x##f

@@ -10,6 +10,7 @@ from __future__ import annotations
 import jinja2
 
 from derive.codegen.backends.base import Backend, Function, RobotContext, float_literal
+from derive.codegen.backends.c import printer as c_printer
 from derive.codegen.backends.c.printer import CPrinter, literal
 
 MATH_FUNCTIONS = [("SIN", "sin"), ("COS", "cos"), ("TAN", "tan"), ("SQRT", "sqrt"), ("EXP", "exp"),
@@ -44,11 +45,21 @@ class CBackend(Backend):
         used = {a[1] for ins in prog.body for a in ins.args if a[0] == "in"}
         used |= {a[1] for _, _, a in prog.results if a[0] == "in"}
         printer = CPrinter(in_names)
-        return {**fn.common, **self._files(spec),
-                **self._contract([(n, x.shape) for n, x in spec.inputs], [(n, e.shape) for n, e in spec.outputs]),
-                "unused": [n for i, n in enumerate(in_names) if i not in used],
-                "body": printer.body(prog), "work": printer.declarations(),
-                "stores": printer.stores(prog, [n for n, _ in spec.outputs])}
+        out_names = [n for n, _ in spec.outputs]
+        context = {**fn.common, **self._files(spec),
+                   **self._contract([(n, x.shape) for n, x in spec.inputs], [(n, e.shape) for n, e in spec.outputs]),
+                   "unused": [n for i, n in enumerate(in_names) if i not in used]}
+        if len(prog.body) <= c_printer.SPLIT_ABOVE:
+            return {**context, "parts": None, "body": printer.body(prog), "work": printer.declarations(),
+                    "stores": printer.stores(prog, out_names)}
+        parts = printer.split(prog, out_names)
+        for k, part in enumerate(parts):
+            part["name"] = f"{spec.name}_part{k}"
+            part.setdefault("stores", [])
+            part["unused"] = ([n for i, n in enumerate(in_names) if i not in part["reads"]]
+                              + (out_names if not part["stores"] else []) + ([] if part["uses_slots"] else ["W"]))
+        return {**context, "parts": parts, "slots": max(1, printer.slots), "part_size": printer.part_size,
+                "part_args": self._signature(spec) + ["DERIVE_REAL *W"], "call_args": in_names + out_names + ["W"]}
 
     def template_context(self, fn: Function) -> dict:
         t = fn.spec
