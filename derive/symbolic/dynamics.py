@@ -47,6 +47,15 @@ def link_mass_properties(robot: Robot, sym: Symbols, link_name: str):
     return sym.value(link.mass), _vec(sym, link.com), R_in @ I @ R_in.T
 
 
+CHRISTOFFEL_MAX_NV = 12
+"""Up to this many coordinates the Coriolis matrix is built both ways (see NewtonEuler.coriolis_matrix)."""
+
+
+def graph_cost(e: ca.SX, *inputs: ca.SX) -> int:
+    """Instructions of ``e`` after CSE (inputs, constants and outputs included: a comparison, not a count)."""
+    return ca.Function("cost", list(inputs), [ca.cse(ca.densify(e))], {"allow_free": True}).n_instructions()
+
+
 def christoffel_coriolis(M: ca.SX, q: ca.SX, qd: ca.SX) -> ca.SX:
     """C_ij = sum_k 1/2 (dM_ij/dq_k + dM_ik/dq_j - dM_jk/dq_i) qd_k (Christoffel symbols of the first kind)."""
     n = q.numel()
@@ -394,8 +403,20 @@ class NewtonEuler:
 
     @cached_property
     def coriolis_matrix(self) -> ca.SX:
+        """The Christoffel-symbol C(q, qd), by the cheaper of two exact forms: the symbols of M
+        (:func:`christoffel_coriolis`, O(n^3) terms), or 1/2 d(C qd)/dqd of the Newton-Euler velocity
+        terms rnea(q, qd, 0) without gravity (C qd = sum_jk c_ijk qd_j qd_k with c_ijk = c_ikj, so its
+        derivative is 2 C), which grows as n^2 and wins from about 8 generic joints; up to
+        :data:`CHRISTOFFEL_MAX_NV` coordinates both are built and the one with fewer operations
+        after CSE is kept."""
         self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
-        return christoffel_coriolis(self.mass_matrix, self.sym.q, self.sym.qd)
+        q, qd = self.sym.q, self.sym.qd
+        velocity_terms = self.rnea(qd, ca.SX.zeros(self.sym.nv, 1), gravity=False)
+        by_derivative = 0.5 * ca.jacobian(velocity_terms, qd)
+        if self.sym.nv > CHRISTOFFEL_MAX_NV:
+            return by_derivative
+        by_symbols = christoffel_coriolis(self.mass_matrix, q, qd)
+        return by_symbols if graph_cost(by_symbols, q, qd) <= graph_cost(by_derivative, q, qd) else by_derivative
 
     def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False, split: bool = False) -> ca.SX:
         """RNEA plus the actuators' armature and friction (Coulomb as sign(qd), tanh(qd / eps) if ``smooth``);
