@@ -5,7 +5,7 @@ VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip --disable-pip-version-check -q
 
-.PHONY: derive test check bench clean venv venv-test
+.PHONY: derive test check bench firmware-check clean venv venv-test
 
 derive: $(VENV)/.core
 	$(PY) -m derive generate --prune
@@ -16,6 +16,12 @@ test: $(VENV)/.test
 
 bench: $(VENV)/.test
 	$(PY) -m derive bench
+
+# Cross-compile every generated C file for Cortex-M4F and M7 (needs arm-none-eabi-gcc: Debian's
+# gcc-arm-none-eabi and libnewlib-arm-none-eabi) and record text and stack into firmware.json and
+# the manifests; with the same toolchain a rerun changes nothing.
+firmware-check: $(VENV)/.core
+	$(PY) -m derive firmware-check --record
 
 $(VENV)/.core: pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)

@@ -12,25 +12,10 @@ import casadi as ca
 import numpy as np
 import pytest
 
+from derive.bench.large import generic_chain
 from derive.description.model import parse_models
 from derive.symbolic import dynamics
 from derive.symbolic.model import SXModel
-
-
-def generic_chain(n: int, seed: int = 0) -> str:
-    """An n-joint chain with random placements, axes cycling z, y, x, and random mass properties."""
-    rng = np.random.default_rng(seed)
-    axes = ("[0, 0, 1]", "[0, 1, 0]", "[1, 0, 0]")
-    links = ["      - {name: base}"]
-    joints = []
-    for i in range(1, n + 1):
-        c, xyz, rpy = rng.uniform(-0.1, 0.1, 3), rng.uniform(-0.2, 0.2, 3), rng.uniform(-1, 1, 3)
-        links.append(f"      - {{name: l{i}, mass: {rng.uniform(0.5, 2):.3f}, com: [{c[0]:.3f}, {c[1]:.3f}, {c[2]:.3f}], "
-                     "inertia: [0.02, 0.03, 0.04]}")
-        joints.append(f"      - {{name: q{i}, type: revolute, parent: {'base' if i == 1 else f'l{i - 1}'}, child: l{i}, "
-                      f"axis: {axes[i % 3]}, origin: {{xyz: [{xyz[0]:.3f}, {xyz[1]:.3f}, {xyz[2]:.3f}], "
-                      f"rpy: [{rpy[0]:.3f}, {rpy[1]:.3f}, {rpy[2]:.3f}]}}}}")
-    return f"robots:\n  chain{n}:\n    links:\n" + "\n".join(links) + "\n    joints:\n" + "\n".join(joints) + "\n"
 
 
 @pytest.mark.parametrize("n", [8, 14])

@@ -19,7 +19,7 @@ from derive.codegen.generate import remove_temporaries
 from derive.errors import DeriveError
 
 COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.inspect", "derive.cli.analysis",
-                              "derive.cli.solvers", "derive.cli.identify", "derive.cli.bench"]
+                              "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench"]
 """The command groups; imported when the parser is built."""
 
 

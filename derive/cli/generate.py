@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from derive.cli.common import robots_of
-from derive.codegen.generate import check, default_output, generate
+from derive.codegen.generate import check, default_output, firmware_record_path, generate
 from derive.description.model import MODELS_FILE, load_models, local_models_path
 from derive.errors import DeriveError
 from derive.resources import EXAMPLE_MODELS
@@ -29,7 +29,7 @@ def cmd_generate(args) -> int:
     out = Path(args.out) if args.out else default_output()
     if args.check:
         problems = check({k: v for k, v in robots.items() if not args.robot or k in args.robot}, out,
-                         prune=args.prune and not args.robot)
+                         prune=args.prune and not args.robot, firmware=firmware_record_path(args.models))
         if problems:
             print(f"{out} is stale; run `make derive` (or `derive generate`). {len(problems)} problem(s):",
                   file=sys.stderr)
@@ -42,7 +42,7 @@ def cmd_generate(args) -> int:
         raise DeriveError("generate: --prune removes every robot not in the models file; it cannot be "
                           "combined with --robot")
     generate(robots, out, only=args.robot or None, use_cache=not args.no_cache,
-             log=lambda s: print(s, flush=True), prune=args.prune)
+             log=lambda s: print(s, flush=True), prune=args.prune, firmware=firmware_record_path(args.models))
     return 0
 
 

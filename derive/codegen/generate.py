@@ -9,6 +9,12 @@
   and pinned tool versions) and the sha256 of every file; if both match and the
   files are intact, they are carried over.
 - ``check`` compares those hashes and files without writing anything.
+- Firmware figures (text and stack of each C function cross-compiled for microcontrollers, see
+  ``derive firmware-check``) are measured, not derived: ``derive firmware-check --record`` keeps
+  them in ``firmware.json`` beside the models file, each against the sha256 of the function's
+  translation unit. Generation copies a robot's figures into its manifest.json (``firmware``) for
+  the functions whose translation unit still has that hash, and leaves out the others, so a
+  figure never outlives its source and a fresh generation reproduces the same files.
 """
 
 from __future__ import annotations
@@ -30,9 +36,11 @@ from typing import Callable, Iterable
 import casadi as ca
 import numpy as np
 
+from derive.codegen.backends.c import translation_unit_hash
 from derive.codegen.catalogue import function_specs, template_functions
 from derive.codegen.render import render_robot
 from derive.errors import DeriveError
+from derive.description.model import default_models_path
 from derive.description.robot import Robot, model_data
 from derive.resources import PACKAGE, TEMPLATES
 from derive.symbolic.model import SXModel
@@ -110,6 +118,104 @@ def _intact(out: Path, name: str, entry: dict) -> bool:
     return present == set(entry.get("files", {}))
 
 
+FIRMWARE_RECORD = "firmware.json"
+"""The firmware figures' file, beside the models file (see the module's docstring)."""
+
+
+def firmware_record_path(models: str | Path | None = None) -> Path:
+    """``firmware.json`` beside ``models``, or beside the default models file."""
+    return Path(models if models else default_models_path()).with_name(FIRMWARE_RECORD)
+
+
+def read_firmware_record(path: Path) -> dict:
+    """The recorded figures, ``{"robots": {robot: entry}}``; empty when there is no such file."""
+    try:
+        text = Path(path).read_text()
+    except FileNotFoundError:
+        return {"robots": {}}
+    try:
+        record = json.loads(text)
+    except ValueError as exc:
+        raise DeriveError(f"{path}: not valid JSON ({exc}); it is written by `derive firmware-check --record`") from None
+    robots = record.get("robots") if isinstance(record, dict) else None
+    if not isinstance(robots, dict) or not all(
+            isinstance(e, dict) and isinstance(e.get("functions"), dict) for e in robots.values()):
+        raise DeriveError(f"{path}: not a firmware record (expected {{\"robots\": {{robot: {{..., \"functions\": "
+                          "{...}}}}); it is written by `derive firmware-check --record`")
+    return record
+
+
+def source_hashes(files: dict[str, bytes]) -> dict[str, str]:
+    """{C function: sha256 of its translation unit} of one robot's files ({path under generated/<robot>/:
+    bytes}, manifest.json among them); the key of its firmware figures."""
+    manifest = json.loads(files["manifest.json"])
+    return {fn["name"]: translation_unit_hash(files, fn["c"]["source"], manifest["model_hash"])
+            for fn in manifest["functions"] if fn.get("c")}
+
+
+def firmware_section(files: dict[str, bytes], entry: dict | None) -> dict | None:
+    """A robot's recorded figures (its entry of firmware.json) cut down to the functions whose
+    translation unit is unchanged; None when none is."""
+    if not entry:
+        return None
+    hashes = source_hashes(files)
+    functions = {name: figures for name, figures in entry["functions"].items()
+                 if isinstance(figures, dict) and hashes.get(name) == figures.get("source_sha256")}
+    if not functions:
+        return None
+    # keys sorted at every level, as firmware.json holds them: the same text from a record read or in memory
+    return json.loads(json.dumps({**entry, "functions": functions}, sort_keys=True))
+
+
+def with_firmware(files: dict[str, bytes], entry: dict | None) -> bytes:
+    """The robot's manifest.json with its ``firmware`` section as the record says (or without one)."""
+    manifest = json.loads(files["manifest.json"])
+    manifest.pop("firmware", None)
+    section = firmware_section(files, entry)
+    if section:
+        manifest["firmware"] = section
+    return (json.dumps(manifest, indent=2) + "\n").encode()
+
+
+def robot_files(robot_dir: Path) -> dict[str, bytes]:
+    """{path under the robot's folder: bytes} of every file in it."""
+    return {p.relative_to(robot_dir).as_posix(): p.read_bytes() for p in sorted(Path(robot_dir).rglob("*")) if p.is_file()}
+
+
+def record_firmware(out: Path, entries: dict[str, dict], record_path: Path, log: Callable[[str], None] = print) -> None:
+    """Write measured figures: ``entries`` ({robot: entry}) replace those robots' entries of the record
+    at ``record_path``, then the robots' manifest.json under ``out`` take them (and MANIFEST.json
+    their new sha256), as ``derive generate`` would. The robots' folders must be as derive wrote them."""
+    out = Path(out)
+    manifest = _read_manifest(out)
+    for name in entries:
+        entry = manifest.get("robots", {}).get(name)
+        if entry is None or not _intact(out, name, entry):
+            raise DeriveError(f"{out / name}: not as `derive generate` wrote it (see `derive generate --check`); "
+                              "regenerate it before recording its firmware figures")
+    record = read_firmware_record(record_path)
+    record["robots"] = {**record["robots"], **entries}
+    record["robots"] = {k: record["robots"][k] for k in sorted(record["robots"])}
+    _write_atomically(Path(record_path), (json.dumps(record, indent=2, sort_keys=True) + "\n").encode())
+    for name, entry in entries.items():
+        text = with_firmware(robot_files(out / name), entry)
+        _write_atomically(out / name / "manifest.json", text)
+        manifest["robots"][name]["files"]["manifest.json"] = _sha(text)
+        log(f"{out / name / 'manifest.json'}: firmware figures of "
+            f"{len((firmware_section(robot_files(out / name), entry) or {}).get('functions', {}))} function(s)")
+    _write_atomically(out / "MANIFEST.json", (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+
+
+def _write_atomically(path: Path, data: bytes) -> None:
+    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
+    try:
+        tmp.write_bytes(data)
+        os.replace(tmp, path)
+    except BaseException:
+        tmp.unlink(missing_ok=True)
+        raise
+
+
 def check_mass_matrix(model: SXModel, samples: int = 3) -> None:
     """Refuse a robot whose M(q) is singular at every q, where forward dynamics and the ODE do not
     exist (their code would divide by zero): a coordinate that moves no mass or inertia."""
@@ -182,17 +288,20 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, st
 
 
 def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = None, use_cache: bool = True,
-             log: Callable[[str], None] = print, prune: bool = False) -> dict:
+             log: Callable[[str], None] = print, prune: bool = False, firmware: Path | None = None) -> dict:
     """Write the robots of ``robots`` (all, or the names in ``only``) into ``out``; returns the new MANIFEST.
 
     Only those robots' folders are written or replaced: other robots already in ``out``
     (from another models file, say) and files derive does not manage stay as they are.
     With ``prune``, robots that ``out`` holds but ``robots`` does not are removed (and logged).
+    ``firmware``: the firmware record whose figures go into the manifests (default: the one
+    beside the default models file, :func:`firmware_record_path`).
     """
     shown = Path(out)
     out = output_folder(shown)
+    record = read_firmware_record(firmware or firmware_record_path())
     try:
-        return _generate(robots, out, shown, only, use_cache, log, prune)
+        return _generate(robots, out, shown, only, use_cache, log, prune, record["robots"])
     except OSError as exc:
         raise DeriveError(f"{exc.filename or out}: cannot write the generated code ({exc.strerror or exc})") from None
 
@@ -211,7 +320,7 @@ def output_folder(out: Path) -> Path:
     return out
 
 
-def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune) -> dict:
+def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figures: dict) -> dict:
     _recover(out, log)
     names = sorted(robots) if only is None else sorted(only)
     ghash = generator_hash()
@@ -245,15 +354,22 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune) -> di
                     and _intact(out, name, prev)):
                 shutil.copytree(out / name, tmp / name)
                 new_robots[name] = prev
+                text = with_firmware(robot_files(tmp / name), figures.get(name))
+                if text != (tmp / name / "manifest.json").read_bytes():  # the record changed
+                    (tmp / name / "manifest.json").write_bytes(text)
+                    new_robots[name] = {**prev, "files": {**prev["files"], "manifest.json": _sha(text)}}
+                    log(f"[{k}/{len(names)}] {name}: unchanged, kept; firmware figures updated")
+                    continue
                 log(f"[{k}/{len(names)}] {name}: unchanged, kept")
                 continue
             log(f"[{k}/{len(names)}] {name}: deriving")
-            files = render(robot, mhash, log)
-            for rel, text in files.items():
+            files = {rel: text.encode() for rel, text in render(robot, mhash, log).items()}
+            files["manifest.json"] = with_firmware(files, figures.get(name))
+            for rel, data in files.items():
                 path = tmp / name / rel
                 path.parent.mkdir(parents=True, exist_ok=True)
-                path.write_text(text)
-            new_robots[name] = {"model_hash": mhash, "generator_hash": ghash, "files": {rel: _sha(text) for rel, text in sorted(files.items())}}
+                path.write_bytes(data)
+            new_robots[name] = {"model_hash": mhash, "generator_hash": ghash, "files": {rel: _sha(data) for rel, data in sorted(files.items())}}
         manifest = {"tools": tool_versions(),
                     "robots": {k: new_robots[k] for k in sorted(new_robots)}}
         (tmp / "MANIFEST.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
@@ -332,13 +448,16 @@ def _swap(tmp: Path, out: Path) -> None:
     shutil.rmtree(backup, ignore_errors=True)
 
 
-def check(robots: dict[str, Robot], out: Path, prune: bool = False) -> list[str]:
-    """Stale or edited files of ``robots`` under ``out``: empty when they match the models and derive.
+def check(robots: dict[str, Robot], out: Path, prune: bool = False, firmware: Path | None = None) -> list[str]:
+    """Stale or edited files of ``robots`` under ``out``: empty when they match the models, derive and
+    the firmware record (``firmware``, default :func:`firmware_record_path`).
 
     Other robots in ``out`` are not judged, unless ``prune``: then each is a problem
     (``generate --prune`` would remove it).
     """
     out = Path(out)
+    record_path = firmware or firmware_record_path()
+    figures = read_firmware_record(record_path)["robots"]
     manifest = _read_manifest(out)
     if not manifest:
         return [f"{out}/MANIFEST.json (missing or unreadable)"]
@@ -357,6 +476,7 @@ def check(robots: dict[str, Robot], out: Path, prune: bool = False) -> list[str]
             problems.append(f"{out}/{name}/ (derive, its templates or tool versions changed since generation)")
         else:
             robot_dir = out / name
+            found = len(problems)
             for rel, digest in entry.get("files", {}).items():
                 path = robot_dir / rel
                 if not path.is_file():
@@ -367,4 +487,8 @@ def check(robots: dict[str, Robot], out: Path, prune: bool = False) -> list[str]
                 for path in sorted(robot_dir.rglob("*")):
                     if path.is_file() and path.relative_to(robot_dir).as_posix() not in entry.get("files", {}):
                         problems.append(f"{path} (not generated by derive)")
+            if len(problems) == found:
+                files = robot_files(robot_dir)
+                if with_firmware(files, figures.get(name)) != files["manifest.json"]:
+                    problems.append(f"{robot_dir / 'manifest.json'} (its firmware figures differ from {record_path})")
     return problems

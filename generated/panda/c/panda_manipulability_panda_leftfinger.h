@@ -16,6 +16,9 @@ extern "C" {
  *
  * in  q [7]
  * out mu [3]
+ * -ffast-math / -Ofast / -ffinite-math-only: the compiler may then assume that no value is
+ * infinite, so at a singularity mu1 and mu2 (+inf by IEEE division here) are unspecified; test
+ * mu3 (finite, near 0 at a singularity) against a threshold instead.
  * Arrays are row-major. cost: the arithmetic of panda_jacobian_panda_leftfinger per call, plus loops
  */
 DERIVE_FN void panda_manipulability_panda_leftfinger(const DERIVE_REAL *q, DERIVE_REAL *mu);

@@ -17,6 +17,9 @@ extern "C" {
  * in  q [5]
  * in  p [3]
  * out mu [3]
+ * -ffast-math / -Ofast / -ffinite-math-only: the compiler may then assume that no value is
+ * infinite, so at a singularity mu1 and mu2 (+inf by IEEE division here) are unspecified; test
+ * mu3 (finite, near 0 at a singularity) against a threshold instead.
  * Arrays are row-major. cost: the arithmetic of rrprr_jacobian_tcp per call, plus loops
  */
 DERIVE_FN void rrprr_manipulability_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *mu);

@@ -16,6 +16,9 @@ extern "C" {
  *
  * in  q [6]
  * out mu [3]
+ * -ffast-math / -Ofast / -ffinite-math-only: the compiler may then assume that no value is
+ * infinite, so at a singularity mu1 and mu2 (+inf by IEEE division here) are unspecified; test
+ * mu3 (finite, near 0 at a singularity) against a threshold instead.
  * Arrays are row-major. cost: the arithmetic of ur5_jacobian_ee_link per call, plus loops
  */
 DERIVE_FN void ur5_manipulability_ee_link(const DERIVE_REAL *q, DERIVE_REAL *mu);

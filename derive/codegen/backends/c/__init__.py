@@ -1,4 +1,5 @@
-"""The C99 backend: one ``.c`` and ``.h`` per function, ``derive_real.h``, an umbrella header.
+"""The C99 backend: one ``.c`` and ``.h`` per function, ``derive_real.h``, an umbrella header,
+and the drop-in build files (``CMakeLists.txt``, ``<robot>.mk``, ``example/main.c``).
 
 No malloc, no globals, only ``<math.h>``; ``DERIVE_REAL`` is double, or float with
 ``-DDERIVE_FLOAT``. Functions are ``<robot>_<quantity>[_<frame>]`` taking inputs, then
@@ -6,6 +7,9 @@ outputs, as row-major arrays. Templates and support headers: ``templates/c/``.
 """
 
 from __future__ import annotations
+
+import hashlib
+import re
 
 import jinja2
 
@@ -18,6 +22,26 @@ MATH_FUNCTIONS = [("SIN", "sin"), ("COS", "cos"), ("TAN", "tan"), ("SQRT", "sqrt
                   ("TANH", "tanh"), ("POW", "pow"), ("ATAN2", "atan2"), ("FMIN", "fmin"), ("FMAX", "fmax")]
 SUPPORT = {"ik": ("derive_linalg.h", "derive_ik.h"), "manipulability": ("derive_linalg.h", "derive_manipulability.h")}
 """Fixed algorithms -> the header-only support files (templates/c/support/) that implement them."""
+
+HEADER_NOTES = {
+    "manipulability": (
+        "-ffast-math / -Ofast / -ffinite-math-only: the compiler may then assume that no value is",
+        "infinite, so at a singularity mu1 and mu2 (+inf by IEEE division here) are unspecified; test",
+        "mu3 (finite, near 0 at a singularity) against a threshold instead."),
+}
+"""Notes for the header comment of template functions, by template: what -ffast-math changes.
+(ik_<frame> states its own in ik.h.jinja: its non-finite checks read bits, which fast-math keeps.)"""
+
+BUILD_FILES = (("CMakeLists.txt", "CMakeLists.txt.jinja"), ("{robot}.mk", "robot.mk.jinja"),
+               ("example/main.c", "example_main.c.jinja"))
+"""Drop-in build files under c/: (path, template): a CMake static library, a Makefile fragment and an
+example control loop that uses them."""
+
+EXAMPLE_SIGNATURES = {"mass_matrix": ["q"], "inverse_dynamics": ["q", "qd", "qdd"],
+                      "forward_dynamics": ["q", "qd", "tau"], "rk4_step": ["x", "u", "dt"]}
+"""The inputs (before p) of the functions example/main.c calls, as its template spells the calls."""
+
+INCLUDE = re.compile(r'^#include "([^"]+)"', re.MULTILINE)
 
 
 class CBackend(Backend):
@@ -48,7 +72,7 @@ class CBackend(Backend):
         out_names = [n for n, _ in spec.outputs]
         context = {**fn.common, **self._files(spec),
                    **self._contract([(n, x.shape) for n, x in spec.inputs], [(n, e.shape) for n, e in spec.outputs]),
-                   "unused": [n for i, n in enumerate(in_names) if i not in used]}
+                   "unused": [n for i, n in enumerate(in_names) if i not in used], "header_notes": []}
         if len(prog.body) <= c_printer.SPLIT_ABOVE:
             return {**context, "parts": None, "body": printer.body(prog), "work": printer.declarations(),
                     "stores": printer.stores(prog, out_names)}
@@ -70,6 +94,7 @@ class CBackend(Backend):
         return {**fn.common, **self._files(t), **context, **calls,
                 **self._contract(t.inputs, t.outputs, t.status, t.optional),
                 "macro": t.name.upper(), "c_return": "int" if t.status else "void",
+                "header_notes": list(HEADER_NOTES.get(t.template, ())),
                 "c_template": self.template(f"{t.template}.c.jinja"),
                 "h_template": self.template(header) if self.has_template(header) else self.template("function.h.jinja"),
                 "call_headers": [f"{t.robot}_{short}.h" for short in t.callees],
@@ -90,7 +115,22 @@ class CBackend(Backend):
                 base, f=f)
         files[f"c/{robot.robot}.h"] = env.get_template(self.template("robot.h.jinja")).render(
             base, guard=f"{robot.robot.upper()}_DERIVE_H", headers=[f["header"] for f in functions])
+        build = self.build_context(robot, functions)
+        for path, template in BUILD_FILES:
+            files[f"c/{path.format(robot=robot.robot)}"] = env.get_template(self.template(template)).render(base, **build)
         return files
+
+    @staticmethod
+    def build_context(robot: RobotContext, functions: list[dict]) -> dict:
+        """What the build files and the example need: the sources, and how the example's calls are spelled."""
+        by_quantity = {f["quantity"]: f for f in functions if f["frame"] is None}
+        has_p = bool(robot.parameters)
+        for quantity, inputs in EXAMPLE_SIGNATURES.items():
+            got = [a["name"] for a in by_quantity[quantity]["c_reads"]]
+            if got != inputs + (["p"] if has_p else []):  # the template's calls would not compile
+                raise AssertionError(f"example/main.c calls {quantity}({', '.join(inputs)}), the C has {got}")
+        return {"sources": sorted(f["source"] for f in functions), "has_p": has_p, "p_arg": ", p" if has_p else "",
+                "quaternion": by_quantity["rk4_step"]["quaternion"]}
 
     @staticmethod
     def support_files(functions: list[dict]) -> list[str]:
@@ -104,7 +144,43 @@ class CBackend(Backend):
                 "reads": f["c_reads"], "writes": f["c_writes"]}
 
     def manifest_support(self, robot: RobotContext, functions: list[dict]) -> list[dict]:
-        return [{"file": f"c/{name}", "source": self.support_source(name)} for name in self.support_files(functions)]
+        """The support headers (verbatim copies), then the build files: ``build`` says which tool
+        uses each (``cmake``: its library target; ``make``: the variables it defines; ``example``)."""
+        prefix = f"{robot.robot.upper()}_DERIVE"
+        uses = [{"build": "cmake", "target": f"{robot.robot}_derive", "options": [f"{prefix}_FLOAT", f"{prefix}_EXAMPLE"]},
+                {"build": "make", "variables": [f"{prefix}_{v}" for v in ("SRC", "INC", "CFLAGS", "LDLIBS", "EXAMPLE")],
+                 "options": [f"{prefix}_FLOAT"]},
+                {"build": "example", "target": f"{robot.robot}_derive_example"}]
+        return [{"file": f"c/{name}", "source": self.support_source(name)} for name in self.support_files(functions)] + [
+            {"file": f"c/{path.format(robot=robot.robot)}", "source": f"templates/{self.name}/{template}", **use}
+            for (path, template), use in zip(BUILD_FILES, uses)]
+
+
+def translation_unit(files: dict[str, bytes], source: str) -> list[str]:
+    """The files one C source compiles from: ``source`` (a path of ``files``, e.g. ``c/panda_gravity.c``)
+    and every generated header it includes, directly or not, sorted. Headers outside ``files``
+    (``<math.h>``) are the toolchain's."""
+    folder = source.rpartition("/")[0]
+    seen, todo = set(), [source]
+    while todo:
+        path = todo.pop()
+        if path in seen or path not in files:
+            continue
+        seen.add(path)
+        text = files[path].decode("utf-8", "replace")
+        todo += [f"{folder}/{name}" if folder else name for name in INCLUDE.findall(text)]
+    return sorted(seen)
+
+
+def translation_unit_hash(files: dict[str, bytes], source: str, model_hash: str) -> str:
+    """sha256 of what compiling ``source`` reads (:func:`translation_unit`), with the model hash of
+    the banners left out: a model edit that does not change a function's code (a new frame, say)
+    keeps its hash. Firmware figures (text, stack) are recorded against it."""
+    h = hashlib.sha256()
+    for path in translation_unit(files, source):
+        h.update(f"\0{path}\0".encode())
+        h.update(files[path].replace(model_hash.encode(), b"MODEL") if model_hash else files[path])
+    return h.hexdigest()
 
 
 BACKEND = CBackend()
