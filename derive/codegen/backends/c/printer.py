@@ -21,7 +21,7 @@ from derive.codegen.backends.base import ExpressionPrinter, float_literal
 from derive.codegen.program import Program, allocate, last_reads
 
 WORK_PER_LINE = 12
-SPLIT_ABOVE = 16000
+SPLIT_ABOVE = 12000
 """Instructions above which a function is split into parts (the shipped robots' largest, the
 Panda's ode_jac_x, has 10 305, and stays one function)."""
 PART_SIZE = 4000
