@@ -2,7 +2,8 @@
 
 The program is the single representation every printer reads: C, Python and
 sympy (for inspection and LaTeX). CasADi's ``cse`` merges equal
-subexpressions first; each instruction then becomes ``t<k> = op(args)``, and
+subexpressions first, then the commuted duplicates it keeps apart (a * b and b * a);
+each instruction then becomes ``t<k> = op(args)``, and
 outputs are listed as (output index, row-major position, operand).
 
 Operands are tagged tuples: ("t", k) a temporary, ("in", i, j) element j of
@@ -27,6 +28,8 @@ BINARY = {
     ca.OP_ADD: "add", ca.OP_SUB: "sub", ca.OP_MUL: "mul", ca.OP_DIV: "div", ca.OP_POW: "pow",
     ca.OP_CONSTPOW: "pow", ca.OP_ATAN2: "atan2", ca.OP_FMIN: "fmin", ca.OP_FMAX: "fmax",
 }
+COMMUTATIVE = {"add", "mul"}
+"""IEEE addition and multiplication are exactly commutative: ``build_program`` merges a * b with b * a."""
 TRIG = {"sin", "cos", "tan", "asin", "acos", "atan", "atan2"}
 # cost class of each op for the "ops" comment: mul, add, div, trig, other
 COST = {"add": "add", "sub": "add", "neg": "add", "mul": "mul", "sq": "mul", "twice": "add",
@@ -68,6 +71,7 @@ def build_program(inputs: list[tuple[str, ca.SX]], outputs: list[tuple[str, ca.S
     f = ca.Function("f", [x for _, x in inputs], outs, {"allow_free": False})
     prog = Program([(n, x.shape) for n, x in inputs], [(n, e.shape) for n, e in outputs])
     work: dict[int, tuple] = {}
+    seen: dict[tuple, tuple] = {}  # (op, operands; commutative ones sorted) -> its operand
     for k in range(f.n_instructions()):
         op = f.instruction_id(k)
         ins, outs_k = f.instruction_input(k), f.instruction_output(k)
@@ -86,8 +90,12 @@ def build_program(inputs: list[tuple[str, ca.SX]], outputs: list[tuple[str, ca.S
             if name == "assign":
                 work[outs_k[0]] = args[0]
                 continue
+            key = (name, tuple(sorted(args, key=repr)) if name in COMMUTATIVE else args)
+            if key in seen:  # a * b after b * a (CasADi's CSE tells them apart): the same number, exactly
+                work[outs_k[0]] = seen[key]
+                continue
             prog.body.append(Instr(name, args))
-            work[outs_k[0]] = ("t", len(prog.body) - 1)
+            work[outs_k[0]] = seen[key] = ("t", len(prog.body) - 1)
         else:
             raise NotImplementedError(f"CasADi operation {op} has no printer")
     prog.results.sort(key=lambda r: (r[0], r[1]))

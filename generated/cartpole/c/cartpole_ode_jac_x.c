@@ -6,7 +6,7 @@
 
 DERIVE_FN void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *A)
 {
-    /* 63 ops: 34 mul, 21 add, 6 div, 2 trig */
+    /* 57 ops: 30 mul, 19 add, 6 div, 2 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9;
     w0 = DERIVE_SIN(x[1]);
     w1 = DERIVE_COS(x[1]);
@@ -34,43 +34,37 @@ DERIVE_FN void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DE
     w7 = w0 * w2;
     w8 = DERIVE_LIT(9.81) * w1;
     w7 = w7 + w8;
-    w7 = DERIVE_LIT(0.1) * w7;
-    w3 = w7 - w3;
-    w7 = w3 * w1;
-    w3 = w2 * w1;
+    w8 = DERIVE_LIT(0.1) * w7;
+    w3 = w8 - w3;
+    w3 = w3 * w1;
+    w2 = w2 * w1;
     w9 = DERIVE_LIT(9.81) * w0;
-    w3 = w3 - w9;
-    w3 = DERIVE_LIT(0.1) * w3;
-    w3 = w0 * w3;
-    w7 = w7 + w3;
-    w3 = w1 * w2;
-    w9 = w3 - w9;
-    w3 = DERIVE_LIT(0.1) * w9;
-    w9 = (-DERIVE_LIT(0.05)) * w6;
-    w6 = w3 + w9;
-    w3 = w6 * w0;
-    w9 = w2 * w0;
-    w6 = w9 + w8;
-    w2 = DERIVE_LIT(0.1) * w6;
-    w8 = w1 * w2;
-    w9 = w3 + w8;
-    w1 = w7 - w9;
-    w2 = w1 / DERIVE_LIT(1.1);
-    w3 = (-DERIVE_LIT(0.05)) * w6;
-    w8 = w5 * w1;
-    w7 = w3 + w8;
-    w9 = w7 / w4;
-    w6 = w5 * w9;
-    w1 = w2 + w6;
-    w3 = -w1;
-    w8 = (-DERIVE_LIT(0.1)) * x[3];
-    w7 = w0 * w8;
-    w2 = w7 / DERIVE_LIT(1.1);
-    w6 = w5 * w7;
-    w1 = w6 / w4;
+    w2 = w2 - w9;
+    w9 = DERIVE_LIT(0.1) * w2;
+    w2 = w0 * w9;
+    w3 = w3 + w2;
+    w2 = (-DERIVE_LIT(0.05)) * w6;
+    w6 = w9 + w2;
+    w9 = w6 * w0;
+    w2 = w1 * w8;
+    w6 = w9 + w2;
+    w1 = w3 - w6;
+    w8 = w1 / DERIVE_LIT(1.1);
+    w9 = (-DERIVE_LIT(0.05)) * w7;
+    w2 = w5 * w1;
+    w3 = w9 + w2;
+    w6 = w3 / w4;
+    w7 = w5 * w6;
+    w1 = w8 + w7;
+    w9 = -w1;
+    w2 = (-DERIVE_LIT(0.1)) * x[3];
+    w3 = w0 * w2;
+    w8 = w3 / DERIVE_LIT(1.1);
+    w7 = w5 * w3;
+    w1 = w7 / w4;
     w0 = w5 * w1;
-    w8 = w2 + w0;
-    w7 = -w1;
+    w2 = w8 + w0;
+    w3 = -w1;
     A[0] = DERIVE_LIT(0.0);
     A[1] = DERIVE_LIT(0.0);
     A[2] = DERIVE_LIT(1.0);
@@ -80,11 +74,11 @@ DERIVE_FN void cartpole_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, DE
     A[6] = DERIVE_LIT(0.0);
     A[7] = DERIVE_LIT(1.0);
     A[8] = DERIVE_LIT(0.0);
-    A[9] = w3;
+    A[9] = w9;
     A[10] = DERIVE_LIT(0.0);
-    A[11] = w8;
+    A[11] = w2;
     A[12] = DERIVE_LIT(0.0);
-    A[13] = w9;
+    A[13] = w6;
     A[14] = DERIVE_LIT(0.0);
-    A[15] = w7;
+    A[15] = w3;
 }

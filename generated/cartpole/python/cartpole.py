@@ -1380,7 +1380,7 @@ def ode_jac_x(x, u):
     in  x [4]
     in  u [2]
     out A [4x4]
-    63 ops: 34 mul, 21 add, 6 div, 2 trig
+    57 ops: 30 mul, 19 add, 6 div, 2 trig
     """
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
@@ -1416,29 +1416,23 @@ def ode_jac_x(x, u):
     t7 = t0 * t4
     t8 = 9.81 * t1
     t7 = t7 + t8
-    t7 = 0.1 * t7
-    t3 = t7 - t3
+    t8 = 0.1 * t7
+    t3 = t8 - t3
     t3 = t3 * t1
-    t7 = t4 * t1
+    t4 = t4 * t1
     t9 = 9.81 * t0
-    t7 = t7 - t9
-    t7 = 0.1 * t7
-    t7 = t0 * t7
-    t3 = t3 + t7
-    t7 = t1 * t4
-    t7 = t7 - t9
-    t7 = 0.1 * t7
+    t4 = t4 - t9
+    t4 = 0.1 * t4
+    t9 = t0 * t4
+    t3 = t3 + t9
     t2 = (-0.05) * t2
-    t2 = t7 + t2
+    t2 = t4 + t2
     t2 = t2 * t0
-    t4 = t4 * t0
-    t4 = t4 + t8
-    t7 = 0.1 * t4
-    t1 = t1 * t7
+    t1 = t1 * t8
     t1 = t2 + t1
     t1 = t3 - t1
     t2 = t1 / 1.1
-    t3 = (-0.05) * t4
+    t3 = (-0.05) * t7
     t1 = t5 * t1
     t1 = t3 + t1
     t1 = t1 / t6
@@ -1505,32 +1499,26 @@ def _ode_jac_x_chunk(x, t, s, y):
     multiply(t0, t4, t7)
     multiply(k6, t1, t8)
     add(t7, t8, t7)
-    multiply(k7, t7, t7)
-    subtract(t7, t3, t7)
-    multiply(t7, t1, t7)
-    multiply(t4, t1, t3)
+    multiply(k7, t7, t8)
+    subtract(t8, t3, t3)
+    multiply(t3, t1, t3)
+    multiply(t4, t1, t4)
     multiply(k6, t0, t9)
-    subtract(t3, t9, t3)
-    multiply(k7, t3, t3)
-    multiply(t0, t3, t3)
-    add(t7, t3, t7)
-    multiply(t1, t4, t3)
-    subtract(t3, t9, t3)
-    multiply(k7, t3, t3)
+    subtract(t4, t9, t4)
+    multiply(k7, t4, t4)
+    multiply(t0, t4, t9)
+    add(t3, t9, t3)
     multiply(k1, t6, t6)
-    add(t3, t6, t3)
-    multiply(t3, t0, t3)
+    add(t4, t6, t4)
     multiply(t4, t0, t4)
-    add(t4, t8, t4)
-    multiply(k7, t4, t6)
-    multiply(t1, t6, t1)
-    add(t3, t1, t3)
-    subtract(t7, t3, t7)
-    divide(t7, k2, t1)
-    multiply(k1, t4, t4)
-    multiply(t5, t7, t7)
-    add(t4, t7, t4)
-    divide(t4, t2, A_13)
+    multiply(t1, t8, t1)
+    add(t4, t1, t4)
+    subtract(t3, t4, t3)
+    divide(t3, k2, t1)
+    multiply(k1, t7, t7)
+    multiply(t5, t3, t3)
+    add(t7, t3, t7)
+    divide(t7, t2, A_13)
     multiply(t5, A_13, t3)
     add(t1, t3, t1)
     negative(t1, A_9)

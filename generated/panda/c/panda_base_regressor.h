@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [7]
  * in  qdd [7]
  * out Y_b [7x62]
- * Arrays are row-major. 1320 ops: 750 mul, 551 add, 0 div, 12 trig, 7 other
+ * Arrays are row-major. 1270 ops: 711 mul, 540 add, 0 div, 12 trig, 7 other
  */
 DERIVE_FN void panda_base_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *Y_b);
 

@@ -21,7 +21,7 @@ extern "C" {
  * out fk_tcp [4x4]
  * out jacobian_tcp [6x7]
  * out jdot_qd_tcp [6]
- * Arrays are row-major. 1573 ops: 859 mul, 700 add, 0 div, 14 trig
+ * Arrays are row-major. 1566 ops: 857 mul, 695 add, 0 div, 14 trig
  */
 DERIVE_FN void panda_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *mass_matrix, DERIVE_REAL *bias, DERIVE_REAL *fk_tcp, DERIVE_REAL *jacobian_tcp, DERIVE_REAL *jdot_qd_tcp);
 

@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [7]
  * in  tau [7]
  * out qdd [7]
- * Arrays are row-major. 1534 ops: 831 mul, 663 add, 28 div, 12 trig
+ * Arrays are row-major. 1527 ops: 829 mul, 658 add, 28 div, 12 trig
  */
 DERIVE_FN void panda_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
 

@@ -19,7 +19,7 @@ extern "C" {
  * in  tau [7]
  * in  w [6]
  * out qdd [7]
- * Arrays are row-major. 1780 ops: 970 mul, 768 add, 28 div, 14 trig
+ * Arrays are row-major. 1773 ops: 968 mul, 763 add, 28 div, 14 trig
  */
 DERIVE_FN void panda_forward_dynamics_fext(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *w, DERIVE_REAL *qdd);
 

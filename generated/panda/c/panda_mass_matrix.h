@@ -16,7 +16,7 @@ extern "C" {
  *
  * in  q [7]
  * out M [7x7]
- * Arrays are row-major. 478 ops: 239 mul, 227 add, 0 div, 12 trig
+ * Arrays are row-major. 471 ops: 237 mul, 222 add, 0 div, 12 trig
  */
 DERIVE_FN void panda_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
 

@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [7]
  * in  qdd [7]
  * out Y [7x91]
- * Arrays are row-major. 1673 ops: 943 mul, 711 add, 0 div, 12 trig, 7 other
+ * Arrays are row-major. 1581 ops: 868 mul, 694 add, 0 div, 12 trig, 7 other
  */
 DERIVE_FN void panda_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *Y);
 

@@ -6,9 +6,9 @@
 
 DERIVE_FN void planar_2r_bundle_computed_torque(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *inverse_dynamics, DERIVE_REAL *fk_tcp, DERIVE_REAL *jacobian_tcp, DERIVE_REAL *frame_acceleration_tcp)
 {
-    /* 89 ops: 50 mul, 31 add, 4 div, 4 trig */
+    /* 88 ops: 50 mul, 30 add, 4 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11;
-    DERIVE_REAL w12, w13, w14, w15;
+    DERIVE_REAL w12, w13, w14;
     w0 = p[0] * p[0];
     w0 = p[2] * w0;
     w0 = w0 / DERIVE_LIT(12.0);
@@ -77,37 +77,36 @@ DERIVE_FN void planar_2r_bundle_computed_torque(const DERIVE_REAL *q, const DERI
     w11 = w12 * w9;
     w13 = w1 * w6;
     w2 = w11 + w13;
-    w4 = w13 + w11;
-    w9 = -w4;
-    w6 = w1 * p[0];
-    w11 = w3 * p[1];
-    w13 = w6 + w11;
-    w1 = w12 * p[0];
-    w6 = w2 * p[1];
-    w12 = w1 + w6;
-    w1 = -w12;
-    w6 = -w6;
-    w15 = w10 * p[1];
-    w10 = w10 * w15;
-    w15 = w7 - w10;
-    w7 = w3 * w15;
+    w4 = -w2;
+    w9 = w1 * p[0];
+    w6 = w3 * p[1];
+    w11 = w9 + w6;
+    w13 = w12 * p[0];
+    w1 = w2 * p[1];
+    w9 = w13 + w1;
+    w12 = -w9;
+    w13 = -w1;
+    w1 = w10 * p[1];
+    w10 = w10 * w1;
+    w1 = w7 - w10;
+    w7 = w3 * w1;
     w10 = w5 * p[1];
     w8 = w8 + w10;
-    w10 = w4 * w8;
-    w4 = w7 - w10;
-    w7 = w2 * w15;
-    w10 = w3 * w8;
-    w15 = w7 + w10;
+    w10 = w2 * w8;
+    w7 = w7 - w10;
+    w10 = w2 * w1;
+    w1 = w3 * w8;
+    w8 = w10 + w1;
     inverse_dynamics[0] = w14;
     inverse_dynamics[1] = w0;
     fk_tcp[0] = w3;
-    fk_tcp[1] = w9;
+    fk_tcp[1] = w4;
     fk_tcp[2] = DERIVE_LIT(0.0);
-    fk_tcp[3] = w13;
+    fk_tcp[3] = w11;
     fk_tcp[4] = w2;
     fk_tcp[5] = w3;
     fk_tcp[6] = DERIVE_LIT(0.0);
-    fk_tcp[7] = w12;
+    fk_tcp[7] = w9;
     fk_tcp[8] = DERIVE_LIT(0.0);
     fk_tcp[9] = DERIVE_LIT(0.0);
     fk_tcp[10] = DERIVE_LIT(1.0);
@@ -116,10 +115,10 @@ DERIVE_FN void planar_2r_bundle_computed_torque(const DERIVE_REAL *q, const DERI
     fk_tcp[13] = DERIVE_LIT(0.0);
     fk_tcp[14] = DERIVE_LIT(0.0);
     fk_tcp[15] = DERIVE_LIT(1.0);
-    jacobian_tcp[0] = w1;
-    jacobian_tcp[1] = w6;
-    jacobian_tcp[2] = w13;
-    jacobian_tcp[3] = w11;
+    jacobian_tcp[0] = w12;
+    jacobian_tcp[1] = w13;
+    jacobian_tcp[2] = w11;
+    jacobian_tcp[3] = w6;
     jacobian_tcp[4] = DERIVE_LIT(0.0);
     jacobian_tcp[5] = DERIVE_LIT(0.0);
     jacobian_tcp[6] = DERIVE_LIT(0.0);
@@ -128,8 +127,8 @@ DERIVE_FN void planar_2r_bundle_computed_torque(const DERIVE_REAL *q, const DERI
     jacobian_tcp[9] = DERIVE_LIT(0.0);
     jacobian_tcp[10] = DERIVE_LIT(1.0);
     jacobian_tcp[11] = DERIVE_LIT(1.0);
-    frame_acceleration_tcp[0] = w4;
-    frame_acceleration_tcp[1] = w15;
+    frame_acceleration_tcp[0] = w7;
+    frame_acceleration_tcp[1] = w8;
     frame_acceleration_tcp[2] = DERIVE_LIT(0.0);
     frame_acceleration_tcp[3] = DERIVE_LIT(0.0);
     frame_acceleration_tcp[4] = DERIVE_LIT(0.0);

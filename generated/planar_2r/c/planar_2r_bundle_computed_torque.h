@@ -22,7 +22,7 @@ extern "C" {
  * out fk_tcp [4x4]
  * out jacobian_tcp [6x2]
  * out frame_acceleration_tcp [6]
- * Arrays are row-major. 89 ops: 50 mul, 31 add, 4 div, 4 trig
+ * Arrays are row-major. 88 ops: 50 mul, 30 add, 4 div, 4 trig
  */
 DERIVE_FN void planar_2r_bundle_computed_torque(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *inverse_dynamics, DERIVE_REAL *fk_tcp, DERIVE_REAL *jacobian_tcp, DERIVE_REAL *frame_acceleration_tcp);
 

@@ -6,9 +6,9 @@
 
 DERIVE_FN void planar_2r_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *mass_matrix, DERIVE_REAL *bias, DERIVE_REAL *fk_tcp, DERIVE_REAL *jacobian_tcp, DERIVE_REAL *jdot_qd_tcp)
 {
-    /* 84 ops: 47 mul, 29 add, 4 div, 4 trig */
+    /* 82 ops: 46 mul, 28 add, 4 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11;
-    DERIVE_REAL w12, w13, w14, w15, w16, w17;
+    DERIVE_REAL w12, w13, w14, w15, w16;
     w0 = p[0] * p[0];
     w1 = p[2] * w0;
     w1 = w1 / DERIVE_LIT(12.0);
@@ -28,9 +28,8 @@ DERIVE_FN void planar_2r_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL 
     w5 = DERIVE_COS(q[1]);
     w4 = p[3] * w4;
     w6 = w5 * w4;
-    w7 = p[0] * w6;
-    w7 = w3 + w7;
-    w6 = w6 * p[0];
+    w6 = p[0] * w6;
+    w7 = w3 + w6;
     w6 = w7 + w6;
     w0 = p[3] * w0;
     w6 = w6 + w0;
@@ -73,26 +72,25 @@ DERIVE_FN void planar_2r_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL 
     w13 = w12 * w5;
     w1 = w6 * w8;
     w5 = w13 + w1;
-    w8 = w1 + w13;
-    w13 = -w8;
-    w1 = w6 * p[0];
-    w6 = w4 * p[1];
-    w1 = w1 + w6;
-    w12 = w12 * p[0];
-    w15 = w5 * p[1];
-    w12 = w12 + w15;
-    w16 = -w12;
-    w15 = -w15;
-    w17 = w9 * p[1];
-    w9 = w9 * w17;
-    w17 = w2 + w9;
-    w2 = w4 * w17;
-    w9 = w8 * w10;
-    w8 = w2 + w9;
-    w2 = -w8;
-    w9 = w4 * w10;
-    w8 = w5 * w17;
-    w10 = w9 - w8;
+    w8 = -w5;
+    w13 = w6 * p[0];
+    w1 = w4 * p[1];
+    w6 = w13 + w1;
+    w13 = w12 * p[0];
+    w12 = w5 * p[1];
+    w13 = w13 + w12;
+    w15 = -w13;
+    w12 = -w12;
+    w16 = w9 * p[1];
+    w9 = w9 * w16;
+    w16 = w2 + w9;
+    w2 = w4 * w16;
+    w9 = w5 * w10;
+    w2 = w2 + w9;
+    w9 = -w2;
+    w2 = w4 * w10;
+    w10 = w5 * w16;
+    w16 = w2 - w10;
     mass_matrix[0] = w0;
     mass_matrix[1] = w7;
     mass_matrix[2] = w7;
@@ -100,13 +98,13 @@ DERIVE_FN void planar_2r_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL 
     bias[0] = w14;
     bias[1] = w11;
     fk_tcp[0] = w4;
-    fk_tcp[1] = w13;
+    fk_tcp[1] = w8;
     fk_tcp[2] = DERIVE_LIT(0.0);
-    fk_tcp[3] = w1;
+    fk_tcp[3] = w6;
     fk_tcp[4] = w5;
     fk_tcp[5] = w4;
     fk_tcp[6] = DERIVE_LIT(0.0);
-    fk_tcp[7] = w12;
+    fk_tcp[7] = w13;
     fk_tcp[8] = DERIVE_LIT(0.0);
     fk_tcp[9] = DERIVE_LIT(0.0);
     fk_tcp[10] = DERIVE_LIT(1.0);
@@ -115,10 +113,10 @@ DERIVE_FN void planar_2r_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL 
     fk_tcp[13] = DERIVE_LIT(0.0);
     fk_tcp[14] = DERIVE_LIT(0.0);
     fk_tcp[15] = DERIVE_LIT(1.0);
-    jacobian_tcp[0] = w16;
-    jacobian_tcp[1] = w15;
-    jacobian_tcp[2] = w1;
-    jacobian_tcp[3] = w6;
+    jacobian_tcp[0] = w15;
+    jacobian_tcp[1] = w12;
+    jacobian_tcp[2] = w6;
+    jacobian_tcp[3] = w1;
     jacobian_tcp[4] = DERIVE_LIT(0.0);
     jacobian_tcp[5] = DERIVE_LIT(0.0);
     jacobian_tcp[6] = DERIVE_LIT(0.0);
@@ -127,8 +125,8 @@ DERIVE_FN void planar_2r_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL 
     jacobian_tcp[9] = DERIVE_LIT(0.0);
     jacobian_tcp[10] = DERIVE_LIT(1.0);
     jacobian_tcp[11] = DERIVE_LIT(1.0);
-    jdot_qd_tcp[0] = w2;
-    jdot_qd_tcp[1] = w10;
+    jdot_qd_tcp[0] = w9;
+    jdot_qd_tcp[1] = w16;
     jdot_qd_tcp[2] = DERIVE_LIT(0.0);
     jdot_qd_tcp[3] = DERIVE_LIT(0.0);
     jdot_qd_tcp[4] = DERIVE_LIT(0.0);

@@ -22,7 +22,7 @@ extern "C" {
  * out fk_tcp [4x4]
  * out jacobian_tcp [6x2]
  * out jdot_qd_tcp [6]
- * Arrays are row-major. 84 ops: 47 mul, 29 add, 4 div, 4 trig
+ * Arrays are row-major. 82 ops: 46 mul, 28 add, 4 div, 4 trig
  */
 DERIVE_FN void planar_2r_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *mass_matrix, DERIVE_REAL *bias, DERIVE_REAL *fk_tcp, DERIVE_REAL *jacobian_tcp, DERIVE_REAL *jdot_qd_tcp);
 

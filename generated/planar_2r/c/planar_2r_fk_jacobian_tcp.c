@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J)
 {
-    /* 20 ops: 8 mul, 8 add, 0 div, 4 trig */
+    /* 19 ops: 8 mul, 7 add, 0 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7;
     w0 = DERIVE_COS(q[0]);
     w1 = DERIVE_COS(q[1]);
@@ -18,20 +18,19 @@ DERIVE_FN void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL
     w5 = w3 * w1;
     w1 = w0 * w4;
     w4 = w5 + w1;
-    w5 = w1 + w5;
-    w1 = -w5;
-    w5 = w0 * p[0];
+    w5 = -w4;
+    w1 = w0 * p[0];
     w0 = w2 * p[1];
-    w5 = w5 + w0;
+    w1 = w1 + w0;
     w3 = w3 * p[0];
     w6 = w4 * p[1];
     w3 = w3 + w6;
     w7 = -w3;
     w6 = -w6;
     T[0] = w2;
-    T[1] = w1;
+    T[1] = w5;
     T[2] = DERIVE_LIT(0.0);
-    T[3] = w5;
+    T[3] = w1;
     T[4] = w4;
     T[5] = w2;
     T[6] = DERIVE_LIT(0.0);
@@ -46,7 +45,7 @@ DERIVE_FN void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL
     T[15] = DERIVE_LIT(1.0);
     J[0] = w7;
     J[1] = w6;
-    J[2] = w5;
+    J[2] = w1;
     J[3] = w0;
     J[4] = DERIVE_LIT(0.0);
     J[5] = DERIVE_LIT(0.0);

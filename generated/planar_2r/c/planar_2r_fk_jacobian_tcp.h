@@ -18,7 +18,7 @@ extern "C" {
  * in  p [5]
  * out T [4x4]
  * out J [6x2]
- * Arrays are row-major. 20 ops: 8 mul, 8 add, 0 div, 4 trig
+ * Arrays are row-major. 19 ops: 8 mul, 7 add, 0 div, 4 trig
  */
 DERIVE_FN void planar_2r_fk_jacobian_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T, DERIVE_REAL *J);
 

@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T)
 {
-    /* 18 ops: 8 mul, 6 add, 0 div, 4 trig */
+    /* 17 ops: 8 mul, 5 add, 0 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5;
     w0 = DERIVE_COS(q[0]);
     w1 = DERIVE_COS(q[1]);
@@ -18,18 +18,17 @@ DERIVE_FN void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERI
     w5 = w3 * w1;
     w1 = w0 * w4;
     w4 = w5 + w1;
-    w5 = w1 + w5;
-    w1 = -w5;
-    w5 = w0 * p[0];
+    w5 = -w4;
+    w1 = w0 * p[0];
     w0 = w2 * p[1];
-    w5 = w5 + w0;
+    w1 = w1 + w0;
     w0 = w3 * p[0];
     w3 = w4 * p[1];
     w0 = w0 + w3;
     T[0] = w2;
-    T[1] = w1;
+    T[1] = w5;
     T[2] = DERIVE_LIT(0.0);
-    T[3] = w5;
+    T[3] = w1;
     T[4] = w4;
     T[5] = w2;
     T[6] = DERIVE_LIT(0.0);

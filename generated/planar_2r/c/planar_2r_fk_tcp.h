@@ -17,7 +17,7 @@ extern "C" {
  * in  q [2]
  * in  p [5]
  * out T [4x4]
- * Arrays are row-major. 18 ops: 8 mul, 6 add, 0 div, 4 trig
+ * Arrays are row-major. 17 ops: 8 mul, 5 add, 0 div, 4 trig
  */
 DERIVE_FN void planar_2r_fk_tcp(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *T);
 

@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd)
 {
-    /* 67 ops: 35 mul, 21 add, 7 div, 4 trig */
+    /* 66 ops: 34 mul, 21 add, 7 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10;
     w0 = p[0] / DERIVE_LIT(2.0);
     w0 = p[0] - w0;
@@ -59,22 +59,21 @@ DERIVE_FN void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REA
     w3 = w5 * w4;
     w8 = p[0] * w3;
     w1 = w6 + w8;
-    w0 = w3 * p[0];
-    w4 = w1 + w0;
-    w5 = p[3] * w7;
-    w8 = w4 + w5;
-    w3 = w10 + w8;
-    w0 = w2 / w3;
+    w0 = w1 + w8;
+    w4 = p[3] * w7;
+    w5 = w0 + w4;
+    w3 = w10 + w5;
+    w8 = w2 / w3;
     w7 = w1 / w3;
-    w4 = tau[1] - w9;
-    w5 = w7 * w2;
-    w10 = w4 - w5;
-    w8 = w7 * w7;
-    w1 = w8 * w3;
+    w0 = tau[1] - w9;
+    w4 = w7 * w2;
+    w10 = w0 - w4;
+    w5 = w7 * w7;
+    w1 = w5 * w3;
     w9 = w6 - w1;
     w2 = w10 / w9;
-    w4 = w7 * w2;
-    w5 = w0 - w4;
-    qdd[0] = w5;
+    w0 = w7 * w2;
+    w4 = w8 - w0;
+    qdd[0] = w4;
     qdd[1] = w2;
 }

@@ -19,7 +19,7 @@ extern "C" {
  * in  tau [2]
  * in  p [5]
  * out qdd [2]
- * Arrays are row-major. 67 ops: 35 mul, 21 add, 7 div, 4 trig
+ * Arrays are row-major. 66 ops: 34 mul, 21 add, 7 div, 4 trig
  */
 DERIVE_FN void planar_2r_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
 

@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_forward_dynamics_fext(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *w, const DERIVE_REAL *p, DERIVE_REAL *qdd)
 {
-    /* 89 ops: 47 mul, 31 add, 7 div, 4 trig */
+    /* 88 ops: 46 mul, 31 add, 7 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11;
     DERIVE_REAL w12, w13;
     w0 = DERIVE_COS(q[0]);
@@ -77,27 +77,26 @@ DERIVE_FN void planar_2r_forward_dynamics_fext(const DERIVE_REAL *q, const DERIV
     w1 = w2 * w10;
     w9 = p[0] * w1;
     w7 = w13 + w9;
-    w11 = w1 * p[0];
-    w3 = w7 + w11;
-    w2 = p[3] * w5;
-    w10 = w3 + w2;
-    w9 = w4 + w10;
-    w1 = w0 / w9;
-    w11 = w7 / w9;
+    w11 = w7 + w9;
+    w3 = p[3] * w5;
+    w2 = w11 + w3;
+    w10 = w4 + w2;
+    w1 = w0 / w10;
+    w9 = w7 / w10;
     w5 = w6 * w[1];
-    w3 = w8 * w[0];
-    w2 = w5 - w3;
-    w4 = w2 + w[5];
-    w10 = tau[1] + w4;
-    w7 = w10 - w12;
-    w6 = w11 * w0;
+    w11 = w8 * w[0];
+    w3 = w5 - w11;
+    w4 = w3 + w[5];
+    w2 = tau[1] + w4;
+    w7 = w2 - w12;
+    w6 = w9 * w0;
     w8 = w7 - w6;
-    w5 = w11 * w11;
-    w3 = w5 * w9;
-    w2 = w13 - w3;
-    w4 = w8 / w2;
-    w12 = w11 * w4;
-    w10 = w1 - w12;
-    qdd[0] = w10;
+    w5 = w9 * w9;
+    w11 = w5 * w10;
+    w3 = w13 - w11;
+    w4 = w8 / w3;
+    w12 = w9 * w4;
+    w2 = w1 - w12;
+    qdd[0] = w2;
     qdd[1] = w4;
 }

@@ -20,7 +20,7 @@ extern "C" {
  * in  w [6]
  * in  p [5]
  * out qdd [2]
- * Arrays are row-major. 89 ops: 47 mul, 31 add, 7 div, 4 trig
+ * Arrays are row-major. 88 ops: 46 mul, 31 add, 7 div, 4 trig
  */
 DERIVE_FN void planar_2r_forward_dynamics_fext(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *w, const DERIVE_REAL *p, DERIVE_REAL *qdd);
 

@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *a)
 {
-    /* 33 ops: 18 mul, 11 add, 0 div, 4 trig */
+    /* 32 ops: 18 mul, 10 add, 0 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9;
     w0 = DERIVE_COS(q[0]);
     w1 = DERIVE_COS(q[1]);
@@ -29,22 +29,21 @@ DERIVE_FN void planar_2r_frame_acceleration_tcp(const DERIVE_REAL *q, const DERI
     w8 = w0 * w4;
     w0 = w3 * w1;
     w3 = w8 + w0;
-    w4 = w4 * w7;
-    w7 = w1 * w5;
-    w1 = w4 + w7;
-    w5 = qdd[0] + qdd[1];
-    w4 = w5 * p[1];
-    w7 = w1 + w4;
-    w1 = w3 * w7;
-    w4 = w6 - w1;
-    w3 = w0 + w8;
-    w6 = w3 * w9;
-    w1 = w2 * w7;
-    w8 = w6 + w1;
-    a[0] = w4;
-    a[1] = w8;
+    w8 = w4 * w7;
+    w0 = w1 * w5;
+    w4 = w8 + w0;
+    w7 = qdd[0] + qdd[1];
+    w1 = w7 * p[1];
+    w5 = w4 + w1;
+    w8 = w3 * w5;
+    w0 = w6 - w8;
+    w4 = w3 * w9;
+    w1 = w2 * w5;
+    w6 = w4 + w1;
+    a[0] = w0;
+    a[1] = w6;
     a[2] = DERIVE_LIT(0.0);
     a[3] = DERIVE_LIT(0.0);
     a[4] = DERIVE_LIT(0.0);
-    a[5] = w5;
+    a[5] = w7;
 }

@@ -19,7 +19,7 @@ extern "C" {
  * in  qdd [2]
  * in  p [5]
  * out a [6]
- * Arrays are row-major. 33 ops: 18 mul, 11 add, 0 div, 4 trig
+ * Arrays are row-major. 32 ops: 18 mul, 10 add, 0 div, 4 trig
  */
 DERIVE_FN void planar_2r_frame_acceleration_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *a);
 

@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *a)
 {
-    /* 26 ops: 14 mul, 8 add, 0 div, 4 trig */
+    /* 25 ops: 14 mul, 7 add, 0 div, 4 trig */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8;
     w0 = DERIVE_COS(q[0]);
     w1 = DERIVE_COS(q[1]);
@@ -27,15 +27,14 @@ DERIVE_FN void planar_2r_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd
     w0 = w3 * w1;
     w1 = w7 + w0;
     w3 = w4 * w5;
-    w4 = w1 * w3;
-    w5 = w6 + w4;
-    w1 = -w5;
-    w6 = w2 * w3;
-    w4 = w0 + w7;
-    w5 = w4 * w8;
-    w2 = w6 - w5;
-    a[0] = w1;
-    a[1] = w2;
+    w7 = w1 * w3;
+    w0 = w6 + w7;
+    w4 = -w0;
+    w5 = w2 * w3;
+    w6 = w1 * w8;
+    w7 = w5 - w6;
+    a[0] = w4;
+    a[1] = w7;
     a[2] = DERIVE_LIT(0.0);
     a[3] = DERIVE_LIT(0.0);
     a[4] = DERIVE_LIT(0.0);

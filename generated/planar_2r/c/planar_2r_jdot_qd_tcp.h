@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [2]
  * in  p [5]
  * out a [6]
- * Arrays are row-major. 26 ops: 14 mul, 8 add, 0 div, 4 trig
+ * Arrays are row-major. 25 ops: 14 mul, 7 add, 0 div, 4 trig
  */
 DERIVE_FN void planar_2r_jdot_qd_tcp(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *a);
 

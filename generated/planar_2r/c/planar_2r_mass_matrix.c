@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M)
 {
-    /* 26 ops: 13 mul, 8 add, 4 div, 1 trig */
+    /* 25 ops: 12 mul, 8 add, 4 div, 1 trig */
     DERIVE_REAL w0, w1, w2, w3, w4;
     w0 = p[0] * p[0];
     w1 = p[2] * w0;
@@ -28,14 +28,13 @@ DERIVE_FN void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p,
     w3 = p[3] * w3;
     w4 = w4 * w3;
     w3 = p[0] * w4;
-    w3 = w2 + w3;
-    w4 = w4 * p[0];
-    w4 = w3 + w4;
+    w4 = w2 + w3;
+    w3 = w4 + w3;
     w0 = p[3] * w0;
-    w4 = w4 + w0;
-    w0 = w1 + w4;
+    w3 = w3 + w0;
+    w0 = w1 + w3;
     M[0] = w0;
-    M[1] = w3;
-    M[2] = w3;
+    M[1] = w4;
+    M[2] = w4;
     M[3] = w2;
 }

@@ -17,7 +17,7 @@ extern "C" {
  * in  q [2]
  * in  p [5]
  * out M [2x2]
- * Arrays are row-major. 26 ops: 13 mul, 8 add, 4 div, 1 trig
+ * Arrays are row-major. 25 ops: 12 mul, 8 add, 4 div, 1 trig
  */
 DERIVE_FN void planar_2r_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
 

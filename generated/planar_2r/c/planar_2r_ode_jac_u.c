@@ -6,7 +6,7 @@
 
 DERIVE_FN void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B)
 {
-    /* 36 ops: 16 mul, 11 add, 8 div, 1 trig */
+    /* 35 ops: 15 mul, 11 add, 8 div, 1 trig */
     (void)u;
     DERIVE_REAL w0, w1, w2, w3, w4;
     w0 = p[0] * p[0];
@@ -29,27 +29,26 @@ DERIVE_FN void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, c
     w3 = p[3] * w3;
     w4 = w4 * w3;
     w3 = p[0] * w4;
-    w3 = w2 + w3;
-    w4 = w4 * p[0];
-    w4 = w3 + w4;
+    w4 = w2 + w3;
+    w3 = w4 + w3;
     w0 = p[3] * w0;
-    w4 = w4 + w0;
-    w0 = w1 + w4;
+    w3 = w3 + w0;
+    w0 = w1 + w3;
     w1 = DERIVE_LIT(1.0) / w0;
-    w4 = w3 / w0;
-    w3 = w4 * w4;
-    w0 = w3 * w0;
-    w3 = w2 - w0;
-    w2 = w4 / w3;
-    w0 = w4 * w2;
-    w4 = w1 + w0;
+    w3 = w4 / w0;
+    w4 = w3 * w3;
+    w0 = w4 * w0;
+    w4 = w2 - w0;
+    w2 = w3 / w4;
+    w0 = w3 * w2;
+    w3 = w1 + w0;
     w1 = -w2;
-    w0 = DERIVE_LIT(1.0) / w3;
+    w0 = DERIVE_LIT(1.0) / w4;
     B[0] = DERIVE_LIT(0.0);
     B[1] = DERIVE_LIT(0.0);
     B[2] = DERIVE_LIT(0.0);
     B[3] = DERIVE_LIT(0.0);
-    B[4] = w4;
+    B[4] = w3;
     B[5] = w1;
     B[6] = w1;
     B[7] = w0;

@@ -18,7 +18,7 @@ extern "C" {
  * in  u [2]
  * in  p [5]
  * out B [4x2]
- * Arrays are row-major. 36 ops: 16 mul, 11 add, 8 div, 1 trig
+ * Arrays are row-major. 35 ops: 15 mul, 11 add, 8 div, 1 trig
  */
 DERIVE_FN void planar_2r_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
 

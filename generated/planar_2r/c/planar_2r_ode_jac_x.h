@@ -18,7 +18,7 @@ extern "C" {
  * in  u [2]
  * in  p [5]
  * out A [4x4]
- * Arrays are row-major. 158 ops: 84 mul, 55 add, 15 div, 4 trig
+ * Arrays are row-major. 145 ops: 73 mul, 53 add, 15 div, 4 trig
  */
 DERIVE_FN void planar_2r_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *A);
 

@@ -18,7 +18,7 @@ extern "C" {
  * in  u [2]
  * in  p [5]
  * out xdot [4]
- * Arrays are row-major. 67 ops: 35 mul, 21 add, 7 div, 4 trig
+ * Arrays are row-major. 66 ops: 34 mul, 21 add, 7 div, 4 trig
  */
 DERIVE_FN void planar_2r_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
 

@@ -80,7 +80,7 @@ def fk_tcp(q, p=DEFAULT_P):
     in  q [2]
     in  p [5]
     out T [4x4]
-    18 ops: 8 mul, 6 add, 0 div, 4 trig
+    17 ops: 8 mul, 5 add, 0 div, 4 trig
     """
     q = _input(q, 2, "q")
     p = _input(p, 5, "p")
@@ -95,15 +95,14 @@ def fk_tcp(q, p=DEFAULT_P):
     t7 = t3 * t1
     t8 = t0 * t4
     t9 = t7 + t8
-    t10 = t8 + t7
-    t11 = -t10
-    t12 = t0 * p[..., 0]
-    t13 = t6 * p[..., 1]
-    t14 = t12 + t13
-    t15 = t3 * p[..., 0]
-    t16 = t9 * p[..., 1]
-    t17 = t15 + t16
-    T = _assemble([t6, t11, 0.0, t14, t9, t6, 0.0, t17, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    t10 = -t9
+    t11 = t0 * p[..., 0]
+    t12 = t6 * p[..., 1]
+    t13 = t11 + t12
+    t14 = t3 * p[..., 0]
+    t15 = t9 * p[..., 1]
+    t16 = t14 + t15
+    T = _assemble([t6, t10, 0.0, t13, t9, t6, 0.0, t16, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
     return T
 
 
@@ -147,7 +146,7 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     in  qd [2]
     in  p [5]
     out a [6]
-    26 ops: 14 mul, 8 add, 0 div, 4 trig
+    25 ops: 14 mul, 7 add, 0 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
@@ -176,10 +175,9 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     t20 = t14 + t19
     t21 = -t20
     t22 = t6 * t18
-    t23 = t16 + t15
-    t24 = t23 * t13
-    t25 = t22 - t24
-    a = _assemble([t21, t25, 0.0, 0.0, 0.0, 0.0], batch)
+    t23 = t17 * t13
+    t24 = t22 - t23
+    a = _assemble([t21, t24, 0.0, 0.0, 0.0, 0.0], batch)
     return a
 
 
@@ -191,7 +189,7 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     in  qdd [2]
     in  p [5]
     out a [6]
-    33 ops: 18 mul, 11 add, 0 div, 4 trig
+    32 ops: 18 mul, 10 add, 0 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
@@ -227,11 +225,10 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     t26 = t23 + t25
     t27 = t20 * t26
     t28 = t17 - t27
-    t29 = t19 + t18
-    t30 = t29 * t16
-    t31 = t6 * t26
-    t32 = t30 + t31
-    a = _assemble([t28, t32, 0.0, 0.0, 0.0, t24], batch)
+    t29 = t20 * t16
+    t30 = t6 * t26
+    t31 = t29 + t30
+    a = _assemble([t28, t31, 0.0, 0.0, 0.0, t24], batch)
     return a
 
 
@@ -242,7 +239,7 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     in  p [5]
     out T [4x4]
     out J [6x2]
-    20 ops: 8 mul, 8 add, 0 div, 4 trig
+    19 ops: 8 mul, 7 add, 0 div, 4 trig
     """
     q = _input(q, 2, "q")
     p = _input(p, 5, "p")
@@ -257,18 +254,17 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     t7 = t3 * t1
     t8 = t0 * t4
     t9 = t7 + t8
-    t10 = t8 + t7
-    t11 = -t10
-    t12 = t0 * p[..., 0]
-    t13 = t6 * p[..., 1]
-    t14 = t12 + t13
-    t15 = t3 * p[..., 0]
-    t16 = t9 * p[..., 1]
-    t17 = t15 + t16
-    t18 = -t17
-    t19 = -t16
-    T = _assemble([t6, t11, 0.0, t14, t9, t6, 0.0, t17, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    J = _assemble([t18, t19, t14, t13, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
+    t10 = -t9
+    t11 = t0 * p[..., 0]
+    t12 = t6 * p[..., 1]
+    t13 = t11 + t12
+    t14 = t3 * p[..., 0]
+    t15 = t9 * p[..., 1]
+    t16 = t14 + t15
+    t17 = -t16
+    t18 = -t15
+    T = _assemble([t6, t10, 0.0, t13, t9, t6, 0.0, t16, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    J = _assemble([t17, t18, t13, t12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
     return T, J
 
 
@@ -278,7 +274,7 @@ def mass_matrix(q, p=DEFAULT_P):
     in  q [2]
     in  p [5]
     out M [2x2]
-    26 ops: 13 mul, 8 add, 4 div, 1 trig
+    25 ops: 12 mul, 8 add, 4 div, 1 trig
     """
     q = _input(q, 2, "q")
     p = _input(p, 5, "p")
@@ -304,12 +300,11 @@ def mass_matrix(q, p=DEFAULT_P):
     t18 = t16 * t17
     t19 = p[..., 0] * t18
     t20 = t15 + t19
-    t21 = t18 * p[..., 0]
-    t22 = t20 + t21
-    t23 = p[..., 3] * t0
-    t24 = t22 + t23
-    t25 = t7 + t24
-    M = _assemble([t25, t20, t20, t15], batch).reshape(batch + (2, 2))
+    t21 = t20 + t19
+    t22 = p[..., 3] * t0
+    t23 = t21 + t22
+    t24 = t7 + t23
+    M = _assemble([t24, t20, t20, t15], batch).reshape(batch + (2, 2))
     return M
 
 
@@ -519,7 +514,7 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     in  tau [2]
     in  p [5]
     out qdd [2]
-    67 ops: 35 mul, 21 add, 7 div, 4 trig
+    66 ops: 34 mul, 21 add, 7 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
@@ -577,23 +572,22 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t48 = t9 * t8
     t49 = p[..., 0] * t48
     t50 = t47 + t49
-    t51 = t48 * p[..., 0]
-    t52 = t50 + t51
-    t53 = p[..., 3] * t36
-    t54 = t52 + t53
-    t55 = t41 + t54
-    t56 = t35 / t55
-    t57 = t50 / t55
-    t58 = tau[..., 1] - t19
-    t59 = t57 * t35
-    t60 = t58 - t59
-    t61 = t57 * t57
-    t62 = t61 * t55
-    t63 = t47 - t62
-    t64 = t60 / t63
-    t65 = t57 * t64
-    t66 = t56 - t65
-    qdd = _assemble([t66, t64], batch)
+    t51 = t50 + t49
+    t52 = p[..., 3] * t36
+    t53 = t51 + t52
+    t54 = t41 + t53
+    t55 = t35 / t54
+    t56 = t50 / t54
+    t57 = tau[..., 1] - t19
+    t58 = t56 * t35
+    t59 = t57 - t58
+    t60 = t56 * t56
+    t61 = t60 * t54
+    t62 = t47 - t61
+    t63 = t59 / t62
+    t64 = t56 * t63
+    t65 = t55 - t64
+    qdd = _assemble([t65, t63], batch)
     return qdd
 
 
@@ -705,7 +699,7 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     in  w [6]
     in  p [5]
     out qdd [2]
-    89 ops: 47 mul, 31 add, 7 div, 4 trig
+    88 ops: 46 mul, 31 add, 7 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
@@ -781,28 +775,27 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     t65 = t2 * t28
     t66 = p[..., 0] * t65
     t67 = t64 + t66
-    t68 = t65 * p[..., 0]
-    t69 = t67 + t68
-    t70 = p[..., 3] * t53
-    t71 = t69 + t70
-    t72 = t58 + t71
-    t73 = t52 / t72
-    t74 = t67 / t72
-    t75 = t8 * w[..., 1]
-    t76 = t15 * w[..., 0]
-    t77 = t75 - t76
-    t78 = t77 + w[..., 5]
-    t79 = tau[..., 1] + t78
-    t80 = t79 - t36
-    t81 = t74 * t52
-    t82 = t80 - t81
-    t83 = t74 * t74
-    t84 = t83 * t72
-    t85 = t64 - t84
-    t86 = t82 / t85
-    t87 = t74 * t86
-    t88 = t73 - t87
-    qdd = _assemble([t88, t86], batch)
+    t68 = t67 + t66
+    t69 = p[..., 3] * t53
+    t70 = t68 + t69
+    t71 = t58 + t70
+    t72 = t52 / t71
+    t73 = t67 / t71
+    t74 = t8 * w[..., 1]
+    t75 = t15 * w[..., 0]
+    t76 = t74 - t75
+    t77 = t76 + w[..., 5]
+    t78 = tau[..., 1] + t77
+    t79 = t78 - t36
+    t80 = t73 * t52
+    t81 = t79 - t80
+    t82 = t73 * t73
+    t83 = t82 * t71
+    t84 = t64 - t83
+    t85 = t81 / t84
+    t86 = t73 * t85
+    t87 = t72 - t86
+    qdd = _assemble([t87, t85], batch)
     return qdd
 
 
@@ -988,7 +981,7 @@ def ode_rhs(x, u, p=DEFAULT_P):
     in  u [2]
     in  p [5]
     out xdot [4]
-    67 ops: 35 mul, 21 add, 7 div, 4 trig
+    66 ops: 34 mul, 21 add, 7 div, 4 trig
     """
     x = _input(x, 4, "x")
     u = _input(u, 2, "u")
@@ -1045,23 +1038,22 @@ def ode_rhs(x, u, p=DEFAULT_P):
     t48 = t9 * t8
     t49 = p[..., 0] * t48
     t50 = t47 + t49
-    t51 = t48 * p[..., 0]
-    t52 = t50 + t51
-    t53 = p[..., 3] * t36
-    t54 = t52 + t53
-    t55 = t41 + t54
-    t56 = t35 / t55
-    t57 = t50 / t55
-    t58 = u[..., 1] - t19
-    t59 = t57 * t35
-    t60 = t58 - t59
-    t61 = t57 * t57
-    t62 = t61 * t55
-    t63 = t47 - t62
-    t64 = t60 / t63
-    t65 = t57 * t64
-    t66 = t56 - t65
-    xdot = _assemble([x[..., 2], x[..., 3], t66, t64], batch)
+    t51 = t50 + t49
+    t52 = p[..., 3] * t36
+    t53 = t51 + t52
+    t54 = t41 + t53
+    t55 = t35 / t54
+    t56 = t50 / t54
+    t57 = u[..., 1] - t19
+    t58 = t56 * t35
+    t59 = t57 - t58
+    t60 = t56 * t56
+    t61 = t60 * t54
+    t62 = t47 - t61
+    t63 = t59 / t62
+    t64 = t56 * t63
+    t65 = t55 - t64
+    xdot = _assemble([x[..., 2], x[..., 3], t65, t63], batch)
     return xdot
 
 
@@ -1072,7 +1064,7 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     in  u [2]
     in  p [5]
     out A [4x4]
-    158 ops: 84 mul, 55 add, 15 div, 4 trig
+    145 ops: 73 mul, 53 add, 15 div, 4 trig
     """
     x = _input(x, 4, "x")
     u = _input(u, 2, "u")
@@ -1121,122 +1113,109 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t40 = t1 * t24
     t41 = p[..., 0] * t40
     t42 = t39 + t41
-    t43 = t40 * p[..., 0]
-    t44 = t42 + t43
-    t45 = p[..., 3] * t28
-    t46 = t44 + t45
-    t47 = t33 + t46
-    t48 = t27 / t47
-    t49 = t42 / t47
-    t50 = t49 * t27
-    t51 = t25 + t50
-    t52 = t49 * t49
-    t53 = t52 * t47
-    t54 = t39 - t53
-    t55 = t51 / t54
-    t56 = t49 * t55
-    t57 = t48 + t56
-    t58 = -t57
-    t59 = t5 * p[..., 4]
-    t60 = x[..., 2] * p[..., 0]
-    t61 = x[..., 2] * t60
-    t62 = t59 - t61
-    t63 = t1 * t62
-    t64 = t2 * p[..., 4]
-    t65 = t20 * t64
-    t66 = t1 * t64
-    t67 = t0 * t62
-    t68 = t66 - t67
-    t69 = t24 * t68
-    t70 = t65 + t69
-    t71 = t0 * t64
-    t72 = t63 + t71
-    t73 = p[..., 3] * t72
-    t74 = x[..., 2] + x[..., 3]
-    t75 = t74 * t24
-    t76 = t74 * t75
-    t77 = t73 - t76
-    t78 = t0 * t77
-    t79 = p[..., 3] * t68
-    t80 = t1 * t79
-    t81 = t78 + t80
-    t82 = p[..., 0] * t81
-    t83 = t70 + t82
-    t84 = u[..., 0] - t83
-    t85 = t84 / t47
-    t86 = u[..., 1] - t69
-    t87 = t49 * t84
-    t88 = t86 - t87
-    t89 = t88 / t54
-    t90 = t49 * t89
-    t91 = t85 - t90
-    t92 = t91 * p[..., 0]
-    t93 = t64 + t92
-    t94 = t0 * t93
-    t95 = t63 + t94
+    t43 = t42 + t41
+    t44 = p[..., 3] * t28
+    t45 = t43 + t44
+    t46 = t33 + t45
+    t47 = t27 / t46
+    t48 = t42 / t46
+    t49 = t48 * t27
+    t50 = t25 + t49
+    t51 = t48 * t48
+    t52 = t51 * t46
+    t53 = t39 - t52
+    t54 = t50 / t53
+    t55 = t48 * t54
+    t56 = t47 + t55
+    t57 = -t56
+    t58 = x[..., 2] * p[..., 0]
+    t59 = x[..., 2] * t58
+    t60 = t6 - t59
+    t61 = t1 * t60
+    t62 = t20 * t3
+    t63 = t0 * t60
+    t64 = t4 - t63
+    t65 = t24 * t64
+    t66 = t62 + t65
+    t67 = t61 + t12
+    t68 = p[..., 3] * t67
+    t69 = x[..., 2] + x[..., 3]
+    t70 = t69 * t24
+    t71 = t69 * t70
+    t72 = t68 - t71
+    t73 = t0 * t72
+    t74 = p[..., 3] * t64
+    t75 = t1 * t74
+    t76 = t73 + t75
+    t77 = p[..., 0] * t76
+    t78 = t66 + t77
+    t79 = u[..., 0] - t78
+    t80 = t79 / t46
+    t81 = u[..., 1] - t65
+    t82 = t48 * t79
+    t83 = t81 - t82
+    t84 = t83 / t53
+    t85 = t48 * t84
+    t86 = t80 - t85
+    t87 = t86 * p[..., 0]
+    t88 = t3 + t87
+    t89 = t0 * t88
+    t90 = t61 + t89
+    t91 = p[..., 3] * t90
+    t92 = t91 - t71
+    t93 = t92 * t1
+    t94 = t88 * t1
+    t95 = t94 - t63
     t96 = p[..., 3] * t95
-    t97 = t96 - t76
-    t98 = t97 * t1
-    t99 = t93 * t1
-    t100 = t62 * t0
-    t101 = t99 - t100
-    t102 = p[..., 3] * t101
-    t103 = t0 * t102
-    t104 = t98 + t103
-    t105 = t1 * t93
-    t106 = t105 - t67
-    t107 = p[..., 3] * t106
-    t108 = t91 + t89
-    t109 = t108 * t24
-    t110 = t107 + t109
-    t111 = t110 * t0
-    t112 = t93 * t0
-    t113 = t62 * t1
-    t114 = t112 + t113
-    t115 = p[..., 3] * t114
-    t116 = t1 * t115
-    t117 = t111 + t116
-    t118 = t104 - t117
-    t119 = p[..., 0] * t118
-    t120 = t24 * t114
-    t121 = t119 - t120
-    t122 = t121 / t47
-    t123 = t49 * t121
-    t124 = t120 + t123
-    t125 = t124 / t54
-    t126 = t49 * t125
-    t127 = t122 + t126
-    t128 = -t127
-    t129 = t60 + t60
-    t130 = t0 * t129
-    t131 = t24 * t130
-    t132 = p[..., 3] * t130
-    t133 = t1 * t132
-    t134 = t1 * t129
-    t135 = p[..., 3] * t134
-    t136 = t75 + t75
-    t137 = t135 + t136
-    t138 = t0 * t137
-    t139 = t133 - t138
-    t140 = p[..., 0] * t139
-    t141 = t131 + t140
-    t142 = t141 / t47
-    t143 = t49 * t141
-    t144 = t131 - t143
-    t145 = t144 / t54
-    t146 = t49 * t145
-    t147 = t142 - t146
-    t148 = -t147
-    t149 = -t145
-    t150 = t0 * t136
-    t151 = p[..., 0] * t150
-    t152 = t151 / t47
-    t153 = t49 * t151
-    t154 = t153 / t54
-    t155 = t49 * t154
-    t156 = t152 + t155
-    t157 = -t154
-    A = _assemble([0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t58, t128, t148, t156, t55, t125, t149, t157], batch).reshape(batch + (4, 4))
+    t97 = t0 * t96
+    t98 = t93 + t97
+    t99 = t86 + t84
+    t100 = t99 * t24
+    t101 = t96 + t100
+    t102 = t101 * t0
+    t103 = t1 * t91
+    t104 = t102 + t103
+    t105 = t98 - t104
+    t106 = p[..., 0] * t105
+    t107 = t24 * t90
+    t108 = t106 - t107
+    t109 = t108 / t46
+    t110 = t48 * t108
+    t111 = t107 + t110
+    t112 = t111 / t53
+    t113 = t48 * t112
+    t114 = t109 + t113
+    t115 = -t114
+    t116 = t58 + t58
+    t117 = t0 * t116
+    t118 = t24 * t117
+    t119 = p[..., 3] * t117
+    t120 = t1 * t119
+    t121 = t1 * t116
+    t122 = p[..., 3] * t121
+    t123 = t70 + t70
+    t124 = t122 + t123
+    t125 = t0 * t124
+    t126 = t120 - t125
+    t127 = p[..., 0] * t126
+    t128 = t118 + t127
+    t129 = t128 / t46
+    t130 = t48 * t128
+    t131 = t118 - t130
+    t132 = t131 / t53
+    t133 = t48 * t132
+    t134 = t129 - t133
+    t135 = -t134
+    t136 = -t132
+    t137 = t0 * t123
+    t138 = p[..., 0] * t137
+    t139 = t138 / t46
+    t140 = t48 * t138
+    t141 = t140 / t53
+    t142 = t48 * t141
+    t143 = t139 + t142
+    t144 = -t141
+    A = _assemble([0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t57, t115, t135, t143, t54, t112, t136, t144], batch).reshape(batch + (4, 4))
     return A
 
 
@@ -1247,7 +1226,7 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     in  u [2]
     in  p [5]
     out B [4x2]
-    36 ops: 16 mul, 11 add, 8 div, 1 trig
+    35 ops: 15 mul, 11 add, 8 div, 1 trig
     """
     x = _input(x, 4, "x")
     u = _input(u, 2, "u")
@@ -1274,22 +1253,21 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t18 = t16 * t17
     t19 = p[..., 0] * t18
     t20 = t15 + t19
-    t21 = t18 * p[..., 0]
-    t22 = t20 + t21
-    t23 = p[..., 3] * t0
-    t24 = t22 + t23
-    t25 = t7 + t24
-    t26 = 1.0 / t25
-    t27 = t20 / t25
-    t28 = t27 * t27
-    t29 = t28 * t25
-    t30 = t15 - t29
-    t31 = t27 / t30
-    t32 = t27 * t31
-    t33 = t26 + t32
-    t34 = -t31
-    t35 = 1.0 / t30
-    B = _assemble([0.0, 0.0, 0.0, 0.0, t33, t34, t34, t35], batch).reshape(batch + (4, 2))
+    t21 = t20 + t19
+    t22 = p[..., 3] * t0
+    t23 = t21 + t22
+    t24 = t7 + t23
+    t25 = 1.0 / t24
+    t26 = t20 / t24
+    t27 = t26 * t26
+    t28 = t27 * t24
+    t29 = t15 - t28
+    t30 = t26 / t29
+    t31 = t26 * t30
+    t32 = t25 + t31
+    t33 = -t30
+    t34 = 1.0 / t29
+    B = _assemble([0.0, 0.0, 0.0, 0.0, t32, t33, t33, t34], batch).reshape(batch + (4, 2))
     return B
 
 
@@ -1415,7 +1393,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     out fk_tcp [4x4]
     out jacobian_tcp [6x2]
     out jdot_qd_tcp [6]
-    84 ops: 47 mul, 29 add, 4 div, 4 trig
+    82 ops: 46 mul, 28 add, 4 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
@@ -1442,74 +1420,72 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t18 = t16 * t17
     t19 = p[..., 0] * t18
     t20 = t15 + t19
-    t21 = t18 * p[..., 0]
-    t22 = t20 + t21
-    t23 = p[..., 3] * t0
-    t24 = t22 + t23
-    t25 = t7 + t24
-    t26 = p[..., 2] * t4
-    t27 = jnp.cos(q[..., 0])
-    t28 = t27 * p[..., 4]
-    t29 = t26 * t28
-    t30 = jnp.sin(q[..., 1])
-    t31 = qd[..., 0] * p[..., 0]
-    t32 = qd[..., 0] * t31
-    t33 = t30 * t32
-    t34 = t16 * t28
-    t35 = jnp.sin(q[..., 0])
-    t36 = t35 * p[..., 4]
-    t37 = t30 * t36
-    t38 = t34 - t37
-    t39 = t33 + t38
-    t40 = t17 * t39
-    t41 = t29 + t40
-    t42 = t16 * t36
-    t43 = t30 * t28
-    t44 = t42 + t43
-    t45 = t16 * t32
-    t46 = t44 - t45
-    t47 = p[..., 3] * t46
-    t48 = qd[..., 0] + qd[..., 1]
-    t49 = t48 * t17
-    t50 = t48 * t49
-    t51 = t47 - t50
-    t52 = t30 * t51
-    t53 = p[..., 3] * t39
-    t54 = t16 * t53
-    t55 = t52 + t54
-    t56 = p[..., 0] * t55
-    t57 = t41 + t56
-    t58 = t27 * t16
-    t59 = t35 * t30
-    t60 = t58 - t59
-    t61 = t35 * t16
-    t62 = t27 * t30
-    t63 = t61 + t62
-    t64 = t62 + t61
-    t65 = -t64
-    t66 = t27 * p[..., 0]
-    t67 = t60 * p[..., 1]
-    t68 = t66 + t67
-    t69 = t35 * p[..., 0]
-    t70 = t63 * p[..., 1]
-    t71 = t69 + t70
-    t72 = -t71
-    t73 = -t70
-    t74 = t48 * p[..., 1]
-    t75 = t48 * t74
-    t76 = t45 + t75
-    t77 = t60 * t76
-    t78 = t64 * t33
-    t79 = t77 + t78
-    t80 = -t79
-    t81 = t60 * t33
-    t82 = t63 * t76
-    t83 = t81 - t82
-    mass_matrix = _assemble([t25, t20, t20, t15], batch).reshape(batch + (2, 2))
-    bias = _assemble([t57, t40], batch)
-    fk_tcp = _assemble([t60, t65, 0.0, t68, t63, t60, 0.0, t71, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    jacobian_tcp = _assemble([t72, t73, t68, t67, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
-    jdot_qd_tcp = _assemble([t80, t83, 0.0, 0.0, 0.0, 0.0], batch)
+    t21 = t20 + t19
+    t22 = p[..., 3] * t0
+    t23 = t21 + t22
+    t24 = t7 + t23
+    t25 = p[..., 2] * t4
+    t26 = jnp.cos(q[..., 0])
+    t27 = t26 * p[..., 4]
+    t28 = t25 * t27
+    t29 = jnp.sin(q[..., 1])
+    t30 = qd[..., 0] * p[..., 0]
+    t31 = qd[..., 0] * t30
+    t32 = t29 * t31
+    t33 = t16 * t27
+    t34 = jnp.sin(q[..., 0])
+    t35 = t34 * p[..., 4]
+    t36 = t29 * t35
+    t37 = t33 - t36
+    t38 = t32 + t37
+    t39 = t17 * t38
+    t40 = t28 + t39
+    t41 = t16 * t35
+    t42 = t29 * t27
+    t43 = t41 + t42
+    t44 = t16 * t31
+    t45 = t43 - t44
+    t46 = p[..., 3] * t45
+    t47 = qd[..., 0] + qd[..., 1]
+    t48 = t47 * t17
+    t49 = t47 * t48
+    t50 = t46 - t49
+    t51 = t29 * t50
+    t52 = p[..., 3] * t38
+    t53 = t16 * t52
+    t54 = t51 + t53
+    t55 = p[..., 0] * t54
+    t56 = t40 + t55
+    t57 = t26 * t16
+    t58 = t34 * t29
+    t59 = t57 - t58
+    t60 = t34 * t16
+    t61 = t26 * t29
+    t62 = t60 + t61
+    t63 = -t62
+    t64 = t26 * p[..., 0]
+    t65 = t59 * p[..., 1]
+    t66 = t64 + t65
+    t67 = t34 * p[..., 0]
+    t68 = t62 * p[..., 1]
+    t69 = t67 + t68
+    t70 = -t69
+    t71 = -t68
+    t72 = t47 * p[..., 1]
+    t73 = t47 * t72
+    t74 = t44 + t73
+    t75 = t59 * t74
+    t76 = t62 * t32
+    t77 = t75 + t76
+    t78 = -t77
+    t79 = t59 * t32
+    t80 = t62 * t74
+    t81 = t79 - t80
+    mass_matrix = _assemble([t24, t20, t20, t15], batch).reshape(batch + (2, 2))
+    bias = _assemble([t56, t39], batch)
+    fk_tcp = _assemble([t59, t63, 0.0, t66, t62, t59, 0.0, t69, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([t70, t71, t66, t65, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
+    jdot_qd_tcp = _assemble([t78, t81, 0.0, 0.0, 0.0, 0.0], batch)
     return mass_matrix, bias, fk_tcp, jacobian_tcp, jdot_qd_tcp
 
 
@@ -1524,7 +1500,7 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     out fk_tcp [4x4]
     out jacobian_tcp [6x2]
     out frame_acceleration_tcp [6]
-    89 ops: 50 mul, 31 add, 4 div, 4 trig
+    88 ops: 50 mul, 30 add, 4 div, 4 trig
     """
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
@@ -1599,31 +1575,30 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     t65 = t34 * t29
     t66 = t10 * t25
     t67 = t65 + t66
-    t68 = t66 + t65
-    t69 = -t68
-    t70 = t10 * p[..., 0]
-    t71 = t64 * p[..., 1]
-    t72 = t70 + t71
-    t73 = t34 * p[..., 0]
-    t74 = t67 * p[..., 1]
-    t75 = t73 + t74
-    t76 = -t75
-    t77 = -t74
-    t78 = t50 * p[..., 1]
-    t79 = t50 * t78
-    t80 = t44 - t79
-    t81 = t64 * t80
-    t82 = t22 * p[..., 1]
-    t83 = t32 + t82
-    t84 = t68 * t83
-    t85 = t81 - t84
-    t86 = t67 * t80
-    t87 = t64 * t83
-    t88 = t86 + t87
+    t68 = -t67
+    t69 = t10 * p[..., 0]
+    t70 = t64 * p[..., 1]
+    t71 = t69 + t70
+    t72 = t34 * p[..., 0]
+    t73 = t67 * p[..., 1]
+    t74 = t72 + t73
+    t75 = -t74
+    t76 = -t73
+    t77 = t50 * p[..., 1]
+    t78 = t50 * t77
+    t79 = t44 - t78
+    t80 = t64 * t79
+    t81 = t22 * p[..., 1]
+    t82 = t32 + t81
+    t83 = t67 * t82
+    t84 = t80 - t83
+    t85 = t67 * t79
+    t86 = t64 * t82
+    t87 = t85 + t86
     inverse_dynamics = _assemble([t61, t40], batch)
-    fk_tcp = _assemble([t64, t69, 0.0, t72, t67, t64, 0.0, t75, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    jacobian_tcp = _assemble([t76, t77, t72, t71, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
-    frame_acceleration_tcp = _assemble([t85, t88, 0.0, 0.0, 0.0, t22], batch)
+    fk_tcp = _assemble([t64, t68, 0.0, t71, t67, t64, 0.0, t74, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _assemble([t75, t76, t71, t70, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0], batch).reshape(batch + (6, 2))
+    frame_acceleration_tcp = _assemble([t84, t87, 0.0, 0.0, 0.0, t22], batch)
     return inverse_dynamics, fk_tcp, jacobian_tcp, frame_acceleration_tcp
 
 

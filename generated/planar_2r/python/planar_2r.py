@@ -284,7 +284,7 @@ def fk_tcp(q, p=DEFAULT_P):
     in  q [2]
     in  p [5]
     out T [4x4]
-    18 ops: 8 mul, 6 add, 0 div, 4 trig
+    17 ops: 8 mul, 5 add, 0 div, 4 trig
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
@@ -303,17 +303,16 @@ def fk_tcp(q, p=DEFAULT_P):
     t2 = t2 - t5
     t1 = t3 * t1
     t4 = t0 * t4
-    t5 = t1 + t4
-    t1 = t4 + t1
-    t1 = -t1
+    t1 = t1 + t4
+    t4 = -t1
     t0 = t0 * p[0]
-    t4 = t2 * p[1]
-    t0 = t0 + t4
+    t5 = t2 * p[1]
+    t0 = t0 + t5
     t3 = t3 * p[0]
-    t4 = t5 * p[1]
-    t3 = t3 + t4
-    _T = (t2, t1, 0.0, t0,
-          t5, t2, 0.0, t3,
+    t5 = t1 * p[1]
+    t3 = t3 + t5
+    _T = (t2, t4, 0.0, t0,
+          t1, t2, 0.0, t3,
           0.0, 0.0, 1.0, 0.0,
           0.0, 0.0, 0.0, 1.0)
     return np.array(_T).reshape(4, 4)
@@ -342,8 +341,7 @@ def _fk_tcp_chunk(x, t, s, y):
     multiply(t3, t1, t1)
     multiply(t0, t4, t4)
     add(t1, t4, T_4)
-    add(t4, t1, t4)
-    negative(t4, T_1)
+    negative(T_4, T_1)
     multiply(t0, p_0, t0)
     multiply(T_0, p_1, t1)
     add(t0, t1, T_3)
@@ -436,7 +434,7 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     in  qd [2]
     in  p [5]
     out a [6]
-    26 ops: 14 mul, 8 add, 0 div, 4 trig
+    25 ops: 14 mul, 7 add, 0 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
@@ -465,15 +463,14 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     t7 = t2 * t6
     t0 = t0 * t4
     t1 = t3 * t1
-    t3 = t0 + t1
-    t4 = t4 * t5
-    t3 = t3 * t4
+    t0 = t0 + t1
+    t1 = t4 * t5
+    t3 = t0 * t1
     t3 = t7 + t3
     t3 = -t3
-    t2 = t2 * t4
-    t0 = t1 + t0
+    t1 = t2 * t1
     t0 = t0 * t6
-    t0 = t2 - t0
+    t0 = t1 - t0
     _a = (t3, t0, 0.0, 0.0, 0.0, 0.0)
     return np.array(_a)
 
@@ -508,15 +505,14 @@ def _jdot_qd_tcp_chunk(x, t, s, y):
     multiply(t2, t6, t7)
     multiply(t0, t4, t0)
     multiply(t3, t1, t3)
-    add(t0, t3, t1)
+    add(t0, t3, t0)
     multiply(t4, t5, t4)
-    multiply(t1, t4, t1)
+    multiply(t0, t4, t1)
     add(t7, t1, t7)
     negative(t7, a_0)
     multiply(t2, t4, t2)
-    add(t3, t0, t3)
-    multiply(t3, t6, t3)
-    subtract(t2, t3, a_1)
+    multiply(t0, t6, t0)
+    subtract(t2, t0, a_1)
 
 
 def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
@@ -527,7 +523,7 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     in  qdd [2]
     in  p [5]
     out a [6]
-    33 ops: 18 mul, 11 add, 0 div, 4 trig
+    32 ops: 18 mul, 10 add, 0 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
@@ -561,20 +557,19 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     t8 = t2 * t6
     t0 = t0 * t4
     t3 = t3 * t1
-    t9 = t0 + t3
-    t4 = t4 * t7
+    t0 = t0 + t3
+    t3 = t4 * t7
     t1 = t1 * t5
-    t1 = t4 + t1
-    t4 = qdd[0] + qdd[1]
-    t5 = t4 * p[1]
-    t1 = t1 + t5
-    t5 = t9 * t1
-    t5 = t8 - t5
-    t0 = t3 + t0
+    t1 = t3 + t1
+    t3 = qdd[0] + qdd[1]
+    t4 = t3 * p[1]
+    t1 = t1 + t4
+    t4 = t0 * t1
+    t4 = t8 - t4
     t0 = t0 * t6
     t1 = t2 * t1
     t0 = t0 + t1
-    _a = (t5, t0, 0.0, 0.0, 0.0, t4)
+    _a = (t4, t0, 0.0, 0.0, 0.0, t3)
     return np.array(_a)
 
 
@@ -611,19 +606,18 @@ def _frame_acceleration_tcp_chunk(x, t, s, y):
     multiply(t2, t6, t8)
     multiply(t0, t4, t0)
     multiply(t3, t1, t3)
-    add(t0, t3, t9)
+    add(t0, t3, t0)
     multiply(t4, t7, t4)
     multiply(t1, t5, t1)
     add(t4, t1, t4)
     add(qdd_0, qdd_1, a_5)
     multiply(a_5, p_1, t1)
     add(t4, t1, t4)
-    multiply(t9, t4, t9)
-    subtract(t8, t9, a_0)
-    add(t3, t0, t3)
-    multiply(t3, t6, t3)
+    multiply(t0, t4, t1)
+    subtract(t8, t1, a_0)
+    multiply(t0, t6, t0)
     multiply(t2, t4, t2)
-    add(t3, t2, a_1)
+    add(t0, t2, a_1)
 
 
 def fk_jacobian_tcp(q, p=DEFAULT_P):
@@ -633,7 +627,7 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     in  p [5]
     out T [4x4]
     out J [6x2]
-    20 ops: 8 mul, 8 add, 0 div, 4 trig
+    19 ops: 8 mul, 7 add, 0 div, 4 trig
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
@@ -652,23 +646,22 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     t2 = t2 - t5
     t1 = t3 * t1
     t4 = t0 * t4
-    t5 = t1 + t4
-    t1 = t4 + t1
-    t1 = -t1
+    t1 = t1 + t4
+    t4 = -t1
     t0 = t0 * p[0]
-    t4 = t2 * p[1]
-    t0 = t0 + t4
+    t5 = t2 * p[1]
+    t0 = t0 + t5
     t3 = t3 * p[0]
-    t6 = t5 * p[1]
+    t6 = t1 * p[1]
     t3 = t3 + t6
     t7 = -t3
     t6 = -t6
-    _T = (t2, t1, 0.0, t0,
-          t5, t2, 0.0, t3,
+    _T = (t2, t4, 0.0, t0,
+          t1, t2, 0.0, t3,
           0.0, 0.0, 1.0, 0.0,
           0.0, 0.0, 0.0, 1.0)
     _J = (t7, t6,
-          t0, t4,
+          t0, t5,
           0.0, 0.0,
           0.0, 0.0,
           0.0, 0.0,
@@ -700,8 +693,7 @@ def _fk_jacobian_tcp_chunk(x, t, s, y):
     multiply(t3, t1, t1)
     multiply(t0, t4, t4)
     add(t1, t4, T_4)
-    add(t4, t1, t4)
-    negative(t4, T_1)
+    negative(T_4, T_1)
     multiply(t0, p_0, t0)
     multiply(T_0, p_1, J_3)
     add(t0, J_3, T_3)
@@ -720,12 +712,12 @@ def mass_matrix(q, p=DEFAULT_P):
     in  q [2]
     in  p [5]
     out M [2x2]
-    26 ops: 13 mul, 8 add, 4 div, 1 trig
+    25 ops: 12 mul, 8 add, 4 div, 1 trig
     """
     q = _array(q, 2, "q")
     p = _array(p, 5, "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_mass_matrix_chunk, (q, p), 2, ((2, 2),), pure=5)
+        return _batch(_mass_matrix_chunk, (q, p), 1, ((2, 2),), pure=5)
     # one state: Python floats
     q = q.tolist()
     p = p.tolist()
@@ -749,9 +741,8 @@ def mass_matrix(q, p=DEFAULT_P):
     t4 = cos(q[1])
     t3 = p[3] * t3
     t3 = t4 * t3
-    t4 = p[0] * t3
-    t4 = t2 + t4
-    t3 = t3 * p[0]
+    t3 = p[0] * t3
+    t4 = t2 + t3
     t3 = t4 + t3
     t0 = p[3] * t0
     t0 = t3 + t0
@@ -770,7 +761,7 @@ def _mass_matrix_chunk(x, t, s, y):
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
     add, copyto, cos, divide, multiply, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.subtract
     q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
-    t0, t1 = t
+    t0, = t
     s0, s1, s2, s3, s4 = s
     M_0, M_1, M_2, M_3 = y
     k0, k1 = _mass_matrix_constants
@@ -793,9 +784,8 @@ def _mass_matrix_chunk(x, t, s, y):
     cos(q_1, t0)
     multiply(p_3, s3, s3)
     multiply(t0, s3, t0)
-    multiply(p_0, t0, t1)
-    add(s2, t1, M_1)
-    multiply(t0, p_0, t0)
+    multiply(p_0, t0, t0)
+    add(s2, t0, M_1)
     add(M_1, t0, t0)
     multiply(p_3, s0, s0)
     add(t0, s0, t0)
@@ -1231,7 +1221,7 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     in  tau [2]
     in  p [5]
     out qdd [2]
-    67 ops: 35 mul, 21 add, 7 div, 4 trig
+    66 ops: 34 mul, 21 add, 7 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
@@ -1294,9 +1284,8 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t3 = p[3] * t3
     t3 = t6 + t3
     t4 = t5 * t4
-    t5 = p[0] * t4
-    t5 = t3 + t5
-    t4 = t4 * p[0]
+    t4 = p[0] * t4
+    t5 = t3 + t4
     t4 = t5 + t4
     t2 = p[3] * t2
     t2 = t4 + t2
@@ -1378,9 +1367,8 @@ def _forward_dynamics_chunk(x, t, s, y):
     multiply(p_3, s1, s1)
     add(s0, s1, s0)
     multiply(t2, s2, t2)
-    multiply(p_0, t2, t0)
-    add(s0, t0, t0)
-    multiply(t2, p_0, t2)
+    multiply(p_0, t2, t2)
+    add(s0, t2, t0)
     add(t0, t2, t2)
     multiply(p_3, s3, s3)
     add(t2, s3, t2)
@@ -1607,7 +1595,7 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     in  w [6]
     in  p [5]
     out qdd [2]
-    89 ops: 47 mul, 31 add, 7 div, 4 trig
+    88 ops: 46 mul, 31 add, 7 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
@@ -1689,9 +1677,8 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     t6 = p[3] * t6
     t5 = t5 + t6
     t2 = t2 * t10
-    t6 = p[0] * t2
-    t6 = t5 + t6
-    t2 = t2 * p[0]
+    t2 = p[0] * t2
+    t6 = t5 + t2
     t2 = t6 + t2
     t1 = p[3] * t1
     t1 = t2 + t1
@@ -1795,9 +1782,8 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     multiply(p_3, s1, s1)
     add(s0, s1, s0)
     multiply(t2, s2, t2)
-    multiply(p_0, t2, t0)
-    add(s0, t0, t0)
-    multiply(t2, p_0, t2)
+    multiply(p_0, t2, t2)
+    add(s0, t2, t0)
     add(t0, t2, t2)
     multiply(p_3, s3, s3)
     add(t2, s3, t2)
@@ -2217,7 +2203,7 @@ def ode_rhs(x, u, p=DEFAULT_P):
     in  u [2]
     in  p [5]
     out xdot [4]
-    67 ops: 35 mul, 21 add, 7 div, 4 trig
+    66 ops: 34 mul, 21 add, 7 div, 4 trig
     """
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
@@ -2278,9 +2264,8 @@ def ode_rhs(x, u, p=DEFAULT_P):
     t3 = p[3] * t3
     t3 = t6 + t3
     t4 = t5 * t4
-    t5 = p[0] * t4
-    t5 = t3 + t5
-    t4 = t4 * p[0]
+    t4 = p[0] * t4
+    t5 = t3 + t4
     t4 = t5 + t4
     t2 = p[3] * t2
     t2 = t4 + t2
@@ -2362,9 +2347,8 @@ def _ode_rhs_chunk(x, t, s, y):
     multiply(p_3, s1, s1)
     add(s0, s1, s0)
     multiply(t2, s2, t2)
-    multiply(p_0, t2, t0)
-    add(s0, t0, t0)
-    multiply(t2, p_0, t2)
+    multiply(p_0, t2, t2)
+    add(s0, t2, t0)
     add(t0, t2, t2)
     multiply(p_3, s3, s3)
     add(t2, s3, t2)
@@ -2391,13 +2375,13 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     in  u [2]
     in  p [5]
     out A [4x4]
-    158 ops: 84 mul, 55 add, 15 div, 4 trig
+    145 ops: 73 mul, 53 add, 15 div, 4 trig
     """
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
     p = _array(p, 5, "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_ode_jac_x_chunk, (x, u, p), 16, ((4, 4),), fixed=_ode_jac_x_fixed, pure=6)
+        return _batch(_ode_jac_x_chunk, (x, u, p), 15, ((4, 4),), fixed=_ode_jac_x_fixed, pure=6)
     # one state: Python floats
     x = x.tolist()
     u = u.tolist()
@@ -2406,165 +2390,152 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t0 = sin(x[1])
     t1 = cos(x[1])
     t2 = cos(x[0])
-    t3 = p[4] * t2
-    t4 = t1 * t3
-    t5 = sin(x[0])
-    t6 = p[4] * t5
-    t7 = t0 * t6
-    t4 = t4 - t7
-    t4 = p[3] * t4
-    t4 = t0 * t4
-    t7 = t1 * t6
-    t3 = t0 * t3
-    t3 = t7 + t3
-    t7 = p[3] * t3
-    t7 = t1 * t7
-    t4 = t4 - t7
-    t4 = p[0] * t4
-    t7 = p[0] / 2.0
-    t7 = p[0] - t7
-    t8 = p[2] * t7
-    t6 = t8 * t6
-    t9 = p[1] / 2.0
-    t9 = p[1] - t9
-    t10 = p[3] * t9
-    t3 = t10 * t3
-    t6 = t6 + t3
-    t4 = t4 - t6
-    t6 = p[0] * p[0]
-    t11 = p[2] * t6
-    t11 = t11 / 12.0
-    t7 = t7 * t7
-    t7 = p[2] * t7
-    t7 = t11 + t7
-    t11 = p[1] * p[1]
-    t11 = p[3] * t11
-    t11 = t11 / 12.0
-    t9 = t9 * t9
-    t9 = p[3] * t9
-    t9 = t11 + t9
-    t11 = t1 * t10
-    t12 = p[0] * t11
-    t12 = t9 + t12
-    t11 = t11 * p[0]
-    t11 = t12 + t11
-    t6 = p[3] * t6
-    t6 = t11 + t6
-    t6 = t7 + t6
-    t7 = t4 / t6
-    t11 = t12 / t6
-    t4 = t11 * t4
-    t3 = t3 + t4
-    t4 = t11 * t11
-    t4 = t4 * t6
-    t4 = t9 - t4
-    t3 = t3 / t4
-    t9 = t11 * t3
-    t7 = t7 + t9
-    t7 = -t7
-    t5 = t5 * p[4]
-    t9 = x[2] * p[0]
-    t12 = x[2] * t9
-    t5 = t5 - t12
-    t12 = t1 * t5
-    t2 = t2 * p[4]
-    t8 = t8 * t2
-    t13 = t1 * t2
-    t14 = t0 * t5
-    t13 = t13 - t14
-    t15 = t10 * t13
-    t8 = t8 + t15
-    t16 = t0 * t2
-    t16 = t12 + t16
-    t16 = p[3] * t16
-    t17 = x[2] + x[3]
-    t18 = t17 * t10
-    t17 = t17 * t18
-    t16 = t16 - t17
-    t16 = t0 * t16
-    t13 = p[3] * t13
-    t13 = t1 * t13
-    t13 = t16 + t13
-    t13 = p[0] * t13
-    t8 = t8 + t13
-    t8 = u[0] - t8
-    t13 = t8 / t6
-    t15 = u[1] - t15
-    t8 = t11 * t8
-    t8 = t15 - t8
-    t8 = t8 / t4
-    t15 = t11 * t8
-    t13 = t13 - t15
-    t15 = t13 * p[0]
-    t2 = t2 + t15
-    t15 = t0 * t2
-    t12 = t12 + t15
-    t12 = p[3] * t12
-    t12 = t12 - t17
-    t12 = t12 * t1
-    t15 = t2 * t1
-    t16 = t5 * t0
-    t15 = t15 - t16
-    t15 = p[3] * t15
-    t15 = t0 * t15
-    t12 = t12 + t15
-    t15 = t1 * t2
-    t14 = t15 - t14
-    t14 = p[3] * t14
-    t8 = t13 + t8
-    t8 = t8 * t10
-    t8 = t14 + t8
-    t8 = t8 * t0
-    t2 = t2 * t0
-    t5 = t5 * t1
-    t2 = t2 + t5
-    t5 = p[3] * t2
-    t5 = t1 * t5
-    t5 = t8 + t5
-    t5 = t12 - t5
+    t2 = p[4] * t2
+    t3 = t1 * t2
+    t4 = sin(x[0])
+    t4 = p[4] * t4
+    t5 = t0 * t4
+    t5 = t3 - t5
+    t5 = p[3] * t5
+    t5 = t0 * t5
+    t6 = t1 * t4
+    t7 = t0 * t2
+    t6 = t6 + t7
+    t8 = p[3] * t6
+    t8 = t1 * t8
+    t5 = t5 - t8
     t5 = p[0] * t5
-    t2 = t10 * t2
-    t5 = t5 - t2
-    t8 = t5 / t6
-    t5 = t11 * t5
-    t2 = t2 + t5
-    t2 = t2 / t4
-    t5 = t11 * t2
-    t5 = t8 + t5
-    t5 = -t5
-    t8 = t9 + t9
-    t9 = t0 * t8
-    t10 = t10 * t9
-    t9 = p[3] * t9
-    t9 = t1 * t9
-    t1 = t1 * t8
+    t8 = p[0] / 2.0
+    t8 = p[0] - t8
+    t9 = p[2] * t8
+    t10 = t9 * t4
+    t11 = p[1] / 2.0
+    t11 = p[1] - t11
+    t12 = p[3] * t11
+    t6 = t12 * t6
+    t10 = t10 + t6
+    t5 = t5 - t10
+    t10 = p[0] * p[0]
+    t13 = p[2] * t10
+    t13 = t13 / 12.0
+    t8 = t8 * t8
+    t8 = p[2] * t8
+    t8 = t13 + t8
+    t13 = p[1] * p[1]
+    t13 = p[3] * t13
+    t13 = t13 / 12.0
+    t11 = t11 * t11
+    t11 = p[3] * t11
+    t11 = t13 + t11
+    t13 = t1 * t12
+    t13 = p[0] * t13
+    t14 = t11 + t13
+    t13 = t14 + t13
+    t10 = p[3] * t10
+    t10 = t13 + t10
+    t8 = t8 + t10
+    t10 = t5 / t8
+    t13 = t14 / t8
+    t5 = t13 * t5
+    t5 = t6 + t5
+    t6 = t13 * t13
+    t6 = t6 * t8
+    t6 = t11 - t6
+    t5 = t5 / t6
+    t11 = t13 * t5
+    t10 = t10 + t11
+    t10 = -t10
+    t11 = x[2] * p[0]
+    t14 = x[2] * t11
+    t4 = t4 - t14
+    t14 = t1 * t4
+    t9 = t9 * t2
+    t4 = t0 * t4
+    t3 = t3 - t4
+    t15 = t12 * t3
+    t9 = t9 + t15
+    t7 = t14 + t7
+    t7 = p[3] * t7
+    t16 = x[2] + x[3]
+    t17 = t16 * t12
+    t16 = t16 * t17
+    t7 = t7 - t16
+    t7 = t0 * t7
+    t3 = p[3] * t3
+    t3 = t1 * t3
+    t3 = t7 + t3
+    t3 = p[0] * t3
+    t3 = t9 + t3
+    t3 = u[0] - t3
+    t7 = t3 / t8
+    t9 = u[1] - t15
+    t3 = t13 * t3
+    t3 = t9 - t3
+    t3 = t3 / t6
+    t9 = t13 * t3
+    t7 = t7 - t9
+    t9 = t7 * p[0]
+    t2 = t2 + t9
+    t9 = t0 * t2
+    t9 = t14 + t9
+    t14 = p[3] * t9
+    t15 = t14 - t16
+    t15 = t15 * t1
+    t2 = t2 * t1
+    t2 = t2 - t4
+    t2 = p[3] * t2
+    t4 = t0 * t2
+    t4 = t15 + t4
+    t3 = t7 + t3
+    t3 = t3 * t12
+    t2 = t2 + t3
+    t2 = t2 * t0
+    t3 = t1 * t14
+    t2 = t2 + t3
+    t2 = t4 - t2
+    t2 = p[0] * t2
+    t3 = t12 * t9
+    t2 = t2 - t3
+    t4 = t2 / t8
+    t2 = t13 * t2
+    t2 = t3 + t2
+    t2 = t2 / t6
+    t3 = t13 * t2
+    t3 = t4 + t3
+    t3 = -t3
+    t4 = t11 + t11
+    t7 = t0 * t4
+    t9 = t12 * t7
+    t7 = p[3] * t7
+    t7 = t1 * t7
+    t1 = t1 * t4
     t1 = p[3] * t1
-    t8 = t18 + t18
-    t1 = t1 + t8
+    t4 = t17 + t17
+    t1 = t1 + t4
     t1 = t0 * t1
-    t1 = t9 - t1
+    t1 = t7 - t1
     t1 = p[0] * t1
-    t1 = t10 + t1
-    t9 = t1 / t6
-    t1 = t11 * t1
-    t1 = t10 - t1
-    t1 = t1 / t4
-    t10 = t11 * t1
-    t9 = t9 - t10
-    t9 = -t9
+    t1 = t9 + t1
+    t7 = t1 / t8
+    t1 = t13 * t1
+    t1 = t9 - t1
+    t1 = t1 / t6
+    t9 = t13 * t1
+    t7 = t7 - t9
+    t7 = -t7
     t1 = -t1
-    t0 = t0 * t8
+    t0 = t0 * t4
     t0 = p[0] * t0
-    t6 = t0 / t6
-    t0 = t11 * t0
-    t0 = t0 / t4
-    t4 = t11 * t0
-    t4 = t6 + t4
+    t4 = t0 / t8
+    t0 = t13 * t0
+    t0 = t0 / t6
+    t6 = t13 * t0
+    t4 = t4 + t6
     t0 = -t0
     _A = (0.0, 0.0, 1.0, 0.0,
           0.0, 0.0, 0.0, 1.0,
-          t7, t5, t9, t4,
-          t3, t2, t1, t0)
+          t10, t3, t7, t4,
+          t5, t2, t1, t0)
     return np.array(_A).reshape(4, 4)
 
 
@@ -2583,38 +2554,38 @@ def _ode_jac_x_chunk(x, t, s, y):
     same order, each a numpy call on rows (one float per state) writing into its last argument."""
     add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
     x_0, x_1, x_2, x_3, u_0, u_1, p_0, p_1, p_2, p_3, p_4 = x
-    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15 = t
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14 = t
     s0, s1, s2, s3, s4, s5 = s
     A_8, A_9, A_10, A_11, A_12, A_13, A_14, A_15 = y
     k0, k1 = _ode_jac_x_constants
     sin(x_1, t0)
     cos(x_1, t1)
     cos(x_0, t2)
-    multiply(p_4, t2, t3)
-    multiply(t1, t3, t4)
-    sin(x_0, t5)
-    multiply(p_4, t5, t6)
-    multiply(t0, t6, t7)
-    subtract(t4, t7, t4)
-    multiply(p_3, t4, t4)
-    multiply(t0, t4, t4)
-    multiply(t1, t6, t7)
-    multiply(t0, t3, t3)
-    add(t7, t3, t7)
-    multiply(p_3, t7, t3)
-    multiply(t1, t3, t3)
-    subtract(t4, t3, t4)
-    multiply(p_0, t4, t4)
+    multiply(p_4, t2, t2)
+    multiply(t1, t2, t3)
+    sin(x_0, t4)
+    multiply(p_4, t4, t4)
+    multiply(t0, t4, t5)
+    subtract(t3, t5, t5)
+    multiply(p_3, t5, t5)
+    multiply(t0, t5, t5)
+    multiply(t1, t4, t6)
+    multiply(t0, t2, t7)
+    add(t6, t7, t6)
+    multiply(p_3, t6, t8)
+    multiply(t1, t8, t8)
+    subtract(t5, t8, t5)
+    multiply(p_0, t5, t5)
     divide(p_0, k0, s0)
     subtract(p_0, s0, s0)
     multiply(p_2, s0, s1)
-    multiply(s1, t6, t6)
+    multiply(s1, t4, t8)
     divide(p_1, k0, s2)
     subtract(p_1, s2, s2)
     multiply(p_3, s2, s3)
-    multiply(s3, t7, t7)
-    add(t6, t7, t6)
-    subtract(t4, t6, t4)
+    multiply(s3, t6, t6)
+    add(t8, t6, t8)
+    subtract(t5, t8, t5)
     multiply(p_0, p_0, s4)
     multiply(p_2, s4, s5)
     divide(s5, k1, s5)
@@ -2627,123 +2598,110 @@ def _ode_jac_x_chunk(x, t, s, y):
     multiply(s2, s2, s2)
     multiply(p_3, s2, s2)
     add(s0, s2, s0)
-    multiply(t1, s3, t3)
-    multiply(p_0, t3, t6)
-    add(s0, t6, t6)
-    multiply(t3, p_0, t3)
-    add(t6, t3, t3)
-    multiply(p_3, s4, s4)
-    add(t3, s4, t3)
-    add(s5, t3, t3)
-    divide(t4, t3, t8)
-    divide(t6, t3, t6)
-    multiply(t6, t4, t4)
-    add(t7, t4, t7)
-    multiply(t6, t6, t4)
-    multiply(t4, t3, t4)
-    subtract(s0, t4, t4)
-    divide(t7, t4, A_12)
-    multiply(t6, A_12, t7)
-    add(t8, t7, t8)
-    negative(t8, A_8)
-    multiply(t5, p_4, t5)
-    multiply(x_2, p_0, t7)
-    multiply(x_2, t7, t8)
-    subtract(t5, t8, t5)
-    multiply(t1, t5, t8)
-    multiply(t2, p_4, t2)
-    multiply(s1, t2, t9)
-    multiply(t1, t2, t10)
-    multiply(t0, t5, t11)
-    subtract(t10, t11, t10)
-    multiply(s3, t10, t12)
-    add(t9, t12, t9)
-    multiply(t0, t2, t13)
-    add(t8, t13, t13)
-    multiply(p_3, t13, t13)
-    add(x_2, x_3, t14)
-    multiply(t14, s3, t15)
-    multiply(t14, t15, t14)
-    subtract(t13, t14, t13)
-    multiply(t0, t13, t13)
-    multiply(p_3, t10, t10)
-    multiply(t1, t10, t10)
-    add(t13, t10, t13)
-    multiply(p_0, t13, t13)
-    add(t9, t13, t9)
-    subtract(u_0, t9, t9)
-    divide(t9, t3, t10)
-    subtract(u_1, t12, t12)
-    multiply(t6, t9, t9)
-    subtract(t12, t9, t12)
-    divide(t12, t4, t12)
-    multiply(t6, t12, t9)
-    subtract(t10, t9, t10)
-    multiply(t10, p_0, t9)
-    add(t2, t9, t2)
-    multiply(t0, t2, t9)
-    add(t8, t9, t8)
-    multiply(p_3, t8, t8)
-    subtract(t8, t14, t8)
-    multiply(t8, t1, t8)
-    multiply(t2, t1, t9)
-    multiply(t5, t0, t13)
-    subtract(t9, t13, t9)
-    multiply(p_3, t9, t9)
-    multiply(t0, t9, t9)
-    add(t8, t9, t8)
-    multiply(t1, t2, t9)
-    subtract(t9, t11, t9)
-    multiply(p_3, t9, t9)
-    add(t10, t12, t10)
-    multiply(t10, s3, t10)
-    add(t9, t10, t9)
-    multiply(t9, t0, t9)
-    multiply(t2, t0, t2)
-    multiply(t5, t1, t5)
-    add(t2, t5, t2)
-    multiply(p_3, t2, t5)
-    multiply(t1, t5, t5)
-    add(t9, t5, t9)
-    subtract(t8, t9, t8)
+    multiply(t1, s3, t8)
     multiply(p_0, t8, t8)
-    multiply(s3, t2, t2)
-    subtract(t8, t2, t8)
-    divide(t8, t3, t5)
-    multiply(t6, t8, t8)
-    add(t2, t8, t2)
-    divide(t2, t4, A_13)
-    multiply(t6, A_13, t2)
-    add(t5, t2, t5)
-    negative(t5, A_9)
-    add(t7, t7, t7)
-    multiply(t0, t7, t2)
-    multiply(s3, t2, t5)
+    add(s0, t8, t9)
+    add(t9, t8, t8)
+    multiply(p_3, s4, s4)
+    add(t8, s4, t8)
+    add(s5, t8, t8)
+    divide(t5, t8, t10)
+    divide(t9, t8, t9)
+    multiply(t9, t5, t5)
+    add(t6, t5, t6)
+    multiply(t9, t9, t5)
+    multiply(t5, t8, t5)
+    subtract(s0, t5, t5)
+    divide(t6, t5, A_12)
+    multiply(t9, A_12, t6)
+    add(t10, t6, t10)
+    negative(t10, A_8)
+    multiply(x_2, p_0, t6)
+    multiply(x_2, t6, t10)
+    subtract(t4, t10, t4)
+    multiply(t1, t4, t10)
+    multiply(s1, t2, t11)
+    multiply(t0, t4, t4)
+    subtract(t3, t4, t3)
+    multiply(s3, t3, t12)
+    add(t11, t12, t11)
+    add(t10, t7, t7)
+    multiply(p_3, t7, t7)
+    add(x_2, x_3, t13)
+    multiply(t13, s3, t14)
+    multiply(t13, t14, t13)
+    subtract(t7, t13, t7)
+    multiply(t0, t7, t7)
+    multiply(p_3, t3, t3)
+    multiply(t1, t3, t3)
+    add(t7, t3, t7)
+    multiply(p_0, t7, t7)
+    add(t11, t7, t11)
+    subtract(u_0, t11, t11)
+    divide(t11, t8, t3)
+    subtract(u_1, t12, t12)
+    multiply(t9, t11, t11)
+    subtract(t12, t11, t12)
+    divide(t12, t5, t12)
+    multiply(t9, t12, t7)
+    subtract(t3, t7, t3)
+    multiply(t3, p_0, t7)
+    add(t2, t7, t2)
+    multiply(t0, t2, t7)
+    add(t10, t7, t10)
+    multiply(p_3, t10, t7)
+    subtract(t7, t13, t13)
+    multiply(t13, t1, t13)
+    multiply(t2, t1, t2)
+    subtract(t2, t4, t2)
+    multiply(p_3, t2, t2)
+    multiply(t0, t2, t4)
+    add(t13, t4, t13)
+    add(t3, t12, t3)
+    multiply(t3, s3, t3)
+    add(t2, t3, t2)
+    multiply(t2, t0, t2)
+    multiply(t1, t7, t7)
+    add(t2, t7, t2)
+    subtract(t13, t2, t13)
+    multiply(p_0, t13, t13)
+    multiply(s3, t10, t10)
+    subtract(t13, t10, t13)
+    divide(t13, t8, t2)
+    multiply(t9, t13, t13)
+    add(t10, t13, t10)
+    divide(t10, t5, A_13)
+    multiply(t9, A_13, t3)
+    add(t2, t3, t2)
+    negative(t2, A_9)
+    add(t6, t6, t6)
+    multiply(t0, t6, t2)
+    multiply(s3, t2, t3)
     multiply(p_3, t2, t2)
     multiply(t1, t2, t2)
-    multiply(t1, t7, t1)
+    multiply(t1, t6, t1)
     multiply(p_3, t1, t1)
-    add(t15, t15, t15)
-    add(t1, t15, t1)
+    add(t14, t14, t14)
+    add(t1, t14, t1)
     multiply(t0, t1, t1)
     subtract(t2, t1, t2)
     multiply(p_0, t2, t2)
-    add(t5, t2, t2)
-    divide(t2, t3, t1)
-    multiply(t6, t2, t2)
-    subtract(t5, t2, t5)
-    divide(t5, t4, t5)
-    multiply(t6, t5, t2)
+    add(t3, t2, t2)
+    divide(t2, t8, t1)
+    multiply(t9, t2, t2)
+    subtract(t3, t2, t3)
+    divide(t3, t5, t3)
+    multiply(t9, t3, t2)
     subtract(t1, t2, t1)
     negative(t1, A_10)
-    negative(t5, A_14)
-    multiply(t0, t15, t0)
+    negative(t3, A_14)
+    multiply(t0, t14, t0)
     multiply(p_0, t0, t0)
-    divide(t0, t3, t3)
-    multiply(t6, t0, t0)
-    divide(t0, t4, t0)
-    multiply(t6, t0, t6)
-    add(t3, t6, A_11)
+    divide(t0, t8, t8)
+    multiply(t9, t0, t0)
+    divide(t0, t5, t0)
+    multiply(t9, t0, t9)
+    add(t8, t9, A_11)
     negative(t0, A_15)
 
 
@@ -2754,7 +2712,7 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     in  u [2]
     in  p [5]
     out B [4x2]
-    36 ops: 16 mul, 11 add, 8 div, 1 trig
+    35 ops: 15 mul, 11 add, 8 div, 1 trig
     """
     x = _array(x, 4, "x")
     u = _array(u, 2, "u")
@@ -2785,9 +2743,8 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t4 = cos(x[1])
     t3 = p[3] * t3
     t3 = t4 * t3
-    t4 = p[0] * t3
-    t4 = t2 + t4
-    t3 = t3 * p[0]
+    t3 = p[0] * t3
+    t4 = t2 + t3
     t3 = t4 + t3
     t0 = p[3] * t0
     t0 = t3 + t0
@@ -2847,9 +2804,8 @@ def _ode_jac_u_chunk(x, t, s, y):
     cos(x_1, t0)
     multiply(p_3, s3, s3)
     multiply(t0, s3, t0)
-    multiply(p_0, t0, t1)
-    add(s2, t1, t1)
-    multiply(t0, p_0, t0)
+    multiply(p_0, t0, t0)
+    add(s2, t0, t1)
     add(t1, t0, t0)
     multiply(p_3, s0, s0)
     add(t0, s0, t0)
@@ -3123,7 +3079,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     out fk_tcp [4x4]
     out jacobian_tcp [6x2]
     out jdot_qd_tcp [6]
-    84 ops: 47 mul, 29 add, 4 div, 4 trig
+    82 ops: 46 mul, 28 add, 4 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
@@ -3154,9 +3110,8 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t5 = cos(q[1])
     t4 = p[3] * t4
     t6 = t5 * t4
-    t7 = p[0] * t6
-    t7 = t3 + t7
-    t6 = t6 * p[0]
+    t6 = p[0] * t6
+    t7 = t3 + t6
     t6 = t7 + t6
     t0 = p[3] * t0
     t0 = t6 + t0
@@ -3198,41 +3153,40 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t4 = t4 - t6
     t5 = t12 * t5
     t6 = t2 * t8
-    t8 = t5 + t6
-    t5 = t6 + t5
+    t5 = t5 + t6
     t6 = -t5
     t2 = t2 * p[0]
-    t11 = t4 * p[1]
-    t2 = t2 + t11
-    t12 = t12 * p[0]
-    t15 = t8 * p[1]
-    t12 = t12 + t15
-    t16 = -t12
-    t15 = -t15
-    t17 = t13 * p[1]
-    t13 = t13 * t17
+    t8 = t4 * p[1]
+    t2 = t2 + t8
+    t11 = t12 * p[0]
+    t12 = t5 * p[1]
+    t11 = t11 + t12
+    t15 = -t11
+    t12 = -t12
+    t16 = t13 * p[1]
+    t13 = t13 * t16
     t9 = t9 + t13
     t13 = t4 * t9
-    t5 = t5 * t10
-    t5 = t13 + t5
-    t5 = -t5
+    t16 = t5 * t10
+    t13 = t13 + t16
+    t13 = -t13
     t10 = t4 * t10
-    t9 = t8 * t9
+    t9 = t5 * t9
     t9 = t10 - t9
     _mass_matrix = (t0, t7,
                     t7, t3)
     _bias = (t1, t14)
     _fk_tcp = (t4, t6, 0.0, t2,
-               t8, t4, 0.0, t12,
+               t5, t4, 0.0, t11,
                0.0, 0.0, 1.0, 0.0,
                0.0, 0.0, 0.0, 1.0)
-    _jacobian_tcp = (t16, t15,
-                     t2, t11,
+    _jacobian_tcp = (t15, t12,
+                     t2, t8,
                      0.0, 0.0,
                      0.0, 0.0,
                      0.0, 0.0,
                      1.0, 1.0)
-    _jdot_qd_tcp = (t5, t9, 0.0, 0.0, 0.0, 0.0)
+    _jdot_qd_tcp = (t13, t9, 0.0, 0.0, 0.0, 0.0)
     return np.array(_mass_matrix).reshape(2, 2), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 2), np.array(_jdot_qd_tcp)
 
 
@@ -3280,9 +3234,8 @@ def _bundle_control_chunk(x, t, s, y):
     cos(q_1, t0)
     multiply(p_3, s4, s4)
     multiply(t0, s4, t1)
-    multiply(p_0, t1, t2)
-    add(s3, t2, mass_matrix_1)
-    multiply(t1, p_0, t1)
+    multiply(p_0, t1, t1)
+    add(s3, t1, mass_matrix_1)
     add(mass_matrix_1, t1, t1)
     multiply(p_3, s0, s0)
     add(t1, s0, t1)
@@ -3325,8 +3278,7 @@ def _bundle_control_chunk(x, t, s, y):
     multiply(t8, t0, t0)
     multiply(t1, t4, t4)
     add(t0, t4, fk_tcp_4)
-    add(t4, t0, t4)
-    negative(t4, fk_tcp_1)
+    negative(fk_tcp_4, fk_tcp_1)
     multiply(t1, p_0, t1)
     multiply(fk_tcp_0, p_1, jacobian_tcp_3)
     add(t1, jacobian_tcp_3, fk_tcp_3)
@@ -3339,8 +3291,8 @@ def _bundle_control_chunk(x, t, s, y):
     multiply(t2, t0, t2)
     add(t5, t2, t5)
     multiply(fk_tcp_0, t5, t0)
-    multiply(t4, t6, t4)
-    add(t0, t4, t0)
+    multiply(fk_tcp_4, t6, t1)
+    add(t0, t1, t0)
     negative(t0, jdot_qd_tcp_0)
     multiply(fk_tcp_0, t6, t6)
     multiply(fk_tcp_4, t5, t5)
@@ -3362,7 +3314,7 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     out fk_tcp [4x4]
     out jacobian_tcp [6x2]
     out frame_acceleration_tcp [6]
-    89 ops: 50 mul, 31 add, 4 div, 4 trig
+    88 ops: 50 mul, 30 add, 4 div, 4 trig
     """
     q = _array(q, 2, "q")
     qd = _array(qd, 2, "qd")
@@ -3443,40 +3395,39 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     t3 = t3 - t4
     t4 = t12 * t9
     t6 = t2 * t6
-    t9 = t4 + t6
-    t4 = t6 + t4
+    t4 = t4 + t6
     t6 = -t4
     t2 = t2 * p[0]
-    t11 = t3 * p[1]
-    t2 = t2 + t11
-    t12 = t12 * p[0]
-    t13 = t9 * p[1]
-    t12 = t12 + t13
-    t14 = -t12
-    t13 = -t13
-    t15 = t10 * p[1]
-    t10 = t10 * t15
+    t9 = t3 * p[1]
+    t2 = t2 + t9
+    t11 = t12 * p[0]
+    t12 = t4 * p[1]
+    t11 = t11 + t12
+    t13 = -t11
+    t12 = -t12
+    t14 = t10 * p[1]
+    t10 = t10 * t14
     t7 = t7 - t10
     t10 = t3 * t7
-    t15 = t5 * p[1]
-    t8 = t8 + t15
-    t4 = t4 * t8
-    t4 = t10 - t4
-    t7 = t9 * t7
+    t14 = t5 * p[1]
+    t8 = t8 + t14
+    t14 = t4 * t8
+    t10 = t10 - t14
+    t7 = t4 * t7
     t8 = t3 * t8
     t7 = t7 + t8
     _inverse_dynamics = (t0, t1)
     _fk_tcp = (t3, t6, 0.0, t2,
-               t9, t3, 0.0, t12,
+               t4, t3, 0.0, t11,
                0.0, 0.0, 1.0, 0.0,
                0.0, 0.0, 0.0, 1.0)
-    _jacobian_tcp = (t14, t13,
-                     t2, t11,
+    _jacobian_tcp = (t13, t12,
+                     t2, t9,
                      0.0, 0.0,
                      0.0, 0.0,
                      0.0, 0.0,
                      1.0, 1.0)
-    _frame_acceleration_tcp = (t4, t7, 0.0, 0.0, 0.0, t5)
+    _frame_acceleration_tcp = (t10, t7, 0.0, 0.0, 0.0, t5)
     return np.array(_inverse_dynamics), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 2), np.array(_frame_acceleration_tcp)
 
 
@@ -3572,8 +3523,7 @@ def _bundle_computed_torque_chunk(x, t, s, y):
     multiply(t10, t7, t7)
     multiply(t1, t4, t4)
     add(t7, t4, fk_tcp_4)
-    add(t4, t7, t4)
-    negative(t4, fk_tcp_1)
+    negative(fk_tcp_4, fk_tcp_1)
     multiply(t1, p_0, t1)
     multiply(fk_tcp_0, p_1, jacobian_tcp_3)
     add(t1, jacobian_tcp_3, fk_tcp_3)
@@ -3588,8 +3538,8 @@ def _bundle_computed_torque_chunk(x, t, s, y):
     multiply(fk_tcp_0, t8, t0)
     multiply(frame_acceleration_tcp_5, p_1, t1)
     add(t6, t1, t6)
-    multiply(t4, t6, t4)
-    subtract(t0, t4, frame_acceleration_tcp_0)
+    multiply(fk_tcp_4, t6, t1)
+    subtract(t0, t1, frame_acceleration_tcp_0)
     multiply(fk_tcp_4, t8, t8)
     multiply(fk_tcp_0, t6, t6)
     add(t8, t6, frame_acceleration_tcp_1)

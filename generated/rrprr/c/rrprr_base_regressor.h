@@ -19,7 +19,7 @@ extern "C" {
  * in  qdd [5]
  * in  p [3]
  * out Y_b [5x40]
- * Arrays are row-major. 422 ops: 229 mul, 180 add, 0 div, 8 trig, 5 other
+ * Arrays are row-major. 400 ops: 213 mul, 174 add, 0 div, 8 trig, 5 other
  */
 DERIVE_FN void rrprr_base_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *Y_b);
 

@@ -22,7 +22,7 @@ extern "C" {
  * out fk_tcp [4x4]
  * out jacobian_tcp [6x5]
  * out jdot_qd_tcp [6]
- * Arrays are row-major. 480 ops: 281 mul, 191 add, 0 div, 8 trig
+ * Arrays are row-major. 478 ops: 280 mul, 190 add, 0 div, 8 trig
  */
 DERIVE_FN void rrprr_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *mass_matrix, DERIVE_REAL *bias, DERIVE_REAL *fk_tcp, DERIVE_REAL *jacobian_tcp, DERIVE_REAL *jdot_qd_tcp);
 

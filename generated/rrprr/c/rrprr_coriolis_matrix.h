@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [5]
  * in  p [3]
  * out C [5x5]
- * Arrays are row-major. 298 ops: 176 mul, 116 add, 0 div, 6 trig
+ * Arrays are row-major. 255 ops: 143 mul, 106 add, 0 div, 6 trig
  */
 DERIVE_FN void rrprr_coriolis_matrix(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *p, DERIVE_REAL *C);
 

@@ -19,7 +19,7 @@ extern "C" {
  * in  tau [5]
  * in  p [3]
  * out qdd [5]
- * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
+ * Arrays are row-major. 444 ops: 252 mul, 169 add, 15 div, 8 trig
  */
 DERIVE_FN void rrprr_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *p, DERIVE_REAL *qdd);
 

@@ -20,7 +20,7 @@ extern "C" {
  * in  w [6]
  * in  p [3]
  * out qdd [5]
- * Arrays are row-major. 542 ops: 309 mul, 210 add, 15 div, 8 trig
+ * Arrays are row-major. 540 ops: 308 mul, 209 add, 15 div, 8 trig
  */
 DERIVE_FN void rrprr_forward_dynamics_fext(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *w, const DERIVE_REAL *p, DERIVE_REAL *qdd);
 

@@ -17,7 +17,7 @@ extern "C" {
  * in  q [5]
  * in  p [3]
  * out M [5x5]
- * Arrays are row-major. 88 ops: 46 mul, 36 add, 0 div, 6 trig
+ * Arrays are row-major. 86 ops: 45 mul, 35 add, 0 div, 6 trig
  */
 DERIVE_FN void rrprr_mass_matrix(const DERIVE_REAL *q, const DERIVE_REAL *p, DERIVE_REAL *M);
 

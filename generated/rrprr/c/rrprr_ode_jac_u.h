@@ -18,7 +18,7 @@ extern "C" {
  * in  u [5]
  * in  p [3]
  * out B [10x5]
- * Arrays are row-major. 291 ops: 142 mul, 115 add, 28 div, 6 trig
+ * Arrays are row-major. 289 ops: 141 mul, 114 add, 28 div, 6 trig
  */
 DERIVE_FN void rrprr_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *B);
 

@@ -18,7 +18,7 @@ extern "C" {
  * in  u [5]
  * in  p [3]
  * out xdot [10]
- * Arrays are row-major. 446 ops: 253 mul, 170 add, 15 div, 8 trig
+ * Arrays are row-major. 444 ops: 252 mul, 169 add, 15 div, 8 trig
  */
 DERIVE_FN void rrprr_ode_rhs(const DERIVE_REAL *x, const DERIVE_REAL *u, const DERIVE_REAL *p, DERIVE_REAL *xdot);
 

@@ -19,7 +19,7 @@ extern "C" {
  * in  qdd [5]
  * in  p [3]
  * out Y [5x65]
- * Arrays are row-major. 534 ops: 289 mul, 232 add, 0 div, 8 trig, 5 other
+ * Arrays are row-major. 501 ops: 264 mul, 224 add, 0 div, 8 trig, 5 other
  */
 DERIVE_FN void rrprr_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, const DERIVE_REAL *p, DERIVE_REAL *Y);
 

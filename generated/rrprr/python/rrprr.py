@@ -1566,7 +1566,7 @@ def mass_matrix(q, p=DEFAULT_P):
     in  q [5]
     in  p [3]
     out M [5x5]
-    88 ops: 46 mul, 36 add, 0 div, 6 trig
+    86 ops: 45 mul, 35 add, 0 div, 6 trig
     """
     q = _array(q, 5, "q")
     p = _array(p, 3, "p")
@@ -1583,87 +1583,85 @@ def mass_matrix(q, p=DEFAULT_P):
     t4 = sin(q[4])
     t5 = 0.0027500000000000003 * t4
     t6 = t4 * t5
-    t7 = t3 + t6
-    t8 = (-0.015) * p[1]
-    t7 = t7 - t8
-    t9 = 0.015 * p[1]
+    t3 = t3 + t6
+    t6 = (-0.015) * p[1]
+    t7 = t3 - t6
+    t8 = 0.015 * p[1]
+    t7 = t7 + t8
+    t9 = p[1] * p[1]
+    t9 = 0.3 * t9
     t7 = t7 + t9
-    t10 = p[1] * p[1]
-    t10 = 0.3 * t10
-    t7 = t7 + t10
     t7 = 0.009000000000000001 + t7
-    t11 = 0.00424 + t7
-    t11 = t0 * t11
-    t12 = sin(q[2])
-    t13 = cos(q[3])
+    t10 = 0.00424 + t7
+    t10 = t0 * t10
+    t11 = sin(q[2])
+    t12 = cos(q[3])
     t2 = t4 * t2
     t1 = t1 * t5
     t1 = t2 - t1
-    t2 = t13 * t1
-    t4 = t12 * t2
-    t5 = t11 + t4
+    t2 = t12 * t1
+    t4 = t11 * t2
+    t5 = t10 + t4
     t5 = t0 * t5
     t2 = t0 * t2
-    t11 = sin(q[3])
-    t14 = 0.003 * t11
-    t15 = t11 * t14
-    t3 = t6 + t3
+    t10 = sin(q[3])
+    t13 = 0.003 * t10
+    t14 = t10 * t13
+    t3 = t3 + t8
+    t3 = t3 - t6
     t3 = t3 + t9
-    t3 = t3 - t8
-    t3 = t3 + t10
     t3 = 0.009000000000000001 + t3
-    t6 = t13 * t3
-    t8 = t13 * t6
-    t8 = t15 + t8
+    t6 = t12 * t3
+    t8 = t12 * t6
+    t8 = t14 + t8
     t8 = 0.003 + t8
-    t8 = t12 * t8
+    t8 = t11 * t8
     t2 = t2 + t8
-    t2 = t12 * t2
+    t2 = t11 * t2
     t2 = t5 + t2
     t2 = 0.01 + t2
     t5 = p[0] + q[1]
     t8 = 0.3 * p[1]
     t8 = 0.065 + t8
-    t9 = t13 * t8
-    t10 = 0.04000000000000001 + t9
-    t15 = t5 * t10
-    t2 = t2 + t15
-    t10 = t10 * t5
-    t2 = t2 + t10
-    t10 = t5 * t5
-    t10 = 2.2 * t10
-    t2 = t2 + t10
+    t9 = t12 * t8
+    t14 = 0.04000000000000001 + t9
+    t14 = t5 * t14
+    t2 = t2 + t14
+    t2 = t2 + t14
+    t14 = t5 * t5
+    t14 = 2.2 * t14
+    t2 = t2 + t14
     t2 = 0.020000000000000004 + t2
-    t8 = t11 * t8
-    t10 = 0.012 + t8
-    t15 = t0 * t10
+    t8 = t10 * t8
+    t14 = 0.012 + t8
+    t15 = t0 * t14
     t15 = -t15
-    t14 = t13 * t14
+    t13 = t12 * t13
+    t6 = t10 * t6
+    t6 = t13 - t6
     t6 = t11 * t6
-    t6 = t14 - t6
-    t6 = t12 * t6
-    t1 = t11 * t1
-    t14 = t0 * t1
-    t6 = t6 - t14
-    t10 = t12 * t10
-    t10 = t5 * t10
-    t6 = t6 - t10
-    t10 = t0 * t7
-    t4 = t10 + t4
+    t1 = t10 * t1
+    t13 = t0 * t1
+    t6 = t6 - t13
+    t13 = t11 * t14
+    t13 = t5 * t13
+    t6 = t6 - t13
+    t13 = t0 * t7
+    t4 = t13 + t4
     t0 = t0 * t9
     t0 = t5 * t0
     t0 = t4 + t0
-    t4 = 0.001 * t11
-    t4 = t12 * t4
+    t4 = 0.001 * t10
+    t4 = t11 * t4
     t5 = -t8
-    t8 = 0.003 * t13
-    t8 = t13 * t8
-    t3 = t11 * t3
-    t3 = t11 * t3
+    t8 = 0.003 * t12
+    t8 = t12 * t8
+    t3 = t10 * t3
+    t3 = t10 * t3
     t3 = t8 + t3
     t3 = 0.00424 + t3
     t1 = -t1
-    t8 = 0.001 * t13
+    t8 = 0.001 * t12
     _M = (t2, t15, t6, t0, t4,
           t15, 2.2, 0.0, t5, 0.0,
           t6, 0.0, t3, t1, t8,
@@ -1699,87 +1697,85 @@ def _mass_matrix_chunk(x, t, s, y):
     sin(q_4, t4)
     multiply(k0, t4, t5)
     multiply(t4, t5, t6)
-    add(t3, t6, t7)
+    add(t3, t6, t3)
     multiply(k1, p_1, s0)
-    subtract(t7, s0, t7)
+    subtract(t3, s0, t6)
     multiply(k2, p_1, s1)
-    add(t7, s1, t7)
+    add(t6, s1, t6)
     multiply(p_1, p_1, s2)
     multiply(k3, s2, s2)
-    add(t7, s2, t7)
-    add(k4, t7, M_18)
-    add(k5, M_18, t7)
-    multiply(t0, t7, t7)
-    sin(q_2, t8)
-    cos(q_3, t9)
+    add(t6, s2, t6)
+    add(k4, t6, M_18)
+    add(k5, M_18, t6)
+    multiply(t0, t6, t6)
+    sin(q_2, t7)
+    cos(q_3, t8)
     multiply(t4, t2, t4)
     multiply(t1, t5, t1)
     subtract(t4, t1, t4)
-    multiply(t9, t4, t1)
-    multiply(t8, t1, t2)
-    add(t7, t2, t7)
-    multiply(t0, t7, t7)
+    multiply(t8, t4, t1)
+    multiply(t7, t1, t2)
+    add(t6, t2, t6)
+    multiply(t0, t6, t6)
     multiply(t0, t1, t1)
     sin(q_3, t5)
-    multiply(k6, t5, t10)
-    multiply(t5, t10, t11)
-    add(t6, t3, t6)
-    add(t6, s1, t6)
-    subtract(t6, s0, t6)
-    add(t6, s2, t6)
-    add(k4, t6, t6)
-    multiply(t9, t6, t3)
-    multiply(t9, t3, t12)
-    add(t11, t12, t11)
-    add(k6, t11, t11)
-    multiply(t8, t11, t11)
-    add(t1, t11, t1)
-    multiply(t8, t1, t1)
-    add(t7, t1, t7)
-    add(k7, t7, t7)
+    multiply(k6, t5, t9)
+    multiply(t5, t9, t10)
+    add(t3, s1, t3)
+    subtract(t3, s0, t3)
+    add(t3, s2, t3)
+    add(k4, t3, t3)
+    multiply(t8, t3, t11)
+    multiply(t8, t11, t12)
+    add(t10, t12, t10)
+    add(k6, t10, t10)
+    multiply(t7, t10, t10)
+    add(t1, t10, t1)
+    multiply(t7, t1, t1)
+    add(t6, t1, t6)
+    add(k7, t6, t6)
     add(p_0, q_1, t1)
     multiply(k3, p_1, s0)
     add(k8, s0, s0)
-    multiply(t9, s0, t11)
-    add(k9, t11, t12)
-    multiply(t1, t12, t13)
-    add(t7, t13, t7)
-    multiply(t12, t1, t12)
-    add(t7, t12, t7)
+    multiply(t8, s0, t10)
+    add(k9, t10, t12)
+    multiply(t1, t12, t12)
+    add(t6, t12, t6)
+    add(t6, t12, t6)
     multiply(t1, t1, t12)
     multiply(k10, t12, t12)
-    add(t7, t12, t7)
-    add(k11, t7, M_0)
-    multiply(t5, s0, t7)
-    add(k12, t7, t12)
+    add(t6, t12, t6)
+    add(k11, t6, M_0)
+    multiply(t5, s0, t6)
+    add(k12, t6, t12)
     multiply(t0, t12, t13)
     negative(t13, M_1)
-    multiply(t9, t10, t10)
-    multiply(t5, t3, t3)
-    subtract(t10, t3, t10)
-    multiply(t8, t10, t10)
+    multiply(t8, t9, t9)
+    multiply(t5, t11, t11)
+    subtract(t9, t11, t9)
+    multiply(t7, t9, t9)
     multiply(t5, t4, t4)
-    multiply(t0, t4, t3)
-    subtract(t10, t3, t10)
-    multiply(t8, t12, t12)
+    multiply(t0, t4, t11)
+    subtract(t9, t11, t9)
+    multiply(t7, t12, t12)
     multiply(t1, t12, t12)
-    subtract(t10, t12, M_2)
-    multiply(t0, M_18, t3)
-    add(t3, t2, t3)
-    multiply(t0, t11, t0)
+    subtract(t9, t12, M_2)
+    multiply(t0, M_18, t9)
+    add(t9, t2, t9)
+    multiply(t0, t10, t0)
     multiply(t1, t0, t1)
-    add(t3, t1, M_3)
+    add(t9, t1, M_3)
     multiply(k13, t5, t0)
-    multiply(t8, t0, M_4)
-    negative(t7, M_8)
-    multiply(k6, t9, t0)
-    multiply(t9, t0, t0)
-    multiply(t5, t6, t6)
-    multiply(t5, t6, t5)
+    multiply(t7, t0, M_4)
+    negative(t6, M_8)
+    multiply(k6, t8, t0)
+    multiply(t8, t0, t0)
+    multiply(t5, t3, t3)
+    multiply(t5, t3, t5)
     add(t0, t5, t0)
     add(k5, t0, M_12)
     negative(t4, M_13)
-    multiply(k13, t9, M_14)
+    multiply(k13, t8, M_14)
     copyto(M_5, M_1)
     copyto(M_10, M_2)
     copyto(M_15, M_3)
@@ -1796,13 +1792,13 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     in  qd [5]
     in  p [3]
     out C [5x5]
-    298 ops: 176 mul, 116 add, 0 div, 6 trig
+    255 ops: 143 mul, 106 add, 0 div, 6 trig
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
     p = _array(p, 3, "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_coriolis_matrix_chunk, (q, qd, p), 42, ((5, 5),), fixed=_coriolis_matrix_fixed, pure=4)
+        return _batch(_coriolis_matrix_chunk, (q, qd, p), 35, ((5, 5),), fixed=_coriolis_matrix_fixed, pure=4)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -1829,288 +1825,245 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     t13 = t10 - t12
     t14 = t0 * t13
     t15 = t14 * t6
-    t16 = t8 * t9
-    t17 = t7 * t11
-    t18 = t16 + t17
-    t19 = (-0.015) * p[1]
-    t18 = t18 - t19
-    t20 = 0.015 * p[1]
-    t18 = t18 + t20
-    t21 = p[1] * p[1]
-    t21 = 0.3 * t21
-    t18 = t18 + t21
-    t18 = 0.009000000000000001 + t18
-    t22 = 0.00424 + t18
-    t23 = sin(q[2])
-    t24 = t22 * t23
-    t24 = t15 - t24
-    t24 = t6 * t24
-    t22 = t6 * t22
-    t25 = t23 * t14
-    t22 = t22 + t25
-    t22 = t22 * t23
-    t22 = t24 - t22
-    t24 = t6 * t14
-    t25 = sin(q[3])
-    t26 = 0.003 * t25
-    t27 = t25 * t26
-    t28 = t17 + t16
-    t20 = t28 + t20
-    t19 = t20 - t19
-    t19 = t19 + t21
-    t19 = 0.009000000000000001 + t19
-    t20 = t0 * t19
-    t21 = t0 * t20
-    t21 = t27 + t21
-    t21 = 0.003 + t21
-    t27 = t23 * t21
-    t24 = t24 + t27
-    t24 = t24 * t6
-    t21 = t21 * t6
-    t14 = t14 * t23
-    t14 = t21 - t14
-    t14 = t23 * t14
-    t14 = t24 + t14
-    t14 = t22 + t14
-    t14 = 0.5 * t14
-    t21 = t14 * qd[2]
-    t5 = t5 + t21
-    t21 = t26 * t0
-    t22 = 0.003 * t0
-    t24 = t25 * t22
-    t21 = t21 + t24
-    t24 = t20 * t25
-    t27 = t19 * t25
-    t28 = t0 * t27
-    t24 = t24 + t28
-    t21 = t21 - t24
-    t21 = t23 * t21
-    t24 = t13 * t25
-    t28 = t6 * t24
-    t21 = t21 - t28
-    t21 = t23 * t21
-    t24 = t23 * t24
-    t28 = t6 * t24
-    t21 = t21 - t28
-    t28 = t1 * t25
-    t29 = t4 * t28
-    t21 = t21 - t29
-    t21 = t21 - t29
-    t21 = 0.5 * t21
-    t29 = t21 * qd[3]
-    t5 = t5 + t29
-    t29 = t11 * t8
-    t10 = t29 + t10
-    t29 = t9 * t7
-    t12 = t29 + t12
-    t10 = t10 - t12
-    t12 = t6 * t10
-    t8 = t9 * t8
-    t8 = t8 - t17
-    t7 = t11 * t7
-    t7 = t16 - t7
-    t7 = t8 - t7
-    t8 = t0 * t7
-    t9 = t23 * t8
-    t9 = t12 + t9
-    t11 = t6 * t9
-    t8 = t6 * t8
-    t12 = t0 * t10
-    t16 = t0 * t12
-    t16 = t23 * t16
-    t8 = t8 + t16
-    t8 = t23 * t8
-    t8 = t11 + t8
-    t8 = 0.5 * t8
-    t11 = t8 * qd[4]
-    t5 = t5 + t11
-    t11 = t25 * t1
-    t11 = 0.012 + t11
-    t16 = t11 * t23
-    t17 = t16 * qd[2]
-    t3 = t3 * qd[0]
-    t17 = t17 - t3
-    t1 = t1 * t0
-    t29 = t6 * t1
-    t30 = t6 * t2
-    t31 = t29 + t30
-    t31 = 0.5 * t31
-    t32 = t31 * qd[3]
-    t17 = t17 - t32
-    t32 = t0 * t22
-    t33 = t26 * t25
-    t32 = t32 - t33
-    t33 = t20 * t0
-    t27 = t25 * t27
-    t27 = t33 - t27
-    t27 = t32 - t27
-    t27 = t23 * t27
-    t32 = t13 * t0
-    t33 = t6 * t32
-    t27 = t27 - t33
-    t33 = t23 * t1
-    t33 = t4 * t33
-    t27 = t27 - t33
-    t18 = t18 * t23
-    t15 = t15 - t18
-    t2 = t2 * t23
-    t2 = t4 * t2
-    t2 = t15 - t2
-    t15 = t27 - t2
-    t15 = 0.5 * t15
-    t18 = t15 * qd[3]
-    t14 = t14 * qd[0]
-    t33 = t23 * t11
-    t34 = t33 * qd[1]
-    t34 = t14 + t34
-    t18 = t18 - t34
-    t12 = t25 * t12
-    t12 = t23 * t12
-    t7 = t25 * t7
-    t34 = t6 * t7
-    t12 = t12 + t34
-    t34 = 0.001 * t25
-    t35 = t34 * t6
-    t36 = t12 + t35
-    t36 = 0.5 * t36
-    t37 = t36 * qd[4]
-    t18 = t18 - t37
-    t37 = t30 + t29
-    t37 = 0.5 * t37
-    t38 = t37 * qd[1]
-    t21 = t21 * qd[0]
-    t38 = t38 - t21
-    t39 = t2 - t27
-    t39 = 0.5 * t39
-    t40 = t39 * qd[2]
-    t38 = t38 + t40
-    t40 = 0.001 * t0
-    t40 = t23 * t40
-    t41 = t9 - t40
-    t41 = 0.5 * t41
-    t42 = t41 * qd[4]
-    t38 = t38 + t42
-    t42 = t35 + t12
-    t42 = 0.5 * t42
-    t43 = t42 * qd[2]
-    t8 = t8 * qd[0]
-    t43 = t43 - t8
-    t44 = t40 - t9
-    t44 = 0.5 * t44
-    t45 = t44 * qd[3]
-    t43 = t43 + t45
-    t29 = t30 - t29
-    t29 = 0.5 * t29
-    t30 = t29 * qd[3]
-    t3 = t3 + t30
-    t30 = t33 * qd[0]
-    t30 = -t30
-    t33 = t37 * qd[0]
-    t26 = t0 * t26
-    t20 = t25 * t20
-    t20 = t26 - t20
-    t20 = t20 * t6
-    t13 = t25 * t13
-    t13 = t13 * t23
-    t13 = t20 + t13
-    t11 = t11 * t6
-    t11 = t4 * t11
-    t11 = t13 - t11
-    t11 = t11 * qd[2]
-    t11 = t14 + t11
-    t13 = t27 + t2
-    t13 = 0.5 * t13
-    t13 = t13 * qd[3]
-    t11 = t11 + t13
-    t12 = t35 - t12
-    t12 = 0.5 * t12
-    t13 = t12 * qd[4]
-    t11 = t11 + t13
-    t13 = t16 * qd[0]
-    t14 = t25 * t19
-    t14 = t14 * t0
-    t0 = t19 * t0
-    t0 = t25 * t0
-    t0 = t14 + t0
-    t14 = t22 * t25
-    t14 = t14 + t26
-    t0 = t0 - t14
-    t0 = 0.5 * t0
-    t14 = t0 * qd[3]
-    t16 = t25 * t10
-    t16 = t25 * t16
-    t16 = 0.5 * t16
-    t19 = t16 * qd[4]
-    t14 = t14 + t19
-    t19 = t39 * qd[0]
-    t0 = t0 * qd[2]
-    t19 = t19 - t0
-    t20 = t34 - t7
-    t20 = 0.5 * t20
-    t22 = t20 * qd[4]
+    t8 = t8 * t9
+    t7 = t7 * t11
+    t9 = t8 + t7
+    t11 = (-0.015) * p[1]
+    t16 = t9 - t11
+    t17 = 0.015 * p[1]
+    t16 = t16 + t17
+    t18 = p[1] * p[1]
+    t18 = 0.3 * t18
+    t16 = t16 + t18
+    t16 = 0.009000000000000001 + t16
+    t19 = 0.00424 + t16
+    t20 = sin(q[2])
+    t21 = t19 * t20
+    t21 = t15 - t21
+    t21 = t6 * t21
+    t19 = t6 * t19
+    t22 = t20 * t14
     t19 = t19 + t22
-    t22 = t42 * qd[0]
-    t16 = t16 * qd[2]
-    t22 = t22 - t16
-    t23 = t7 - t34
-    t23 = 0.5 * t23
-    t25 = t23 * qd[3]
-    t22 = t22 + t25
-    t25 = t29 * qd[1]
-    t21 = t21 + t25
-    t2 = t2 + t27
-    t2 = 0.5 * t2
-    t2 = t2 * qd[2]
-    t2 = t21 + t2
-    t6 = t6 * t28
-    t4 = t4 * t6
-    t4 = t24 + t4
-    t4 = t4 * qd[3]
-    t2 = t2 - t4
-    t4 = t9 + t40
-    t4 = 0.5 * t4
-    t4 = t4 * qd[4]
-    t2 = t2 + t4
-    t4 = t31 * qd[0]
-    t1 = t1 * qd[3]
-    t1 = t4 + t1
-    t1 = -t1
-    t4 = t15 * qd[0]
-    t0 = t4 + t0
-    t4 = t32 * qd[3]
-    t0 = t0 - t4
-    t4 = t7 + t34
-    t4 = 0.5 * t4
-    t4 = t4 * qd[4]
-    t0 = t0 - t4
-    t4 = 0.5 * t10
-    t6 = t4 * qd[4]
-    t10 = t44 * qd[0]
-    t15 = t23 * qd[2]
-    t10 = t10 + t15
-    t4 = t4 * qd[3]
-    t10 = t10 - t4
-    t12 = t12 * qd[2]
-    t8 = t8 + t12
-    t9 = t40 + t9
+    t19 = t19 * t20
+    t19 = t21 - t19
+    t21 = sin(q[3])
+    t23 = 0.003 * t21
+    t24 = t21 * t23
+    t9 = t9 + t17
+    t9 = t9 - t11
+    t9 = t9 + t18
+    t9 = 0.009000000000000001 + t9
+    t11 = t0 * t9
+    t17 = t0 * t11
+    t18 = t24 + t17
+    t18 = 0.003 + t18
+    t25 = t20 * t18
+    t25 = t15 + t25
+    t25 = t25 * t6
+    t18 = t18 * t6
+    t18 = t18 - t22
+    t18 = t20 * t18
+    t18 = t25 + t18
+    t18 = t19 + t18
+    t18 = 0.5 * t18
+    t19 = t18 * qd[2]
+    t5 = t5 + t19
+    t19 = t23 * t0
+    t22 = 0.003 * t0
+    t23 = t21 * t22
+    t23 = t19 + t23
+    t11 = t11 * t21
+    t9 = t9 * t21
+    t25 = t0 * t9
+    t25 = t11 + t25
+    t26 = t23 - t25
+    t26 = t20 * t26
+    t13 = t13 * t21
+    t27 = t6 * t13
+    t26 = t26 - t27
+    t26 = t20 * t26
+    t13 = t20 * t13
+    t27 = t6 * t13
+    t26 = t26 - t27
+    t1 = t1 * t21
+    t27 = t4 * t1
+    t26 = t26 - t27
+    t26 = t26 - t27
+    t26 = 0.5 * t26
+    t27 = t26 * qd[3]
+    t5 = t5 + t27
+    t10 = t12 + t10
+    t10 = t10 - t10
+    t12 = t6 * t10
+    t7 = t8 - t7
+    t7 = t7 - t7
+    t8 = t0 * t7
+    t27 = t20 * t8
+    t12 = t12 + t27
+    t27 = t6 * t12
+    t8 = t6 * t8
+    t28 = t0 * t10
+    t29 = t0 * t28
+    t29 = t20 * t29
+    t8 = t8 + t29
+    t8 = t20 * t8
+    t8 = t27 + t8
+    t8 = 0.5 * t8
+    t27 = t8 * qd[4]
+    t5 = t5 + t27
+    t27 = 0.012 + t1
+    t29 = t27 * t20
+    t30 = t29 * qd[2]
+    t3 = t3 * qd[0]
+    t30 = t30 - t3
+    t31 = t6 * t2
+    t32 = t31 + t31
+    t32 = 0.5 * t32
+    t33 = t32 * qd[3]
+    t30 = t30 - t33
+    t22 = t0 * t22
+    t22 = t22 - t24
+    t9 = t21 * t9
+    t9 = t17 - t9
+    t9 = t22 - t9
+    t9 = t20 * t9
+    t9 = t9 - t15
+    t17 = t20 * t2
+    t17 = t4 * t17
+    t9 = t9 - t17
+    t16 = t16 * t20
+    t15 = t15 - t16
+    t15 = t15 - t17
+    t16 = t9 - t15
+    t16 = 0.5 * t16
+    t17 = t16 * qd[3]
+    t18 = t18 * qd[0]
+    t22 = t29 * qd[1]
+    t22 = t18 + t22
+    t17 = t17 - t22
+    t22 = t21 * t28
+    t22 = t20 * t22
+    t7 = t21 * t7
+    t24 = t6 * t7
+    t22 = t22 + t24
+    t24 = 0.001 * t21
+    t28 = t24 * t6
+    t33 = t22 + t28
+    t33 = 0.5 * t33
+    t34 = t33 * qd[4]
+    t17 = t17 - t34
+    t34 = t32 * qd[1]
+    t26 = t26 * qd[0]
+    t34 = t34 - t26
+    t35 = t15 - t9
+    t35 = 0.5 * t35
+    t36 = t35 * qd[2]
+    t34 = t34 + t36
+    t0 = 0.001 * t0
+    t0 = t20 * t0
+    t20 = t12 - t0
+    t20 = 0.5 * t20
+    t36 = t20 * qd[4]
+    t34 = t34 + t36
+    t36 = t33 * qd[2]
+    t8 = t8 * qd[0]
+    t36 = t36 - t8
+    t37 = t0 - t12
+    t37 = 0.5 * t37
+    t38 = t37 * qd[3]
+    t36 = t36 + t38
+    t31 = t31 - t31
+    t31 = 0.5 * t31
+    t38 = t31 * qd[3]
+    t3 = t3 + t38
+    t29 = t29 * qd[0]
+    t38 = -t29
+    t32 = t32 * qd[0]
+    t11 = t19 - t11
+    t11 = t11 * t6
+    t11 = t11 + t13
+    t19 = t27 * t6
+    t19 = t4 * t19
+    t11 = t11 - t19
+    t11 = t11 * qd[2]
+    t11 = t18 + t11
+    t9 = t9 + t15
     t9 = 0.5 * t9
-    t9 = t9 * qd[3]
-    t8 = t8 + t9
-    t9 = t36 * qd[0]
-    t9 = t16 - t9
-    t7 = t34 + t7
-    t7 = 0.5 * t7
+    t15 = t9 * qd[3]
+    t11 = t11 + t15
+    t15 = t28 - t22
+    t15 = 0.5 * t15
+    t18 = t15 * qd[4]
+    t11 = t11 + t18
+    t18 = t25 - t23
+    t18 = 0.5 * t18
+    t19 = t18 * qd[3]
+    t22 = t21 * t10
+    t21 = t21 * t22
+    t21 = 0.5 * t21
+    t22 = t21 * qd[4]
+    t19 = t19 + t22
+    t22 = t35 * qd[0]
+    t18 = t18 * qd[2]
+    t22 = t22 - t18
+    t23 = t24 - t7
+    t23 = 0.5 * t23
+    t25 = t23 * qd[4]
+    t22 = t22 + t25
+    t25 = t33 * qd[0]
+    t21 = t21 * qd[2]
+    t27 = t25 - t21
+    t28 = t7 - t24
+    t28 = 0.5 * t28
+    t33 = t28 * qd[3]
+    t27 = t27 + t33
+    t31 = t31 * qd[1]
+    t26 = t26 + t31
+    t9 = t9 * qd[2]
+    t9 = t26 + t9
+    t1 = t6 * t1
+    t1 = t4 * t1
+    t1 = t13 + t1
+    t1 = t1 * qd[3]
+    t1 = t9 - t1
+    t0 = t12 + t0
+    t0 = 0.5 * t0
+    t4 = t0 * qd[4]
+    t1 = t1 + t4
+    t2 = t2 * qd[3]
+    t2 = t32 + t2
+    t2 = -t2
+    t4 = t16 * qd[0]
+    t4 = t4 + t18
+    t6 = t14 * qd[3]
+    t4 = t4 - t6
+    t6 = t7 + t24
+    t6 = 0.5 * t6
+    t7 = t6 * qd[4]
+    t4 = t4 - t7
+    t7 = 0.5 * t10
+    t9 = t7 * qd[4]
+    t10 = t37 * qd[0]
+    t12 = t28 * qd[2]
+    t10 = t10 + t12
     t7 = t7 * qd[3]
-    t7 = t9 - t7
-    t9 = t41 * qd[0]
-    t12 = t20 * qd[2]
-    t9 = t9 + t12
-    t4 = t9 + t4
-    _C = (t5, t3, t11, t2, t8,
-          t17, 0.0, t13, t1, 0.0,
-          t18, t30, t14, t0, t7,
-          t38, t33, t19, t6, t4,
-          t43, 0.0, t22, t10, 0.0)
+    t10 = t10 - t7
+    t12 = t15 * qd[2]
+    t8 = t8 + t12
+    t0 = t0 * qd[3]
+    t0 = t8 + t0
+    t8 = t21 - t25
+    t6 = t6 * qd[3]
+    t6 = t8 - t6
+    t8 = t20 * qd[0]
+    t12 = t23 * qd[2]
+    t8 = t8 + t12
+    t7 = t8 + t7
+    _C = (t5, t3, t11, t1, t0,
+          t30, 0.0, t29, t2, 0.0,
+          t17, t38, t19, t4, t6,
+          t34, t32, t22, t9, t7,
+          t36, 0.0, t27, t10, 0.0)
     return np.array(_C).reshape(5, 5)
 
 
@@ -2131,7 +2084,7 @@ def _coriolis_matrix_chunk(x, t, s, y):
     add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
     q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, p_0, p_1, p_2 = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34) = t
     s0, s1, s2, s3 = s
     (C_0, C_1, C_2, C_3, C_4, C_5, C_7, C_8, C_10, C_11, C_12, C_13, C_14, C_15, C_16, C_17, C_18, C_19,
      C_20, C_22, C_23) = y
@@ -2157,283 +2110,240 @@ def _coriolis_matrix_chunk(x, t, s, y):
     subtract(t9, t11, t12)
     multiply(t0, t12, t13)
     multiply(t13, t5, t14)
-    multiply(t7, t8, t15)
-    multiply(t6, t10, t16)
-    add(t15, t16, t17)
+    multiply(t7, t8, t7)
+    multiply(t6, t10, t6)
+    add(t7, t6, t8)
     multiply(k6, p_1, s1)
-    subtract(t17, s1, t17)
+    subtract(t8, s1, t10)
     multiply(k7, p_1, s2)
-    add(t17, s2, t17)
+    add(t10, s2, t10)
     multiply(p_1, p_1, s3)
     multiply(k0, s3, s3)
-    add(t17, s3, t17)
-    add(k8, t17, t17)
-    add(k9, t17, t18)
-    sin(q_2, t19)
-    multiply(t18, t19, t20)
-    subtract(t14, t20, t20)
-    multiply(t5, t20, t20)
-    multiply(t5, t18, t18)
-    multiply(t19, t13, t21)
-    add(t18, t21, t18)
-    multiply(t18, t19, t18)
-    subtract(t20, t18, t20)
-    multiply(t5, t13, t18)
-    sin(q_3, t21)
-    multiply(k10, t21, t22)
-    multiply(t21, t22, t23)
-    add(t16, t15, t24)
-    add(t24, s2, t24)
-    subtract(t24, s1, t24)
-    add(t24, s3, t24)
-    add(k8, t24, t24)
-    multiply(t0, t24, t25)
-    multiply(t0, t25, t26)
-    add(t23, t26, t23)
+    add(t10, s3, t10)
+    add(k8, t10, t10)
+    add(k9, t10, t15)
+    sin(q_2, t16)
+    multiply(t15, t16, t17)
+    subtract(t14, t17, t17)
+    multiply(t5, t17, t17)
+    multiply(t5, t15, t15)
+    multiply(t16, t13, t18)
+    add(t15, t18, t15)
+    multiply(t15, t16, t15)
+    subtract(t17, t15, t17)
+    sin(q_3, t15)
+    multiply(k10, t15, t19)
+    multiply(t15, t19, t20)
+    add(t8, s2, t8)
+    subtract(t8, s1, t8)
+    add(t8, s3, t8)
+    add(k8, t8, t8)
+    multiply(t0, t8, t21)
+    multiply(t0, t21, t22)
+    add(t20, t22, t23)
     add(k10, t23, t23)
-    multiply(t19, t23, t26)
-    add(t18, t26, t18)
-    multiply(t18, t5, t18)
+    multiply(t16, t23, t24)
+    add(t14, t24, t24)
+    multiply(t24, t5, t24)
     multiply(t23, t5, t23)
-    multiply(t13, t19, t13)
-    subtract(t23, t13, t23)
-    multiply(t19, t23, t23)
-    add(t18, t23, t18)
-    add(t20, t18, t20)
-    multiply(k4, t20, t20)
-    multiply(t20, qd_2, t13)
-    add(t4, t13, t4)
-    multiply(t22, t0, t13)
-    multiply(k10, t0, t18)
-    multiply(t21, t18, t23)
-    add(t13, t23, t13)
-    multiply(t25, t21, t23)
-    multiply(t24, t21, t26)
-    multiply(t0, t26, t27)
-    add(t23, t27, t23)
-    subtract(t13, t23, t13)
-    multiply(t19, t13, t13)
-    multiply(t12, t21, t23)
-    multiply(t5, t23, t27)
-    subtract(t13, t27, t13)
-    multiply(t19, t13, t13)
-    multiply(t19, t23, t23)
-    multiply(t5, t23, t27)
-    subtract(t13, t27, t13)
-    multiply(s0, t21, t27)
-    multiply(t3, t27, t28)
-    subtract(t13, t28, t13)
-    subtract(t13, t28, t13)
-    multiply(k4, t13, t13)
-    multiply(t13, qd_3, t28)
-    add(t4, t28, t4)
-    multiply(t10, t7, t28)
-    add(t28, t9, t28)
-    multiply(t8, t6, t9)
-    add(t9, t11, t9)
-    subtract(t28, t9, t28)
-    multiply(t5, t28, t9)
-    multiply(t8, t7, t8)
-    subtract(t8, t16, t8)
-    multiply(t10, t6, t10)
-    subtract(t15, t10, t15)
-    subtract(t8, t15, t8)
-    multiply(t0, t8, t6)
-    multiply(t19, t6, t7)
-    add(t9, t7, t9)
-    multiply(t5, t9, t7)
-    multiply(t5, t6, t6)
-    multiply(t0, t28, t10)
-    multiply(t0, t10, t11)
-    multiply(t19, t11, t11)
-    add(t6, t11, t6)
-    multiply(t19, t6, t6)
-    add(t7, t6, t7)
-    multiply(k4, t7, t7)
-    multiply(t7, qd_4, t6)
-    add(t4, t6, C_0)
-    multiply(t21, s0, t4)
-    add(k11, t4, t4)
-    multiply(t4, t19, t6)
-    multiply(t6, qd_2, t11)
-    multiply(t2, qd_0, t2)
-    subtract(t11, t2, t11)
-    multiply(s0, t0, t15)
-    multiply(t5, t15, t16)
-    multiply(t5, t1, t29)
-    add(t16, t29, t30)
-    multiply(k4, t30, t30)
-    multiply(t30, qd_3, t31)
-    subtract(t11, t31, C_5)
-    multiply(t0, t18, t11)
-    multiply(t22, t21, t31)
-    subtract(t11, t31, t11)
-    multiply(t25, t0, t31)
-    multiply(t21, t26, t26)
-    subtract(t31, t26, t31)
-    subtract(t11, t31, t11)
-    multiply(t19, t11, t11)
-    multiply(t12, t0, t26)
-    multiply(t5, t26, t31)
-    subtract(t11, t31, t11)
-    multiply(t19, t15, t31)
-    multiply(t3, t31, t31)
-    subtract(t11, t31, t11)
-    multiply(t17, t19, t17)
-    subtract(t14, t17, t14)
-    multiply(t1, t19, t1)
-    multiply(t3, t1, t1)
-    subtract(t14, t1, t14)
-    subtract(t11, t14, t1)
-    multiply(k4, t1, t1)
-    multiply(t1, qd_3, t17)
-    multiply(t20, qd_0, t20)
-    multiply(t19, t4, t31)
-    multiply(t31, qd_1, t32)
-    add(t20, t32, t32)
-    subtract(t17, t32, t17)
-    multiply(t21, t10, t10)
-    multiply(t19, t10, t10)
-    multiply(t21, t8, t8)
-    multiply(t5, t8, t32)
-    add(t10, t32, t10)
-    multiply(k12, t21, t32)
-    multiply(t32, t5, t33)
-    add(t10, t33, t34)
-    multiply(k4, t34, t34)
-    multiply(t34, qd_4, t35)
-    subtract(t17, t35, C_10)
-    add(t29, t16, t17)
+    subtract(t23, t18, t23)
+    multiply(t16, t23, t23)
+    add(t24, t23, t24)
+    add(t17, t24, t17)
     multiply(k4, t17, t17)
-    multiply(t17, qd_1, t35)
-    multiply(t13, qd_0, t13)
-    subtract(t35, t13, t35)
-    subtract(t14, t11, t36)
-    multiply(k4, t36, t36)
-    multiply(t36, qd_2, t37)
-    add(t35, t37, t35)
-    multiply(k12, t0, t37)
-    multiply(t19, t37, t37)
-    subtract(t9, t37, t38)
-    multiply(k4, t38, t38)
-    multiply(t38, qd_4, t39)
-    add(t35, t39, C_15)
-    add(t33, t10, t35)
-    multiply(k4, t35, t35)
-    multiply(t35, qd_2, t39)
-    multiply(t7, qd_0, t7)
-    subtract(t39, t7, t39)
-    subtract(t37, t9, t40)
-    multiply(k4, t40, t40)
-    multiply(t40, qd_3, t41)
-    add(t39, t41, C_20)
-    subtract(t29, t16, t29)
+    multiply(t17, qd_2, t18)
+    add(t4, t18, t4)
+    multiply(t19, t0, t19)
+    multiply(k10, t0, t18)
+    multiply(t15, t18, t23)
+    add(t19, t23, t23)
+    multiply(t21, t15, t21)
+    multiply(t8, t15, t8)
+    multiply(t0, t8, t24)
+    add(t21, t24, t24)
+    subtract(t23, t24, t25)
+    multiply(t16, t25, t25)
+    multiply(t12, t15, t12)
+    multiply(t5, t12, t26)
+    subtract(t25, t26, t25)
+    multiply(t16, t25, t25)
+    multiply(t16, t12, t12)
+    multiply(t5, t12, t26)
+    subtract(t25, t26, t25)
+    multiply(s0, t15, t26)
+    multiply(t3, t26, t27)
+    subtract(t25, t27, t25)
+    subtract(t25, t27, t25)
+    multiply(k4, t25, t25)
+    multiply(t25, qd_3, t27)
+    add(t4, t27, t4)
+    add(t11, t9, t11)
+    subtract(t11, t11, t11)
+    multiply(t5, t11, t9)
+    subtract(t7, t6, t7)
+    subtract(t7, t7, t7)
+    multiply(t0, t7, t6)
+    multiply(t16, t6, t27)
+    add(t9, t27, t9)
+    multiply(t5, t9, t27)
+    multiply(t5, t6, t6)
+    multiply(t0, t11, t28)
+    multiply(t0, t28, t29)
+    multiply(t16, t29, t29)
+    add(t6, t29, t6)
+    multiply(t16, t6, t6)
+    add(t27, t6, t27)
+    multiply(k4, t27, t27)
+    multiply(t27, qd_4, t6)
+    add(t4, t6, C_0)
+    add(k11, t26, t4)
+    multiply(t4, t16, t6)
+    multiply(t6, qd_2, t29)
+    multiply(t2, qd_0, t2)
+    subtract(t29, t2, t29)
+    multiply(t5, t1, t30)
+    add(t30, t30, t31)
+    multiply(k4, t31, t31)
+    multiply(t31, qd_3, t32)
+    subtract(t29, t32, C_5)
+    multiply(t0, t18, t18)
+    subtract(t18, t20, t18)
+    multiply(t15, t8, t8)
+    subtract(t22, t8, t22)
+    subtract(t18, t22, t18)
+    multiply(t16, t18, t18)
+    subtract(t18, t14, t18)
+    multiply(t16, t1, t8)
+    multiply(t3, t8, t8)
+    subtract(t18, t8, t18)
+    multiply(t10, t16, t10)
+    subtract(t14, t10, t14)
+    subtract(t14, t8, t14)
+    subtract(t18, t14, t8)
+    multiply(k4, t8, t8)
+    multiply(t8, qd_3, t10)
+    multiply(t17, qd_0, t17)
+    multiply(t6, qd_1, t20)
+    add(t17, t20, t20)
+    subtract(t10, t20, t10)
+    multiply(t15, t28, t28)
+    multiply(t16, t28, t28)
+    multiply(t15, t7, t7)
+    multiply(t5, t7, t20)
+    add(t28, t20, t28)
+    multiply(k12, t15, t20)
+    multiply(t20, t5, t22)
+    add(t28, t22, t29)
     multiply(k4, t29, t29)
-    multiply(t29, qd_3, t16)
-    add(t2, t16, C_1)
-    multiply(t31, qd_0, t31)
-    negative(t31, C_11)
-    multiply(t17, qd_0, C_16)
-    multiply(t0, t22, t22)
-    multiply(t21, t25, t25)
-    subtract(t22, t25, t25)
-    multiply(t25, t5, t25)
-    multiply(t21, t12, t12)
-    multiply(t12, t19, t12)
-    add(t25, t12, t25)
+    multiply(t29, qd_4, t32)
+    subtract(t10, t32, C_10)
+    multiply(t31, qd_1, t10)
+    multiply(t25, qd_0, t25)
+    subtract(t10, t25, t10)
+    subtract(t14, t18, t32)
+    multiply(k4, t32, t32)
+    multiply(t32, qd_2, t33)
+    add(t10, t33, t10)
+    multiply(k12, t0, t0)
+    multiply(t16, t0, t16)
+    subtract(t9, t16, t0)
+    multiply(k4, t0, t0)
+    multiply(t0, qd_4, t33)
+    add(t10, t33, C_15)
+    multiply(t29, qd_2, t10)
+    multiply(t27, qd_0, t27)
+    subtract(t10, t27, t10)
+    subtract(t16, t9, t33)
+    multiply(k4, t33, t33)
+    multiply(t33, qd_3, t34)
+    add(t10, t34, C_20)
+    subtract(t30, t30, t30)
+    multiply(k4, t30, t30)
+    multiply(t30, qd_3, t10)
+    add(t2, t10, C_1)
+    multiply(t6, qd_0, C_7)
+    negative(C_7, C_11)
+    multiply(t31, qd_0, C_16)
+    subtract(t19, t21, t19)
+    multiply(t19, t5, t19)
+    add(t19, t12, t19)
     multiply(t4, t5, t4)
     multiply(t3, t4, t4)
-    subtract(t25, t4, t25)
-    multiply(t25, qd_2, t25)
-    add(t20, t25, t20)
-    add(t11, t14, t2)
+    subtract(t19, t4, t19)
+    multiply(t19, qd_2, t19)
+    add(t17, t19, t17)
+    add(t18, t14, t18)
+    multiply(k4, t18, t18)
+    multiply(t18, qd_3, t2)
+    add(t17, t2, t17)
+    subtract(t22, t28, t22)
+    multiply(k4, t22, t22)
+    multiply(t22, qd_4, t2)
+    add(t17, t2, C_2)
+    subtract(t24, t23, t24)
+    multiply(k4, t24, t24)
+    multiply(t24, qd_3, t2)
+    multiply(t15, t11, t4)
+    multiply(t15, t4, t15)
+    multiply(k4, t15, t15)
+    multiply(t15, qd_4, t4)
+    add(t2, t4, C_12)
+    multiply(t32, qd_0, t32)
+    multiply(t24, qd_2, t24)
+    subtract(t32, t24, t32)
+    subtract(t20, t7, t2)
     multiply(k4, t2, t2)
-    multiply(t2, qd_3, t2)
-    add(t20, t2, t20)
-    subtract(t33, t10, t33)
-    multiply(k4, t33, t33)
-    multiply(t33, qd_4, t2)
-    add(t20, t2, C_2)
-    multiply(t6, qd_0, C_7)
-    multiply(t21, t24, t2)
-    multiply(t2, t0, t2)
-    multiply(t24, t0, t24)
-    multiply(t21, t24, t24)
-    add(t2, t24, t2)
-    multiply(t18, t21, t18)
-    add(t18, t22, t18)
-    subtract(t2, t18, t2)
-    multiply(k4, t2, t2)
-    multiply(t2, qd_3, t0)
-    multiply(t21, t28, t4)
-    multiply(t21, t4, t21)
-    multiply(k4, t21, t21)
-    multiply(t21, qd_4, t4)
-    add(t0, t4, C_12)
-    multiply(t36, qd_0, t36)
-    multiply(t2, qd_2, t2)
-    subtract(t36, t2, t36)
-    subtract(t32, t8, t0)
-    multiply(k4, t0, t0)
-    multiply(t0, qd_4, t4)
-    add(t36, t4, C_17)
-    multiply(t35, qd_0, t35)
-    multiply(t21, qd_2, t21)
-    subtract(t35, t21, t35)
-    subtract(t8, t32, t4)
-    multiply(k4, t4, t4)
-    multiply(t4, qd_3, t6)
-    add(t35, t6, C_22)
-    multiply(t29, qd_1, t29)
-    add(t13, t29, t13)
-    add(t14, t11, t14)
-    multiply(k4, t14, t14)
-    multiply(t14, qd_2, t14)
-    add(t13, t14, t13)
-    multiply(t5, t27, t5)
+    multiply(t2, qd_4, t4)
+    add(t32, t4, C_17)
+    multiply(t29, qd_0, t29)
+    multiply(t15, qd_2, t15)
+    subtract(t29, t15, t4)
+    subtract(t7, t20, t6)
+    multiply(k4, t6, t6)
+    multiply(t6, qd_3, t10)
+    add(t4, t10, C_22)
+    multiply(t30, qd_1, t30)
+    add(t25, t30, t25)
+    multiply(t18, qd_2, t18)
+    add(t25, t18, t25)
+    multiply(t5, t26, t5)
     multiply(t3, t5, t3)
-    add(t23, t3, t23)
-    multiply(t23, qd_3, t23)
-    subtract(t13, t23, t13)
-    add(t9, t37, t3)
-    multiply(k4, t3, t3)
-    multiply(t3, qd_4, t3)
-    add(t13, t3, C_3)
-    multiply(t30, qd_0, t30)
-    multiply(t15, qd_3, t15)
-    add(t30, t15, t30)
-    negative(t30, C_8)
-    multiply(t1, qd_0, t1)
-    add(t1, t2, t1)
-    multiply(t26, qd_3, t26)
-    subtract(t1, t26, t1)
-    add(t8, t32, t2)
-    multiply(k4, t2, t2)
-    multiply(t2, qd_4, t2)
-    subtract(t1, t2, C_13)
-    multiply(k4, t28, t28)
-    multiply(t28, qd_4, C_18)
-    multiply(t40, qd_0, t40)
-    multiply(t4, qd_2, t4)
-    add(t40, t4, t40)
-    multiply(t28, qd_3, t28)
-    subtract(t40, t28, C_23)
-    multiply(t33, qd_2, t33)
-    add(t7, t33, t7)
-    add(t37, t9, t37)
-    multiply(k4, t37, t37)
-    multiply(t37, qd_3, t37)
-    add(t7, t37, C_4)
-    multiply(t34, qd_0, t34)
-    subtract(t21, t34, t21)
-    add(t32, t8, t32)
-    multiply(k4, t32, t32)
-    multiply(t32, qd_3, t32)
-    subtract(t21, t32, C_14)
-    multiply(t38, qd_0, t38)
-    multiply(t0, qd_2, t0)
-    add(t38, t0, t38)
-    add(t38, t28, C_19)
+    add(t12, t3, t12)
+    multiply(t12, qd_3, t12)
+    subtract(t25, t12, t25)
+    add(t9, t16, t9)
+    multiply(k4, t9, t9)
+    multiply(t9, qd_4, t3)
+    add(t25, t3, C_3)
+    multiply(t1, qd_3, t1)
+    add(C_16, t1, t1)
+    negative(t1, C_8)
+    multiply(t8, qd_0, t8)
+    add(t8, t24, t8)
+    multiply(t13, qd_3, t13)
+    subtract(t8, t13, t8)
+    add(t7, t20, t7)
+    multiply(k4, t7, t7)
+    multiply(t7, qd_4, t1)
+    subtract(t8, t1, C_13)
+    multiply(k4, t11, t11)
+    multiply(t11, qd_4, C_18)
+    multiply(t33, qd_0, t33)
+    multiply(t6, qd_2, t6)
+    add(t33, t6, t33)
+    multiply(t11, qd_3, t11)
+    subtract(t33, t11, C_23)
+    multiply(t22, qd_2, t22)
+    add(t27, t22, t27)
+    multiply(t9, qd_3, t9)
+    add(t27, t9, C_4)
+    subtract(t15, t29, t15)
+    multiply(t7, qd_3, t7)
+    subtract(t15, t7, C_14)
+    multiply(t0, qd_0, t0)
+    multiply(t2, qd_2, t2)
+    add(t0, t2, t0)
+    add(t0, t11, C_19)
 
 
 def gravity(q, p=DEFAULT_P):
@@ -3801,7 +3711,7 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     in  tau [5]
     in  p [3]
     out qdd [5]
-    446 ops: 253 mul, 170 add, 15 div, 8 trig
+    444 ops: 252 mul, 169 add, 15 div, 8 trig
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
@@ -4048,35 +3958,34 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t2 = t21 * t1
     t7 = 0.0027500000000000003 * t23
     t13 = t23 * t7
-    t15 = t2 + t13
-    t20 = (-0.015) * p[1]
-    t15 = t15 - t20
-    t22 = 0.015 * p[1]
+    t2 = t2 + t13
+    t13 = (-0.015) * p[1]
+    t15 = t2 - t13
+    t20 = 0.015 * p[1]
+    t15 = t15 + t20
+    t22 = p[1] * p[1]
+    t22 = 0.3 * t22
     t15 = t15 + t22
-    t25 = p[1] * p[1]
-    t25 = 0.3 * t25
-    t15 = t15 + t25
     t15 = 0.009000000000000001 + t15
-    t26 = 0.00424 + t15
-    t26 = t3 * t26
+    t25 = 0.00424 + t15
+    t25 = t3 * t25
     t1 = t23 * t1
     t7 = t21 * t7
     t1 = t1 - t7
     t7 = t12 * t1
     t21 = t4 * t7
-    t23 = t26 + t21
+    t23 = t25 + t21
     t23 = t3 * t23
     t7 = t3 * t7
-    t26 = 0.003 * t14
-    t29 = t14 * t26
-    t2 = t13 + t2
+    t25 = 0.003 * t14
+    t26 = t14 * t25
+    t2 = t2 + t20
+    t2 = t2 - t13
     t2 = t2 + t22
-    t2 = t2 - t20
-    t2 = t2 + t25
     t2 = 0.009000000000000001 + t2
     t13 = t12 * t2
     t20 = t12 * t13
-    t20 = t29 + t20
+    t20 = t26 + t20
     t20 = 0.003 + t20
     t20 = t4 * t20
     t7 = t7 + t20
@@ -4087,16 +3996,15 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     t20 = 0.065 + t20
     t22 = t12 * t20
     t23 = 0.04000000000000001 + t22
-    t25 = t11 * t23
-    t7 = t7 + t25
-    t23 = t23 * t11
+    t23 = t11 * t23
+    t7 = t7 + t23
     t7 = t7 + t23
     t23 = t11 * t11
     t23 = 2.2 * t23
     t7 = t7 + t23
     t7 = 0.020000000000000004 + t7
     t23 = t0 / t7
-    t25 = t12 * t26
+    t25 = t12 * t25
     t13 = t14 * t13
     t13 = t25 - t13
     t13 = t4 * t13
@@ -4516,67 +4424,65 @@ def _forward_dynamics_chunk(x, t, s, y):
     multiply(t21, t0, t2)
     multiply(k9, t23, t7)
     multiply(t23, t7, t13)
-    add(t2, t13, t15)
+    add(t2, t13, t2)
     multiply(k16, p_1, s0)
-    subtract(t15, s0, t15)
+    subtract(t2, s0, t13)
     multiply(k11, p_1, s1)
-    add(t15, s1, t15)
+    add(t13, s1, t13)
     multiply(p_1, p_1, s2)
     multiply(k12, s2, s2)
-    add(t15, s2, t15)
-    add(k6, t15, t15)
-    add(k4, t15, t16)
-    multiply(t3, t16, t16)
+    add(t13, s2, t13)
+    add(k6, t13, t13)
+    add(k4, t13, t15)
+    multiply(t3, t15, t15)
     multiply(t23, t0, t23)
     multiply(t21, t7, t21)
     subtract(t23, t21, t23)
     multiply(t12, t23, t0)
     multiply(t4, t0, t7)
-    add(t16, t7, t16)
-    multiply(t3, t16, t16)
+    add(t15, t7, t15)
+    multiply(t3, t15, t15)
     multiply(t3, t0, t0)
-    multiply(k3, t14, t21)
-    multiply(t14, t21, t22)
-    add(t13, t2, t13)
-    add(t13, s1, t13)
-    subtract(t13, s0, t13)
-    add(t13, s2, t13)
-    add(k6, t13, t13)
-    multiply(t12, t13, t2)
-    multiply(t12, t2, t25)
-    add(t22, t25, t22)
-    add(k3, t22, t22)
-    multiply(t4, t22, t22)
-    add(t0, t22, t0)
+    multiply(k3, t14, t16)
+    multiply(t14, t16, t21)
+    add(t2, s1, t2)
+    subtract(t2, s0, t2)
+    add(t2, s2, t2)
+    add(k6, t2, t2)
+    multiply(t12, t2, t22)
+    multiply(t12, t22, t25)
+    add(t21, t25, t21)
+    add(k3, t21, t21)
+    multiply(t4, t21, t21)
+    add(t0, t21, t0)
     multiply(t4, t0, t0)
-    add(t16, t0, t16)
-    add(k17, t16, t16)
+    add(t15, t0, t15)
+    add(k17, t15, t15)
     multiply(k12, p_1, s0)
     add(k18, s0, s0)
     multiply(t12, s0, t0)
-    add(k2, t0, t22)
-    multiply(t11, t22, t25)
-    add(t16, t25, t16)
-    multiply(t22, t11, t22)
-    add(t16, t22, t16)
-    multiply(t11, t11, t22)
-    multiply(k19, t22, t22)
-    add(t16, t22, t16)
-    add(k20, t16, t16)
-    divide(t1, t16, t22)
-    multiply(t12, t21, t21)
-    multiply(t14, t2, t2)
-    subtract(t21, t2, t21)
-    multiply(t4, t21, t21)
+    add(k2, t0, t21)
+    multiply(t11, t21, t21)
+    add(t15, t21, t15)
+    add(t15, t21, t15)
+    multiply(t11, t11, t21)
+    multiply(k19, t21, t21)
+    add(t15, t21, t15)
+    add(k20, t15, t15)
+    divide(t1, t15, t21)
+    multiply(t12, t16, t16)
+    multiply(t14, t22, t22)
+    subtract(t16, t22, t16)
+    multiply(t4, t16, t16)
     multiply(t14, t23, t23)
-    multiply(t3, t23, t2)
-    subtract(t21, t2, t21)
-    multiply(t14, s0, t2)
-    add(k5, t2, t25)
+    multiply(t3, t23, t22)
+    subtract(t16, t22, t16)
+    multiply(t14, s0, t22)
+    add(k5, t22, t25)
     multiply(t4, t25, t26)
     multiply(t11, t26, t26)
-    subtract(t21, t26, t21)
-    divide(t21, t16, t21)
+    subtract(t16, t26, t16)
+    divide(t16, t15, t16)
     multiply(t5, t39, t39)
     multiply(t24, t6, t24)
     subtract(t39, t24, t39)
@@ -4587,13 +4493,13 @@ def _forward_dynamics_chunk(x, t, s, y):
     subtract(t8, t27, t8)
     add(t39, t8, t39)
     subtract(tau_2, t39, t39)
-    multiply(t21, t1, t6)
+    multiply(t16, t1, t6)
     multiply(t3, t25, t25)
-    divide(t25, t16, t25)
-    multiply(t21, t25, t8)
-    multiply(t8, t16, t8)
+    divide(t25, t15, t25)
+    multiply(t16, t25, t8)
+    multiply(t8, t15, t8)
     multiply(t25, t25, t24)
-    multiply(t24, t16, t24)
+    multiply(t24, t15, t24)
     subtract(k19, t24, t24)
     divide(t8, t24, t8)
     multiply(k13, t10, t26)
@@ -4618,117 +4524,117 @@ def _forward_dynamics_chunk(x, t, s, y):
     subtract(t39, t6, t39)
     multiply(k3, t12, t5)
     multiply(t12, t5, t5)
-    multiply(t14, t13, t13)
-    multiply(t14, t13, t13)
-    add(t5, t13, t5)
+    multiply(t14, t2, t2)
+    multiply(t14, t2, t2)
+    add(t5, t2, t5)
     add(k4, t5, t5)
-    multiply(t21, t21, t6)
-    multiply(t6, t16, t6)
-    multiply(t8, t8, t9)
-    multiply(t9, t24, t9)
-    add(t6, t9, t6)
-    subtract(t5, t6, t5)
-    divide(t39, t5, t6)
+    multiply(t16, t16, t2)
+    multiply(t2, t15, t2)
+    multiply(t8, t8, t6)
+    multiply(t6, t24, t6)
+    add(t2, t6, t2)
+    subtract(t5, t2, t5)
+    divide(t39, t5, t2)
     multiply(k10, t12, t12)
     multiply(k10, t14, t14)
     multiply(t4, t14, t4)
-    divide(t4, t16, t4)
-    multiply(t4, t21, t9)
-    multiply(t9, t16, t9)
-    multiply(t4, t25, t10)
-    multiply(t10, t16, t10)
-    divide(t10, t24, t10)
-    multiply(t10, t8, t13)
-    multiply(t13, t24, t13)
-    add(t9, t13, t9)
-    subtract(t12, t9, t12)
+    divide(t4, t15, t4)
+    multiply(t4, t16, t6)
+    multiply(t6, t15, t6)
+    multiply(t4, t25, t9)
+    multiply(t9, t15, t9)
+    divide(t9, t24, t9)
+    multiply(t9, t8, t10)
+    multiply(t10, t24, t10)
+    add(t6, t10, t6)
+    subtract(t12, t6, t12)
     divide(t12, t5, t12)
     subtract(tau_4, t31, t31)
-    multiply(t4, t1, t9)
-    multiply(t10, t26, t13)
-    add(t9, t13, t9)
-    multiply(t12, t39, t13)
-    add(t9, t13, t9)
-    multiply(t3, t15, t13)
-    add(t13, t7, t13)
+    multiply(t4, t1, t6)
+    multiply(t9, t26, t10)
+    add(t6, t10, t6)
+    multiply(t12, t39, t10)
+    add(t6, t10, t6)
+    multiply(t3, t13, t10)
+    add(t10, t7, t10)
     multiply(t3, t0, t3)
     multiply(t11, t3, t11)
-    add(t13, t11, t13)
-    divide(t13, t16, t13)
-    multiply(t4, t13, t0)
-    multiply(t0, t16, t0)
-    multiply(t13, t25, t3)
-    multiply(t3, t16, t3)
-    subtract(t3, t2, t3)
+    add(t10, t11, t10)
+    divide(t10, t15, t10)
+    multiply(t4, t10, t0)
+    multiply(t0, t15, t0)
+    multiply(t10, t25, t3)
+    multiply(t3, t15, t3)
+    subtract(t3, t22, t3)
     divide(t3, t24, t3)
-    multiply(t10, t3, t2)
-    multiply(t2, t24, t2)
-    add(t0, t2, t0)
-    multiply(t13, t21, t2)
-    multiply(t2, t16, t2)
-    multiply(t3, t8, t7)
+    multiply(t9, t3, t7)
     multiply(t7, t24, t7)
-    add(t2, t7, t2)
-    add(t23, t2, t23)
+    add(t0, t7, t0)
+    multiply(t10, t16, t7)
+    multiply(t7, t15, t7)
+    multiply(t3, t8, t11)
+    multiply(t11, t24, t11)
+    add(t7, t11, t7)
+    add(t23, t7, t23)
     divide(t23, t5, t23)
-    multiply(t12, t23, t2)
-    multiply(t2, t5, t2)
-    subtract(t0, t2, t0)
-    multiply(t13, t13, t2)
-    multiply(t2, t16, t2)
-    multiply(t3, t3, t7)
-    multiply(t7, t24, t7)
-    add(t2, t7, t2)
-    multiply(t23, t23, t7)
+    multiply(t12, t23, t7)
     multiply(t7, t5, t7)
-    add(t2, t7, t2)
-    subtract(t15, t2, t15)
-    divide(t0, t15, t0)
+    subtract(t0, t7, t0)
+    multiply(t10, t10, t7)
+    multiply(t7, t15, t7)
+    multiply(t3, t3, t11)
+    multiply(t11, t24, t11)
+    add(t7, t11, t7)
+    multiply(t23, t23, t11)
+    multiply(t11, t5, t11)
+    add(t7, t11, t7)
+    subtract(t13, t7, t13)
+    divide(t0, t13, t0)
     subtract(tau_3, t17, t17)
-    multiply(t13, t1, t1)
-    multiply(t3, t26, t2)
-    add(t1, t2, t1)
+    multiply(t10, t1, t1)
+    multiply(t3, t26, t7)
+    add(t1, t7, t1)
     multiply(t23, t39, t39)
     subtract(t1, t39, t1)
     subtract(t17, t1, t17)
     multiply(t0, t17, t1)
-    subtract(t9, t1, t9)
-    subtract(t31, t9, t31)
+    subtract(t6, t1, t6)
+    subtract(t31, t6, t31)
     multiply(t4, t4, t1)
-    multiply(t1, t16, t1)
-    multiply(t10, t10, t2)
-    multiply(t2, t24, t2)
-    add(t1, t2, t1)
-    multiply(t12, t12, t2)
-    multiply(t2, t5, t2)
-    add(t1, t2, t1)
-    multiply(t0, t0, t2)
-    multiply(t2, t15, t2)
-    add(t1, t2, t1)
+    multiply(t1, t15, t1)
+    multiply(t9, t9, t6)
+    multiply(t6, t24, t6)
+    add(t1, t6, t1)
+    multiply(t12, t12, t6)
+    multiply(t6, t5, t6)
+    add(t1, t6, t1)
+    multiply(t0, t0, t5)
+    multiply(t5, t13, t5)
+    add(t1, t5, t1)
     subtract(k10, t1, t1)
     divide(t31, t1, qdd_4)
     multiply(t12, qdd_4, t12)
-    divide(t17, t15, t17)
+    divide(t17, t13, t17)
     multiply(t0, qdd_4, t0)
     add(t17, t0, qdd_3)
     multiply(t23, qdd_3, t23)
     subtract(t12, t23, t12)
-    subtract(t6, t12, qdd_2)
-    multiply(t21, qdd_2, t21)
+    subtract(t2, t12, qdd_2)
+    multiply(t16, qdd_2, t16)
     divide(t26, t24, t26)
     multiply(t8, qdd_2, t8)
     multiply(t3, qdd_3, t3)
     add(t8, t3, t8)
-    multiply(t10, qdd_4, t10)
-    add(t8, t10, t8)
+    multiply(t9, qdd_4, t9)
+    add(t8, t9, t8)
     subtract(t26, t8, qdd_1)
     multiply(t25, qdd_1, t25)
-    subtract(t21, t25, t21)
-    multiply(t13, qdd_3, t13)
-    add(t21, t13, t21)
+    subtract(t16, t25, t16)
+    multiply(t10, qdd_3, t10)
+    add(t16, t10, t16)
     multiply(t4, qdd_4, t4)
-    add(t21, t4, t21)
-    subtract(t22, t21, qdd_0)
+    add(t16, t4, t16)
+    subtract(t21, t16, qdd_0)
 
 
 def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
@@ -5527,7 +5433,7 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     in  w [6]
     in  p [3]
     out qdd [5]
-    542 ops: 309 mul, 210 add, 15 div, 8 trig
+    540 ops: 308 mul, 209 add, 15 div, 8 trig
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
@@ -5803,55 +5709,53 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     t15 = t32 * t14
     t16 = 0.0027500000000000003 * t34
     t20 = t34 * t16
-    t25 = t15 + t20
-    t26 = (-0.015) * p[1]
-    t25 = t25 - t26
-    t31 = 0.015 * p[1]
+    t15 = t15 + t20
+    t20 = (-0.015) * p[1]
+    t25 = t15 - t20
+    t26 = 0.015 * p[1]
+    t25 = t25 + t26
+    t31 = p[1] * p[1]
+    t31 = 0.3 * t31
     t25 = t25 + t31
-    t33 = p[1] * p[1]
-    t33 = 0.3 * t33
-    t25 = t25 + t33
     t25 = 0.009000000000000001 + t25
-    t36 = 0.00424 + t25
-    t36 = t5 * t36
+    t33 = 0.00424 + t25
+    t33 = t5 * t33
     t14 = t34 * t14
     t16 = t32 * t16
     t14 = t14 - t16
     t16 = t2 * t14
     t32 = t17 * t16
-    t34 = t36 + t32
-    t34 = t5 * t34
+    t33 = t33 + t32
+    t33 = t5 * t33
     t16 = t5 * t16
-    t36 = 0.003 * t7
-    t37 = t7 * t36
-    t15 = t20 + t15
+    t34 = 0.003 * t7
+    t36 = t7 * t34
+    t15 = t15 + t26
+    t15 = t15 - t20
     t15 = t15 + t31
-    t15 = t15 - t26
-    t15 = t15 + t33
     t15 = 0.009000000000000001 + t15
     t20 = t2 * t15
     t26 = t2 * t20
-    t26 = t37 + t26
+    t26 = t36 + t26
     t26 = 0.003 + t26
     t26 = t17 * t26
     t16 = t16 + t26
     t16 = t17 * t16
-    t16 = t34 + t16
+    t16 = t33 + t16
     t16 = 0.01 + t16
     t26 = 0.3 * p[1]
     t26 = 0.065 + t26
     t31 = t2 * t26
     t33 = 0.04000000000000001 + t31
-    t34 = t24 * t33
-    t16 = t16 + t34
-    t33 = t33 * t24
+    t33 = t24 * t33
+    t16 = t16 + t33
     t16 = t16 + t33
     t33 = t24 * t24
     t33 = 2.2 * t33
     t16 = t16 + t33
     t16 = 0.020000000000000004 + t16
     t33 = t9 / t16
-    t34 = t2 * t36
+    t34 = t2 * t34
     t20 = t7 * t20
     t20 = t34 - t20
     t20 = t17 * t20
@@ -6367,67 +6271,65 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     multiply(t32, t14, t15)
     multiply(k9, t34, t16)
     multiply(t34, t16, t20)
-    add(t15, t20, t25)
+    add(t15, t20, t15)
     multiply(k16, p_1, s0)
-    subtract(t25, s0, t25)
+    subtract(t15, s0, t20)
     multiply(k11, p_1, s1)
-    add(t25, s1, t25)
+    add(t20, s1, t20)
     multiply(p_1, p_1, s2)
     multiply(k12, s2, s2)
-    add(t25, s2, t25)
-    add(k6, t25, t25)
-    add(k4, t25, t26)
-    multiply(t5, t26, t26)
+    add(t20, s2, t20)
+    add(k6, t20, t20)
+    add(k4, t20, t25)
+    multiply(t5, t25, t25)
     multiply(t34, t14, t34)
     multiply(t32, t16, t32)
     subtract(t34, t32, t34)
     multiply(t2, t34, t14)
     multiply(t17, t14, t16)
-    add(t26, t16, t26)
-    multiply(t5, t26, t26)
+    add(t25, t16, t25)
+    multiply(t5, t25, t25)
     multiply(t5, t14, t14)
-    multiply(k3, t7, t27)
-    multiply(t7, t27, t32)
-    add(t20, t15, t20)
-    add(t20, s1, t20)
-    subtract(t20, s0, t20)
-    add(t20, s2, t20)
-    add(k6, t20, t20)
-    multiply(t2, t20, t15)
-    multiply(t2, t15, t33)
-    add(t32, t33, t32)
-    add(k3, t32, t32)
-    multiply(t17, t32, t32)
-    add(t14, t32, t14)
+    multiply(k3, t7, t26)
+    multiply(t7, t26, t27)
+    add(t15, s1, t15)
+    subtract(t15, s0, t15)
+    add(t15, s2, t15)
+    add(k6, t15, t15)
+    multiply(t2, t15, t32)
+    multiply(t2, t32, t33)
+    add(t27, t33, t27)
+    add(k3, t27, t27)
+    multiply(t17, t27, t27)
+    add(t14, t27, t14)
     multiply(t17, t14, t14)
-    add(t26, t14, t26)
-    add(k17, t26, t26)
+    add(t25, t14, t25)
+    add(k17, t25, t25)
     multiply(k12, p_1, s0)
     add(k18, s0, s0)
     multiply(t2, s0, t14)
-    add(k2, t14, t32)
-    multiply(t24, t32, t33)
-    add(t26, t33, t26)
-    multiply(t32, t24, t32)
-    add(t26, t32, t26)
-    multiply(t24, t24, t32)
-    multiply(k19, t32, t32)
-    add(t26, t32, t26)
-    add(k20, t26, t26)
-    divide(t9, t26, t32)
-    multiply(t2, t27, t27)
-    multiply(t7, t15, t15)
-    subtract(t27, t15, t27)
-    multiply(t17, t27, t27)
+    add(k2, t14, t27)
+    multiply(t24, t27, t27)
+    add(t25, t27, t25)
+    add(t25, t27, t25)
+    multiply(t24, t24, t27)
+    multiply(k19, t27, t27)
+    add(t25, t27, t25)
+    add(k20, t25, t25)
+    divide(t9, t25, t27)
+    multiply(t2, t26, t26)
+    multiply(t7, t32, t32)
+    subtract(t26, t32, t26)
+    multiply(t17, t26, t26)
     multiply(t7, t34, t34)
-    multiply(t5, t34, t15)
-    subtract(t27, t15, t27)
-    multiply(t7, s0, t15)
-    add(k5, t15, t33)
+    multiply(t5, t34, t32)
+    subtract(t26, t32, t26)
+    multiply(t7, s0, t32)
+    add(k5, t32, t33)
     multiply(t17, t33, t36)
     multiply(t24, t36, t36)
-    subtract(t27, t36, t27)
-    divide(t27, t26, t27)
+    subtract(t26, t36, t26)
+    divide(t26, t25, t26)
     subtract(t12, t10, t12)
     multiply(t0, t12, t10)
     subtract(t6, t1, t6)
@@ -6459,13 +6361,13 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     subtract(t21, t38, t21)
     add(t50, t21, t50)
     subtract(t10, t50, t10)
-    multiply(t27, t9, t19)
+    multiply(t26, t9, t19)
     multiply(t5, t33, t33)
-    divide(t33, t26, t33)
-    multiply(t27, t33, t21)
-    multiply(t21, t26, t21)
+    divide(t33, t25, t33)
+    multiply(t26, t33, t21)
+    multiply(t21, t25, t21)
     multiply(t33, t33, t35)
-    multiply(t35, t26, t35)
+    multiply(t35, t25, t35)
     subtract(k19, t35, t35)
     divide(t21, t35, t21)
     multiply(t0, w_1, t38)
@@ -6494,75 +6396,75 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     subtract(t10, t19, t10)
     multiply(k3, t2, t18)
     multiply(t2, t18, t18)
-    multiply(t7, t20, t20)
-    multiply(t7, t20, t20)
-    add(t18, t20, t18)
+    multiply(t7, t15, t15)
+    multiply(t7, t15, t15)
+    add(t18, t15, t18)
     add(k4, t18, t18)
-    multiply(t27, t27, t19)
-    multiply(t19, t26, t19)
-    multiply(t21, t21, t20)
-    multiply(t20, t35, t20)
-    add(t19, t20, t19)
-    subtract(t18, t19, t18)
-    divide(t10, t18, t19)
+    multiply(t26, t26, t15)
+    multiply(t15, t25, t15)
+    multiply(t21, t21, t19)
+    multiply(t19, t35, t19)
+    add(t15, t19, t15)
+    subtract(t18, t15, t18)
+    divide(t10, t18, t15)
     multiply(k10, t2, t2)
     multiply(k10, t7, t7)
     multiply(t17, t7, t7)
-    divide(t7, t26, t7)
-    multiply(t7, t27, t20)
-    multiply(t20, t26, t20)
+    divide(t7, t25, t7)
+    multiply(t7, t26, t19)
+    multiply(t19, t25, t19)
     multiply(t7, t33, t22)
-    multiply(t22, t26, t22)
+    multiply(t22, t25, t22)
     divide(t22, t35, t22)
     multiply(t22, t21, t23)
     multiply(t23, t35, t23)
-    add(t20, t23, t20)
-    subtract(t2, t20, t2)
+    add(t19, t23, t19)
+    subtract(t2, t19, t2)
     divide(t2, t18, t2)
-    multiply(t3, t13, t20)
+    multiply(t3, t13, t19)
     multiply(t11, t8, t23)
-    subtract(t20, t23, t20)
-    multiply(t20, w_0, t20)
+    subtract(t19, t23, t19)
+    multiply(t19, w_0, t19)
     multiply(t11, t37, t23)
     multiply(t1, t13, t13)
     subtract(t23, t13, t23)
     multiply(t23, w_1, t23)
-    add(t20, t23, t20)
+    add(t19, t23, t19)
     multiply(t1, t8, t8)
     multiply(t3, t37, t37)
     subtract(t8, t37, t8)
     multiply(t8, w_2, t8)
-    add(t20, t8, t20)
+    add(t19, t8, t19)
     multiply(t1, w_3, t1)
-    add(t20, t1, t20)
+    add(t19, t1, t19)
     multiply(t3, w_4, t3)
-    add(t20, t3, t20)
+    add(t19, t3, t19)
     multiply(t11, w_5, t11)
-    add(t20, t11, t20)
-    add(tau_4, t20, t20)
-    subtract(t20, t42, t20)
+    add(t19, t11, t19)
+    add(tau_4, t19, t19)
+    subtract(t19, t42, t19)
     multiply(t7, t9, t1)
     multiply(t22, t38, t3)
     add(t1, t3, t1)
     multiply(t2, t10, t3)
     add(t1, t3, t1)
-    multiply(t5, t25, t3)
+    multiply(t5, t20, t3)
     add(t3, t16, t3)
     multiply(t5, t14, t14)
     multiply(t24, t14, t24)
     add(t3, t24, t3)
-    divide(t3, t26, t3)
+    divide(t3, t25, t3)
     multiply(t7, t3, t8)
-    multiply(t8, t26, t8)
+    multiply(t8, t25, t8)
     multiply(t3, t33, t11)
-    multiply(t11, t26, t11)
-    subtract(t11, t15, t11)
+    multiply(t11, t25, t11)
+    subtract(t11, t32, t11)
     divide(t11, t35, t11)
     multiply(t22, t11, t13)
     multiply(t13, t35, t13)
     add(t8, t13, t8)
-    multiply(t3, t27, t13)
-    multiply(t13, t26, t13)
+    multiply(t3, t26, t13)
+    multiply(t13, t25, t13)
     multiply(t11, t21, t14)
     multiply(t14, t35, t14)
     add(t13, t14, t13)
@@ -6572,15 +6474,15 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     multiply(t13, t18, t13)
     subtract(t8, t13, t8)
     multiply(t3, t3, t13)
-    multiply(t13, t26, t13)
+    multiply(t13, t25, t13)
     multiply(t11, t11, t14)
     multiply(t14, t35, t14)
     add(t13, t14, t13)
     multiply(t34, t34, t14)
     multiply(t14, t18, t14)
     add(t13, t14, t13)
-    subtract(t25, t13, t25)
-    divide(t8, t25, t8)
+    subtract(t20, t13, t20)
+    divide(t8, t20, t8)
     multiply(t4, t17, t4)
     multiply(t4, t12, t13)
     multiply(t0, t17, t0)
@@ -6613,9 +6515,9 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     subtract(t13, t9, t13)
     multiply(t8, t13, t0)
     subtract(t1, t0, t1)
-    subtract(t20, t1, t20)
+    subtract(t19, t1, t19)
     multiply(t7, t7, t0)
-    multiply(t0, t26, t0)
+    multiply(t0, t25, t0)
     multiply(t22, t22, t1)
     multiply(t1, t35, t1)
     add(t0, t1, t0)
@@ -6623,18 +6525,18 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     multiply(t1, t18, t1)
     add(t0, t1, t0)
     multiply(t8, t8, t1)
-    multiply(t1, t25, t1)
+    multiply(t1, t20, t1)
     add(t0, t1, t0)
     subtract(k10, t0, t0)
-    divide(t20, t0, qdd_4)
+    divide(t19, t0, qdd_4)
     multiply(t2, qdd_4, t2)
-    divide(t13, t25, t13)
+    divide(t13, t20, t13)
     multiply(t8, qdd_4, t8)
     add(t13, t8, qdd_3)
     multiply(t34, qdd_3, t34)
     subtract(t2, t34, t2)
-    subtract(t19, t2, qdd_2)
-    multiply(t27, qdd_2, t27)
+    subtract(t15, t2, qdd_2)
+    multiply(t26, qdd_2, t26)
     divide(t38, t35, t38)
     multiply(t21, qdd_2, t21)
     multiply(t11, qdd_3, t11)
@@ -6643,12 +6545,12 @@ def _forward_dynamics_fext_chunk(x, t, s, y):
     add(t21, t22, t21)
     subtract(t38, t21, qdd_1)
     multiply(t33, qdd_1, t33)
-    subtract(t27, t33, t27)
+    subtract(t26, t33, t26)
     multiply(t3, qdd_3, t3)
-    add(t27, t3, t27)
+    add(t26, t3, t26)
     multiply(t7, qdd_4, t7)
-    add(t27, t7, t27)
-    subtract(t32, t27, qdd_0)
+    add(t26, t7, t26)
+    subtract(t27, t26, qdd_0)
 
 
 def com(q, p=DEFAULT_P):
@@ -8569,7 +8471,7 @@ def ode_rhs(x, u, p=DEFAULT_P):
     in  u [5]
     in  p [3]
     out xdot [10]
-    446 ops: 253 mul, 170 add, 15 div, 8 trig
+    444 ops: 252 mul, 169 add, 15 div, 8 trig
     """
     x = _array(x, 10, "x")
     u = _array(u, 5, "u")
@@ -8814,35 +8716,34 @@ def ode_rhs(x, u, p=DEFAULT_P):
     t2 = t21 * t1
     t7 = 0.0027500000000000003 * t23
     t13 = t23 * t7
-    t15 = t2 + t13
-    t20 = (-0.015) * p[1]
-    t15 = t15 - t20
-    t22 = 0.015 * p[1]
+    t2 = t2 + t13
+    t13 = (-0.015) * p[1]
+    t15 = t2 - t13
+    t20 = 0.015 * p[1]
+    t15 = t15 + t20
+    t22 = p[1] * p[1]
+    t22 = 0.3 * t22
     t15 = t15 + t22
-    t25 = p[1] * p[1]
-    t25 = 0.3 * t25
-    t15 = t15 + t25
     t15 = 0.009000000000000001 + t15
-    t26 = 0.00424 + t15
-    t26 = t3 * t26
+    t25 = 0.00424 + t15
+    t25 = t3 * t25
     t1 = t23 * t1
     t7 = t21 * t7
     t1 = t1 - t7
     t7 = t12 * t1
     t21 = t4 * t7
-    t23 = t26 + t21
+    t23 = t25 + t21
     t23 = t3 * t23
     t7 = t3 * t7
-    t26 = 0.003 * t14
-    t29 = t14 * t26
-    t2 = t13 + t2
+    t25 = 0.003 * t14
+    t26 = t14 * t25
+    t2 = t2 + t20
+    t2 = t2 - t13
     t2 = t2 + t22
-    t2 = t2 - t20
-    t2 = t2 + t25
     t2 = 0.009000000000000001 + t2
     t13 = t12 * t2
     t20 = t12 * t13
-    t20 = t29 + t20
+    t20 = t26 + t20
     t20 = 0.003 + t20
     t20 = t4 * t20
     t7 = t7 + t20
@@ -8853,16 +8754,15 @@ def ode_rhs(x, u, p=DEFAULT_P):
     t20 = 0.065 + t20
     t22 = t12 * t20
     t23 = 0.04000000000000001 + t22
-    t25 = t11 * t23
-    t7 = t7 + t25
-    t23 = t23 * t11
+    t23 = t11 * t23
+    t7 = t7 + t23
     t7 = t7 + t23
     t23 = t11 * t11
     t23 = 2.2 * t23
     t7 = t7 + t23
     t7 = 0.020000000000000004 + t7
     t23 = t0 / t7
-    t25 = t12 * t26
+    t25 = t12 * t25
     t13 = t14 * t13
     t13 = t25 - t13
     t13 = t4 * t13
@@ -9282,67 +9182,65 @@ def _ode_rhs_chunk(x, t, s, y):
     multiply(t21, t0, t2)
     multiply(k9, t23, t7)
     multiply(t23, t7, t13)
-    add(t2, t13, t15)
+    add(t2, t13, t2)
     multiply(k16, p_1, s0)
-    subtract(t15, s0, t15)
+    subtract(t2, s0, t13)
     multiply(k11, p_1, s1)
-    add(t15, s1, t15)
+    add(t13, s1, t13)
     multiply(p_1, p_1, s2)
     multiply(k12, s2, s2)
-    add(t15, s2, t15)
-    add(k6, t15, t15)
-    add(k4, t15, t16)
-    multiply(t3, t16, t16)
+    add(t13, s2, t13)
+    add(k6, t13, t13)
+    add(k4, t13, t15)
+    multiply(t3, t15, t15)
     multiply(t23, t0, t23)
     multiply(t21, t7, t21)
     subtract(t23, t21, t23)
     multiply(t12, t23, t0)
     multiply(t4, t0, t7)
-    add(t16, t7, t16)
-    multiply(t3, t16, t16)
+    add(t15, t7, t15)
+    multiply(t3, t15, t15)
     multiply(t3, t0, t0)
-    multiply(k3, t14, t21)
-    multiply(t14, t21, t22)
-    add(t13, t2, t13)
-    add(t13, s1, t13)
-    subtract(t13, s0, t13)
-    add(t13, s2, t13)
-    add(k6, t13, t13)
-    multiply(t12, t13, t2)
-    multiply(t12, t2, t25)
-    add(t22, t25, t22)
-    add(k3, t22, t22)
-    multiply(t4, t22, t22)
-    add(t0, t22, t0)
+    multiply(k3, t14, t16)
+    multiply(t14, t16, t21)
+    add(t2, s1, t2)
+    subtract(t2, s0, t2)
+    add(t2, s2, t2)
+    add(k6, t2, t2)
+    multiply(t12, t2, t22)
+    multiply(t12, t22, t25)
+    add(t21, t25, t21)
+    add(k3, t21, t21)
+    multiply(t4, t21, t21)
+    add(t0, t21, t0)
     multiply(t4, t0, t0)
-    add(t16, t0, t16)
-    add(k17, t16, t16)
+    add(t15, t0, t15)
+    add(k17, t15, t15)
     multiply(k12, p_1, s0)
     add(k18, s0, s0)
     multiply(t12, s0, t0)
-    add(k2, t0, t22)
-    multiply(t11, t22, t25)
-    add(t16, t25, t16)
-    multiply(t22, t11, t22)
-    add(t16, t22, t16)
-    multiply(t11, t11, t22)
-    multiply(k19, t22, t22)
-    add(t16, t22, t16)
-    add(k20, t16, t16)
-    divide(t1, t16, t22)
-    multiply(t12, t21, t21)
-    multiply(t14, t2, t2)
-    subtract(t21, t2, t21)
-    multiply(t4, t21, t21)
+    add(k2, t0, t21)
+    multiply(t11, t21, t21)
+    add(t15, t21, t15)
+    add(t15, t21, t15)
+    multiply(t11, t11, t21)
+    multiply(k19, t21, t21)
+    add(t15, t21, t15)
+    add(k20, t15, t15)
+    divide(t1, t15, t21)
+    multiply(t12, t16, t16)
+    multiply(t14, t22, t22)
+    subtract(t16, t22, t16)
+    multiply(t4, t16, t16)
     multiply(t14, t23, t23)
-    multiply(t3, t23, t2)
-    subtract(t21, t2, t21)
-    multiply(t14, s0, t2)
-    add(k5, t2, t25)
+    multiply(t3, t23, t22)
+    subtract(t16, t22, t16)
+    multiply(t14, s0, t22)
+    add(k5, t22, t25)
     multiply(t4, t25, t26)
     multiply(t11, t26, t26)
-    subtract(t21, t26, t21)
-    divide(t21, t16, t21)
+    subtract(t16, t26, t16)
+    divide(t16, t15, t16)
     multiply(t5, t39, t39)
     multiply(t24, t6, t24)
     subtract(t39, t24, t39)
@@ -9353,13 +9251,13 @@ def _ode_rhs_chunk(x, t, s, y):
     subtract(t8, t27, t8)
     add(t39, t8, t39)
     subtract(u_2, t39, t39)
-    multiply(t21, t1, t6)
+    multiply(t16, t1, t6)
     multiply(t3, t25, t25)
-    divide(t25, t16, t25)
-    multiply(t21, t25, t8)
-    multiply(t8, t16, t8)
+    divide(t25, t15, t25)
+    multiply(t16, t25, t8)
+    multiply(t8, t15, t8)
     multiply(t25, t25, t24)
-    multiply(t24, t16, t24)
+    multiply(t24, t15, t24)
     subtract(k19, t24, t24)
     divide(t8, t24, t8)
     multiply(k13, t10, t26)
@@ -9384,117 +9282,117 @@ def _ode_rhs_chunk(x, t, s, y):
     subtract(t39, t6, t39)
     multiply(k3, t12, t5)
     multiply(t12, t5, t5)
-    multiply(t14, t13, t13)
-    multiply(t14, t13, t13)
-    add(t5, t13, t5)
+    multiply(t14, t2, t2)
+    multiply(t14, t2, t2)
+    add(t5, t2, t5)
     add(k4, t5, t5)
-    multiply(t21, t21, t6)
-    multiply(t6, t16, t6)
-    multiply(t8, t8, t9)
-    multiply(t9, t24, t9)
-    add(t6, t9, t6)
-    subtract(t5, t6, t5)
-    divide(t39, t5, t6)
+    multiply(t16, t16, t2)
+    multiply(t2, t15, t2)
+    multiply(t8, t8, t6)
+    multiply(t6, t24, t6)
+    add(t2, t6, t2)
+    subtract(t5, t2, t5)
+    divide(t39, t5, t2)
     multiply(k10, t12, t12)
     multiply(k10, t14, t14)
     multiply(t4, t14, t4)
-    divide(t4, t16, t4)
-    multiply(t4, t21, t9)
-    multiply(t9, t16, t9)
-    multiply(t4, t25, t10)
-    multiply(t10, t16, t10)
-    divide(t10, t24, t10)
-    multiply(t10, t8, t13)
-    multiply(t13, t24, t13)
-    add(t9, t13, t9)
-    subtract(t12, t9, t12)
+    divide(t4, t15, t4)
+    multiply(t4, t16, t6)
+    multiply(t6, t15, t6)
+    multiply(t4, t25, t9)
+    multiply(t9, t15, t9)
+    divide(t9, t24, t9)
+    multiply(t9, t8, t10)
+    multiply(t10, t24, t10)
+    add(t6, t10, t6)
+    subtract(t12, t6, t12)
     divide(t12, t5, t12)
     subtract(u_4, t31, t31)
-    multiply(t4, t1, t9)
-    multiply(t10, t26, t13)
-    add(t9, t13, t9)
-    multiply(t12, t39, t13)
-    add(t9, t13, t9)
-    multiply(t3, t15, t13)
-    add(t13, t7, t13)
+    multiply(t4, t1, t6)
+    multiply(t9, t26, t10)
+    add(t6, t10, t6)
+    multiply(t12, t39, t10)
+    add(t6, t10, t6)
+    multiply(t3, t13, t10)
+    add(t10, t7, t10)
     multiply(t3, t0, t3)
     multiply(t11, t3, t11)
-    add(t13, t11, t13)
-    divide(t13, t16, t13)
-    multiply(t4, t13, t0)
-    multiply(t0, t16, t0)
-    multiply(t13, t25, t3)
-    multiply(t3, t16, t3)
-    subtract(t3, t2, t3)
+    add(t10, t11, t10)
+    divide(t10, t15, t10)
+    multiply(t4, t10, t0)
+    multiply(t0, t15, t0)
+    multiply(t10, t25, t3)
+    multiply(t3, t15, t3)
+    subtract(t3, t22, t3)
     divide(t3, t24, t3)
-    multiply(t10, t3, t2)
-    multiply(t2, t24, t2)
-    add(t0, t2, t0)
-    multiply(t13, t21, t2)
-    multiply(t2, t16, t2)
-    multiply(t3, t8, t7)
+    multiply(t9, t3, t7)
     multiply(t7, t24, t7)
-    add(t2, t7, t2)
-    add(t23, t2, t23)
+    add(t0, t7, t0)
+    multiply(t10, t16, t7)
+    multiply(t7, t15, t7)
+    multiply(t3, t8, t11)
+    multiply(t11, t24, t11)
+    add(t7, t11, t7)
+    add(t23, t7, t23)
     divide(t23, t5, t23)
-    multiply(t12, t23, t2)
-    multiply(t2, t5, t2)
-    subtract(t0, t2, t0)
-    multiply(t13, t13, t2)
-    multiply(t2, t16, t2)
-    multiply(t3, t3, t7)
-    multiply(t7, t24, t7)
-    add(t2, t7, t2)
-    multiply(t23, t23, t7)
+    multiply(t12, t23, t7)
     multiply(t7, t5, t7)
-    add(t2, t7, t2)
-    subtract(t15, t2, t15)
-    divide(t0, t15, t0)
+    subtract(t0, t7, t0)
+    multiply(t10, t10, t7)
+    multiply(t7, t15, t7)
+    multiply(t3, t3, t11)
+    multiply(t11, t24, t11)
+    add(t7, t11, t7)
+    multiply(t23, t23, t11)
+    multiply(t11, t5, t11)
+    add(t7, t11, t7)
+    subtract(t13, t7, t13)
+    divide(t0, t13, t0)
     subtract(u_3, t17, t17)
-    multiply(t13, t1, t1)
-    multiply(t3, t26, t2)
-    add(t1, t2, t1)
+    multiply(t10, t1, t1)
+    multiply(t3, t26, t7)
+    add(t1, t7, t1)
     multiply(t23, t39, t39)
     subtract(t1, t39, t1)
     subtract(t17, t1, t17)
     multiply(t0, t17, t1)
-    subtract(t9, t1, t9)
-    subtract(t31, t9, t31)
+    subtract(t6, t1, t6)
+    subtract(t31, t6, t31)
     multiply(t4, t4, t1)
-    multiply(t1, t16, t1)
-    multiply(t10, t10, t2)
-    multiply(t2, t24, t2)
-    add(t1, t2, t1)
-    multiply(t12, t12, t2)
-    multiply(t2, t5, t2)
-    add(t1, t2, t1)
-    multiply(t0, t0, t2)
-    multiply(t2, t15, t2)
-    add(t1, t2, t1)
+    multiply(t1, t15, t1)
+    multiply(t9, t9, t6)
+    multiply(t6, t24, t6)
+    add(t1, t6, t1)
+    multiply(t12, t12, t6)
+    multiply(t6, t5, t6)
+    add(t1, t6, t1)
+    multiply(t0, t0, t5)
+    multiply(t5, t13, t5)
+    add(t1, t5, t1)
     subtract(k10, t1, t1)
     divide(t31, t1, xdot_9)
     multiply(t12, xdot_9, t12)
-    divide(t17, t15, t17)
+    divide(t17, t13, t17)
     multiply(t0, xdot_9, t0)
     add(t17, t0, xdot_8)
     multiply(t23, xdot_8, t23)
     subtract(t12, t23, t12)
-    subtract(t6, t12, xdot_7)
-    multiply(t21, xdot_7, t21)
+    subtract(t2, t12, xdot_7)
+    multiply(t16, xdot_7, t16)
     divide(t26, t24, t26)
     multiply(t8, xdot_7, t8)
     multiply(t3, xdot_8, t3)
     add(t8, t3, t8)
-    multiply(t10, xdot_9, t10)
-    add(t8, t10, t8)
+    multiply(t9, xdot_9, t9)
+    add(t8, t9, t8)
     subtract(t26, t8, xdot_6)
     multiply(t25, xdot_6, t25)
-    subtract(t21, t25, t21)
-    multiply(t13, xdot_8, t13)
-    add(t21, t13, t21)
+    subtract(t16, t25, t16)
+    multiply(t10, xdot_8, t10)
+    add(t16, t10, t16)
     multiply(t4, xdot_9, t4)
-    add(t21, t4, t21)
-    subtract(t22, t21, xdot_5)
+    add(t16, t4, t16)
+    subtract(t21, t16, xdot_5)
     copyto(xdot_0, x_5)
     copyto(xdot_1, x_6)
     copyto(xdot_2, x_7)
@@ -9509,13 +9407,13 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     in  u [5]
     in  p [3]
     out A [10x10]
-    2457 ops: 1348 mul, 1036 add, 65 div, 8 trig
+    2321 ops: 1242 mul, 1006 add, 65 div, 8 trig
     """
     x = _array(x, 10, "x")
     u = _array(u, 5, "u")
     p = _array(p, 3, "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_ode_jac_x_chunk, (x, u, p), 116, ((10, 10),), fixed=_ode_jac_x_fixed, pure=3)
+        return _batch(_ode_jac_x_chunk, (x, u, p), 130, ((10, 10),), fixed=_ode_jac_x_fixed, pure=3)
     # one state: Python floats
     x = x.tolist()
     u = u.tolist()
@@ -9605,64 +9503,62 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t9 = t1 * t7
     t16 = 0.0027500000000000003 * t2
     t18 = t2 * t16
-    t20 = t9 + t18
-    t21 = (-0.015) * p[1]
-    t20 = t20 - t21
-    t22 = 0.015 * p[1]
+    t9 = t9 + t18
+    t18 = (-0.015) * p[1]
+    t20 = t9 - t18
+    t21 = 0.015 * p[1]
+    t20 = t20 + t21
+    t22 = p[1] * p[1]
+    t22 = 0.3 * t22
     t20 = t20 + t22
-    t23 = p[1] * p[1]
-    t23 = 0.3 * t23
-    t20 = t20 + t23
     t20 = 0.009000000000000001 + t20
-    t24 = 0.00424 + t20
-    t24 = t0 * t24
-    t25 = t2 * t7
-    t26 = t1 * t16
-    t25 = t25 - t26
-    t26 = t8 * t25
-    t27 = t3 * t26
-    t24 = t24 + t27
-    t24 = t0 * t24
-    t26 = t0 * t26
-    t28 = 0.003 * t11
-    t29 = t11 * t28
-    t9 = t18 + t9
+    t23 = 0.00424 + t20
+    t23 = t0 * t23
+    t24 = t2 * t7
+    t25 = t1 * t16
+    t24 = t24 - t25
+    t25 = t8 * t24
+    t26 = t3 * t25
+    t23 = t23 + t26
+    t23 = t0 * t23
+    t25 = t0 * t25
+    t27 = 0.003 * t11
+    t28 = t11 * t27
+    t9 = t9 + t21
+    t9 = t9 - t18
     t9 = t9 + t22
-    t9 = t9 - t21
-    t9 = t9 + t23
     t9 = 0.009000000000000001 + t9
     t18 = t8 * t9
     t21 = t8 * t18
-    t21 = t29 + t21
+    t21 = t28 + t21
     t21 = 0.003 + t21
     t21 = t3 * t21
-    t21 = t26 + t21
+    t21 = t25 + t21
     t21 = t3 * t21
-    t21 = t24 + t21
+    t21 = t23 + t21
     t21 = 0.01 + t21
     t22 = 0.3 * p[1]
     t22 = 0.065 + t22
     t23 = t8 * t22
-    t24 = 0.04000000000000001 + t23
-    t26 = t17 * t24
-    t21 = t21 + t26
-    t24 = t24 * t17
-    t21 = t21 + t24
-    t24 = t17 * t17
-    t24 = 2.2 * t24
-    t21 = t21 + t24
+    t25 = 0.04000000000000001 + t23
+    t25 = t17 * t25
+    t21 = t21 + t25
+    t21 = t21 + t25
+    t25 = t17 * t17
+    t25 = 2.2 * t25
+    t21 = t21 + t25
     t21 = 0.020000000000000004 + t21
-    t24 = t4 / t21
-    t26 = t8 * t28
+    t25 = t4 / t21
+    t27 = t8 * t27
     t18 = t11 * t18
-    t18 = t26 - t18
+    t18 = t27 - t18
     t18 = t3 * t18
-    t25 = t11 * t25
-    t26 = t0 * t25
-    t18 = t18 - t26
+    t24 = t11 * t24
+    t27 = t0 * t24
+    t18 = t18 - t27
     t22 = t11 * t22
-    t26 = 0.012 + t22
-    t28 = t3 * t26
+    t27 = 0.012 + t22
+    t28 = t3 * t27
     t28 = t17 * t28
     t18 = t18 - t28
     t18 = t18 / t21
@@ -9670,11 +9566,11 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t14 = t11 * t14
     t6 = t6 + t14
     t14 = t18 * t4
-    t26 = t0 * t26
-    t26 = t26 / t21
-    t28 = t18 * t26
+    t27 = t0 * t27
+    t27 = t27 / t21
+    t28 = t18 * t27
     t28 = t28 * t21
-    t29 = t26 * t26
+    t29 = t27 * t27
     t29 = t29 * t21
     t29 = 2.2 - t29
     t28 = t28 / t29
@@ -9685,7 +9581,7 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t10 = t19 - t10
     t10 = t31 + t10
     t10 = t30 + t10
-    t19 = t26 * t4
+    t19 = t27 * t4
     t10 = t10 + t19
     t19 = t28 * t10
     t14 = t14 + t19
@@ -9704,51 +9600,51 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t9 = t9 - t14
     t14 = t6 / t9
     t19 = t0 * t20
-    t19 = t19 + t27
+    t19 = t19 + t26
     t23 = t0 * t23
     t23 = t17 * t23
     t19 = t19 + t23
     t19 = t19 / t21
     t23 = t19 * t18
     t23 = t23 * t21
-    t27 = t19 * t26
-    t27 = t27 * t21
-    t22 = t27 - t22
+    t26 = t19 * t27
+    t26 = t26 * t21
+    t22 = t26 - t22
     t22 = t22 / t29
-    t27 = t22 * t28
-    t27 = t27 * t29
-    t23 = t23 + t27
-    t23 = t25 + t23
+    t26 = t22 * t28
+    t26 = t26 * t29
+    t23 = t23 + t26
+    t23 = t24 + t23
     t23 = t23 / t9
-    t25 = t19 * t4
-    t27 = t22 * t10
-    t25 = t25 + t27
-    t27 = t23 * t6
-    t25 = t25 - t27
-    t15 = t15 - t25
-    t25 = t19 * t19
-    t25 = t25 * t21
-    t27 = t22 * t22
-    t27 = t27 * t29
-    t25 = t25 + t27
-    t27 = t23 * t23
-    t27 = t27 * t9
-    t25 = t25 + t27
-    t20 = t20 - t25
-    t25 = t15 / t20
-    t27 = 0.001 * t11
-    t27 = t3 * t27
-    t27 = t27 / t21
-    t30 = t27 * t19
+    t24 = t19 * t4
+    t26 = t22 * t10
+    t24 = t24 + t26
+    t26 = t23 * t6
+    t24 = t24 - t26
+    t15 = t15 - t24
+    t24 = t19 * t19
+    t24 = t24 * t21
+    t26 = t22 * t22
+    t26 = t26 * t29
+    t24 = t24 + t26
+    t26 = t23 * t23
+    t26 = t26 * t9
+    t24 = t24 + t26
+    t20 = t20 - t24
+    t24 = t15 / t20
+    t26 = 0.001 * t11
+    t26 = t3 * t26
+    t26 = t26 / t21
+    t30 = t26 * t19
     t30 = t30 * t21
-    t31 = t27 * t26
+    t31 = t26 * t27
     t31 = t31 * t21
     t31 = t31 / t29
     t32 = t31 * t22
     t32 = t32 * t29
     t30 = t30 + t32
     t32 = 0.001 * t8
-    t33 = t27 * t18
+    t33 = t26 * t18
     t33 = t33 * t21
     t34 = t31 * t28
     t34 = t34 * t29
@@ -9759,14 +9655,14 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t34 = t34 * t9
     t30 = t30 - t34
     t30 = t30 / t20
-    t4 = t27 * t4
+    t4 = t26 * t4
     t34 = t31 * t10
     t4 = t4 + t34
     t6 = t33 * t6
     t4 = t4 + t6
     t6 = t30 * t15
     t4 = t4 - t6
-    t6 = t27 * t27
+    t6 = t26 * t26
     t6 = t6 * t21
     t15 = t31 * t31
     t15 = t15 * t29
@@ -9780,12 +9676,12 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t6 = 0.001 - t6
     t4 = t4 / t6
     t15 = t30 * t4
-    t15 = t25 - t15
-    t25 = t23 * t15
+    t15 = t24 - t15
+    t24 = t23 * t15
     t34 = t33 * t4
-    t25 = t25 + t34
-    t14 = t14 + t25
-    t25 = t18 * t14
+    t24 = t24 + t34
+    t14 = t14 + t24
+    t24 = t18 * t14
     t10 = t10 / t29
     t34 = t28 * t14
     t35 = t22 * t15
@@ -9793,13 +9689,13 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t35 = t31 * t4
     t34 = t34 - t35
     t10 = t10 - t34
-    t34 = t26 * t10
-    t25 = t25 - t34
+    t34 = t27 * t10
+    t24 = t24 - t34
     t34 = t19 * t15
-    t25 = t25 + t34
-    t34 = t27 * t4
-    t25 = t25 - t34
-    t24 = t24 - t25
+    t24 = t24 + t34
+    t34 = t26 * t4
+    t24 = t24 - t34
+    t24 = t25 - t24
     t24 = -t24
     t10 = -t10
     t14 = -t14
@@ -9815,2124 +9711,1990 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t39 = 0.00424 * x[7]
     t40 = t36 * t39
     t38 = t38 - t40
-    t40 = t36 * x[7]
-    t41 = 0.00424 * t40
-    t41 = t38 - t41
-    t42 = x[5] * t17
-    t43 = x[5] * t42
-    t5 = t5 - t43
-    t43 = 0.012 * t5
-    t41 = t41 - t43
-    t43 = t8 * x[7]
-    t44 = t11 * t36
-    t43 = t43 + t44
-    t44 = t8 * t36
-    t45 = t11 * x[7]
-    t44 = t44 - t45
-    t45 = 0.009000000000000001 * t44
-    t46 = t43 * t45
-    t47 = 0.002 * t43
-    t48 = t44 * t47
-    t46 = t46 - t48
-    t48 = 0.009000000000000001 * t40
-    t48 = t46 - t48
-    t49 = t0 * t34
-    t50 = t8 * t49
-    t51 = t11 * t5
-    t50 = t50 - t51
-    t51 = 0.05 * t50
-    t48 = t48 + t51
-    t51 = t43 + x[9]
-    t52 = t0 * x[5]
-    t53 = t52 + x[8]
-    t54 = t2 * t53
-    t55 = t1 * t44
-    t54 = t54 + t55
-    t55 = 0.0027500000000000003 * t54
-    t56 = t51 * t55
-    t57 = 0.001 * t51
-    t58 = t54 * t57
-    t56 = t56 - t58
-    t58 = t1 * t40
-    t59 = t52 * x[7]
-    t60 = t8 * t59
-    t61 = t43 * x[8]
-    t60 = t60 - t61
-    t62 = t2 * t60
-    t58 = t58 + t62
-    t62 = t54 * x[9]
-    t58 = t58 + t62
-    t63 = 0.0027500000000000003 * t58
-    t63 = t56 - t63
-    t64 = t53 * p[1]
-    t65 = t43 * t64
-    t66 = t3 * t34
-    t67 = t60 * p[1]
-    t67 = t66 + t67
-    t67 = t65 - t67
-    t68 = t2 * t67
-    t69 = t40 * p[1]
-    t69 = t50 - t69
-    t70 = t44 * p[1]
-    t71 = t43 * t70
-    t69 = t69 + t71
-    t72 = t1 * t69
-    t68 = t68 + t72
-    t72 = 0.015 * t68
-    t63 = t63 + t72
-    t72 = t1 * t63
-    t73 = t1 * t60
-    t74 = t2 * t40
-    t73 = t73 - t74
-    t74 = t1 * t53
-    t75 = t2 * t44
+    t41 = t36 * x[7]
+    t42 = 0.00424 * t41
+    t42 = t38 - t42
+    t43 = x[5] * t17
+    t44 = x[5] * t43
+    t5 = t5 - t44
+    t44 = 0.012 * t5
+    t42 = t42 - t44
+    t44 = t8 * x[7]
+    t45 = t11 * t36
+    t44 = t44 + t45
+    t45 = t8 * t36
+    t46 = t11 * x[7]
+    t45 = t45 - t46
+    t46 = 0.009000000000000001 * t45
+    t47 = t44 * t46
+    t48 = 0.002 * t44
+    t49 = t45 * t48
+    t47 = t47 - t49
+    t49 = 0.009000000000000001 * t41
+    t49 = t47 - t49
+    t50 = t0 * t34
+    t51 = t8 * t50
+    t52 = t11 * t5
+    t51 = t51 - t52
+    t52 = 0.05 * t51
+    t49 = t49 + t52
+    t52 = t44 + x[9]
+    t53 = t0 * x[5]
+    t54 = t53 + x[8]
+    t55 = t2 * t54
+    t56 = t1 * t45
+    t55 = t55 + t56
+    t56 = 0.0027500000000000003 * t55
+    t57 = t52 * t56
+    t58 = 0.001 * t52
+    t59 = t55 * t58
+    t57 = t57 - t59
+    t59 = t1 * t41
+    t60 = t53 * x[7]
+    t61 = t8 * t60
+    t62 = t44 * x[8]
+    t61 = t61 - t62
+    t63 = t2 * t61
+    t59 = t59 + t63
+    t63 = t55 * x[9]
+    t59 = t59 + t63
+    t64 = 0.0027500000000000003 * t59
+    t64 = t57 - t64
+    t65 = t54 * p[1]
+    t66 = t44 * t65
+    t67 = t3 * t34
+    t68 = t61 * p[1]
+    t68 = t67 + t68
+    t68 = t66 - t68
+    t69 = t2 * t68
+    t70 = t41 * p[1]
+    t70 = t51 - t70
+    t71 = t45 * p[1]
+    t72 = t44 * t71
+    t70 = t70 + t72
+    t73 = t1 * t70
+    t69 = t69 + t73
+    t73 = 0.015 * t69
+    t64 = t64 + t73
+    t73 = t1 * t64
+    t74 = t1 * t61
+    t75 = t2 * t41
     t74 = t74 - t75
-    t75 = t74 * x[9]
-    t73 = t73 + t75
-    t76 = 0.0027500000000000003 * t73
-    t77 = t74 * t57
-    t78 = 0.0027500000000000003 * t74
-    t79 = t51 * t78
-    t77 = t77 - t79
-    t76 = t76 + t77
-    t67 = t1 * t67
-    t69 = t2 * t69
-    t67 = t67 - t69
-    t69 = 0.015 * t67
-    t69 = t76 - t69
-    t76 = t2 * t69
-    t72 = t72 + t76
-    t48 = t48 + t72
+    t75 = t1 * t54
+    t76 = t2 * t45
+    t75 = t75 - t76
+    t76 = t75 * x[9]
+    t74 = t74 + t76
+    t77 = 0.0027500000000000003 * t74
+    t78 = t75 * t58
+    t79 = 0.0027500000000000003 * t75
+    t80 = t52 * t79
+    t81 = t78 - t80
+    t77 = t77 + t81
+    t68 = t1 * t68
+    t70 = t2 * t70
+    t68 = t68 - t70
+    t70 = 0.015 * t68
+    t70 = t77 - t70
+    t77 = t2 * t70
+    t73 = t73 + t77
+    t49 = t49 + t73
+    t69 = 0.3 * t69
+    t59 = 0.015 * t59
+    t59 = t69 - t59
+    t69 = 0.015 * t55
+    t73 = t52 * t69
+    t59 = t59 + t73
+    t77 = t1 * t59
     t68 = 0.3 * t68
-    t58 = 0.015 * t58
-    t58 = t68 - t58
-    t68 = 0.015 * t54
-    t72 = t51 * t68
-    t58 = t58 + t72
-    t76 = t1 * t58
-    t67 = 0.3 * t67
-    t73 = 0.015 * t73
-    t67 = t67 - t73
-    t73 = 0.015 * t74
-    t79 = t51 * t73
-    t67 = t67 + t79
-    t80 = t2 * t67
-    t76 = t76 - t80
-    t80 = p[1] * t76
-    t48 = t48 + t80
-    t41 = t41 + t48
-    t41 = t0 * t41
-    t80 = 0.003 * t59
-    t81 = t52 * t39
-    t82 = 0.00424 * t52
-    t83 = x[7] * t82
-    t81 = t81 - t83
-    t80 = t80 + t81
-    t83 = t11 * t59
-    t84 = t44 * x[8]
-    t83 = t83 + t84
-    t85 = 0.002 * t83
-    t86 = 0.009000000000000001 * t53
-    t87 = t44 * t86
-    t88 = t53 * t45
-    t87 = t87 - t88
-    t85 = t85 + t87
-    t83 = 0.001 * t83
-    t88 = t54 * t78
-    t89 = t74 * t55
-    t88 = t88 - t89
-    t83 = t83 + t88
-    t85 = t85 + t83
-    t89 = t11 * t85
-    t90 = 0.009000000000000001 * t60
-    t91 = t53 * t47
-    t92 = t43 * t86
-    t91 = t91 - t92
-    t90 = t90 + t91
-    t92 = 0.05 * t66
-    t90 = t90 + t92
-    t69 = t1 * t69
-    t63 = t2 * t63
-    t63 = t69 - t63
-    t63 = t90 + t63
-    t67 = t1 * t67
-    t58 = t2 * t58
-    t58 = t67 + t58
-    t67 = p[1] * t58
-    t63 = t63 - t67
-    t67 = t8 * t63
-    t67 = t89 + t67
-    t67 = t80 + t67
-    t67 = t3 * t67
-    t41 = t41 + t67
-    t35 = t35 + t41
+    t74 = 0.015 * t74
+    t68 = t68 - t74
+    t74 = 0.015 * t75
+    t82 = t52 * t74
+    t68 = t68 + t82
+    t83 = t2 * t68
+    t77 = t77 - t83
+    t83 = p[1] * t77
+    t49 = t49 + t83
+    t42 = t42 + t49
+    t42 = t0 * t42
+    t83 = 0.003 * t60
+    t84 = t53 * t39
+    t85 = 0.00424 * t53
+    t86 = x[7] * t85
+    t86 = t84 - t86
+    t83 = t83 + t86
+    t87 = t11 * t60
+    t88 = t45 * x[8]
+    t87 = t87 + t88
+    t89 = 0.002 * t87
+    t90 = 0.009000000000000001 * t54
+    t91 = t45 * t90
+    t92 = t54 * t46
+    t92 = t91 - t92
+    t89 = t89 + t92
+    t87 = 0.001 * t87
+    t93 = t55 * t79
+    t94 = t75 * t56
+    t93 = t93 - t94
+    t87 = t87 + t93
+    t89 = t89 + t87
+    t94 = t11 * t89
+    t95 = 0.009000000000000001 * t61
+    t96 = t54 * t48
+    t97 = t44 * t90
+    t96 = t96 - t97
+    t95 = t95 + t96
+    t98 = 0.05 * t67
+    t95 = t95 + t98
+    t70 = t1 * t70
+    t64 = t2 * t64
+    t64 = t70 - t64
+    t64 = t95 + t64
+    t68 = t1 * t68
+    t59 = t2 * t59
+    t59 = t68 + t59
+    t68 = p[1] * t59
+    t64 = t64 - t68
+    t68 = t8 * t64
+    t68 = t94 + t68
+    t68 = t83 + t68
+    t68 = t3 * t68
+    t42 = t42 + t68
+    t35 = t35 + t42
     t12 = t12 + t35
     t34 = 0.8 * t34
-    t35 = 0.6 * t49
-    t41 = 0.012 * t52
-    t67 = t52 * t41
-    t69 = 0.012 * x[7]
-    t80 = x[7] * t69
-    t67 = t67 + t80
-    t35 = t35 - t67
-    t80 = t8 * t5
-    t49 = t11 * t49
-    t49 = t80 + t49
-    t80 = 0.5 * t49
-    t89 = 0.05 * t44
-    t90 = t44 * t89
-    t92 = 0.05 * t53
-    t93 = t53 * t92
-    t90 = t90 + t93
-    t80 = t80 - t90
-    t93 = t44 * t70
-    t94 = t53 * t64
-    t93 = t93 + t94
-    t49 = t49 - t93
-    t49 = 0.3 * t49
-    t94 = t54 * t68
-    t95 = t74 * t73
-    t94 = t94 + t95
-    t49 = t49 - t94
-    t49 = t80 + t49
-    t80 = t11 * t49
-    t50 = 0.5 * t50
-    t95 = 0.05 * t40
-    t50 = t50 - t95
-    t95 = t43 * t89
-    t50 = t50 + t95
-    t50 = t50 + t76
-    t76 = t8 * t50
-    t76 = t80 + t76
-    t35 = t35 + t76
+    t35 = 0.6 * t50
+    t42 = 0.012 * t53
+    t68 = t53 * t42
+    t70 = 0.012 * x[7]
+    t83 = x[7] * t70
+    t83 = t68 + t83
+    t35 = t35 - t83
+    t94 = t8 * t5
+    t50 = t11 * t50
+    t50 = t94 + t50
+    t94 = 0.5 * t50
+    t95 = 0.05 * t45
+    t98 = t45 * t95
+    t99 = 0.05 * t54
+    t100 = t54 * t99
+    t100 = t98 + t100
+    t94 = t94 - t100
+    t101 = t45 * t71
+    t102 = t54 * t65
+    t102 = t101 + t102
+    t50 = t50 - t102
+    t50 = 0.3 * t50
+    t103 = t55 * t69
+    t104 = t75 * t74
+    t103 = t103 + t104
+    t50 = t50 - t103
+    t50 = t94 + t50
+    t94 = t11 * t50
+    t51 = 0.5 * t51
+    t104 = 0.05 * t41
+    t51 = t51 - t104
+    t104 = t44 * t95
+    t51 = t51 + t104
+    t51 = t51 + t77
+    t77 = t8 * t51
+    t77 = t94 + t77
+    t35 = t35 + t77
     t35 = t0 * t35
-    t76 = t36 * t41
-    t80 = 0.6 * t66
-    t80 = t76 - t80
-    t96 = t43 * t92
-    t97 = 0.5 * t66
-    t60 = 0.05 * t60
-    t60 = t97 + t60
-    t60 = t96 - t60
-    t58 = t60 + t58
-    t58 = t80 + t58
-    t58 = t3 * t58
-    t35 = t35 - t58
+    t77 = t36 * t42
+    t94 = 0.6 * t67
+    t94 = t77 - t94
+    t105 = t44 * t99
+    t106 = 0.5 * t67
+    t61 = 0.05 * t61
+    t61 = t106 + t61
+    t61 = t105 - t61
+    t59 = t61 + t59
+    t59 = t94 + t59
+    t59 = t3 * t59
+    t35 = t35 - t59
     t34 = t34 + t35
     t34 = t17 * t34
     t12 = t12 + t34
     t12 = u[0] - t12
     t34 = t12 / t21
-    t35 = t36 * t82
-    t58 = t52 * t37
-    t35 = t35 - t58
-    t58 = 0.012 * t66
-    t35 = t35 - t58
-    t58 = t8 * t85
-    t60 = t11 * t63
-    t58 = t58 - t60
-    t35 = t35 + t58
+    t35 = t36 * t85
+    t59 = t53 * t37
+    t35 = t35 - t59
+    t59 = 0.012 * t67
+    t35 = t35 - t59
+    t59 = t8 * t89
+    t61 = t11 * t64
+    t59 = t59 - t61
+    t35 = t35 + t59
     t35 = u[2] - t35
-    t58 = t18 * t12
-    t60 = 0.8 * t5
-    t63 = 0.04000000000000001 * x[5]
-    t63 = x[5] * t63
-    t60 = t60 - t63
-    t63 = 0.6 * t5
-    t66 = 0.012 * t40
-    t63 = t63 + t66
-    t66 = t36 * t69
-    t63 = t63 + t66
-    t49 = t8 * t49
-    t50 = t11 * t50
-    t49 = t49 - t50
-    t49 = t63 + t49
-    t49 = t60 + t49
-    t49 = u[1] - t49
-    t50 = t26 * t12
-    t49 = t49 + t50
-    t50 = t28 * t49
-    t50 = t58 + t50
-    t35 = t35 - t50
-    t50 = t35 / t9
-    t58 = u[4] - t83
-    t60 = t27 * t12
-    t63 = t31 * t49
-    t60 = t60 + t63
-    t63 = t33 * t35
-    t60 = t60 + t63
-    t48 = u[3] - t48
+    t59 = t18 * t12
+    t61 = 0.8 * t5
+    t64 = 0.04000000000000001 * x[5]
+    t64 = x[5] * t64
+    t61 = t61 - t64
+    t64 = 0.6 * t5
+    t67 = 0.012 * t41
+    t64 = t64 + t67
+    t67 = t36 * t70
+    t64 = t64 + t67
+    t50 = t8 * t50
+    t51 = t11 * t51
+    t50 = t50 - t51
+    t50 = t64 + t50
+    t50 = t61 + t50
+    t50 = u[1] - t50
+    t51 = t27 * t12
+    t50 = t50 + t51
+    t51 = t28 * t50
+    t51 = t59 + t51
+    t35 = t35 - t51
+    t51 = t35 / t9
+    t59 = u[4] - t87
+    t61 = t26 * t12
+    t64 = t31 * t50
+    t61 = t61 + t64
+    t64 = t33 * t35
+    t61 = t61 + t64
+    t49 = u[3] - t49
     t12 = t19 * t12
-    t63 = t22 * t49
-    t12 = t12 + t63
+    t64 = t22 * t50
+    t12 = t12 + t64
     t35 = t23 * t35
     t12 = t12 - t35
-    t12 = t48 - t12
+    t12 = t49 - t12
     t35 = t30 * t12
-    t35 = t60 - t35
-    t35 = t58 - t35
+    t35 = t61 - t35
+    t35 = t59 - t35
     t35 = t35 / t6
-    t48 = t33 * t35
+    t49 = t33 * t35
     t12 = t12 / t20
-    t58 = t30 * t35
-    t12 = t12 + t58
-    t58 = t23 * t12
-    t48 = t48 - t58
-    t48 = t50 - t48
-    t50 = t18 * t48
-    t49 = t49 / t29
-    t58 = t28 * t48
-    t60 = t22 * t12
-    t58 = t58 + t60
-    t60 = t31 * t35
-    t58 = t58 + t60
-    t49 = t49 - t58
-    t58 = t26 * t49
-    t50 = t50 - t58
-    t58 = t19 * t12
-    t50 = t50 + t58
-    t58 = t27 * t35
-    t50 = t50 + t58
-    t34 = t34 - t50
-    t50 = 0.04000000000000001 * t34
-    t58 = x[5] * x[5]
-    t60 = 0.012 * t58
-    t63 = t0 * t34
-    t66 = t8 * t63
-    t80 = t11 * t58
-    t66 = t66 + t80
-    t80 = 0.05 * t66
-    t83 = t1 * t66
-    t85 = t3 * t34
-    t97 = t2 * t85
-    t83 = t83 - t97
-    t97 = 0.015 * t83
-    t98 = t1 * t97
-    t99 = t1 * t85
-    t100 = t2 * t66
-    t99 = t99 + t100
-    t100 = 0.015 * t99
-    t101 = t2 * t100
-    t98 = t98 + t101
-    t80 = t80 + t98
-    t83 = 0.3 * t83
-    t98 = t1 * t83
-    t99 = 0.3 * t99
-    t101 = t2 * t99
-    t98 = t98 + t101
-    t101 = p[1] * t98
-    t80 = t80 + t101
-    t60 = t60 + t80
-    t60 = t0 * t60
-    t101 = 0.05 * t85
-    t100 = t1 * t100
-    t97 = t2 * t97
-    t97 = t100 - t97
-    t97 = t101 + t97
-    t83 = t2 * t83
-    t99 = t1 * t99
-    t83 = t83 - t99
-    t99 = p[1] * t83
-    t97 = t97 - t99
-    t99 = t8 * t97
-    t99 = t3 * t99
-    t60 = t60 + t99
-    t60 = t50 + t60
-    t99 = t34 * t17
-    t13 = t13 + t99
+    t59 = t30 * t35
+    t12 = t12 + t59
+    t59 = t23 * t12
+    t49 = t49 - t59
+    t49 = t51 - t49
+    t51 = t18 * t49
+    t50 = t50 / t29
+    t59 = t28 * t49
+    t61 = t22 * t12
+    t59 = t59 + t61
+    t61 = t31 * t35
+    t59 = t59 + t61
+    t50 = t50 - t59
+    t59 = t27 * t50
+    t51 = t51 - t59
+    t59 = t19 * t12
+    t51 = t51 + t59
+    t59 = t26 * t35
+    t51 = t51 + t59
+    t34 = t34 - t51
+    t51 = 0.04000000000000001 * t34
+    t59 = x[5] * x[5]
+    t61 = 0.012 * t59
+    t64 = t0 * t34
+    t67 = t8 * t64
+    t87 = t11 * t59
+    t67 = t67 + t87
+    t87 = 0.05 * t67
+    t89 = t1 * t67
+    t94 = t3 * t34
+    t106 = t2 * t94
+    t89 = t89 - t106
+    t106 = 0.015 * t89
+    t107 = t1 * t106
+    t108 = t1 * t94
+    t109 = t2 * t67
+    t108 = t108 + t109
+    t109 = 0.015 * t108
+    t110 = t2 * t109
+    t107 = t107 + t110
+    t87 = t87 + t107
+    t89 = 0.3 * t89
+    t107 = t1 * t89
+    t108 = 0.3 * t108
+    t110 = t2 * t108
+    t107 = t107 + t110
+    t110 = p[1] * t107
+    t87 = t87 + t110
+    t61 = t61 + t87
+    t61 = t0 * t61
+    t110 = 0.05 * t94
+    t109 = t1 * t109
+    t106 = t2 * t106
+    t106 = t109 - t106
+    t106 = t110 + t106
+    t89 = t2 * t89
+    t108 = t1 * t108
+    t89 = t89 - t108
+    t108 = p[1] * t89
+    t106 = t106 - t108
+    t108 = t8 * t106
+    t108 = t3 * t108
+    t61 = t61 + t108
+    t61 = t51 + t61
+    t108 = t34 * t17
+    t13 = t13 + t108
     t13 = t13 + t25
     t25 = 0.8 * t13
-    t25 = t25 + t50
-    t50 = t0 * t13
-    t99 = 0.6 * t50
-    t67 = t99 - t67
-    t5 = t5 + t49
-    t49 = t8 * t5
-    t99 = t11 * t50
-    t49 = t49 + t99
-    t99 = 0.5 * t49
-    t90 = t99 - t90
-    t49 = t49 - t93
-    t49 = 0.3 * t49
-    t49 = t49 - t94
-    t49 = t90 + t49
-    t90 = t11 * t49
-    t93 = t8 * t50
-    t94 = t11 * t5
-    t93 = t93 - t94
-    t94 = 0.5 * t93
-    t40 = t63 - t40
-    t12 = t40 + t12
-    t99 = 0.05 * t12
-    t94 = t94 + t99
-    t94 = t94 + t95
-    t95 = t3 * t13
-    t59 = t85 + t59
-    t99 = t8 * t59
-    t100 = t11 * t48
-    t99 = t99 - t100
-    t61 = t99 - t61
-    t99 = t61 * p[1]
-    t99 = t95 + t99
-    t65 = t65 - t99
-    t99 = t2 * t65
-    t100 = t12 * p[1]
-    t100 = t93 + t100
-    t71 = t100 + t71
-    t100 = t1 * t71
-    t99 = t99 + t100
-    t100 = 0.3 * t99
-    t101 = t1 * t12
-    t102 = t2 * t61
-    t101 = t101 - t102
-    t62 = t101 - t62
-    t101 = 0.015 * t62
-    t100 = t100 + t101
-    t72 = t100 + t72
-    t100 = t1 * t72
-    t101 = t1 * t65
-    t102 = t2 * t71
-    t101 = t101 - t102
-    t102 = 0.3 * t101
-    t103 = t2 * t12
-    t104 = t1 * t61
-    t103 = t103 + t104
-    t75 = t103 + t75
-    t103 = 0.015 * t75
+    t25 = t25 + t51
+    t51 = t0 * t13
+    t108 = 0.6 * t51
+    t83 = t108 - t83
+    t5 = t5 + t50
+    t50 = t8 * t5
+    t109 = t11 * t51
+    t50 = t50 + t109
+    t109 = 0.5 * t50
+    t100 = t109 - t100
+    t102 = t50 - t102
+    t102 = 0.3 * t102
     t102 = t102 - t103
-    t79 = t102 + t79
-    t102 = t2 * t79
-    t100 = t100 - t102
-    t94 = t94 + t100
-    t102 = t8 * t94
-    t90 = t90 + t102
-    t67 = t67 + t90
-    t90 = t0 * t67
-    t102 = 0.012 * t48
-    t103 = 0.6 * t95
-    t102 = t102 - t103
-    t76 = t102 + t76
-    t102 = 0.5 * t95
-    t103 = 0.05 * t61
-    t102 = t102 + t103
-    t96 = t96 - t102
-    t102 = t1 * t79
-    t103 = t2 * t72
-    t102 = t102 + t103
-    t96 = t96 + t102
-    t76 = t76 + t96
-    t96 = t3 * t76
-    t90 = t90 - t96
-    t25 = t25 + t90
-    t90 = 0.8 * t34
-    t96 = 0.6 * t63
-    t63 = t11 * t63
-    t103 = t8 * t58
-    t63 = t63 - t103
-    t103 = 0.5 * t63
-    t63 = 0.3 * t63
-    t63 = t103 + t63
-    t103 = t11 * t63
-    t66 = 0.5 * t66
-    t66 = t66 + t98
-    t98 = t8 * t66
-    t98 = t103 + t98
-    t96 = t96 + t98
-    t96 = t0 * t96
-    t98 = 0.5 * t85
-    t83 = t83 - t98
-    t98 = 0.6 * t85
-    t83 = t83 - t98
-    t83 = t3 * t83
-    t83 = t96 - t83
-    t83 = t90 + t83
-    t83 = t17 * t83
-    t25 = t25 + t83
-    t25 = t60 + t25
-    t60 = t25 / t21
-    t83 = t19 * t25
-    t63 = t8 * t63
-    t66 = t11 * t66
-    t63 = t63 - t66
-    t66 = 0.6 * t58
-    t63 = t63 - t66
-    t58 = 0.8 * t58
-    t58 = t63 - t58
-    t63 = t26 * t25
-    t58 = t58 + t63
-    t63 = t22 * t58
-    t63 = t83 + t63
-    t66 = 0.012 * t85
-    t83 = t11 * t97
-    t66 = t66 + t83
-    t83 = t18 * t25
-    t85 = t28 * t58
-    t83 = t83 + t85
-    t66 = t66 + t83
-    t83 = t23 * t66
-    t63 = t63 + t83
-    t63 = t80 - t63
-    t80 = t63 / t20
-    t25 = t27 * t25
-    t83 = t31 * t58
-    t25 = t25 + t83
-    t83 = t33 * t66
-    t25 = t25 - t83
-    t63 = t30 * t63
-    t25 = t25 - t63
+    t100 = t100 + t102
+    t102 = t11 * t100
+    t103 = t8 * t51
+    t110 = t11 * t5
+    t103 = t103 - t110
+    t110 = 0.5 * t103
+    t41 = t64 - t41
+    t12 = t41 + t12
+    t111 = 0.05 * t12
+    t111 = t110 + t111
+    t111 = t111 + t104
+    t13 = t3 * t13
+    t60 = t94 + t60
+    t112 = t8 * t60
+    t113 = t11 * t49
+    t112 = t112 - t113
+    t62 = t112 - t62
+    t112 = t62 * p[1]
+    t112 = t13 + t112
+    t66 = t66 - t112
+    t112 = t2 * t66
+    t113 = t12 * p[1]
+    t113 = t103 + t113
+    t113 = t113 + t72
+    t114 = t1 * t113
+    t112 = t112 + t114
+    t114 = 0.3 * t112
+    t115 = t1 * t12
+    t116 = t2 * t62
+    t115 = t115 - t116
+    t63 = t115 - t63
+    t115 = 0.015 * t63
+    t114 = t114 + t115
+    t73 = t114 + t73
+    t114 = t1 * t73
+    t66 = t1 * t66
+    t113 = t2 * t113
+    t66 = t66 - t113
+    t113 = 0.3 * t66
+    t115 = t2 * t12
+    t116 = t1 * t62
+    t115 = t115 + t116
+    t76 = t115 + t76
+    t115 = 0.015 * t76
+    t113 = t113 - t115
+    t82 = t113 + t82
+    t113 = t2 * t82
+    t115 = t114 - t113
+    t111 = t111 + t115
+    t116 = t8 * t111
+    t117 = t102 + t116
+    t83 = t83 + t117
+    t117 = t0 * t83
+    t118 = 0.012 * t49
+    t119 = 0.6 * t13
+    t118 = t118 - t119
+    t118 = t118 + t77
+    t120 = 0.5 * t13
+    t121 = 0.05 * t62
+    t120 = t120 + t121
+    t105 = t105 - t120
+    t82 = t1 * t82
+    t73 = t2 * t73
+    t120 = t82 + t73
+    t105 = t105 + t120
+    t105 = t118 + t105
+    t118 = t3 * t105
+    t117 = t117 - t118
+    t25 = t25 + t117
+    t34 = 0.8 * t34
+    t117 = 0.6 * t64
+    t64 = t11 * t64
+    t118 = t8 * t59
+    t64 = t64 - t118
+    t118 = 0.5 * t64
+    t64 = 0.3 * t64
+    t64 = t118 + t64
+    t118 = t11 * t64
+    t67 = 0.5 * t67
+    t67 = t67 + t107
+    t107 = t8 * t67
+    t107 = t118 + t107
+    t107 = t117 + t107
+    t107 = t0 * t107
+    t117 = 0.5 * t94
+    t89 = t89 - t117
+    t117 = 0.6 * t94
+    t89 = t89 - t117
+    t89 = t3 * t89
+    t89 = t107 - t89
+    t34 = t34 + t89
+    t34 = t17 * t34
+    t25 = t25 + t34
+    t25 = t61 + t25
+    t34 = t25 / t21
+    t61 = t19 * t25
+    t64 = t8 * t64
+    t67 = t11 * t67
+    t64 = t64 - t67
+    t67 = 0.6 * t59
+    t64 = t64 - t67
+    t59 = 0.8 * t59
+    t59 = t64 - t59
+    t64 = t27 * t25
+    t59 = t59 + t64
+    t64 = t22 * t59
+    t61 = t61 + t64
+    t64 = 0.012 * t94
+    t67 = t11 * t106
+    t64 = t64 + t67
+    t67 = t18 * t25
+    t89 = t28 * t59
+    t67 = t67 + t89
+    t64 = t64 + t67
+    t67 = t23 * t64
+    t61 = t61 + t67
+    t61 = t87 - t61
+    t67 = t61 / t20
+    t25 = t26 * t25
+    t87 = t31 * t59
+    t25 = t25 + t87
+    t87 = t33 * t64
+    t25 = t25 - t87
+    t61 = t30 * t61
+    t25 = t25 - t61
     t25 = t25 / t6
-    t63 = t30 * t25
-    t63 = t80 - t63
-    t80 = t23 * t63
-    t83 = t33 * t25
-    t80 = t80 + t83
-    t66 = t66 / t9
-    t66 = t80 - t66
-    t80 = t18 * t66
-    t58 = t58 / t29
-    t83 = t28 * t66
-    t85 = t22 * t63
-    t83 = t83 + t85
-    t85 = t31 * t25
-    t83 = t83 - t85
-    t58 = t58 - t83
-    t83 = t26 * t58
-    t80 = t80 - t83
-    t83 = t19 * t63
-    t80 = t80 + t83
-    t83 = t27 * t25
-    t80 = t80 - t83
-    t60 = t60 - t80
-    t60 = -t60
-    t58 = -t58
+    t61 = t30 * t25
+    t61 = t67 - t61
+    t67 = t23 * t61
+    t87 = t33 * t25
+    t67 = t67 + t87
+    t64 = t64 / t9
+    t64 = t67 - t64
+    t67 = t18 * t64
+    t59 = t59 / t29
+    t87 = t28 * t64
+    t89 = t22 * t61
+    t87 = t87 + t89
+    t89 = t31 * t25
+    t87 = t87 - t89
+    t59 = t59 - t87
+    t87 = t27 * t59
+    t67 = t67 - t87
+    t87 = t19 * t61
+    t67 = t67 + t87
+    t87 = t26 * t25
+    t67 = t67 - t87
+    t34 = t34 - t67
+    t34 = -t34
+    t59 = -t59
+    t64 = -t64
+    t61 = -t61
+    t67 = 0.003 * t53
+    t87 = x[7] * t67
+    t84 = t87 - t84
+    t87 = 0.00424 * t60
+    t84 = t84 - t87
+    t87 = t11 * t53
+    t89 = t46 * t87
+    t94 = t8 * t53
+    t106 = 0.009000000000000001 * t94
+    t107 = t44 * t106
+    t89 = t89 + t107
+    t107 = t48 * t94
+    t117 = 0.002 * t87
+    t118 = t45 * t117
+    t107 = t107 + t118
+    t89 = t89 - t107
+    t107 = 0.009000000000000001 * t60
+    t89 = t89 - t107
+    t107 = t8 * t13
+    t118 = 0.05 * t107
+    t89 = t89 - t118
+    t118 = t56 * t87
+    t121 = t1 * t94
+    t122 = t2 * t36
+    t121 = t121 - t122
+    t123 = 0.0027500000000000003 * t121
+    t124 = t52 * t123
+    t118 = t118 + t124
+    t124 = t58 * t121
+    t125 = 0.001 * t87
+    t126 = t55 * t125
+    t124 = t124 + t126
+    t118 = t118 - t124
+    t124 = t1 * t60
+    t126 = t8 * t41
+    t127 = x[8] * t87
+    t126 = t126 - t127
+    t127 = t2 * t126
+    t124 = t124 + t127
+    t127 = x[9] * t121
+    t124 = t124 + t127
+    t127 = 0.0027500000000000003 * t124
+    t118 = t118 - t127
+    t127 = t65 * t87
+    t128 = p[1] * t36
+    t129 = t44 * t128
+    t127 = t127 - t129
+    t129 = p[1] * t126
+    t129 = t51 + t129
+    t127 = t127 - t129
+    t129 = t2 * t127
+    t130 = t71 * t87
+    t131 = p[1] * t94
+    t132 = t44 * t131
+    t130 = t130 + t132
+    t132 = p[1] * t60
+    t132 = t107 + t132
+    t130 = t130 - t132
+    t132 = t1 * t130
+    t129 = t129 + t132
+    t132 = 0.015 * t129
+    t118 = t118 + t132
+    t132 = t1 * t118
+    t133 = t1 * t126
+    t134 = t2 * t60
+    t133 = t133 - t134
+    t134 = t1 * t36
+    t135 = t2 * t94
+    t135 = t134 + t135
+    t136 = x[9] * t135
+    t133 = t133 - t136
+    t136 = 0.0027500000000000003 * t133
+    t125 = t75 * t125
+    t137 = t58 * t135
+    t125 = t125 - t137
+    t137 = t79 * t87
+    t138 = 0.0027500000000000003 * t135
+    t139 = t52 * t138
+    t137 = t137 - t139
+    t125 = t125 - t137
+    t125 = t136 + t125
+    t127 = t1 * t127
+    t130 = t2 * t130
+    t127 = t127 - t130
+    t130 = 0.015 * t127
+    t125 = t125 - t130
+    t130 = t2 * t125
+    t130 = t132 + t130
+    t89 = t89 + t130
+    t129 = 0.3 * t129
+    t124 = 0.015 * t124
+    t124 = t129 - t124
+    t129 = t69 * t87
+    t130 = 0.015 * t121
+    t132 = t52 * t130
+    t129 = t129 + t132
+    t124 = t124 + t129
+    t129 = t1 * t124
+    t127 = 0.3 * t127
+    t132 = 0.015 * t133
+    t127 = t127 - t132
+    t132 = t74 * t87
+    t133 = 0.015 * t135
+    t136 = t52 * t133
+    t132 = t132 - t136
+    t127 = t127 + t132
+    t132 = t2 * t127
+    t129 = t129 - t132
+    t132 = p[1] * t129
+    t89 = t89 + t132
+    t84 = t84 + t89
+    t84 = t0 * t84
+    t132 = 0.00424 * t41
+    t38 = t132 + t38
+    t5 = 0.012 * t5
+    t5 = t38 - t5
+    t12 = 0.009000000000000001 * t12
+    t12 = t12 + t47
+    t38 = 0.05 * t103
+    t12 = t12 + t38
+    t38 = 0.0027500000000000003 * t63
+    t38 = t38 + t57
+    t47 = 0.015 * t112
+    t38 = t38 + t47
+    t47 = t1 * t38
+    t57 = 0.0027500000000000003 * t76
+    t63 = t57 + t81
+    t66 = 0.015 * t66
+    t63 = t63 - t66
+    t76 = t2 * t63
+    t81 = t47 + t76
+    t12 = t12 + t81
+    t81 = p[1] * t115
+    t12 = t12 + t81
+    t5 = t5 + t12
+    t5 = t5 * t3
+    t5 = t84 - t5
+    t12 = 0.003 * t60
+    t12 = t12 + t86
+    t49 = t8 * t49
+    t81 = t11 * t60
+    t49 = t49 + t81
+    t49 = t49 + t88
+    t81 = 0.002 * t49
+    t81 = t81 + t92
+    t35 = t49 + t35
+    t35 = 0.001 * t35
+    t35 = t35 + t93
+    t35 = t81 + t35
+    t81 = t11 * t35
+    t84 = 0.009000000000000001 * t62
+    t84 = t84 + t96
+    t86 = 0.05 * t13
+    t84 = t84 + t86
+    t63 = t1 * t63
+    t38 = t2 * t38
+    t86 = t63 - t38
+    t84 = t84 + t86
+    t86 = p[1] * t120
+    t84 = t84 - t86
+    t86 = t8 * t84
+    t88 = t81 + t86
+    t12 = t12 + t88
+    t12 = t12 * t0
+    t88 = 0.003 * t41
+    t92 = 0.00424 * t36
+    t93 = x[7] * t92
+    t40 = t93 - t40
+    t40 = t88 + t40
+    t41 = t11 * t41
+    t88 = x[8] * t94
+    t41 = t41 + t88
+    t88 = 0.002 * t41
+    t93 = t90 * t94
+    t96 = 0.009000000000000001 * t36
+    t112 = t45 * t96
+    t93 = t93 - t112
+    t106 = t54 * t106
+    t112 = t46 * t36
+    t106 = t106 - t112
+    t93 = t93 - t106
+    t88 = t88 + t93
+    t41 = 0.001 * t41
+    t93 = t79 * t121
+    t106 = t55 * t138
+    t93 = t93 - t106
+    t106 = t75 * t123
+    t112 = t56 * t135
+    t106 = t106 - t112
+    t93 = t93 - t106
+    t41 = t41 + t93
+    t88 = t88 + t41
+    t93 = t11 * t88
+    t106 = 0.009000000000000001 * t126
+    t112 = t54 * t117
+    t115 = t48 * t36
+    t112 = t112 - t115
+    t115 = t90 * t87
+    t117 = t44 * t96
+    t115 = t115 - t117
+    t112 = t112 - t115
+    t106 = t106 + t112
+    t112 = 0.05 * t51
+    t106 = t106 + t112
+    t112 = t1 * t125
+    t115 = t2 * t118
+    t112 = t112 - t115
+    t106 = t106 + t112
+    t112 = t1 * t127
+    t115 = t2 * t124
+    t112 = t112 + t115
+    t115 = p[1] * t112
+    t106 = t106 - t115
+    t115 = t8 * t106
+    t93 = t93 + t115
+    t40 = t40 + t93
+    t40 = t3 * t40
+    t12 = t12 + t40
+    t5 = t5 + t12
+    t12 = 0.012 * t36
+    t40 = t53 * t12
+    t40 = t77 + t40
+    t40 = t40 - t119
+    t77 = t95 * t87
+    t93 = 0.05 * t94
+    t115 = t44 * t93
+    t77 = t77 + t115
+    t107 = 0.5 * t107
+    t115 = 0.05 * t60
+    t107 = t107 + t115
+    t77 = t77 - t107
+    t77 = t77 + t129
+    t107 = t8 * t77
+    t13 = t11 * t13
+    t115 = 0.5 * t13
+    t117 = t95 * t94
+    t93 = t45 * t93
+    t93 = t117 + t93
+    t117 = t99 * t36
+    t118 = 0.05 * t36
+    t119 = t54 * t118
+    t117 = t117 + t119
+    t93 = t93 - t117
+    t93 = t115 + t93
+    t115 = t71 * t94
+    t117 = t45 * t131
+    t115 = t115 + t117
+    t117 = t65 * t36
+    t119 = t54 * t128
+    t117 = t117 + t119
+    t115 = t115 - t117
+    t13 = t13 + t115
+    t13 = 0.3 * t13
+    t115 = t69 * t121
+    t117 = t55 * t130
+    t115 = t115 + t117
+    t117 = t74 * t135
+    t119 = t75 * t133
+    t117 = t117 + t119
+    t115 = t115 - t117
+    t13 = t13 + t115
+    t13 = t93 + t13
+    t93 = t11 * t13
+    t93 = t107 - t93
+    t40 = t40 + t93
+    t40 = t0 * t40
+    t83 = t83 * t3
+    t40 = t40 - t83
+    t83 = t105 * t0
+    t12 = t36 * t12
+    t12 = t68 - t12
+    t12 = t12 - t108
+    t68 = t99 * t87
+    t93 = t44 * t118
+    t68 = t68 - t93
+    t93 = 0.5 * t51
+    t105 = 0.05 * t126
+    t93 = t93 + t105
+    t68 = t68 - t93
+    t68 = t68 + t112
+    t12 = t12 + t68
+    t12 = t3 * t12
+    t12 = t83 + t12
+    t12 = t40 - t12
+    t12 = t17 * t12
+    t5 = t5 + t12
+    t12 = t5 / t21
+    t40 = t85 * t53
+    t68 = t36 * t92
+    t40 = t40 - t68
+    t68 = t53 * t67
+    t83 = t37 * t36
+    t68 = t68 - t83
+    t40 = t40 - t68
+    t51 = 0.012 * t51
+    t40 = t40 - t51
+    t51 = t8 * t88
+    t68 = t11 * t106
+    t51 = t51 - t68
+    t40 = t40 + t51
+    t51 = t18 * t5
+    t60 = 0.012 * t60
+    t68 = t70 * t53
+    t60 = t60 + t68
+    t13 = t8 * t13
+    t68 = t11 * t77
+    t13 = t13 + t68
+    t13 = t60 - t13
+    t60 = t27 * t5
+    t13 = t13 + t60
+    t60 = t28 * t13
+    t51 = t51 + t60
+    t40 = t40 - t51
+    t51 = t40 / t9
+    t60 = t26 * t5
+    t68 = t31 * t13
+    t60 = t60 + t68
+    t68 = t33 * t40
+    t60 = t60 + t68
+    t5 = t19 * t5
+    t68 = t22 * t13
+    t5 = t5 + t68
+    t40 = t23 * t40
+    t5 = t5 - t40
+    t5 = t89 - t5
+    t40 = t30 * t5
+    t40 = t60 - t40
+    t40 = t41 - t40
+    t40 = t40 / t6
+    t41 = t33 * t40
+    t5 = t5 / t20
+    t60 = t30 * t40
+    t5 = t5 + t60
+    t60 = t23 * t5
+    t41 = t41 - t60
+    t41 = t51 - t41
+    t51 = t18 * t41
+    t13 = t13 / t29
+    t60 = t28 * t41
+    t68 = t22 * t5
+    t60 = t60 + t68
+    t68 = t31 * t40
+    t60 = t60 + t68
+    t13 = t13 - t60
+    t60 = t27 * t13
+    t51 = t51 - t60
+    t60 = t19 * t5
+    t51 = t51 + t60
+    t60 = t26 * t40
+    t51 = t51 + t60
+    t12 = t12 - t51
+    t12 = -t12
+    t13 = -t13
+    t41 = -t41
+    t5 = -t5
+    t40 = -t40
+    t51 = t46 * t45
+    t60 = 0.009000000000000001 * t44
+    t68 = t44 * t60
+    t51 = t51 - t68
+    t68 = 0.002 * t45
+    t77 = t45 * t68
+    t83 = t48 * t44
+    t77 = t77 - t83
+    t51 = t51 - t77
+    t77 = 0.05 * t50
+    t51 = t51 - t77
+    t77 = t2 * t49
+    t83 = t1 * t44
+    t88 = x[9] * t83
+    t77 = t77 + t88
+    t88 = 0.0027500000000000003 * t77
+    t89 = t56 * t45
+    t93 = 0.0027500000000000003 * t83
+    t105 = t52 * t93
+    t89 = t89 - t105
+    t105 = 0.001 * t45
+    t106 = t55 * t105
+    t107 = t58 * t83
+    t106 = t106 - t107
+    t89 = t89 - t106
+    t88 = t88 + t89
+    t89 = t65 * t45
+    t106 = p[1] * t49
+    t89 = t89 + t106
+    t106 = t2 * t89
+    t107 = p[1] * t44
+    t108 = t44 * t107
+    t101 = t101 - t108
+    t50 = t101 - t50
+    t101 = t1 * t50
+    t101 = t106 + t101
+    t106 = 0.015 * t101
+    t88 = t88 + t106
+    t106 = t1 * t88
+    t108 = t2 * t44
+    t112 = x[9] * t108
+    t115 = t1 * t49
+    t112 = t112 - t115
+    t115 = 0.0027500000000000003 * t112
+    t117 = t58 * t108
+    t119 = t75 * t105
+    t117 = t117 + t119
+    t119 = t79 * t45
+    t120 = 0.0027500000000000003 * t108
+    t121 = t52 * t120
+    t119 = t119 + t121
+    t117 = t117 - t119
+    t115 = t115 + t117
+    t89 = t1 * t89
+    t50 = t2 * t50
+    t50 = t89 - t50
+    t89 = 0.015 * t50
+    t89 = t115 - t89
+    t115 = t2 * t89
+    t106 = t106 + t115
+    t51 = t51 + t106
+    t101 = 0.3 * t101
+    t77 = 0.015 * t77
+    t77 = t101 + t77
+    t101 = t69 * t45
+    t106 = 0.015 * t83
+    t115 = t52 * t106
+    t101 = t101 - t115
+    t77 = t77 + t101
+    t101 = t1 * t77
+    t50 = 0.3 * t50
+    t112 = 0.015 * t112
+    t50 = t50 - t112
+    t112 = t74 * t45
+    t115 = 0.015 * t108
+    t117 = t52 * t115
+    t112 = t112 + t117
+    t50 = t50 + t112
+    t112 = t2 * t50
+    t101 = t101 - t112
+    t112 = p[1] * t101
+    t51 = t51 + t112
+    t112 = t0 * t51
+    t35 = t35 * t8
+    t117 = 0.002 * t62
+    t119 = t54 * t60
+    t97 = t119 - t97
+    t97 = t117 + t97
+    t62 = 0.001 * t62
+    t117 = t55 * t120
+    t119 = t79 * t83
+    t117 = t117 - t119
+    t119 = t56 * t108
+    t93 = t75 * t93
+    t93 = t119 - t93
+    t93 = t117 - t93
+    t62 = t62 + t93
+    t93 = t97 + t62
+    t97 = t11 * t93
+    t35 = t35 + t97
+    t97 = t54 * t68
+    t91 = t97 - t91
+    t97 = 0.009000000000000001 * t49
+    t91 = t91 - t97
+    t89 = t1 * t89
+    t88 = t2 * t88
+    t88 = t89 - t88
+    t88 = t91 + t88
+    t50 = t1 * t50
+    t77 = t2 * t77
+    t50 = t50 + t77
+    t77 = p[1] * t50
+    t77 = t88 - t77
+    t88 = t8 * t77
+    t84 = t84 * t11
+    t84 = t88 - t84
+    t35 = t35 + t84
+    t35 = t3 * t35
+    t35 = t112 + t35
+    t84 = t100 * t8
+    t88 = 0.05 * t44
+    t89 = t45 * t88
+    t89 = t104 + t89
+    t89 = t110 + t89
+    t91 = t45 * t107
+    t72 = t72 + t91
+    t72 = t103 + t72
+    t72 = 0.3 * t72
+    t91 = t74 * t108
+    t97 = t75 * t115
+    t91 = t91 + t97
+    t97 = t69 * t83
+    t100 = t55 * t106
+    t97 = t97 + t100
+    t91 = t91 - t97
+    t72 = t72 - t91
+    t72 = t89 + t72
+    t89 = t11 * t72
+    t84 = t84 + t89
+    t88 = t44 * t88
+    t88 = t98 - t88
+    t88 = t88 - t109
+    t88 = t88 + t101
+    t89 = t8 * t88
+    t91 = t111 * t11
+    t89 = t89 - t91
+    t84 = t84 + t89
+    t84 = t0 * t84
+    t89 = t99 * t45
+    t49 = 0.05 * t49
+    t49 = t89 + t49
+    t49 = t49 + t50
+    t49 = t3 * t49
+    t49 = t84 - t49
+    t49 = t17 * t49
+    t35 = t35 + t49
+    t49 = t35 / t21
+    t50 = t8 * t93
+    t50 = t50 - t81
+    t77 = t11 * t77
+    t77 = t86 + t77
+    t50 = t50 - t77
+    t77 = t18 * t35
+    t72 = t8 * t72
+    t72 = t72 - t102
+    t81 = t11 * t88
+    t81 = t116 + t81
+    t72 = t72 - t81
+    t81 = t27 * t35
+    t72 = t72 + t81
+    t81 = t28 * t72
+    t77 = t77 + t81
+    t50 = t50 - t77
+    t77 = t50 / t9
+    t81 = t26 * t35
+    t84 = t31 * t72
+    t81 = t81 + t84
+    t84 = t33 * t50
+    t81 = t81 + t84
+    t35 = t19 * t35
+    t84 = t22 * t72
+    t35 = t35 + t84
+    t50 = t23 * t50
+    t35 = t35 - t50
+    t35 = t51 - t35
+    t50 = t30 * t35
+    t50 = t81 - t50
+    t50 = t62 - t50
+    t50 = t50 / t6
+    t51 = t33 * t50
+    t35 = t35 / t20
+    t62 = t30 * t50
+    t35 = t35 + t62
+    t62 = t23 * t35
+    t51 = t51 - t62
+    t51 = t77 - t51
+    t62 = t18 * t51
+    t72 = t72 / t29
+    t77 = t28 * t51
+    t81 = t22 * t35
+    t77 = t77 + t81
+    t81 = t31 * t50
+    t77 = t77 + t81
+    t72 = t72 - t77
+    t77 = t27 * t72
+    t62 = t62 - t77
+    t77 = t19 * t35
+    t62 = t62 + t77
+    t77 = t26 * t50
+    t62 = t62 + t77
+    t49 = t49 - t62
+    t49 = -t49
+    t62 = -t72
+    t51 = -t51
+    t35 = -t35
+    t50 = -t50
+    t72 = t80 - t78
+    t57 = t72 - t57
+    t57 = t57 + t66
+    t66 = t1 * t57
+    t66 = t66 - t38
+    t38 = t63 + t38
+    t38 = t66 + t38
+    t63 = t82 - t73
+    t63 = t63 - t63
+    t66 = p[1] * t63
+    t38 = t38 + t66
+    t66 = t0 * t38
+    t72 = t79 * t75
+    t73 = t55 * t56
+    t72 = t72 - t73
+    t72 = t72 - t72
+    t73 = t11 * t72
+    t76 = t47 - t76
+    t57 = t2 * t57
+    t47 = t47 + t57
+    t47 = t76 - t47
+    t57 = t114 + t113
+    t57 = t57 - t57
+    t76 = p[1] * t57
+    t47 = t47 - t76
+    t76 = t8 * t47
+    t73 = t73 + t76
+    t73 = t3 * t73
+    t66 = t66 + t73
+    t73 = t8 * t63
+    t76 = t69 * t75
+    t77 = t55 * t74
+    t76 = t76 + t77
+    t76 = t76 - t76
+    t77 = t11 * t76
+    t73 = t73 - t77
+    t73 = t0 * t73
+    t57 = t3 * t57
+    t57 = t73 - t57
+    t57 = t17 * t57
+    t57 = t66 + t57
+    t66 = t57 / t21
+    t73 = t8 * t72
+    t47 = t11 * t47
+    t47 = t73 - t47
+    t73 = t18 * t57
+    t77 = t27 * t57
+    t76 = t8 * t76
+    t63 = t11 * t63
+    t63 = t76 + t63
+    t63 = t77 - t63
+    t76 = t28 * t63
+    t73 = t73 + t76
+    t47 = t47 - t73
+    t73 = t47 / t9
+    t76 = t26 * t57
+    t77 = t31 * t63
+    t76 = t76 + t77
+    t77 = t33 * t47
+    t76 = t76 + t77
+    t57 = t19 * t57
+    t77 = t22 * t63
+    t57 = t57 + t77
+    t47 = t23 * t47
+    t47 = t57 - t47
+    t38 = t38 - t47
+    t47 = t30 * t38
+    t47 = t76 - t47
+    t47 = t72 - t47
+    t47 = t47 / t6
+    t57 = t33 * t47
+    t38 = t38 / t20
+    t72 = t30 * t47
+    t38 = t38 + t72
+    t72 = t23 * t38
+    t57 = t57 - t72
+    t57 = t73 - t57
+    t72 = t18 * t57
+    t63 = t63 / t29
+    t73 = t28 * t57
+    t76 = t22 * t38
+    t73 = t73 + t76
+    t76 = t31 * t47
+    t73 = t73 + t76
+    t63 = t63 - t73
+    t73 = t27 * t63
+    t72 = t72 - t73
+    t73 = t19 * t38
+    t72 = t72 + t73
+    t73 = t26 * t47
+    t72 = t72 + t73
+    t66 = t66 - t72
     t66 = -t66
     t63 = -t63
-    t80 = x[5] * t0
-    t83 = 0.003 * t80
-    t85 = x[7] * t83
-    t90 = t39 * t80
-    t85 = t85 - t90
-    t90 = t34 * t3
-    t96 = x[7] * t80
-    t90 = t90 + t96
-    t96 = 0.00424 * t90
-    t85 = t85 - t96
-    t96 = t11 * t80
-    t97 = t45 * t96
-    t98 = t8 * t80
-    t103 = 0.009000000000000001 * t98
-    t104 = t43 * t103
-    t97 = t97 + t104
-    t104 = t47 * t98
-    t105 = 0.002 * t96
-    t106 = t44 * t105
-    t104 = t104 + t106
-    t97 = t97 - t104
-    t104 = 0.009000000000000001 * t90
-    t97 = t97 - t104
-    t104 = t13 * t3
-    t106 = t8 * t104
-    t107 = 0.05 * t106
-    t97 = t97 - t107
-    t107 = t55 * t96
-    t108 = t1 * t98
-    t109 = x[5] * t3
-    t110 = t2 * t109
-    t108 = t108 - t110
-    t110 = 0.0027500000000000003 * t108
-    t111 = t51 * t110
-    t107 = t107 + t111
-    t111 = t57 * t108
-    t112 = 0.001 * t96
-    t113 = t54 * t112
-    t111 = t111 + t113
-    t107 = t107 - t111
-    t111 = t1 * t90
-    t34 = t34 * t0
-    t113 = x[7] * t109
-    t34 = t34 - t113
-    t113 = t8 * t34
-    t114 = x[8] * t96
-    t113 = t113 - t114
-    t114 = t2 * t113
-    t111 = t111 + t114
-    t114 = x[9] * t108
-    t111 = t111 + t114
-    t114 = 0.0027500000000000003 * t111
-    t107 = t107 - t114
-    t114 = t64 * t96
-    t115 = p[1] * t109
-    t116 = t43 * t115
-    t114 = t114 - t116
-    t13 = t13 * t0
-    t116 = p[1] * t113
-    t116 = t13 + t116
-    t114 = t114 - t116
-    t116 = t2 * t114
-    t117 = t70 * t96
-    t118 = p[1] * t98
-    t119 = t43 * t118
-    t117 = t117 + t119
-    t119 = p[1] * t90
-    t119 = t106 + t119
-    t117 = t117 - t119
-    t119 = t1 * t117
-    t116 = t116 + t119
-    t119 = 0.015 * t116
-    t107 = t107 + t119
-    t119 = t1 * t107
-    t120 = t1 * t113
-    t121 = t2 * t90
-    t120 = t120 - t121
-    t121 = t1 * t109
-    t122 = t2 * t98
-    t121 = t121 + t122
-    t122 = x[9] * t121
-    t120 = t120 - t122
-    t122 = 0.0027500000000000003 * t120
-    t112 = t74 * t112
-    t123 = t57 * t121
-    t112 = t112 - t123
-    t123 = t78 * t96
-    t124 = 0.0027500000000000003 * t121
-    t125 = t51 * t124
-    t123 = t123 - t125
-    t112 = t112 - t123
-    t112 = t122 + t112
-    t114 = t1 * t114
-    t117 = t2 * t117
-    t114 = t114 - t117
-    t117 = 0.015 * t114
-    t112 = t112 - t117
-    t117 = t2 * t112
-    t117 = t119 + t117
-    t97 = t97 + t117
-    t116 = 0.3 * t116
-    t111 = 0.015 * t111
-    t111 = t116 - t111
-    t116 = t68 * t96
-    t117 = 0.015 * t108
-    t119 = t51 * t117
-    t116 = t116 + t119
-    t111 = t111 + t116
-    t116 = t1 * t111
-    t114 = 0.3 * t114
-    t119 = 0.015 * t120
-    t114 = t114 - t119
-    t119 = t73 * t96
-    t120 = 0.015 * t121
-    t122 = t51 * t120
-    t119 = t119 - t122
-    t114 = t114 + t119
-    t119 = t2 * t114
-    t116 = t116 - t119
-    t119 = p[1] * t116
-    t97 = t97 + t119
-    t85 = t85 + t97
-    t85 = t0 * t85
-    t40 = 0.00424 * t40
-    t38 = t40 + t38
-    t40 = 0.012 * t5
-    t38 = t38 - t40
-    t40 = 0.009000000000000001 * t12
-    t40 = t40 + t46
-    t46 = 0.05 * t93
-    t40 = t40 + t46
-    t46 = 0.0027500000000000003 * t62
-    t46 = t46 + t56
-    t56 = 0.015 * t99
-    t46 = t46 + t56
-    t56 = t1 * t46
-    t62 = 0.0027500000000000003 * t75
-    t62 = t62 + t77
-    t75 = 0.015 * t101
-    t62 = t62 - t75
-    t75 = t2 * t62
-    t56 = t56 + t75
-    t40 = t40 + t56
-    t56 = p[1] * t100
-    t40 = t40 + t56
-    t38 = t38 + t40
-    t38 = t38 * t3
-    t38 = t85 - t38
-    t40 = 0.003 * t59
-    t40 = t40 + t81
-    t56 = t8 * t48
-    t75 = t11 * t59
-    t56 = t56 + t75
-    t56 = t56 + t84
-    t75 = 0.002 * t56
-    t75 = t75 + t87
-    t35 = t56 + t35
-    t35 = 0.001 * t35
-    t35 = t35 + t88
-    t35 = t75 + t35
-    t56 = t11 * t35
-    t75 = 0.009000000000000001 * t61
-    t75 = t75 + t91
-    t77 = 0.05 * t95
-    t75 = t75 + t77
-    t77 = t1 * t62
-    t81 = t2 * t46
-    t77 = t77 - t81
-    t75 = t75 + t77
-    t77 = p[1] * t102
-    t75 = t75 - t77
-    t77 = t8 * t75
-    t56 = t56 + t77
-    t40 = t40 + t56
-    t40 = t40 * t0
-    t56 = 0.003 * t34
-    t77 = 0.00424 * t109
-    t81 = x[7] * t77
-    t84 = t39 * t109
-    t81 = t81 - t84
-    t56 = t56 + t81
-    t34 = t11 * t34
-    t81 = x[8] * t98
-    t34 = t34 + t81
-    t81 = 0.002 * t34
-    t84 = t86 * t98
-    t85 = 0.009000000000000001 * t109
-    t87 = t44 * t85
-    t84 = t84 - t87
-    t87 = t53 * t103
-    t88 = t45 * t109
-    t87 = t87 - t88
-    t84 = t84 - t87
-    t81 = t81 + t84
-    t34 = 0.001 * t34
-    t84 = t78 * t108
-    t87 = t54 * t124
-    t84 = t84 - t87
-    t87 = t74 * t110
-    t88 = t55 * t121
-    t87 = t87 - t88
-    t84 = t84 - t87
-    t34 = t34 + t84
-    t81 = t81 + t34
-    t84 = t11 * t81
-    t87 = 0.009000000000000001 * t113
-    t88 = t53 * t105
-    t91 = t47 * t109
-    t88 = t88 - t91
-    t91 = t86 * t96
-    t85 = t43 * t85
-    t85 = t91 - t85
-    t85 = t88 - t85
-    t85 = t87 + t85
-    t87 = 0.05 * t13
-    t85 = t85 + t87
-    t87 = t1 * t112
-    t88 = t2 * t107
-    t87 = t87 - t88
-    t85 = t85 + t87
-    t87 = t1 * t114
-    t88 = t2 * t111
-    t87 = t87 + t88
-    t88 = p[1] * t87
-    t85 = t85 - t88
-    t88 = t8 * t85
-    t84 = t84 + t88
-    t56 = t56 + t84
-    t56 = t3 * t56
-    t40 = t40 + t56
-    t38 = t38 + t40
-    t40 = t41 * t109
-    t56 = 0.012 * t109
-    t84 = t52 * t56
-    t40 = t40 + t84
-    t84 = 0.6 * t104
-    t40 = t40 - t84
-    t84 = t89 * t96
-    t88 = 0.05 * t98
-    t91 = t43 * t88
-    t84 = t84 + t91
-    t91 = 0.5 * t106
-    t93 = 0.05 * t90
-    t91 = t91 + t93
-    t84 = t84 - t91
-    t84 = t84 + t116
-    t91 = t8 * t84
-    t93 = t11 * t104
-    t95 = 0.5 * t93
-    t99 = t89 * t98
-    t88 = t44 * t88
-    t88 = t99 + t88
-    t99 = t92 * t109
-    t100 = 0.05 * t109
-    t101 = t53 * t100
-    t99 = t99 + t101
-    t88 = t88 - t99
-    t88 = t95 + t88
-    t95 = t70 * t98
-    t98 = t44 * t118
-    t95 = t95 + t98
-    t98 = t64 * t109
-    t99 = t53 * t115
-    t98 = t98 + t99
-    t95 = t95 - t98
-    t93 = t93 + t95
-    t93 = 0.3 * t93
-    t95 = t68 * t108
-    t98 = t54 * t117
-    t95 = t95 + t98
-    t98 = t73 * t121
-    t99 = t74 * t120
-    t98 = t98 + t99
-    t95 = t95 - t98
-    t93 = t93 + t95
-    t88 = t88 + t93
-    t93 = t11 * t88
-    t91 = t91 - t93
-    t40 = t40 + t91
-    t40 = t0 * t40
-    t67 = t67 * t3
-    t40 = t40 - t67
-    t67 = t76 * t0
-    t76 = t41 * t80
-    t56 = t36 * t56
-    t56 = t76 - t56
-    t76 = 0.6 * t13
-    t56 = t56 - t76
-    t76 = t92 * t96
-    t91 = t43 * t100
-    t76 = t76 - t91
-    t91 = 0.5 * t13
-    t93 = 0.05 * t113
-    t91 = t91 + t93
-    t76 = t76 - t91
-    t76 = t76 + t87
-    t56 = t56 + t76
-    t56 = t3 * t56
-    t56 = t67 + t56
-    t40 = t40 - t56
-    t40 = t17 * t40
-    t38 = t38 + t40
-    t40 = t38 / t21
-    t56 = t82 * t80
-    t67 = t36 * t77
-    t56 = t56 - t67
-    t67 = t52 * t83
-    t76 = t37 * t109
-    t67 = t67 - t76
-    t56 = t56 - t67
-    t13 = 0.012 * t13
-    t13 = t56 - t13
-    t56 = t8 * t81
-    t67 = t11 * t85
-    t56 = t56 - t67
-    t13 = t13 + t56
-    t56 = t18 * t38
-    t67 = 0.012 * t90
-    t76 = t69 * t80
-    t67 = t67 + t76
-    t76 = t8 * t88
-    t77 = t11 * t84
-    t76 = t76 + t77
-    t67 = t67 - t76
-    t76 = t26 * t38
-    t67 = t67 + t76
-    t76 = t28 * t67
-    t56 = t56 + t76
-    t13 = t13 - t56
-    t56 = t13 / t9
-    t76 = t27 * t38
-    t77 = t31 * t67
-    t76 = t76 + t77
-    t77 = t33 * t13
-    t76 = t76 + t77
-    t38 = t19 * t38
-    t77 = t22 * t67
-    t38 = t38 + t77
-    t13 = t23 * t13
-    t13 = t38 - t13
-    t13 = t97 - t13
-    t38 = t30 * t13
-    t38 = t76 - t38
-    t34 = t34 - t38
-    t34 = t34 / t6
-    t38 = t33 * t34
-    t13 = t13 / t20
-    t76 = t30 * t34
-    t13 = t13 + t76
-    t76 = t23 * t13
-    t38 = t38 - t76
-    t38 = t56 - t38
-    t56 = t18 * t38
-    t67 = t67 / t29
-    t76 = t28 * t38
-    t77 = t22 * t13
-    t76 = t76 + t77
-    t77 = t31 * t34
-    t76 = t76 + t77
-    t67 = t67 - t76
-    t76 = t26 * t67
-    t56 = t56 - t76
-    t76 = t19 * t13
-    t56 = t56 + t76
-    t76 = t27 * t34
-    t56 = t56 + t76
-    t40 = t40 - t56
-    t40 = -t40
-    t56 = -t67
+    t57 = -t57
     t38 = -t38
-    t13 = -t13
-    t34 = -t34
-    t67 = t36 * t8
-    t76 = x[7] * t11
-    t67 = t67 - t76
-    t76 = t45 * t67
-    t77 = t36 * t11
-    t80 = x[7] * t8
-    t77 = t77 + t80
-    t80 = 0.009000000000000001 * t77
-    t81 = t43 * t80
-    t76 = t76 - t81
-    t81 = 0.002 * t67
-    t83 = t44 * t81
-    t84 = t47 * t77
-    t83 = t83 - t84
-    t76 = t76 - t83
-    t83 = t50 * t11
-    t84 = t5 * t8
-    t83 = t83 + t84
-    t84 = 0.05 * t83
-    t76 = t76 - t84
-    t84 = t59 * t11
-    t85 = t48 * t8
-    t84 = t84 + t85
-    t85 = x[8] * t67
-    t84 = t84 + t85
-    t85 = t2 * t84
-    t87 = t1 * t77
-    t88 = x[9] * t87
-    t85 = t85 + t88
-    t88 = 0.0027500000000000003 * t85
-    t90 = t55 * t67
-    t91 = 0.0027500000000000003 * t87
-    t93 = t51 * t91
-    t90 = t90 - t93
-    t93 = 0.001 * t67
-    t95 = t54 * t93
-    t96 = t57 * t87
-    t95 = t95 - t96
-    t90 = t90 - t95
-    t88 = t88 + t90
-    t90 = t64 * t67
-    t95 = p[1] * t84
-    t90 = t90 + t95
-    t95 = t2 * t90
-    t96 = t70 * t67
-    t97 = p[1] * t77
-    t98 = t43 * t97
-    t96 = t96 - t98
-    t96 = t96 - t83
-    t98 = t1 * t96
-    t95 = t95 + t98
-    t98 = 0.015 * t95
-    t88 = t88 + t98
-    t98 = t1 * t88
-    t99 = t2 * t77
-    t100 = x[9] * t99
-    t101 = t1 * t84
-    t100 = t100 - t101
-    t101 = 0.0027500000000000003 * t100
-    t102 = t57 * t99
-    t93 = t74 * t93
-    t93 = t102 + t93
-    t102 = t78 * t67
-    t103 = 0.0027500000000000003 * t99
-    t104 = t51 * t103
-    t102 = t102 + t104
-    t93 = t93 - t102
-    t93 = t101 + t93
-    t90 = t1 * t90
-    t96 = t2 * t96
-    t90 = t90 - t96
-    t96 = 0.015 * t90
-    t93 = t93 - t96
-    t96 = t2 * t93
-    t96 = t98 + t96
-    t76 = t76 + t96
-    t95 = 0.3 * t95
-    t85 = 0.015 * t85
-    t85 = t95 + t85
-    t95 = t68 * t67
-    t96 = 0.015 * t87
-    t98 = t51 * t96
-    t95 = t95 - t98
-    t85 = t85 + t95
-    t95 = t1 * t85
-    t90 = 0.3 * t90
-    t98 = 0.015 * t100
-    t90 = t90 - t98
-    t98 = t73 * t67
-    t100 = 0.015 * t99
-    t101 = t51 * t100
-    t98 = t98 + t101
-    t90 = t90 + t98
-    t98 = t2 * t90
-    t95 = t95 - t98
-    t98 = p[1] * t95
-    t76 = t76 + t98
-    t98 = t0 * t76
-    t101 = t35 * t8
-    t59 = t59 * t8
-    t48 = t48 * t11
-    t48 = t59 - t48
-    t59 = x[8] * t77
-    t48 = t48 - t59
-    t59 = 0.002 * t48
-    t80 = t53 * t80
-    t102 = t86 * t77
-    t80 = t80 - t102
-    t59 = t59 + t80
-    t48 = 0.001 * t48
-    t80 = t54 * t103
-    t102 = t78 * t87
-    t80 = t80 - t102
-    t102 = t55 * t99
-    t91 = t74 * t91
-    t91 = t102 - t91
-    t80 = t80 - t91
-    t48 = t48 + t80
-    t59 = t59 + t48
-    t80 = t11 * t59
-    t80 = t101 + t80
-    t81 = t53 * t81
-    t91 = t86 * t67
-    t81 = t81 - t91
-    t91 = 0.009000000000000001 * t84
-    t81 = t81 - t91
-    t91 = t1 * t93
-    t88 = t2 * t88
-    t88 = t91 - t88
-    t81 = t81 + t88
-    t88 = t1 * t90
-    t85 = t2 * t85
-    t85 = t88 + t85
-    t88 = p[1] * t85
-    t81 = t81 - t88
-    t88 = t8 * t81
-    t90 = t75 * t11
-    t88 = t88 - t90
-    t80 = t80 + t88
-    t80 = t3 * t80
-    t80 = t98 + t80
-    t88 = t49 * t8
-    t50 = t50 * t8
-    t5 = t5 * t11
-    t5 = t50 - t5
-    t50 = 0.5 * t5
-    t90 = t89 * t77
-    t91 = 0.05 * t77
-    t93 = t44 * t91
-    t90 = t90 + t93
-    t50 = t50 + t90
-    t77 = t70 * t77
-    t90 = t44 * t97
-    t77 = t77 + t90
-    t5 = t5 + t77
-    t5 = 0.3 * t5
-    t77 = t73 * t99
-    t90 = t74 * t100
-    t77 = t77 + t90
-    t87 = t68 * t87
-    t90 = t54 * t96
-    t87 = t87 + t90
-    t77 = t77 - t87
-    t5 = t5 - t77
-    t5 = t50 + t5
-    t50 = t11 * t5
-    t50 = t88 + t50
-    t77 = t89 * t67
-    t87 = t43 * t91
-    t77 = t77 - t87
-    t83 = 0.5 * t83
-    t77 = t77 - t83
-    t77 = t77 + t95
-    t83 = t8 * t77
-    t87 = t94 * t11
-    t83 = t83 - t87
-    t50 = t50 + t83
-    t50 = t0 * t50
-    t67 = t92 * t67
-    t83 = 0.05 * t84
-    t67 = t67 + t83
-    t67 = t67 + t85
-    t67 = t3 * t67
-    t50 = t50 - t67
-    t50 = t17 * t50
-    t50 = t80 + t50
-    t67 = t50 / t21
-    t59 = t8 * t59
-    t35 = t35 * t11
-    t35 = t59 - t35
-    t59 = t75 * t8
-    t75 = t11 * t81
-    t59 = t59 + t75
-    t35 = t35 - t59
-    t59 = t18 * t50
-    t5 = t8 * t5
-    t49 = t49 * t11
-    t5 = t5 - t49
-    t49 = t94 * t8
-    t75 = t11 * t77
-    t49 = t49 + t75
-    t5 = t5 - t49
-    t49 = t26 * t50
-    t5 = t5 + t49
-    t49 = t28 * t5
-    t49 = t59 + t49
-    t35 = t35 - t49
-    t49 = t35 / t9
-    t59 = t27 * t50
-    t75 = t31 * t5
-    t59 = t59 + t75
-    t75 = t33 * t35
-    t59 = t59 + t75
-    t50 = t19 * t50
-    t75 = t22 * t5
-    t50 = t50 + t75
-    t35 = t23 * t35
-    t35 = t50 - t35
-    t35 = t76 - t35
-    t50 = t30 * t35
-    t50 = t59 - t50
-    t48 = t48 - t50
-    t48 = t48 / t6
-    t50 = t33 * t48
-    t35 = t35 / t20
-    t59 = t30 * t48
-    t35 = t35 + t59
-    t59 = t23 * t35
-    t50 = t50 - t59
-    t49 = t49 - t50
-    t50 = t18 * t49
-    t5 = t5 / t29
-    t59 = t28 * t49
-    t75 = t22 * t35
-    t59 = t59 + t75
-    t75 = t31 * t48
-    t59 = t59 + t75
-    t5 = t5 - t59
-    t59 = t26 * t5
-    t50 = t50 - t59
-    t59 = t19 * t35
-    t50 = t50 + t59
-    t59 = t27 * t48
-    t50 = t50 + t59
-    t50 = t67 - t50
-    t50 = -t50
-    t5 = -t5
-    t49 = -t49
-    t35 = -t35
-    t48 = -t48
-    t59 = t53 * t1
-    t67 = t44 * t2
-    t59 = t59 - t67
-    t67 = 0.0027500000000000003 * t59
-    t75 = t51 * t67
-    t76 = t57 * t59
-    t75 = t75 - t76
-    t76 = t12 * t2
-    t77 = t61 * t1
-    t76 = t76 + t77
-    t77 = x[9] * t59
-    t76 = t76 + t77
-    t77 = 0.0027500000000000003 * t76
-    t75 = t75 - t77
-    t77 = t65 * t1
-    t80 = t71 * t2
-    t77 = t77 - t80
-    t80 = 0.015 * t77
-    t75 = t75 + t80
-    t80 = t1 * t75
-    t81 = t46 * t2
-    t80 = t80 - t81
-    t81 = t62 * t1
-    t12 = t12 * t1
-    t61 = t61 * t2
-    t12 = t12 - t61
-    t61 = t53 * t2
-    t83 = t44 * t1
-    t61 = t61 + t83
-    t83 = x[9] * t61
-    t12 = t12 - t83
-    t83 = 0.0027500000000000003 * t12
-    t84 = 0.0027500000000000003 * t61
-    t85 = t51 * t84
-    t87 = t57 * t61
-    t85 = t85 - t87
-    t83 = t83 + t85
-    t65 = t65 * t2
-    t71 = t71 * t1
-    t65 = t65 + t71
-    t71 = 0.015 * t65
-    t71 = t83 + t71
-    t83 = t2 * t71
-    t81 = t81 + t83
-    t80 = t80 + t81
-    t77 = 0.3 * t77
-    t76 = 0.015 * t76
-    t76 = t77 - t76
-    t77 = 0.015 * t59
-    t81 = t51 * t77
-    t76 = t76 + t81
-    t81 = t1 * t76
-    t83 = t72 * t2
-    t81 = t81 - t83
-    t83 = t79 * t1
-    t65 = 0.3 * t65
-    t12 = 0.015 * t12
-    t12 = t65 + t12
-    t65 = 0.015 * t61
-    t85 = t51 * t65
-    t12 = t12 + t85
-    t85 = t2 * t12
-    t83 = t83 - t85
-    t81 = t81 - t83
-    t83 = p[1] * t81
-    t80 = t80 + t83
-    t83 = t0 * t80
-    t85 = t78 * t59
-    t84 = t54 * t84
-    t84 = t85 - t84
-    t67 = t74 * t67
-    t85 = t55 * t61
-    t67 = t67 - t85
-    t67 = t84 - t67
-    t84 = t11 * t67
-    t71 = t1 * t71
-    t62 = t62 * t2
-    t62 = t71 - t62
-    t46 = t46 * t1
-    t71 = t2 * t75
-    t46 = t46 + t71
-    t46 = t62 - t46
-    t62 = t72 * t1
-    t71 = t2 * t76
-    t62 = t62 + t71
-    t71 = t79 * t2
-    t12 = t1 * t12
-    t12 = t71 + t12
-    t12 = t62 - t12
-    t62 = p[1] * t12
-    t46 = t46 - t62
-    t62 = t8 * t46
-    t62 = t84 + t62
-    t62 = t3 * t62
-    t62 = t83 + t62
-    t71 = t8 * t81
-    t59 = t68 * t59
-    t72 = t54 * t77
-    t59 = t59 + t72
-    t61 = t73 * t61
-    t65 = t74 * t65
-    t61 = t61 + t65
-    t59 = t59 - t61
-    t61 = t11 * t59
-    t61 = t71 - t61
-    t61 = t0 * t61
-    t12 = t3 * t12
-    t12 = t61 - t12
-    t12 = t17 * t12
-    t12 = t62 + t12
-    t61 = t12 / t21
-    t62 = t8 * t67
-    t46 = t11 * t46
-    t46 = t62 - t46
-    t62 = t18 * t12
-    t65 = t26 * t12
-    t59 = t8 * t59
-    t71 = t11 * t81
-    t59 = t59 + t71
-    t59 = t65 - t59
-    t65 = t28 * t59
-    t62 = t62 + t65
-    t46 = t46 - t62
-    t62 = t46 / t9
-    t65 = t27 * t12
-    t71 = t31 * t59
-    t65 = t65 + t71
-    t71 = t33 * t46
-    t65 = t65 + t71
-    t12 = t19 * t12
-    t71 = t22 * t59
-    t12 = t12 + t71
-    t46 = t23 * t46
-    t12 = t12 - t46
-    t12 = t80 - t12
-    t46 = t30 * t12
-    t46 = t65 - t46
-    t46 = t67 - t46
-    t46 = t46 / t6
-    t65 = t33 * t46
-    t12 = t12 / t20
-    t67 = t30 * t46
-    t12 = t12 + t67
-    t67 = t23 * t12
-    t65 = t65 - t67
-    t62 = t62 - t65
-    t65 = t18 * t62
-    t59 = t59 / t29
-    t67 = t28 * t62
-    t71 = t22 * t12
-    t67 = t67 + t71
-    t71 = t31 * t46
-    t67 = t67 + t71
-    t59 = t59 - t67
-    t67 = t26 * t59
-    t65 = t65 - t67
-    t67 = t19 * t12
-    t65 = t65 + t67
-    t67 = t27 * t46
-    t65 = t65 + t67
-    t61 = t61 - t65
-    t61 = -t61
-    t59 = -t59
-    t62 = -t62
-    t12 = -t12
-    t46 = -t46
-    t65 = 0.08000000000000002 * x[6]
-    t67 = 0.003 * t3
-    t71 = x[7] * t67
-    t72 = t39 * t3
-    t71 = t71 - t72
-    t72 = x[7] * t3
-    t75 = 0.00424 * t72
-    t71 = t71 - t75
-    t75 = 0.024 * t42
-    t71 = t71 + t75
-    t75 = t11 * t3
-    t76 = t45 * t75
-    t77 = t8 * t3
-    t79 = 0.009000000000000001 * t77
-    t80 = t43 * t79
-    t76 = t76 + t80
-    t80 = t47 * t77
-    t81 = 0.002 * t75
-    t83 = t44 * t81
-    t80 = t80 + t83
-    t76 = t76 - t80
-    t80 = 0.009000000000000001 * t72
-    t76 = t76 - t80
-    t80 = x[6] + x[6]
-    t83 = t0 * t80
-    t84 = t8 * t83
-    t85 = t42 + t42
-    t87 = t11 * t85
-    t84 = t84 + t87
-    t87 = 0.05 * t84
-    t76 = t76 + t87
-    t87 = t55 * t75
-    t88 = t2 * t0
-    t90 = t1 * t77
-    t88 = t88 + t90
-    t90 = 0.0027500000000000003 * t88
-    t91 = t51 * t90
-    t87 = t87 + t91
-    t91 = t57 * t88
-    t93 = 0.001 * t75
-    t94 = t54 * t93
-    t91 = t91 + t94
-    t87 = t87 - t91
-    t91 = t1 * t72
-    t94 = x[7] * t0
-    t95 = t8 * t94
-    t96 = x[8] * t75
-    t95 = t95 - t96
-    t96 = t2 * t95
-    t91 = t91 + t96
-    t96 = x[9] * t88
-    t91 = t91 + t96
-    t96 = 0.0027500000000000003 * t91
-    t87 = t87 - t96
-    t96 = t64 * t75
-    t97 = p[1] * t0
-    t98 = t43 * t97
-    t96 = t96 + t98
-    t80 = t3 * t80
-    t98 = p[1] * t95
-    t98 = t80 + t98
-    t96 = t96 - t98
-    t98 = t2 * t96
-    t99 = p[1] * t72
-    t99 = t84 - t99
-    t100 = t70 * t75
-    t101 = p[1] * t77
-    t102 = t43 * t101
+    t47 = -t47
+    t72 = 0.08000000000000002 * x[6]
+    t73 = 0.003 * t3
+    t76 = x[7] * t73
+    t77 = t39 * t3
+    t76 = t76 - t77
+    t77 = x[7] * t3
+    t78 = 0.00424 * t77
+    t76 = t76 - t78
+    t78 = 0.024 * t43
+    t76 = t76 + t78
+    t78 = t11 * t3
+    t80 = t46 * t78
+    t81 = t8 * t3
+    t82 = 0.009000000000000001 * t81
+    t84 = t44 * t82
+    t80 = t80 + t84
+    t84 = t48 * t81
+    t86 = 0.002 * t78
+    t88 = t45 * t86
+    t84 = t84 + t88
+    t80 = t80 - t84
+    t84 = 0.009000000000000001 * t77
+    t80 = t80 - t84
+    t84 = x[6] + x[6]
+    t88 = t0 * t84
+    t89 = t8 * t88
+    t91 = t43 + t43
+    t93 = t11 * t91
+    t89 = t89 + t93
+    t93 = 0.05 * t89
+    t80 = t80 + t93
+    t93 = t56 * t78
+    t97 = t2 * t0
+    t98 = t1 * t81
+    t97 = t97 + t98
+    t98 = 0.0027500000000000003 * t97
+    t100 = t52 * t98
+    t93 = t93 + t100
+    t100 = t58 * t97
+    t101 = 0.001 * t78
+    t102 = t55 * t101
     t100 = t100 + t102
-    t99 = t99 + t100
-    t100 = t1 * t99
-    t98 = t98 + t100
-    t100 = 0.015 * t98
-    t87 = t87 + t100
-    t100 = t1 * t87
-    t102 = t1 * t95
-    t103 = t2 * t72
-    t102 = t102 - t103
-    t103 = t1 * t0
-    t104 = t2 * t77
+    t93 = t93 - t100
+    t100 = t1 * t77
+    t102 = x[7] * t0
+    t103 = t8 * t102
+    t104 = x[8] * t78
     t103 = t103 - t104
-    t104 = x[9] * t103
-    t102 = t102 + t104
-    t104 = 0.0027500000000000003 * t102
-    t105 = t57 * t103
-    t93 = t74 * t93
-    t93 = t105 + t93
-    t105 = t78 * t75
-    t106 = 0.0027500000000000003 * t103
-    t107 = t51 * t106
-    t105 = t105 + t107
-    t93 = t93 - t105
-    t93 = t104 + t93
-    t96 = t1 * t96
-    t99 = t2 * t99
-    t96 = t96 - t99
-    t99 = 0.015 * t96
-    t93 = t93 - t99
-    t99 = t2 * t93
-    t99 = t100 + t99
-    t76 = t76 + t99
-    t98 = 0.3 * t98
-    t91 = 0.015 * t91
-    t91 = t98 - t91
-    t98 = t68 * t75
-    t99 = 0.015 * t88
-    t100 = t51 * t99
-    t98 = t98 + t100
-    t91 = t91 + t98
-    t98 = t1 * t91
-    t96 = 0.3 * t96
-    t100 = 0.015 * t102
-    t96 = t96 - t100
-    t100 = t73 * t75
-    t102 = 0.015 * t103
-    t104 = t51 * t102
+    t104 = t2 * t103
     t100 = t100 + t104
-    t96 = t96 + t100
-    t100 = t2 * t96
-    t98 = t98 - t100
-    t100 = p[1] * t98
-    t76 = t76 + t100
-    t71 = t71 + t76
-    t71 = t0 * t71
-    t100 = 0.003 * t94
-    t39 = t39 * t0
-    t104 = 0.00424 * t0
-    t105 = x[7] * t104
-    t39 = t39 - t105
-    t39 = t100 + t39
-    t94 = t11 * t94
-    t100 = x[8] * t77
-    t94 = t94 + t100
-    t100 = 0.002 * t94
-    t105 = t86 * t77
-    t107 = 0.009000000000000001 * t0
-    t108 = t44 * t107
-    t105 = t105 + t108
-    t108 = t45 * t0
-    t79 = t53 * t79
-    t79 = t108 + t79
-    t79 = t105 - t79
-    t79 = t100 + t79
-    t94 = 0.001 * t94
-    t100 = t78 * t88
-    t105 = t54 * t106
-    t100 = t100 + t105
-    t105 = t55 * t103
-    t90 = t74 * t90
-    t90 = t105 + t90
-    t90 = t100 - t90
-    t90 = t94 + t90
-    t79 = t79 + t90
-    t94 = t11 * t79
-    t100 = 0.009000000000000001 * t95
-    t105 = t47 * t0
-    t81 = t53 * t81
-    t81 = t105 + t81
-    t105 = t86 * t75
-    t106 = t43 * t107
-    t105 = t105 + t106
-    t81 = t81 - t105
-    t81 = t100 + t81
-    t100 = 0.05 * t80
-    t81 = t81 + t100
-    t93 = t1 * t93
-    t87 = t2 * t87
-    t87 = t93 - t87
-    t81 = t81 + t87
-    t87 = t1 * t96
-    t91 = t2 * t91
-    t87 = t87 + t91
-    t91 = p[1] * t87
-    t81 = t81 - t91
-    t91 = t8 * t81
-    t91 = t94 + t91
-    t39 = t39 + t91
-    t39 = t3 * t39
-    t39 = t71 + t39
-    t39 = t65 + t39
-    t65 = 1.6 * x[6]
-    t71 = 0.6 * t83
-    t91 = t41 * t0
-    t93 = 0.012 * t0
-    t94 = t52 * t93
-    t91 = t91 + t94
-    t71 = t71 - t91
-    t83 = t11 * t83
-    t85 = t8 * t85
-    t83 = t83 - t85
-    t85 = 0.5 * t83
-    t91 = t89 * t77
-    t94 = 0.05 * t77
-    t96 = t44 * t94
-    t91 = t91 + t96
-    t96 = t92 * t0
-    t100 = 0.05 * t0
-    t105 = t53 * t100
-    t96 = t96 + t105
-    t91 = t91 + t96
-    t85 = t85 - t91
-    t77 = t70 * t77
-    t91 = t44 * t101
-    t77 = t77 + t91
-    t91 = t64 * t0
-    t96 = t53 * t97
-    t91 = t91 + t96
-    t77 = t77 + t91
-    t77 = t83 - t77
-    t77 = 0.3 * t77
-    t83 = t68 * t88
-    t88 = t54 * t99
-    t83 = t83 + t88
-    t88 = t73 * t103
-    t91 = t74 * t102
-    t88 = t88 + t91
-    t83 = t83 + t88
-    t77 = t77 - t83
-    t77 = t85 + t77
-    t83 = t11 * t77
-    t84 = 0.5 * t84
-    t85 = 0.05 * t72
-    t84 = t84 - t85
-    t85 = t89 * t75
-    t88 = t43 * t94
-    t85 = t85 + t88
-    t84 = t84 + t85
-    t84 = t84 + t98
-    t85 = t8 * t84
-    t83 = t83 + t85
-    t71 = t71 + t83
-    t71 = t0 * t71
-    t41 = t41 * t3
-    t83 = t36 * t93
-    t41 = t41 + t83
-    t83 = 0.6 * t80
-    t41 = t41 - t83
-    t75 = t92 * t75
-    t83 = t43 * t100
-    t75 = t75 + t83
-    t83 = 0.5 * t80
-    t85 = 0.05 * t95
-    t83 = t83 + t85
-    t75 = t75 - t83
-    t75 = t75 + t87
-    t41 = t41 + t75
-    t41 = t3 * t41
-    t41 = t71 - t41
-    t41 = t65 + t41
-    t41 = t17 * t41
-    t39 = t39 + t41
-    t41 = t39 / t21
-    t65 = t82 * t3
-    t71 = t36 * t104
-    t65 = t65 + t71
-    t71 = t37 * t0
-    t67 = t52 * t67
-    t67 = t71 + t67
-    t65 = t65 - t67
-    t67 = 0.012 * t80
-    t65 = t65 - t67
-    t67 = t8 * t79
-    t71 = t11 * t81
-    t67 = t67 - t71
-    t65 = t65 + t67
-    t67 = t18 * t39
-    t71 = 0.012 * t72
-    t72 = 1.2 * t42
-    t71 = t71 - t72
-    t69 = t69 * t3
-    t69 = t71 + t69
-    t71 = t8 * t77
-    t72 = t11 * t84
-    t71 = t71 - t72
-    t69 = t69 + t71
-    t42 = 1.6 * t42
-    t71 = 0.08000000000000002 * x[5]
-    t42 = t42 + t71
-    t42 = t69 - t42
-    t69 = t26 * t39
-    t42 = t42 + t69
-    t69 = t28 * t42
-    t67 = t67 + t69
-    t65 = t65 - t67
-    t67 = t65 / t9
-    t69 = t27 * t39
-    t72 = t31 * t42
-    t69 = t69 + t72
-    t72 = t33 * t65
-    t69 = t69 + t72
-    t39 = t19 * t39
-    t72 = t22 * t42
-    t39 = t39 + t72
-    t65 = t23 * t65
-    t39 = t39 - t65
-    t39 = t76 - t39
-    t65 = t30 * t39
-    t65 = t69 - t65
-    t65 = t90 - t65
-    t65 = t65 / t6
-    t69 = t33 * t65
-    t39 = t39 / t20
-    t72 = t30 * t65
-    t39 = t39 + t72
-    t72 = t23 * t39
-    t69 = t69 - t72
-    t67 = t67 - t69
-    t69 = t18 * t67
-    t42 = t42 / t29
-    t72 = t28 * t67
-    t75 = t22 * t39
-    t72 = t72 + t75
-    t75 = t31 * t65
-    t72 = t72 + t75
-    t42 = t42 - t72
-    t72 = t26 * t42
-    t69 = t69 - t72
-    t72 = t19 * t39
-    t69 = t69 + t72
-    t72 = t27 * t65
-    t69 = t69 + t72
-    t41 = t41 - t69
-    t41 = -t41
-    t42 = -t42
-    t67 = -t67
-    t39 = -t39
-    t65 = -t65
-    t69 = x[5] + x[5]
-    t72 = t0 * t69
-    t75 = t8 * t72
-    t76 = 0.05 * t75
-    t77 = t1 * t75
-    t69 = t3 * t69
-    t79 = t2 * t69
-    t77 = t77 - t79
-    t79 = 0.015 * t77
-    t80 = t1 * t79
-    t81 = t1 * t69
-    t82 = t2 * t75
-    t81 = t81 + t82
-    t82 = 0.015 * t81
-    t83 = t2 * t82
-    t80 = t80 + t83
+    t104 = x[9] * t97
+    t100 = t100 + t104
+    t104 = 0.0027500000000000003 * t100
+    t93 = t93 - t104
+    t104 = t65 * t78
+    t106 = p[1] * t0
+    t109 = t44 * t106
+    t104 = t104 + t109
+    t84 = t3 * t84
+    t109 = p[1] * t103
+    t109 = t84 + t109
+    t104 = t104 - t109
+    t109 = t2 * t104
+    t110 = p[1] * t77
+    t110 = t89 - t110
+    t111 = t71 * t78
+    t112 = p[1] * t81
+    t113 = t44 * t112
+    t111 = t111 + t113
+    t110 = t110 + t111
+    t111 = t1 * t110
+    t109 = t109 + t111
+    t111 = 0.015 * t109
+    t93 = t93 + t111
+    t111 = t1 * t93
+    t113 = t1 * t103
+    t114 = t2 * t77
+    t113 = t113 - t114
+    t114 = t1 * t0
+    t115 = t2 * t81
+    t114 = t114 - t115
+    t115 = x[9] * t114
+    t113 = t113 + t115
+    t115 = 0.0027500000000000003 * t113
+    t116 = t58 * t114
+    t101 = t75 * t101
+    t101 = t116 + t101
+    t116 = t79 * t78
+    t117 = 0.0027500000000000003 * t114
+    t119 = t52 * t117
+    t116 = t116 + t119
+    t101 = t101 - t116
+    t101 = t115 + t101
+    t104 = t1 * t104
+    t110 = t2 * t110
+    t104 = t104 - t110
+    t110 = 0.015 * t104
+    t101 = t101 - t110
+    t110 = t2 * t101
+    t110 = t111 + t110
+    t80 = t80 + t110
+    t109 = 0.3 * t109
+    t100 = 0.015 * t100
+    t100 = t109 - t100
+    t109 = t69 * t78
+    t110 = 0.015 * t97
+    t111 = t52 * t110
+    t109 = t109 + t111
+    t100 = t100 + t109
+    t109 = t1 * t100
+    t104 = 0.3 * t104
+    t111 = 0.015 * t113
+    t104 = t104 - t111
+    t111 = t74 * t78
+    t113 = 0.015 * t114
+    t115 = t52 * t113
+    t111 = t111 + t115
+    t104 = t104 + t111
+    t111 = t2 * t104
+    t109 = t109 - t111
+    t111 = p[1] * t109
+    t80 = t80 + t111
     t76 = t76 + t80
-    t77 = 0.3 * t77
-    t80 = t1 * t77
+    t76 = t0 * t76
+    t111 = 0.003 * t102
+    t39 = t39 * t0
+    t115 = 0.00424 * t0
+    t116 = x[7] * t115
+    t39 = t39 - t116
+    t39 = t111 + t39
+    t102 = t11 * t102
+    t111 = x[8] * t81
+    t102 = t102 + t111
+    t111 = 0.002 * t102
+    t116 = t90 * t81
+    t119 = 0.009000000000000001 * t0
+    t120 = t45 * t119
+    t116 = t116 + t120
+    t120 = t46 * t0
+    t82 = t54 * t82
+    t82 = t120 + t82
+    t82 = t116 - t82
+    t82 = t111 + t82
+    t102 = 0.001 * t102
+    t111 = t79 * t97
+    t116 = t55 * t117
+    t111 = t111 + t116
+    t116 = t56 * t114
+    t98 = t75 * t98
+    t98 = t116 + t98
+    t98 = t111 - t98
+    t98 = t102 + t98
+    t82 = t82 + t98
+    t102 = t11 * t82
+    t111 = 0.009000000000000001 * t103
+    t116 = t48 * t0
+    t86 = t54 * t86
+    t86 = t116 + t86
+    t116 = t90 * t78
+    t117 = t44 * t119
+    t116 = t116 + t117
+    t86 = t86 - t116
+    t86 = t111 + t86
+    t111 = 0.05 * t84
+    t86 = t86 + t111
+    t101 = t1 * t101
+    t93 = t2 * t93
+    t93 = t101 - t93
+    t86 = t86 + t93
+    t93 = t1 * t104
+    t100 = t2 * t100
+    t93 = t93 + t100
+    t100 = p[1] * t93
+    t86 = t86 - t100
+    t100 = t8 * t86
+    t100 = t102 + t100
+    t39 = t39 + t100
+    t39 = t3 * t39
+    t39 = t76 + t39
+    t39 = t72 + t39
+    t72 = 1.6 * x[6]
+    t76 = 0.6 * t88
+    t100 = t42 * t0
+    t101 = 0.012 * t0
+    t102 = t53 * t101
+    t100 = t100 + t102
+    t76 = t76 - t100
+    t88 = t11 * t88
+    t91 = t8 * t91
+    t88 = t88 - t91
+    t91 = 0.5 * t88
+    t100 = t95 * t81
+    t102 = 0.05 * t81
+    t104 = t45 * t102
+    t100 = t100 + t104
+    t104 = t99 * t0
+    t111 = 0.05 * t0
+    t116 = t54 * t111
+    t104 = t104 + t116
+    t100 = t100 + t104
+    t91 = t91 - t100
+    t81 = t71 * t81
+    t100 = t45 * t112
+    t81 = t81 + t100
+    t100 = t65 * t0
+    t104 = t54 * t106
+    t100 = t100 + t104
+    t81 = t81 + t100
+    t81 = t88 - t81
     t81 = 0.3 * t81
-    t83 = t2 * t81
-    t80 = t80 + t83
-    t83 = p[1] * t80
-    t76 = t76 + t83
-    t83 = t0 * t76
-    t84 = 0.05 * t69
-    t82 = t1 * t82
-    t79 = t2 * t79
-    t79 = t82 - t79
-    t79 = t84 + t79
-    t77 = t2 * t77
-    t81 = t1 * t81
-    t77 = t77 - t81
-    t81 = p[1] * t77
-    t79 = t79 - t81
-    t81 = t8 * t79
-    t81 = t3 * t81
-    t81 = t83 + t81
-    t71 = t71 + t81
-    t81 = 1.6 * x[5]
-    t82 = 0.6 * t72
-    t72 = t11 * t72
-    t83 = 0.5 * t72
-    t72 = 0.3 * t72
-    t72 = t83 + t72
-    t83 = t11 * t72
-    t75 = 0.5 * t75
-    t75 = t75 + t80
-    t80 = t8 * t75
-    t80 = t83 + t80
-    t80 = t82 + t80
-    t80 = t0 * t80
-    t82 = 0.5 * t69
-    t77 = t77 - t82
-    t82 = 0.6 * t69
-    t77 = t77 - t82
-    t77 = t3 * t77
-    t77 = t80 - t77
-    t77 = t81 + t77
-    t77 = t17 * t77
-    t71 = t71 + t77
-    t77 = t71 / t21
-    t80 = t19 * t71
-    t72 = t8 * t72
-    t75 = t11 * t75
-    t72 = t72 - t75
-    t75 = t26 * t71
-    t72 = t72 + t75
-    t75 = t22 * t72
-    t75 = t80 + t75
-    t69 = 0.012 * t69
-    t79 = t11 * t79
-    t69 = t69 + t79
-    t79 = t18 * t71
-    t80 = t28 * t72
-    t79 = t79 + t80
-    t69 = t69 + t79
-    t79 = t23 * t69
-    t75 = t75 + t79
-    t75 = t76 - t75
-    t76 = t75 / t20
-    t71 = t27 * t71
-    t79 = t31 * t72
-    t71 = t71 + t79
-    t79 = t33 * t69
-    t71 = t71 - t79
-    t75 = t30 * t75
-    t71 = t71 - t75
-    t71 = t71 / t6
-    t75 = t30 * t71
-    t75 = t76 - t75
-    t76 = t23 * t75
-    t79 = t33 * t71
-    t76 = t76 + t79
-    t69 = t69 / t9
-    t69 = t76 - t69
-    t76 = t18 * t69
-    t72 = t72 / t29
-    t79 = t28 * t69
-    t80 = t22 * t75
-    t79 = t79 + t80
-    t80 = t31 * t71
-    t79 = t79 - t80
-    t72 = t72 - t79
-    t79 = t26 * t72
-    t76 = t76 - t79
-    t79 = t19 * t75
-    t76 = t76 + t79
-    t79 = t27 * t71
-    t76 = t76 - t79
-    t76 = t77 - t76
+    t88 = t69 * t97
+    t97 = t55 * t110
+    t88 = t88 + t97
+    t97 = t74 * t114
+    t100 = t75 * t113
+    t97 = t97 + t100
+    t88 = t88 + t97
+    t81 = t81 - t88
+    t81 = t91 + t81
+    t88 = t11 * t81
+    t89 = 0.5 * t89
+    t91 = 0.05 * t77
+    t89 = t89 - t91
+    t91 = t95 * t78
+    t97 = t44 * t102
+    t91 = t91 + t97
+    t89 = t89 + t91
+    t89 = t89 + t109
+    t91 = t8 * t89
+    t88 = t88 + t91
+    t76 = t76 + t88
+    t76 = t0 * t76
+    t42 = t42 * t3
+    t88 = t36 * t101
+    t42 = t42 + t88
+    t88 = 0.6 * t84
+    t42 = t42 - t88
+    t78 = t99 * t78
+    t88 = t44 * t111
+    t78 = t78 + t88
+    t88 = 0.5 * t84
+    t91 = 0.05 * t103
+    t88 = t88 + t91
+    t78 = t78 - t88
+    t78 = t78 + t93
+    t42 = t42 + t78
+    t42 = t3 * t42
+    t42 = t76 - t42
+    t42 = t72 + t42
+    t42 = t17 * t42
+    t39 = t39 + t42
+    t42 = t39 / t21
+    t72 = t85 * t3
+    t76 = t36 * t115
+    t72 = t72 + t76
+    t76 = t37 * t0
+    t53 = t53 * t73
+    t53 = t76 + t53
+    t53 = t72 - t53
+    t72 = 0.012 * t84
+    t53 = t53 - t72
+    t72 = t8 * t82
+    t73 = t11 * t86
+    t72 = t72 - t73
+    t53 = t53 + t72
+    t72 = t18 * t39
+    t73 = 0.012 * t77
+    t76 = 1.2 * t43
+    t73 = t73 - t76
+    t70 = t70 * t3
+    t70 = t73 + t70
+    t73 = t8 * t81
+    t76 = t11 * t89
+    t73 = t73 - t76
+    t70 = t70 + t73
+    t43 = 1.6 * t43
+    t73 = 0.08000000000000002 * x[5]
+    t43 = t43 + t73
+    t43 = t70 - t43
+    t70 = t27 * t39
+    t43 = t43 + t70
+    t70 = t28 * t43
+    t70 = t72 + t70
+    t53 = t53 - t70
+    t70 = t53 / t9
+    t72 = t26 * t39
+    t76 = t31 * t43
+    t72 = t72 + t76
+    t76 = t33 * t53
+    t72 = t72 + t76
+    t39 = t19 * t39
+    t76 = t22 * t43
+    t39 = t39 + t76
+    t53 = t23 * t53
+    t39 = t39 - t53
+    t39 = t80 - t39
+    t53 = t30 * t39
+    t53 = t72 - t53
+    t53 = t98 - t53
+    t53 = t53 / t6
+    t72 = t33 * t53
+    t39 = t39 / t20
+    t76 = t30 * t53
+    t39 = t39 + t76
+    t76 = t23 * t39
+    t72 = t72 - t76
+    t70 = t70 - t72
+    t72 = t18 * t70
+    t43 = t43 / t29
+    t76 = t28 * t70
+    t77 = t22 * t39
+    t76 = t76 + t77
+    t77 = t31 * t53
+    t76 = t76 + t77
+    t43 = t43 - t76
+    t76 = t27 * t43
+    t72 = t72 - t76
+    t76 = t19 * t39
+    t72 = t72 + t76
+    t76 = t26 * t53
+    t72 = t72 + t76
+    t42 = t42 - t72
+    t42 = -t42
+    t43 = -t43
+    t70 = -t70
+    t39 = -t39
+    t53 = -t53
+    t72 = x[5] + x[5]
+    t76 = t0 * t72
+    t77 = t8 * t76
+    t78 = 0.05 * t77
+    t80 = t1 * t77
+    t72 = t3 * t72
+    t81 = t2 * t72
+    t80 = t80 - t81
+    t81 = 0.015 * t80
+    t82 = t1 * t81
+    t84 = t1 * t72
+    t85 = t2 * t77
+    t84 = t84 + t85
+    t85 = 0.015 * t84
+    t86 = t2 * t85
+    t82 = t82 + t86
+    t78 = t78 + t82
+    t80 = 0.3 * t80
+    t82 = t1 * t80
+    t84 = 0.3 * t84
+    t86 = t2 * t84
+    t82 = t82 + t86
+    t86 = p[1] * t82
+    t78 = t78 + t86
+    t86 = t0 * t78
+    t88 = 0.05 * t72
+    t85 = t1 * t85
+    t81 = t2 * t81
+    t81 = t85 - t81
+    t81 = t88 + t81
+    t80 = t2 * t80
+    t84 = t1 * t84
+    t80 = t80 - t84
+    t84 = p[1] * t80
+    t81 = t81 - t84
+    t84 = t8 * t81
+    t84 = t3 * t84
+    t84 = t86 + t84
+    t73 = t73 + t84
+    t84 = 1.6 * x[5]
+    t85 = 0.6 * t76
+    t76 = t11 * t76
+    t86 = 0.5 * t76
+    t76 = 0.3 * t76
+    t76 = t86 + t76
+    t86 = t11 * t76
+    t77 = 0.5 * t77
+    t77 = t77 + t82
+    t82 = t8 * t77
+    t82 = t86 + t82
+    t82 = t85 + t82
+    t82 = t0 * t82
+    t85 = 0.5 * t72
+    t80 = t80 - t85
+    t85 = 0.6 * t72
+    t80 = t80 - t85
+    t80 = t3 * t80
+    t80 = t82 - t80
+    t80 = t84 + t80
+    t80 = t17 * t80
+    t73 = t73 + t80
+    t80 = t73 / t21
+    t82 = t19 * t73
+    t76 = t8 * t76
+    t77 = t11 * t77
+    t76 = t76 - t77
+    t77 = t27 * t73
+    t76 = t76 + t77
+    t77 = t22 * t76
+    t77 = t82 + t77
+    t72 = 0.012 * t72
+    t81 = t11 * t81
+    t72 = t72 + t81
+    t81 = t18 * t73
+    t82 = t28 * t76
+    t81 = t81 + t82
+    t72 = t72 + t81
+    t81 = t23 * t72
+    t77 = t77 + t81
+    t77 = t78 - t77
+    t78 = t77 / t20
+    t73 = t26 * t73
+    t81 = t31 * t76
+    t73 = t73 + t81
+    t81 = t33 * t72
+    t73 = t73 - t81
+    t77 = t30 * t77
+    t73 = t73 - t77
+    t73 = t73 / t6
+    t77 = t30 * t73
+    t77 = t78 - t77
+    t78 = t23 * t77
+    t81 = t33 * t73
+    t78 = t78 + t81
+    t72 = t72 / t9
+    t72 = t78 - t72
+    t78 = t18 * t72
+    t76 = t76 / t29
+    t81 = t28 * t72
+    t82 = t22 * t77
+    t81 = t81 + t82
+    t82 = t31 * t73
+    t81 = t81 - t82
+    t76 = t76 - t81
+    t81 = t27 * t76
+    t78 = t78 - t81
+    t81 = t19 * t77
+    t78 = t78 + t81
+    t81 = t26 * t73
+    t78 = t78 - t81
+    t78 = t80 - t78
+    t78 = -t78
     t76 = -t76
     t72 = -t72
-    t69 = -t69
-    t75 = -t75
-    t77 = 0.00424 * t36
-    t37 = t37 - t77
-    t37 = t37 - t77
-    t45 = t45 * t8
-    t77 = 0.009000000000000001 * t11
-    t79 = t43 * t77
-    t45 = t45 - t79
-    t79 = 0.002 * t8
-    t80 = t44 * t79
-    t81 = t47 * t11
-    t80 = t80 - t81
-    t45 = t45 - t80
-    t80 = 0.009000000000000001 * t36
-    t45 = t45 - t80
-    t80 = t1 * t11
-    t81 = x[9] * t80
-    t82 = t1 * t36
-    t83 = t8 * t52
-    t84 = x[8] * t8
-    t83 = t83 - t84
-    t84 = t2 * t83
-    t82 = t82 + t84
-    t81 = t81 - t82
-    t82 = 0.0027500000000000003 * t81
-    t84 = t55 * t8
-    t85 = 0.0027500000000000003 * t80
-    t87 = t51 * t85
-    t84 = t84 - t87
-    t87 = t54 * t32
-    t88 = t57 * t80
-    t87 = t87 - t88
-    t84 = t84 - t87
-    t82 = t82 + t84
-    t84 = t64 * t8
-    t87 = p[1] * t83
-    t84 = t84 - t87
-    t87 = t2 * t84
-    t88 = t70 * t8
-    t90 = p[1] * t11
-    t91 = t43 * t90
+    t77 = -t77
+    t37 = t37 - t92
+    t37 = t37 - t92
+    t46 = t46 * t8
+    t80 = 0.009000000000000001 * t11
+    t81 = t44 * t80
+    t46 = t46 - t81
+    t81 = 0.002 * t8
+    t82 = t45 * t81
+    t84 = t48 * t11
+    t82 = t82 - t84
+    t46 = t46 - t82
+    t46 = t46 - t96
+    t82 = t1 * t11
+    t84 = x[9] * t82
+    t85 = x[8] * t8
+    t85 = t94 - t85
+    t86 = t2 * t85
+    t86 = t134 + t86
+    t84 = t84 - t86
+    t86 = 0.0027500000000000003 * t84
+    t88 = t56 * t8
+    t89 = 0.0027500000000000003 * t82
+    t91 = t52 * t89
     t88 = t88 - t91
-    t91 = p[1] * t36
+    t91 = t55 * t32
+    t92 = t58 * t82
+    t91 = t91 - t92
     t88 = t88 - t91
-    t91 = t1 * t88
-    t87 = t87 + t91
-    t91 = 0.015 * t87
-    t82 = t82 + t91
-    t91 = t1 * t82
-    t93 = t1 * t83
-    t94 = t2 * t36
-    t93 = t93 - t94
-    t94 = t2 * t11
-    t95 = x[9] * t94
-    t93 = t93 + t95
-    t95 = 0.0027500000000000003 * t93
-    t96 = t57 * t94
-    t32 = t74 * t32
-    t32 = t96 + t32
-    t96 = t78 * t8
-    t97 = 0.0027500000000000003 * t94
-    t98 = t51 * t97
+    t86 = t86 + t88
+    t88 = t65 * t8
+    t91 = p[1] * t85
+    t88 = t88 - t91
+    t91 = t2 * t88
+    t92 = t71 * t8
+    t93 = p[1] * t11
+    t94 = t44 * t93
+    t92 = t92 - t94
+    t92 = t92 - t128
+    t94 = t1 * t92
+    t91 = t91 + t94
+    t94 = 0.015 * t91
+    t86 = t86 + t94
+    t94 = t1 * t86
+    t96 = t1 * t85
+    t96 = t96 - t122
+    t97 = t2 * t11
+    t98 = x[9] * t97
     t96 = t96 + t98
-    t32 = t32 - t96
-    t32 = t95 + t32
-    t84 = t1 * t84
-    t88 = t2 * t88
-    t84 = t84 - t88
-    t88 = 0.015 * t84
-    t32 = t32 - t88
-    t88 = t2 * t32
-    t88 = t91 + t88
-    t45 = t45 + t88
-    t87 = 0.3 * t87
-    t81 = 0.015 * t81
-    t81 = t87 + t81
-    t87 = t68 * t8
-    t88 = 0.015 * t80
-    t91 = t51 * t88
-    t87 = t87 - t91
-    t81 = t81 + t87
-    t87 = t1 * t81
-    t84 = 0.3 * t84
-    t91 = 0.015 * t93
-    t84 = t84 - t91
-    t91 = t73 * t8
-    t93 = 0.015 * t94
-    t95 = t51 * t93
-    t91 = t91 + t95
+    t98 = 0.0027500000000000003 * t96
+    t100 = t58 * t97
+    t32 = t75 * t32
+    t32 = t100 + t32
+    t100 = t79 * t8
+    t101 = 0.0027500000000000003 * t97
+    t102 = t52 * t101
+    t100 = t100 + t102
+    t32 = t32 - t100
+    t32 = t98 + t32
+    t88 = t1 * t88
+    t92 = t2 * t92
+    t88 = t88 - t92
+    t92 = 0.015 * t88
+    t32 = t32 - t92
+    t92 = t2 * t32
+    t92 = t94 + t92
+    t46 = t46 + t92
+    t91 = 0.3 * t91
+    t84 = 0.015 * t84
+    t84 = t91 + t84
+    t91 = t69 * t8
+    t92 = 0.015 * t82
+    t94 = t52 * t92
+    t91 = t91 - t94
     t84 = t84 + t91
-    t91 = t2 * t84
-    t87 = t87 - t91
-    t91 = p[1] * t87
-    t45 = t45 + t91
-    t37 = t37 + t45
+    t91 = t1 * t84
+    t88 = 0.3 * t88
+    t94 = 0.015 * t96
+    t88 = t88 - t94
+    t94 = t74 * t8
+    t96 = 0.015 * t97
+    t98 = t52 * t96
+    t94 = t94 + t98
+    t88 = t88 + t94
+    t94 = t2 * t88
+    t91 = t91 - t94
+    t94 = p[1] * t91
+    t46 = t46 + t94
+    t37 = t37 + t46
     t37 = t0 * t37
-    t91 = 0.003 * t52
-    t52 = t11 * t52
-    t95 = x[8] * t11
-    t52 = t52 - t95
-    t95 = 0.002 * t52
-    t77 = t53 * t77
-    t96 = t86 * t11
-    t77 = t77 - t96
-    t77 = t95 + t77
-    t52 = 0.001 * t52
-    t95 = t54 * t97
-    t96 = t78 * t80
-    t95 = t95 - t96
-    t96 = t55 * t94
-    t85 = t74 * t85
-    t85 = t96 - t85
-    t85 = t95 - t85
-    t52 = t52 + t85
-    t77 = t77 + t52
-    t85 = t11 * t77
-    t95 = 0.009000000000000001 * t83
-    t79 = t53 * t79
-    t86 = t86 * t8
-    t79 = t79 - t86
-    t79 = t95 + t79
+    t94 = x[8] * t11
+    t87 = t87 - t94
+    t94 = 0.002 * t87
+    t80 = t54 * t80
+    t98 = t90 * t11
+    t80 = t80 - t98
+    t80 = t94 + t80
+    t87 = 0.001 * t87
+    t94 = t55 * t101
+    t98 = t79 * t82
+    t94 = t94 - t98
+    t98 = t56 * t97
+    t89 = t75 * t89
+    t89 = t98 - t89
+    t89 = t94 - t89
+    t87 = t87 + t89
+    t80 = t80 + t87
+    t89 = t11 * t80
+    t94 = 0.009000000000000001 * t85
+    t81 = t54 * t81
+    t90 = t90 * t8
+    t81 = t81 - t90
+    t81 = t94 + t81
     t32 = t1 * t32
-    t82 = t2 * t82
-    t32 = t32 - t82
-    t32 = t79 + t32
-    t79 = t1 * t84
-    t81 = t2 * t81
-    t79 = t79 + t81
-    t81 = p[1] * t79
-    t32 = t32 - t81
-    t81 = t8 * t32
-    t81 = t85 + t81
-    t81 = t91 + t81
-    t81 = t3 * t81
-    t37 = t37 + t81
-    t81 = t89 * t11
-    t82 = 0.05 * t11
-    t84 = t44 * t82
+    t86 = t2 * t86
+    t32 = t32 - t86
+    t32 = t81 + t32
+    t81 = t1 * t88
+    t84 = t2 * t84
     t81 = t81 + t84
-    t70 = t70 * t11
-    t84 = t44 * t90
-    t70 = t70 + t84
-    t70 = 0.3 * t70
-    t84 = t73 * t94
-    t85 = t74 * t93
-    t84 = t84 + t85
-    t80 = t68 * t80
-    t85 = t54 * t88
-    t80 = t80 + t85
-    t80 = t84 - t80
-    t70 = t70 - t80
-    t70 = t81 + t70
-    t80 = t11 * t70
-    t81 = t89 * t8
-    t82 = t43 * t82
-    t81 = t81 - t82
-    t82 = 0.05 * t36
-    t81 = t81 - t82
-    t81 = t81 + t87
-    t82 = t8 * t81
-    t80 = t80 + t82
+    t84 = p[1] * t81
+    t32 = t32 - t84
+    t84 = t8 * t32
+    t84 = t89 + t84
+    t67 = t67 + t84
+    t67 = t3 * t67
+    t37 = t37 + t67
+    t67 = t95 * t11
+    t84 = 0.05 * t11
+    t86 = t45 * t84
+    t67 = t67 + t86
+    t71 = t71 * t11
+    t45 = t45 * t93
+    t45 = t71 + t45
+    t45 = 0.3 * t45
+    t71 = t74 * t97
+    t86 = t75 * t96
+    t71 = t71 + t86
+    t82 = t69 * t82
+    t86 = t55 * t92
+    t82 = t82 + t86
+    t71 = t71 - t82
+    t45 = t45 - t71
+    t45 = t67 + t45
+    t67 = t11 * t45
+    t71 = t95 * t8
+    t82 = t44 * t84
+    t71 = t71 - t82
+    t71 = t71 - t118
+    t71 = t71 + t91
+    t82 = t8 * t71
+    t67 = t67 + t82
     t82 = 0.024 * x[7]
-    t80 = t80 - t82
-    t80 = t0 * t80
-    t82 = t92 * t8
-    t83 = 0.05 * t83
-    t82 = t82 - t83
-    t79 = t82 + t79
-    t79 = t3 * t79
-    t79 = t80 - t79
-    t79 = t17 * t79
-    t37 = t37 + t79
-    t79 = t37 / t21
-    t77 = t8 * t77
+    t67 = t67 - t82
+    t67 = t0 * t67
+    t82 = t99 * t8
+    t84 = 0.05 * t85
+    t82 = t82 - t84
+    t81 = t82 + t81
+    t81 = t3 * t81
+    t67 = t67 - t81
+    t67 = t17 * t67
+    t37 = t37 + t67
+    t67 = t37 / t21
+    t80 = t8 * t80
     t32 = t11 * t32
-    t32 = t77 - t32
-    t77 = t18 * t37
+    t32 = t80 - t32
+    t80 = t18 * t37
     t36 = 0.024 * t36
-    t70 = t8 * t70
-    t80 = t11 * t81
-    t70 = t70 - t80
-    t36 = t36 + t70
-    t70 = t26 * t37
-    t36 = t36 + t70
-    t70 = t28 * t36
-    t70 = t77 + t70
-    t32 = t32 - t70
-    t70 = t32 / t9
-    t77 = t27 * t37
+    t45 = t8 * t45
+    t71 = t11 * t71
+    t45 = t45 - t71
+    t36 = t36 + t45
+    t45 = t27 * t37
+    t36 = t36 + t45
+    t45 = t28 * t36
+    t45 = t80 + t45
+    t32 = t32 - t45
+    t45 = t32 / t9
+    t71 = t26 * t37
     t80 = t31 * t36
-    t77 = t77 + t80
+    t71 = t71 + t80
     t80 = t33 * t32
-    t77 = t77 + t80
+    t71 = t71 + t80
     t37 = t19 * t37
     t80 = t22 * t36
     t37 = t37 + t80
     t32 = t23 * t32
     t32 = t37 - t32
-    t32 = t45 - t32
+    t32 = t46 - t32
     t37 = t30 * t32
-    t37 = t77 - t37
-    t37 = t52 - t37
+    t37 = t71 - t37
+    t37 = t87 - t37
     t37 = t37 / t6
-    t45 = t33 * t37
+    t46 = t33 * t37
     t32 = t32 / t20
-    t52 = t30 * t37
-    t32 = t32 + t52
-    t52 = t23 * t32
-    t45 = t45 - t52
-    t45 = t70 - t45
-    t52 = t18 * t45
+    t71 = t30 * t37
+    t32 = t32 + t71
+    t71 = t23 * t32
+    t46 = t46 - t71
+    t45 = t45 - t46
+    t46 = t18 * t45
     t36 = t36 / t29
-    t70 = t28 * t45
-    t77 = t22 * t32
-    t70 = t70 + t77
-    t77 = t31 * t37
-    t70 = t70 + t77
-    t36 = t36 - t70
-    t70 = t26 * t36
-    t52 = t52 - t70
-    t70 = t19 * t32
-    t52 = t52 + t70
-    t70 = t27 * t37
-    t52 = t52 + t70
-    t52 = t79 - t52
-    t52 = -t52
+    t71 = t28 * t45
+    t80 = t22 * t32
+    t71 = t71 + t80
+    t80 = t31 * t37
+    t71 = t71 + t80
+    t36 = t36 - t71
+    t71 = t27 * t36
+    t46 = t46 - t71
+    t71 = t19 * t32
+    t46 = t46 + t71
+    t71 = t26 * t37
+    t46 = t46 + t71
+    t46 = t67 - t46
+    t46 = -t46
     t36 = -t36
     t45 = -t45
     t32 = -t32
     t37 = -t37
-    t70 = t2 * t43
-    t77 = x[9] * t2
-    t70 = t70 - t77
-    t77 = 0.0027500000000000003 * t70
-    t79 = t51 * t16
-    t80 = t57 * t2
-    t79 = t79 - t80
-    t77 = t77 + t79
-    t79 = t43 * p[1]
-    t79 = t79 + t79
-    t80 = t2 * t79
-    t81 = 0.015 * t80
-    t77 = t77 + t81
-    t81 = t1 * t77
-    t82 = x[9] * t1
-    t83 = t1 * t43
-    t82 = t82 - t83
-    t83 = 0.0027500000000000003 * t82
-    t57 = t57 * t1
-    t84 = t51 * t7
-    t57 = t57 - t84
-    t57 = t83 + t57
-    t79 = t1 * t79
-    t83 = 0.015 * t79
-    t57 = t57 - t83
-    t83 = t2 * t57
-    t81 = t81 + t83
+    t67 = x[9] * t2
+    t67 = t108 - t67
+    t71 = 0.0027500000000000003 * t67
+    t80 = t52 * t16
+    t81 = t58 * t2
+    t80 = t80 - t81
+    t71 = t71 + t80
+    t80 = t107 + t107
+    t81 = t2 * t80
+    t82 = 0.015 * t81
+    t71 = t71 + t82
+    t82 = t1 * t71
+    t84 = x[9] * t1
+    t83 = t84 - t83
+    t84 = 0.0027500000000000003 * t83
+    t58 = t58 * t1
+    t85 = t52 * t7
+    t58 = t58 - t85
+    t58 = t84 + t58
+    t80 = t1 * t80
+    t84 = 0.015 * t80
+    t58 = t58 - t84
+    t84 = t2 * t58
+    t82 = t82 + t84
+    t81 = 0.3 * t81
+    t67 = 0.015 * t67
+    t67 = t81 + t67
+    t81 = 0.015 * t2
+    t84 = t52 * t81
+    t67 = t67 + t84
+    t84 = t1 * t67
     t80 = 0.3 * t80
-    t70 = 0.015 * t70
-    t70 = t80 + t70
-    t80 = 0.015 * t2
-    t83 = t51 * t80
-    t70 = t70 + t83
-    t83 = t1 * t70
-    t79 = 0.3 * t79
-    t82 = 0.015 * t82
-    t79 = t79 - t82
-    t82 = 0.015 * t1
-    t51 = t51 * t82
-    t51 = t79 + t51
-    t79 = t2 * t51
-    t79 = t83 - t79
-    t83 = p[1] * t79
-    t81 = t81 + t83
-    t83 = t0 * t81
-    t84 = 0.002 * t44
-    t44 = 0.001 * t44
-    t78 = t78 * t2
-    t7 = t54 * t7
-    t7 = t78 + t7
-    t78 = t55 * t1
-    t16 = t74 * t16
-    t16 = t78 + t16
+    t83 = 0.015 * t83
+    t80 = t80 - t83
+    t83 = 0.015 * t1
+    t52 = t52 * t83
+    t52 = t80 + t52
+    t80 = t2 * t52
+    t80 = t84 - t80
+    t84 = p[1] * t80
+    t82 = t82 + t84
+    t84 = t0 * t82
+    t79 = t79 * t2
+    t7 = t55 * t7
+    t7 = t79 + t7
+    t79 = t56 * t1
+    t16 = t75 * t16
+    t16 = t79 + t16
     t7 = t7 - t16
-    t7 = t44 + t7
-    t16 = t84 + t7
-    t44 = t11 * t16
-    t78 = 0.009000000000000001 * t43
-    t47 = t47 - t78
-    t47 = t47 - t78
-    t57 = t1 * t57
-    t77 = t2 * t77
-    t57 = t57 - t77
-    t47 = t47 + t57
-    t51 = t1 * t51
-    t57 = t2 * t70
-    t51 = t51 + t57
-    t57 = p[1] * t51
-    t47 = t47 - t57
-    t57 = t8 * t47
-    t44 = t44 + t57
+    t7 = t105 + t7
+    t16 = t68 + t7
+    t68 = t11 * t16
+    t48 = t48 - t60
+    t48 = t48 - t60
+    t58 = t1 * t58
+    t60 = t2 * t71
+    t58 = t58 - t60
+    t48 = t48 + t58
+    t52 = t1 * t52
+    t58 = t2 * t67
+    t52 = t52 + t58
+    t58 = p[1] * t52
+    t48 = t48 - t58
+    t58 = t8 * t48
+    t58 = t68 + t58
+    t58 = t3 * t58
+    t58 = t84 + t58
+    t60 = t8 * t80
+    t54 = 0.1 * t54
+    t65 = 0.6 * t65
+    t67 = t69 * t2
+    t68 = t55 * t81
+    t67 = t67 + t68
+    t68 = t74 * t1
+    t69 = t75 * t83
+    t68 = t68 + t69
+    t67 = t67 + t68
+    t65 = t65 + t67
+    t54 = t54 + t65
+    t65 = t11 * t54
+    t60 = t60 - t65
+    t60 = t0 * t60
+    t44 = 0.1 * t44
+    t44 = t44 + t52
     t44 = t3 * t44
-    t44 = t83 + t44
-    t57 = t8 * t79
-    t53 = 0.1 * t53
-    t64 = 0.6 * t64
-    t68 = t68 * t2
-    t70 = t54 * t80
-    t68 = t68 + t70
-    t70 = t73 * t1
-    t73 = t74 * t82
-    t70 = t70 + t73
-    t68 = t68 + t70
-    t64 = t64 + t68
-    t53 = t53 + t64
-    t64 = t11 * t53
-    t57 = t57 - t64
-    t57 = t0 * t57
-    t43 = 0.1 * t43
-    t43 = t43 + t51
-    t43 = t3 * t43
-    t43 = t57 - t43
-    t17 = t17 * t43
-    t17 = t44 + t17
-    t43 = t17 / t21
+    t44 = t60 - t44
+    t17 = t17 * t44
+    t17 = t58 + t17
+    t44 = t17 / t21
     t16 = t8 * t16
-    t44 = t11 * t47
-    t16 = t16 - t44
-    t44 = t18 * t17
-    t47 = t26 * t17
-    t51 = t8 * t53
-    t53 = t11 * t79
-    t51 = t51 + t53
-    t47 = t47 - t51
-    t51 = t28 * t47
-    t44 = t44 + t51
-    t16 = t16 - t44
-    t44 = t16 / t9
-    t51 = t27 * t17
-    t53 = t31 * t47
-    t51 = t51 + t53
-    t53 = t33 * t16
-    t51 = t51 + t53
+    t48 = t11 * t48
+    t16 = t16 - t48
+    t48 = t18 * t17
+    t52 = t27 * t17
+    t54 = t8 * t54
+    t58 = t11 * t80
+    t54 = t54 + t58
+    t52 = t52 - t54
+    t54 = t28 * t52
+    t48 = t48 + t54
+    t16 = t16 - t48
+    t48 = t16 / t9
+    t54 = t26 * t17
+    t58 = t31 * t52
+    t54 = t54 + t58
+    t58 = t33 * t16
+    t54 = t54 + t58
     t17 = t19 * t17
-    t53 = t22 * t47
-    t17 = t17 + t53
+    t58 = t22 * t52
+    t17 = t17 + t58
     t16 = t23 * t16
     t16 = t17 - t16
-    t16 = t81 - t16
+    t16 = t82 - t16
     t17 = t30 * t16
-    t17 = t51 - t17
+    t17 = t54 - t17
     t7 = t7 - t17
     t7 = t7 / t6
     t17 = t33 * t7
     t16 = t16 / t20
-    t51 = t30 * t7
-    t16 = t16 + t51
-    t51 = t23 * t16
-    t17 = t17 - t51
-    t17 = t44 - t17
-    t44 = t18 * t17
-    t47 = t47 / t29
-    t51 = t28 * t17
-    t53 = t22 * t16
-    t51 = t51 + t53
-    t53 = t31 * t7
-    t51 = t51 + t53
-    t47 = t47 - t51
-    t51 = t26 * t47
-    t44 = t44 - t51
-    t51 = t19 * t16
-    t44 = t44 + t51
-    t51 = t27 * t7
-    t44 = t44 + t51
-    t43 = t43 - t44
-    t43 = -t43
-    t44 = -t47
+    t54 = t30 * t7
+    t16 = t16 + t54
+    t54 = t23 * t16
+    t17 = t17 - t54
+    t17 = t48 - t17
+    t48 = t18 * t17
+    t52 = t52 / t29
+    t54 = t28 * t17
+    t58 = t22 * t16
+    t54 = t54 + t58
+    t58 = t31 * t7
+    t54 = t54 + t58
+    t52 = t52 - t54
+    t54 = t27 * t52
+    t48 = t48 - t54
+    t54 = t19 * t16
+    t48 = t48 + t54
+    t54 = t26 * t7
+    t48 = t48 + t54
+    t44 = t44 - t48
+    t44 = -t44
+    t48 = -t52
     t17 = -t17
     t16 = -t16
     t7 = -t7
-    t47 = 0.001 * t54
-    t47 = t55 - t47
-    t47 = t47 - t55
-    t51 = t1 * t47
-    t53 = 0.001 * t74
-    t54 = t2 * t53
-    t51 = t51 + t54
-    t0 = t0 * t51
-    t1 = t1 * t53
-    t2 = t2 * t47
+    t52 = 0.001 * t55
+    t52 = t56 - t52
+    t52 = t52 - t56
+    t54 = t1 * t52
+    t55 = 0.001 * t75
+    t56 = t2 * t55
+    t54 = t54 + t56
+    t0 = t0 * t54
+    t1 = t1 * t55
+    t2 = t2 * t52
     t1 = t1 - t2
     t2 = t8 * t1
     t2 = t3 * t2
     t0 = t0 + t2
     t2 = t0 / t21
     t3 = t19 * t0
-    t8 = t26 * t0
+    t8 = t27 * t0
     t21 = t22 * t8
     t3 = t3 + t21
     t1 = t11 * t1
@@ -11942,9 +11704,9 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t1 = t1 + t11
     t11 = t23 * t1
     t3 = t3 + t11
-    t3 = t51 - t3
+    t3 = t54 - t3
     t11 = t3 / t20
-    t0 = t27 * t0
+    t0 = t26 * t0
     t20 = t31 * t8
     t0 = t0 + t20
     t20 = t33 * t1
@@ -11967,11 +11729,11 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     t11 = t31 * t0
     t9 = t9 - t11
     t8 = t8 - t9
-    t9 = t26 * t8
+    t9 = t27 * t8
     t6 = t6 - t9
     t9 = t19 * t3
     t6 = t6 + t9
-    t9 = t27 * t0
+    t9 = t26 * t0
     t6 = t6 - t9
     t2 = t2 - t6
     t2 = -t2
@@ -11983,11 +11745,11 @@ def ode_jac_x(x, u, p=DEFAULT_P):
           0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0,
           0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0,
           0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 1.0,
-          t24, t60, t40, t50, t61, t41, t76, t52, t43, t2,
-          t10, t58, t56, t5, t59, t42, t72, t36, t44, t6,
-          t14, t66, t38, t49, t62, t67, t69, t45, t17, t1,
-          t15, t63, t13, t35, t12, t39, t75, t32, t16, t3,
-          t4, t25, t34, t48, t46, t65, t71, t37, t7, t0)
+          t24, t34, t12, t49, t66, t42, t78, t46, t44, t2,
+          t10, t59, t13, t62, t63, t43, t76, t36, t48, t6,
+          t14, t64, t41, t51, t57, t70, t72, t45, t17, t1,
+          t15, t61, t5, t35, t38, t39, t77, t32, t16, t3,
+          t4, t25, t40, t50, t47, t53, t73, t37, t7, t0)
     return np.array(_A).reshape(10, 10)
 
 
@@ -12018,7 +11780,8 @@ def _ode_jac_x_chunk(x, t, s, y):
      t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
      t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80, t81,
      t82, t83, t84, t85, t86, t87, t88, t89, t90, t91, t92, t93, t94, t95, t96, t97, t98, t99, t100, t101,
-     t102, t103, t104, t105, t106, t107, t108, t109, t110, t111, t112, t113, t114, t115) = t
+     t102, t103, t104, t105, t106, t107, t108, t109, t110, t111, t112, t113, t114, t115, t116, t117, t118,
+     t119, t120, t121, t122, t123, t124, t125, t126, t127, t128, t129) = t
     s0, s1, s2 = s
     (A_50, A_51, A_52, A_53, A_54, A_55, A_56, A_57, A_58, A_59, A_60, A_61, A_62, A_63, A_64, A_65, A_66,
      A_67, A_68, A_69, A_70, A_71, A_72, A_73, A_74, A_75, A_76, A_77, A_78, A_79, A_80, A_81, A_82, A_83,
@@ -12109,77 +11872,75 @@ def _ode_jac_x_chunk(x, t, s, y):
     multiply(t1, t4, t9)
     multiply(k10, t2, t10)
     multiply(t2, t10, t14)
-    add(t9, t14, t16)
+    add(t9, t14, t9)
     multiply(k11, p_1, s0)
-    subtract(t16, s0, t16)
+    subtract(t9, s0, t14)
     multiply(k1, p_1, s1)
-    add(t16, s1, t16)
+    add(t14, s1, t14)
     multiply(p_1, p_1, s2)
     multiply(k3, s2, s2)
-    add(t16, s2, t16)
-    add(k12, t16, t16)
-    add(k13, t16, t21)
-    multiply(t0, t21, t21)
-    multiply(t2, t4, t22)
-    multiply(t1, t10, t23)
-    subtract(t22, t23, t22)
-    multiply(t8, t22, t23)
-    multiply(t3, t23, t24)
-    add(t21, t24, t21)
-    multiply(t0, t21, t21)
-    multiply(t0, t23, t23)
-    multiply(k14, t11, t25)
-    multiply(t11, t25, t26)
-    add(t14, t9, t14)
-    add(t14, s1, t14)
-    subtract(t14, s0, t14)
     add(t14, s2, t14)
     add(k12, t14, t14)
-    multiply(t8, t14, t9)
-    multiply(t8, t9, t27)
-    add(t26, t27, t26)
-    add(k14, t26, t26)
-    multiply(t3, t26, t26)
-    add(t23, t26, t23)
-    multiply(t3, t23, t23)
-    add(t21, t23, t21)
-    add(k15, t21, t21)
+    add(k13, t14, t16)
+    multiply(t0, t16, t16)
+    multiply(t2, t4, t21)
+    multiply(t1, t10, t22)
+    subtract(t21, t22, t21)
+    multiply(t8, t21, t22)
+    multiply(t3, t22, t23)
+    add(t16, t23, t16)
+    multiply(t0, t16, t16)
+    multiply(t0, t22, t22)
+    multiply(k14, t11, t24)
+    multiply(t11, t24, t25)
+    add(t9, s1, t9)
+    subtract(t9, s0, t9)
+    add(t9, s2, t9)
+    add(k12, t9, t9)
+    multiply(t8, t9, t26)
+    multiply(t8, t26, t27)
+    add(t25, t27, t25)
+    add(k14, t25, t25)
+    multiply(t3, t25, t25)
+    add(t22, t25, t22)
+    multiply(t3, t22, t22)
+    add(t16, t22, t16)
+    add(k15, t16, t16)
     multiply(k3, p_1, s0)
     add(k16, s0, s0)
-    multiply(t8, s0, t23)
-    add(k17, t23, t26)
-    multiply(t7, t26, t27)
-    add(t21, t27, t21)
-    multiply(t26, t7, t26)
-    add(t21, t26, t21)
-    multiply(t7, t7, t26)
-    multiply(k18, t26, t26)
-    add(t21, t26, t21)
-    add(k19, t21, t21)
-    divide(t19, t21, t26)
-    multiply(t8, t25, t25)
-    multiply(t11, t9, t9)
-    subtract(t25, t9, t25)
-    multiply(t3, t25, t25)
-    multiply(t11, t22, t22)
-    multiply(t0, t22, t9)
-    subtract(t25, t9, t25)
-    multiply(t11, s0, t9)
-    add(k20, t9, t27)
+    multiply(t8, s0, t22)
+    add(k17, t22, t25)
+    multiply(t7, t25, t25)
+    add(t16, t25, t16)
+    add(t16, t25, t16)
+    multiply(t7, t7, t25)
+    multiply(k18, t25, t25)
+    add(t16, t25, t16)
+    add(k19, t16, t16)
+    divide(t19, t16, t25)
+    multiply(t8, t24, t24)
+    multiply(t11, t26, t26)
+    subtract(t24, t26, t24)
+    multiply(t3, t24, t24)
+    multiply(t11, t21, t21)
+    multiply(t0, t21, t26)
+    subtract(t24, t26, t24)
+    multiply(t11, s0, t26)
+    add(k20, t26, t27)
     multiply(t3, t27, t28)
     multiply(t7, t28, t28)
-    subtract(t25, t28, t25)
-    divide(t25, t21, t25)
+    subtract(t24, t28, t24)
+    divide(t24, t16, t24)
     multiply(k20, t6, t6)
     multiply(t11, t20, t20)
     add(t6, t20, t6)
-    multiply(t25, t19, t20)
+    multiply(t24, t19, t20)
     multiply(t0, t27, t27)
-    divide(t27, t21, t27)
-    multiply(t25, t27, t28)
-    multiply(t28, t21, t28)
+    divide(t27, t16, t27)
+    multiply(t24, t27, t28)
+    multiply(t28, t16, t28)
     multiply(t27, t27, t29)
-    multiply(t29, t21, t29)
+    multiply(t29, t16, t29)
     subtract(k18, t29, t29)
     divide(t28, t29, t28)
     multiply(k9, t12, t30)
@@ -12196,2292 +11957,2158 @@ def _ode_jac_x_chunk(x, t, s, y):
     subtract(t6, t20, t6)
     multiply(k14, t8, t17)
     multiply(t8, t17, t17)
-    multiply(t11, t14, t14)
-    multiply(t11, t14, t14)
-    add(t17, t14, t17)
+    multiply(t11, t9, t9)
+    multiply(t11, t9, t9)
+    add(t17, t9, t17)
     add(k13, t17, t17)
-    multiply(t25, t25, t14)
-    multiply(t14, t21, t14)
+    multiply(t24, t24, t9)
+    multiply(t9, t16, t9)
     multiply(t28, t28, t18)
     multiply(t18, t29, t18)
-    add(t14, t18, t14)
-    subtract(t17, t14, t17)
-    divide(t6, t17, t14)
-    multiply(t0, t16, t18)
-    add(t18, t24, t18)
-    multiply(t0, t23, t23)
-    multiply(t7, t23, t23)
+    add(t9, t18, t9)
+    subtract(t17, t9, t17)
+    divide(t6, t17, t9)
+    multiply(t0, t14, t18)
     add(t18, t23, t18)
-    divide(t18, t21, t18)
-    multiply(t18, t25, t20)
-    multiply(t20, t21, t20)
-    multiply(t18, t27, t23)
-    multiply(t23, t21, t23)
-    subtract(t23, t9, t23)
-    divide(t23, t29, t23)
-    multiply(t23, t28, t9)
-    multiply(t9, t29, t9)
-    add(t20, t9, t20)
-    add(t22, t20, t22)
-    divide(t22, t17, t22)
-    multiply(t18, t19, t9)
-    multiply(t23, t30, t20)
-    add(t9, t20, t9)
-    multiply(t22, t6, t20)
-    subtract(t9, t20, t9)
-    subtract(t15, t9, t15)
-    multiply(t18, t18, t9)
-    multiply(t9, t21, t9)
-    multiply(t23, t23, t20)
-    multiply(t20, t29, t20)
-    add(t9, t20, t9)
-    multiply(t22, t22, t20)
-    multiply(t20, t17, t20)
-    add(t9, t20, t9)
-    subtract(t16, t9, t16)
-    divide(t15, t16, t9)
-    multiply(k22, t11, t20)
-    multiply(t3, t20, t20)
-    divide(t20, t21, t20)
-    multiply(t20, t18, t24)
-    multiply(t24, t21, t24)
-    multiply(t20, t27, t31)
-    multiply(t31, t21, t31)
+    multiply(t0, t22, t22)
+    multiply(t7, t22, t22)
+    add(t18, t22, t18)
+    divide(t18, t16, t18)
+    multiply(t18, t24, t20)
+    multiply(t20, t16, t20)
+    multiply(t18, t27, t22)
+    multiply(t22, t16, t22)
+    subtract(t22, t26, t22)
+    divide(t22, t29, t22)
+    multiply(t22, t28, t23)
+    multiply(t23, t29, t23)
+    add(t20, t23, t20)
+    add(t21, t20, t21)
+    divide(t21, t17, t21)
+    multiply(t18, t19, t20)
+    multiply(t22, t30, t23)
+    add(t20, t23, t20)
+    multiply(t21, t6, t23)
+    subtract(t20, t23, t20)
+    subtract(t15, t20, t15)
+    multiply(t18, t18, t20)
+    multiply(t20, t16, t20)
+    multiply(t22, t22, t23)
+    multiply(t23, t29, t23)
+    add(t20, t23, t20)
+    multiply(t21, t21, t23)
+    multiply(t23, t17, t23)
+    add(t20, t23, t20)
+    subtract(t14, t20, t14)
+    divide(t15, t14, t20)
+    multiply(k22, t11, t23)
+    multiply(t3, t23, t23)
+    divide(t23, t16, t23)
+    multiply(t23, t18, t26)
+    multiply(t26, t16, t26)
+    multiply(t23, t27, t31)
+    multiply(t31, t16, t31)
     divide(t31, t29, t31)
-    multiply(t31, t23, t32)
+    multiply(t31, t22, t32)
     multiply(t32, t29, t32)
-    add(t24, t32, t24)
+    add(t26, t32, t26)
     multiply(k22, t8, t32)
-    multiply(t20, t25, t33)
-    multiply(t33, t21, t33)
+    multiply(t23, t24, t33)
+    multiply(t33, t16, t33)
     multiply(t31, t28, t34)
     multiply(t34, t29, t34)
     add(t33, t34, t33)
     subtract(t32, t33, t33)
     divide(t33, t17, t33)
-    multiply(t33, t22, t34)
+    multiply(t33, t21, t34)
     multiply(t34, t17, t34)
-    subtract(t24, t34, t24)
-    divide(t24, t16, t24)
-    multiply(t20, t19, t19)
+    subtract(t26, t34, t26)
+    divide(t26, t14, t26)
+    multiply(t23, t19, t19)
     multiply(t31, t30, t34)
     add(t19, t34, t19)
     multiply(t33, t6, t6)
     add(t19, t6, t19)
-    multiply(t24, t15, t15)
+    multiply(t26, t15, t15)
     subtract(t19, t15, t19)
-    multiply(t20, t20, t6)
-    multiply(t6, t21, t6)
+    multiply(t23, t23, t6)
+    multiply(t6, t16, t6)
     multiply(t31, t31, t15)
     multiply(t15, t29, t15)
     add(t6, t15, t6)
     multiply(t33, t33, t15)
     multiply(t15, t17, t15)
     add(t6, t15, t6)
-    multiply(t24, t24, t15)
-    multiply(t15, t16, t15)
+    multiply(t26, t26, t15)
+    multiply(t15, t14, t15)
     add(t6, t15, t6)
     subtract(k22, t6, t6)
     divide(t19, t6, A_90)
-    multiply(t24, A_90, t15)
-    subtract(t9, t15, t9)
-    multiply(t22, t9, t15)
+    multiply(t26, A_90, t15)
+    subtract(t20, t15, t20)
+    multiply(t21, t20, t15)
     multiply(t33, A_90, t19)
     add(t15, t19, t15)
-    add(t14, t15, t14)
-    multiply(t25, t14, t15)
+    add(t9, t15, t9)
+    multiply(t24, t9, t15)
     divide(t30, t29, t30)
-    multiply(t28, t14, t19)
-    multiply(t23, t9, t34)
+    multiply(t28, t9, t19)
+    multiply(t22, t20, t34)
     add(t19, t34, t19)
     multiply(t31, A_90, t34)
     subtract(t19, t34, t19)
     subtract(t30, t19, t30)
     multiply(t27, t30, t19)
     subtract(t15, t19, t15)
-    multiply(t18, t9, t19)
+    multiply(t18, t20, t19)
     add(t15, t19, t15)
-    multiply(t20, A_90, t19)
+    multiply(t23, A_90, t19)
     subtract(t15, t19, t15)
-    subtract(t26, t15, t26)
-    negative(t26, A_50)
+    subtract(t25, t15, t25)
+    negative(t25, A_50)
     negative(t30, A_60)
-    negative(t14, A_70)
-    negative(t9, A_80)
+    negative(t9, A_70)
+    negative(t20, A_80)
     multiply(k6, t12, t12)
     multiply(x_5, x_6, t9)
     add(t9, t9, t9)
-    add(t13, t9, t14)
-    multiply(k17, t14, t15)
-    multiply(t3, x_5, t19)
-    multiply(k14, t19, t26)
-    multiply(x_7, t26, t30)
+    add(t13, t9, t15)
+    multiply(k17, t15, t19)
+    multiply(t3, x_5, t20)
+    multiply(k14, t20, t25)
+    multiply(x_7, t25, t30)
     multiply(k13, x_7, t34)
-    multiply(t19, t34, t35)
+    multiply(t20, t34, t35)
     subtract(t30, t35, t30)
-    multiply(t19, x_7, t35)
-    multiply(k13, t35, t36)
-    subtract(t30, t36, t36)
-    multiply(x_5, t7, t37)
-    multiply(x_5, t37, t38)
-    subtract(t5, t38, t5)
-    multiply(k20, t5, t38)
-    subtract(t36, t38, t36)
-    multiply(t8, x_7, t38)
-    multiply(t11, t19, t39)
-    add(t38, t39, t38)
-    multiply(t8, t19, t39)
-    multiply(t11, x_7, t40)
-    subtract(t39, t40, t39)
-    multiply(k12, t39, t40)
-    multiply(t38, t40, t41)
-    multiply(k23, t38, t42)
-    multiply(t39, t42, t43)
-    subtract(t41, t43, t41)
-    multiply(k12, t35, t43)
-    subtract(t41, t43, t43)
-    multiply(t0, t14, t44)
-    multiply(t8, t44, t45)
-    multiply(t11, t5, t46)
-    subtract(t45, t46, t45)
-    multiply(k2, t45, t46)
-    add(t43, t46, t43)
-    add(t38, x_9, t46)
-    multiply(t0, x_5, t47)
-    add(t47, x_8, t48)
-    multiply(t2, t48, t49)
-    multiply(t1, t39, t50)
-    add(t49, t50, t49)
-    multiply(k10, t49, t50)
-    multiply(t46, t50, t51)
-    multiply(k22, t46, t52)
-    multiply(t49, t52, t53)
-    subtract(t51, t53, t51)
-    multiply(t1, t35, t53)
-    multiply(t47, x_7, t54)
-    multiply(t8, t54, t55)
-    multiply(t38, x_8, t56)
-    subtract(t55, t56, t55)
-    multiply(t2, t55, t57)
-    add(t53, t57, t53)
-    multiply(t49, x_9, t57)
-    add(t53, t57, t53)
-    multiply(k10, t53, t58)
-    subtract(t51, t58, t58)
-    multiply(t48, p_1, t59)
-    multiply(t38, t59, t60)
-    multiply(t3, t14, t61)
-    multiply(t55, p_1, t62)
-    add(t61, t62, t62)
-    subtract(t60, t62, t62)
-    multiply(t2, t62, t63)
-    multiply(t35, p_1, t64)
-    subtract(t45, t64, t64)
-    multiply(t39, p_1, t65)
-    multiply(t38, t65, t66)
-    add(t64, t66, t64)
-    multiply(t1, t64, t67)
-    add(t63, t67, t63)
-    multiply(k1, t63, t67)
-    add(t58, t67, t58)
-    multiply(t1, t58, t67)
-    multiply(t1, t55, t68)
-    multiply(t2, t35, t69)
-    subtract(t68, t69, t68)
-    multiply(t1, t48, t69)
-    multiply(t2, t39, t70)
+    multiply(t20, x_7, t36)
+    multiply(k13, t36, t37)
+    subtract(t30, t37, t37)
+    multiply(x_5, t7, t38)
+    multiply(x_5, t38, t39)
+    subtract(t5, t39, t5)
+    multiply(k20, t5, t39)
+    subtract(t37, t39, t37)
+    multiply(t8, x_7, t39)
+    multiply(t11, t20, t40)
+    add(t39, t40, t39)
+    multiply(t8, t20, t40)
+    multiply(t11, x_7, t41)
+    subtract(t40, t41, t40)
+    multiply(k12, t40, t41)
+    multiply(t39, t41, t42)
+    multiply(k23, t39, t43)
+    multiply(t40, t43, t44)
+    subtract(t42, t44, t42)
+    multiply(k12, t36, t44)
+    subtract(t42, t44, t44)
+    multiply(t0, t15, t45)
+    multiply(t8, t45, t46)
+    multiply(t11, t5, t47)
+    subtract(t46, t47, t46)
+    multiply(k2, t46, t47)
+    add(t44, t47, t44)
+    add(t39, x_9, t47)
+    multiply(t0, x_5, t48)
+    add(t48, x_8, t49)
+    multiply(t2, t49, t50)
+    multiply(t1, t40, t51)
+    add(t50, t51, t50)
+    multiply(k10, t50, t51)
+    multiply(t47, t51, t52)
+    multiply(k22, t47, t53)
+    multiply(t50, t53, t54)
+    subtract(t52, t54, t52)
+    multiply(t1, t36, t54)
+    multiply(t48, x_7, t55)
+    multiply(t8, t55, t56)
+    multiply(t39, x_8, t57)
+    subtract(t56, t57, t56)
+    multiply(t2, t56, t58)
+    add(t54, t58, t54)
+    multiply(t50, x_9, t58)
+    add(t54, t58, t54)
+    multiply(k10, t54, t59)
+    subtract(t52, t59, t59)
+    multiply(t49, p_1, t60)
+    multiply(t39, t60, t61)
+    multiply(t3, t15, t62)
+    multiply(t56, p_1, t63)
+    add(t62, t63, t63)
+    subtract(t61, t63, t63)
+    multiply(t2, t63, t64)
+    multiply(t36, p_1, t65)
+    subtract(t46, t65, t65)
+    multiply(t40, p_1, t66)
+    multiply(t39, t66, t67)
+    add(t65, t67, t65)
+    multiply(t1, t65, t68)
+    add(t64, t68, t64)
+    multiply(k1, t64, t68)
+    add(t59, t68, t59)
+    multiply(t1, t59, t68)
+    multiply(t1, t56, t69)
+    multiply(t2, t36, t70)
     subtract(t69, t70, t69)
-    multiply(t69, x_9, t70)
-    add(t68, t70, t68)
-    multiply(k10, t68, t71)
-    multiply(t69, t52, t72)
-    multiply(k10, t69, t73)
-    multiply(t46, t73, t74)
-    subtract(t72, t74, t72)
-    add(t71, t72, t71)
-    multiply(t1, t62, t62)
-    multiply(t2, t64, t64)
-    subtract(t62, t64, t62)
-    multiply(k1, t62, t64)
-    subtract(t71, t64, t71)
-    multiply(t2, t71, t64)
-    add(t67, t64, t67)
-    add(t43, t67, t43)
+    multiply(t1, t49, t70)
+    multiply(t2, t40, t71)
+    subtract(t70, t71, t70)
+    multiply(t70, x_9, t71)
+    add(t69, t71, t69)
+    multiply(k10, t69, t72)
+    multiply(t70, t53, t73)
+    multiply(k10, t70, t74)
+    multiply(t47, t74, t75)
+    subtract(t73, t75, t76)
+    add(t72, t76, t72)
+    multiply(t1, t63, t63)
+    multiply(t2, t65, t65)
+    subtract(t63, t65, t63)
+    multiply(k1, t63, t65)
+    subtract(t72, t65, t72)
+    multiply(t2, t72, t65)
+    add(t68, t65, t68)
+    add(t44, t68, t44)
+    multiply(k3, t64, t64)
+    multiply(k1, t54, t54)
+    subtract(t64, t54, t64)
+    multiply(k1, t50, t54)
+    multiply(t47, t54, t65)
+    add(t64, t65, t64)
+    multiply(t1, t64, t68)
     multiply(k3, t63, t63)
-    multiply(k1, t53, t53)
-    subtract(t63, t53, t63)
-    multiply(k1, t49, t53)
-    multiply(t46, t53, t64)
+    multiply(k1, t69, t69)
+    subtract(t63, t69, t63)
+    multiply(k1, t70, t69)
+    multiply(t47, t69, t77)
+    add(t63, t77, t63)
+    multiply(t2, t63, t78)
+    subtract(t68, t78, t68)
+    multiply(p_1, t68, t78)
+    add(t44, t78, t44)
+    add(t37, t44, t37)
+    multiply(t0, t37, t37)
+    multiply(k14, t55, t78)
+    multiply(t48, t34, t79)
+    multiply(k13, t48, t80)
+    multiply(x_7, t80, t81)
+    subtract(t79, t81, t81)
+    add(t78, t81, t78)
+    multiply(t11, t55, t82)
+    multiply(t40, x_8, t83)
+    add(t82, t83, t82)
+    multiply(k23, t82, t84)
+    multiply(k12, t49, t85)
+    multiply(t40, t85, t86)
+    multiply(t49, t41, t87)
+    subtract(t86, t87, t87)
+    add(t84, t87, t84)
+    multiply(k22, t82, t82)
+    multiply(t50, t74, t88)
+    multiply(t70, t51, t89)
+    subtract(t88, t89, t88)
+    add(t82, t88, t82)
+    add(t84, t82, t84)
+    multiply(t11, t84, t89)
+    multiply(k12, t56, t90)
+    multiply(t49, t43, t91)
+    multiply(t39, t85, t92)
+    subtract(t91, t92, t91)
+    add(t90, t91, t90)
+    multiply(k2, t62, t93)
+    add(t90, t93, t90)
+    multiply(t1, t72, t72)
+    multiply(t2, t59, t59)
+    subtract(t72, t59, t72)
+    add(t90, t72, t90)
+    multiply(t1, t63, t63)
+    multiply(t2, t64, t64)
     add(t63, t64, t63)
-    multiply(t1, t63, t67)
-    multiply(k3, t62, t62)
-    multiply(k1, t68, t68)
-    subtract(t62, t68, t62)
-    multiply(k1, t69, t68)
-    multiply(t46, t68, t74)
-    add(t62, t74, t62)
-    multiply(t2, t62, t75)
-    subtract(t67, t75, t67)
-    multiply(p_1, t67, t75)
-    add(t43, t75, t43)
-    add(t36, t43, t36)
-    multiply(t0, t36, t36)
-    multiply(k14, t54, t75)
-    multiply(t47, t34, t76)
-    multiply(k13, t47, t77)
-    multiply(x_7, t77, t78)
-    subtract(t76, t78, t76)
-    add(t75, t76, t75)
-    multiply(t11, t54, t78)
-    multiply(t39, x_8, t79)
-    add(t78, t79, t78)
-    multiply(k23, t78, t80)
-    multiply(k12, t48, t81)
-    multiply(t39, t81, t82)
-    multiply(t48, t40, t83)
-    subtract(t82, t83, t82)
-    add(t80, t82, t80)
-    multiply(k22, t78, t78)
-    multiply(t49, t73, t83)
-    multiply(t69, t50, t84)
-    subtract(t83, t84, t83)
-    add(t78, t83, t78)
-    add(t80, t78, t80)
-    multiply(t11, t80, t84)
-    multiply(k12, t55, t85)
-    multiply(t48, t42, t86)
-    multiply(t38, t81, t87)
-    subtract(t86, t87, t86)
-    add(t85, t86, t85)
-    multiply(k2, t61, t87)
-    add(t85, t87, t85)
-    multiply(t1, t71, t71)
-    multiply(t2, t58, t58)
-    subtract(t71, t58, t71)
-    add(t85, t71, t85)
-    multiply(t1, t62, t62)
-    multiply(t2, t63, t63)
-    add(t62, t63, t62)
-    multiply(p_1, t62, t58)
-    subtract(t85, t58, t85)
-    multiply(t8, t85, t58)
-    add(t84, t58, t84)
-    add(t75, t84, t75)
-    multiply(t3, t75, t75)
-    add(t36, t75, t36)
-    add(t15, t36, t15)
-    add(t12, t15, t12)
-    multiply(k24, t14, t14)
-    multiply(k8, t44, t15)
-    multiply(k20, t47, t36)
-    multiply(t47, t36, t58)
-    multiply(k20, x_7, t63)
-    multiply(x_7, t63, t71)
-    add(t58, t71, t58)
-    subtract(t15, t58, t15)
-    multiply(t8, t5, t71)
-    multiply(t11, t44, t44)
-    add(t71, t44, t71)
-    multiply(k7, t71, t44)
-    multiply(k2, t39, t75)
-    multiply(t39, t75, t84)
-    multiply(k2, t48, t87)
-    multiply(t48, t87, t88)
-    add(t84, t88, t84)
-    subtract(t44, t84, t44)
-    multiply(t39, t65, t88)
-    multiply(t48, t59, t89)
-    add(t88, t89, t88)
-    subtract(t71, t88, t71)
-    multiply(k3, t71, t71)
-    multiply(t49, t53, t89)
-    multiply(t69, t68, t90)
-    add(t89, t90, t89)
-    subtract(t71, t89, t71)
-    add(t44, t71, t44)
-    multiply(t11, t44, t71)
-    multiply(k7, t45, t45)
-    multiply(k2, t35, t90)
-    subtract(t45, t90, t45)
-    multiply(t38, t75, t90)
-    add(t45, t90, t45)
-    add(t45, t67, t45)
-    multiply(t8, t45, t67)
-    add(t71, t67, t71)
-    add(t15, t71, t15)
-    multiply(t0, t15, t15)
-    multiply(t19, t36, t67)
-    multiply(k8, t61, t71)
-    subtract(t67, t71, t71)
-    multiply(t38, t87, t91)
-    multiply(k7, t61, t92)
-    multiply(k2, t55, t55)
-    add(t92, t55, t92)
-    subtract(t91, t92, t92)
-    add(t92, t62, t92)
-    add(t71, t92, t71)
-    multiply(t3, t71, t71)
-    subtract(t15, t71, t15)
-    add(t14, t15, t14)
-    multiply(t7, t14, t14)
-    add(t12, t14, t12)
-    subtract(u_0, t12, t12)
-    divide(t12, t21, t14)
-    multiply(t19, t77, t15)
-    multiply(t47, t26, t55)
-    subtract(t15, t55, t15)
-    multiply(k20, t61, t61)
-    subtract(t15, t61, t15)
-    multiply(t8, t80, t80)
-    multiply(t11, t85, t85)
-    subtract(t80, t85, t80)
-    add(t15, t80, t15)
-    subtract(u_2, t15, t15)
-    multiply(t25, t12, t55)
-    multiply(k24, t5, t61)
-    multiply(k17, x_5, t62)
-    multiply(x_5, t62, t62)
-    subtract(t61, t62, t61)
-    multiply(k8, t5, t62)
-    multiply(k20, t35, t71)
-    add(t62, t71, t62)
-    multiply(t19, t63, t71)
-    add(t62, t71, t62)
-    multiply(t8, t44, t44)
+    multiply(p_1, t63, t59)
+    subtract(t90, t59, t90)
+    multiply(t8, t90, t59)
+    add(t89, t59, t89)
+    add(t78, t89, t78)
+    multiply(t3, t78, t78)
+    add(t37, t78, t37)
+    add(t19, t37, t19)
+    add(t12, t19, t12)
+    multiply(k24, t15, t15)
+    multiply(k8, t45, t19)
+    multiply(k20, t48, t37)
+    multiply(t48, t37, t59)
+    multiply(k20, x_7, t64)
+    multiply(x_7, t64, t72)
+    add(t59, t72, t72)
+    subtract(t19, t72, t19)
+    multiply(t8, t5, t78)
     multiply(t11, t45, t45)
-    subtract(t44, t45, t44)
-    add(t62, t44, t62)
-    add(t61, t62, t61)
-    subtract(u_1, t61, t61)
-    multiply(t27, t12, t44)
-    add(t61, t44, t61)
-    multiply(t28, t61, t44)
-    add(t55, t44, t55)
-    subtract(t15, t55, t15)
-    divide(t15, t17, t44)
-    subtract(u_4, t78, t78)
-    multiply(t20, t12, t45)
-    multiply(t31, t61, t55)
-    add(t45, t55, t45)
-    multiply(t33, t15, t55)
-    add(t45, t55, t45)
-    subtract(u_3, t43, t43)
+    add(t78, t45, t78)
+    multiply(k7, t78, t45)
+    multiply(k2, t40, t89)
+    multiply(t40, t89, t93)
+    multiply(k2, t49, t94)
+    multiply(t49, t94, t95)
+    add(t93, t95, t95)
+    subtract(t45, t95, t45)
+    multiply(t40, t66, t96)
+    multiply(t49, t60, t97)
+    add(t96, t97, t97)
+    subtract(t78, t97, t78)
+    multiply(k3, t78, t78)
+    multiply(t50, t54, t98)
+    multiply(t70, t69, t99)
+    add(t98, t99, t98)
+    subtract(t78, t98, t78)
+    add(t45, t78, t45)
+    multiply(t11, t45, t78)
+    multiply(k7, t46, t46)
+    multiply(k2, t36, t99)
+    subtract(t46, t99, t46)
+    multiply(t39, t89, t99)
+    add(t46, t99, t46)
+    add(t46, t68, t46)
+    multiply(t8, t46, t68)
+    add(t78, t68, t78)
+    add(t19, t78, t19)
+    multiply(t0, t19, t19)
+    multiply(t20, t37, t68)
+    multiply(k8, t62, t78)
+    subtract(t68, t78, t78)
+    multiply(t39, t94, t100)
+    multiply(k7, t62, t101)
+    multiply(k2, t56, t56)
+    add(t101, t56, t101)
+    subtract(t100, t101, t101)
+    add(t101, t63, t101)
+    add(t78, t101, t78)
+    multiply(t3, t78, t78)
+    subtract(t19, t78, t19)
+    add(t15, t19, t15)
+    multiply(t7, t15, t15)
+    add(t12, t15, t12)
+    subtract(u_0, t12, t12)
+    divide(t12, t16, t15)
+    multiply(t20, t80, t19)
+    multiply(t48, t25, t56)
+    subtract(t19, t56, t19)
+    multiply(k20, t62, t62)
+    subtract(t19, t62, t19)
+    multiply(t8, t84, t84)
+    multiply(t11, t90, t90)
+    subtract(t84, t90, t84)
+    add(t19, t84, t19)
+    subtract(u_2, t19, t19)
+    multiply(t24, t12, t56)
+    multiply(k24, t5, t62)
+    multiply(k17, x_5, t63)
+    multiply(x_5, t63, t63)
+    subtract(t62, t63, t62)
+    multiply(k8, t5, t63)
+    multiply(k20, t36, t78)
+    add(t63, t78, t63)
+    multiply(t20, t64, t78)
+    add(t63, t78, t63)
+    multiply(t8, t45, t45)
+    multiply(t11, t46, t46)
+    subtract(t45, t46, t45)
+    add(t63, t45, t63)
+    add(t62, t63, t62)
+    subtract(u_1, t62, t62)
+    multiply(t27, t12, t45)
+    add(t62, t45, t62)
+    multiply(t28, t62, t45)
+    add(t56, t45, t56)
+    subtract(t19, t56, t19)
+    divide(t19, t17, t45)
+    subtract(u_4, t82, t82)
+    multiply(t23, t12, t46)
+    multiply(t31, t62, t56)
+    add(t46, t56, t46)
+    multiply(t33, t19, t56)
+    add(t46, t56, t46)
+    subtract(u_3, t44, t44)
     multiply(t18, t12, t12)
-    multiply(t23, t61, t55)
-    add(t12, t55, t12)
-    multiply(t22, t15, t15)
-    subtract(t12, t15, t12)
-    subtract(t43, t12, t43)
-    multiply(t24, t43, t12)
-    subtract(t45, t12, t45)
-    subtract(t78, t45, t78)
-    divide(t78, t6, t78)
-    multiply(t33, t78, t12)
-    divide(t43, t16, t43)
-    multiply(t24, t78, t15)
-    add(t43, t15, t43)
-    multiply(t22, t43, t15)
-    subtract(t12, t15, t12)
+    multiply(t22, t62, t56)
+    add(t12, t56, t12)
+    multiply(t21, t19, t19)
+    subtract(t12, t19, t12)
     subtract(t44, t12, t44)
-    multiply(t25, t44, t12)
-    divide(t61, t29, t61)
-    multiply(t28, t44, t15)
-    multiply(t23, t43, t45)
-    add(t15, t45, t15)
-    multiply(t31, t78, t45)
-    add(t15, t45, t15)
-    subtract(t61, t15, t61)
-    multiply(t27, t61, t15)
-    subtract(t12, t15, t12)
-    multiply(t18, t43, t15)
-    add(t12, t15, t12)
-    multiply(t20, t78, t15)
-    add(t12, t15, t12)
-    subtract(t14, t12, t14)
-    multiply(k17, t14, t12)
-    multiply(x_5, x_5, t15)
-    multiply(k20, t15, t45)
-    multiply(t0, t14, t55)
-    multiply(t8, t55, t62)
-    multiply(t11, t15, t71)
-    add(t62, t71, t62)
-    multiply(k2, t62, t71)
-    multiply(t1, t62, t80)
-    multiply(t3, t14, t85)
-    multiply(t2, t85, t92)
-    subtract(t80, t92, t80)
-    multiply(k1, t80, t92)
-    multiply(t1, t92, t93)
-    multiply(t1, t85, t94)
-    multiply(t2, t62, t95)
-    add(t94, t95, t94)
-    multiply(k1, t94, t95)
-    multiply(t2, t95, t96)
-    add(t93, t96, t93)
-    add(t71, t93, t71)
-    multiply(k3, t80, t80)
-    multiply(t1, t80, t93)
-    multiply(k3, t94, t94)
-    multiply(t2, t94, t96)
-    add(t93, t96, t93)
-    multiply(p_1, t93, t96)
-    add(t71, t96, t71)
-    add(t45, t71, t45)
-    multiply(t0, t45, t45)
-    multiply(k2, t85, t96)
-    multiply(t1, t95, t95)
-    multiply(t2, t92, t92)
-    subtract(t95, t92, t95)
-    add(t96, t95, t96)
-    multiply(t2, t80, t80)
-    multiply(t1, t94, t94)
-    subtract(t80, t94, t80)
-    multiply(p_1, t80, t92)
-    subtract(t96, t92, t96)
-    multiply(t8, t96, t92)
-    multiply(t3, t92, t92)
-    add(t45, t92, t45)
-    add(t12, t45, t45)
-    multiply(t14, t7, t92)
-    add(t13, t92, t13)
+    multiply(t26, t44, t12)
+    subtract(t46, t12, t46)
+    subtract(t82, t46, t82)
+    divide(t82, t6, t82)
+    multiply(t33, t82, t12)
+    divide(t44, t14, t44)
+    multiply(t26, t82, t19)
+    add(t44, t19, t44)
+    multiply(t21, t44, t19)
+    subtract(t12, t19, t12)
+    subtract(t45, t12, t45)
+    multiply(t24, t45, t12)
+    divide(t62, t29, t62)
+    multiply(t28, t45, t19)
+    multiply(t22, t44, t46)
+    add(t19, t46, t19)
+    multiply(t31, t82, t46)
+    add(t19, t46, t19)
+    subtract(t62, t19, t62)
+    multiply(t27, t62, t19)
+    subtract(t12, t19, t12)
+    multiply(t18, t44, t19)
+    add(t12, t19, t12)
+    multiply(t23, t82, t19)
+    add(t12, t19, t12)
+    subtract(t15, t12, t15)
+    multiply(k17, t15, t12)
+    multiply(x_5, x_5, t19)
+    multiply(k20, t19, t46)
+    multiply(t0, t15, t56)
+    multiply(t8, t56, t63)
+    multiply(t11, t19, t78)
+    add(t63, t78, t63)
+    multiply(k2, t63, t78)
+    multiply(t1, t63, t84)
+    multiply(t3, t15, t90)
+    multiply(t2, t90, t101)
+    subtract(t84, t101, t84)
+    multiply(k1, t84, t101)
+    multiply(t1, t101, t102)
+    multiply(t1, t90, t103)
+    multiply(t2, t63, t104)
+    add(t103, t104, t103)
+    multiply(k1, t103, t104)
+    multiply(t2, t104, t105)
+    add(t102, t105, t102)
+    add(t78, t102, t78)
+    multiply(k3, t84, t84)
+    multiply(t1, t84, t102)
+    multiply(k3, t103, t103)
+    multiply(t2, t103, t105)
+    add(t102, t105, t102)
+    multiply(p_1, t102, t105)
+    add(t78, t105, t78)
+    add(t46, t78, t46)
+    multiply(t0, t46, t46)
+    multiply(k2, t90, t105)
+    multiply(t1, t104, t104)
+    multiply(t2, t101, t101)
+    subtract(t104, t101, t104)
+    add(t105, t104, t105)
+    multiply(t2, t84, t84)
+    multiply(t1, t103, t103)
+    subtract(t84, t103, t84)
+    multiply(p_1, t84, t101)
+    subtract(t105, t101, t105)
+    multiply(t8, t105, t101)
+    multiply(t3, t101, t101)
+    add(t46, t101, t46)
+    add(t12, t46, t46)
+    multiply(t15, t7, t101)
+    add(t13, t101, t13)
     add(t13, t9, t13)
     multiply(k24, t13, t9)
     add(t9, t12, t9)
     multiply(t0, t13, t12)
-    multiply(k8, t12, t92)
-    subtract(t92, t58, t92)
-    add(t5, t61, t5)
-    multiply(t8, t5, t58)
-    multiply(t11, t12, t61)
-    add(t58, t61, t58)
-    multiply(k7, t58, t61)
-    subtract(t61, t84, t61)
-    subtract(t58, t88, t58)
-    multiply(k3, t58, t58)
-    subtract(t58, t89, t58)
-    add(t61, t58, t61)
-    multiply(t11, t61, t58)
-    multiply(t8, t12, t84)
-    multiply(t11, t5, t88)
-    subtract(t84, t88, t84)
-    multiply(k7, t84, t88)
-    subtract(t55, t35, t35)
-    add(t35, t43, t43)
-    multiply(k2, t43, t89)
-    add(t88, t89, t88)
-    add(t88, t90, t88)
-    multiply(t3, t13, t89)
-    add(t85, t54, t54)
-    multiply(t8, t54, t90)
-    multiply(t11, t44, t94)
-    subtract(t90, t94, t90)
-    subtract(t90, t56, t90)
-    multiply(t90, p_1, t56)
-    add(t89, t56, t56)
-    subtract(t60, t56, t60)
-    multiply(t2, t60, t56)
-    multiply(t43, p_1, t94)
-    add(t84, t94, t94)
-    add(t94, t66, t94)
-    multiply(t1, t94, t66)
-    add(t56, t66, t56)
-    multiply(k3, t56, t66)
-    multiply(t1, t43, t95)
-    multiply(t2, t90, t97)
-    subtract(t95, t97, t95)
-    subtract(t95, t57, t95)
-    multiply(k1, t95, t57)
-    add(t66, t57, t66)
-    add(t66, t64, t66)
-    multiply(t1, t66, t57)
-    multiply(t1, t60, t64)
-    multiply(t2, t94, t97)
-    subtract(t64, t97, t64)
-    multiply(k3, t64, t97)
-    multiply(t2, t43, t98)
-    multiply(t1, t90, t99)
-    add(t98, t99, t98)
-    add(t98, t70, t98)
-    multiply(k1, t98, t70)
-    subtract(t97, t70, t97)
-    add(t97, t74, t97)
-    multiply(t2, t97, t70)
-    subtract(t57, t70, t57)
-    add(t88, t57, t88)
-    multiply(t8, t88, t70)
-    add(t58, t70, t58)
-    add(t92, t58, t92)
-    multiply(t0, t92, t58)
-    multiply(k20, t44, t70)
-    multiply(k8, t89, t74)
-    subtract(t70, t74, t70)
-    add(t70, t67, t70)
-    multiply(k7, t89, t67)
-    multiply(k2, t90, t74)
-    add(t67, t74, t67)
-    subtract(t91, t67, t91)
-    multiply(t1, t97, t67)
-    multiply(t2, t66, t74)
-    add(t67, t74, t67)
-    add(t91, t67, t91)
-    add(t70, t91, t70)
-    multiply(t3, t70, t74)
-    subtract(t58, t74, t58)
-    add(t9, t58, t9)
-    multiply(k24, t14, t58)
-    multiply(k8, t55, t74)
-    multiply(t11, t55, t55)
-    multiply(t8, t15, t91)
-    subtract(t55, t91, t55)
-    multiply(k7, t55, t91)
-    multiply(k3, t55, t55)
-    add(t91, t55, t91)
-    multiply(t11, t91, t55)
-    multiply(k7, t62, t62)
-    add(t62, t93, t62)
-    multiply(t8, t62, t93)
-    add(t55, t93, t55)
-    add(t74, t55, t74)
-    multiply(t0, t74, t74)
-    multiply(k7, t85, t55)
-    subtract(t80, t55, t80)
-    multiply(k8, t85, t55)
-    subtract(t80, t55, t80)
-    multiply(t3, t80, t80)
-    subtract(t74, t80, t74)
-    add(t58, t74, t58)
-    multiply(t7, t58, t58)
-    add(t9, t58, t9)
-    add(t45, t9, t45)
-    divide(t45, t21, t9)
-    multiply(t18, t45, t55)
-    multiply(t8, t91, t91)
-    multiply(t11, t62, t62)
-    subtract(t91, t62, t91)
-    multiply(k8, t15, t58)
-    subtract(t91, t58, t91)
-    multiply(k24, t15, t15)
-    subtract(t91, t15, t91)
-    multiply(t27, t45, t15)
-    add(t91, t15, t91)
-    multiply(t23, t91, t15)
-    add(t55, t15, t55)
-    multiply(k20, t85, t85)
-    multiply(t11, t96, t96)
-    add(t85, t96, t85)
-    multiply(t25, t45, t15)
-    multiply(t28, t91, t58)
-    add(t15, t58, t15)
-    add(t85, t15, t85)
-    multiply(t22, t85, t15)
-    add(t55, t15, t55)
-    subtract(t71, t55, t71)
-    divide(t71, t16, t15)
-    multiply(t20, t45, t45)
-    multiply(t31, t91, t55)
-    add(t45, t55, t45)
-    multiply(t33, t85, t55)
-    subtract(t45, t55, t45)
-    multiply(t24, t71, t71)
-    subtract(t45, t71, t45)
-    divide(t45, t6, A_91)
-    multiply(t24, A_91, t45)
-    subtract(t15, t45, t15)
-    multiply(t22, t15, t45)
-    multiply(t33, A_91, t55)
-    add(t45, t55, t45)
-    divide(t85, t17, t85)
-    subtract(t45, t85, t45)
-    multiply(t25, t45, t55)
-    divide(t91, t29, t91)
-    multiply(t28, t45, t58)
-    multiply(t23, t15, t62)
-    add(t58, t62, t58)
-    multiply(t31, A_91, t62)
-    subtract(t58, t62, t58)
-    subtract(t91, t58, t91)
-    multiply(t27, t91, t58)
-    subtract(t55, t58, t55)
-    multiply(t18, t15, t58)
-    add(t55, t58, t55)
-    multiply(t20, A_91, t58)
-    subtract(t55, t58, t55)
-    subtract(t9, t55, t9)
-    negative(t9, A_51)
-    negative(t91, A_61)
-    negative(t45, A_71)
-    negative(t15, A_81)
-    multiply(x_5, t0, t9)
-    multiply(k14, t9, t15)
-    multiply(x_7, t15, t45)
-    multiply(t34, t9, t55)
-    subtract(t45, t55, t45)
-    multiply(t14, t3, t55)
-    multiply(x_7, t9, t58)
-    add(t55, t58, t55)
-    multiply(k13, t55, t58)
-    subtract(t45, t58, t45)
-    multiply(t11, t9, t58)
-    multiply(t40, t58, t62)
-    multiply(t8, t9, t71)
-    multiply(k12, t71, t74)
-    multiply(t38, t74, t80)
-    add(t62, t80, t62)
-    multiply(t42, t71, t80)
-    multiply(k23, t58, t85)
-    multiply(t39, t85, t91)
-    add(t80, t91, t80)
-    subtract(t62, t80, t62)
-    multiply(k12, t55, t80)
-    subtract(t62, t80, t62)
-    multiply(t13, t3, t80)
-    multiply(t8, t80, t91)
-    multiply(k2, t91, t93)
-    subtract(t62, t93, t62)
-    multiply(t50, t58, t93)
-    multiply(t1, t71, t96)
-    multiply(x_5, t3, t99)
-    multiply(t2, t99, t100)
-    subtract(t96, t100, t96)
-    multiply(k10, t96, t100)
-    multiply(t46, t100, t101)
-    add(t93, t101, t93)
-    multiply(t52, t96, t101)
-    multiply(k22, t58, t102)
-    multiply(t49, t102, t103)
-    add(t101, t103, t101)
-    subtract(t93, t101, t93)
-    multiply(t1, t55, t101)
-    multiply(t14, t0, t14)
-    multiply(x_7, t99, t103)
-    subtract(t14, t103, t14)
-    multiply(t8, t14, t103)
-    multiply(x_8, t58, t104)
-    subtract(t103, t104, t103)
-    multiply(t2, t103, t104)
-    add(t101, t104, t101)
-    multiply(x_9, t96, t104)
-    add(t101, t104, t101)
-    multiply(k10, t101, t104)
-    subtract(t93, t104, t93)
-    multiply(t59, t58, t104)
-    multiply(p_1, t99, t105)
-    multiply(t38, t105, t106)
-    subtract(t104, t106, t104)
-    multiply(t13, t0, t13)
-    multiply(p_1, t103, t106)
-    add(t13, t106, t106)
-    subtract(t104, t106, t104)
-    multiply(t2, t104, t106)
-    multiply(t65, t58, t107)
-    multiply(p_1, t71, t108)
-    multiply(t38, t108, t109)
-    add(t107, t109, t107)
-    multiply(p_1, t55, t109)
-    add(t91, t109, t109)
-    subtract(t107, t109, t107)
-    multiply(t1, t107, t109)
-    add(t106, t109, t106)
-    multiply(k1, t106, t109)
-    add(t93, t109, t93)
-    multiply(t1, t93, t109)
-    multiply(t1, t103, t110)
-    multiply(t2, t55, t111)
+    multiply(k8, t12, t101)
+    subtract(t101, t72, t72)
+    add(t5, t62, t5)
+    multiply(t8, t5, t62)
+    multiply(t11, t12, t103)
+    add(t62, t103, t62)
+    multiply(k7, t62, t103)
+    subtract(t103, t95, t95)
+    subtract(t62, t97, t97)
+    multiply(k3, t97, t97)
+    subtract(t97, t98, t97)
+    add(t95, t97, t95)
+    multiply(t11, t95, t97)
+    multiply(t8, t12, t98)
+    multiply(t11, t5, t104)
+    subtract(t98, t104, t98)
+    multiply(k7, t98, t104)
+    subtract(t56, t36, t36)
+    add(t36, t44, t44)
+    multiply(k2, t44, t106)
+    add(t104, t106, t106)
+    add(t106, t99, t106)
+    multiply(t3, t13, t13)
+    add(t90, t55, t55)
+    multiply(t8, t55, t107)
+    multiply(t11, t45, t108)
+    subtract(t107, t108, t107)
+    subtract(t107, t57, t107)
+    multiply(t107, p_1, t57)
+    add(t13, t57, t57)
+    subtract(t61, t57, t61)
+    multiply(t2, t61, t57)
+    multiply(t44, p_1, t108)
+    add(t98, t108, t108)
+    add(t108, t67, t108)
+    multiply(t1, t108, t109)
+    add(t57, t109, t57)
+    multiply(k3, t57, t109)
+    multiply(t1, t44, t110)
+    multiply(t2, t107, t111)
     subtract(t110, t111, t110)
-    multiply(t1, t99, t111)
-    multiply(t2, t71, t112)
-    add(t111, t112, t111)
-    multiply(x_9, t111, t112)
-    subtract(t110, t112, t110)
-    multiply(k10, t110, t112)
-    multiply(t69, t102, t102)
-    multiply(t52, t111, t113)
-    subtract(t102, t113, t102)
-    multiply(t73, t58, t113)
-    multiply(k10, t111, t114)
-    multiply(t46, t114, t115)
-    subtract(t113, t115, t113)
-    subtract(t102, t113, t102)
-    add(t112, t102, t112)
-    multiply(t1, t104, t104)
-    multiply(t2, t107, t107)
-    subtract(t104, t107, t104)
-    multiply(k1, t104, t102)
-    subtract(t112, t102, t112)
-    multiply(t2, t112, t102)
-    add(t109, t102, t109)
-    add(t62, t109, t62)
-    multiply(k3, t106, t106)
-    multiply(k1, t101, t101)
-    subtract(t106, t101, t106)
-    multiply(t53, t58, t101)
-    multiply(k1, t96, t102)
-    multiply(t46, t102, t107)
-    add(t101, t107, t101)
-    add(t106, t101, t106)
-    multiply(t1, t106, t101)
-    multiply(k3, t104, t104)
-    multiply(k1, t110, t110)
-    subtract(t104, t110, t104)
-    multiply(t68, t58, t107)
-    multiply(k1, t111, t109)
-    multiply(t46, t109, t110)
-    subtract(t107, t110, t107)
-    add(t104, t107, t104)
-    multiply(t2, t104, t107)
-    subtract(t101, t107, t101)
-    multiply(p_1, t101, t107)
-    add(t62, t107, t62)
-    add(t45, t62, t45)
-    multiply(t0, t45, t45)
-    multiply(k13, t35, t35)
-    add(t35, t30, t35)
-    multiply(k20, t5, t30)
-    subtract(t35, t30, t35)
-    multiply(k12, t43, t30)
-    add(t30, t41, t30)
-    multiply(k2, t84, t84)
-    add(t30, t84, t30)
-    multiply(k10, t95, t95)
-    add(t95, t51, t95)
-    multiply(k1, t56, t56)
-    add(t95, t56, t95)
-    multiply(t1, t95, t41)
-    multiply(k10, t98, t98)
-    add(t98, t72, t98)
-    multiply(k1, t64, t64)
-    subtract(t98, t64, t98)
-    multiply(t2, t98, t51)
-    add(t41, t51, t41)
-    add(t30, t41, t30)
-    multiply(p_1, t57, t57)
-    add(t30, t57, t30)
-    add(t35, t30, t35)
-    multiply(t35, t3, t35)
-    subtract(t45, t35, t45)
-    multiply(k14, t54, t30)
-    add(t30, t76, t30)
-    multiply(t8, t44, t35)
-    multiply(t11, t54, t41)
-    add(t35, t41, t35)
-    add(t35, t79, t35)
-    multiply(k23, t35, t41)
-    add(t41, t82, t41)
-    add(t35, t78, t35)
-    multiply(k22, t35, t35)
-    add(t35, t83, t35)
-    add(t41, t35, t41)
-    multiply(t11, t41, t35)
-    multiply(k12, t90, t51)
-    add(t51, t86, t51)
-    multiply(k2, t89, t89)
-    add(t51, t89, t51)
-    multiply(t1, t98, t56)
-    multiply(t2, t95, t57)
-    subtract(t56, t57, t56)
-    add(t51, t56, t51)
-    multiply(p_1, t67, t67)
-    subtract(t51, t67, t51)
-    multiply(t8, t51, t56)
-    add(t35, t56, t35)
-    add(t30, t35, t30)
-    multiply(t30, t0, t30)
-    multiply(k14, t14, t35)
-    multiply(k13, t99, t56)
-    multiply(x_7, t56, t57)
-    multiply(t34, t99, t64)
-    subtract(t57, t64, t57)
-    add(t35, t57, t35)
-    multiply(t11, t14, t14)
-    multiply(x_8, t71, t57)
-    add(t14, t57, t14)
-    multiply(k23, t14, t57)
-    multiply(t81, t71, t64)
-    multiply(k12, t99, t67)
-    multiply(t39, t67, t72)
-    subtract(t64, t72, t64)
-    multiply(t48, t74, t74)
-    multiply(t40, t99, t72)
-    subtract(t74, t72, t74)
-    subtract(t64, t74, t64)
-    add(t57, t64, t57)
-    multiply(k22, t14, t14)
-    multiply(t73, t96, t64)
-    multiply(t49, t114, t114)
-    subtract(t64, t114, t64)
-    multiply(t69, t100, t100)
-    multiply(t50, t111, t72)
-    subtract(t100, t72, t100)
-    subtract(t64, t100, t64)
-    add(t14, t64, t14)
-    add(t57, t14, t57)
-    multiply(t11, t57, t64)
-    multiply(k12, t103, t72)
-    multiply(t48, t85, t85)
-    multiply(t42, t99, t74)
-    subtract(t85, t74, t85)
-    multiply(t81, t58, t74)
-    multiply(t38, t67, t67)
-    subtract(t74, t67, t74)
-    subtract(t85, t74, t85)
-    add(t72, t85, t72)
-    multiply(k2, t13, t67)
-    add(t72, t67, t72)
-    multiply(t1, t112, t112)
-    multiply(t2, t93, t93)
-    subtract(t112, t93, t112)
+    subtract(t110, t58, t110)
+    multiply(k1, t110, t58)
+    add(t109, t58, t109)
+    add(t109, t65, t109)
+    multiply(t1, t109, t58)
+    multiply(t1, t61, t61)
+    multiply(t2, t108, t108)
+    subtract(t61, t108, t61)
+    multiply(k3, t61, t65)
+    multiply(t2, t44, t108)
+    multiply(t1, t107, t111)
+    add(t108, t111, t108)
+    add(t108, t71, t108)
+    multiply(k1, t108, t71)
+    subtract(t65, t71, t65)
+    add(t65, t77, t65)
+    multiply(t2, t65, t71)
+    subtract(t58, t71, t77)
+    add(t106, t77, t106)
+    multiply(t8, t106, t111)
+    add(t97, t111, t112)
     add(t72, t112, t72)
-    multiply(t1, t104, t104)
-    multiply(t2, t106, t106)
-    add(t104, t106, t104)
-    multiply(p_1, t104, t67)
-    subtract(t72, t67, t72)
-    multiply(t8, t72, t67)
-    add(t64, t67, t64)
-    add(t35, t64, t35)
-    multiply(t3, t35, t35)
-    add(t30, t35, t30)
-    add(t45, t30, t45)
-    multiply(t36, t99, t30)
-    multiply(k20, t99, t35)
-    multiply(t47, t35, t64)
-    add(t30, t64, t30)
-    multiply(k8, t80, t64)
-    subtract(t30, t64, t30)
-    multiply(t75, t58, t64)
-    multiply(k2, t71, t67)
-    multiply(t38, t67, t74)
-    add(t64, t74, t64)
-    multiply(k7, t91, t91)
-    multiply(k2, t55, t74)
-    add(t91, t74, t91)
-    subtract(t64, t91, t64)
-    add(t64, t101, t64)
-    multiply(t8, t64, t74)
-    multiply(t11, t80, t80)
-    multiply(k7, t80, t76)
-    multiply(t75, t71, t78)
-    multiply(t39, t67, t67)
-    add(t78, t67, t78)
-    multiply(t87, t99, t67)
-    multiply(k2, t99, t79)
-    multiply(t48, t79, t82)
-    add(t67, t82, t67)
-    subtract(t78, t67, t78)
-    add(t76, t78, t76)
-    multiply(t65, t71, t71)
-    multiply(t39, t108, t108)
-    add(t71, t108, t71)
-    multiply(t59, t99, t67)
-    multiply(t48, t105, t105)
-    add(t67, t105, t67)
-    subtract(t71, t67, t71)
-    add(t80, t71, t80)
-    multiply(k3, t80, t80)
-    multiply(t53, t96, t96)
-    multiply(t49, t102, t102)
-    add(t96, t102, t96)
-    multiply(t68, t111, t111)
-    multiply(t69, t109, t109)
-    add(t111, t109, t111)
-    subtract(t96, t111, t96)
-    add(t80, t96, t80)
-    add(t76, t80, t76)
-    multiply(t11, t76, t67)
-    subtract(t74, t67, t74)
-    add(t30, t74, t30)
-    multiply(t0, t30, t30)
-    multiply(t92, t3, t92)
-    subtract(t30, t92, t30)
-    multiply(t70, t0, t70)
-    multiply(t36, t9, t67)
-    multiply(t19, t35, t35)
-    subtract(t67, t35, t67)
-    multiply(k8, t13, t35)
-    subtract(t67, t35, t67)
-    multiply(t87, t58, t58)
-    multiply(t38, t79, t79)
-    subtract(t58, t79, t58)
-    multiply(k7, t13, t35)
-    multiply(k2, t103, t103)
-    add(t35, t103, t35)
-    subtract(t58, t35, t58)
-    add(t58, t104, t58)
-    add(t67, t58, t67)
-    multiply(t3, t67, t67)
-    add(t70, t67, t70)
-    subtract(t30, t70, t30)
-    multiply(t7, t30, t30)
-    add(t45, t30, t45)
-    divide(t45, t21, t30)
-    multiply(t77, t9, t35)
-    multiply(t19, t56, t56)
-    subtract(t35, t56, t35)
-    multiply(t47, t15, t15)
-    multiply(t26, t99, t99)
-    subtract(t15, t99, t15)
-    subtract(t35, t15, t35)
-    multiply(k20, t13, t13)
-    subtract(t35, t13, t35)
-    multiply(t8, t57, t57)
-    multiply(t11, t72, t72)
-    subtract(t57, t72, t57)
-    add(t35, t57, t35)
-    multiply(t25, t45, t13)
-    multiply(k20, t55, t55)
-    multiply(t63, t9, t9)
-    add(t55, t9, t55)
-    multiply(t8, t76, t76)
-    multiply(t11, t64, t64)
-    add(t76, t64, t76)
-    subtract(t55, t76, t55)
-    multiply(t27, t45, t9)
-    add(t55, t9, t55)
-    multiply(t28, t55, t9)
-    add(t13, t9, t13)
-    subtract(t35, t13, t35)
-    divide(t35, t17, t9)
-    multiply(t20, t45, t13)
-    multiply(t31, t55, t15)
-    add(t13, t15, t13)
-    multiply(t33, t35, t15)
-    add(t13, t15, t13)
-    multiply(t18, t45, t45)
-    multiply(t23, t55, t15)
-    add(t45, t15, t45)
-    multiply(t22, t35, t35)
-    subtract(t45, t35, t45)
-    subtract(t62, t45, t62)
-    multiply(t24, t62, t15)
-    subtract(t13, t15, t13)
-    subtract(t14, t13, t14)
-    divide(t14, t6, t14)
-    multiply(t33, t14, t13)
-    divide(t62, t16, t62)
-    multiply(t24, t14, t15)
-    add(t62, t15, t62)
-    multiply(t22, t62, t15)
-    subtract(t13, t15, t13)
-    subtract(t9, t13, t9)
-    multiply(t25, t9, t13)
-    divide(t55, t29, t55)
-    multiply(t28, t9, t15)
-    multiply(t23, t62, t35)
-    add(t15, t35, t15)
-    multiply(t31, t14, t35)
-    add(t15, t35, t15)
-    subtract(t55, t15, t55)
-    multiply(t27, t55, t15)
-    subtract(t13, t15, t13)
-    multiply(t18, t62, t15)
-    add(t13, t15, t13)
-    multiply(t20, t14, t15)
-    add(t13, t15, t13)
-    subtract(t30, t13, t30)
-    negative(t30, A_52)
-    negative(t55, A_62)
-    negative(t9, A_72)
-    negative(t62, A_82)
-    negative(t14, A_92)
-    multiply(t19, t8, t9)
-    multiply(x_7, t11, t13)
-    subtract(t9, t13, t9)
-    multiply(t40, t9, t13)
-    multiply(t19, t11, t14)
-    multiply(x_7, t8, t15)
-    add(t14, t15, t14)
-    multiply(k12, t14, t15)
-    multiply(t38, t15, t30)
-    subtract(t13, t30, t13)
-    multiply(k23, t9, t30)
-    multiply(t39, t30, t35)
-    multiply(t42, t14, t45)
-    subtract(t35, t45, t35)
-    subtract(t13, t35, t13)
-    multiply(t12, t11, t35)
-    multiply(t5, t8, t45)
-    add(t35, t45, t35)
-    multiply(k2, t35, t45)
-    subtract(t13, t45, t13)
-    multiply(t54, t11, t45)
-    multiply(t44, t8, t55)
-    add(t45, t55, t45)
-    multiply(x_8, t9, t55)
-    add(t45, t55, t45)
-    multiply(t2, t45, t55)
-    multiply(t1, t14, t56)
-    multiply(x_9, t56, t57)
-    add(t55, t57, t55)
-    multiply(k10, t55, t57)
-    multiply(t50, t9, t58)
-    multiply(k10, t56, t62)
-    multiply(t46, t62, t64)
-    subtract(t58, t64, t58)
-    multiply(k22, t9, t64)
-    multiply(t49, t64, t67)
-    multiply(t52, t56, t70)
-    subtract(t67, t70, t67)
-    subtract(t58, t67, t58)
-    add(t57, t58, t57)
-    multiply(t59, t9, t58)
-    multiply(p_1, t45, t67)
-    add(t58, t67, t58)
-    multiply(t2, t58, t67)
-    multiply(t65, t9, t70)
-    multiply(p_1, t14, t71)
-    multiply(t38, t71, t72)
-    subtract(t70, t72, t70)
-    subtract(t70, t35, t70)
-    multiply(t1, t70, t72)
-    add(t67, t72, t67)
-    multiply(k1, t67, t72)
-    add(t57, t72, t57)
-    multiply(t1, t57, t72)
-    multiply(t2, t14, t74)
-    multiply(x_9, t74, t76)
-    multiply(t1, t45, t78)
-    subtract(t76, t78, t76)
-    multiply(k10, t76, t78)
-    multiply(t52, t74, t79)
-    multiply(t69, t64, t64)
-    add(t79, t64, t79)
-    multiply(t73, t9, t64)
-    multiply(k10, t74, t80)
-    multiply(t46, t80, t82)
-    add(t64, t82, t64)
-    subtract(t79, t64, t79)
-    add(t78, t79, t78)
-    multiply(t1, t58, t58)
-    multiply(t2, t70, t70)
-    subtract(t58, t70, t58)
-    multiply(k1, t58, t64)
-    subtract(t78, t64, t78)
-    multiply(t2, t78, t64)
-    add(t72, t64, t72)
-    add(t13, t72, t13)
-    multiply(k3, t67, t67)
-    multiply(k1, t55, t55)
-    add(t67, t55, t67)
-    multiply(t53, t9, t55)
-    multiply(k1, t56, t64)
-    multiply(t46, t64, t70)
-    subtract(t55, t70, t55)
-    add(t67, t55, t67)
-    multiply(t1, t67, t55)
-    multiply(k3, t58, t58)
-    multiply(k1, t76, t76)
-    subtract(t58, t76, t58)
-    multiply(t68, t9, t70)
-    multiply(k1, t74, t72)
-    multiply(t46, t72, t76)
-    add(t70, t76, t70)
-    add(t58, t70, t58)
-    multiply(t2, t58, t70)
-    subtract(t55, t70, t55)
-    multiply(p_1, t55, t70)
-    add(t13, t70, t13)
-    multiply(t0, t13, t70)
-    multiply(t41, t8, t76)
-    multiply(t54, t8, t54)
-    multiply(t44, t11, t44)
-    subtract(t54, t44, t54)
-    multiply(x_8, t14, t44)
-    subtract(t54, t44, t54)
-    multiply(k23, t54, t44)
-    multiply(t48, t15, t15)
-    multiply(t81, t14, t79)
-    subtract(t15, t79, t15)
-    add(t44, t15, t44)
-    multiply(k22, t54, t54)
-    multiply(t49, t80, t80)
-    multiply(t73, t56, t15)
-    subtract(t80, t15, t80)
-    multiply(t50, t74, t15)
-    multiply(t69, t62, t62)
-    subtract(t15, t62, t15)
-    subtract(t80, t15, t80)
-    add(t54, t80, t54)
-    add(t44, t54, t44)
-    multiply(t11, t44, t15)
-    add(t76, t15, t76)
-    multiply(t48, t30, t30)
-    multiply(t81, t9, t15)
-    subtract(t30, t15, t30)
-    multiply(k12, t45, t15)
-    subtract(t30, t15, t30)
-    multiply(t1, t78, t78)
-    multiply(t2, t57, t57)
-    subtract(t78, t57, t78)
-    add(t30, t78, t30)
-    multiply(t1, t58, t58)
-    multiply(t2, t67, t67)
-    add(t58, t67, t58)
-    multiply(p_1, t58, t15)
-    subtract(t30, t15, t30)
-    multiply(t8, t30, t15)
-    multiply(t51, t11, t57)
-    subtract(t15, t57, t15)
-    add(t76, t15, t76)
-    multiply(t3, t76, t76)
-    add(t70, t76, t70)
-    multiply(t61, t8, t15)
-    multiply(t12, t8, t12)
-    multiply(t5, t11, t5)
-    subtract(t12, t5, t12)
-    multiply(k7, t12, t5)
-    multiply(t75, t14, t57)
-    multiply(k2, t14, t62)
-    multiply(t39, t62, t67)
-    add(t57, t67, t57)
-    add(t5, t57, t5)
-    multiply(t65, t14, t14)
-    multiply(t39, t71, t71)
-    add(t14, t71, t14)
-    add(t12, t14, t12)
-    multiply(k3, t12, t12)
-    multiply(t68, t74, t74)
-    multiply(t69, t72, t72)
-    add(t74, t72, t74)
-    multiply(t53, t56, t56)
-    multiply(t49, t64, t64)
-    add(t56, t64, t56)
-    subtract(t74, t56, t74)
-    subtract(t12, t74, t12)
-    add(t5, t12, t5)
-    multiply(t11, t5, t12)
-    add(t15, t12, t15)
-    multiply(t75, t9, t12)
-    multiply(t38, t62, t62)
-    subtract(t12, t62, t12)
-    multiply(k7, t35, t35)
-    subtract(t12, t35, t12)
-    add(t12, t55, t12)
-    multiply(t8, t12, t14)
-    multiply(t88, t11, t35)
-    subtract(t14, t35, t14)
-    add(t15, t14, t15)
-    multiply(t0, t15, t15)
-    multiply(t87, t9, t9)
-    multiply(k2, t45, t45)
-    add(t9, t45, t9)
-    add(t9, t58, t9)
-    multiply(t3, t9, t9)
-    subtract(t15, t9, t15)
-    multiply(t7, t15, t15)
-    add(t70, t15, t70)
-    divide(t70, t21, t9)
-    multiply(t8, t44, t44)
-    multiply(t41, t11, t41)
-    subtract(t44, t41, t44)
-    multiply(t51, t8, t51)
-    multiply(t11, t30, t30)
-    add(t51, t30, t51)
-    subtract(t44, t51, t44)
-    multiply(t25, t70, t14)
-    multiply(t8, t5, t5)
-    multiply(t61, t11, t61)
-    subtract(t5, t61, t5)
-    multiply(t88, t8, t88)
-    multiply(t11, t12, t12)
-    add(t88, t12, t88)
-    subtract(t5, t88, t5)
-    multiply(t27, t70, t12)
-    add(t5, t12, t5)
-    multiply(t28, t5, t12)
-    add(t14, t12, t14)
-    subtract(t44, t14, t44)
-    divide(t44, t17, t12)
-    multiply(t20, t70, t14)
-    multiply(t31, t5, t15)
-    add(t14, t15, t14)
-    multiply(t33, t44, t15)
-    add(t14, t15, t14)
-    multiply(t18, t70, t70)
-    multiply(t23, t5, t15)
-    add(t70, t15, t70)
-    multiply(t22, t44, t44)
-    subtract(t70, t44, t70)
-    subtract(t13, t70, t13)
-    multiply(t24, t13, t15)
-    subtract(t14, t15, t14)
-    subtract(t54, t14, t54)
-    divide(t54, t6, t54)
-    multiply(t33, t54, t14)
-    divide(t13, t16, t13)
-    multiply(t24, t54, t15)
-    add(t13, t15, t13)
-    multiply(t22, t13, t15)
-    subtract(t14, t15, t14)
-    subtract(t12, t14, t12)
-    multiply(t25, t12, t14)
-    divide(t5, t29, t5)
-    multiply(t28, t12, t15)
-    multiply(t23, t13, t30)
-    add(t15, t30, t15)
-    multiply(t31, t54, t30)
-    add(t15, t30, t15)
-    subtract(t5, t15, t5)
-    multiply(t27, t5, t15)
-    subtract(t14, t15, t14)
-    multiply(t18, t13, t15)
-    add(t14, t15, t14)
-    multiply(t20, t54, t15)
-    add(t14, t15, t14)
-    subtract(t9, t14, t9)
-    negative(t9, A_53)
-    negative(t5, A_63)
-    negative(t12, A_73)
-    negative(t13, A_83)
-    negative(t54, A_93)
-    multiply(t48, t1, t5)
-    multiply(t39, t2, t9)
-    subtract(t5, t9, t5)
-    multiply(k10, t5, t9)
-    multiply(t46, t9, t12)
-    multiply(t52, t5, t13)
-    subtract(t12, t13, t12)
-    multiply(t43, t2, t13)
-    multiply(t90, t1, t14)
-    add(t13, t14, t13)
-    multiply(x_9, t5, t14)
-    add(t13, t14, t13)
-    multiply(k10, t13, t14)
-    subtract(t12, t14, t12)
-    multiply(t60, t1, t14)
-    multiply(t94, t2, t15)
-    subtract(t14, t15, t14)
-    multiply(k1, t14, t15)
-    add(t12, t15, t12)
-    multiply(t1, t12, t15)
-    multiply(t95, t2, t30)
-    subtract(t15, t30, t15)
-    multiply(t98, t1, t30)
-    multiply(t43, t1, t43)
-    multiply(t90, t2, t90)
-    subtract(t43, t90, t43)
-    multiply(t48, t2, t35)
-    multiply(t39, t1, t41)
-    add(t35, t41, t35)
-    multiply(x_9, t35, t41)
-    subtract(t43, t41, t43)
-    multiply(k10, t43, t41)
-    multiply(k10, t35, t44)
-    multiply(t46, t44, t45)
-    multiply(t52, t35, t51)
-    subtract(t45, t51, t45)
-    add(t41, t45, t41)
-    multiply(t60, t2, t60)
-    multiply(t94, t1, t94)
-    add(t60, t94, t60)
-    multiply(k1, t60, t45)
-    add(t41, t45, t41)
-    multiply(t2, t41, t45)
-    add(t30, t45, t30)
-    add(t15, t30, t15)
-    multiply(k3, t14, t14)
-    multiply(k1, t13, t13)
-    subtract(t14, t13, t14)
-    multiply(k1, t5, t13)
-    multiply(t46, t13, t30)
-    add(t14, t30, t14)
-    multiply(t1, t14, t30)
-    multiply(t66, t2, t45)
-    subtract(t30, t45, t30)
-    multiply(t97, t1, t45)
-    multiply(k3, t60, t60)
-    multiply(k1, t43, t43)
-    add(t60, t43, t60)
-    multiply(k1, t35, t43)
-    multiply(t46, t43, t51)
-    add(t60, t51, t60)
-    multiply(t2, t60, t51)
-    subtract(t45, t51, t45)
-    subtract(t30, t45, t30)
-    multiply(p_1, t30, t45)
-    add(t15, t45, t15)
-    multiply(t0, t15, t45)
-    multiply(t73, t5, t51)
-    multiply(t49, t44, t44)
-    subtract(t51, t44, t51)
-    multiply(t69, t9, t9)
-    multiply(t50, t35, t44)
-    subtract(t9, t44, t9)
-    subtract(t51, t9, t51)
-    multiply(t11, t51, t9)
-    multiply(t1, t41, t41)
-    multiply(t98, t2, t98)
-    subtract(t41, t98, t41)
-    multiply(t95, t1, t95)
-    multiply(t2, t12, t12)
-    add(t95, t12, t95)
-    subtract(t41, t95, t41)
-    multiply(t66, t1, t66)
-    multiply(t2, t14, t14)
-    add(t66, t14, t66)
-    multiply(t97, t2, t97)
-    multiply(t1, t60, t60)
-    add(t97, t60, t97)
-    subtract(t66, t97, t66)
-    multiply(p_1, t66, t12)
-    subtract(t41, t12, t41)
-    multiply(t8, t41, t12)
-    add(t9, t12, t9)
-    multiply(t3, t9, t9)
-    add(t45, t9, t45)
-    multiply(t8, t30, t9)
-    multiply(t53, t5, t5)
-    multiply(t49, t13, t13)
-    add(t5, t13, t5)
-    multiply(t68, t35, t35)
-    multiply(t69, t43, t43)
-    add(t35, t43, t35)
-    subtract(t5, t35, t5)
-    multiply(t11, t5, t12)
-    subtract(t9, t12, t9)
-    multiply(t0, t9, t9)
-    multiply(t3, t66, t66)
-    subtract(t9, t66, t9)
-    multiply(t7, t9, t9)
-    add(t45, t9, t45)
-    divide(t45, t21, t9)
-    multiply(t8, t51, t12)
-    multiply(t11, t41, t41)
-    subtract(t12, t41, t12)
-    multiply(t25, t45, t13)
-    multiply(t27, t45, t14)
-    multiply(t8, t5, t5)
-    multiply(t11, t30, t30)
-    add(t5, t30, t5)
-    subtract(t14, t5, t14)
-    multiply(t28, t14, t5)
-    add(t13, t5, t13)
-    subtract(t12, t13, t12)
-    divide(t12, t17, t5)
-    multiply(t20, t45, t13)
-    multiply(t31, t14, t30)
-    add(t13, t30, t13)
-    multiply(t33, t12, t30)
-    add(t13, t30, t13)
-    multiply(t18, t45, t45)
-    multiply(t23, t14, t30)
-    add(t45, t30, t45)
-    multiply(t22, t12, t12)
-    subtract(t45, t12, t45)
-    subtract(t15, t45, t15)
-    multiply(t24, t15, t12)
-    subtract(t13, t12, t13)
-    subtract(t51, t13, t51)
-    divide(t51, t6, t51)
-    multiply(t33, t51, t12)
-    divide(t15, t16, t15)
-    multiply(t24, t51, t13)
-    add(t15, t13, t15)
-    multiply(t22, t15, t13)
-    subtract(t12, t13, t12)
-    subtract(t5, t12, t5)
-    multiply(t25, t5, t12)
-    divide(t14, t29, t14)
-    multiply(t28, t5, t13)
-    multiply(t23, t15, t30)
-    add(t13, t30, t13)
-    multiply(t31, t51, t30)
-    add(t13, t30, t13)
-    subtract(t14, t13, t14)
-    multiply(t27, t14, t13)
-    subtract(t12, t13, t12)
-    multiply(t18, t15, t13)
-    add(t12, t13, t12)
-    multiply(t20, t51, t13)
-    add(t12, t13, t12)
-    subtract(t9, t12, t9)
-    negative(t9, A_54)
-    negative(t14, A_64)
-    negative(t5, A_74)
-    negative(t15, A_84)
-    negative(t51, A_94)
-    multiply(k25, x_6, t5)
-    multiply(k14, t3, t9)
-    multiply(x_7, t9, t12)
-    multiply(t34, t3, t13)
-    subtract(t12, t13, t12)
-    multiply(x_7, t3, t13)
-    multiply(k13, t13, t14)
-    subtract(t12, t14, t12)
-    multiply(k26, t37, t14)
-    add(t12, t14, t12)
-    multiply(t11, t3, t14)
-    multiply(t40, t14, t15)
-    multiply(t8, t3, t30)
-    multiply(k12, t30, t35)
-    multiply(t38, t35, t41)
-    add(t15, t41, t15)
-    multiply(t42, t30, t41)
-    multiply(k23, t14, t43)
-    multiply(t39, t43, t44)
-    add(t41, t44, t41)
-    subtract(t15, t41, t15)
-    multiply(k12, t13, t41)
-    subtract(t15, t41, t15)
-    add(x_6, x_6, t41)
-    multiply(t0, t41, t44)
-    multiply(t8, t44, t45)
-    add(t37, t37, t51)
-    multiply(t11, t51, t54)
-    add(t45, t54, t45)
-    multiply(k2, t45, t54)
-    add(t15, t54, t15)
-    multiply(t50, t14, t54)
-    multiply(t2, t0, t55)
-    multiply(t1, t30, t56)
-    add(t55, t56, t55)
-    multiply(k10, t55, t56)
-    multiply(t46, t56, t57)
-    add(t54, t57, t54)
-    multiply(t52, t55, t57)
-    multiply(k22, t14, t58)
-    multiply(t49, t58, t60)
-    add(t57, t60, t57)
-    subtract(t54, t57, t54)
-    multiply(t1, t13, t57)
-    multiply(x_7, t0, t60)
-    multiply(t8, t60, t61)
-    multiply(x_8, t14, t62)
-    subtract(t61, t62, t61)
-    multiply(t2, t61, t62)
-    add(t57, t62, t57)
-    multiply(x_9, t55, t62)
-    add(t57, t62, t57)
-    multiply(k10, t57, t62)
-    subtract(t54, t62, t54)
-    multiply(t59, t14, t62)
-    multiply(p_1, t0, t64)
-    multiply(t38, t64, t66)
-    add(t62, t66, t62)
-    multiply(t3, t41, t41)
-    multiply(p_1, t61, t66)
-    add(t41, t66, t66)
-    subtract(t62, t66, t62)
-    multiply(t2, t62, t66)
-    multiply(p_1, t13, t67)
-    subtract(t45, t67, t67)
-    multiply(t65, t14, t70)
-    multiply(p_1, t30, t71)
-    multiply(t38, t71, t72)
-    add(t70, t72, t70)
-    add(t67, t70, t67)
-    multiply(t1, t67, t70)
-    add(t66, t70, t66)
-    multiply(k1, t66, t70)
-    add(t54, t70, t54)
-    multiply(t1, t54, t70)
-    multiply(t1, t61, t72)
-    multiply(t2, t13, t74)
-    subtract(t72, t74, t72)
-    multiply(t1, t0, t74)
-    multiply(t2, t30, t76)
-    subtract(t74, t76, t74)
-    multiply(x_9, t74, t76)
-    add(t72, t76, t72)
-    multiply(k10, t72, t76)
-    multiply(t52, t74, t78)
-    multiply(t69, t58, t58)
-    add(t78, t58, t78)
-    multiply(t73, t14, t58)
-    multiply(k10, t74, t79)
-    multiply(t46, t79, t80)
-    add(t58, t80, t58)
-    subtract(t78, t58, t78)
-    add(t76, t78, t76)
-    multiply(t1, t62, t62)
-    multiply(t2, t67, t67)
-    subtract(t62, t67, t62)
-    multiply(k1, t62, t58)
-    subtract(t76, t58, t76)
-    multiply(t2, t76, t58)
-    add(t70, t58, t70)
-    add(t15, t70, t15)
-    multiply(k3, t66, t66)
-    multiply(k1, t57, t57)
-    subtract(t66, t57, t66)
-    multiply(t53, t14, t57)
-    multiply(k1, t55, t58)
-    multiply(t46, t58, t67)
-    add(t57, t67, t57)
-    add(t66, t57, t66)
-    multiply(t1, t66, t57)
-    multiply(k3, t62, t62)
-    multiply(k1, t72, t72)
-    subtract(t62, t72, t62)
-    multiply(t68, t14, t67)
-    multiply(k1, t74, t70)
-    multiply(t46, t70, t72)
-    add(t67, t72, t67)
-    add(t62, t67, t62)
-    multiply(t2, t62, t67)
-    subtract(t57, t67, t57)
-    multiply(p_1, t57, t67)
-    add(t15, t67, t15)
-    add(t12, t15, t12)
-    multiply(t0, t12, t12)
-    multiply(k14, t60, t67)
-    multiply(t34, t0, t34)
-    multiply(k13, t0, t72)
-    multiply(x_7, t72, t78)
-    subtract(t34, t78, t34)
-    add(t67, t34, t67)
-    multiply(t11, t60, t60)
-    multiply(x_8, t30, t34)
-    add(t60, t34, t60)
-    multiply(k23, t60, t34)
-    multiply(t81, t30, t78)
-    multiply(k12, t0, t80)
-    multiply(t39, t80, t82)
-    add(t78, t82, t78)
-    multiply(t40, t0, t82)
-    multiply(t48, t35, t35)
-    add(t82, t35, t82)
-    subtract(t78, t82, t78)
-    add(t34, t78, t34)
-    multiply(k22, t60, t60)
-    multiply(t73, t55, t35)
-    multiply(t49, t79, t79)
-    add(t35, t79, t35)
-    multiply(t50, t74, t78)
-    multiply(t69, t56, t56)
-    add(t78, t56, t78)
-    subtract(t35, t78, t35)
-    add(t60, t35, t60)
-    add(t34, t60, t34)
-    multiply(t11, t34, t35)
-    multiply(k12, t61, t56)
-    multiply(t42, t0, t78)
-    multiply(t48, t43, t43)
-    add(t78, t43, t78)
-    multiply(t81, t14, t43)
-    multiply(t38, t80, t80)
-    add(t43, t80, t43)
-    subtract(t78, t43, t78)
-    add(t56, t78, t56)
-    multiply(k2, t41, t43)
-    add(t56, t43, t56)
-    multiply(t1, t76, t76)
-    multiply(t2, t54, t54)
-    subtract(t76, t54, t76)
-    add(t56, t76, t56)
-    multiply(t1, t62, t62)
-    multiply(t2, t66, t66)
-    add(t62, t66, t62)
-    multiply(p_1, t62, t43)
-    subtract(t56, t43, t56)
-    multiply(t8, t56, t43)
-    add(t35, t43, t35)
-    add(t67, t35, t67)
-    multiply(t3, t67, t67)
-    add(t12, t67, t12)
-    add(t5, t12, t5)
-    multiply(k27, x_6, t12)
-    multiply(k8, t44, t35)
-    multiply(t36, t0, t43)
-    multiply(k20, t0, t54)
-    multiply(t47, t54, t66)
-    add(t43, t66, t43)
-    subtract(t35, t43, t35)
-    multiply(t11, t44, t44)
-    multiply(t8, t51, t51)
-    subtract(t44, t51, t44)
-    multiply(k7, t44, t43)
-    multiply(t75, t30, t51)
-    multiply(k2, t30, t66)
-    multiply(t39, t66, t67)
-    add(t51, t67, t51)
-    multiply(t87, t0, t67)
-    multiply(k2, t0, t76)
-    multiply(t48, t76, t78)
-    add(t67, t78, t67)
-    add(t51, t67, t51)
-    subtract(t43, t51, t43)
-    multiply(t65, t30, t30)
-    multiply(t39, t71, t71)
-    add(t30, t71, t30)
-    multiply(t59, t0, t51)
-    multiply(t48, t64, t64)
-    add(t51, t64, t51)
-    add(t30, t51, t30)
-    subtract(t44, t30, t44)
-    multiply(k3, t44, t44)
-    multiply(t53, t55, t55)
-    multiply(t49, t58, t58)
-    add(t55, t58, t55)
-    multiply(t68, t74, t74)
-    multiply(t69, t70, t70)
-    add(t74, t70, t74)
-    add(t55, t74, t55)
-    subtract(t44, t55, t44)
-    add(t43, t44, t43)
-    multiply(t11, t43, t30)
-    multiply(k7, t45, t45)
-    multiply(k2, t13, t44)
-    subtract(t45, t44, t45)
-    multiply(t75, t14, t44)
-    multiply(t38, t66, t66)
-    add(t44, t66, t44)
-    add(t45, t44, t45)
-    add(t45, t57, t45)
-    multiply(t8, t45, t44)
-    add(t30, t44, t30)
-    add(t35, t30, t35)
-    multiply(t0, t35, t35)
-    multiply(t36, t3, t36)
-    multiply(t19, t54, t54)
-    add(t36, t54, t36)
-    multiply(k8, t41, t30)
-    subtract(t36, t30, t36)
-    multiply(t87, t14, t14)
-    multiply(t38, t76, t76)
-    add(t14, t76, t14)
-    multiply(k7, t41, t30)
-    multiply(k2, t61, t61)
-    add(t30, t61, t30)
-    subtract(t14, t30, t14)
-    add(t14, t62, t14)
-    add(t36, t14, t36)
-    multiply(t3, t36, t36)
-    subtract(t35, t36, t35)
-    add(t12, t35, t12)
-    multiply(t7, t12, t12)
-    add(t5, t12, t5)
-    divide(t5, t21, t12)
-    multiply(t77, t3, t77)
-    multiply(t19, t72, t72)
-    add(t77, t72, t77)
-    multiply(t26, t0, t14)
-    multiply(t47, t9, t9)
-    add(t14, t9, t14)
-    subtract(t77, t14, t77)
-    multiply(k20, t41, t41)
-    subtract(t77, t41, t77)
-    multiply(t8, t34, t34)
+    multiply(t0, t72, t112)
+    multiply(k20, t45, t113)
+    multiply(k8, t13, t114)
+    subtract(t113, t114, t113)
+    add(t113, t68, t113)
+    multiply(k7, t13, t115)
+    multiply(k2, t107, t116)
+    add(t115, t116, t115)
+    subtract(t100, t115, t100)
+    multiply(t1, t65, t65)
+    multiply(t2, t109, t109)
+    add(t65, t109, t115)
+    add(t100, t115, t100)
+    add(t113, t100, t113)
+    multiply(t3, t113, t100)
+    subtract(t112, t100, t112)
+    add(t9, t112, t9)
+    multiply(k24, t15, t15)
+    multiply(k8, t56, t100)
     multiply(t11, t56, t56)
-    subtract(t34, t56, t34)
-    add(t77, t34, t77)
-    multiply(t25, t5, t9)
-    multiply(k20, t13, t13)
-    multiply(k28, t37, t14)
-    subtract(t13, t14, t13)
-    multiply(t63, t3, t63)
-    add(t13, t63, t13)
-    multiply(t8, t43, t43)
-    multiply(t11, t45, t45)
-    subtract(t43, t45, t43)
-    add(t13, t43, t13)
-    multiply(k27, t37, t37)
-    multiply(k25, x_5, t14)
-    add(t37, t14, t37)
-    subtract(t13, t37, t13)
-    multiply(t27, t5, t30)
-    add(t13, t30, t13)
-    multiply(t28, t13, t30)
-    add(t9, t30, t9)
-    subtract(t77, t9, t77)
-    divide(t77, t17, t9)
-    multiply(t20, t5, t30)
-    multiply(t31, t13, t34)
-    add(t30, t34, t30)
-    multiply(t33, t77, t34)
-    add(t30, t34, t30)
-    multiply(t18, t5, t5)
-    multiply(t23, t13, t34)
-    add(t5, t34, t5)
-    multiply(t22, t77, t77)
-    subtract(t5, t77, t5)
-    subtract(t15, t5, t15)
-    multiply(t24, t15, t5)
-    subtract(t30, t5, t30)
-    subtract(t60, t30, t60)
-    divide(t60, t6, t60)
-    multiply(t33, t60, t5)
-    divide(t15, t16, t15)
-    multiply(t24, t60, t30)
-    add(t15, t30, t15)
-    multiply(t22, t15, t30)
-    subtract(t5, t30, t5)
-    subtract(t9, t5, t9)
-    multiply(t25, t9, t5)
-    divide(t13, t29, t13)
-    multiply(t28, t9, t30)
-    multiply(t23, t15, t34)
-    add(t30, t34, t30)
-    multiply(t31, t60, t34)
-    add(t30, t34, t30)
-    subtract(t13, t30, t13)
-    multiply(t27, t13, t30)
-    subtract(t5, t30, t5)
-    multiply(t18, t15, t30)
-    add(t5, t30, t5)
-    multiply(t20, t60, t30)
-    add(t5, t30, t5)
-    subtract(t12, t5, t12)
-    negative(t12, A_55)
-    negative(t13, A_65)
-    negative(t9, A_75)
-    negative(t15, A_85)
-    negative(t60, A_95)
-    add(x_5, x_5, t5)
-    multiply(t0, t5, t9)
-    multiply(t8, t9, t12)
-    multiply(k2, t12, t13)
-    multiply(t1, t12, t15)
-    multiply(t3, t5, t5)
-    multiply(t2, t5, t30)
-    subtract(t15, t30, t15)
-    multiply(k1, t15, t30)
-    multiply(t1, t30, t34)
-    multiply(t1, t5, t35)
-    multiply(t2, t12, t36)
-    add(t35, t36, t35)
-    multiply(k1, t35, t36)
-    multiply(t2, t36, t37)
-    add(t34, t37, t34)
-    add(t13, t34, t13)
-    multiply(k3, t15, t15)
-    multiply(t1, t15, t34)
-    multiply(k3, t35, t35)
-    multiply(t2, t35, t37)
-    add(t34, t37, t34)
-    multiply(p_1, t34, t37)
-    add(t13, t37, t13)
-    multiply(t0, t13, t37)
-    multiply(k2, t5, t41)
-    multiply(t1, t36, t36)
-    multiply(t2, t30, t30)
-    subtract(t36, t30, t36)
-    add(t41, t36, t41)
-    multiply(t2, t15, t15)
-    multiply(t1, t35, t35)
-    subtract(t15, t35, t15)
-    multiply(p_1, t15, t30)
-    subtract(t41, t30, t41)
-    multiply(t8, t41, t30)
-    multiply(t3, t30, t30)
-    add(t37, t30, t37)
-    add(t14, t37, t14)
-    multiply(k27, x_5, t30)
-    multiply(k8, t9, t35)
-    multiply(t11, t9, t9)
-    multiply(k7, t9, t36)
-    multiply(k3, t9, t9)
-    add(t36, t9, t36)
-    multiply(t11, t36, t9)
-    multiply(k7, t12, t12)
-    add(t12, t34, t12)
-    multiply(t8, t12, t34)
-    add(t9, t34, t9)
-    add(t35, t9, t35)
-    multiply(t0, t35, t35)
-    multiply(k7, t5, t9)
-    subtract(t15, t9, t15)
-    multiply(k8, t5, t9)
-    subtract(t15, t9, t15)
-    multiply(t3, t15, t15)
-    subtract(t35, t15, t35)
-    add(t30, t35, t30)
-    multiply(t7, t30, t30)
-    add(t14, t30, t14)
-    divide(t14, t21, t9)
-    multiply(t18, t14, t15)
-    multiply(t8, t36, t36)
-    multiply(t11, t12, t12)
-    subtract(t36, t12, t36)
-    multiply(t27, t14, t12)
-    add(t36, t12, t36)
-    multiply(t23, t36, t12)
-    add(t15, t12, t15)
+    multiply(t8, t19, t112)
+    subtract(t56, t112, t56)
+    multiply(k7, t56, t112)
+    multiply(k3, t56, t56)
+    add(t112, t56, t112)
+    multiply(t11, t112, t56)
+    multiply(k7, t63, t63)
+    add(t63, t102, t63)
+    multiply(t8, t63, t102)
+    add(t56, t102, t56)
+    add(t100, t56, t100)
+    multiply(t0, t100, t100)
+    multiply(k7, t90, t56)
+    subtract(t84, t56, t84)
+    multiply(k8, t90, t56)
+    subtract(t84, t56, t84)
+    multiply(t3, t84, t84)
+    subtract(t100, t84, t100)
+    add(t15, t100, t15)
+    multiply(t7, t15, t15)
+    add(t9, t15, t9)
+    add(t46, t9, t46)
+    divide(t46, t16, t9)
+    multiply(t18, t46, t15)
+    multiply(t8, t112, t112)
+    multiply(t11, t63, t63)
+    subtract(t112, t63, t112)
+    multiply(k8, t19, t56)
+    subtract(t112, t56, t112)
+    multiply(k24, t19, t19)
+    subtract(t112, t19, t112)
+    multiply(t27, t46, t19)
+    add(t112, t19, t112)
+    multiply(t22, t112, t19)
+    add(t15, t19, t15)
+    multiply(k20, t90, t90)
+    multiply(t11, t105, t105)
+    add(t90, t105, t90)
+    multiply(t24, t46, t19)
+    multiply(t28, t112, t56)
+    add(t19, t56, t19)
+    add(t90, t19, t90)
+    multiply(t21, t90, t19)
+    add(t15, t19, t15)
+    subtract(t78, t15, t78)
+    divide(t78, t14, t15)
+    multiply(t23, t46, t46)
+    multiply(t31, t112, t19)
+    add(t46, t19, t46)
+    multiply(t33, t90, t19)
+    subtract(t46, t19, t46)
+    multiply(t26, t78, t78)
+    subtract(t46, t78, t46)
+    divide(t46, t6, A_91)
+    multiply(t26, A_91, t19)
+    subtract(t15, t19, t15)
+    multiply(t21, t15, t19)
+    multiply(t33, A_91, t46)
+    add(t19, t46, t19)
+    divide(t90, t17, t90)
+    subtract(t19, t90, t19)
+    multiply(t24, t19, t46)
+    divide(t112, t29, t112)
+    multiply(t28, t19, t56)
+    multiply(t22, t15, t63)
+    add(t56, t63, t56)
+    multiply(t31, A_91, t63)
+    subtract(t56, t63, t56)
+    subtract(t112, t56, t112)
+    multiply(t27, t112, t56)
+    subtract(t46, t56, t46)
+    multiply(t18, t15, t56)
+    add(t46, t56, t46)
+    multiply(t23, A_91, t56)
+    subtract(t46, t56, t46)
+    subtract(t9, t46, t9)
+    negative(t9, A_51)
+    negative(t112, A_61)
+    negative(t19, A_71)
+    negative(t15, A_81)
+    multiply(k14, t48, t9)
+    multiply(x_7, t9, t15)
+    subtract(t15, t79, t15)
+    multiply(k13, t55, t19)
+    subtract(t15, t19, t15)
+    multiply(t11, t48, t19)
+    multiply(t41, t19, t46)
+    multiply(t8, t48, t56)
+    multiply(k12, t56, t63)
+    multiply(t39, t63, t78)
+    add(t46, t78, t46)
+    multiply(t43, t56, t78)
+    multiply(k23, t19, t79)
+    multiply(t40, t79, t84)
+    add(t78, t84, t78)
+    subtract(t46, t78, t46)
+    multiply(k12, t55, t78)
+    subtract(t46, t78, t46)
+    multiply(t8, t13, t78)
+    multiply(k2, t78, t84)
+    subtract(t46, t84, t46)
+    multiply(t51, t19, t84)
+    multiply(t1, t56, t90)
+    multiply(t2, t20, t100)
+    subtract(t90, t100, t90)
+    multiply(k10, t90, t102)
+    multiply(t47, t102, t105)
+    add(t84, t105, t84)
+    multiply(t53, t90, t105)
+    multiply(k22, t19, t112)
+    multiply(t50, t112, t116)
+    add(t105, t116, t105)
+    subtract(t84, t105, t84)
+    multiply(t1, t55, t105)
+    multiply(t8, t36, t116)
+    multiply(x_8, t19, t117)
+    subtract(t116, t117, t116)
+    multiply(t2, t116, t117)
+    add(t105, t117, t105)
+    multiply(x_9, t90, t117)
+    add(t105, t117, t105)
+    multiply(k10, t105, t117)
+    subtract(t84, t117, t84)
+    multiply(t60, t19, t117)
+    multiply(p_1, t20, t118)
+    multiply(t39, t118, t119)
+    subtract(t117, t119, t117)
+    multiply(p_1, t116, t119)
+    add(t12, t119, t119)
+    subtract(t117, t119, t117)
+    multiply(t2, t117, t119)
+    multiply(t66, t19, t120)
+    multiply(p_1, t56, t121)
+    multiply(t39, t121, t122)
+    add(t120, t122, t120)
+    multiply(p_1, t55, t122)
+    add(t78, t122, t122)
+    subtract(t120, t122, t120)
+    multiply(t1, t120, t122)
+    add(t119, t122, t119)
+    multiply(k1, t119, t122)
+    add(t84, t122, t84)
+    multiply(t1, t84, t122)
+    multiply(t1, t116, t123)
+    multiply(t2, t55, t124)
+    subtract(t123, t124, t123)
+    multiply(t1, t20, t124)
+    multiply(t2, t56, t125)
+    add(t124, t125, t125)
+    multiply(x_9, t125, t126)
+    subtract(t123, t126, t123)
+    multiply(k10, t123, t126)
+    multiply(t70, t112, t112)
+    multiply(t53, t125, t127)
+    subtract(t112, t127, t112)
+    multiply(t74, t19, t127)
+    multiply(k10, t125, t128)
+    multiply(t47, t128, t129)
+    subtract(t127, t129, t127)
+    subtract(t112, t127, t112)
+    add(t126, t112, t126)
+    multiply(t1, t117, t117)
+    multiply(t2, t120, t120)
+    subtract(t117, t120, t117)
+    multiply(k1, t117, t112)
+    subtract(t126, t112, t126)
+    multiply(t2, t126, t112)
+    add(t122, t112, t122)
+    add(t46, t122, t46)
+    multiply(k3, t119, t119)
+    multiply(k1, t105, t105)
+    subtract(t119, t105, t119)
+    multiply(t54, t19, t105)
+    multiply(k1, t90, t112)
+    multiply(t47, t112, t120)
+    add(t105, t120, t105)
+    add(t119, t105, t119)
+    multiply(t1, t119, t105)
+    multiply(k3, t117, t117)
+    multiply(k1, t123, t123)
+    subtract(t117, t123, t117)
+    multiply(t69, t19, t120)
+    multiply(k1, t125, t122)
+    multiply(t47, t122, t123)
+    subtract(t120, t123, t120)
+    add(t117, t120, t117)
+    multiply(t2, t117, t120)
+    subtract(t105, t120, t105)
+    multiply(p_1, t105, t120)
+    add(t46, t120, t46)
+    add(t15, t46, t15)
+    multiply(t0, t15, t15)
+    multiply(k13, t36, t120)
+    add(t120, t30, t120)
     multiply(k20, t5, t5)
-    multiply(t11, t41, t41)
-    add(t5, t41, t5)
-    multiply(t25, t14, t12)
-    multiply(t28, t36, t30)
-    add(t12, t30, t12)
-    add(t5, t12, t5)
-    multiply(t22, t5, t12)
-    add(t15, t12, t15)
+    subtract(t120, t5, t120)
+    multiply(k12, t44, t44)
+    add(t44, t42, t44)
+    multiply(k2, t98, t5)
+    add(t44, t5, t44)
+    multiply(k10, t110, t110)
+    add(t110, t52, t110)
+    multiply(k1, t57, t57)
+    add(t110, t57, t110)
+    multiply(t1, t110, t5)
+    multiply(k10, t108, t108)
+    add(t108, t76, t76)
+    multiply(k1, t61, t61)
+    subtract(t76, t61, t76)
+    multiply(t2, t76, t30)
+    add(t5, t30, t42)
+    add(t44, t42, t44)
+    multiply(p_1, t77, t77)
+    add(t44, t77, t44)
+    add(t120, t44, t120)
+    multiply(t120, t3, t120)
+    subtract(t15, t120, t15)
+    multiply(k14, t55, t42)
+    add(t42, t81, t42)
+    multiply(t8, t45, t45)
+    multiply(t11, t55, t44)
+    add(t45, t44, t45)
+    add(t45, t83, t45)
+    multiply(k23, t45, t44)
+    add(t44, t87, t44)
+    add(t45, t82, t82)
+    multiply(k22, t82, t82)
+    add(t82, t88, t82)
+    add(t44, t82, t44)
+    multiply(t11, t44, t52)
+    multiply(k12, t107, t57)
+    add(t57, t91, t57)
+    multiply(k2, t13, t77)
+    add(t57, t77, t57)
+    multiply(t1, t76, t76)
+    multiply(t2, t110, t110)
+    subtract(t76, t110, t77)
+    add(t57, t77, t57)
+    multiply(p_1, t115, t115)
+    subtract(t57, t115, t57)
+    multiply(t8, t57, t77)
+    add(t52, t77, t81)
+    add(t42, t81, t42)
+    multiply(t42, t0, t42)
+    multiply(k14, t36, t81)
+    multiply(k13, t20, t82)
+    multiply(x_7, t82, t83)
+    subtract(t83, t35, t83)
+    add(t81, t83, t81)
+    multiply(t11, t36, t36)
+    multiply(x_8, t56, t35)
+    add(t36, t35, t36)
+    multiply(k23, t36, t35)
+    multiply(t85, t56, t83)
+    multiply(k12, t20, t87)
+    multiply(t40, t87, t88)
+    subtract(t83, t88, t83)
+    multiply(t49, t63, t63)
+    multiply(t41, t20, t88)
+    subtract(t63, t88, t63)
+    subtract(t83, t63, t83)
+    add(t35, t83, t35)
+    multiply(k22, t36, t36)
+    multiply(t74, t90, t63)
+    multiply(t50, t128, t128)
+    subtract(t63, t128, t63)
+    multiply(t70, t102, t102)
+    multiply(t51, t125, t83)
+    subtract(t102, t83, t102)
+    subtract(t63, t102, t63)
+    add(t36, t63, t36)
+    add(t35, t36, t35)
+    multiply(t11, t35, t63)
+    multiply(k12, t116, t83)
+    multiply(t49, t79, t79)
+    multiply(t43, t20, t88)
+    subtract(t79, t88, t79)
+    multiply(t85, t19, t88)
+    multiply(t39, t87, t91)
+    subtract(t88, t91, t88)
+    subtract(t79, t88, t79)
+    add(t83, t79, t83)
+    multiply(k2, t12, t79)
+    add(t83, t79, t83)
+    multiply(t1, t126, t126)
+    multiply(t2, t84, t84)
+    subtract(t126, t84, t126)
+    add(t83, t126, t83)
+    multiply(t1, t117, t117)
+    multiply(t2, t119, t119)
+    add(t117, t119, t117)
+    multiply(p_1, t117, t79)
+    subtract(t83, t79, t83)
+    multiply(t8, t83, t79)
+    add(t63, t79, t63)
+    add(t81, t63, t81)
+    multiply(t3, t81, t81)
+    add(t42, t81, t42)
+    add(t15, t42, t15)
+    multiply(k20, t20, t42)
+    multiply(t48, t42, t63)
+    add(t68, t63, t68)
+    subtract(t68, t114, t68)
+    multiply(t89, t19, t63)
+    multiply(k2, t56, t79)
+    multiply(t39, t79, t81)
+    add(t63, t81, t63)
+    multiply(k7, t78, t78)
+    multiply(k2, t55, t81)
+    add(t78, t81, t78)
+    subtract(t63, t78, t63)
+    add(t63, t105, t63)
+    multiply(t8, t63, t78)
+    multiply(t11, t13, t13)
+    multiply(k7, t13, t81)
+    multiply(t89, t56, t84)
+    multiply(t40, t79, t79)
+    add(t84, t79, t84)
+    multiply(t94, t20, t79)
+    multiply(k2, t20, t88)
+    multiply(t49, t88, t91)
+    add(t79, t91, t79)
+    subtract(t84, t79, t84)
+    add(t81, t84, t81)
+    multiply(t66, t56, t79)
+    multiply(t40, t121, t121)
+    add(t79, t121, t79)
+    multiply(t60, t20, t84)
+    multiply(t49, t118, t91)
+    add(t84, t91, t84)
+    subtract(t79, t84, t79)
+    add(t13, t79, t13)
+    multiply(k3, t13, t13)
+    multiply(t54, t90, t90)
+    multiply(t50, t112, t112)
+    add(t90, t112, t90)
+    multiply(t69, t125, t125)
+    multiply(t70, t122, t122)
+    add(t125, t122, t125)
+    subtract(t90, t125, t90)
+    add(t13, t90, t13)
+    add(t81, t13, t81)
+    multiply(t11, t81, t13)
+    subtract(t78, t13, t78)
+    add(t68, t78, t68)
+    multiply(t0, t68, t68)
+    multiply(t72, t3, t72)
+    subtract(t68, t72, t68)
+    multiply(t113, t0, t113)
+    multiply(t20, t42, t42)
+    subtract(t59, t42, t59)
+    subtract(t59, t101, t59)
+    multiply(t94, t19, t13)
+    multiply(t39, t88, t42)
+    subtract(t13, t42, t13)
+    multiply(k7, t12, t42)
+    multiply(k2, t116, t116)
+    add(t42, t116, t42)
+    subtract(t13, t42, t13)
+    add(t13, t117, t13)
+    add(t59, t13, t59)
+    multiply(t3, t59, t59)
+    add(t113, t59, t113)
+    subtract(t68, t113, t68)
+    multiply(t7, t68, t68)
+    add(t15, t68, t15)
+    divide(t15, t16, t13)
+    multiply(t80, t48, t42)
+    multiply(t20, t82, t59)
+    subtract(t42, t59, t42)
+    multiply(t48, t9, t59)
+    multiply(t25, t20, t68)
+    subtract(t59, t68, t59)
+    subtract(t42, t59, t42)
+    multiply(k20, t12, t12)
+    subtract(t42, t12, t42)
+    multiply(t8, t35, t35)
+    multiply(t11, t83, t83)
+    subtract(t35, t83, t35)
+    add(t42, t35, t42)
+    multiply(t24, t15, t12)
+    multiply(k20, t55, t55)
+    multiply(t64, t48, t35)
+    add(t55, t35, t55)
+    multiply(t8, t81, t81)
+    multiply(t11, t63, t63)
+    add(t81, t63, t81)
+    subtract(t55, t81, t55)
+    multiply(t27, t15, t35)
+    add(t55, t35, t55)
+    multiply(t28, t55, t35)
+    add(t12, t35, t12)
+    subtract(t42, t12, t42)
+    divide(t42, t17, t12)
+    multiply(t23, t15, t35)
+    multiply(t31, t55, t59)
+    add(t35, t59, t35)
+    multiply(t33, t42, t59)
+    add(t35, t59, t35)
+    multiply(t18, t15, t15)
+    multiply(t22, t55, t59)
+    add(t15, t59, t15)
+    multiply(t21, t42, t42)
+    subtract(t15, t42, t15)
+    subtract(t46, t15, t46)
+    multiply(t26, t46, t15)
+    subtract(t35, t15, t35)
+    subtract(t36, t35, t36)
+    divide(t36, t6, t36)
+    multiply(t33, t36, t15)
+    divide(t46, t14, t46)
+    multiply(t26, t36, t35)
+    add(t46, t35, t46)
+    multiply(t21, t46, t35)
+    subtract(t15, t35, t15)
+    subtract(t12, t15, t12)
+    multiply(t24, t12, t15)
+    divide(t55, t29, t55)
+    multiply(t28, t12, t35)
+    multiply(t22, t46, t42)
+    add(t35, t42, t35)
+    multiply(t31, t36, t42)
+    add(t35, t42, t35)
+    subtract(t55, t35, t55)
+    multiply(t27, t55, t35)
+    subtract(t15, t35, t15)
+    multiply(t18, t46, t35)
+    add(t15, t35, t15)
+    multiply(t23, t36, t35)
+    add(t15, t35, t15)
     subtract(t13, t15, t13)
-    divide(t13, t16, t12)
-    multiply(t20, t14, t14)
-    multiply(t31, t36, t15)
-    add(t14, t15, t14)
-    multiply(t33, t5, t15)
-    subtract(t14, t15, t14)
-    multiply(t24, t13, t13)
-    subtract(t14, t13, t14)
-    divide(t14, t6, A_96)
-    multiply(t24, A_96, t13)
-    subtract(t12, t13, t12)
-    multiply(t22, t12, t13)
-    multiply(t33, A_96, t14)
-    add(t13, t14, t13)
-    divide(t5, t17, t5)
-    subtract(t13, t5, t13)
-    multiply(t25, t13, t5)
-    divide(t36, t29, t36)
-    multiply(t28, t13, t14)
-    multiply(t23, t12, t15)
-    add(t14, t15, t14)
-    multiply(t31, A_96, t15)
-    subtract(t14, t15, t14)
-    subtract(t36, t14, t36)
-    multiply(t27, t36, t14)
-    subtract(t5, t14, t5)
-    multiply(t18, t12, t14)
-    add(t5, t14, t5)
-    multiply(t20, A_96, t14)
-    subtract(t5, t14, t5)
-    subtract(t9, t5, t9)
-    negative(t9, A_56)
-    negative(t36, A_66)
-    negative(t13, A_76)
-    negative(t12, A_86)
-    multiply(k13, t19, t5)
-    subtract(t26, t5, t26)
-    subtract(t26, t5, t26)
-    multiply(t40, t8, t40)
-    multiply(k12, t11, t5)
-    multiply(t38, t5, t9)
-    subtract(t40, t9, t40)
-    multiply(k23, t8, t9)
-    multiply(t39, t9, t12)
-    multiply(t42, t11, t13)
-    subtract(t12, t13, t12)
-    subtract(t40, t12, t40)
-    multiply(k12, t19, t12)
-    subtract(t40, t12, t40)
-    multiply(t1, t11, t12)
-    multiply(x_9, t12, t13)
-    multiply(t1, t19, t14)
-    multiply(t8, t47, t15)
-    multiply(x_8, t8, t30)
-    subtract(t15, t30, t15)
-    multiply(t2, t15, t30)
-    add(t14, t30, t14)
-    subtract(t13, t14, t13)
-    multiply(k10, t13, t14)
-    multiply(t50, t8, t30)
-    multiply(k10, t12, t34)
-    multiply(t46, t34, t35)
-    subtract(t30, t35, t30)
-    multiply(t49, t32, t35)
-    multiply(t52, t12, t36)
+    negative(t13, A_52)
+    negative(t55, A_62)
+    negative(t12, A_72)
+    negative(t46, A_82)
+    negative(t36, A_92)
+    multiply(t41, t40, t12)
+    multiply(k12, t39, t13)
+    multiply(t39, t13, t15)
+    subtract(t12, t15, t12)
+    multiply(k23, t40, t15)
+    multiply(t40, t15, t35)
+    multiply(t43, t39, t36)
     subtract(t35, t36, t35)
+    subtract(t12, t35, t12)
+    multiply(k2, t62, t35)
+    subtract(t12, t35, t12)
+    multiply(t2, t45, t35)
+    multiply(t1, t39, t36)
+    multiply(x_9, t36, t42)
+    add(t35, t42, t35)
+    multiply(k10, t35, t42)
+    multiply(t51, t40, t46)
+    multiply(k10, t36, t55)
+    multiply(t47, t55, t59)
+    subtract(t46, t59, t46)
+    multiply(k22, t40, t59)
+    multiply(t50, t59, t63)
+    multiply(t53, t36, t68)
+    subtract(t63, t68, t63)
+    subtract(t46, t63, t46)
+    add(t42, t46, t42)
+    multiply(t60, t40, t46)
+    multiply(p_1, t45, t63)
+    add(t46, t63, t46)
+    multiply(t2, t46, t63)
+    multiply(p_1, t39, t68)
+    multiply(t39, t68, t72)
+    subtract(t96, t72, t96)
+    subtract(t96, t62, t96)
+    multiply(t1, t96, t62)
+    add(t63, t62, t63)
+    multiply(k1, t63, t62)
+    add(t42, t62, t42)
+    multiply(t1, t42, t62)
+    multiply(t2, t39, t72)
+    multiply(x_9, t72, t78)
+    multiply(t1, t45, t79)
+    subtract(t78, t79, t78)
+    multiply(k10, t78, t79)
+    multiply(t53, t72, t81)
+    multiply(t70, t59, t83)
+    add(t81, t83, t81)
+    multiply(t74, t40, t83)
+    multiply(k10, t72, t84)
+    multiply(t47, t84, t90)
+    add(t83, t90, t83)
+    subtract(t81, t83, t81)
+    add(t79, t81, t79)
+    multiply(t1, t46, t46)
+    multiply(t2, t96, t96)
+    subtract(t46, t96, t46)
+    multiply(k1, t46, t81)
+    subtract(t79, t81, t79)
+    multiply(t2, t79, t81)
+    add(t62, t81, t62)
+    add(t12, t62, t12)
+    multiply(k3, t63, t63)
+    multiply(k1, t35, t35)
+    add(t63, t35, t63)
+    multiply(t54, t40, t35)
+    multiply(k1, t36, t62)
+    multiply(t47, t62, t81)
+    subtract(t35, t81, t35)
+    add(t63, t35, t63)
+    multiply(t1, t63, t35)
+    multiply(k3, t46, t46)
+    multiply(k1, t78, t78)
+    subtract(t46, t78, t46)
+    multiply(t69, t40, t78)
+    multiply(k1, t72, t81)
+    multiply(t47, t81, t83)
+    add(t78, t83, t78)
+    add(t46, t78, t46)
+    multiply(t2, t46, t78)
+    subtract(t35, t78, t35)
+    multiply(p_1, t35, t78)
+    add(t12, t78, t12)
+    multiply(t0, t12, t78)
+    multiply(t44, t8, t44)
+    multiply(k23, t107, t83)
+    multiply(t49, t13, t90)
+    subtract(t90, t92, t90)
+    add(t83, t90, t83)
+    multiply(k22, t107, t107)
+    multiply(t50, t84, t84)
+    multiply(t74, t36, t90)
+    subtract(t84, t90, t84)
+    multiply(t51, t72, t90)
+    multiply(t70, t55, t55)
+    subtract(t90, t55, t90)
+    subtract(t84, t90, t84)
+    add(t107, t84, t107)
+    add(t83, t107, t83)
+    multiply(t11, t83, t55)
+    add(t44, t55, t44)
+    multiply(t49, t15, t55)
+    subtract(t55, t86, t55)
+    multiply(k12, t45, t84)
+    subtract(t55, t84, t55)
+    multiply(t1, t79, t79)
+    multiply(t2, t42, t42)
+    subtract(t79, t42, t79)
+    add(t55, t79, t55)
+    multiply(t1, t46, t46)
+    multiply(t2, t63, t63)
+    add(t46, t63, t46)
+    multiply(p_1, t46, t42)
+    subtract(t55, t42, t55)
+    multiply(t8, t55, t42)
+    multiply(t57, t11, t57)
+    subtract(t42, t57, t42)
+    add(t44, t42, t44)
+    multiply(t3, t44, t44)
+    add(t78, t44, t78)
+    multiply(t95, t8, t95)
+    multiply(k2, t39, t42)
+    multiply(t40, t42, t44)
+    add(t99, t44, t99)
+    add(t104, t99, t104)
+    multiply(t40, t68, t44)
+    add(t67, t44, t67)
+    add(t98, t67, t98)
+    multiply(k3, t98, t98)
+    multiply(t69, t72, t44)
+    multiply(t70, t81, t81)
+    add(t44, t81, t44)
+    multiply(t54, t36, t57)
+    multiply(t50, t62, t62)
+    add(t57, t62, t57)
+    subtract(t44, t57, t44)
+    subtract(t98, t44, t98)
+    add(t104, t98, t104)
+    multiply(t11, t104, t44)
+    add(t95, t44, t95)
+    multiply(t39, t42, t42)
+    subtract(t93, t42, t93)
+    subtract(t93, t103, t93)
+    add(t93, t35, t93)
+    multiply(t8, t93, t35)
+    multiply(t106, t11, t106)
+    subtract(t35, t106, t35)
+    add(t95, t35, t95)
+    multiply(t0, t95, t95)
+    multiply(t94, t40, t35)
+    multiply(k2, t45, t45)
+    add(t35, t45, t35)
+    add(t35, t46, t35)
+    multiply(t3, t35, t35)
+    subtract(t95, t35, t95)
+    multiply(t7, t95, t95)
+    add(t78, t95, t78)
+    divide(t78, t16, t35)
+    multiply(t8, t83, t83)
+    subtract(t83, t52, t83)
+    multiply(t11, t55, t55)
+    add(t77, t55, t77)
+    subtract(t83, t77, t83)
+    multiply(t24, t78, t42)
+    multiply(t8, t104, t104)
+    subtract(t104, t97, t104)
+    multiply(t11, t93, t93)
+    add(t111, t93, t111)
+    subtract(t104, t111, t104)
+    multiply(t27, t78, t44)
+    add(t104, t44, t104)
+    multiply(t28, t104, t44)
+    add(t42, t44, t42)
+    subtract(t83, t42, t83)
+    divide(t83, t17, t42)
+    multiply(t23, t78, t44)
+    multiply(t31, t104, t45)
+    add(t44, t45, t44)
+    multiply(t33, t83, t45)
+    add(t44, t45, t44)
+    multiply(t18, t78, t78)
+    multiply(t22, t104, t45)
+    add(t78, t45, t78)
+    multiply(t21, t83, t83)
+    subtract(t78, t83, t78)
+    subtract(t12, t78, t12)
+    multiply(t26, t12, t45)
+    subtract(t44, t45, t44)
+    subtract(t107, t44, t107)
+    divide(t107, t6, t107)
+    multiply(t33, t107, t44)
+    divide(t12, t14, t12)
+    multiply(t26, t107, t45)
+    add(t12, t45, t12)
+    multiply(t21, t12, t45)
+    subtract(t44, t45, t44)
+    subtract(t42, t44, t42)
+    multiply(t24, t42, t44)
+    divide(t104, t29, t104)
+    multiply(t28, t42, t45)
+    multiply(t22, t12, t46)
+    add(t45, t46, t45)
+    multiply(t31, t107, t46)
+    add(t45, t46, t45)
+    subtract(t104, t45, t104)
+    multiply(t27, t104, t45)
+    subtract(t44, t45, t44)
+    multiply(t18, t12, t45)
+    add(t44, t45, t44)
+    multiply(t23, t107, t45)
+    add(t44, t45, t44)
+    subtract(t35, t44, t35)
+    negative(t35, A_53)
+    negative(t104, A_63)
+    negative(t42, A_73)
+    negative(t12, A_83)
+    negative(t107, A_93)
+    subtract(t75, t73, t75)
+    subtract(t75, t108, t75)
+    add(t75, t61, t75)
+    multiply(t1, t75, t12)
+    subtract(t12, t110, t12)
+    add(t76, t110, t76)
+    add(t12, t76, t12)
+    subtract(t65, t109, t65)
+    subtract(t65, t65, t65)
+    multiply(p_1, t65, t35)
+    add(t12, t35, t12)
+    multiply(t0, t12, t35)
+    multiply(t74, t70, t42)
+    multiply(t50, t51, t44)
+    subtract(t42, t44, t42)
+    subtract(t42, t42, t42)
+    multiply(t11, t42, t44)
+    subtract(t5, t30, t30)
+    multiply(t2, t75, t75)
+    add(t5, t75, t5)
+    subtract(t30, t5, t30)
+    add(t58, t71, t58)
+    subtract(t58, t58, t58)
+    multiply(p_1, t58, t5)
+    subtract(t30, t5, t30)
+    multiply(t8, t30, t5)
+    add(t44, t5, t44)
+    multiply(t3, t44, t44)
+    add(t35, t44, t35)
+    multiply(t8, t65, t5)
+    multiply(t54, t70, t44)
+    multiply(t50, t69, t45)
+    add(t44, t45, t44)
+    subtract(t44, t44, t44)
+    multiply(t11, t44, t45)
+    subtract(t5, t45, t5)
+    multiply(t0, t5, t5)
+    multiply(t3, t58, t58)
+    subtract(t5, t58, t5)
+    multiply(t7, t5, t5)
+    add(t35, t5, t35)
+    divide(t35, t16, t5)
+    multiply(t8, t42, t45)
+    multiply(t11, t30, t30)
+    subtract(t45, t30, t45)
+    multiply(t24, t35, t30)
+    multiply(t27, t35, t46)
+    multiply(t8, t44, t44)
+    multiply(t11, t65, t65)
+    add(t44, t65, t44)
+    subtract(t46, t44, t46)
+    multiply(t28, t46, t44)
+    add(t30, t44, t30)
+    subtract(t45, t30, t45)
+    divide(t45, t17, t30)
+    multiply(t23, t35, t44)
+    multiply(t31, t46, t52)
+    add(t44, t52, t44)
+    multiply(t33, t45, t52)
+    add(t44, t52, t44)
+    multiply(t18, t35, t35)
+    multiply(t22, t46, t52)
+    add(t35, t52, t35)
+    multiply(t21, t45, t45)
+    subtract(t35, t45, t35)
+    subtract(t12, t35, t12)
+    multiply(t26, t12, t35)
+    subtract(t44, t35, t44)
+    subtract(t42, t44, t42)
+    divide(t42, t6, t42)
+    multiply(t33, t42, t35)
+    divide(t12, t14, t12)
+    multiply(t26, t42, t44)
+    add(t12, t44, t12)
+    multiply(t21, t12, t44)
+    subtract(t35, t44, t35)
     subtract(t30, t35, t30)
-    add(t14, t30, t14)
-    multiply(t59, t8, t30)
-    multiply(p_1, t15, t35)
+    multiply(t24, t30, t35)
+    divide(t46, t29, t46)
+    multiply(t28, t30, t44)
+    multiply(t22, t12, t45)
+    add(t44, t45, t44)
+    multiply(t31, t42, t45)
+    add(t44, t45, t44)
+    subtract(t46, t44, t46)
+    multiply(t27, t46, t44)
+    subtract(t35, t44, t35)
+    multiply(t18, t12, t44)
+    add(t35, t44, t35)
+    multiply(t23, t42, t44)
+    add(t35, t44, t35)
+    subtract(t5, t35, t5)
+    negative(t5, A_54)
+    negative(t46, A_64)
+    negative(t30, A_74)
+    negative(t12, A_84)
+    negative(t42, A_94)
+    multiply(k25, x_6, t5)
+    multiply(k14, t3, t12)
+    multiply(x_7, t12, t30)
+    multiply(t34, t3, t35)
     subtract(t30, t35, t30)
-    multiply(t2, t30, t35)
-    multiply(t65, t8, t36)
-    multiply(p_1, t11, t37)
-    multiply(t38, t37, t41)
-    subtract(t36, t41, t36)
-    multiply(p_1, t19, t41)
-    subtract(t36, t41, t36)
-    multiply(t1, t36, t41)
-    add(t35, t41, t35)
-    multiply(k1, t35, t41)
-    add(t14, t41, t14)
-    multiply(t1, t14, t41)
-    multiply(t1, t15, t43)
-    multiply(t2, t19, t44)
-    subtract(t43, t44, t43)
-    multiply(t2, t11, t44)
-    multiply(x_9, t44, t45)
-    add(t43, t45, t43)
-    multiply(k10, t43, t45)
-    multiply(t52, t44, t51)
-    multiply(t69, t32, t32)
-    add(t51, t32, t51)
-    multiply(t73, t8, t32)
-    multiply(k10, t44, t54)
-    multiply(t46, t54, t55)
-    add(t32, t55, t32)
-    subtract(t51, t32, t51)
-    add(t45, t51, t45)
-    multiply(t1, t30, t30)
-    multiply(t2, t36, t36)
-    subtract(t30, t36, t30)
-    multiply(k1, t30, t32)
-    subtract(t45, t32, t45)
-    multiply(t2, t45, t32)
-    add(t41, t32, t41)
-    add(t40, t41, t40)
-    multiply(k3, t35, t35)
-    multiply(k1, t13, t13)
-    add(t35, t13, t35)
-    multiply(t53, t8, t13)
-    multiply(k1, t12, t32)
-    multiply(t46, t32, t36)
-    subtract(t13, t36, t13)
-    add(t35, t13, t35)
-    multiply(t1, t35, t13)
-    multiply(k3, t30, t30)
-    multiply(k1, t43, t43)
-    subtract(t30, t43, t30)
-    multiply(t68, t8, t36)
-    multiply(k1, t44, t41)
-    multiply(t46, t41, t43)
-    add(t36, t43, t36)
-    add(t30, t36, t30)
-    multiply(t2, t30, t36)
-    subtract(t13, t36, t13)
-    multiply(p_1, t13, t36)
-    add(t40, t36, t40)
-    add(t26, t40, t26)
-    multiply(t0, t26, t26)
-    multiply(k14, t47, t36)
-    multiply(t11, t47, t47)
-    multiply(x_8, t11, t43)
-    subtract(t47, t43, t47)
-    multiply(k23, t47, t43)
-    multiply(t48, t5, t5)
-    multiply(t81, t11, t51)
-    subtract(t5, t51, t5)
-    add(t43, t5, t43)
-    multiply(k22, t47, t47)
-    multiply(t49, t54, t54)
-    multiply(t73, t12, t5)
-    subtract(t54, t5, t54)
-    multiply(t50, t44, t5)
-    multiply(t69, t34, t34)
-    subtract(t5, t34, t5)
-    subtract(t54, t5, t54)
-    add(t47, t54, t47)
-    add(t43, t47, t43)
-    multiply(t11, t43, t5)
-    multiply(k12, t15, t34)
-    multiply(t48, t9, t9)
-    multiply(t81, t8, t81)
-    subtract(t9, t81, t9)
-    add(t34, t9, t34)
+    multiply(x_7, t3, t35)
+    multiply(k13, t35, t42)
+    subtract(t30, t42, t30)
+    multiply(k26, t38, t42)
+    add(t30, t42, t30)
+    multiply(t11, t3, t42)
+    multiply(t41, t42, t44)
+    multiply(t8, t3, t45)
+    multiply(k12, t45, t46)
+    multiply(t39, t46, t52)
+    add(t44, t52, t44)
+    multiply(t43, t45, t52)
+    multiply(k23, t42, t55)
+    multiply(t40, t55, t57)
+    add(t52, t57, t52)
+    subtract(t44, t52, t44)
+    multiply(k12, t35, t52)
+    subtract(t44, t52, t44)
+    add(x_6, x_6, t52)
+    multiply(t0, t52, t57)
+    multiply(t8, t57, t58)
+    add(t38, t38, t61)
+    multiply(t11, t61, t62)
+    add(t58, t62, t58)
+    multiply(k2, t58, t62)
+    add(t44, t62, t44)
+    multiply(t51, t42, t62)
+    multiply(t2, t0, t63)
+    multiply(t1, t45, t65)
+    add(t63, t65, t63)
+    multiply(k10, t63, t65)
+    multiply(t47, t65, t67)
+    add(t62, t67, t62)
+    multiply(t53, t63, t67)
+    multiply(k22, t42, t71)
+    multiply(t50, t71, t73)
+    add(t67, t73, t67)
+    subtract(t62, t67, t62)
+    multiply(t1, t35, t67)
+    multiply(x_7, t0, t73)
+    multiply(t8, t73, t75)
+    multiply(x_8, t42, t76)
+    subtract(t75, t76, t75)
+    multiply(t2, t75, t76)
+    add(t67, t76, t67)
+    multiply(x_9, t63, t76)
+    add(t67, t76, t67)
+    multiply(k10, t67, t76)
+    subtract(t62, t76, t62)
+    multiply(t60, t42, t76)
+    multiply(p_1, t0, t77)
+    multiply(t39, t77, t78)
+    add(t76, t78, t76)
+    multiply(t3, t52, t52)
+    multiply(p_1, t75, t78)
+    add(t52, t78, t78)
+    subtract(t76, t78, t76)
+    multiply(t2, t76, t78)
+    multiply(p_1, t35, t79)
+    subtract(t58, t79, t79)
+    multiply(t66, t42, t81)
+    multiply(p_1, t45, t83)
+    multiply(t39, t83, t84)
+    add(t81, t84, t81)
+    add(t79, t81, t79)
+    multiply(t1, t79, t81)
+    add(t78, t81, t78)
+    multiply(k1, t78, t81)
+    add(t62, t81, t62)
+    multiply(t1, t62, t81)
+    multiply(t1, t75, t84)
+    multiply(t2, t35, t86)
+    subtract(t84, t86, t84)
+    multiply(t1, t0, t86)
+    multiply(t2, t45, t90)
+    subtract(t86, t90, t86)
+    multiply(x_9, t86, t90)
+    add(t84, t90, t84)
+    multiply(k10, t84, t90)
+    multiply(t53, t86, t91)
+    multiply(t70, t71, t71)
+    add(t91, t71, t91)
+    multiply(t74, t42, t71)
+    multiply(k10, t86, t92)
+    multiply(t47, t92, t93)
+    add(t71, t93, t71)
+    subtract(t91, t71, t91)
+    add(t90, t91, t90)
+    multiply(t1, t76, t76)
+    multiply(t2, t79, t79)
+    subtract(t76, t79, t76)
+    multiply(k1, t76, t71)
+    subtract(t90, t71, t90)
+    multiply(t2, t90, t71)
+    add(t81, t71, t81)
+    add(t44, t81, t44)
+    multiply(k3, t78, t78)
+    multiply(k1, t67, t67)
+    subtract(t78, t67, t78)
+    multiply(t54, t42, t67)
+    multiply(k1, t63, t71)
+    multiply(t47, t71, t79)
+    add(t67, t79, t67)
+    add(t78, t67, t78)
+    multiply(t1, t78, t67)
+    multiply(k3, t76, t76)
+    multiply(k1, t84, t84)
+    subtract(t76, t84, t76)
+    multiply(t69, t42, t79)
+    multiply(k1, t86, t81)
+    multiply(t47, t81, t84)
+    add(t79, t84, t79)
+    add(t76, t79, t76)
+    multiply(t2, t76, t79)
+    subtract(t67, t79, t67)
+    multiply(p_1, t67, t79)
+    add(t44, t79, t44)
+    add(t30, t44, t30)
+    multiply(t0, t30, t30)
+    multiply(k14, t73, t79)
+    multiply(t34, t0, t34)
+    multiply(k13, t0, t84)
+    multiply(x_7, t84, t91)
+    subtract(t34, t91, t34)
+    add(t79, t34, t79)
+    multiply(t11, t73, t73)
+    multiply(x_8, t45, t34)
+    add(t73, t34, t73)
+    multiply(k23, t73, t34)
+    multiply(t85, t45, t91)
+    multiply(k12, t0, t93)
+    multiply(t40, t93, t95)
+    add(t91, t95, t91)
+    multiply(t41, t0, t95)
+    multiply(t49, t46, t46)
+    add(t95, t46, t95)
+    subtract(t91, t95, t91)
+    add(t34, t91, t34)
+    multiply(k22, t73, t73)
+    multiply(t74, t63, t46)
+    multiply(t50, t92, t92)
+    add(t46, t92, t46)
+    multiply(t51, t86, t91)
+    multiply(t70, t65, t65)
+    add(t91, t65, t91)
+    subtract(t46, t91, t46)
+    add(t73, t46, t73)
+    add(t34, t73, t34)
+    multiply(t11, t34, t46)
+    multiply(k12, t75, t65)
+    multiply(t43, t0, t91)
+    multiply(t49, t55, t55)
+    add(t91, t55, t91)
+    multiply(t85, t42, t55)
+    multiply(t39, t93, t93)
+    add(t55, t93, t55)
+    subtract(t91, t55, t91)
+    add(t65, t91, t65)
+    multiply(k2, t52, t55)
+    add(t65, t55, t65)
+    multiply(t1, t90, t90)
+    multiply(t2, t62, t62)
+    subtract(t90, t62, t90)
+    add(t65, t90, t65)
+    multiply(t1, t76, t76)
+    multiply(t2, t78, t78)
+    add(t76, t78, t76)
+    multiply(p_1, t76, t55)
+    subtract(t65, t55, t65)
+    multiply(t8, t65, t55)
+    add(t46, t55, t46)
+    add(t79, t46, t79)
+    multiply(t3, t79, t79)
+    add(t30, t79, t30)
+    add(t5, t30, t5)
+    multiply(k27, x_6, t30)
+    multiply(k8, t57, t46)
+    multiply(t37, t0, t55)
+    multiply(k20, t0, t62)
+    multiply(t48, t62, t78)
+    add(t55, t78, t55)
+    subtract(t46, t55, t46)
+    multiply(t11, t57, t57)
+    multiply(t8, t61, t61)
+    subtract(t57, t61, t57)
+    multiply(k7, t57, t55)
+    multiply(t89, t45, t61)
+    multiply(k2, t45, t78)
+    multiply(t40, t78, t79)
+    add(t61, t79, t61)
+    multiply(t94, t0, t79)
+    multiply(k2, t0, t90)
+    multiply(t49, t90, t91)
+    add(t79, t91, t79)
+    add(t61, t79, t61)
+    subtract(t55, t61, t55)
+    multiply(t66, t45, t45)
+    multiply(t40, t83, t83)
+    add(t45, t83, t45)
+    multiply(t60, t0, t61)
+    multiply(t49, t77, t77)
+    add(t61, t77, t61)
+    add(t45, t61, t45)
+    subtract(t57, t45, t57)
+    multiply(k3, t57, t57)
+    multiply(t54, t63, t63)
+    multiply(t50, t71, t71)
+    add(t63, t71, t63)
+    multiply(t69, t86, t86)
+    multiply(t70, t81, t81)
+    add(t86, t81, t86)
+    add(t63, t86, t63)
+    subtract(t57, t63, t57)
+    add(t55, t57, t55)
+    multiply(t11, t55, t45)
+    multiply(k7, t58, t58)
+    multiply(k2, t35, t57)
+    subtract(t58, t57, t58)
+    multiply(t89, t42, t57)
+    multiply(t39, t78, t78)
+    add(t57, t78, t57)
+    add(t58, t57, t58)
+    add(t58, t67, t58)
+    multiply(t8, t58, t57)
+    add(t45, t57, t45)
+    add(t46, t45, t46)
+    multiply(t0, t46, t46)
+    multiply(t37, t3, t37)
+    multiply(t20, t62, t62)
+    add(t37, t62, t37)
+    multiply(k8, t52, t45)
+    subtract(t37, t45, t37)
+    multiply(t94, t42, t42)
+    multiply(t39, t90, t90)
+    add(t42, t90, t42)
+    multiply(k7, t52, t45)
+    multiply(k2, t75, t75)
+    add(t45, t75, t45)
+    subtract(t42, t45, t42)
+    add(t42, t76, t42)
+    add(t37, t42, t37)
+    multiply(t3, t37, t37)
+    subtract(t46, t37, t46)
+    add(t30, t46, t30)
+    multiply(t7, t30, t30)
+    add(t5, t30, t5)
+    divide(t5, t16, t30)
+    multiply(t80, t3, t80)
+    multiply(t20, t84, t84)
+    add(t80, t84, t80)
+    multiply(t25, t0, t37)
+    multiply(t48, t12, t48)
+    add(t37, t48, t37)
+    subtract(t80, t37, t80)
+    multiply(k20, t52, t52)
+    subtract(t80, t52, t80)
+    multiply(t8, t34, t34)
+    multiply(t11, t65, t65)
+    subtract(t34, t65, t34)
+    add(t80, t34, t80)
+    multiply(t24, t5, t12)
+    multiply(k20, t35, t35)
+    multiply(k28, t38, t34)
+    subtract(t35, t34, t35)
+    multiply(t64, t3, t64)
+    add(t35, t64, t35)
+    multiply(t8, t55, t55)
+    multiply(t11, t58, t58)
+    subtract(t55, t58, t55)
+    add(t35, t55, t35)
+    multiply(k27, t38, t38)
+    multiply(k25, x_5, t34)
+    add(t38, t34, t38)
+    subtract(t35, t38, t35)
+    multiply(t27, t5, t37)
+    add(t35, t37, t35)
+    multiply(t28, t35, t37)
+    add(t12, t37, t12)
+    subtract(t80, t12, t80)
+    divide(t80, t17, t12)
+    multiply(t23, t5, t37)
+    multiply(t31, t35, t38)
+    add(t37, t38, t37)
+    multiply(t33, t80, t38)
+    add(t37, t38, t37)
+    multiply(t18, t5, t5)
+    multiply(t22, t35, t38)
+    add(t5, t38, t5)
+    multiply(t21, t80, t80)
+    subtract(t5, t80, t5)
+    subtract(t44, t5, t44)
+    multiply(t26, t44, t5)
+    subtract(t37, t5, t37)
+    subtract(t73, t37, t73)
+    divide(t73, t6, t73)
+    multiply(t33, t73, t5)
+    divide(t44, t14, t44)
+    multiply(t26, t73, t37)
+    add(t44, t37, t44)
+    multiply(t21, t44, t37)
+    subtract(t5, t37, t5)
+    subtract(t12, t5, t12)
+    multiply(t24, t12, t5)
+    divide(t35, t29, t35)
+    multiply(t28, t12, t37)
+    multiply(t22, t44, t38)
+    add(t37, t38, t37)
+    multiply(t31, t73, t38)
+    add(t37, t38, t37)
+    subtract(t35, t37, t35)
+    multiply(t27, t35, t37)
+    subtract(t5, t37, t5)
+    multiply(t18, t44, t37)
+    add(t5, t37, t5)
+    multiply(t23, t73, t37)
+    add(t5, t37, t5)
+    subtract(t30, t5, t30)
+    negative(t30, A_55)
+    negative(t35, A_65)
+    negative(t12, A_75)
+    negative(t44, A_85)
+    negative(t73, A_95)
+    add(x_5, x_5, t5)
+    multiply(t0, t5, t12)
+    multiply(t8, t12, t30)
+    multiply(k2, t30, t35)
+    multiply(t1, t30, t37)
+    multiply(t3, t5, t5)
+    multiply(t2, t5, t38)
+    subtract(t37, t38, t37)
+    multiply(k1, t37, t38)
+    multiply(t1, t38, t42)
+    multiply(t1, t5, t44)
+    multiply(t2, t30, t45)
+    add(t44, t45, t44)
+    multiply(k1, t44, t45)
+    multiply(t2, t45, t46)
+    add(t42, t46, t42)
+    add(t35, t42, t35)
+    multiply(k3, t37, t37)
+    multiply(t1, t37, t42)
+    multiply(k3, t44, t44)
+    multiply(t2, t44, t46)
+    add(t42, t46, t42)
+    multiply(p_1, t42, t46)
+    add(t35, t46, t35)
+    multiply(t0, t35, t46)
+    multiply(k2, t5, t48)
     multiply(t1, t45, t45)
-    multiply(t2, t14, t14)
-    subtract(t45, t14, t45)
-    add(t34, t45, t34)
-    multiply(t1, t30, t30)
+    multiply(t2, t38, t38)
+    subtract(t45, t38, t45)
+    add(t48, t45, t48)
+    multiply(t2, t37, t37)
+    multiply(t1, t44, t44)
+    subtract(t37, t44, t37)
+    multiply(p_1, t37, t38)
+    subtract(t48, t38, t48)
+    multiply(t8, t48, t38)
+    multiply(t3, t38, t38)
+    add(t46, t38, t46)
+    add(t34, t46, t34)
+    multiply(k27, x_5, t38)
+    multiply(k8, t12, t44)
+    multiply(t11, t12, t12)
+    multiply(k7, t12, t45)
+    multiply(k3, t12, t12)
+    add(t45, t12, t45)
+    multiply(t11, t45, t12)
+    multiply(k7, t30, t30)
+    add(t30, t42, t30)
+    multiply(t8, t30, t42)
+    add(t12, t42, t12)
+    add(t44, t12, t44)
+    multiply(t0, t44, t44)
+    multiply(k7, t5, t12)
+    subtract(t37, t12, t37)
+    multiply(k8, t5, t12)
+    subtract(t37, t12, t37)
+    multiply(t3, t37, t37)
+    subtract(t44, t37, t44)
+    add(t38, t44, t38)
+    multiply(t7, t38, t38)
+    add(t34, t38, t34)
+    divide(t34, t16, t12)
+    multiply(t18, t34, t37)
+    multiply(t8, t45, t45)
+    multiply(t11, t30, t30)
+    subtract(t45, t30, t45)
+    multiply(t27, t34, t30)
+    add(t45, t30, t45)
+    multiply(t22, t45, t30)
+    add(t37, t30, t37)
+    multiply(k20, t5, t5)
+    multiply(t11, t48, t48)
+    add(t5, t48, t5)
+    multiply(t24, t34, t30)
+    multiply(t28, t45, t38)
+    add(t30, t38, t30)
+    add(t5, t30, t5)
+    multiply(t21, t5, t30)
+    add(t37, t30, t37)
+    subtract(t35, t37, t35)
+    divide(t35, t14, t30)
+    multiply(t23, t34, t34)
+    multiply(t31, t45, t37)
+    add(t34, t37, t34)
+    multiply(t33, t5, t37)
+    subtract(t34, t37, t34)
+    multiply(t26, t35, t35)
+    subtract(t34, t35, t34)
+    divide(t34, t6, A_96)
+    multiply(t26, A_96, t34)
+    subtract(t30, t34, t30)
+    multiply(t21, t30, t34)
+    multiply(t33, A_96, t35)
+    add(t34, t35, t34)
+    divide(t5, t17, t5)
+    subtract(t34, t5, t34)
+    multiply(t24, t34, t5)
+    divide(t45, t29, t45)
+    multiply(t28, t34, t35)
+    multiply(t22, t30, t37)
+    add(t35, t37, t35)
+    multiply(t31, A_96, t37)
+    subtract(t35, t37, t35)
+    subtract(t45, t35, t45)
+    multiply(t27, t45, t35)
+    subtract(t5, t35, t5)
+    multiply(t18, t30, t35)
+    add(t5, t35, t5)
+    multiply(t23, A_96, t35)
+    subtract(t5, t35, t5)
+    subtract(t12, t5, t12)
+    negative(t12, A_56)
+    negative(t45, A_66)
+    negative(t34, A_76)
+    negative(t30, A_86)
+    subtract(t25, t82, t25)
+    subtract(t25, t82, t25)
+    multiply(t41, t8, t41)
+    multiply(k12, t11, t5)
+    multiply(t39, t5, t12)
+    subtract(t41, t12, t41)
+    multiply(k23, t8, t12)
+    multiply(t40, t12, t30)
+    multiply(t43, t11, t34)
+    subtract(t30, t34, t30)
+    subtract(t41, t30, t41)
+    subtract(t41, t87, t41)
+    multiply(t1, t11, t30)
+    multiply(x_9, t30, t34)
+    multiply(x_8, t8, t35)
+    subtract(t56, t35, t56)
+    multiply(t2, t56, t35)
+    add(t124, t35, t124)
+    subtract(t34, t124, t34)
+    multiply(k10, t34, t35)
+    multiply(t51, t8, t37)
+    multiply(k10, t30, t38)
+    multiply(t47, t38, t42)
+    subtract(t37, t42, t37)
+    multiply(t50, t32, t42)
+    multiply(t53, t30, t44)
+    subtract(t42, t44, t42)
+    subtract(t37, t42, t37)
+    add(t35, t37, t35)
+    multiply(t60, t8, t37)
+    multiply(p_1, t56, t42)
+    subtract(t37, t42, t37)
+    multiply(t2, t37, t42)
+    multiply(t66, t8, t44)
+    multiply(p_1, t11, t45)
+    multiply(t39, t45, t46)
+    subtract(t44, t46, t44)
+    subtract(t44, t118, t44)
+    multiply(t1, t44, t46)
+    add(t42, t46, t42)
+    multiply(k1, t42, t46)
+    add(t35, t46, t35)
+    multiply(t1, t35, t46)
+    multiply(t1, t56, t48)
+    subtract(t48, t100, t48)
+    multiply(t2, t11, t52)
+    multiply(x_9, t52, t55)
+    add(t48, t55, t48)
+    multiply(k10, t48, t55)
+    multiply(t53, t52, t57)
+    multiply(t70, t32, t32)
+    add(t57, t32, t57)
+    multiply(t74, t8, t32)
+    multiply(k10, t52, t58)
+    multiply(t47, t58, t61)
+    add(t32, t61, t32)
+    subtract(t57, t32, t57)
+    add(t55, t57, t55)
+    multiply(t1, t37, t37)
+    multiply(t2, t44, t44)
+    subtract(t37, t44, t37)
+    multiply(k1, t37, t32)
+    subtract(t55, t32, t55)
+    multiply(t2, t55, t32)
+    add(t46, t32, t46)
+    add(t41, t46, t41)
+    multiply(k3, t42, t42)
+    multiply(k1, t34, t34)
+    add(t42, t34, t42)
+    multiply(t54, t8, t32)
+    multiply(k1, t30, t34)
+    multiply(t47, t34, t44)
+    subtract(t32, t44, t32)
+    add(t42, t32, t42)
+    multiply(t1, t42, t32)
+    multiply(k3, t37, t37)
+    multiply(k1, t48, t48)
+    subtract(t37, t48, t37)
+    multiply(t69, t8, t44)
+    multiply(k1, t52, t46)
+    multiply(t47, t46, t48)
+    add(t44, t48, t44)
+    add(t37, t44, t37)
+    multiply(t2, t37, t44)
+    subtract(t32, t44, t32)
+    multiply(p_1, t32, t44)
+    add(t41, t44, t41)
+    add(t25, t41, t25)
+    multiply(t0, t25, t25)
+    multiply(x_8, t11, t44)
+    subtract(t19, t44, t19)
+    multiply(k23, t19, t44)
+    multiply(t49, t5, t5)
+    multiply(t85, t11, t48)
+    subtract(t5, t48, t5)
+    add(t44, t5, t44)
+    multiply(k22, t19, t19)
+    multiply(t50, t58, t58)
+    multiply(t74, t30, t5)
+    subtract(t58, t5, t58)
+    multiply(t51, t52, t5)
+    multiply(t70, t38, t38)
+    subtract(t5, t38, t5)
+    subtract(t58, t5, t58)
+    add(t19, t58, t19)
+    add(t44, t19, t44)
+    multiply(t11, t44, t5)
+    multiply(k12, t56, t38)
+    multiply(t49, t12, t12)
+    multiply(t85, t8, t85)
+    subtract(t12, t85, t12)
+    add(t38, t12, t38)
+    multiply(t1, t55, t55)
     multiply(t2, t35, t35)
-    add(t30, t35, t30)
-    multiply(p_1, t30, t9)
-    subtract(t34, t9, t34)
-    multiply(t8, t34, t9)
-    add(t5, t9, t5)
-    add(t36, t5, t36)
-    multiply(t3, t36, t36)
-    add(t26, t36, t26)
-    multiply(t75, t11, t5)
+    subtract(t55, t35, t55)
+    add(t38, t55, t38)
+    multiply(t1, t37, t37)
+    multiply(t2, t42, t42)
+    add(t37, t42, t37)
+    multiply(p_1, t37, t12)
+    subtract(t38, t12, t38)
+    multiply(t8, t38, t12)
+    add(t5, t12, t5)
+    add(t9, t5, t9)
+    multiply(t3, t9, t9)
+    add(t25, t9, t25)
+    multiply(t89, t11, t5)
     multiply(k2, t11, t9)
-    multiply(t39, t9, t14)
-    add(t5, t14, t5)
-    multiply(t65, t11, t65)
-    multiply(t39, t37, t37)
-    add(t65, t37, t65)
-    multiply(k3, t65, t65)
-    multiply(t68, t44, t44)
-    multiply(t69, t41, t41)
-    add(t44, t41, t44)
-    multiply(t53, t12, t12)
-    multiply(t49, t32, t32)
-    add(t12, t32, t12)
-    subtract(t44, t12, t44)
-    subtract(t65, t44, t65)
-    add(t5, t65, t5)
+    multiply(t40, t9, t12)
+    add(t5, t12, t5)
+    multiply(t66, t11, t66)
+    multiply(t40, t45, t40)
+    add(t66, t40, t66)
+    multiply(k3, t66, t66)
+    multiply(t69, t52, t52)
+    multiply(t70, t46, t46)
+    add(t52, t46, t52)
+    multiply(t54, t30, t30)
+    multiply(t50, t34, t34)
+    add(t30, t34, t30)
+    subtract(t52, t30, t52)
+    subtract(t66, t52, t66)
+    add(t5, t66, t5)
     multiply(t11, t5, t12)
-    multiply(t75, t8, t75)
-    multiply(t38, t9, t9)
-    subtract(t75, t9, t75)
-    multiply(k2, t19, t9)
-    subtract(t75, t9, t75)
-    add(t75, t13, t75)
-    multiply(t8, t75, t9)
+    multiply(t89, t8, t89)
+    multiply(t39, t9, t9)
+    subtract(t89, t9, t89)
+    subtract(t89, t88, t89)
+    add(t89, t32, t89)
+    multiply(t8, t89, t9)
     add(t12, t9, t12)
     multiply(k26, x_7, t9)
     subtract(t12, t9, t12)
     multiply(t0, t12, t12)
-    multiply(t87, t8, t87)
-    multiply(k2, t15, t15)
-    subtract(t87, t15, t87)
-    add(t87, t30, t87)
-    multiply(t3, t87, t87)
-    subtract(t12, t87, t12)
+    multiply(t94, t8, t94)
+    multiply(k2, t56, t56)
+    subtract(t94, t56, t94)
+    add(t94, t37, t94)
+    multiply(t3, t94, t94)
+    subtract(t12, t94, t12)
     multiply(t7, t12, t12)
-    add(t26, t12, t26)
-    divide(t26, t21, t9)
-    multiply(t8, t43, t43)
-    multiply(t11, t34, t34)
-    subtract(t43, t34, t43)
-    multiply(t25, t26, t12)
-    multiply(k26, t19, t19)
+    add(t25, t12, t25)
+    divide(t25, t16, t9)
+    multiply(t8, t44, t44)
+    multiply(t11, t38, t38)
+    subtract(t44, t38, t44)
+    multiply(t24, t25, t12)
+    multiply(k26, t20, t20)
     multiply(t8, t5, t5)
-    multiply(t11, t75, t75)
-    subtract(t5, t75, t5)
-    add(t19, t5, t19)
-    multiply(t27, t26, t5)
-    add(t19, t5, t19)
-    multiply(t28, t19, t5)
+    multiply(t11, t89, t89)
+    subtract(t5, t89, t5)
+    add(t20, t5, t20)
+    multiply(t27, t25, t5)
+    add(t20, t5, t20)
+    multiply(t28, t20, t5)
     add(t12, t5, t12)
-    subtract(t43, t12, t43)
-    divide(t43, t17, t5)
-    multiply(t20, t26, t12)
-    multiply(t31, t19, t13)
-    add(t12, t13, t12)
-    multiply(t33, t43, t13)
-    add(t12, t13, t12)
-    multiply(t18, t26, t26)
-    multiply(t23, t19, t13)
-    add(t26, t13, t26)
-    multiply(t22, t43, t43)
-    subtract(t26, t43, t26)
-    subtract(t40, t26, t40)
-    multiply(t24, t40, t13)
-    subtract(t12, t13, t12)
-    subtract(t47, t12, t47)
-    divide(t47, t6, t47)
-    multiply(t33, t47, t12)
-    divide(t40, t16, t40)
-    multiply(t24, t47, t13)
-    add(t40, t13, t40)
-    multiply(t22, t40, t13)
-    subtract(t12, t13, t12)
+    subtract(t44, t12, t44)
+    divide(t44, t17, t5)
+    multiply(t23, t25, t12)
+    multiply(t31, t20, t30)
+    add(t12, t30, t12)
+    multiply(t33, t44, t30)
+    add(t12, t30, t12)
+    multiply(t18, t25, t25)
+    multiply(t22, t20, t30)
+    add(t25, t30, t25)
+    multiply(t21, t44, t44)
+    subtract(t25, t44, t25)
+    subtract(t41, t25, t41)
+    multiply(t26, t41, t25)
+    subtract(t12, t25, t12)
+    subtract(t19, t12, t19)
+    divide(t19, t6, t19)
+    multiply(t33, t19, t12)
+    divide(t41, t14, t41)
+    multiply(t26, t19, t25)
+    add(t41, t25, t41)
+    multiply(t21, t41, t25)
+    subtract(t12, t25, t12)
     subtract(t5, t12, t5)
-    multiply(t25, t5, t12)
-    divide(t19, t29, t19)
-    multiply(t28, t5, t13)
-    multiply(t23, t40, t14)
-    add(t13, t14, t13)
-    multiply(t31, t47, t14)
-    add(t13, t14, t13)
-    subtract(t19, t13, t19)
-    multiply(t27, t19, t13)
-    subtract(t12, t13, t12)
-    multiply(t18, t40, t13)
-    add(t12, t13, t12)
-    multiply(t20, t47, t13)
-    add(t12, t13, t12)
+    multiply(t24, t5, t12)
+    divide(t20, t29, t20)
+    multiply(t28, t5, t25)
+    multiply(t22, t41, t30)
+    add(t25, t30, t25)
+    multiply(t31, t19, t30)
+    add(t25, t30, t25)
+    subtract(t20, t25, t20)
+    multiply(t27, t20, t25)
+    subtract(t12, t25, t12)
+    multiply(t18, t41, t25)
+    add(t12, t25, t12)
+    multiply(t23, t19, t25)
+    add(t12, t25, t12)
     subtract(t9, t12, t9)
     negative(t9, A_57)
-    negative(t19, A_67)
+    negative(t20, A_67)
     negative(t5, A_77)
-    negative(t40, A_87)
-    negative(t47, A_97)
-    multiply(t2, t38, t5)
-    multiply(x_9, t2, t9)
-    subtract(t5, t9, t5)
-    multiply(k10, t5, t9)
-    multiply(t46, t10, t12)
-    multiply(t52, t2, t13)
-    subtract(t12, t13, t12)
-    add(t9, t12, t9)
-    multiply(t38, p_1, t12)
-    add(t12, t12, t12)
-    multiply(t2, t12, t13)
-    multiply(k1, t13, t14)
-    add(t9, t14, t9)
-    multiply(t1, t9, t14)
-    multiply(x_9, t1, t15)
-    multiply(t1, t38, t19)
-    subtract(t15, t19, t15)
-    multiply(k10, t15, t19)
-    multiply(t52, t1, t52)
-    multiply(t46, t4, t26)
-    subtract(t52, t26, t52)
-    add(t19, t52, t19)
-    multiply(t1, t12, t12)
-    multiply(k1, t12, t26)
-    subtract(t19, t26, t19)
-    multiply(t2, t19, t26)
-    add(t14, t26, t14)
-    multiply(k3, t13, t13)
-    multiply(k1, t5, t5)
-    add(t13, t5, t13)
-    multiply(k1, t2, t5)
-    multiply(t46, t5, t26)
-    add(t13, t26, t13)
-    multiply(t1, t13, t26)
-    multiply(k3, t12, t12)
-    multiply(k1, t15, t15)
-    subtract(t12, t15, t12)
-    multiply(k1, t1, t15)
-    multiply(t46, t15, t46)
-    add(t12, t46, t12)
-    multiply(t2, t12, t30)
-    subtract(t26, t30, t26)
-    multiply(p_1, t26, t30)
-    add(t14, t30, t14)
-    multiply(t0, t14, t30)
-    multiply(k23, t39, t32)
-    multiply(k22, t39, t39)
-    multiply(t73, t2, t73)
-    multiply(t49, t4, t4)
-    add(t73, t4, t73)
-    multiply(t50, t1, t4)
-    multiply(t69, t10, t10)
+    negative(t41, A_87)
+    negative(t19, A_97)
+    multiply(x_9, t2, t5)
+    subtract(t72, t5, t72)
+    multiply(k10, t72, t5)
+    multiply(t47, t10, t9)
+    multiply(t53, t2, t12)
+    subtract(t9, t12, t9)
+    add(t5, t9, t5)
+    add(t68, t68, t68)
+    multiply(t2, t68, t9)
+    multiply(k1, t9, t12)
+    add(t5, t12, t5)
+    multiply(t1, t5, t12)
+    multiply(x_9, t1, t19)
+    subtract(t19, t36, t19)
+    multiply(k10, t19, t20)
+    multiply(t53, t1, t53)
+    multiply(t47, t4, t25)
+    subtract(t53, t25, t53)
+    add(t20, t53, t20)
+    multiply(t1, t68, t68)
+    multiply(k1, t68, t25)
+    subtract(t20, t25, t20)
+    multiply(t2, t20, t25)
+    add(t12, t25, t12)
+    multiply(k3, t9, t9)
+    multiply(k1, t72, t72)
+    add(t9, t72, t9)
+    multiply(k1, t2, t25)
+    multiply(t47, t25, t30)
+    add(t9, t30, t9)
+    multiply(t1, t9, t30)
+    multiply(k3, t68, t68)
+    multiply(k1, t19, t19)
+    subtract(t68, t19, t68)
+    multiply(k1, t1, t19)
+    multiply(t47, t19, t47)
+    add(t68, t47, t68)
+    multiply(t2, t68, t32)
+    subtract(t30, t32, t30)
+    multiply(p_1, t30, t32)
+    add(t12, t32, t12)
+    multiply(t0, t12, t32)
+    multiply(t74, t2, t74)
+    multiply(t50, t4, t4)
+    add(t74, t4, t74)
+    multiply(t51, t1, t4)
+    multiply(t70, t10, t10)
     add(t4, t10, t4)
-    subtract(t73, t4, t73)
-    add(t39, t73, t39)
-    add(t32, t39, t32)
-    multiply(t11, t32, t4)
-    multiply(k12, t38, t10)
-    subtract(t42, t10, t42)
-    subtract(t42, t10, t42)
-    multiply(t1, t19, t19)
+    subtract(t74, t4, t74)
+    add(t59, t74, t59)
+    add(t15, t59, t15)
+    multiply(t11, t15, t4)
+    subtract(t43, t13, t43)
+    subtract(t43, t13, t43)
+    multiply(t1, t20, t20)
+    multiply(t2, t5, t5)
+    subtract(t20, t5, t20)
+    add(t43, t20, t43)
+    multiply(t1, t68, t68)
     multiply(t2, t9, t9)
-    subtract(t19, t9, t19)
-    add(t42, t19, t42)
-    multiply(t1, t12, t12)
-    multiply(t2, t13, t13)
-    add(t12, t13, t12)
-    multiply(p_1, t12, t9)
-    subtract(t42, t9, t42)
-    multiply(t8, t42, t9)
-    add(t4, t9, t4)
+    add(t68, t9, t68)
+    multiply(p_1, t68, t5)
+    subtract(t43, t5, t43)
+    multiply(t8, t43, t5)
+    add(t4, t5, t4)
     multiply(t3, t4, t4)
-    add(t30, t4, t30)
-    multiply(t8, t26, t4)
-    multiply(k29, t48, t48)
-    multiply(k8, t59, t59)
-    multiply(t53, t2, t53)
-    multiply(t49, t5, t5)
-    add(t53, t5, t53)
-    multiply(t68, t1, t68)
-    multiply(t69, t15, t15)
-    add(t68, t15, t68)
-    add(t53, t68, t53)
-    add(t59, t53, t59)
-    add(t48, t59, t48)
-    multiply(t11, t48, t5)
+    add(t32, t4, t32)
+    multiply(t8, t30, t4)
+    multiply(k29, t49, t49)
+    multiply(k8, t60, t60)
+    multiply(t54, t2, t54)
+    multiply(t50, t25, t25)
+    add(t54, t25, t54)
+    multiply(t69, t1, t69)
+    multiply(t70, t19, t19)
+    add(t69, t19, t69)
+    add(t54, t69, t54)
+    add(t60, t54, t60)
+    add(t49, t60, t49)
+    multiply(t11, t49, t5)
     subtract(t4, t5, t4)
     multiply(t0, t4, t4)
-    multiply(k29, t38, t38)
-    add(t38, t12, t38)
-    multiply(t3, t38, t38)
-    subtract(t4, t38, t4)
+    multiply(k29, t39, t39)
+    add(t39, t68, t39)
+    multiply(t3, t39, t39)
+    subtract(t4, t39, t4)
     multiply(t7, t4, t7)
-    add(t30, t7, t30)
-    divide(t30, t21, t4)
-    multiply(t8, t32, t32)
-    multiply(t11, t42, t42)
-    subtract(t32, t42, t32)
-    multiply(t25, t30, t5)
-    multiply(t27, t30, t7)
-    multiply(t8, t48, t48)
-    multiply(t11, t26, t26)
-    add(t48, t26, t48)
-    subtract(t7, t48, t7)
+    add(t32, t7, t32)
+    divide(t32, t16, t4)
+    multiply(t8, t15, t15)
+    multiply(t11, t43, t43)
+    subtract(t15, t43, t15)
+    multiply(t24, t32, t5)
+    multiply(t27, t32, t7)
+    multiply(t8, t49, t49)
+    multiply(t11, t30, t30)
+    add(t49, t30, t49)
+    subtract(t7, t49, t7)
     multiply(t28, t7, t9)
     add(t5, t9, t5)
-    subtract(t32, t5, t32)
-    divide(t32, t17, t5)
-    multiply(t20, t30, t9)
+    subtract(t15, t5, t15)
+    divide(t15, t17, t5)
+    multiply(t23, t32, t9)
     multiply(t31, t7, t10)
     add(t9, t10, t9)
-    multiply(t33, t32, t10)
+    multiply(t33, t15, t10)
     add(t9, t10, t9)
-    multiply(t18, t30, t30)
-    multiply(t23, t7, t10)
-    add(t30, t10, t30)
-    multiply(t22, t32, t32)
-    subtract(t30, t32, t30)
-    subtract(t14, t30, t14)
-    multiply(t24, t14, t10)
+    multiply(t18, t32, t32)
+    multiply(t22, t7, t10)
+    add(t32, t10, t32)
+    multiply(t21, t15, t15)
+    subtract(t32, t15, t32)
+    subtract(t12, t32, t12)
+    multiply(t26, t12, t10)
     subtract(t9, t10, t9)
-    subtract(t39, t9, t39)
-    divide(t39, t6, t39)
-    multiply(t33, t39, t9)
-    divide(t14, t16, t14)
-    multiply(t24, t39, t10)
-    add(t14, t10, t14)
-    multiply(t22, t14, t10)
+    subtract(t59, t9, t59)
+    divide(t59, t6, t59)
+    multiply(t33, t59, t9)
+    divide(t12, t14, t12)
+    multiply(t26, t59, t10)
+    add(t12, t10, t12)
+    multiply(t21, t12, t10)
     subtract(t9, t10, t9)
     subtract(t5, t9, t5)
-    multiply(t25, t5, t9)
+    multiply(t24, t5, t9)
     divide(t7, t29, t7)
     multiply(t28, t5, t10)
-    multiply(t23, t14, t12)
-    add(t10, t12, t10)
-    multiply(t31, t39, t12)
-    add(t10, t12, t10)
+    multiply(t22, t12, t13)
+    add(t10, t13, t10)
+    multiply(t31, t59, t13)
+    add(t10, t13, t10)
     subtract(t7, t10, t7)
     multiply(t27, t7, t10)
     subtract(t9, t10, t9)
-    multiply(t18, t14, t10)
+    multiply(t18, t12, t10)
     add(t9, t10, t9)
-    multiply(t20, t39, t10)
+    multiply(t23, t59, t10)
     add(t9, t10, t9)
     subtract(t4, t9, t4)
     negative(t4, A_58)
     negative(t7, A_68)
     negative(t5, A_78)
-    negative(t14, A_88)
-    negative(t39, A_98)
-    multiply(k22, t49, t49)
-    subtract(t50, t49, t49)
-    subtract(t49, t50, t49)
-    multiply(t1, t49, t4)
-    multiply(k22, t69, t69)
-    multiply(t2, t69, t5)
+    negative(t12, A_88)
+    negative(t59, A_98)
+    multiply(k22, t50, t50)
+    subtract(t51, t50, t50)
+    subtract(t50, t51, t50)
+    multiply(t1, t50, t4)
+    multiply(k22, t70, t70)
+    multiply(t2, t70, t5)
     add(t4, t5, t4)
     multiply(t0, t4, t0)
-    multiply(t1, t69, t1)
-    multiply(t2, t49, t2)
+    multiply(t1, t70, t1)
+    multiply(t2, t50, t2)
     subtract(t1, t2, t1)
     multiply(t8, t1, t8)
     multiply(t3, t8, t3)
     add(t0, t3, t0)
-    divide(t0, t21, t21)
+    divide(t0, t16, t16)
     multiply(t18, t0, t2)
     multiply(t27, t0, t3)
-    multiply(t23, t3, t5)
+    multiply(t22, t3, t5)
     add(t2, t5, t2)
     multiply(t11, t1, t11)
-    multiply(t25, t0, t1)
+    multiply(t24, t0, t1)
     multiply(t28, t3, t5)
     add(t1, t5, t1)
     add(t11, t1, t11)
-    multiply(t22, t11, t1)
+    multiply(t21, t11, t1)
     add(t2, t1, t2)
     subtract(t4, t2, t4)
-    divide(t4, t16, t16)
-    multiply(t20, t0, t0)
+    divide(t4, t14, t14)
+    multiply(t23, t0, t0)
     multiply(t31, t3, t1)
     add(t0, t1, t0)
     multiply(t33, t11, t1)
     subtract(t0, t1, t0)
-    multiply(t24, t4, t4)
+    multiply(t26, t4, t4)
     subtract(t0, t4, t0)
     divide(t0, t6, A_99)
-    multiply(t24, A_99, t24)
-    subtract(t16, t24, t16)
-    multiply(t22, t16, t22)
+    multiply(t26, A_99, t26)
+    subtract(t14, t26, t14)
+    multiply(t21, t14, t21)
     multiply(t33, A_99, t33)
-    add(t22, t33, t22)
+    add(t21, t33, t21)
     divide(t11, t17, t11)
-    subtract(t22, t11, t22)
-    multiply(t25, t22, t25)
+    subtract(t21, t11, t21)
+    multiply(t24, t21, t24)
     divide(t3, t29, t3)
-    multiply(t28, t22, t28)
-    multiply(t23, t16, t23)
-    add(t28, t23, t28)
+    multiply(t28, t21, t28)
+    multiply(t22, t14, t22)
+    add(t28, t22, t28)
     multiply(t31, A_99, t31)
     subtract(t28, t31, t28)
     subtract(t3, t28, t3)
     multiply(t27, t3, t27)
-    subtract(t25, t27, t25)
-    multiply(t18, t16, t18)
-    add(t25, t18, t25)
-    multiply(t20, A_99, t20)
-    subtract(t25, t20, t25)
-    subtract(t21, t25, t21)
-    negative(t21, A_59)
+    subtract(t24, t27, t24)
+    multiply(t18, t14, t18)
+    add(t24, t18, t24)
+    multiply(t23, A_99, t23)
+    subtract(t24, t23, t24)
+    subtract(t16, t24, t16)
+    negative(t16, A_59)
     negative(t3, A_69)
-    negative(t22, A_79)
-    negative(t16, A_89)
+    negative(t21, A_79)
+    negative(t14, A_89)
 
 
 def ode_jac_u(x, u, p=DEFAULT_P):
@@ -14491,7 +14118,7 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     in  u [5]
     in  p [3]
     out B [10x5]
-    291 ops: 142 mul, 115 add, 28 div, 6 trig
+    289 ops: 141 mul, 114 add, 28 div, 6 trig
     """
     x = _array(x, 10, "x")
     u = _array(u, 5, "u")
@@ -14510,59 +14137,57 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t4 = sin(x[4])
     t5 = 0.0027500000000000003 * t4
     t6 = t4 * t5
-    t7 = t3 + t6
-    t8 = (-0.015) * p[1]
-    t7 = t7 - t8
-    t9 = 0.015 * p[1]
+    t3 = t3 + t6
+    t6 = (-0.015) * p[1]
+    t7 = t3 - t6
+    t8 = 0.015 * p[1]
+    t7 = t7 + t8
+    t9 = p[1] * p[1]
+    t9 = 0.3 * t9
     t7 = t7 + t9
-    t10 = p[1] * p[1]
-    t10 = 0.3 * t10
-    t7 = t7 + t10
     t7 = 0.009000000000000001 + t7
-    t11 = 0.00424 + t7
-    t11 = t0 * t11
-    t12 = sin(x[2])
-    t13 = cos(x[3])
+    t10 = 0.00424 + t7
+    t10 = t0 * t10
+    t11 = sin(x[2])
+    t12 = cos(x[3])
     t2 = t4 * t2
     t1 = t1 * t5
     t1 = t2 - t1
-    t2 = t13 * t1
-    t4 = t12 * t2
-    t5 = t11 + t4
+    t2 = t12 * t1
+    t4 = t11 * t2
+    t5 = t10 + t4
     t5 = t0 * t5
     t2 = t0 * t2
-    t11 = sin(x[3])
-    t14 = 0.003 * t11
-    t15 = t11 * t14
-    t3 = t6 + t3
+    t10 = sin(x[3])
+    t13 = 0.003 * t10
+    t14 = t10 * t13
+    t3 = t3 + t8
+    t3 = t3 - t6
     t3 = t3 + t9
-    t3 = t3 - t8
-    t3 = t3 + t10
     t3 = 0.009000000000000001 + t3
-    t6 = t13 * t3
-    t8 = t13 * t6
-    t8 = t15 + t8
+    t6 = t12 * t3
+    t8 = t12 * t6
+    t8 = t14 + t8
     t8 = 0.003 + t8
-    t8 = t12 * t8
+    t8 = t11 * t8
     t2 = t2 + t8
-    t2 = t12 * t2
+    t2 = t11 * t2
     t2 = t5 + t2
     t2 = 0.01 + t2
     t5 = p[0] + x[1]
     t8 = 0.3 * p[1]
     t8 = 0.065 + t8
-    t9 = t13 * t8
-    t10 = 0.04000000000000001 + t9
-    t15 = t5 * t10
-    t2 = t2 + t15
-    t10 = t10 * t5
-    t2 = t2 + t10
-    t10 = t5 * t5
-    t10 = 2.2 * t10
-    t2 = t2 + t10
+    t9 = t12 * t8
+    t14 = 0.04000000000000001 + t9
+    t14 = t5 * t14
+    t2 = t2 + t14
+    t2 = t2 + t14
+    t14 = t5 * t5
+    t14 = 2.2 * t14
+    t2 = t2 + t14
     t2 = 0.020000000000000004 + t2
-    t10 = 1.0 / t2
-    t8 = t11 * t8
+    t14 = 1.0 / t2
+    t8 = t10 * t8
     t15 = 0.012 + t8
     t16 = t0 * t15
     t16 = t16 / t2
@@ -14570,31 +14195,31 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t17 = t17 * t2
     t17 = 2.2 - t17
     t18 = t16 / t17
-    t14 = t13 * t14
+    t13 = t12 * t13
+    t6 = t10 * t6
+    t6 = t13 - t6
     t6 = t11 * t6
-    t6 = t14 - t6
-    t6 = t12 * t6
-    t1 = t11 * t1
-    t14 = t0 * t1
-    t6 = t6 - t14
-    t14 = t12 * t15
-    t14 = t5 * t14
-    t6 = t6 - t14
+    t1 = t10 * t1
+    t13 = t0 * t1
+    t6 = t6 - t13
+    t13 = t11 * t15
+    t13 = t5 * t13
+    t6 = t6 - t13
     t6 = t6 / t2
-    t14 = t6 * t16
-    t14 = t14 * t2
-    t14 = t14 / t17
-    t15 = t14 * t16
+    t13 = t6 * t16
+    t13 = t13 * t2
+    t13 = t13 / t17
+    t15 = t13 * t16
     t15 = t6 + t15
-    t19 = 0.003 * t13
-    t19 = t13 * t19
-    t3 = t11 * t3
-    t3 = t11 * t3
+    t19 = 0.003 * t12
+    t19 = t12 * t19
+    t3 = t10 * t3
+    t3 = t10 * t3
     t3 = t19 + t3
     t3 = 0.00424 + t3
     t19 = t6 * t6
     t19 = t19 * t2
-    t20 = t14 * t14
+    t20 = t13 * t13
     t20 = t20 * t17
     t19 = t19 + t20
     t3 = t3 - t19
@@ -14611,7 +14236,7 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t5 = t5 * t2
     t5 = t5 - t8
     t5 = t5 / t17
-    t8 = t5 * t14
+    t8 = t5 * t13
     t8 = t8 * t17
     t4 = t4 + t8
     t1 = t1 + t4
@@ -14630,58 +14255,58 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t8 = t8 + t9
     t7 = t7 - t8
     t8 = t4 / t7
-    t9 = 0.001 * t11
-    t9 = t12 * t9
+    t9 = 0.001 * t10
+    t9 = t11 * t9
     t9 = t9 / t2
-    t11 = t9 * t0
+    t10 = t9 * t0
+    t10 = t10 * t2
+    t11 = t9 * t16
     t11 = t11 * t2
-    t12 = t9 * t16
-    t12 = t12 * t2
-    t12 = t12 / t17
-    t20 = t12 * t5
+    t11 = t11 / t17
+    t20 = t11 * t5
     t20 = t20 * t17
-    t11 = t11 + t20
-    t13 = 0.001 * t13
+    t10 = t10 + t20
+    t12 = 0.001 * t12
     t20 = t9 * t6
     t20 = t20 * t2
-    t21 = t12 * t14
+    t21 = t11 * t13
     t21 = t21 * t17
     t20 = t20 + t21
-    t13 = t13 - t20
-    t13 = t13 / t3
-    t20 = t13 * t1
+    t12 = t12 - t20
+    t12 = t12 / t3
+    t20 = t12 * t1
     t20 = t20 * t3
-    t11 = t11 - t20
-    t11 = t11 / t7
-    t20 = t12 * t16
+    t10 = t10 - t20
+    t10 = t10 / t7
+    t20 = t11 * t16
     t20 = t9 + t20
-    t15 = t13 * t15
+    t15 = t12 * t15
     t15 = t20 - t15
-    t4 = t11 * t4
+    t4 = t10 * t4
     t4 = t15 + t4
     t15 = t9 * t9
     t2 = t15 * t2
-    t15 = t12 * t12
+    t15 = t11 * t11
     t15 = t15 * t17
     t2 = t2 + t15
-    t15 = t13 * t13
+    t15 = t12 * t12
     t15 = t15 * t3
     t2 = t2 + t15
-    t15 = t11 * t11
+    t15 = t10 * t10
     t15 = t15 * t7
     t2 = t2 + t15
     t2 = 0.001 - t2
     t4 = t4 / t2
-    t15 = t11 * t4
+    t15 = t10 * t4
     t8 = t8 + t15
     t15 = t1 * t8
-    t20 = t13 * t4
+    t20 = t12 * t4
     t15 = t15 - t20
     t15 = t19 + t15
-    t19 = t14 * t15
+    t19 = t13 * t15
     t20 = t5 * t8
     t19 = t19 + t20
-    t20 = t12 * t4
+    t20 = t11 * t4
     t19 = t19 + t20
     t18 = t18 + t19
     t19 = t16 * t18
@@ -14691,30 +14316,30 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t19 = t19 + t20
     t20 = t9 * t4
     t19 = t19 + t20
-    t10 = t10 + t19
+    t14 = t14 + t19
     t15 = -t15
     t8 = -t8
     t4 = -t4
     t17 = 1.0 / t17
-    t19 = t14 / t3
-    t20 = t1 * t14
+    t19 = t13 / t3
+    t20 = t1 * t13
     t20 = t5 + t20
     t21 = t20 / t7
-    t22 = t13 * t14
-    t22 = t12 - t22
-    t20 = t11 * t20
+    t22 = t12 * t13
+    t22 = t11 - t22
+    t20 = t10 * t20
     t20 = t22 + t20
     t20 = t20 / t2
-    t22 = t11 * t20
+    t22 = t10 * t20
     t21 = t21 + t22
     t22 = t1 * t21
-    t23 = t13 * t20
+    t23 = t12 * t20
     t22 = t22 - t23
     t19 = t19 + t22
-    t22 = t14 * t19
+    t22 = t13 * t19
     t23 = t5 * t21
     t22 = t22 + t23
-    t23 = t12 * t20
+    t23 = t11 * t20
     t22 = t22 + t23
     t17 = t17 + t22
     t22 = t16 * t17
@@ -14729,19 +14354,19 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t20 = -t20
     t3 = 1.0 / t3
     t23 = t1 / t7
-    t24 = t11 * t1
-    t24 = t13 - t24
+    t24 = t10 * t1
+    t24 = t12 - t24
     t24 = t24 / t2
-    t25 = t11 * t24
+    t25 = t10 * t24
     t23 = t23 - t25
     t25 = t1 * t23
-    t26 = t13 * t24
+    t26 = t12 * t24
     t25 = t25 + t26
     t3 = t3 + t25
-    t25 = t14 * t3
+    t25 = t13 * t3
     t26 = t5 * t23
     t25 = t25 + t26
-    t26 = t12 * t24
+    t26 = t11 * t24
     t25 = t25 - t26
     t26 = t16 * t25
     t27 = t6 * t3
@@ -14754,18 +14379,18 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t25 = -t25
     t24 = -t24
     t7 = 1.0 / t7
-    t27 = t11 / t2
-    t11 = t11 * t27
-    t7 = t7 + t11
-    t11 = t5 * t7
-    t28 = t13 * t27
+    t27 = t10 / t2
+    t10 = t10 * t27
+    t7 = t7 + t10
+    t10 = t5 * t7
+    t28 = t12 * t27
     t29 = t1 * t7
     t28 = t28 - t29
-    t29 = t14 * t28
-    t11 = t11 - t29
-    t29 = t12 * t27
-    t11 = t11 + t29
-    t29 = t16 * t11
+    t29 = t13 * t28
+    t10 = t10 - t29
+    t29 = t11 * t27
+    t10 = t10 + t29
+    t29 = t16 * t10
     t30 = t6 * t28
     t29 = t29 - t30
     t30 = t0 * t7
@@ -14773,19 +14398,19 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     t30 = t9 * t27
     t29 = t29 + t30
     t29 = -t29
-    t11 = -t11
+    t10 = -t10
     t28 = -t28
     t5 = t5 * t27
-    t13 = t13 / t2
-    t1 = t1 * t27
-    t1 = t13 - t1
-    t13 = t14 * t1
-    t5 = t5 - t13
     t12 = t12 / t2
-    t5 = t5 + t12
-    t12 = t16 * t5
+    t1 = t1 * t27
+    t1 = t12 - t1
+    t12 = t13 * t1
+    t5 = t5 - t12
+    t11 = t11 / t2
+    t5 = t5 + t11
+    t11 = t16 * t5
     t6 = t6 * t1
-    t6 = t12 - t6
+    t6 = t11 - t6
     t0 = t0 * t27
     t0 = t6 + t0
     t6 = t9 / t2
@@ -14799,8 +14424,8 @@ def ode_jac_u(x, u, p=DEFAULT_P):
           0.0, 0.0, 0.0, 0.0, 0.0,
           0.0, 0.0, 0.0, 0.0, 0.0,
           0.0, 0.0, 0.0, 0.0, 0.0,
-          t10, t22, t26, t29, t0,
-          t18, t17, t25, t11, t5,
+          t14, t22, t26, t29, t0,
+          t18, t17, t25, t10, t5,
           t15, t19, t3, t28, t1,
           t8, t21, t23, t7, t27,
           t4, t20, t24, t27, t2)
@@ -14837,108 +14462,106 @@ def _ode_jac_u_chunk(x, t, s, y):
     sin(x_4, t4)
     multiply(k0, t4, t5)
     multiply(t4, t5, t6)
-    add(t3, t6, t7)
+    add(t3, t6, t3)
     multiply(k1, p_1, s0)
-    subtract(t7, s0, t7)
+    subtract(t3, s0, t6)
     multiply(k2, p_1, s1)
-    add(t7, s1, t7)
+    add(t6, s1, t6)
     multiply(p_1, p_1, s2)
     multiply(k3, s2, s2)
-    add(t7, s2, t7)
-    add(k4, t7, t7)
-    add(k5, t7, t8)
-    multiply(t0, t8, t8)
-    sin(x_2, t9)
-    cos(x_3, t10)
+    add(t6, s2, t6)
+    add(k4, t6, t6)
+    add(k5, t6, t7)
+    multiply(t0, t7, t7)
+    sin(x_2, t8)
+    cos(x_3, t9)
     multiply(t4, t2, t4)
     multiply(t1, t5, t1)
     subtract(t4, t1, t4)
-    multiply(t10, t4, t1)
-    multiply(t9, t1, t2)
-    add(t8, t2, t8)
-    multiply(t0, t8, t8)
+    multiply(t9, t4, t1)
+    multiply(t8, t1, t2)
+    add(t7, t2, t7)
+    multiply(t0, t7, t7)
     multiply(t0, t1, t1)
     sin(x_3, t5)
-    multiply(k6, t5, t11)
-    multiply(t5, t11, t12)
-    add(t6, t3, t6)
-    add(t6, s1, t6)
-    subtract(t6, s0, t6)
-    add(t6, s2, t6)
-    add(k4, t6, t6)
-    multiply(t10, t6, t3)
-    multiply(t10, t3, t13)
-    add(t12, t13, t12)
-    add(k6, t12, t12)
-    multiply(t9, t12, t12)
-    add(t1, t12, t1)
-    multiply(t9, t1, t1)
-    add(t8, t1, t8)
-    add(k7, t8, t8)
+    multiply(k6, t5, t10)
+    multiply(t5, t10, t11)
+    add(t3, s1, t3)
+    subtract(t3, s0, t3)
+    add(t3, s2, t3)
+    add(k4, t3, t3)
+    multiply(t9, t3, t12)
+    multiply(t9, t12, t13)
+    add(t11, t13, t11)
+    add(k6, t11, t11)
+    multiply(t8, t11, t11)
+    add(t1, t11, t1)
+    multiply(t8, t1, t1)
+    add(t7, t1, t7)
+    add(k7, t7, t7)
     add(p_0, x_1, t1)
     multiply(k3, p_1, s0)
     add(k8, s0, s0)
-    multiply(t10, s0, t12)
-    add(k9, t12, t13)
-    multiply(t1, t13, t14)
-    add(t8, t14, t8)
-    multiply(t13, t1, t13)
-    add(t8, t13, t8)
+    multiply(t9, s0, t11)
+    add(k9, t11, t13)
+    multiply(t1, t13, t13)
+    add(t7, t13, t7)
+    add(t7, t13, t7)
     multiply(t1, t1, t13)
     multiply(k10, t13, t13)
-    add(t8, t13, t8)
-    add(k11, t8, t8)
-    divide(k12, t8, t13)
+    add(t7, t13, t7)
+    add(k11, t7, t7)
+    divide(k12, t7, t13)
     multiply(t5, s0, t14)
     add(k13, t14, t15)
     multiply(t0, t15, t16)
-    divide(t16, t8, t16)
+    divide(t16, t7, t16)
     multiply(t16, t16, t17)
-    multiply(t17, t8, t17)
+    multiply(t17, t7, t17)
     subtract(k10, t17, t17)
     divide(t16, t17, t18)
-    multiply(t10, t11, t11)
-    multiply(t5, t3, t3)
-    subtract(t11, t3, t11)
-    multiply(t9, t11, t11)
+    multiply(t9, t10, t10)
+    multiply(t5, t12, t12)
+    subtract(t10, t12, t10)
+    multiply(t8, t10, t10)
     multiply(t5, t4, t4)
-    multiply(t0, t4, t3)
-    subtract(t11, t3, t11)
-    multiply(t9, t15, t15)
+    multiply(t0, t4, t12)
+    subtract(t10, t12, t10)
+    multiply(t8, t15, t15)
     multiply(t1, t15, t15)
-    subtract(t11, t15, t11)
-    divide(t11, t8, t11)
-    multiply(t11, t16, t3)
-    multiply(t3, t8, t3)
-    divide(t3, t17, t3)
-    multiply(t3, t16, t15)
-    add(t11, t15, t15)
-    multiply(k6, t10, t19)
-    multiply(t10, t19, t19)
-    multiply(t5, t6, t6)
-    multiply(t5, t6, t6)
-    add(t19, t6, t19)
+    subtract(t10, t15, t10)
+    divide(t10, t7, t10)
+    multiply(t10, t16, t12)
+    multiply(t12, t7, t12)
+    divide(t12, t17, t12)
+    multiply(t12, t16, t15)
+    add(t10, t15, t15)
+    multiply(k6, t9, t19)
+    multiply(t9, t19, t19)
+    multiply(t5, t3, t3)
+    multiply(t5, t3, t3)
+    add(t19, t3, t19)
     add(k5, t19, t19)
-    multiply(t11, t11, t6)
-    multiply(t6, t8, t6)
-    multiply(t3, t3, t20)
+    multiply(t10, t10, t3)
+    multiply(t3, t7, t3)
+    multiply(t12, t12, t20)
     multiply(t20, t17, t20)
-    add(t6, t20, t6)
-    subtract(t19, t6, t19)
-    divide(t15, t19, t6)
-    multiply(t0, t7, t20)
+    add(t3, t20, t3)
+    subtract(t19, t3, t19)
+    divide(t15, t19, t3)
+    multiply(t0, t6, t20)
     add(t20, t2, t20)
-    multiply(t0, t12, t0)
+    multiply(t0, t11, t0)
     multiply(t1, t0, t1)
     add(t20, t1, t20)
-    divide(t20, t8, t20)
-    multiply(t20, t11, t0)
-    multiply(t0, t8, t0)
+    divide(t20, t7, t20)
+    multiply(t20, t10, t0)
+    multiply(t0, t7, t0)
     multiply(t20, t16, t1)
-    multiply(t1, t8, t1)
+    multiply(t1, t7, t1)
     subtract(t1, t14, t1)
     divide(t1, t17, t1)
-    multiply(t1, t3, t2)
+    multiply(t1, t12, t2)
     multiply(t2, t17, t2)
     add(t0, t2, t0)
     add(t4, t0, t4)
@@ -14948,178 +14571,178 @@ def _ode_jac_u_chunk(x, t, s, y):
     multiply(t4, t15, t2)
     add(t0, t2, t0)
     multiply(t20, t20, t2)
-    multiply(t2, t8, t2)
-    multiply(t1, t1, t12)
-    multiply(t12, t17, t12)
-    add(t2, t12, t2)
-    multiply(t4, t4, t12)
-    multiply(t12, t19, t12)
-    add(t2, t12, t2)
-    subtract(t7, t2, t7)
-    divide(t0, t7, t2)
+    multiply(t2, t7, t2)
+    multiply(t1, t1, t11)
+    multiply(t11, t17, t11)
+    add(t2, t11, t2)
+    multiply(t4, t4, t11)
+    multiply(t11, t19, t11)
+    add(t2, t11, t2)
+    subtract(t6, t2, t6)
+    divide(t0, t6, t2)
     multiply(k14, t5, t5)
-    multiply(t9, t5, t9)
-    divide(t9, t8, t9)
-    multiply(t9, t20, t5)
-    multiply(t5, t8, t5)
-    multiply(t9, t16, t12)
-    multiply(t12, t8, t12)
-    divide(t12, t17, t12)
-    multiply(t12, t1, t14)
+    multiply(t8, t5, t8)
+    divide(t8, t7, t8)
+    multiply(t8, t20, t5)
+    multiply(t5, t7, t5)
+    multiply(t8, t16, t11)
+    multiply(t11, t7, t11)
+    divide(t11, t17, t11)
+    multiply(t11, t1, t14)
     multiply(t14, t17, t14)
     add(t5, t14, t5)
-    multiply(k14, t10, t10)
-    multiply(t9, t11, t14)
-    multiply(t14, t8, t14)
-    multiply(t12, t3, t21)
+    multiply(k14, t9, t9)
+    multiply(t8, t10, t14)
+    multiply(t14, t7, t14)
+    multiply(t11, t12, t21)
     multiply(t21, t17, t21)
     add(t14, t21, t14)
-    subtract(t10, t14, t10)
-    divide(t10, t19, t10)
-    multiply(t10, t4, t14)
+    subtract(t9, t14, t9)
+    divide(t9, t19, t9)
+    multiply(t9, t4, t14)
     multiply(t14, t19, t14)
     subtract(t5, t14, t5)
-    divide(t5, t7, t5)
-    multiply(t12, t16, t14)
-    add(t9, t14, t14)
-    multiply(t10, t15, t15)
+    divide(t5, t6, t5)
+    multiply(t11, t16, t14)
+    add(t8, t14, t14)
+    multiply(t9, t15, t15)
     subtract(t14, t15, t14)
     multiply(t5, t0, t0)
     add(t14, t0, t14)
-    multiply(t9, t9, t0)
-    multiply(t0, t8, t0)
-    multiply(t12, t12, t8)
-    multiply(t8, t17, t8)
-    add(t0, t8, t0)
-    multiply(t10, t10, t8)
-    multiply(t8, t19, t8)
-    add(t0, t8, t0)
-    multiply(t5, t5, t8)
-    multiply(t8, t7, t8)
-    add(t0, t8, t0)
+    multiply(t8, t8, t0)
+    multiply(t0, t7, t0)
+    multiply(t11, t11, t7)
+    multiply(t7, t17, t7)
+    add(t0, t7, t0)
+    multiply(t9, t9, t7)
+    multiply(t7, t19, t7)
+    add(t0, t7, t0)
+    multiply(t5, t5, t7)
+    multiply(t7, t6, t7)
+    add(t0, t7, t0)
     subtract(k14, t0, t0)
     divide(t14, t0, t14)
-    multiply(t5, t14, t8)
-    add(t2, t8, t2)
-    multiply(t4, t2, t8)
-    multiply(t10, t14, t15)
-    subtract(t8, t15, t8)
-    add(t6, t8, t6)
-    multiply(t3, t6, t8)
-    multiply(t1, t2, t15)
-    add(t8, t15, t8)
-    multiply(t12, t14, t15)
-    add(t8, t15, t8)
-    add(t18, t8, B_30)
-    multiply(t16, B_30, t8)
-    multiply(t11, t6, t15)
-    add(t8, t15, t8)
-    multiply(t20, t2, t15)
-    add(t8, t15, t8)
+    multiply(t5, t14, t7)
+    add(t2, t7, t2)
+    multiply(t4, t2, t7)
     multiply(t9, t14, t15)
-    add(t8, t15, t8)
-    add(t13, t8, B_25)
-    negative(t6, B_35)
+    subtract(t7, t15, t7)
+    add(t3, t7, t3)
+    multiply(t12, t3, t7)
+    multiply(t1, t2, t15)
+    add(t7, t15, t7)
+    multiply(t11, t14, t15)
+    add(t7, t15, t7)
+    add(t18, t7, B_30)
+    multiply(t16, B_30, t7)
+    multiply(t10, t3, t15)
+    add(t7, t15, t7)
+    multiply(t20, t2, t15)
+    add(t7, t15, t7)
+    multiply(t8, t14, t15)
+    add(t7, t15, t7)
+    add(t13, t7, B_25)
+    negative(t3, B_35)
     negative(t2, B_40)
     negative(t14, B_45)
     divide(k12, t17, t17)
-    divide(t3, t19, t2)
-    multiply(t4, t3, t6)
-    add(t1, t6, t6)
-    divide(t6, t7, t8)
-    multiply(t10, t3, t13)
-    subtract(t12, t13, t13)
-    multiply(t5, t6, t6)
-    add(t13, t6, t13)
+    divide(t12, t19, t2)
+    multiply(t4, t12, t3)
+    add(t1, t3, t3)
+    divide(t3, t6, t7)
+    multiply(t9, t12, t13)
+    subtract(t11, t13, t13)
+    multiply(t5, t3, t3)
+    add(t13, t3, t13)
     divide(t13, t0, t13)
-    multiply(t5, t13, t6)
-    add(t8, t6, t8)
-    multiply(t4, t8, t6)
-    multiply(t10, t13, t14)
-    subtract(t6, t14, t6)
-    add(t2, t6, t2)
-    multiply(t3, t2, t6)
-    multiply(t1, t8, t14)
-    add(t6, t14, t6)
-    multiply(t12, t13, t14)
-    add(t6, t14, t6)
-    add(t17, t6, B_31)
-    multiply(t16, B_31, t6)
-    multiply(t11, t2, t14)
-    add(t6, t14, t6)
-    multiply(t20, t8, t14)
-    add(t6, t14, t6)
+    multiply(t5, t13, t3)
+    add(t7, t3, t7)
+    multiply(t4, t7, t3)
     multiply(t9, t13, t14)
-    add(t6, t14, B_26)
+    subtract(t3, t14, t3)
+    add(t2, t3, t2)
+    multiply(t12, t2, t3)
+    multiply(t1, t7, t14)
+    add(t3, t14, t3)
+    multiply(t11, t13, t14)
+    add(t3, t14, t3)
+    add(t17, t3, B_31)
+    multiply(t16, B_31, t3)
+    multiply(t10, t2, t14)
+    add(t3, t14, t3)
+    multiply(t20, t7, t14)
+    add(t3, t14, t3)
+    multiply(t8, t13, t14)
+    add(t3, t14, B_26)
     negative(t2, B_36)
-    negative(t8, B_41)
+    negative(t7, B_41)
     negative(t13, B_46)
     divide(k12, t19, t19)
-    divide(t4, t7, t2)
-    multiply(t5, t4, t6)
-    subtract(t10, t6, t6)
-    divide(t6, t0, t6)
-    multiply(t5, t6, t8)
-    subtract(t2, t8, B_42)
+    divide(t4, t6, t2)
+    multiply(t5, t4, t3)
+    subtract(t9, t3, t3)
+    divide(t3, t0, t3)
+    multiply(t5, t3, t7)
+    subtract(t2, t7, B_42)
     multiply(t4, B_42, t2)
-    multiply(t10, t6, t8)
-    add(t2, t8, t2)
+    multiply(t9, t3, t7)
+    add(t2, t7, t2)
     add(t19, t2, B_37)
-    multiply(t3, B_37, t2)
-    multiply(t1, B_42, t8)
-    add(t2, t8, t2)
-    multiply(t12, t6, t8)
-    subtract(t2, t8, t2)
-    multiply(t16, t2, t8)
-    multiply(t11, B_37, t13)
-    add(t8, t13, t8)
+    multiply(t12, B_37, t2)
+    multiply(t1, B_42, t7)
+    add(t2, t7, t2)
+    multiply(t11, t3, t7)
+    subtract(t2, t7, t2)
+    multiply(t16, t2, t7)
+    multiply(t10, B_37, t13)
+    add(t7, t13, t7)
     multiply(t20, B_42, t13)
-    add(t8, t13, t8)
-    multiply(t9, t6, t13)
-    subtract(t8, t13, t8)
-    negative(t8, B_27)
+    add(t7, t13, t7)
+    multiply(t8, t3, t13)
+    subtract(t7, t13, t7)
+    negative(t7, B_27)
     negative(t2, B_32)
-    negative(t6, B_47)
-    divide(k12, t7, t7)
+    negative(t3, B_47)
+    divide(k12, t6, t6)
     divide(t5, t0, B_44)
     multiply(t5, B_44, t5)
-    add(t7, t5, B_43)
+    add(t6, t5, B_43)
     multiply(t1, B_43, t2)
-    multiply(t10, B_44, t5)
-    multiply(t4, B_43, t6)
+    multiply(t9, B_44, t3)
+    multiply(t4, B_43, t5)
+    subtract(t3, t5, t3)
+    multiply(t12, t3, t5)
+    subtract(t2, t5, t2)
+    multiply(t11, B_44, t5)
+    add(t2, t5, t2)
+    multiply(t16, t2, t5)
+    multiply(t10, t3, t6)
     subtract(t5, t6, t5)
-    multiply(t3, t5, t6)
-    subtract(t2, t6, t2)
-    multiply(t12, B_44, t6)
-    add(t2, t6, t2)
-    multiply(t16, t2, t6)
-    multiply(t11, t5, t7)
-    subtract(t6, t7, t6)
-    multiply(t20, B_43, t7)
-    add(t6, t7, t6)
-    multiply(t9, B_44, t7)
-    add(t6, t7, t6)
-    negative(t6, B_28)
+    multiply(t20, B_43, t6)
+    add(t5, t6, t5)
+    multiply(t8, B_44, t6)
+    add(t5, t6, t5)
+    negative(t5, B_28)
     negative(t2, B_33)
-    negative(t5, B_38)
+    negative(t3, B_38)
     multiply(t1, B_44, t1)
-    divide(t10, t0, t10)
+    divide(t9, t0, t9)
     multiply(t4, B_44, t4)
-    subtract(t10, t4, t10)
-    multiply(t3, t10, t3)
-    subtract(t1, t3, t1)
-    divide(t12, t0, t12)
-    add(t1, t12, t1)
+    subtract(t9, t4, t9)
+    multiply(t12, t9, t12)
+    subtract(t1, t12, t1)
+    divide(t11, t0, t11)
+    add(t1, t11, t1)
     multiply(t16, t1, t16)
-    multiply(t11, t10, t11)
-    subtract(t16, t11, t16)
+    multiply(t10, t9, t10)
+    subtract(t16, t10, t16)
     multiply(t20, B_44, t20)
     add(t16, t20, t16)
-    divide(t9, t0, t9)
-    add(t16, t9, t16)
+    divide(t8, t0, t8)
+    add(t16, t8, t16)
     negative(t16, B_29)
     negative(t1, B_34)
-    negative(t10, B_39)
+    negative(t9, B_39)
     divide(k12, t0, B_49)
     copyto(B_48, B_44)
 
@@ -15132,14 +14755,14 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     in  qdd [5]
     in  p [3]
     out Y [5x65]
-    534 ops: 289 mul, 232 add, 0 div, 8 trig, 5 other
+    501 ops: 264 mul, 224 add, 0 div, 8 trig, 5 other
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
     qdd = _array(qdd, 5, "qdd")
     p = _array(p, 3, "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
-        return _batch(_regressor_chunk, (q, qd, qdd, p), 36, ((5, 65),), fixed=_regressor_fixed)
+        return _batch(_regressor_chunk, (q, qd, qdd, p), 32, ((5, 65),), fixed=_regressor_fixed)
     # one state: Python floats
     q = q.tolist()
     qd = qd.tolist()
@@ -15153,17 +14776,16 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t2 = -t1
     t3 = p[0] + q[1]
     t4 = qdd[0] * t3
-    t4 = t0 + t4
-    t5 = qd[0] * qd[1]
-    t5 = t5 + t5
-    t4 = t4 + t5
-    t5 = t3 * t4
-    t6 = qd[0] * t3
-    t6 = qd[0] * t6
-    t1 = t1 - t6
+    t5 = t0 + t4
+    t6 = qd[0] * qd[1]
+    t6 = t6 + t6
+    t5 = t5 + t6
+    t6 = t3 * t5
+    t7 = qd[0] * t3
+    t7 = qd[0] * t7
+    t1 = t1 - t7
     t1 = t1 + qdd[1]
-    t6 = t3 * qdd[0]
-    t6 = t4 + t6
+    t4 = t5 + t4
     t7 = qd[0] * qd[0]
     t8 = -t7
     t7 = t3 * t7
@@ -15172,12 +14794,12 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t9 = -qdd[0]
     t10 = sin(q[2])
     t11 = t10 * t3
-    t12 = t10 * t4
+    t12 = t10 * t5
     t13 = t11 * t12
     t14 = cos(q[2])
     t3 = t14 * t3
-    t4 = t14 * t4
-    t15 = t3 * t4
+    t5 = t14 * t5
+    t15 = t3 * t5
     t15 = t13 + t15
     t16 = t10 * t1
     t17 = qd[2] * qd[2]
@@ -15195,8 +14817,8 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t23 = t21 * qd[2]
     t24 = t20 + t23
     t25 = t24 + t23
-    t26 = -t4
-    t27 = t14 * t4
+    t26 = -t5
+    t27 = t14 * t5
     t28 = t10 * t12
     t27 = t27 + t28
     t28 = t11 * t20
@@ -15208,9 +14830,8 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t30 = t19 + t28
     t30 = -t30
     t31 = t14 * t1
-    t32 = t18 * t21
-    t33 = qdd[2] + t32
-    t33 = t11 * t33
+    t32 = qdd[2] + t22
+    t33 = t11 * t32
     t34 = t28 + t17
     t34 = t3 * t34
     t33 = t33 + t34
@@ -15221,67 +14842,61 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t35 = t33 - t34
     t36 = -t12
     t37 = t14 * t34
-    t38 = qd[2] * t21
-    t39 = t10 * t38
-    t37 = t37 - t39
-    t39 = qdd[2] - t32
-    t39 = t14 * t39
-    t40 = t28 - t17
-    t40 = t10 * t40
-    t39 = t39 + t40
     t23 = t10 * t23
-    t33 = t14 * t33
-    t23 = t23 - t33
-    t33 = t24 + t38
-    t33 = t14 * t33
-    t38 = qd[2] * t18
-    t40 = t34 - t38
-    t40 = t10 * t40
-    t33 = t33 + t40
+    t37 = t37 - t23
+    t38 = qdd[2] - t22
+    t38 = t14 * t38
+    t39 = t28 - t17
+    t39 = t10 * t39
+    t38 = t38 + t39
+    t39 = t14 * t33
+    t23 = t23 - t39
+    t40 = t14 * t25
+    t33 = t34 - t33
+    t33 = t10 * t33
+    t33 = t40 + t33
     t28 = t19 - t28
     t17 = t17 - t19
     t17 = t14 * t17
-    t19 = qdd[2] + t22
-    t19 = t10 * t19
+    t19 = t10 * t32
     t17 = t17 + t19
-    t19 = t14 * t38
-    t38 = t10 * t24
-    t19 = t19 + t38
-    t22 = -t22
-    t38 = sin(q[3])
-    t40 = t38 * t3
+    t19 = t10 * t24
+    t19 = t39 + t19
+    t32 = -t22
+    t39 = sin(q[3])
+    t40 = t39 * t3
     t41 = cos(q[3])
     t42 = t41 * t1
-    t43 = t38 * t4
+    t43 = t39 * t5
     t42 = t42 + t43
     t43 = t40 * t42
     t13 = t13 + t43
     t3 = t41 * t3
-    t4 = t41 * t4
-    t43 = t38 * t1
-    t4 = t4 - t43
-    t43 = t3 * t4
+    t5 = t41 * t5
+    t43 = t39 * t1
+    t5 = t5 - t43
+    t43 = t3 * t5
     t13 = t13 + t43
     t43 = t41 * t42
-    t44 = t38 * t4
+    t44 = t39 * t5
     t43 = t43 - t44
     t44 = t41 * t10
     t45 = t44 * t42
-    t10 = t38 * t10
-    t46 = t10 * t4
+    t10 = t39 * t10
+    t46 = t10 * t5
     t45 = t45 - t46
     t46 = t41 * qd[2]
-    t47 = t38 * t18
+    t47 = t39 * t18
     t46 = t46 + t47
     t47 = t46 * t46
     t18 = t41 * t18
-    t48 = t38 * qd[2]
+    t48 = t39 * qd[2]
     t18 = t18 - t48
     t48 = t18 * t18
     t49 = t47 + t48
     t49 = t11 * t49
     t50 = t41 * t24
-    t51 = t38 * qdd[2]
+    t51 = t39 * qdd[2]
     t50 = t50 - t51
     t51 = t46 * qd[3]
     t50 = t50 - t51
@@ -15292,7 +14907,7 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t49 = t49 + t53
     t53 = t21 * t18
     t54 = t41 * qdd[2]
-    t24 = t38 * t24
+    t24 = t39 * t24
     t24 = t54 + t24
     t54 = t18 * qd[3]
     t24 = t24 + t54
@@ -15301,40 +14916,37 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t49 = t49 + t55
     t45 = t45 + t49
     t49 = t41 * t52
-    t52 = t38 * t54
-    t49 = t49 - t52
-    t52 = t41 * t4
-    t54 = t38 * t42
-    t52 = t52 + t54
-    t52 = -t52
-    t54 = t14 * t4
-    t55 = t44 * t12
+    t54 = t39 * t54
+    t49 = t49 - t54
+    t54 = t41 * t5
+    t55 = t39 * t42
     t54 = t54 + t55
+    t54 = -t54
+    t55 = t14 * t5
+    t56 = t44 * t12
+    t55 = t55 + t56
     t34 = t34 + qdd[3]
-    t55 = t46 * t18
-    t56 = t34 + t55
-    t57 = t3 * t56
-    t58 = t46 * t21
-    t59 = t58 - t50
+    t56 = t46 * t18
+    t57 = t34 + t56
+    t58 = t3 * t57
+    t59 = t51 - t50
     t59 = t11 * t59
     t60 = t21 * t21
     t61 = t48 + t60
     t62 = t40 * t61
     t59 = t59 + t62
-    t57 = t57 - t59
-    t54 = t54 + t57
-    t57 = t41 * t61
-    t56 = t38 * t56
-    t56 = t57 + t56
-    t56 = -t56
-    t57 = t38 * t12
-    t57 = -t57
-    t59 = t18 * t46
-    t61 = t59 - t34
+    t58 = t58 - t59
+    t55 = t55 + t58
+    t58 = t41 * t61
+    t59 = t39 * t57
+    t58 = t58 + t59
+    t58 = -t58
+    t59 = t39 * t12
+    t59 = -t59
+    t61 = t56 - t34
     t62 = t40 * t61
-    t63 = t18 * t21
-    t64 = t24 + t63
-    t64 = t11 * t64
+    t63 = t24 + t53
+    t64 = t11 * t63
     t62 = t62 - t64
     t64 = t60 + t47
     t65 = t3 * t64
@@ -15344,77 +14956,69 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t65 = t65 + t66
     t62 = t62 - t65
     t61 = t41 * t61
-    t64 = t38 * t64
+    t64 = t39 * t64
     t61 = t61 + t64
     t64 = t41 * t12
     t64 = -t64
     t65 = -t42
     t66 = t14 * t34
-    t67 = t10 * t63
+    t67 = t10 * t53
     t66 = t66 + t67
-    t67 = t44 * t58
-    t66 = t66 - t67
-    t67 = t41 * t63
-    t68 = t38 * t58
-    t67 = t67 + t68
-    t63 = t24 - t63
-    t68 = t14 * t63
-    t69 = t34 + t59
-    t70 = t10 * t69
-    t68 = t68 + t70
-    t70 = t60 - t47
-    t71 = t44 * t70
-    t68 = t68 + t71
-    t69 = t41 * t69
-    t70 = t38 * t70
-    t69 = t69 - t70
-    t70 = t10 * t24
-    t71 = t14 * t59
-    t70 = t70 - t71
-    t71 = t44 * t51
-    t70 = t70 + t71
-    t71 = t41 * t24
-    t72 = t38 * t51
-    t71 = t71 - t72
-    t59 = -t59
-    t58 = t50 + t58
-    t72 = t14 * t58
-    t60 = t48 - t60
-    t73 = t10 * t60
+    t68 = t44 * t51
+    t66 = t66 - t68
+    t69 = t41 * t53
+    t70 = t39 * t51
+    t71 = t69 + t70
+    t53 = t24 - t53
+    t72 = t14 * t53
+    t73 = t10 * t57
     t72 = t72 + t73
-    t73 = t34 - t55
+    t73 = t60 - t47
     t74 = t44 * t73
     t72 = t72 + t74
+    t57 = t41 * t57
+    t73 = t39 * t73
+    t57 = t57 - t73
+    t73 = t10 * t24
+    t74 = t14 * t56
+    t73 = t73 - t74
+    t68 = t73 + t68
+    t73 = t41 * t24
+    t70 = t73 - t70
+    t73 = -t56
+    t75 = t14 * t52
+    t60 = t48 - t60
+    t76 = t10 * t60
+    t75 = t75 + t76
+    t76 = t34 - t56
+    t77 = t44 * t76
+    t75 = t75 + t77
     t60 = t41 * t60
-    t73 = t38 * t73
-    t60 = t60 - t73
+    t76 = t39 * t76
+    t60 = t60 - t76
     t47 = t47 - t48
     t48 = t14 * t47
     t51 = t50 - t51
-    t73 = t10 * t51
-    t48 = t48 + t73
-    t73 = t24 + t53
-    t74 = t44 * t73
-    t48 = t48 + t74
+    t76 = t10 * t51
+    t48 = t48 + t76
+    t76 = t44 * t63
+    t48 = t48 + t76
     t51 = t41 * t51
-    t73 = t38 * t73
-    t51 = t51 - t73
-    t73 = t14 * t55
-    t74 = t10 * t53
-    t73 = t73 - t74
-    t74 = t44 * t50
-    t73 = t73 + t74
-    t53 = t41 * t53
-    t74 = t38 * t50
-    t53 = t53 + t74
-    t53 = -t53
-    t74 = t18 * p[1]
-    t75 = t18 * t74
+    t63 = t39 * t63
+    t51 = t51 - t63
+    t63 = t74 - t67
+    t67 = t44 * t50
+    t63 = t63 + t67
+    t67 = t39 * t50
+    t67 = t69 + t67
+    t67 = -t67
+    t69 = t18 * p[1]
+    t74 = t18 * t69
     t76 = t21 * p[1]
     t77 = t21 * t76
-    t75 = t75 + t77
-    t42 = t42 - t75
-    t75 = t40 * t42
+    t74 = t74 + t77
+    t42 = t42 - t74
+    t74 = t40 * t42
     t77 = cos(q[4])
     t78 = t44 * p[1]
     t11 = t11 + t78
@@ -15430,33 +15034,33 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t12 = t76 - t12
     t76 = t77 * t12
     t80 = t34 * p[1]
-    t80 = t4 + t80
-    t74 = t46 * t74
-    t74 = t80 + t74
-    t80 = t79 * t74
+    t80 = t5 + t80
+    t69 = t46 * t69
+    t69 = t80 + t69
+    t80 = t79 * t69
     t76 = t76 - t80
     t80 = t78 * t76
-    t75 = t75 - t80
+    t74 = t74 - t80
     t3 = t77 * t3
     t11 = t79 * t11
     t3 = t3 - t11
     t11 = t79 * t12
-    t12 = t77 * t74
+    t12 = t77 * t69
     t11 = t11 + t12
     t12 = t3 * t11
-    t12 = t75 + t12
-    t74 = t79 * t38
-    t75 = t74 * t76
+    t12 = t74 + t12
+    t69 = t79 * t39
+    t74 = t69 * t76
     t80 = t41 * t42
-    t75 = t75 + t80
-    t80 = t77 * t38
+    t74 = t74 + t80
+    t80 = t77 * t39
     t81 = t80 * t11
-    t75 = t75 - t81
-    t38 = t38 * p[1]
-    t81 = t77 * t38
+    t74 = t74 - t81
+    t39 = t39 * p[1]
+    t81 = t77 * t39
     t82 = t81 * t76
-    t38 = t79 * t38
-    t83 = t38 * t11
+    t39 = t79 * t39
+    t83 = t39 * t11
     t82 = t82 + t83
     t83 = t77 * p[1]
     t84 = t83 * t11
@@ -15496,195 +15100,181 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     t92 = t92 + t97
     t87 = t87 + t92
     t92 = t41 * t94
-    t94 = t74 * t91
-    t92 = t92 - t94
-    t94 = t80 * t96
-    t92 = t92 - t94
-    t94 = t38 * t96
-    t97 = t81 * t91
-    t94 = t94 - t97
-    t97 = t41 * t11
-    t98 = t80 * t42
-    t97 = t97 + t98
-    t94 = t94 - t97
-    t97 = t79 * t42
+    t97 = t69 * t91
+    t92 = t92 - t97
+    t97 = t80 * t96
+    t92 = t92 - t97
+    t97 = t39 * t96
+    t98 = t81 * t91
+    t97 = t97 - t98
+    t98 = t41 * t11
+    t99 = t80 * t42
+    t98 = t98 + t99
+    t97 = t97 - t98
+    t98 = t79 * t42
     t91 = t85 * t91
     t96 = t83 * t96
     t91 = t91 + t96
-    t91 = t97 + t91
+    t91 = t98 + t91
     t96 = -t11
     t14 = t77 * t14
     t44 = t79 * t44
     t14 = t14 - t44
     t44 = t14 * t11
-    t97 = t86 * t76
-    t44 = t44 - t97
-    t97 = t77 * t34
+    t98 = t86 * t76
+    t44 = t44 - t98
+    t98 = t77 * t34
     t50 = t79 * t50
-    t50 = t97 - t50
-    t97 = t89 * qd[4]
-    t50 = t50 - t97
-    t97 = t46 * t89
-    t98 = t50 + t97
-    t99 = t3 * t98
-    t100 = t46 * t18
-    t101 = t100 - t21
-    t102 = t78 * t101
-    t103 = t18 * t18
-    t104 = t90 + t103
-    t105 = t40 * t104
-    t102 = t102 + t105
-    t99 = t99 - t102
-    t44 = t44 + t99
-    t99 = t74 * t101
-    t102 = t41 * t104
-    t99 = t99 - t102
-    t102 = t80 * t98
-    t99 = t99 - t102
-    t102 = t74 * t11
-    t104 = t80 * t76
-    t102 = t102 + t104
-    t104 = t81 * t101
-    t105 = t38 * t98
-    t104 = t104 + t105
-    t102 = t102 + t104
+    t50 = t98 - t50
+    t98 = t89 * qd[4]
+    t50 = t50 - t98
+    t46 = t46 * t89
+    t89 = t50 + t46
+    t98 = t3 * t89
+    t99 = t93 - t21
+    t100 = t78 * t99
+    t18 = t18 * t18
+    t101 = t90 + t18
+    t102 = t40 * t101
+    t100 = t100 + t102
+    t98 = t98 - t100
+    t44 = t44 + t98
+    t98 = t69 * t99
+    t100 = t41 * t101
+    t98 = t98 - t100
+    t100 = t80 * t89
+    t98 = t98 - t100
+    t100 = t69 * t11
+    t101 = t80 * t76
+    t100 = t100 + t101
+    t101 = t81 * t99
+    t102 = t39 * t89
+    t101 = t101 + t102
+    t100 = t100 + t101
     t11 = t77 * t11
-    t104 = t79 * t76
-    t11 = t11 - t104
-    t98 = t83 * t98
-    t101 = t85 * t101
-    t98 = t98 - t101
-    t11 = t11 + t98
-    t98 = t10 * t76
+    t101 = t79 * t76
+    t11 = t11 - t101
+    t101 = t83 * t89
+    t99 = t85 * t99
+    t99 = t101 - t99
+    t11 = t11 + t99
+    t99 = t10 * t76
     t101 = t14 * t42
-    t98 = t98 - t101
-    t46 = t89 * t46
+    t99 = t99 - t101
     t101 = t46 - t50
     t40 = t40 * t101
-    t18 = t89 * t18
-    t89 = t24 + t18
-    t78 = t78 * t89
+    t102 = t24 + t95
+    t78 = t78 * t102
     t40 = t40 - t78
-    t78 = t103 + t88
+    t78 = t18 + t88
     t3 = t3 * t78
     t3 = t40 - t3
-    t3 = t98 + t3
-    t40 = t74 * t89
-    t98 = t41 * t101
-    t40 = t40 + t98
-    t98 = t80 * t78
-    t40 = t40 + t98
-    t98 = t41 * t76
-    t101 = t74 * t42
-    t98 = t98 - t101
-    t81 = t81 * t89
-    t38 = t38 * t78
-    t38 = t81 - t38
-    t38 = t98 + t38
+    t3 = t99 + t3
+    t40 = t69 * t102
+    t99 = t41 * t101
+    t40 = t40 + t99
+    t99 = t80 * t78
+    t40 = t40 + t99
+    t99 = t41 * t76
+    t101 = t69 * t42
+    t99 = t99 - t101
+    t81 = t81 * t102
+    t39 = t39 * t78
+    t39 = t81 - t39
+    t39 = t99 + t39
     t42 = t77 * t42
-    t81 = t85 * t89
+    t81 = t85 * t102
     t78 = t83 * t78
     t78 = t81 + t78
     t42 = t42 + t78
     t42 = -t42
     t78 = t14 * t50
-    t81 = t10 * t18
+    t81 = t10 * t95
     t78 = t78 + t81
-    t81 = t86 * t100
-    t78 = t78 - t81
-    t81 = t74 * t50
-    t83 = t41 * t18
-    t81 = t81 + t83
-    t83 = t80 * t100
-    t81 = t81 + t83
-    t83 = t77 * t50
-    t85 = t79 * t100
-    t83 = t83 - t85
-    t85 = t24 - t18
-    t89 = t14 * t85
-    t98 = t50 + t46
-    t101 = t10 * t98
-    t89 = t89 + t101
-    t101 = t103 - t88
-    t104 = t86 * t101
-    t89 = t89 + t104
-    t104 = t74 * t85
-    t105 = t41 * t98
-    t104 = t104 + t105
-    t105 = t80 * t101
-    t104 = t104 - t105
-    t85 = t77 * t85
-    t101 = t79 * t101
+    t83 = t86 * t93
+    t78 = t78 - t83
+    t85 = t69 * t50
+    t99 = t41 * t95
+    t85 = t85 + t99
+    t101 = t80 * t93
     t85 = t85 + t101
-    t101 = t10 * t24
-    t105 = t14 * t46
-    t101 = t101 - t105
-    t105 = t86 * t93
-    t101 = t101 + t105
-    t105 = t41 * t24
-    t106 = t74 * t46
-    t105 = t105 - t106
-    t106 = t80 * t93
-    t105 = t105 - t106
-    t106 = t79 * t93
-    t46 = t77 * t46
-    t46 = t106 - t46
-    t100 = t21 + t100
-    t106 = t14 * t100
-    t103 = t90 - t103
-    t107 = t10 * t103
+    t103 = t77 * t50
+    t104 = t79 * t93
+    t103 = t103 - t104
+    t105 = t24 - t95
+    t106 = t14 * t105
+    t107 = t10 * t89
     t106 = t106 + t107
-    t50 = t50 - t97
-    t107 = t86 * t50
-    t106 = t106 + t107
-    t107 = t74 * t100
-    t108 = t41 * t103
-    t107 = t107 + t108
-    t108 = t80 * t50
-    t107 = t107 - t108
-    t100 = t77 * t100
-    t50 = t79 * t50
-    t50 = t100 + t50
-    t88 = t88 - t90
-    t90 = t14 * t88
-    t93 = t21 - t93
-    t100 = t10 * t93
-    t90 = t90 + t100
-    t100 = t24 + t95
-    t108 = t86 * t100
-    t90 = t90 + t108
-    t108 = t74 * t88
-    t109 = t41 * t93
+    t107 = t18 - t88
+    t108 = t86 * t107
+    t106 = t106 + t108
+    t108 = t69 * t105
+    t109 = t41 * t89
     t108 = t108 + t109
-    t109 = t80 * t100
+    t109 = t80 * t107
     t108 = t108 - t109
-    t88 = t77 * t88
-    t100 = t79 * t100
-    t88 = t88 + t100
-    t14 = t14 * t97
-    t10 = t10 * t95
-    t10 = t14 - t10
-    t14 = t86 * t21
+    t105 = t77 * t105
+    t107 = t79 * t107
+    t105 = t105 + t107
+    t107 = t10 * t24
+    t109 = t14 * t46
+    t107 = t107 - t109
+    t83 = t107 + t83
+    t107 = t41 * t24
+    t110 = t69 * t46
+    t107 = t107 - t110
+    t101 = t107 - t101
+    t107 = t77 * t46
+    t104 = t104 - t107
+    t111 = t14 * t94
+    t18 = t90 - t18
+    t112 = t10 * t18
+    t111 = t111 + t112
+    t46 = t50 - t46
+    t50 = t86 * t46
+    t50 = t111 + t50
+    t111 = t69 * t94
+    t112 = t41 * t18
+    t111 = t111 + t112
+    t112 = t80 * t46
+    t111 = t111 - t112
+    t94 = t77 * t94
+    t46 = t79 * t46
+    t46 = t94 + t46
+    t88 = t88 - t90
+    t14 = t14 * t88
+    t90 = t21 - t93
+    t10 = t10 * t90
+    t10 = t14 + t10
+    t14 = t86 * t102
     t10 = t10 + t14
-    t14 = t74 * t97
-    t41 = t41 * t95
+    t14 = t69 * t88
+    t41 = t41 * t90
+    t14 = t14 + t41
+    t41 = t80 * t102
     t14 = t14 - t41
-    t41 = t80 * t21
-    t14 = t14 - t41
-    t41 = t77 * t97
+    t41 = t77 * t88
+    t69 = t79 * t102
+    t41 = t41 + t69
+    t69 = t109 - t81
+    t77 = t86 * t21
+    t69 = t69 + t77
+    t77 = t110 - t99
+    t80 = t80 * t21
+    t77 = t77 - t80
     t21 = t79 * t21
-    t21 = t41 + t21
-    t41 = -t95
-    t74 = sign(qd[0])
-    t77 = sign(qd[1])
-    t79 = sign(qd[2])
-    t80 = sign(qd[3])
-    t86 = sign(qd[4])
-    _Y = (0.0, 0.0, t0, t2, qdd[0], 0.0, 0.0, 0.0, 0.0, 0.0, t5, 0.0, t6, t7, qdd[0], 0.0, 0.0, 0.0, 0.0, 0.0, t15, t16, t27, t31, t37, t39, t23, t33, t17, t19, t13, t45, t54, t62, t66, t68, t70, t72, t48, t73, t12, t87, t44, t3, t78, t89, t101, t106, t90, t10, qdd[0], qd[0], t74, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t1, 0.0, t8, t9, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t1, t25, t30, t35, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t43, t49, t56, t61, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t75, t92, t99, t40, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[1], qd[1], t77, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t26, 0.0, t36, t32, t29, qdd[2], t28, t20, t22, 0.0, t52, t57, t64, t67, t69, t71, t60, t51, t53, t82, t94, t102, t38, t81, t104, t105, t107, t108, t14, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[2], qd[2], t79, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t4, t65, t34, t63, t59, t58, t47, t55, t84, t91, t11, t42, t83, t85, t46, t50, t88, t21, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[3], qd[3], t80, 0.0, 0.0, 0.0,
-          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t96, 0.0, t76, t18, t98, t24, t103, t93, t41, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[4], qd[4], t86)
+    t21 = t107 + t21
+    t79 = -t95
+    t80 = sign(qd[0])
+    t81 = sign(qd[1])
+    t86 = sign(qd[2])
+    t88 = sign(qd[3])
+    t93 = sign(qd[4])
+    _Y = (0.0, 0.0, t0, t2, qdd[0], 0.0, 0.0, 0.0, 0.0, 0.0, t6, 0.0, t4, t7, qdd[0], 0.0, 0.0, 0.0, 0.0, 0.0, t15, t16, t27, t31, t37, t38, t23, t33, t17, t19, t13, t45, t55, t62, t66, t72, t68, t75, t48, t63, t12, t87, t44, t3, t78, t106, t83, t50, t10, t69, qdd[0], qd[0], t80, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t1, 0.0, t8, t9, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t1, t25, t30, t35, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t43, t49, t58, t61, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t74, t92, t98, t40, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[1], qd[1], t81, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t26, 0.0, t36, t22, t29, qdd[2], t28, t20, t32, 0.0, t54, t59, t64, t71, t57, t70, t60, t51, t67, t82, t97, t100, t39, t85, t108, t101, t111, t14, t77, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[2], qd[2], t86, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t5, t65, t34, t53, t73, t52, t47, t56, t84, t91, t11, t42, t103, t105, t104, t46, t41, t21, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[3], qd[3], t88, 0.0, 0.0, 0.0,
+          0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t96, 0.0, t76, t95, t89, t24, t18, t90, t79, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[4], qd[4], t93)
     return np.array(_Y).reshape(5, 65)
 
 
@@ -15724,7 +15314,7 @@ def _regressor_chunk(x, t, s, y):
     (q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, qdd_0, qdd_1, qdd_2, qdd_3, qdd_4, p_0, p_1,
      p_2) = x
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
-     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35) = t
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31) = t
     (Y_2, Y_3, Y_4, Y_10, Y_12, Y_13, Y_14, Y_20, Y_21, Y_22, Y_23, Y_24, Y_25, Y_26, Y_27, Y_28, Y_29,
      Y_30, Y_31, Y_32, Y_33, Y_34, Y_35, Y_36, Y_37, Y_38, Y_39, Y_40, Y_41, Y_42, Y_43, Y_44, Y_45, Y_46,
      Y_47, Y_48, Y_49, Y_50, Y_51, Y_52, Y_75, Y_77, Y_78, Y_85, Y_86, Y_87, Y_88, Y_95, Y_96, Y_97, Y_98,
@@ -15741,17 +15331,16 @@ def _regressor_chunk(x, t, s, y):
     negative(t0, Y_3)
     add(p_0, q_1, t1)
     multiply(qdd_0, t1, t2)
-    add(Y_2, t2, t2)
-    multiply(qd_0, qd_1, t3)
-    add(t3, t3, t3)
-    add(t2, t3, t2)
-    multiply(t1, t2, Y_10)
-    multiply(qd_0, t1, t3)
-    multiply(qd_0, t3, t3)
-    subtract(t0, t3, t0)
+    add(Y_2, t2, t3)
+    multiply(qd_0, qd_1, t4)
+    add(t4, t4, t4)
+    add(t3, t4, t3)
+    multiply(t1, t3, Y_10)
+    multiply(qd_0, t1, t4)
+    multiply(qd_0, t4, t4)
+    subtract(t0, t4, t0)
     add(t0, qdd_1, Y_75)
-    multiply(t1, qdd_0, t0)
-    add(t2, t0, Y_12)
+    add(t3, t2, Y_12)
     multiply(qd_0, qd_0, t0)
     negative(t0, Y_77)
     multiply(t1, t0, t0)
@@ -15759,102 +15348,95 @@ def _regressor_chunk(x, t, s, y):
     negative(t0, Y_13)
     negative(qdd_0, Y_78)
     sin(q_2, t0)
-    multiply(t0, t1, t3)
-    multiply(t0, t2, t4)
-    multiply(t3, t4, t5)
+    multiply(t0, t1, t2)
+    multiply(t0, t3, t4)
+    multiply(t2, t4, t5)
     cos(q_2, t6)
     multiply(t6, t1, t1)
-    multiply(t6, t2, t2)
-    multiply(t1, t2, t7)
+    multiply(t6, t3, t3)
+    multiply(t1, t3, t7)
     add(t5, t7, Y_20)
     multiply(t0, Y_75, t7)
     multiply(qd_2, qd_2, t8)
     multiply(t0, qd_0, t9)
     multiply(t9, t9, t10)
     add(t8, t10, t11)
-    multiply(t3, t11, t11)
+    multiply(t2, t11, t11)
     multiply(t6, qd_0, t12)
-    multiply(t12, t9, t13)
-    subtract(t13, qdd_2, t14)
-    multiply(t1, t14, t14)
-    add(t11, t14, t11)
+    multiply(t12, t9, Y_154)
+    subtract(Y_154, qdd_2, t13)
+    multiply(t1, t13, t13)
+    add(t11, t13, t11)
     add(t7, t11, Y_21)
     multiply(t0, qdd_0, Y_158)
     multiply(t12, qd_2, t7)
     add(Y_158, t7, t11)
     add(t11, t7, Y_86)
-    negative(t2, Y_151)
-    multiply(t6, t2, t14)
-    multiply(t0, t4, t15)
-    add(t14, t15, t14)
-    multiply(t3, Y_158, t15)
+    negative(t3, Y_151)
+    multiply(t6, t3, t13)
+    multiply(t0, t4, t14)
+    add(t13, t14, t13)
+    multiply(t2, Y_158, t14)
     multiply(t6, qdd_0, Y_155)
-    multiply(t1, Y_155, t16)
-    add(t15, t16, t15)
-    add(t14, t15, Y_22)
-    multiply(t12, t12, t14)
-    add(t10, t14, t15)
-    negative(t15, Y_87)
-    multiply(t6, Y_75, t15)
-    multiply(t9, t12, Y_154)
-    add(qdd_2, Y_154, t16)
-    multiply(t3, t16, t16)
-    add(t14, t8, t17)
+    multiply(t1, Y_155, t15)
+    add(t14, t15, t14)
+    add(t13, t14, Y_22)
+    multiply(t12, t12, t13)
+    add(t10, t13, t14)
+    negative(t14, Y_87)
+    multiply(t6, Y_75, t14)
+    add(qdd_2, Y_154, t15)
+    multiply(t2, t15, t16)
+    add(t13, t8, t17)
     multiply(t1, t17, t17)
     add(t16, t17, t16)
-    add(t15, t16, t15)
-    negative(t15, Y_23)
-    multiply(t9, qd_2, t15)
-    subtract(Y_155, t15, t16)
-    subtract(t15, t16, Y_88)
+    add(t14, t16, t14)
+    negative(t14, Y_23)
+    multiply(t9, qd_2, t14)
+    subtract(Y_155, t14, t16)
+    subtract(t14, t16, Y_88)
     negative(t4, Y_153)
     multiply(t6, t16, t17)
-    multiply(qd_2, t12, t18)
-    multiply(t0, t18, t19)
-    subtract(t17, t19, Y_24)
+    multiply(t0, t7, t7)
+    subtract(t17, t7, Y_24)
     subtract(qdd_2, Y_154, t17)
     multiply(t6, t17, t17)
-    subtract(t14, t8, t19)
-    multiply(t0, t19, t19)
-    add(t17, t19, Y_25)
-    multiply(t0, t7, t7)
-    multiply(t6, t15, t15)
-    subtract(t7, t15, Y_26)
-    add(t11, t18, t18)
-    multiply(t6, t18, t18)
-    multiply(qd_2, t9, t7)
-    subtract(t16, t7, t15)
-    multiply(t0, t15, t15)
-    add(t18, t15, Y_27)
-    subtract(t10, t14, Y_157)
+    subtract(t13, t8, t18)
+    multiply(t0, t18, t18)
+    add(t17, t18, Y_25)
+    multiply(t6, t14, t17)
+    subtract(t7, t17, Y_26)
+    multiply(t6, Y_86, t7)
+    subtract(t16, t14, t14)
+    multiply(t0, t14, t14)
+    add(t7, t14, Y_27)
+    subtract(t10, t13, Y_157)
     subtract(t8, t10, t8)
     multiply(t6, t8, t8)
-    add(qdd_2, t13, t10)
-    multiply(t0, t10, t10)
-    add(t8, t10, Y_28)
-    multiply(t6, t7, t7)
-    multiply(t0, t11, t8)
-    add(t7, t8, Y_29)
-    negative(t13, Y_159)
+    multiply(t0, t15, t15)
+    add(t8, t15, Y_28)
+    multiply(t0, t11, t7)
+    add(t17, t7, Y_29)
+    negative(Y_154, Y_159)
     sin(q_3, t7)
     multiply(t7, t1, t8)
     cos(q_3, t10)
     multiply(t10, Y_75, t13)
-    multiply(t7, t2, t14)
+    multiply(t7, t3, t14)
     add(t13, t14, t13)
     multiply(t8, t13, t14)
     add(t5, t14, t5)
     multiply(t10, t1, t1)
-    multiply(t10, t2, t2)
+    multiply(t10, t3, t3)
     multiply(t7, Y_75, t14)
-    subtract(t2, t14, Y_227)
-    multiply(t1, Y_227, t2)
-    add(t5, t2, Y_30)
-    multiply(t10, t13, t2)
+    subtract(t3, t14, Y_227)
+    multiply(t1, Y_227, t3)
+    add(t5, t3, Y_30)
+    multiply(t10, t13, t3)
     multiply(t7, Y_227, t5)
-    subtract(t2, t5, Y_95)
-    multiply(t10, t0, t2)
-    multiply(t2, t13, t5)
+    subtract(t3, t5, Y_95)
+    multiply(t10, t0, t3)
+    multiply(t3, t13, t5)
     multiply(t7, t0, t0)
     multiply(t0, Y_227, t14)
     subtract(t5, t14, t5)
@@ -15867,7 +15449,7 @@ def _regressor_chunk(x, t, s, y):
     subtract(t9, t17, t9)
     multiply(t9, t9, t17)
     add(t15, t17, t18)
-    multiply(t3, t18, t18)
+    multiply(t2, t18, t18)
     multiply(t10, t11, t19)
     multiply(t7, qdd_2, t20)
     subtract(t19, t20, t19)
@@ -15875,127 +15457,116 @@ def _regressor_chunk(x, t, s, y):
     subtract(t19, t20, t19)
     add(t12, qd_3, t12)
     multiply(t12, t14, t20)
-    add(t19, t20, t21)
-    multiply(t8, t21, t22)
-    add(t18, t22, t18)
-    multiply(t12, t9, t22)
-    multiply(t10, qdd_2, t23)
+    add(t19, t20, Y_232)
+    multiply(t8, Y_232, t21)
+    add(t18, t21, t18)
+    multiply(t12, t9, t21)
+    multiply(t10, qdd_2, t22)
     multiply(t7, t11, t11)
-    add(t23, t11, t23)
+    add(t22, t11, t22)
     multiply(t9, qd_3, t11)
-    add(t23, t11, t23)
-    subtract(t22, t23, t11)
-    multiply(t1, t11, t24)
-    add(t18, t24, t18)
+    add(t22, t11, t22)
+    subtract(t21, t22, t11)
+    multiply(t1, t11, t23)
+    add(t18, t23, t18)
     add(t5, t18, Y_31)
-    multiply(t10, t21, t21)
+    multiply(t10, Y_232, t5)
     multiply(t7, t11, t11)
-    subtract(t21, t11, Y_96)
+    subtract(t5, t11, Y_96)
     multiply(t10, Y_227, t5)
     multiply(t7, t13, t11)
     add(t5, t11, t5)
     negative(t5, Y_161)
     multiply(t6, Y_227, t5)
-    multiply(t2, t4, t11)
+    multiply(t3, t4, t11)
     add(t5, t11, t5)
     add(t16, qdd_3, Y_229)
     multiply(t14, t9, Y_234)
     add(Y_229, Y_234, t11)
     multiply(t1, t11, t16)
-    multiply(t14, t12, t18)
-    subtract(t18, t19, t21)
-    multiply(t3, t21, t21)
-    multiply(t12, t12, t24)
-    add(t17, t24, t25)
-    multiply(t8, t25, t26)
-    add(t21, t26, t21)
-    subtract(t16, t21, t16)
+    subtract(t20, t19, t18)
+    multiply(t2, t18, t18)
+    multiply(t12, t12, t23)
+    add(t17, t23, t24)
+    multiply(t8, t24, t25)
+    add(t18, t25, t18)
+    subtract(t16, t18, t16)
     add(t5, t16, Y_32)
-    multiply(t10, t25, t25)
-    multiply(t7, t11, t11)
-    add(t25, t11, t25)
-    negative(t25, Y_97)
+    multiply(t10, t24, t24)
+    multiply(t7, t11, t5)
+    add(t24, t5, t24)
+    negative(t24, Y_97)
     multiply(t7, t4, t5)
     negative(t5, Y_162)
-    multiply(t9, t14, t5)
-    subtract(t5, Y_229, t11)
-    multiply(t8, t11, t16)
-    multiply(t9, t12, t21)
-    add(t23, t21, t25)
-    multiply(t3, t25, t25)
+    subtract(Y_234, Y_229, t5)
+    multiply(t8, t5, t16)
+    add(t22, t21, t18)
+    multiply(t2, t18, t24)
+    subtract(t16, t24, t16)
+    add(t23, t15, t24)
+    multiply(t1, t24, t25)
     subtract(t16, t25, t16)
-    add(t24, t15, t25)
-    multiply(t1, t25, t26)
-    subtract(t16, t26, t16)
-    multiply(t6, t13, t26)
-    multiply(t0, t4, t27)
-    add(t26, t27, t26)
-    subtract(t16, t26, Y_33)
-    multiply(t10, t11, t11)
-    multiply(t7, t25, t25)
-    add(t11, t25, Y_98)
-    multiply(t10, t4, t11)
-    negative(t11, Y_163)
+    multiply(t6, t13, t25)
+    multiply(t0, t4, t26)
+    add(t25, t26, t25)
+    subtract(t16, t25, Y_33)
+    multiply(t10, t5, t5)
+    multiply(t7, t24, t24)
+    add(t5, t24, Y_98)
+    multiply(t10, t4, t5)
+    negative(t5, Y_163)
     negative(t13, Y_228)
-    multiply(t6, Y_229, t11)
+    multiply(t6, Y_229, t5)
     multiply(t0, t21, t16)
-    add(t11, t16, t11)
-    multiply(t2, t18, t16)
-    subtract(t11, t16, Y_34)
-    multiply(t10, t21, t11)
-    multiply(t7, t18, t16)
-    add(t11, t16, Y_164)
-    subtract(t23, t21, Y_230)
-    multiply(t6, Y_230, t11)
-    add(Y_229, t5, t16)
-    multiply(t0, t16, t21)
-    add(t11, t21, t11)
-    subtract(t24, t15, t21)
-    multiply(t2, t21, t25)
-    add(t11, t25, Y_35)
-    multiply(t10, t16, t16)
-    multiply(t7, t21, t21)
-    subtract(t16, t21, Y_165)
-    multiply(t0, t23, t11)
-    multiply(t6, t5, t16)
-    subtract(t11, t16, t11)
-    multiply(t2, t20, t16)
-    add(t11, t16, Y_36)
-    multiply(t10, t23, t11)
-    multiply(t7, t20, t16)
-    subtract(t11, t16, Y_166)
-    negative(t5, Y_231)
-    add(t19, t18, Y_232)
-    multiply(t6, Y_232, t5)
-    subtract(t17, t24, t24)
-    multiply(t0, t24, t11)
-    add(t5, t11, t5)
-    subtract(Y_229, Y_234, t11)
-    multiply(t2, t11, t16)
-    add(t5, t16, Y_37)
-    multiply(t10, t24, t24)
-    multiply(t7, t11, t11)
-    subtract(t24, t11, Y_167)
-    subtract(t15, t17, Y_233)
-    multiply(t6, Y_233, t5)
-    subtract(t19, t20, t20)
-    multiply(t0, t20, t11)
-    add(t5, t11, t5)
-    add(t23, t22, t11)
-    multiply(t2, t11, t15)
-    add(t5, t15, Y_38)
-    multiply(t10, t20, t20)
-    multiply(t7, t11, t11)
-    subtract(t20, t11, Y_168)
-    multiply(t6, Y_234, t5)
+    add(t5, t16, t5)
+    multiply(t3, t20, t24)
+    subtract(t5, t24, Y_34)
+    multiply(t10, t21, t5)
+    multiply(t7, t20, t25)
+    add(t5, t25, Y_164)
+    subtract(t22, t21, Y_230)
+    multiply(t6, Y_230, t21)
+    multiply(t0, t11, t26)
+    add(t21, t26, t21)
+    subtract(t23, t15, t26)
+    multiply(t3, t26, t27)
+    add(t21, t27, Y_35)
+    multiply(t10, t11, t11)
+    multiply(t7, t26, t26)
+    subtract(t11, t26, Y_165)
     multiply(t0, t22, t11)
-    subtract(t5, t11, t5)
-    multiply(t2, t19, t11)
-    add(t5, t11, Y_39)
-    multiply(t10, t22, t22)
-    multiply(t7, t19, t5)
-    add(t22, t5, t22)
-    negative(t22, Y_169)
+    multiply(t6, Y_234, t21)
+    subtract(t11, t21, t11)
+    add(t11, t24, Y_36)
+    multiply(t10, t22, t11)
+    subtract(t11, t25, Y_166)
+    negative(Y_234, Y_231)
+    multiply(t6, Y_232, t11)
+    subtract(t17, t23, t23)
+    multiply(t0, t23, t24)
+    add(t11, t24, t11)
+    subtract(Y_229, Y_234, t24)
+    multiply(t3, t24, t25)
+    add(t11, t25, Y_37)
+    multiply(t10, t23, t23)
+    multiply(t7, t24, t24)
+    subtract(t23, t24, Y_167)
+    subtract(t15, t17, Y_233)
+    multiply(t6, Y_233, t11)
+    subtract(t19, t20, t20)
+    multiply(t0, t20, t15)
+    add(t11, t15, t11)
+    multiply(t3, t18, t15)
+    add(t11, t15, Y_38)
+    multiply(t10, t20, t20)
+    multiply(t7, t18, t18)
+    subtract(t20, t18, Y_168)
+    subtract(t21, t16, t21)
+    multiply(t3, t19, t11)
+    add(t21, t11, Y_39)
+    multiply(t7, t19, t11)
+    add(t5, t11, t5)
+    negative(t5, Y_169)
     multiply(t9, p_1, t5)
     multiply(t9, t5, t11)
     multiply(t12, p_1, t15)
@@ -16004,9 +15575,9 @@ def _regressor_chunk(x, t, s, y):
     subtract(t13, t11, t13)
     multiply(t8, t13, t11)
     cos(q_4, t16)
-    multiply(t2, p_1, t17)
-    add(t3, t17, t3)
-    multiply(t16, t3, t17)
+    multiply(t3, p_1, t17)
+    add(t2, t17, t2)
+    multiply(t16, t2, t17)
     sin(q_4, t18)
     multiply(t6, p_1, t20)
     add(t1, t20, t1)
@@ -16026,15 +15597,15 @@ def _regressor_chunk(x, t, s, y):
     multiply(t17, Y_303, t4)
     subtract(t11, t4, t11)
     multiply(t16, t1, t1)
-    multiply(t18, t3, t3)
-    subtract(t1, t3, t1)
+    multiply(t18, t2, t2)
+    subtract(t1, t2, t1)
     multiply(t18, t15, t15)
     multiply(t16, t20, t20)
     add(t15, t20, t15)
-    multiply(t1, t15, t3)
-    add(t11, t3, Y_40)
-    multiply(t18, t7, t3)
-    multiply(t3, Y_303, t4)
+    multiply(t1, t15, t2)
+    add(t11, t2, Y_40)
+    multiply(t18, t7, t2)
+    multiply(t2, Y_303, t4)
     multiply(t10, t13, t5)
     add(t4, t5, t4)
     multiply(t16, t7, t5)
@@ -16049,14 +15620,14 @@ def _regressor_chunk(x, t, s, y):
     multiply(t16, p_1, t11)
     multiply(t11, t15, t20)
     multiply(t18, p_1, t21)
-    multiply(t21, Y_303, t22)
-    subtract(t20, t22, Y_235)
+    multiply(t21, Y_303, t23)
+    subtract(t20, t23, Y_235)
     multiply(t18, t6, t20)
-    multiply(t16, t2, t22)
-    add(t20, t22, t20)
-    multiply(t20, t13, t22)
+    multiply(t16, t3, t23)
+    add(t20, t23, t20)
+    multiply(t20, t13, t23)
     multiply(t0, t15, t24)
-    subtract(t22, t24, t22)
+    subtract(t23, t24, t23)
     add(t14, qd_4, t14)
     multiply(t14, t14, t24)
     multiply(t18, t12, t25)
@@ -16077,192 +15648,178 @@ def _regressor_chunk(x, t, s, y):
     add(t29, t9, t30)
     multiply(t8, t30, t31)
     add(t28, t31, t28)
-    multiply(t12, t25, t31)
-    add(t23, qdd_4, Y_306)
-    subtract(t31, Y_306, t23)
-    multiply(t1, t23, t32)
-    add(t28, t32, t28)
-    add(t22, t28, Y_41)
-    multiply(t10, t30, t30)
-    multiply(t3, t27, t22)
-    subtract(t30, t22, t30)
-    multiply(t5, t23, t22)
-    subtract(t30, t22, Y_106)
-    multiply(t7, t23, t22)
+    multiply(t12, t25, Y_304)
+    add(t22, qdd_4, Y_306)
+    subtract(Y_304, Y_306, t22)
+    multiply(t1, t22, t31)
+    add(t28, t31, t28)
+    add(t23, t28, Y_41)
+    multiply(t10, t30, t23)
+    multiply(t2, t27, t28)
+    subtract(t23, t28, t23)
+    multiply(t5, t22, t28)
+    subtract(t23, t28, Y_106)
+    multiply(t7, t22, t23)
     multiply(t4, t27, t28)
-    subtract(t22, t28, t22)
+    subtract(t23, t28, t23)
     multiply(t10, t15, t28)
-    multiply(t5, t13, t30)
-    add(t28, t30, t28)
-    subtract(t22, t28, Y_171)
-    multiply(t18, t13, t22)
+    multiply(t5, t13, t31)
+    add(t28, t31, t28)
+    subtract(t23, t28, Y_171)
+    multiply(t18, t13, t23)
     multiply(t21, t27, t27)
-    multiply(t11, t23, t23)
-    add(t27, t23, t27)
-    add(t22, t27, Y_236)
+    multiply(t11, t22, t22)
+    add(t27, t22, t27)
+    add(t23, t27, Y_236)
     negative(t15, Y_301)
     multiply(t16, t6, t6)
-    multiply(t18, t2, t2)
-    subtract(t6, t2, t6)
-    multiply(t6, t15, t2)
+    multiply(t18, t3, t3)
+    subtract(t6, t3, t6)
+    multiply(t6, t15, t3)
     multiply(t20, Y_303, t22)
-    subtract(t2, t22, t2)
+    subtract(t3, t22, t3)
     multiply(t16, Y_229, t22)
     multiply(t18, t19, t19)
     subtract(t22, t19, t22)
     multiply(t25, qd_4, t19)
     subtract(t22, t19, t22)
-    multiply(t14, t25, t19)
-    add(t22, t19, t23)
-    multiply(t1, t23, t27)
-    multiply(t14, t12, t28)
-    subtract(t28, t29, t30)
-    multiply(t17, t30, t32)
-    multiply(t12, t12, t33)
-    add(t26, t33, t34)
-    multiply(t8, t34, t35)
-    add(t32, t35, t32)
-    subtract(t27, t32, t27)
-    add(t2, t27, Y_42)
-    multiply(t3, t30, t2)
-    multiply(t10, t34, t34)
-    subtract(t2, t34, t2)
-    multiply(t5, t23, t27)
-    subtract(t2, t27, Y_107)
-    multiply(t3, t15, t2)
-    multiply(t5, Y_303, t27)
-    add(t2, t27, t2)
-    multiply(t4, t30, t27)
-    multiply(t7, t23, t32)
-    add(t27, t32, t27)
-    add(t2, t27, Y_172)
+    multiply(t14, t25, t14)
+    add(t22, t14, Y_305)
+    multiply(t1, Y_305, t19)
+    subtract(t9, t29, t23)
+    multiply(t17, t23, t25)
+    multiply(t12, t12, t12)
+    add(t26, t12, t27)
+    multiply(t8, t27, t28)
+    add(t25, t28, t25)
+    subtract(t19, t25, t19)
+    add(t3, t19, Y_42)
+    multiply(t2, t23, t3)
+    multiply(t10, t27, t27)
+    subtract(t3, t27, t3)
+    multiply(t5, Y_305, t19)
+    subtract(t3, t19, Y_107)
+    multiply(t2, t15, t3)
+    multiply(t5, Y_303, t19)
+    add(t3, t19, t3)
+    multiply(t4, t23, t19)
+    multiply(t7, Y_305, t25)
+    add(t19, t25, t19)
+    add(t3, t19, Y_172)
     multiply(t16, t15, t15)
-    multiply(t18, Y_303, t2)
-    subtract(t15, t2, t15)
-    multiply(t11, t23, t23)
-    multiply(t21, t30, t30)
-    subtract(t23, t30, t23)
-    add(t15, t23, Y_237)
-    multiply(t0, Y_303, t2)
+    multiply(t18, Y_303, t3)
+    subtract(t15, t3, t15)
+    multiply(t11, Y_305, t3)
+    multiply(t21, t23, t23)
+    subtract(t3, t23, t3)
+    add(t15, t3, Y_237)
+    multiply(t0, Y_303, t3)
     multiply(t6, t13, t15)
-    subtract(t2, t15, t2)
-    multiply(t25, t14, t14)
+    subtract(t3, t15, t3)
     subtract(t14, t22, t15)
     multiply(t8, t15, t8)
-    multiply(t25, t12, Y_304)
-    add(Y_306, Y_304, t12)
-    multiply(t17, t12, t17)
+    add(Y_306, Y_304, t19)
+    multiply(t17, t19, t17)
     subtract(t8, t17, t8)
-    add(t33, t24, t17)
+    add(t12, t24, t17)
     multiply(t1, t17, t1)
     subtract(t8, t1, t8)
-    add(t2, t8, Y_43)
-    multiply(t3, t12, t1)
+    add(t3, t8, Y_43)
+    multiply(t2, t19, t1)
     multiply(t10, t15, t15)
     add(t1, t15, t1)
-    multiply(t5, t17, t2)
-    add(t1, t2, Y_108)
+    multiply(t5, t17, t3)
+    add(t1, t3, Y_108)
     multiply(t10, Y_303, t1)
-    multiply(t3, t13, t2)
-    subtract(t1, t2, t1)
-    multiply(t4, t12, t4)
+    multiply(t2, t13, t3)
+    subtract(t1, t3, t1)
+    multiply(t4, t19, t4)
     multiply(t7, t17, t7)
     subtract(t4, t7, t4)
     add(t1, t4, Y_173)
     multiply(t16, t13, t13)
-    multiply(t21, t12, t21)
+    multiply(t21, t19, t21)
     multiply(t11, t17, t11)
     add(t21, t11, t21)
     add(t13, t21, t13)
     negative(t13, Y_238)
     multiply(t6, t22, t1)
-    multiply(t0, Y_304, t2)
-    add(t1, t2, t1)
-    multiply(t20, t28, t2)
-    subtract(t1, t2, Y_44)
-    multiply(t3, t22, t1)
-    multiply(t10, Y_304, t2)
-    add(t1, t2, t1)
-    multiply(t5, t28, t2)
-    add(t1, t2, Y_174)
+    multiply(t0, Y_304, t3)
+    add(t1, t3, t1)
+    multiply(t20, t9, t4)
+    subtract(t1, t4, Y_44)
+    multiply(t2, t22, t1)
+    multiply(t10, Y_304, t7)
+    add(t1, t7, t1)
+    multiply(t5, t9, t8)
+    add(t1, t8, Y_174)
     multiply(t16, t22, t1)
-    multiply(t18, t28, t2)
-    subtract(t1, t2, Y_239)
+    multiply(t18, t9, t11)
+    subtract(t1, t11, Y_239)
     subtract(Y_306, Y_304, t1)
-    multiply(t6, t1, t2)
-    add(t22, t14, Y_305)
-    multiply(t0, Y_305, t4)
-    add(t2, t4, t2)
-    subtract(t33, t24, t4)
-    multiply(t20, t4, t7)
-    add(t2, t7, Y_45)
-    multiply(t3, t1, t2)
-    multiply(t10, Y_305, t7)
-    add(t2, t7, t2)
-    multiply(t5, t4, t7)
-    subtract(t2, t7, Y_175)
+    multiply(t6, t1, t13)
+    multiply(t0, Y_305, t15)
+    add(t13, t15, t13)
+    subtract(t12, t24, t15)
+    multiply(t20, t15, t17)
+    add(t13, t17, Y_45)
+    multiply(t2, t1, t13)
+    multiply(t10, Y_305, t17)
+    add(t13, t17, t13)
+    multiply(t5, t15, t17)
+    subtract(t13, t17, Y_175)
     multiply(t16, t1, t1)
-    multiply(t18, t4, t4)
-    add(t1, t4, Y_240)
+    multiply(t18, t15, t15)
+    add(t1, t15, Y_240)
     multiply(t0, Y_306, t1)
-    multiply(t6, t14, t2)
-    subtract(t1, t2, t1)
-    multiply(t20, t9, t2)
-    add(t1, t2, Y_46)
+    multiply(t6, t14, t13)
+    subtract(t1, t13, t1)
+    add(t1, t4, Y_46)
     multiply(t10, Y_306, t1)
-    multiply(t3, t14, t2)
-    subtract(t1, t2, t1)
-    multiply(t5, t9, t2)
-    subtract(t1, t2, Y_176)
-    multiply(t18, t9, t1)
-    multiply(t16, t14, t14)
-    subtract(t1, t14, Y_241)
-    add(t29, t28, t28)
-    multiply(t6, t28, t1)
-    subtract(t26, t33, Y_307)
-    multiply(t0, Y_307, t2)
-    add(t1, t2, t1)
-    subtract(t22, t19, t22)
-    multiply(t20, t22, t2)
-    add(t1, t2, Y_47)
-    multiply(t3, t28, t1)
-    multiply(t10, Y_307, t2)
-    add(t1, t2, t1)
-    multiply(t5, t22, t2)
-    subtract(t1, t2, Y_177)
-    multiply(t16, t28, t28)
+    multiply(t2, t14, t4)
+    subtract(t1, t4, t1)
+    subtract(t1, t8, Y_176)
+    multiply(t16, t14, t1)
+    subtract(t11, t1, Y_241)
+    multiply(t6, t30, t8)
+    subtract(t26, t12, Y_307)
+    multiply(t0, Y_307, t11)
+    add(t8, t11, t8)
+    subtract(t22, t14, t22)
+    multiply(t20, t22, t11)
+    add(t8, t11, Y_47)
+    multiply(t2, t30, t8)
+    multiply(t10, Y_307, t11)
+    add(t8, t11, t8)
+    multiply(t5, t22, t11)
+    subtract(t8, t11, Y_177)
+    multiply(t16, t30, t30)
     multiply(t18, t22, t22)
-    add(t28, t22, Y_242)
+    add(t30, t22, Y_242)
     subtract(t24, t26, t24)
-    multiply(t6, t24, t1)
+    multiply(t6, t24, t6)
     subtract(t29, t9, Y_308)
-    multiply(t0, Y_308, t2)
-    add(t1, t2, t1)
-    add(Y_306, t31, t2)
-    multiply(t20, t2, t4)
-    add(t1, t4, Y_48)
-    multiply(t3, t24, t1)
-    multiply(t10, Y_308, t4)
-    add(t1, t4, t1)
-    multiply(t5, t2, t4)
-    subtract(t1, t4, Y_178)
-    multiply(t16, t24, t24)
-    multiply(t18, t2, t2)
-    add(t24, t2, Y_243)
-    multiply(t6, t19, t6)
-    multiply(t0, t31, t0)
-    subtract(t6, t0, t6)
+    multiply(t0, Y_308, t0)
+    add(t6, t0, t6)
+    multiply(t20, t19, t0)
+    add(t6, t0, Y_48)
+    multiply(t2, t24, t2)
+    multiply(t10, Y_308, t10)
+    add(t2, t10, t2)
+    multiply(t5, t19, t0)
+    subtract(t2, t0, Y_178)
+    multiply(t16, t24, t16)
+    multiply(t18, t19, t19)
+    add(t16, t19, Y_243)
+    subtract(t13, t3, t13)
     multiply(t20, t29, t20)
-    add(t6, t20, Y_49)
-    multiply(t3, t19, t3)
-    multiply(t10, t31, t10)
-    subtract(t3, t10, t3)
+    add(t13, t20, Y_49)
+    subtract(t4, t7, t4)
     multiply(t5, t29, t5)
-    subtract(t3, t5, Y_179)
-    multiply(t16, t19, t16)
+    subtract(t4, t5, Y_179)
     multiply(t18, t29, t18)
-    add(t16, t18, Y_244)
-    negative(t31, Y_309)
+    add(t1, t18, Y_244)
+    negative(Y_304, Y_309)
     sign(qd_0, Y_52)
     sign(qd_1, Y_120)
     sign(qd_2, Y_188)
@@ -16292,7 +15849,7 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     in  qdd [5]
     in  p [3]
     out Y_b [5x40]
-    422 ops: 229 mul, 180 add, 0 div, 8 trig, 5 other
+    400 ops: 213 mul, 174 add, 0 div, 8 trig, 5 other
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
@@ -16313,17 +15870,16 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t2 = -t1
     t3 = p[0] + q[1]
     t4 = qdd[0] * t3
-    t4 = t0 + t4
-    t5 = qd[0] * qd[1]
-    t5 = t5 + t5
-    t4 = t4 + t5
-    t5 = t3 * t4
-    t6 = qd[0] * t3
-    t6 = qd[0] * t6
-    t1 = t1 - t6
+    t5 = t0 + t4
+    t6 = qd[0] * qd[1]
+    t6 = t6 + t6
+    t5 = t5 + t6
+    t6 = t3 * t5
+    t7 = qd[0] * t3
+    t7 = qd[0] * t7
+    t1 = t1 - t7
     t1 = t1 + qdd[1]
-    t6 = t3 * qdd[0]
-    t6 = t4 + t6
+    t4 = t5 + t4
     t7 = qd[0] * qd[0]
     t8 = -t7
     t7 = t3 * t7
@@ -16350,12 +15906,11 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t20 = t18 * qd[2]
     t21 = t16 + t20
     t22 = t21 + t20
-    t23 = t17 * t4
+    t23 = t17 * t5
     t24 = -t23
     t25 = t17 * t1
-    t26 = t14 * t18
-    t27 = qdd[2] + t26
-    t27 = t12 * t27
+    t26 = qdd[2] + t19
+    t27 = t12 * t26
     t28 = t18 * t18
     t29 = t28 + t13
     t29 = t3 * t29
@@ -16366,48 +15921,43 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t29 = t17 * qdd[0]
     t30 = t29 - t27
     t31 = t27 - t30
-    t4 = t10 * t4
-    t32 = -t4
+    t5 = t10 * t5
+    t32 = -t5
     t33 = t17 * t30
-    t34 = qd[2] * t18
-    t35 = t10 * t34
-    t33 = t33 - t35
-    t35 = qdd[2] - t26
-    t35 = t17 * t35
-    t36 = t28 - t13
-    t36 = t10 * t36
-    t35 = t35 + t36
     t20 = t10 * t20
-    t27 = t17 * t27
-    t20 = t20 - t27
-    t27 = t21 + t34
-    t27 = t17 * t27
-    t34 = qd[2] * t14
-    t34 = t30 - t34
-    t34 = t10 * t34
-    t27 = t27 + t34
+    t33 = t33 - t20
+    t34 = qdd[2] - t19
+    t34 = t17 * t34
+    t35 = t28 - t13
+    t35 = t10 * t35
+    t34 = t34 + t35
+    t35 = t17 * t27
+    t20 = t20 - t35
+    t35 = t17 * t22
+    t27 = t30 - t27
+    t27 = t10 * t27
+    t27 = t35 + t27
     t28 = t15 - t28
     t13 = t13 - t15
     t13 = t17 * t13
-    t15 = qdd[2] + t19
-    t15 = t10 * t15
+    t15 = t10 * t26
     t13 = t13 + t15
     t15 = cos(q[3])
-    t19 = t15 * t23
-    t34 = sin(q[3])
-    t36 = t34 * t1
-    t19 = t19 - t36
-    t36 = t17 * t19
+    t26 = t15 * t23
+    t35 = sin(q[3])
+    t36 = t35 * t1
+    t26 = t26 - t36
+    t36 = t17 * t26
     t37 = t15 * t10
-    t38 = t37 * t4
+    t38 = t37 * t5
     t36 = t36 + t38
     t38 = t15 * t3
     t30 = t30 + qdd[3]
     t39 = t15 * qd[2]
-    t40 = t34 * t14
+    t40 = t35 * t14
     t39 = t39 + t40
     t14 = t15 * t14
-    t40 = t34 * qd[2]
+    t40 = t35 * qd[2]
     t14 = t14 - t40
     t40 = t39 * t14
     t41 = t30 + t40
@@ -16415,13 +15965,13 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t18 = t18 + qd[3]
     t43 = t39 * t18
     t44 = t15 * t21
-    t45 = t34 * qdd[2]
+    t45 = t35 * qdd[2]
     t44 = t44 - t45
     t45 = t39 * qd[3]
     t44 = t44 - t45
     t45 = t43 - t44
     t45 = t12 * t45
-    t3 = t34 * t3
+    t3 = t35 * t3
     t46 = t14 * t14
     t47 = t18 * t18
     t48 = t46 + t47
@@ -16430,95 +15980,88 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t42 = t42 - t45
     t36 = t36 + t42
     t42 = t15 * t48
-    t41 = t34 * t41
-    t41 = t42 + t41
-    t41 = -t41
-    t42 = t34 * t4
+    t45 = t35 * t41
+    t42 = t42 + t45
     t42 = -t42
-    t45 = t14 * t39
-    t48 = t45 - t30
+    t45 = t35 * t5
+    t45 = -t45
+    t48 = t40 - t30
     t49 = t3 * t48
     t50 = t15 * qdd[2]
-    t21 = t34 * t21
+    t21 = t35 * t21
     t21 = t50 + t21
     t50 = t14 * qd[3]
     t21 = t21 + t50
     t50 = t14 * t18
     t51 = t21 + t50
-    t51 = t12 * t51
-    t49 = t49 - t51
-    t51 = t39 * t39
-    t52 = t47 + t51
-    t53 = t38 * t52
-    t49 = t49 - t53
-    t53 = t15 * t1
-    t23 = t34 * t23
-    t23 = t53 + t23
-    t53 = t17 * t23
-    t10 = t34 * t10
-    t54 = t10 * t4
-    t53 = t53 + t54
-    t49 = t49 - t53
-    t48 = t15 * t48
-    t52 = t34 * t52
-    t48 = t48 + t52
-    t52 = t15 * t4
-    t52 = -t52
-    t53 = -t23
-    t54 = t17 * t30
-    t55 = t10 * t50
+    t52 = t12 * t51
+    t49 = t49 - t52
+    t52 = t39 * t39
+    t53 = t47 + t52
+    t54 = t38 * t53
+    t49 = t49 - t54
+    t54 = t15 * t1
+    t23 = t35 * t23
+    t23 = t54 + t23
+    t54 = t17 * t23
+    t10 = t35 * t10
+    t55 = t10 * t5
     t54 = t54 + t55
-    t55 = t37 * t43
-    t54 = t54 - t55
-    t55 = t15 * t50
-    t56 = t34 * t43
+    t49 = t49 - t54
+    t48 = t15 * t48
+    t53 = t35 * t53
+    t48 = t48 + t53
+    t53 = t15 * t5
+    t53 = -t53
+    t54 = -t23
+    t55 = t17 * t30
+    t56 = t10 * t50
     t55 = t55 + t56
+    t57 = t37 * t43
+    t55 = t55 - t57
+    t57 = t15 * t50
+    t58 = t35 * t43
+    t58 = t57 + t58
     t50 = t21 - t50
-    t56 = t17 * t50
-    t45 = t30 + t45
-    t57 = t10 * t45
-    t56 = t56 + t57
-    t57 = t47 - t51
-    t58 = t37 * t57
-    t56 = t56 + t58
-    t45 = t15 * t45
-    t57 = t34 * t57
-    t45 = t45 - t57
-    t43 = t44 + t43
-    t57 = t17 * t43
-    t47 = t46 - t47
-    t58 = t10 * t47
-    t57 = t57 + t58
-    t58 = t30 - t40
-    t59 = t37 * t58
-    t57 = t57 + t59
-    t47 = t15 * t47
-    t58 = t34 * t58
-    t47 = t47 - t58
-    t46 = t51 - t46
-    t51 = t17 * t46
-    t58 = t18 * t39
-    t58 = t44 - t58
-    t59 = t10 * t58
-    t51 = t51 + t59
-    t59 = t18 * t14
-    t60 = t21 + t59
+    t59 = t17 * t50
+    t60 = t10 * t41
+    t59 = t59 + t60
+    t60 = t47 - t52
     t61 = t37 * t60
-    t51 = t51 + t61
-    t58 = t15 * t58
-    t60 = t34 * t60
-    t58 = t58 - t60
-    t60 = t17 * t40
-    t61 = t10 * t59
-    t60 = t60 - t61
-    t61 = t37 * t44
-    t60 = t60 + t61
-    t59 = t15 * t59
-    t61 = t34 * t44
     t59 = t59 + t61
-    t59 = -t59
-    t61 = sin(q[4])
-    t62 = t61 * t17
+    t41 = t15 * t41
+    t60 = t35 * t60
+    t41 = t41 - t60
+    t60 = t44 + t43
+    t61 = t17 * t60
+    t47 = t46 - t47
+    t62 = t10 * t47
+    t61 = t61 + t62
+    t62 = t30 - t40
+    t63 = t37 * t62
+    t61 = t61 + t63
+    t47 = t15 * t47
+    t62 = t35 * t62
+    t47 = t47 - t62
+    t46 = t52 - t46
+    t52 = t17 * t46
+    t43 = t44 - t43
+    t62 = t10 * t43
+    t52 = t52 + t62
+    t62 = t37 * t51
+    t52 = t52 + t62
+    t43 = t15 * t43
+    t51 = t35 * t51
+    t43 = t43 - t51
+    t51 = t17 * t40
+    t51 = t51 - t56
+    t56 = t37 * t44
+    t51 = t51 + t56
+    t56 = t35 * t44
+    t56 = t57 + t56
+    t56 = -t56
+    t57 = sin(q[4])
+    t62 = t57 * t17
     t63 = cos(q[4])
     t64 = t63 * t37
     t62 = t62 + t64
@@ -16531,11 +16074,11 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t65 = t62 * t23
     t66 = t39 * t66
     t67 = t44 * p[1]
-    t4 = t4 + t67
-    t4 = t66 - t4
-    t66 = t61 * t4
+    t5 = t5 + t67
+    t5 = t66 - t5
+    t66 = t57 * t5
     t67 = t30 * p[1]
-    t67 = t19 + t67
+    t67 = t26 + t67
     t64 = t39 * t64
     t64 = t67 + t64
     t67 = t63 * t64
@@ -16547,21 +16090,21 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t67 = t63 * t12
     t68 = t17 * p[1]
     t38 = t38 + t68
-    t68 = t61 * t38
+    t68 = t57 * t38
     t67 = t67 + t68
     t39 = t39 + qd[4]
     t68 = t39 * t39
-    t69 = t61 * t18
+    t69 = t57 * t18
     t70 = t63 * t14
     t69 = t69 + t70
     t70 = t69 * t69
     t71 = t68 + t70
     t72 = t67 * t71
-    t73 = t61 * t30
+    t73 = t57 * t30
     t74 = t63 * t44
     t73 = t73 + t74
     t18 = t63 * t18
-    t14 = t61 * t14
+    t14 = t57 * t14
     t14 = t18 - t14
     t18 = t14 * qd[4]
     t18 = t73 + t18
@@ -16570,7 +16113,7 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t75 = t3 * t74
     t72 = t72 + t75
     t38 = t63 * t38
-    t12 = t61 * t12
+    t12 = t57 * t12
     t12 = t38 - t12
     t38 = t14 * t69
     t21 = t21 + qdd[4]
@@ -16579,160 +16122,152 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     t72 = t72 + t76
     t65 = t65 + t72
     t72 = t15 * t74
-    t74 = t61 * t34
-    t76 = t74 * t71
-    t72 = t72 - t76
-    t76 = t63 * t34
-    t77 = t76 * t75
+    t76 = t57 * t35
+    t77 = t76 * t71
     t72 = t72 - t77
-    t34 = t34 * p[1]
-    t77 = t61 * t34
+    t77 = t63 * t35
     t78 = t77 * t75
-    t34 = t63 * t34
-    t79 = t34 * t71
-    t78 = t78 - t79
-    t79 = t15 * t66
-    t80 = t76 * t23
-    t79 = t79 + t80
-    t78 = t78 - t79
-    t79 = t61 * t23
-    t80 = t61 * p[1]
-    t71 = t80 * t71
-    t81 = t63 * p[1]
-    t75 = t81 * t75
+    t72 = t72 - t78
+    t35 = t35 * p[1]
+    t78 = t57 * t35
+    t79 = t78 * t75
+    t35 = t63 * t35
+    t80 = t35 * t71
+    t79 = t79 - t80
+    t80 = t15 * t66
+    t81 = t77 * t23
+    t80 = t80 + t81
+    t79 = t79 - t80
+    t80 = t57 * t23
+    t81 = t57 * p[1]
+    t71 = t81 * t71
+    t82 = t63 * p[1]
+    t75 = t82 * t75
     t71 = t71 + t75
-    t71 = t79 + t71
+    t71 = t80 + t71
     t66 = -t66
-    t4 = t63 * t4
-    t64 = t61 * t64
-    t4 = t4 - t64
-    t64 = t10 * t4
+    t5 = t63 * t5
+    t64 = t57 * t64
+    t5 = t5 - t64
+    t64 = t10 * t5
     t17 = t63 * t17
-    t37 = t61 * t37
+    t37 = t57 * t37
     t17 = t17 - t37
     t37 = t17 * t23
     t37 = t64 - t37
-    t64 = t69 * t39
-    t75 = t63 * t30
-    t44 = t61 * t44
-    t44 = t75 - t44
-    t75 = t69 * qd[4]
-    t44 = t44 - t75
-    t75 = t64 - t44
-    t3 = t3 * t75
-    t79 = t69 * t14
-    t82 = t21 + t79
-    t67 = t67 * t82
+    t39 = t69 * t39
+    t64 = t63 * t30
+    t44 = t57 * t44
+    t44 = t64 - t44
+    t64 = t69 * qd[4]
+    t44 = t44 - t64
+    t64 = t39 - t44
+    t3 = t3 * t64
+    t69 = t21 + t38
+    t67 = t67 * t69
     t3 = t3 - t67
-    t67 = t14 * t14
-    t83 = t67 + t68
-    t12 = t12 * t83
+    t14 = t14 * t14
+    t67 = t14 + t68
+    t12 = t12 * t67
     t3 = t3 - t12
     t3 = t37 + t3
-    t12 = t74 * t82
-    t37 = t15 * t75
+    t12 = t76 * t69
+    t37 = t15 * t64
     t12 = t12 + t37
-    t37 = t76 * t83
+    t37 = t77 * t67
     t12 = t12 + t37
-    t37 = t15 * t4
-    t75 = t74 * t23
-    t37 = t37 - t75
-    t34 = t34 * t82
-    t75 = t77 * t83
-    t34 = t34 - t75
-    t34 = t37 + t34
+    t37 = t15 * t5
+    t64 = t76 * t23
+    t37 = t37 - t64
+    t35 = t35 * t69
+    t64 = t78 * t67
+    t35 = t35 - t64
+    t35 = t37 + t35
     t23 = t63 * t23
-    t37 = t80 * t82
-    t75 = t81 * t83
-    t37 = t37 + t75
+    t37 = t81 * t69
+    t64 = t82 * t67
+    t37 = t37 + t64
     t23 = t23 + t37
     t23 = -t23
     t37 = t17 * t44
-    t75 = t10 * t79
-    t37 = t37 + t75
-    t14 = t39 * t14
-    t75 = t62 * t14
-    t37 = t37 - t75
-    t75 = t74 * t44
-    t77 = t15 * t79
-    t75 = t75 + t77
-    t77 = t76 * t14
-    t75 = t75 + t77
-    t77 = t63 * t44
-    t80 = t61 * t14
-    t77 = t77 - t80
-    t80 = t21 - t79
-    t81 = t17 * t80
-    t82 = t44 + t64
-    t83 = t10 * t82
-    t81 = t81 + t83
-    t83 = t67 - t68
-    t84 = t62 * t83
+    t64 = t10 * t38
+    t37 = t37 + t64
+    t64 = t62 * t73
+    t37 = t37 - t64
+    t67 = t76 * t44
+    t75 = t15 * t38
+    t67 = t67 + t75
+    t75 = t77 * t73
+    t67 = t67 + t75
+    t78 = t63 * t44
+    t80 = t57 * t73
+    t78 = t78 - t80
+    t81 = t21 - t38
+    t82 = t17 * t81
+    t83 = t44 + t39
+    t84 = t10 * t83
+    t82 = t82 + t84
+    t84 = t14 - t68
+    t85 = t62 * t84
+    t82 = t82 + t85
+    t85 = t76 * t81
+    t86 = t15 * t83
+    t85 = t85 + t86
+    t86 = t77 * t84
+    t85 = t85 - t86
+    t81 = t63 * t81
+    t84 = t57 * t84
     t81 = t81 + t84
-    t84 = t74 * t80
-    t85 = t15 * t82
-    t84 = t84 + t85
-    t85 = t76 * t83
-    t84 = t84 - t85
-    t80 = t63 * t80
-    t83 = t61 * t83
-    t80 = t80 + t83
-    t83 = t10 * t21
-    t85 = t17 * t64
-    t83 = t83 - t85
-    t85 = t62 * t73
-    t83 = t83 + t85
-    t85 = t15 * t21
-    t86 = t74 * t64
-    t85 = t85 - t86
-    t86 = t76 * t73
-    t85 = t85 - t86
-    t86 = t61 * t73
-    t64 = t63 * t64
-    t64 = t86 - t64
-    t14 = t18 + t14
-    t86 = t17 * t14
-    t67 = t70 - t67
-    t87 = t10 * t67
-    t86 = t86 + t87
-    t39 = t39 * t69
+    t84 = t10 * t21
+    t86 = t17 * t39
+    t84 = t84 - t86
+    t64 = t84 + t64
+    t84 = t15 * t21
+    t86 = t76 * t39
+    t84 = t84 - t86
+    t75 = t84 - t75
+    t84 = t63 * t39
+    t80 = t80 - t84
+    t84 = t17 * t74
+    t14 = t70 - t14
+    t86 = t10 * t14
+    t84 = t84 + t86
     t39 = t44 - t39
     t44 = t62 * t39
-    t44 = t86 + t44
-    t69 = t74 * t14
-    t86 = t15 * t67
-    t69 = t69 + t86
-    t86 = t76 * t39
-    t69 = t69 - t86
-    t14 = t63 * t14
-    t39 = t61 * t39
-    t14 = t14 + t39
-    t39 = t68 - t70
-    t17 = t17 * t39
+    t44 = t84 + t44
+    t84 = t76 * t74
+    t86 = t15 * t14
+    t84 = t84 + t86
+    t86 = t77 * t39
+    t84 = t84 - t86
+    t74 = t63 * t74
+    t39 = t57 * t39
+    t39 = t74 + t39
+    t68 = t68 - t70
+    t17 = t17 * t68
     t18 = t18 - t73
     t10 = t10 * t18
     t10 = t17 + t10
-    t17 = t21 + t38
-    t38 = t62 * t17
-    t10 = t10 + t38
-    t38 = t74 * t39
+    t17 = t62 * t69
+    t10 = t10 + t17
+    t17 = t76 * t68
     t15 = t15 * t18
-    t15 = t38 + t15
-    t38 = t76 * t17
-    t15 = t15 - t38
-    t38 = t63 * t39
-    t17 = t61 * t17
-    t17 = t38 + t17
-    t38 = sign(qd[0])
-    t39 = sign(qd[1])
-    t61 = sign(qd[2])
-    t62 = sign(qd[3])
-    t63 = sign(qd[4])
-    _Y_b = (t0, t2, qdd[0], t5, t6, t7, t11, t25, t33, t35, t20, t27, t13, t36, t49, t54, t56, t57, t51, t60, t65, t3, t37, t81, t83, t44, t10, qd[0], t38, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-            0.0, 0.0, 0.0, t1, t8, t9, t22, t31, 0.0, 0.0, 0.0, 0.0, 0.0, t41, t48, 0.0, 0.0, 0.0, 0.0, 0.0, t72, t12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[1], qd[1], t39, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t24, t32, t26, t29, qdd[2], t28, t16, t42, t52, t55, t45, t47, t58, t59, t78, t34, t75, t84, t85, t69, t15, 0.0, 0.0, 0.0, 0.0, 0.0, qd[2], t61, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
-            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t19, t53, t30, t50, t43, t46, t40, t71, t23, t77, t80, t64, t14, t17, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[3], qd[3], t62, 0.0, 0.0, 0.0,
-            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t66, t4, t79, t82, t21, t67, t18, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[4], qd[4], t63)
+    t15 = t17 + t15
+    t17 = t77 * t69
+    t15 = t15 - t17
+    t17 = t63 * t68
+    t57 = t57 * t69
+    t17 = t17 + t57
+    t57 = sign(qd[0])
+    t62 = sign(qd[1])
+    t63 = sign(qd[2])
+    t68 = sign(qd[3])
+    t69 = sign(qd[4])
+    _Y_b = (t0, t2, qdd[0], t6, t4, t7, t11, t25, t33, t34, t20, t27, t13, t36, t49, t55, t59, t61, t52, t51, t65, t3, t37, t82, t64, t44, t10, qd[0], t57, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, t1, t8, t9, t22, t31, 0.0, 0.0, 0.0, 0.0, 0.0, t42, t48, 0.0, 0.0, 0.0, 0.0, 0.0, t72, t12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[1], qd[1], t62, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t24, t32, t19, t29, qdd[2], t28, t16, t45, t53, t58, t41, t47, t43, t56, t79, t35, t67, t85, t75, t84, t15, 0.0, 0.0, 0.0, 0.0, 0.0, qd[2], t63, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t26, t54, t30, t50, t60, t46, t40, t71, t23, t78, t81, t80, t39, t17, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[3], qd[3], t68, 0.0, 0.0, 0.0,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t66, t5, t38, t83, t21, t14, t18, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[4], qd[4], t69)
     return np.array(_Y_b).reshape(5, 40)
 
 
@@ -16780,17 +16315,16 @@ def _base_regressor_chunk(x, t, s, y):
     negative(t0, Y_b_1)
     add(p_0, q_1, t1)
     multiply(qdd_0, t1, t2)
-    add(Y_b_0, t2, t2)
-    multiply(qd_0, qd_1, t3)
-    add(t3, t3, t3)
-    add(t2, t3, t2)
-    multiply(t1, t2, Y_b_3)
-    multiply(qd_0, t1, t3)
-    multiply(qd_0, t3, t3)
-    subtract(t0, t3, t0)
+    add(Y_b_0, t2, t3)
+    multiply(qd_0, qd_1, t4)
+    add(t4, t4, t4)
+    add(t3, t4, t3)
+    multiply(t1, t3, Y_b_3)
+    multiply(qd_0, t1, t4)
+    multiply(qd_0, t4, t4)
+    subtract(t0, t4, t0)
     add(t0, qdd_1, Y_b_43)
-    multiply(t1, qdd_0, t0)
-    add(t2, t0, Y_b_4)
+    add(t3, t2, Y_b_4)
     multiply(qd_0, qd_0, t0)
     negative(t0, Y_b_44)
     multiply(t1, t0, t0)
@@ -16798,7 +16332,7 @@ def _base_regressor_chunk(x, t, s, y):
     negative(t0, Y_b_5)
     negative(qdd_0, Y_b_45)
     sin(q_2, t0)
-    multiply(t0, Y_b_43, t3)
+    multiply(t0, Y_b_43, t2)
     multiply(t0, t1, t4)
     multiply(qd_2, qd_2, t5)
     multiply(t0, qd_0, t6)
@@ -16808,72 +16342,66 @@ def _base_regressor_chunk(x, t, s, y):
     cos(q_2, t9)
     multiply(t9, t1, t1)
     multiply(t9, qd_0, t10)
-    multiply(t10, t6, t11)
-    subtract(t11, qdd_2, t12)
-    multiply(t1, t12, t12)
-    add(t8, t12, t8)
-    add(t3, t8, Y_b_6)
+    multiply(t10, t6, Y_b_88)
+    subtract(Y_b_88, qdd_2, t11)
+    multiply(t1, t11, t11)
+    add(t8, t11, t8)
+    add(t2, t8, Y_b_6)
     multiply(t0, qdd_0, Y_b_92)
-    multiply(t10, qd_2, t3)
-    add(Y_b_92, t3, t8)
-    add(t8, t3, Y_b_46)
-    multiply(t9, t2, t12)
-    negative(t12, Y_b_86)
-    multiply(t9, Y_b_43, t13)
-    multiply(t6, t10, Y_b_88)
-    add(qdd_2, Y_b_88, t14)
-    multiply(t4, t14, t14)
+    multiply(t10, qd_2, t2)
+    add(Y_b_92, t2, t8)
+    add(t8, t2, Y_b_46)
+    multiply(t9, t3, t11)
+    negative(t11, Y_b_86)
+    multiply(t9, Y_b_43, t12)
+    add(qdd_2, Y_b_88, t13)
+    multiply(t4, t13, t14)
     multiply(t10, t10, t15)
     add(t15, t5, t16)
     multiply(t1, t16, t16)
     add(t14, t16, t14)
-    add(t13, t14, t13)
-    negative(t13, Y_b_7)
-    multiply(t6, qd_2, t13)
+    add(t12, t14, t12)
+    negative(t12, Y_b_7)
+    multiply(t6, qd_2, t12)
     multiply(t9, qdd_0, Y_b_89)
-    subtract(Y_b_89, t13, t14)
-    subtract(t13, t14, Y_b_47)
-    multiply(t0, t2, t2)
-    negative(t2, Y_b_87)
+    subtract(Y_b_89, t12, t14)
+    subtract(t12, t14, Y_b_47)
+    multiply(t0, t3, t3)
+    negative(t3, Y_b_87)
     multiply(t9, t14, t16)
-    multiply(qd_2, t10, t17)
-    multiply(t0, t17, t18)
-    subtract(t16, t18, Y_b_8)
+    multiply(t0, t2, t2)
+    subtract(t16, t2, Y_b_8)
     subtract(qdd_2, Y_b_88, t16)
     multiply(t9, t16, t16)
-    subtract(t15, t5, t18)
-    multiply(t0, t18, t18)
-    add(t16, t18, Y_b_9)
-    multiply(t0, t3, t3)
-    multiply(t9, t13, t13)
-    subtract(t3, t13, Y_b_10)
-    add(t8, t17, t17)
-    multiply(t9, t17, t17)
-    multiply(qd_2, t6, t3)
-    subtract(t14, t3, t3)
-    multiply(t0, t3, t3)
-    add(t17, t3, Y_b_11)
+    subtract(t15, t5, t17)
+    multiply(t0, t17, t17)
+    add(t16, t17, Y_b_9)
+    multiply(t9, t12, t16)
+    subtract(t2, t16, Y_b_10)
+    multiply(t9, Y_b_46, t2)
+    subtract(t14, t12, t12)
+    multiply(t0, t12, t12)
+    add(t2, t12, Y_b_11)
     subtract(t7, t15, Y_b_91)
     subtract(t5, t7, t5)
     multiply(t9, t5, t5)
-    add(qdd_2, t11, t11)
-    multiply(t0, t11, t11)
-    add(t5, t11, Y_b_12)
-    cos(q_3, t3)
-    multiply(t3, t12, t5)
+    multiply(t0, t13, t13)
+    add(t5, t13, Y_b_12)
+    cos(q_3, t2)
+    multiply(t2, t11, t5)
     sin(q_3, t7)
-    multiply(t7, Y_b_43, t11)
-    subtract(t5, t11, Y_b_133)
+    multiply(t7, Y_b_43, t12)
+    subtract(t5, t12, Y_b_133)
     multiply(t9, Y_b_133, t5)
-    multiply(t3, t0, t11)
-    multiply(t11, t2, t13)
+    multiply(t2, t0, t12)
+    multiply(t12, t3, t13)
     add(t5, t13, t5)
-    multiply(t3, t1, t13)
+    multiply(t2, t1, t13)
     add(t14, qdd_3, Y_b_135)
-    multiply(t3, qd_2, t14)
+    multiply(t2, qd_2, t14)
     multiply(t7, t6, t15)
     add(t14, t15, t14)
-    multiply(t3, t6, t6)
+    multiply(t2, t6, t6)
     multiply(t7, qd_2, t15)
     subtract(t6, t15, t6)
     multiply(t14, t6, Y_b_139)
@@ -16881,7 +16409,7 @@ def _base_regressor_chunk(x, t, s, y):
     multiply(t13, t15, t16)
     add(t10, qd_3, t10)
     multiply(t14, t10, t17)
-    multiply(t3, t8, t18)
+    multiply(t2, t8, t18)
     multiply(t7, qdd_2, t19)
     subtract(t18, t19, t18)
     multiply(t14, qd_3, t19)
@@ -16896,122 +16424,115 @@ def _base_regressor_chunk(x, t, s, y):
     add(t19, t23, t19)
     subtract(t16, t19, t16)
     add(t5, t16, Y_b_13)
-    multiply(t3, t22, t22)
-    multiply(t7, t15, t15)
-    add(t22, t15, t22)
+    multiply(t2, t22, t22)
+    multiply(t7, t15, t5)
+    add(t22, t5, t22)
     negative(t22, Y_b_53)
-    multiply(t7, t2, t5)
+    multiply(t7, t3, t5)
     negative(t5, Y_b_93)
-    multiply(t6, t14, t5)
-    subtract(t5, Y_b_135, t15)
-    multiply(t1, t15, t16)
-    multiply(t3, qdd_2, t19)
+    subtract(Y_b_139, Y_b_135, t5)
+    multiply(t1, t5, t16)
+    multiply(t2, qdd_2, t19)
     multiply(t7, t8, t8)
     add(t19, t8, t19)
     multiply(t6, qd_3, t8)
     add(t19, t8, t19)
     multiply(t6, t10, t8)
     add(t19, t8, t22)
-    multiply(t4, t22, t22)
-    subtract(t16, t22, t16)
-    multiply(t14, t14, t22)
-    add(t21, t22, t23)
-    multiply(t13, t23, t24)
-    subtract(t16, t24, t16)
-    multiply(t3, Y_b_43, t24)
-    multiply(t7, t12, t12)
-    add(t24, t12, t24)
-    multiply(t9, t24, t12)
+    multiply(t4, t22, t23)
+    subtract(t16, t23, t16)
+    multiply(t14, t14, t23)
+    add(t21, t23, t24)
+    multiply(t13, t24, t25)
+    subtract(t16, t25, t16)
+    multiply(t2, Y_b_43, t25)
+    multiply(t7, t11, t11)
+    add(t25, t11, t25)
+    multiply(t9, t25, t11)
     multiply(t7, t0, t0)
-    multiply(t0, t2, t25)
-    add(t12, t25, t12)
-    subtract(t16, t12, Y_b_14)
-    multiply(t3, t15, t15)
-    multiply(t7, t23, t23)
-    add(t15, t23, Y_b_54)
-    multiply(t3, t2, t12)
-    negative(t12, Y_b_94)
-    negative(t24, Y_b_134)
-    multiply(t9, Y_b_135, t12)
-    multiply(t0, t8, t15)
-    add(t12, t15, t12)
-    multiply(t11, t17, t15)
-    subtract(t12, t15, Y_b_15)
-    multiply(t3, t8, t12)
-    multiply(t7, t17, t15)
-    add(t12, t15, Y_b_95)
+    multiply(t0, t3, t26)
+    add(t11, t26, t11)
+    subtract(t16, t11, Y_b_14)
+    multiply(t2, t5, t5)
+    multiply(t7, t24, t24)
+    add(t5, t24, Y_b_54)
+    multiply(t2, t3, t5)
+    negative(t5, Y_b_94)
+    negative(t25, Y_b_134)
+    multiply(t9, Y_b_135, t5)
+    multiply(t0, t8, t11)
+    add(t5, t11, t5)
+    multiply(t12, t17, t16)
+    subtract(t5, t16, Y_b_15)
+    multiply(t2, t8, t5)
+    multiply(t7, t17, t16)
+    add(t5, t16, Y_b_95)
     subtract(t19, t8, Y_b_136)
     multiply(t9, Y_b_136, t8)
-    add(Y_b_135, t5, t5)
-    multiply(t0, t5, t12)
-    add(t8, t12, t8)
-    subtract(t21, t22, t12)
-    multiply(t11, t12, t15)
-    add(t8, t15, Y_b_16)
-    multiply(t3, t5, t5)
-    multiply(t7, t12, t12)
-    subtract(t5, t12, Y_b_96)
+    multiply(t0, t15, t16)
+    add(t8, t16, t8)
+    subtract(t21, t23, t16)
+    multiply(t12, t16, t24)
+    add(t8, t24, Y_b_16)
+    multiply(t2, t15, t15)
+    multiply(t7, t16, t16)
+    subtract(t15, t16, Y_b_96)
     add(t18, t17, Y_b_137)
-    multiply(t9, Y_b_137, t5)
+    multiply(t9, Y_b_137, t8)
     subtract(t20, t21, t21)
-    multiply(t0, t21, t8)
-    add(t5, t8, t5)
-    subtract(Y_b_135, Y_b_139, t8)
-    multiply(t11, t8, t12)
-    add(t5, t12, Y_b_17)
-    multiply(t3, t21, t21)
-    multiply(t7, t8, t8)
-    subtract(t21, t8, Y_b_97)
-    subtract(t22, t20, Y_b_138)
-    multiply(t9, Y_b_138, t5)
-    multiply(t10, t14, t8)
-    subtract(t18, t8, t8)
-    multiply(t0, t8, t12)
-    add(t5, t12, t5)
-    multiply(t10, t6, t12)
-    add(t19, t12, t15)
-    multiply(t11, t15, t16)
-    add(t5, t16, Y_b_18)
-    multiply(t3, t8, t8)
+    multiply(t0, t21, t15)
+    add(t8, t15, t8)
+    subtract(Y_b_135, Y_b_139, t15)
+    multiply(t12, t15, t16)
+    add(t8, t16, Y_b_17)
+    multiply(t2, t21, t21)
     multiply(t7, t15, t15)
-    subtract(t8, t15, Y_b_98)
-    multiply(t9, Y_b_139, t5)
-    multiply(t0, t12, t8)
-    subtract(t5, t8, t5)
-    multiply(t11, t18, t8)
-    add(t5, t8, Y_b_19)
-    multiply(t3, t12, t12)
-    multiply(t7, t18, t5)
-    add(t12, t5, t12)
-    negative(t12, Y_b_99)
+    subtract(t21, t15, Y_b_97)
+    subtract(t23, t20, Y_b_138)
+    multiply(t9, Y_b_138, t8)
+    subtract(t18, t17, t17)
+    multiply(t0, t17, t15)
+    add(t8, t15, t8)
+    multiply(t12, t22, t15)
+    add(t8, t15, Y_b_18)
+    multiply(t2, t17, t17)
+    multiply(t7, t22, t22)
+    subtract(t17, t22, Y_b_98)
+    multiply(t9, Y_b_139, t8)
+    subtract(t8, t11, t8)
+    multiply(t12, t18, t11)
+    add(t8, t11, Y_b_19)
+    multiply(t7, t18, t8)
+    add(t5, t8, t5)
+    negative(t5, Y_b_99)
     sin(q_4, t5)
     multiply(t5, t9, t8)
-    cos(q_4, t12)
-    multiply(t12, t11, t15)
+    cos(q_4, t11)
+    multiply(t11, t12, t15)
     add(t8, t15, t8)
     multiply(t6, p_1, t15)
     multiply(t6, t15, t16)
     multiply(t10, p_1, t17)
     multiply(t10, t17, t20)
     add(t16, t20, t16)
-    subtract(t24, t16, t24)
-    multiply(t8, t24, t16)
+    subtract(t25, t16, t25)
+    multiply(t8, t25, t16)
     multiply(t14, t17, t17)
     multiply(t18, p_1, t20)
-    add(t2, t20, t2)
-    subtract(t17, t2, t17)
-    multiply(t5, t17, t2)
+    add(t3, t20, t3)
+    subtract(t17, t3, t17)
+    multiply(t5, t17, t3)
     multiply(Y_b_135, p_1, t20)
     add(Y_b_133, t20, t20)
     multiply(t14, t15, t15)
     add(t20, t15, t20)
-    multiply(t12, t20, t15)
-    add(t2, t15, t2)
-    multiply(t0, t2, t15)
+    multiply(t11, t20, t15)
+    add(t3, t15, t3)
+    multiply(t0, t3, t15)
     subtract(t16, t15, t16)
-    multiply(t11, p_1, t15)
+    multiply(t12, p_1, t15)
     add(t4, t15, t4)
-    multiply(t12, t4, t15)
+    multiply(t11, t4, t15)
     multiply(t9, p_1, t21)
     add(t13, t21, t13)
     multiply(t5, t13, t21)
@@ -17019,15 +16540,15 @@ def _base_regressor_chunk(x, t, s, y):
     add(t14, qd_4, t14)
     multiply(t14, t14, t21)
     multiply(t5, t10, t22)
-    multiply(t12, t6, t23)
+    multiply(t11, t6, t23)
     add(t22, t23, t22)
     multiply(t22, t22, t23)
-    add(t21, t23, t25)
-    multiply(t15, t25, t26)
+    add(t21, t23, t24)
+    multiply(t15, t24, t26)
     multiply(t5, Y_b_135, t27)
-    multiply(t12, t18, t28)
+    multiply(t11, t18, t28)
     add(t27, t28, t27)
-    multiply(t12, t10, t10)
+    multiply(t11, t10, t10)
     multiply(t5, t6, t6)
     subtract(t10, t6, t10)
     multiply(t10, qd_4, t6)
@@ -17036,160 +16557,152 @@ def _base_regressor_chunk(x, t, s, y):
     add(t27, t6, t28)
     multiply(t1, t28, t29)
     add(t26, t29, t26)
-    multiply(t12, t13, t13)
+    multiply(t11, t13, t13)
     multiply(t5, t4, t4)
     subtract(t13, t4, t13)
-    multiply(t10, t22, t4)
+    multiply(t10, t22, Y_b_182)
     add(t19, qdd_4, Y_b_184)
-    subtract(t4, Y_b_184, t19)
-    multiply(t13, t19, t29)
-    add(t26, t29, t26)
+    subtract(Y_b_182, Y_b_184, t4)
+    multiply(t13, t4, t19)
+    add(t26, t19, t26)
     add(t16, t26, Y_b_20)
-    multiply(t3, t28, t28)
-    multiply(t5, t7, t16)
-    multiply(t16, t25, t26)
-    subtract(t28, t26, t28)
-    multiply(t12, t7, t26)
-    multiply(t26, t19, t29)
-    subtract(t28, t29, Y_b_60)
+    multiply(t2, t28, t16)
+    multiply(t5, t7, t19)
+    multiply(t19, t24, t26)
+    subtract(t16, t26, t16)
+    multiply(t11, t7, t26)
+    multiply(t26, t4, t29)
+    subtract(t16, t29, Y_b_60)
     multiply(t7, p_1, t7)
-    multiply(t5, t7, t28)
-    multiply(t28, t19, t29)
-    multiply(t12, t7, t7)
-    multiply(t7, t25, t30)
+    multiply(t5, t7, t16)
+    multiply(t16, t4, t29)
+    multiply(t11, t7, t7)
+    multiply(t7, t24, t30)
     subtract(t29, t30, t29)
-    multiply(t3, t2, t30)
-    multiply(t26, t24, t31)
+    multiply(t2, t3, t30)
+    multiply(t26, t25, t31)
     add(t30, t31, t30)
     subtract(t29, t30, Y_b_100)
-    multiply(t5, t24, t29)
+    multiply(t5, t25, t29)
     multiply(t5, p_1, t30)
-    multiply(t30, t25, t25)
-    multiply(t12, p_1, t31)
-    multiply(t31, t19, t19)
-    add(t25, t19, t25)
-    add(t29, t25, Y_b_140)
-    negative(t2, Y_b_180)
-    multiply(t12, t17, t17)
+    multiply(t30, t24, t24)
+    multiply(t11, p_1, t31)
+    multiply(t31, t4, t4)
+    add(t24, t4, t24)
+    add(t29, t24, Y_b_140)
+    negative(t3, Y_b_180)
+    multiply(t11, t17, t17)
     multiply(t5, t20, t20)
     subtract(t17, t20, Y_b_181)
-    multiply(t0, Y_b_181, t2)
-    multiply(t12, t9, t9)
-    multiply(t5, t11, t11)
-    subtract(t9, t11, t9)
-    multiply(t9, t24, t11)
-    subtract(t2, t11, t2)
-    multiply(t22, t14, t11)
-    multiply(t12, Y_b_135, t17)
+    multiply(t0, Y_b_181, t3)
+    multiply(t11, t9, t9)
+    multiply(t5, t12, t12)
+    subtract(t9, t12, t9)
+    multiply(t9, t25, t4)
+    subtract(t3, t4, t3)
+    multiply(t22, t14, t14)
+    multiply(t11, Y_b_135, t4)
     multiply(t5, t18, t18)
-    subtract(t17, t18, t17)
-    multiply(t22, qd_4, t18)
-    subtract(t17, t18, t17)
-    subtract(t11, t17, t18)
-    multiply(t1, t18, t1)
-    multiply(t22, t10, Y_b_182)
-    add(Y_b_184, Y_b_182, t19)
-    multiply(t15, t19, t15)
+    subtract(t4, t18, t4)
+    multiply(t22, qd_4, t22)
+    subtract(t4, t22, t4)
+    subtract(t14, t4, t12)
+    multiply(t1, t12, t1)
+    add(Y_b_184, Y_b_182, t17)
+    multiply(t15, t17, t15)
     subtract(t1, t15, t1)
-    multiply(t10, t10, t15)
-    add(t15, t21, t20)
-    multiply(t13, t20, t13)
+    multiply(t10, t10, t10)
+    add(t10, t21, t15)
+    multiply(t13, t15, t13)
     subtract(t1, t13, t1)
-    add(t2, t1, Y_b_21)
-    multiply(t16, t19, t1)
-    multiply(t3, t18, t18)
-    add(t1, t18, t1)
-    multiply(t26, t20, t2)
-    add(t1, t2, Y_b_61)
-    multiply(t3, Y_b_181, t1)
-    multiply(t16, t24, t2)
-    subtract(t1, t2, t1)
-    multiply(t7, t19, t7)
-    multiply(t28, t20, t28)
-    subtract(t7, t28, t7)
+    add(t3, t1, Y_b_21)
+    multiply(t19, t17, t1)
+    multiply(t2, t12, t12)
+    add(t1, t12, t1)
+    multiply(t26, t15, t3)
+    add(t1, t3, Y_b_61)
+    multiply(t2, Y_b_181, t1)
+    multiply(t19, t25, t3)
+    subtract(t1, t3, t1)
+    multiply(t7, t17, t7)
+    multiply(t16, t15, t16)
+    subtract(t7, t16, t7)
     add(t1, t7, Y_b_101)
-    multiply(t12, t24, t24)
-    multiply(t30, t19, t30)
-    multiply(t31, t20, t31)
+    multiply(t11, t25, t25)
+    multiply(t30, t17, t30)
+    multiply(t31, t15, t31)
     add(t30, t31, t30)
-    add(t24, t30, t24)
-    negative(t24, Y_b_141)
-    multiply(t9, t17, t1)
-    multiply(t0, Y_b_182, t2)
-    add(t1, t2, t1)
-    multiply(t14, t10, t10)
-    multiply(t8, t10, t2)
-    subtract(t1, t2, Y_b_22)
-    multiply(t16, t17, t1)
-    multiply(t3, Y_b_182, t2)
-    add(t1, t2, t1)
-    multiply(t26, t10, t2)
-    add(t1, t2, Y_b_102)
-    multiply(t12, t17, t1)
-    multiply(t5, t10, t2)
-    subtract(t1, t2, Y_b_142)
+    add(t25, t30, t25)
+    negative(t25, Y_b_141)
+    multiply(t9, t4, t1)
+    multiply(t0, Y_b_182, t3)
+    add(t1, t3, t1)
+    multiply(t8, t6, t3)
+    subtract(t1, t3, Y_b_22)
+    multiply(t19, t4, t1)
+    multiply(t2, Y_b_182, t7)
+    add(t1, t7, t1)
+    multiply(t26, t6, t7)
+    add(t1, t7, Y_b_102)
+    multiply(t11, t4, t1)
+    multiply(t5, t6, t12)
+    subtract(t1, t12, Y_b_142)
     subtract(Y_b_184, Y_b_182, t1)
-    multiply(t9, t1, t2)
-    add(t17, t11, Y_b_183)
-    multiply(t0, Y_b_183, t7)
-    add(t2, t7, t2)
-    subtract(t15, t21, t7)
-    multiply(t8, t7, t13)
-    add(t2, t13, Y_b_23)
-    multiply(t16, t1, t2)
-    multiply(t3, Y_b_183, t13)
-    add(t2, t13, t2)
-    multiply(t26, t7, t13)
-    subtract(t2, t13, Y_b_103)
-    multiply(t12, t1, t1)
-    multiply(t5, t7, t7)
-    add(t1, t7, Y_b_143)
+    multiply(t9, t1, t13)
+    add(t4, t14, Y_b_183)
+    multiply(t0, Y_b_183, t15)
+    add(t13, t15, t13)
+    subtract(t10, t21, t15)
+    multiply(t8, t15, t16)
+    add(t13, t16, Y_b_23)
+    multiply(t19, t1, t13)
+    multiply(t2, Y_b_183, t16)
+    add(t13, t16, t13)
+    multiply(t26, t15, t16)
+    subtract(t13, t16, Y_b_103)
+    multiply(t11, t1, t1)
+    multiply(t5, t15, t15)
+    add(t1, t15, Y_b_143)
     multiply(t0, Y_b_184, t1)
-    multiply(t9, t11, t2)
-    subtract(t1, t2, t1)
-    multiply(t8, t6, t2)
-    add(t1, t2, Y_b_24)
-    multiply(t3, Y_b_184, t1)
-    multiply(t16, t11, t2)
-    subtract(t1, t2, t1)
-    multiply(t26, t6, t2)
-    subtract(t1, t2, Y_b_104)
-    multiply(t5, t6, t1)
-    multiply(t12, t11, t11)
-    subtract(t1, t11, Y_b_144)
-    add(t27, t10, t10)
-    multiply(t9, t10, t1)
-    subtract(t23, t15, Y_b_185)
-    multiply(t0, Y_b_185, t2)
-    add(t1, t2, t1)
-    multiply(t14, t22, t14)
-    subtract(t17, t14, t17)
-    multiply(t8, t17, t2)
-    add(t1, t2, Y_b_25)
-    multiply(t16, t10, t1)
-    multiply(t3, Y_b_185, t2)
-    add(t1, t2, t1)
-    multiply(t26, t17, t2)
-    subtract(t1, t2, Y_b_105)
-    multiply(t12, t10, t10)
-    multiply(t5, t17, t17)
-    add(t10, t17, Y_b_145)
+    multiply(t9, t14, t13)
+    subtract(t1, t13, t1)
+    add(t1, t3, Y_b_24)
+    multiply(t2, Y_b_184, t1)
+    multiply(t19, t14, t3)
+    subtract(t1, t3, t1)
+    subtract(t1, t7, Y_b_104)
+    multiply(t11, t14, t1)
+    subtract(t12, t1, Y_b_144)
+    multiply(t9, t28, t1)
+    subtract(t23, t10, Y_b_185)
+    multiply(t0, Y_b_185, t3)
+    add(t1, t3, t1)
+    subtract(t4, t14, t4)
+    multiply(t8, t4, t3)
+    add(t1, t3, Y_b_25)
+    multiply(t19, t28, t1)
+    multiply(t2, Y_b_185, t3)
+    add(t1, t3, t1)
+    multiply(t26, t4, t3)
+    subtract(t1, t3, Y_b_105)
+    multiply(t11, t28, t28)
+    multiply(t5, t4, t4)
+    add(t28, t4, Y_b_145)
     subtract(t21, t23, t21)
     multiply(t9, t21, t9)
     subtract(t27, t6, Y_b_186)
     multiply(t0, Y_b_186, t0)
     add(t9, t0, t9)
-    add(Y_b_184, t4, t4)
-    multiply(t8, t4, t8)
+    multiply(t8, t17, t8)
     add(t9, t8, Y_b_26)
-    multiply(t16, t21, t16)
-    multiply(t3, Y_b_186, t3)
-    add(t16, t3, t16)
-    multiply(t26, t4, t26)
-    subtract(t16, t26, Y_b_106)
-    multiply(t12, t21, t12)
-    multiply(t5, t4, t5)
-    add(t12, t5, Y_b_146)
+    multiply(t19, t21, t19)
+    multiply(t2, Y_b_186, t2)
+    add(t19, t2, t19)
+    multiply(t26, t17, t26)
+    subtract(t19, t26, Y_b_106)
+    multiply(t11, t21, t11)
+    multiply(t5, t17, t5)
+    add(t11, t5, Y_b_146)
     sign(qd_0, Y_b_28)
     sign(qd_1, Y_b_71)
     sign(qd_2, Y_b_113)
@@ -17218,7 +16731,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     out fk_tcp [4x4]
     out jacobian_tcp [6x5]
     out jdot_qd_tcp [6]
-    480 ops: 281 mul, 191 add, 0 div, 8 trig
+    478 ops: 280 mul, 190 add, 0 div, 8 trig
     """
     q = _array(q, 5, "q")
     qd = _array(qd, 5, "qd")
@@ -17237,87 +16750,85 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t4 = sin(q[4])
     t5 = 0.0027500000000000003 * t4
     t6 = t4 * t5
-    t7 = t3 + t6
-    t8 = (-0.015) * p[1]
-    t7 = t7 - t8
-    t9 = 0.015 * p[1]
+    t3 = t3 + t6
+    t6 = (-0.015) * p[1]
+    t7 = t3 - t6
+    t8 = 0.015 * p[1]
+    t7 = t7 + t8
+    t9 = p[1] * p[1]
+    t9 = 0.3 * t9
     t7 = t7 + t9
-    t10 = p[1] * p[1]
-    t10 = 0.3 * t10
-    t7 = t7 + t10
     t7 = 0.009000000000000001 + t7
-    t11 = 0.00424 + t7
-    t11 = t0 * t11
-    t12 = sin(q[2])
-    t13 = cos(q[3])
+    t10 = 0.00424 + t7
+    t10 = t0 * t10
+    t11 = sin(q[2])
+    t12 = cos(q[3])
     t2 = t4 * t2
     t5 = t1 * t5
     t2 = t2 - t5
-    t5 = t13 * t2
-    t14 = t12 * t5
-    t11 = t11 + t14
-    t11 = t0 * t11
+    t5 = t12 * t2
+    t13 = t11 * t5
+    t10 = t10 + t13
+    t10 = t0 * t10
     t5 = t0 * t5
-    t15 = sin(q[3])
-    t16 = 0.003 * t15
-    t17 = t15 * t16
-    t3 = t6 + t3
+    t14 = sin(q[3])
+    t15 = 0.003 * t14
+    t16 = t14 * t15
+    t3 = t3 + t8
+    t3 = t3 - t6
     t3 = t3 + t9
-    t3 = t3 - t8
-    t3 = t3 + t10
     t3 = 0.009000000000000001 + t3
-    t6 = t13 * t3
-    t8 = t13 * t6
-    t8 = t17 + t8
+    t6 = t12 * t3
+    t8 = t12 * t6
+    t8 = t16 + t8
     t8 = 0.003 + t8
-    t8 = t12 * t8
+    t8 = t11 * t8
     t5 = t5 + t8
-    t5 = t12 * t5
-    t5 = t11 + t5
+    t5 = t11 * t5
+    t5 = t10 + t5
     t5 = 0.01 + t5
     t8 = p[0] + q[1]
     t9 = 0.3 * p[1]
     t9 = 0.065 + t9
-    t10 = t13 * t9
-    t11 = 0.04000000000000001 + t10
-    t17 = t8 * t11
-    t5 = t5 + t17
-    t11 = t11 * t8
-    t5 = t5 + t11
-    t11 = t8 * t8
-    t11 = 2.2 * t11
-    t5 = t5 + t11
+    t10 = t12 * t9
+    t16 = 0.04000000000000001 + t10
+    t16 = t8 * t16
+    t5 = t5 + t16
+    t5 = t5 + t16
+    t16 = t8 * t8
+    t16 = 2.2 * t16
+    t5 = t5 + t16
     t5 = 0.020000000000000004 + t5
-    t9 = t15 * t9
-    t11 = 0.012 + t9
-    t17 = t0 * t11
+    t9 = t14 * t9
+    t16 = 0.012 + t9
+    t17 = t0 * t16
     t17 = -t17
-    t16 = t13 * t16
-    t6 = t15 * t6
-    t6 = t16 - t6
-    t6 = t12 * t6
-    t2 = t15 * t2
-    t16 = t0 * t2
-    t6 = t6 - t16
-    t11 = t12 * t11
-    t11 = t8 * t11
-    t6 = t6 - t11
-    t11 = t0 * t7
-    t11 = t11 + t14
+    t15 = t12 * t15
+    t6 = t14 * t6
+    t6 = t15 - t6
+    t6 = t11 * t6
+    t2 = t14 * t2
+    t15 = t0 * t2
+    t6 = t6 - t15
+    t15 = t11 * t16
+    t15 = t8 * t15
+    t6 = t6 - t15
+    t15 = t0 * t7
+    t13 = t15 + t13
     t10 = t0 * t10
     t10 = t8 * t10
-    t10 = t11 + t10
-    t11 = 0.001 * t15
-    t11 = t12 * t11
+    t10 = t13 + t10
+    t13 = 0.001 * t14
+    t13 = t11 * t13
     t9 = -t9
-    t14 = 0.003 * t13
-    t14 = t13 * t14
-    t3 = t15 * t3
-    t3 = t15 * t3
-    t3 = t14 + t3
+    t15 = 0.003 * t12
+    t15 = t12 * t15
+    t3 = t14 * t3
+    t3 = t14 * t3
+    t3 = t15 + t3
     t3 = 0.00424 + t3
     t2 = -t2
-    t14 = 0.001 * t13
+    t15 = 0.001 * t12
     t16 = cos(q[0])
     t18 = 0.9810000000000001 * t16
     t19 = qd[0] * qd[1]
@@ -17325,7 +16836,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t20 = 9.81 * t16
     t21 = t19 + t20
     t22 = 0.04000000000000001 * t21
-    t23 = t12 * qd[0]
+    t23 = t11 * qd[0]
     t24 = 0.003 * t23
     t25 = qd[2] * t24
     t26 = 0.00424 * qd[2]
@@ -17341,11 +16852,11 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t31 = t29 - t30
     t32 = 0.012 * t31
     t25 = t25 - t32
-    t32 = t13 * qd[2]
-    t33 = t15 * t23
+    t32 = t12 * qd[2]
+    t33 = t14 * t23
     t32 = t32 + t33
-    t33 = t13 * t23
-    t34 = t15 * qd[2]
+    t33 = t12 * t23
+    t34 = t14 * qd[2]
     t33 = t33 - t34
     t34 = 0.009000000000000001 * t33
     t35 = t32 * t34
@@ -17354,13 +16865,13 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t35 = t35 - t37
     t37 = 0.009000000000000001 * t27
     t35 = t35 - t37
-    t37 = t15 * t30
+    t37 = t14 * t30
     t38 = t0 * t19
-    t39 = t13 * t38
+    t39 = t12 * t38
     t37 = t37 + t39
     t39 = t0 * t20
-    t40 = t13 * t39
-    t41 = t15 * t29
+    t40 = t12 * t39
+    t41 = t14 * t29
     t40 = t40 - t41
     t41 = t37 + t40
     t42 = 0.05 * t41
@@ -17378,7 +16889,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t47 = t47 - t49
     t49 = t1 * t27
     t50 = t43 * qd[2]
-    t51 = t13 * t50
+    t51 = t12 * t50
     t52 = t32 * qd[3]
     t51 = t51 - t52
     t52 = t4 * t51
@@ -17389,7 +16900,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t47 = t47 - t52
     t52 = t44 * p[1]
     t53 = t32 * t52
-    t19 = t12 * t19
+    t19 = t11 * t19
     t54 = t51 * p[1]
     t54 = t19 + t54
     t53 = t53 - t54
@@ -17402,7 +16913,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t56 = t1 * t37
     t54 = t54 + t56
     t56 = t1 * t40
-    t20 = t12 * t20
+    t20 = t11 * t20
     t57 = t4 * t20
     t56 = t56 - t57
     t56 = t54 + t56
@@ -17460,7 +16971,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t64 = qd[2] * t63
     t26 = t26 - t64
     t26 = t62 + t26
-    t50 = t15 * t50
+    t50 = t14 * t50
     t62 = t33 * qd[3]
     t50 = t50 + t62
     t62 = 0.002 * t50
@@ -17475,7 +16986,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t46 = t61 - t46
     t46 = t62 + t46
     t34 = t34 + t46
-    t61 = t15 * t34
+    t61 = t14 * t34
     t62 = 0.009000000000000001 * t51
     t36 = t44 * t36
     t64 = t32 * t64
@@ -17493,10 +17004,10 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t36 = t36 + t40
     t40 = p[1] * t36
     t20 = t20 - t40
-    t40 = t13 * t20
+    t40 = t12 * t20
     t40 = t61 + t40
     t26 = t26 + t40
-    t26 = t12 * t26
+    t26 = t11 * t26
     t25 = t25 + t26
     t22 = t22 + t25
     t18 = t18 + t22
@@ -17509,11 +17020,11 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t47 = qd[2] * t40
     t26 = t26 + t47
     t22 = t22 - t26
-    t26 = t15 * t38
-    t30 = t13 * t30
+    t26 = t14 * t38
+    t30 = t12 * t30
     t26 = t26 - t30
-    t29 = t13 * t29
-    t30 = t15 * t39
+    t29 = t12 * t29
+    t30 = t14 * t39
     t29 = t29 + t30
     t30 = t26 + t29
     t30 = 0.5 * t30
@@ -17534,14 +17045,14 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t33 = t33 + t39
     t29 = t29 - t33
     t29 = t30 + t29
-    t30 = t15 * t29
+    t30 = t14 * t29
     t33 = 0.5 * t41
     t39 = 0.05 * t27
     t33 = t33 - t39
     t38 = t32 * t38
     t33 = t33 + t38
     t33 = t33 + t57
-    t38 = t13 * t33
+    t38 = t12 * t33
     t30 = t30 + t38
     t22 = t22 + t30
     t22 = t0 * t22
@@ -17555,7 +17066,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t30 = t30 - t32
     t30 = t30 + t36
     t25 = t25 + t30
-    t25 = t12 * t25
+    t25 = t11 * t25
     t22 = t22 - t25
     t21 = t21 + t22
     t8 = t8 * t21
@@ -17569,8 +17080,8 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t21 = t21 + t22
     t22 = t23 * t40
     t21 = t21 + t22
-    t22 = t13 * t29
-    t25 = t15 * t33
+    t22 = t12 * t29
+    t25 = t14 * t33
     t22 = t22 - t25
     t21 = t21 + t22
     t18 = t18 + t21
@@ -17579,49 +17090,49 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t21 = t21 - t22
     t19 = 0.012 * t19
     t19 = t21 - t19
-    t21 = t13 * t34
-    t20 = t15 * t20
+    t21 = t12 * t34
+    t20 = t14 * t20
     t20 = t21 - t20
     t19 = t19 + t20
     t20 = t0 * t1
-    t21 = t12 * t13
+    t21 = t11 * t12
     t22 = t21 * t4
     t20 = t20 - t22
-    t22 = t28 * t12
+    t22 = t28 * t11
     t23 = t22 * t1
-    t24 = t16 * t15
+    t24 = t16 * t14
     t25 = t28 * t0
-    t27 = t25 * t13
+    t27 = t25 * t12
     t24 = t24 + t27
     t27 = t24 * t4
     t23 = t23 + t27
-    t27 = t16 * t12
+    t27 = t16 * t11
     t29 = t27 * t1
     t30 = t16 * t0
-    t31 = t30 * t13
-    t32 = t28 * t15
+    t31 = t30 * t12
+    t32 = t28 * t14
     t31 = t31 - t32
     t32 = t31 * t4
     t29 = t29 + t32
     t32 = -t29
-    t12 = t12 * t15
-    t33 = t16 * t13
-    t25 = t25 * t15
+    t11 = t11 * t14
+    t33 = t16 * t12
+    t25 = t25 * t14
     t25 = t33 - t25
-    t13 = t28 * t13
-    t15 = t30 * t15
-    t13 = t13 + t15
-    t15 = t0 * t4
+    t12 = t28 * t12
+    t14 = t30 * t14
+    t12 = t12 + t14
+    t14 = t0 * t4
     t21 = t21 * t1
-    t15 = t15 + t21
+    t14 = t14 + t21
     t21 = t22 * t4
     t24 = t24 * t1
     t21 = t21 - t24
     t1 = t31 * t1
     t4 = t27 * t4
     t1 = t1 - t4
-    t4 = t12 * p[1]
-    t24 = t12 * p[2]
+    t4 = t11 * p[1]
+    t24 = t11 * p[2]
     t4 = t4 + t24
     t30 = t16 * p[0]
     t31 = t16 * q[1]
@@ -17633,9 +17144,9 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t34 = t28 * p[0]
     t36 = t28 * q[1]
     t34 = t34 + t36
-    t36 = t13 * p[1]
+    t36 = t12 * p[1]
     t36 = t34 + t36
-    t38 = t13 * p[2]
+    t38 = t12 * p[2]
     t36 = t36 + t38
     t39 = -t36
     t34 = t36 - t34
@@ -17658,12 +17169,12 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t30 = t30 - t47
     t27 = -t27
     t47 = t25 * t38
-    t48 = t13 * t33
+    t48 = t12 * t33
     t47 = t47 - t48
-    t48 = t13 * t24
-    t38 = t12 * t38
+    t48 = t12 * t24
+    t38 = t11 * t38
     t38 = t48 - t38
-    t33 = t12 * t33
+    t33 = t11 * t33
     t24 = t25 * t24
     t24 = t33 - t24
     t33 = t58 * p[2]
@@ -17677,28 +17188,28 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t37 = t59 * t37
     t37 = t45 + t37
     t26 = t26 - t37
-    t37 = t12 * t26
+    t37 = t11 * t26
     t37 = t48 + t37
     t45 = t49 * p[2]
     t45 = t54 - t45
     t42 = t42 * t51
     t42 = t45 + t42
-    t45 = t15 * t42
+    t45 = t14 * t42
     t37 = t37 + t45
     t45 = t23 * t33
     t48 = t25 * t26
     t45 = t45 + t48
     t48 = t21 * t42
     t45 = t45 + t48
-    t26 = t13 * t26
+    t26 = t12 * t26
     t33 = t29 * t33
     t26 = t26 - t33
     t33 = t1 * t42
     t26 = t26 + t33
-    t33 = t12 * t50
+    t33 = t11 * t50
     t42 = t20 * t49
     t33 = t33 - t42
-    t42 = t15 * t58
+    t42 = t14 * t58
     t33 = t33 + t42
     t42 = t25 * t50
     t48 = t23 * t49
@@ -17706,26 +17217,26 @@ def bundle_control(q, qd, p=DEFAULT_P):
     t48 = t21 * t58
     t42 = t42 + t48
     t29 = t29 * t49
-    t48 = t13 * t50
+    t48 = t12 * t50
     t29 = t29 + t48
     t48 = t1 * t58
     t29 = t29 + t48
-    _mass_matrix = (t5, t17, t6, t10, t11,
+    _mass_matrix = (t5, t17, t6, t10, t13,
                     t17, 2.2, 0.0, t9, 0.0,
-                    t6, 0.0, t3, t2, t14,
+                    t6, 0.0, t3, t2, t15,
                     t10, t9, t2, t7, 0.0,
-                    t11, 0.0, t14, 0.0, 0.001)
+                    t13, 0.0, t15, 0.0, 0.001)
     _bias = (t8, t18, t19, t35, t46)
-    _fk_tcp = (t20, t12, t15, t4,
+    _fk_tcp = (t20, t11, t14, t4,
                t23, t25, t21, t31,
-               t32, t13, t1, t36,
+               t32, t12, t1, t36,
                0.0, 0.0, 0.0, 1.0)
     _jacobian_tcp = (0.0, 0.0, t40, t44, t47,
                      t39, t16, t41, t34, t38,
                      t31, t28, t43, t30, t24,
-                     1.0, 0.0, 0.0, t0, t12,
+                     1.0, 0.0, 0.0, t0, t11,
                      0.0, 0.0, t16, t22, t25,
-                     0.0, 0.0, t28, t27, t13)
+                     0.0, 0.0, t28, t27, t12)
     _jdot_qd_tcp = (t37, t45, t26, t33, t42, t29)
     return np.array(_mass_matrix).reshape(5, 5), np.array(_bias), np.array(_fk_tcp).reshape(4, 4), np.array(_jacobian_tcp).reshape(6, 5), np.array(_jdot_qd_tcp)
 
@@ -17772,95 +17283,93 @@ def _bundle_control_chunk(x, t, s, y):
     sin(q_4, t3)
     multiply(k0, t3, t4)
     multiply(t3, t4, t5)
-    add(t2, t5, t6)
+    add(t2, t5, t2)
     multiply(k1, p_1, s0)
-    subtract(t6, s0, t6)
+    subtract(t2, s0, t5)
     multiply(k2, p_1, s1)
-    add(t6, s1, t6)
+    add(t5, s1, t5)
     multiply(p_1, p_1, s2)
     multiply(k3, s2, s2)
-    add(t6, s2, t6)
-    add(k4, t6, mass_matrix_18)
-    add(k5, mass_matrix_18, t6)
-    multiply(jacobian_tcp_18, t6, t6)
-    sin(q_2, t7)
-    cos(q_3, t8)
+    add(t5, s2, t5)
+    add(k4, t5, mass_matrix_18)
+    add(k5, mass_matrix_18, t5)
+    multiply(jacobian_tcp_18, t5, t5)
+    sin(q_2, t6)
+    cos(q_3, t7)
     multiply(t3, t1, t1)
     multiply(t0, t4, t4)
     subtract(t1, t4, t1)
-    multiply(t8, t1, t4)
-    multiply(t7, t4, t9)
-    add(t6, t9, t6)
-    multiply(jacobian_tcp_18, t6, t6)
+    multiply(t7, t1, t4)
+    multiply(t6, t4, t8)
+    add(t5, t8, t5)
+    multiply(jacobian_tcp_18, t5, t5)
     multiply(jacobian_tcp_18, t4, t4)
-    sin(q_3, t10)
-    multiply(k6, t10, t11)
-    multiply(t10, t11, t12)
-    add(t5, t2, t5)
-    add(t5, s1, t5)
-    subtract(t5, s0, t5)
-    add(t5, s2, t5)
-    add(k4, t5, t5)
-    multiply(t8, t5, t2)
-    multiply(t8, t2, t13)
-    add(t12, t13, t12)
-    add(k6, t12, t12)
-    multiply(t7, t12, t12)
-    add(t4, t12, t4)
-    multiply(t7, t4, t4)
-    add(t6, t4, t6)
-    add(k7, t6, t6)
+    sin(q_3, t9)
+    multiply(k6, t9, t10)
+    multiply(t9, t10, t11)
+    add(t2, s1, t2)
+    subtract(t2, s0, t2)
+    add(t2, s2, t2)
+    add(k4, t2, t2)
+    multiply(t7, t2, t12)
+    multiply(t7, t12, t13)
+    add(t11, t13, t11)
+    add(k6, t11, t11)
+    multiply(t6, t11, t11)
+    add(t4, t11, t4)
+    multiply(t6, t4, t4)
+    add(t5, t4, t5)
+    add(k7, t5, t5)
     add(p_0, q_1, t4)
     multiply(k3, p_1, s0)
     add(k8, s0, s0)
-    multiply(t8, s0, t12)
-    add(k9, t12, t13)
-    multiply(t4, t13, t14)
-    add(t6, t14, t6)
-    multiply(t13, t4, t13)
-    add(t6, t13, t6)
+    multiply(t7, s0, t11)
+    add(k9, t11, t13)
+    multiply(t4, t13, t13)
+    add(t5, t13, t5)
+    add(t5, t13, t5)
     multiply(t4, t4, t13)
     multiply(k10, t13, t13)
-    add(t6, t13, t6)
-    add(k11, t6, mass_matrix_0)
-    multiply(t10, s0, t6)
-    add(k12, t6, t13)
+    add(t5, t13, t5)
+    add(k11, t5, mass_matrix_0)
+    multiply(t9, s0, t5)
+    add(k12, t5, t13)
     multiply(jacobian_tcp_18, t13, t14)
     negative(t14, mass_matrix_1)
-    multiply(t8, t11, t11)
-    multiply(t10, t2, t2)
-    subtract(t11, t2, t11)
-    multiply(t7, t11, t11)
-    multiply(t10, t1, t1)
-    multiply(jacobian_tcp_18, t1, t2)
-    subtract(t11, t2, t11)
-    multiply(t7, t13, t13)
+    multiply(t7, t10, t10)
+    multiply(t9, t12, t12)
+    subtract(t10, t12, t10)
+    multiply(t6, t10, t10)
+    multiply(t9, t1, t1)
+    multiply(jacobian_tcp_18, t1, t12)
+    subtract(t10, t12, t10)
+    multiply(t6, t13, t13)
     multiply(t4, t13, t13)
-    subtract(t11, t13, mass_matrix_2)
-    multiply(jacobian_tcp_18, mass_matrix_18, t2)
-    add(t2, t9, t2)
-    multiply(jacobian_tcp_18, t12, t12)
-    multiply(t4, t12, t12)
-    add(t2, t12, mass_matrix_3)
-    multiply(k13, t10, t2)
-    multiply(t7, t2, mass_matrix_4)
-    negative(t6, mass_matrix_8)
-    multiply(k6, t8, t2)
-    multiply(t8, t2, t2)
-    multiply(t10, t5, t5)
-    multiply(t10, t5, t5)
-    add(t2, t5, t2)
-    add(k5, t2, mass_matrix_12)
+    subtract(t10, t13, mass_matrix_2)
+    multiply(jacobian_tcp_18, mass_matrix_18, t10)
+    add(t10, t8, t10)
+    multiply(jacobian_tcp_18, t11, t11)
+    multiply(t4, t11, t11)
+    add(t10, t11, mass_matrix_3)
+    multiply(k13, t9, t8)
+    multiply(t6, t8, mass_matrix_4)
+    negative(t5, mass_matrix_8)
+    multiply(k6, t7, t5)
+    multiply(t7, t5, t5)
+    multiply(t9, t2, t2)
+    multiply(t9, t2, t2)
+    add(t5, t2, t5)
+    add(k5, t5, mass_matrix_12)
     negative(t1, mass_matrix_13)
-    multiply(k13, t8, mass_matrix_14)
+    multiply(k13, t7, mass_matrix_14)
     cos(q_0, jacobian_tcp_6)
     multiply(k14, jacobian_tcp_6, t1)
     multiply(qd_0, qd_1, t2)
     add(t2, t2, t2)
     multiply(k15, jacobian_tcp_6, t5)
-    add(t2, t5, t6)
-    multiply(k9, t6, t9)
-    multiply(t7, qd_0, t11)
+    add(t2, t5, t8)
+    multiply(k9, t8, t10)
+    multiply(t6, qd_0, t11)
     multiply(k6, t11, t12)
     multiply(qd_2, t12, t13)
     multiply(k5, qd_2, t14)
@@ -17876,11 +17385,11 @@ def _bundle_control_chunk(x, t, s, y):
     subtract(t16, t17, t18)
     multiply(k12, t18, t19)
     subtract(t13, t19, t13)
-    multiply(t8, qd_2, t19)
-    multiply(t10, t11, t20)
+    multiply(t7, qd_2, t19)
+    multiply(t9, t11, t20)
     add(t19, t20, t19)
-    multiply(t8, t11, t20)
-    multiply(t10, qd_2, t21)
+    multiply(t7, t11, t20)
+    multiply(t9, qd_2, t21)
     subtract(t20, t21, t20)
     multiply(k4, t20, t21)
     multiply(t19, t21, t22)
@@ -17889,13 +17398,13 @@ def _bundle_control_chunk(x, t, s, y):
     subtract(t22, t24, t22)
     multiply(k4, t15, t24)
     subtract(t22, t24, t22)
-    multiply(t10, t17, t24)
+    multiply(t9, t17, t24)
     multiply(jacobian_tcp_18, t2, t25)
-    multiply(t8, t25, t26)
+    multiply(t7, t25, t26)
     add(t24, t26, t24)
     multiply(jacobian_tcp_18, t5, t26)
-    multiply(t8, t26, t27)
-    multiply(t10, t16, t28)
+    multiply(t7, t26, t27)
+    multiply(t9, t16, t28)
     subtract(t27, t28, t27)
     add(t24, t27, t28)
     multiply(k17, t28, t29)
@@ -17913,7 +17422,7 @@ def _bundle_control_chunk(x, t, s, y):
     subtract(t34, t36, t34)
     multiply(t0, t15, t36)
     multiply(t30, qd_2, t37)
-    multiply(t8, t37, t38)
+    multiply(t7, t37, t38)
     multiply(t19, qd_3, t39)
     subtract(t38, t39, t38)
     multiply(t3, t38, t39)
@@ -17924,7 +17433,7 @@ def _bundle_control_chunk(x, t, s, y):
     subtract(t34, t39, t34)
     multiply(t31, p_1, t39)
     multiply(t19, t39, t40)
-    multiply(t7, t2, t2)
+    multiply(t6, t2, t2)
     multiply(t38, p_1, t41)
     add(t2, t41, t41)
     subtract(t40, t41, t40)
@@ -17937,7 +17446,7 @@ def _bundle_control_chunk(x, t, s, y):
     multiply(t0, t24, t43)
     add(t41, t43, t41)
     multiply(t0, t27, t43)
-    multiply(t7, t5, t5)
+    multiply(t6, t5, t5)
     multiply(t3, t5, t44)
     subtract(t43, t44, t43)
     add(t41, t43, t43)
@@ -17995,7 +17504,7 @@ def _bundle_control_chunk(x, t, s, y):
     multiply(qd_2, t49, t50)
     subtract(t14, t50, t14)
     add(t22, t14, t22)
-    multiply(t10, t37, t37)
+    multiply(t9, t37, t37)
     multiply(t20, qd_3, t14)
     add(t37, t14, t37)
     multiply(k16, t37, t14)
@@ -18010,7 +17519,7 @@ def _bundle_control_chunk(x, t, s, y):
     subtract(t48, t33, t48)
     add(t21, t48, bias_4)
     add(t14, bias_4, t14)
-    multiply(t10, t14, t21)
+    multiply(t9, t14, t21)
     multiply(k4, t38, t33)
     multiply(t31, t23, t23)
     multiply(t19, t50, t50)
@@ -18028,27 +17537,27 @@ def _bundle_control_chunk(x, t, s, y):
     add(t24, t43, t24)
     multiply(p_1, t24, t5)
     subtract(t33, t5, t33)
-    multiply(t8, t33, t5)
+    multiply(t7, t33, t5)
     add(t21, t5, t21)
     add(t22, t21, t22)
-    multiply(t7, t22, t22)
+    multiply(t6, t22, t22)
     add(t13, t22, t13)
-    add(t9, t13, t9)
-    add(t1, t9, t1)
-    multiply(k18, t6, t6)
+    add(t10, t13, t10)
+    add(t1, t10, t1)
+    multiply(k18, t8, t8)
     add(t25, t26, t5)
     multiply(k19, t5, t5)
-    multiply(k12, t30, t9)
-    multiply(t30, t9, t13)
+    multiply(k12, t30, t10)
+    multiply(t30, t10, t13)
     multiply(k12, qd_2, t21)
     multiply(qd_2, t21, t22)
     add(t13, t22, t13)
     subtract(t5, t13, t5)
-    multiply(t10, t25, t25)
-    multiply(t8, t17, t17)
+    multiply(t9, t25, t25)
+    multiply(t7, t17, t17)
     subtract(t25, t17, t25)
-    multiply(t8, t16, t16)
-    multiply(t10, t26, t26)
+    multiply(t7, t16, t16)
+    multiply(t9, t26, t26)
     add(t16, t26, t16)
     add(t25, t16, t13)
     multiply(k20, t13, t13)
@@ -18069,31 +17578,31 @@ def _bundle_control_chunk(x, t, s, y):
     add(t27, t44, t27)
     subtract(t16, t27, t16)
     add(t13, t16, t13)
-    multiply(t10, t13, t16)
+    multiply(t9, t13, t16)
     multiply(k20, t28, t28)
     multiply(k17, t15, t20)
     subtract(t28, t20, t28)
     multiply(t19, t17, t17)
     add(t28, t17, t28)
     add(t28, t35, t28)
-    multiply(t8, t28, t17)
+    multiply(t7, t28, t17)
     add(t16, t17, t16)
     add(t5, t16, t5)
     multiply(jacobian_tcp_18, t5, t5)
-    multiply(t11, t9, t9)
+    multiply(t11, t10, t10)
     multiply(k19, t2, t16)
-    subtract(t9, t16, t9)
+    subtract(t10, t16, t10)
     multiply(t19, t23, t19)
     multiply(k20, t2, t16)
     multiply(k17, t38, t38)
     add(t16, t38, t16)
     subtract(t19, t16, t19)
     add(t19, t24, t19)
-    add(t9, t19, t9)
-    multiply(t7, t9, t9)
-    subtract(t5, t9, t5)
-    add(t6, t5, t6)
-    multiply(t4, t6, t4)
+    add(t10, t19, t10)
+    multiply(t6, t10, t10)
+    subtract(t5, t10, t5)
+    add(t8, t5, t8)
+    multiply(t4, t8, t4)
     add(t1, t4, bias_0)
     multiply(k18, t18, t1)
     multiply(k9, qd_0, t4)
@@ -18104,8 +17613,8 @@ def _bundle_control_chunk(x, t, s, y):
     add(t18, t15, t18)
     multiply(t11, t21, t21)
     add(t18, t21, t18)
-    multiply(t8, t13, t13)
-    multiply(t10, t28, t28)
+    multiply(t7, t13, t13)
+    multiply(t9, t28, t28)
     subtract(t13, t28, t13)
     add(t18, t13, t18)
     add(t1, t18, bias_1)
@@ -18114,38 +17623,38 @@ def _bundle_control_chunk(x, t, s, y):
     subtract(t11, t30, t11)
     multiply(k12, t2, t2)
     subtract(t11, t2, t11)
-    multiply(t8, t14, t14)
-    multiply(t10, t33, t33)
+    multiply(t7, t14, t14)
+    multiply(t9, t33, t33)
     subtract(t14, t33, t14)
     add(t11, t14, bias_2)
     multiply(jacobian_tcp_18, t0, t1)
-    multiply(t7, t8, t2)
+    multiply(t6, t7, t2)
     multiply(t2, t3, t4)
     subtract(t1, t4, fk_tcp_0)
-    multiply(jacobian_tcp_11, t7, jacobian_tcp_23)
+    multiply(jacobian_tcp_11, t6, jacobian_tcp_23)
     multiply(jacobian_tcp_23, t0, t1)
-    multiply(jacobian_tcp_6, t10, t4)
+    multiply(jacobian_tcp_6, t9, t4)
     multiply(jacobian_tcp_11, jacobian_tcp_18, t5)
-    multiply(t5, t8, t6)
-    add(t4, t6, t4)
-    multiply(t4, t3, t6)
-    add(t1, t6, fk_tcp_4)
-    multiply(jacobian_tcp_6, t7, t1)
-    multiply(t1, t0, t6)
-    multiply(jacobian_tcp_6, jacobian_tcp_18, t9)
-    multiply(t9, t8, t11)
-    multiply(jacobian_tcp_11, t10, t12)
+    multiply(t5, t7, t8)
+    add(t4, t8, t4)
+    multiply(t4, t3, t8)
+    add(t1, t8, fk_tcp_4)
+    multiply(jacobian_tcp_6, t6, t1)
+    multiply(t1, t0, t8)
+    multiply(jacobian_tcp_6, jacobian_tcp_18, t10)
+    multiply(t10, t7, t11)
+    multiply(jacobian_tcp_11, t9, t12)
     subtract(t11, t12, t11)
     multiply(t11, t3, t12)
-    add(t6, t12, t6)
-    negative(t6, fk_tcp_8)
-    multiply(t7, t10, fk_tcp_1)
-    multiply(jacobian_tcp_6, t8, t7)
-    multiply(t5, t10, t5)
-    subtract(t7, t5, fk_tcp_5)
-    multiply(jacobian_tcp_11, t8, t8)
-    multiply(t9, t10, t9)
-    add(t8, t9, fk_tcp_9)
+    add(t8, t12, t8)
+    negative(t8, fk_tcp_8)
+    multiply(t6, t9, fk_tcp_1)
+    multiply(jacobian_tcp_6, t7, t6)
+    multiply(t5, t9, t5)
+    subtract(t6, t5, fk_tcp_5)
+    multiply(jacobian_tcp_11, t7, t7)
+    multiply(t10, t9, t10)
+    add(t7, t10, fk_tcp_9)
     multiply(jacobian_tcp_18, t3, t5)
     multiply(t2, t0, t2)
     add(t5, t2, fk_tcp_2)
@@ -18170,20 +17679,20 @@ def _bundle_control_chunk(x, t, s, y):
     add(t3, t5, t3)
     multiply(fk_tcp_9, p_1, t5)
     add(t3, t5, t5)
-    multiply(fk_tcp_9, p_2, t7)
-    add(t5, t7, fk_tcp_11)
+    multiply(fk_tcp_9, p_2, t6)
+    add(t5, t6, fk_tcp_11)
     negative(fk_tcp_11, jacobian_tcp_5)
     subtract(fk_tcp_11, t3, t3)
     multiply(jacobian_tcp_6, t3, t5)
     subtract(fk_tcp_7, t0, t0)
-    multiply(jacobian_tcp_11, t0, t8)
-    subtract(t5, t8, jacobian_tcp_2)
+    multiply(jacobian_tcp_11, t0, t7)
+    subtract(t5, t7, jacobian_tcp_2)
     multiply(jacobian_tcp_11, fk_tcp_3, jacobian_tcp_7)
     multiply(jacobian_tcp_6, fk_tcp_3, t5)
     negative(t5, jacobian_tcp_12)
     multiply(jacobian_tcp_23, t3, t5)
-    multiply(t1, t0, t8)
-    add(t5, t8, jacobian_tcp_3)
+    multiply(t1, t0, t7)
+    add(t5, t7, jacobian_tcp_3)
     multiply(t1, fk_tcp_3, t5)
     multiply(jacobian_tcp_18, t3, t3)
     add(t5, t3, t5)
@@ -18192,12 +17701,12 @@ def _bundle_control_chunk(x, t, s, y):
     multiply(jacobian_tcp_23, fk_tcp_3, t3)
     subtract(t0, t3, jacobian_tcp_13)
     negative(t1, jacobian_tcp_28)
-    multiply(fk_tcp_5, t7, t0)
+    multiply(fk_tcp_5, t6, t0)
     multiply(fk_tcp_9, t4, t1)
     subtract(t0, t1, jacobian_tcp_4)
     multiply(fk_tcp_9, t2, t0)
-    multiply(fk_tcp_1, t7, t7)
-    subtract(t0, t7, jacobian_tcp_9)
+    multiply(fk_tcp_1, t6, t6)
+    subtract(t0, t6, jacobian_tcp_9)
     multiply(fk_tcp_1, t4, t4)
     multiply(fk_tcp_5, t2, t2)
     subtract(t4, t2, jacobian_tcp_14)
@@ -18226,7 +17735,7 @@ def _bundle_control_chunk(x, t, s, y):
     multiply(fk_tcp_6, t41, t1)
     add(t0, t1, jdot_qd_tcp_1)
     multiply(fk_tcp_9, t25, t25)
-    multiply(t6, t40, t40)
+    multiply(t8, t40, t40)
     subtract(t25, t40, t25)
     multiply(fk_tcp_10, t41, t41)
     add(t25, t41, jdot_qd_tcp_2)
@@ -18240,11 +17749,11 @@ def _bundle_control_chunk(x, t, s, y):
     subtract(t0, t1, t0)
     multiply(fk_tcp_6, t45, t1)
     add(t0, t1, jdot_qd_tcp_4)
-    multiply(t6, t36, t6)
+    multiply(t8, t36, t8)
     multiply(fk_tcp_9, t37, t37)
-    add(t6, t37, t6)
+    add(t8, t37, t8)
     multiply(fk_tcp_10, t45, t45)
-    add(t6, t45, jdot_qd_tcp_5)
+    add(t8, t45, jdot_qd_tcp_5)
     copyto(mass_matrix_5, mass_matrix_1)
     copyto(mass_matrix_10, mass_matrix_2)
     copyto(mass_matrix_15, mass_matrix_3)

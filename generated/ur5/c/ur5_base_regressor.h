@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [6]
  * in  qdd [6]
  * out Y_b [6x52]
- * Arrays are row-major. 747 ops: 403 mul, 328 add, 0 div, 10 trig, 6 other
+ * Arrays are row-major. 712 ops: 380 mul, 316 add, 0 div, 10 trig, 6 other
  */
 DERIVE_FN void ur5_base_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *Y_b);
 

@@ -21,7 +21,7 @@ extern "C" {
  * out fk_tcp [4x4]
  * out jacobian_tcp [6x6]
  * out jdot_qd_tcp [6]
- * Arrays are row-major. 855 ops: 478 mul, 365 add, 0 div, 12 trig
+ * Arrays are row-major. 850 ops: 475 mul, 363 add, 0 div, 12 trig
  */
 DERIVE_FN void ur5_bundle_control(const DERIVE_REAL *q, const DERIVE_REAL *qd, DERIVE_REAL *mass_matrix, DERIVE_REAL *bias, DERIVE_REAL *fk_tcp, DERIVE_REAL *jacobian_tcp, DERIVE_REAL *jdot_qd_tcp);
 

@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [6]
  * in  tau [6]
  * out qdd [6]
- * Arrays are row-major. 802 ops: 446 mul, 325 add, 21 div, 10 trig
+ * Arrays are row-major. 797 ops: 443 mul, 323 add, 21 div, 10 trig
  */
 DERIVE_FN void ur5_forward_dynamics(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, DERIVE_REAL *qdd);
 

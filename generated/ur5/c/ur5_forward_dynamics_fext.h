@@ -19,7 +19,7 @@ extern "C" {
  * in  tau [6]
  * in  w [6]
  * out qdd [6]
- * Arrays are row-major. 986 ops: 546 mul, 407 add, 21 div, 12 trig
+ * Arrays are row-major. 981 ops: 543 mul, 405 add, 21 div, 12 trig
  */
 DERIVE_FN void ur5_forward_dynamics_fext(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *tau, const DERIVE_REAL *w, DERIVE_REAL *qdd);
 

@@ -16,7 +16,7 @@ extern "C" {
  *
  * in  q [6]
  * out M [6x6]
- * Arrays are row-major. 231 ops: 115 mul, 106 add, 0 div, 10 trig
+ * Arrays are row-major. 226 ops: 112 mul, 104 add, 0 div, 10 trig
  */
 DERIVE_FN void ur5_mass_matrix(const DERIVE_REAL *q, DERIVE_REAL *M);
 

@@ -17,7 +17,7 @@ extern "C" {
  * in  x [12]
  * in  u [6]
  * out B [12x6]
- * Arrays are row-major. 597 ops: 290 mul, 257 add, 40 div, 10 trig
+ * Arrays are row-major. 592 ops: 287 mul, 255 add, 40 div, 10 trig
  */
 DERIVE_FN void ur5_ode_jac_u(const DERIVE_REAL *x, const DERIVE_REAL *u, DERIVE_REAL *B);
 

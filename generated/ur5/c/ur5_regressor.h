@@ -18,7 +18,7 @@ extern "C" {
  * in  qd [6]
  * in  qdd [6]
  * out Y [6x78]
- * Arrays are row-major. 943 ops: 508 mul, 419 add, 0 div, 10 trig, 6 other
+ * Arrays are row-major. 892 ops: 474 mul, 402 add, 0 div, 10 trig, 6 other
  */
 DERIVE_FN void ur5_regressor(const DERIVE_REAL *q, const DERIVE_REAL *qd, const DERIVE_REAL *qdd, DERIVE_REAL *Y);
 
