@@ -73,15 +73,14 @@ class CBackend(Backend):
         context = {**fn.common, **self._files(spec),
                    **self._contract([(n, x.shape) for n, x in spec.inputs], [(n, e.shape) for n, e in spec.outputs]),
                    "unused": [n for i, n in enumerate(in_names) if i not in used], "header_notes": []}
-        if len(prog.body) <= c_printer.SPLIT_ABOVE:
+        if len(prog.body) + len(prog.results) <= c_printer.SPLIT_ABOVE:
             return {**context, "parts": None, "body": printer.body(prog), "work": printer.declarations(),
                     "stores": printer.stores(prog, out_names)}
         parts = printer.split(prog, out_names)
         for k, part in enumerate(parts):
             part["name"] = f"{spec.name}_part{k}"
-            part.setdefault("stores", [])
             part["unused"] = ([n for i, n in enumerate(in_names) if i not in part["reads"]]
-                              + (out_names if not part["stores"] else []) + ([] if part["uses_slots"] else ["W"]))
+                              + [n for n in out_names if n not in part["writes"]] + ([] if part["uses_slots"] else ["W"]))
         return {**context, "parts": parts, "slots": max(1, printer.slots), "part_size": printer.part_size,
                 "part_args": self._signature(spec) + ["DERIVE_REAL *W"], "call_args": in_names + out_names + ["W"]}
 

@@ -7,8 +7,8 @@ own stack slot, so one ``const`` per SSA temporary would need tens of kB of stac
 temporaries are live at once (276 there). The variable dead the longest is reused first.
 Optimising compilers rename the variables back into SSA form, so -O2 code is the same either way.
 
-A function of more than :data:`SPLIT_ABOVE` instructions is split into parts of at most
-:data:`PART_SIZE` (``static`` functions the compiler may not inline, ``DERIVE_NOINLINE``): an
+A function of more than :data:`SPLIT_ABOVE` instructions and output entries is split into parts of
+at most :data:`PART_SIZE` instructions, then parts of as many output stores (``static`` functions the compiler may not inline, ``DERIVE_NOINLINE``): an
 optimising compiler's time and memory grow faster than linearly with the size of one straight-line
 function (12-dof chain, gcc -O2: 8.7k operations compile in 1.7 s, 60k in 30-43 s and 780 MB), and
 linearly with the number of parts (the 60k in 8.6 s and 250 MB in parts of 4000, and 4 % fewer
@@ -22,8 +22,8 @@ from derive.codegen.program import Program, allocate, last_reads
 
 WORK_PER_LINE = 12
 SPLIT_ABOVE = 12000
-"""Instructions above which a function is split into parts (the shipped robots' largest, the
-Panda's ode_jac_x, has 10 305, and stays one function)."""
+"""Instructions plus output entries above which a function is split into parts (the shipped
+robots' largest, the Panda's ode_jac_x, has 9 981 + 196 and stays one function)."""
 PART_SIZE = 4000
 """Most instructions per part of a split function."""
 
@@ -63,8 +63,10 @@ class CPrinter(ExpressionPrinter):
 
 
     def split(self, prog: Program, output_names: list[str], size: int | None = None) -> list[dict]:
-        """The parts of a split function, in order: each its ``body``, ``work`` declarations and the
-        operands it reads (``reads``: to tell the unused parameters); the last also its ``stores``.
+        """The parts of a split function, in order: each its ``body``, ``work`` declarations, the input
+        arrays it reads and output arrays it writes (``reads``, ``writes``: to tell the unused
+        parameters); after the computing parts, store parts writing at most ``size`` output entries
+        each from W (one function with tens of thousands of stores takes gcc minutes: its alias walks).
         Sets :attr:`slots`, the length of the work array W. ``size``: most instructions a part
         (default :data:`PART_SIZE`)."""
         size = size or PART_SIZE
@@ -72,9 +74,9 @@ class CPrinter(ExpressionPrinter):
         n = len(prog.body)
         last = last_reads(prog)
         part = [j // size for j in range(n)]
-        final = part[-1]
-        # carried: read in a later part than the one computing it (an output counts as the last part)
-        carried = sorted(j for j, end in last.items() if (part[end] if end < n else final) > part[j])
+        final = part[-1] if part else -1
+        # carried: read in a later part than the one computing it (an output: by a store part)
+        carried = sorted(j for j, end in last.items() if (part[end] if end < n else final + 1) > part[j])
         self.slot, self.slots = {}, 0
         free: list[int] = []
         active: list[tuple[int, int]] = []  # (the last part reading it, or final + 1 for an output; slot)
@@ -95,14 +97,16 @@ class CPrinter(ExpressionPrinter):
             self.register, self.work = allocate(prog, fixed=outside, oldest=True)
             body = [(self.temporary(k), self.rhs(prog.body[k])) for k in range(start, stop)]
             reads = {a[1] for ins in prog.body[start:stop] for a in ins.args if a[0] == "in"}
-            entry = {"body": body, "work": self.declarations(), "reads": reads,
-                     "uses_slots": any(k in self.slot for k in range(start, stop))
-                     or any(a[0] == "t" and a[1] in self.slot for ins in prog.body[start:stop] for a in ins.args)}
-            if p == final:
-                entry["stores"] = self.stores(prog, output_names)
-                entry["reads"] |= {a[1] for _, _, a in prog.results if a[0] == "in"}
-                entry["uses_slots"] |= any(a[0] == "t" and a[1] in self.slot for _, _, a in prog.results)
-            parts.append(entry)
+            parts.append({"body": body, "work": self.declarations(), "reads": reads, "writes": set(), "stores": [],
+                          "uses_slots": any(k in self.slot for k in range(start, stop))
+                          or any(a[0] == "t" and a[1] in self.slot for ins in prog.body[start:stop] for a in ins.args)})
+        stores = self.stores(prog, output_names)
+        for first in range(0, len(prog.results), size):
+            results = prog.results[first:first + size]
+            parts.append({"body": [], "work": [], "stores": stores[first:first + size],
+                          "reads": {a[1] for _, _, a in results if a[0] == "in"},
+                          "writes": {output_names[oi] for oi, _, _ in results},
+                          "uses_slots": any(a[0] == "t" for _, _, a in results)})
         return parts
 
 
