@@ -17,7 +17,6 @@ import pytest
 from derive.bench.ik import ik_sources, pose_errors, targets, verified
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.codegen.generate import generate
 from derive.solvers.ik import solve_ik
 from derive.symbolic.ik import TOL_POSITION, TOL_ROTATION, joint_ranges
 from derive.reference import NumericRobot
@@ -153,10 +152,8 @@ def test_cli_prints_q_and_residuals(capsys):
 # ---- generated C and Python ----
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory):
-    out = tmp_path_factory.mktemp("ik") / "generated"
-    generate(robots(), out, only=["panda", "ur5", "pendulum"], use_cache=False, log=lambda s: None)
-    return out
+def generated(fresh_copy):
+    return fresh_copy("ik")  # all robots generated without the cache (conftest.py): panda, ur5, pendulum used here
 
 
 def python_module(generated, robot: str):

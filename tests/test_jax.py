@@ -37,10 +37,8 @@ SMALL = ("cartpole", "pendulum", "planar_2r")
 
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("jax") / "generated"
-    generate(load_models(), out, log=lambda s: None)
-    return out
+def generated(fresh_copy) -> Path:
+    return fresh_copy("jax")  # all robots generated without the cache (conftest.py), this module's copy
 
 
 def load_module(path: Path, name: str):
