@@ -5,6 +5,10 @@ the cache (what ``generate(load_models(), out, use_cache=False)`` writes into an
 the modules that test freshly generated code rather than the committed generated/. Each module
 takes its own copy (fresh_copy), so nothing one module writes there (a build, a __pycache__) is
 seen by another; the session's folder itself is only read.
+
+committed_library: the committed generated/<robot>/c built once per session into a shared library
+(strict C99, -Wall -Wextra -Werror -pedantic, -O1), double or float: tests/test_codegen.py and
+tests/test_regressor.py call the same build.
 """
 
 from __future__ import annotations
@@ -15,7 +19,11 @@ from pathlib import Path
 import pytest
 
 from derive.codegen.generate import generate
-from util import robots
+from util import build_library, robots
+
+ROOT = Path(__file__).resolve().parent.parent
+GENERATED = ROOT / "generated"
+STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 
 
 @pytest.fixture(scope="session")
@@ -36,3 +44,20 @@ def fresh_copy(fresh_generated, tmp_path_factory):
         return out
 
     return copy
+
+
+@pytest.fixture(scope="session")
+def committed_library(tmp_path_factory):
+    """committed_library(robot, extra=()) -> the shared library of every C file of generated/<robot>/c,
+    built with STRICT -O1 -fPIC and ``extra`` (say -DDERIVE_FLOAT) once per session."""
+    folder, built = tmp_path_factory.mktemp("committed_c"), {}
+
+    def get(robot: str, extra=()) -> Path:
+        key = (robot, tuple(extra))
+        if key not in built:
+            built[key] = build_library(["cc", *STRICT, "-O1", "-fPIC", *extra], sorted((GENERATED / robot / "c").glob("*.c")),
+                                       folder / f"lib{robot}{'_'.join(extra)}.so")
+        return built[key]
+
+    return get
+

@@ -23,6 +23,7 @@ from derive.description.model import parse_models
 from derive.reference import NumericRobot
 
 from test_generate import MY_MODELS
+from util import compile_objects
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -79,9 +80,8 @@ def test_own_robot_from_any_folder(installed, tmp_path):
     # the C compiles clean, the Python imports and matches the reference
     c_dir = user / "generated" / "my_arm" / "c"
     cc = shutil.which("cc") or shutil.which("gcc")
-    for c in sorted(c_dir.glob("*.c")):
-        subprocess.run([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{c_dir}", "-c", str(c),
-                        "-o", str(tmp_path / (c.stem + ".o"))], check=True)
+    compile_objects([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{c_dir}"],
+                    sorted(c_dir.glob("*.c")), tmp_path)  # one source per process, CPUs at once
     spec = importlib.util.spec_from_file_location("my_arm", user / "generated" / "my_arm" / "python" / "my_arm.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)
