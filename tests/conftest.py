@@ -9,11 +9,18 @@ seen by another; the session's folder itself is only read.
 committed_library: the committed generated/<robot>/c built once per session into a shared library
 (strict C99, -Wall -Wextra -Werror -pedantic, -O1), double or float: tests/test_codegen.py and
 tests/test_regressor.py call the same build.
+
+installed_venv: tests/test_installed.py's wheel and fresh venv (~35 s of pip), started in a thread
+when the session starts if that module has tests to run, so that it runs on a second CPU while the
+modules before it run on the first; the module's fixture waits for it.
 """
 
 from __future__ import annotations
 
 import shutil
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import pytest
@@ -61,3 +68,35 @@ def committed_library(tmp_path_factory):
 
     return get
 
+
+def build_installed(base: Path) -> tuple[Path, Path]:
+    """The wheel built (pip wheel, hatchling) into base/dist and installed with the pinned dependencies
+    into a new venv base/venv: (the venv's `derive` command, its python). RuntimeError with the failing
+    command and its output where a step fails."""
+    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
+
+    def run(argv: list[str]) -> None:
+        res = subprocess.run(argv, capture_output=True, text=True)  # a thread's output would land in any test's report
+        if res.returncode:
+            raise RuntimeError(f"{' '.join(argv)}: exit status {res.returncode}\n{res.stdout[-3000:]}{res.stderr[-5000:]}")
+
+    run(pip + ["wheel", "--no-deps", "-w", str(base / "dist"), str(ROOT)])
+    (wheel,) = (base / "dist").glob("derive_robotics-*.whl")
+    # a venv without pip of its own (ensurepip: ~6 s), installed into by this pip (--python: pip >= 22.3)
+    run([sys.executable, "-m", "venv", "--without-pip", str(base / "venv")])
+    python = base / "venv" / "bin" / "python"
+    run(pip + ["--python", str(python), "install", "-c", str(ROOT / "constraints.txt"), str(wheel)])
+    return base / "venv" / "bin" / "derive", python
+
+
+@pytest.fixture(scope="session", autouse=True)
+def installed_venv(request, tmp_path_factory):
+    """A function that waits for build_installed (begun in a thread at the session's first test when
+    tests/test_installed.py has tests to run) and returns its result or raises its error; None when
+    that module does not run."""
+    if not any(item.path.name == "test_installed.py" for item in request.session.items):
+        yield None
+        return
+    base = tmp_path_factory.mktemp("installed")
+    with ThreadPoolExecutor(max_workers=1) as pool:  # leaving it waits for the build
+        yield pool.submit(build_installed, base).result

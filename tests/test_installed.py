@@ -1,9 +1,10 @@
 """The installed tool: the wheel, in a fresh virtual environment, used from a folder of the user's own.
 
 Builds the wheel (pip wheel, hatchling), installs it with the pinned dependencies into a new
-venv, and runs `derive` there from a temporary folder on a models file that is none of the
-shipped ones: init, generate (other robots untouched), latex, simulate, ik. The generated C
-compiles clean, the generated Python imports and matches the numeric reference.
+venv (conftest.py's build_installed, in the background from the start of the session), and runs
+`derive` there from a temporary folder on a models file that is none of the shipped ones: init,
+generate (other robots untouched), latex, simulate, ik. The generated C compiles clean, the
+generated Python imports and matches the numeric reference.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import importlib.util
 import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -29,17 +29,10 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory):
-    """(path of the venv's `derive` command, its python) with the wheel installed."""
-    base = tmp_path_factory.mktemp("installed")
-    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
-    subprocess.run(pip + ["wheel", "--no-deps", "-w", str(base / "dist"), str(ROOT)], check=True)
-    (wheel,) = (base / "dist").glob("derive_robotics-*.whl")
-    subprocess.run([sys.executable, "-m", "venv", str(base / "venv")], check=True)
-    python = base / "venv" / "bin" / "python"
-    subprocess.run([str(python), "-m", "pip", "--disable-pip-version-check", "-q", "install",
-                    "-c", str(ROOT / "constraints.txt"), str(wheel)], check=True)
-    return base / "venv" / "bin" / "derive", python
+def installed(installed_venv):
+    """(path of the venv's `derive` command, its python) with the wheel installed: conftest.py's
+    build_installed, begun in the background when the session started."""
+    return installed_venv()
 
 
 def run(installed, folder: Path, *argv: str, status: int = 0) -> subprocess.CompletedProcess:
