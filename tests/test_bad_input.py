@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import os
+import shutil
 import signal
 import subprocess
 import sys
@@ -85,12 +86,21 @@ def run_cli(argv, cwd: Path, timeout: float = 30) -> tuple[int, str, float]:
     return res.returncode, res.stderr, time.perf_counter() - start
 
 
+@pytest.fixture(scope="module")
+def generated_ok_arm(tmp_path_factory):
+    """One robot generated once for the module, copied by ``output``."""
+    base = tmp_path_factory.mktemp("ok_arm")
+    (base / "ok.yaml").write_text(arm("ok_arm"))
+    assert main(["--models", str(base / "ok.yaml"), "generate", "--out", str(base / "generated")]) == 0
+    return base / "generated"
+
+
 @pytest.fixture()
-def output(tmp_path):
-    """An output folder holding one generated robot, to prove that failures leave it untouched."""
+def output(tmp_path, generated_ok_arm):
+    """An output folder holding one generated robot (a copy of the module's), to prove that failures
+    leave it untouched."""
     out = tmp_path / "generated"
-    (tmp_path / "ok.yaml").write_text(arm("ok_arm"))
-    assert main(["--models", str(tmp_path / "ok.yaml"), "generate", "--out", str(out)]) == 0
+    shutil.copytree(generated_ok_arm, out)
     return out
 
 

@@ -18,7 +18,6 @@ import numpy as np
 import pytest
 
 from derive.codegen.backends.python import BACKEND
-from derive.codegen.generate import generate
 from derive.codegen.render import render_robot
 from derive.codegen.spec import FunctionSpec
 from util import params, robots
@@ -36,10 +35,8 @@ def load_module(path: Path, name: str):
 
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory) -> Path:
-    out = tmp_path_factory.mktemp("batch") / "generated"
-    generate(robots(), out, use_cache=False, log=lambda s: None)
-    return out
+def generated(fresh_copy) -> Path:
+    return fresh_copy("batch")  # all robots generated without the cache (conftest.py), this module's copy
 
 
 def load(generated: Path, robot: str):

@@ -20,20 +20,12 @@ import pytest
 from derive.codegen.generate import check, generate
 from derive.reference import NumericRobot
 from derive.codegen.catalogue import function_specs
-from util import assert_close, params, random_q, robots, states, sx_model
+from util import assert_close, compile_objects, params, random_q, robots, states, sx_model
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 ROBOTS = sorted(robots())
-
-
-def compile_library(robot: str, out: Path, extra: list[str]) -> Path:
-    sources = sorted((GENERATED / robot / "c").glob("*.c"))
-    lib = out / f"lib{robot}{'_'.join(extra)}.so"
-    subprocess.run(["cc", *CFLAGS, "-O1", "-shared", "-fPIC", *extra, "-o", str(lib), *map(str, sources), "-lm"],
-                   check=True, capture_output=True, text=True)
-    return lib
 
 
 def load_python(robot: str):
@@ -130,16 +122,12 @@ def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
     raise AssertionError(kind)
 
 
-@pytest.fixture(scope="module")
-def build_dir(tmp_path_factory):
-    return tmp_path_factory.mktemp("cbuild")
-
-
 @pytest.mark.parametrize("robot", ROBOTS)
-def test_generated_c_python_casadi_match_reference(robot, build_dir):
+def test_generated_c_python_casadi_match_reference(robot, committed_library):
+    """All of generated/<robot>/c built (conftest.py: -std=c99 -Wall -Wextra -Werror -pedantic -O1), double and float."""
     manifest = json.loads((GENERATED / robot / "manifest.json").read_text())
-    c_double = CFunctions(compile_library(robot, build_dir, []), manifest, ctypes.c_double)
-    c_float = CFunctions(compile_library(robot, build_dir, ["-DDERIVE_FLOAT"]), manifest, ctypes.c_float)
+    c_double = CFunctions(committed_library(robot), manifest, ctypes.c_double)
+    c_float = CFunctions(committed_library(robot, ["-DDERIVE_FLOAT"]), manifest, ctypes.c_float)
     py = load_python(robot)
     model = sx_model(robot)
     casadi_fns = {s.name: ca.Function(s.name, [x for _, x in s.inputs], [e for _, e in s.outputs])
@@ -252,19 +240,19 @@ def test_generated_c_runs_clean_under_sanitizers(tmp_path):
     driver.write_text("\n".join(lines) + "\n")
     includes = [f"-I{GENERATED / r / 'c'}" for r in ROBOTS]
     exe = tmp_path / "driver"
-    subprocess.run(["cc", *CFLAGS, "-O0", "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all",
-                    *includes, "-o", str(exe), str(driver), *map(str, sources), "-lm"],
-                   check=True, capture_output=True, text=True)
+    argv = ["cc", *CFLAGS, "-O0", "-g", "-fsanitize=address,undefined", "-fno-sanitize-recover=all", *includes]
+    objects = compile_objects(argv, [driver, *sources], tmp_path)  # one source per process, CPUs at once
+    subprocess.run([*argv, "-o", str(exe), *map(str, objects), "-lm"], check=True, capture_output=True, text=True)
     run = subprocess.run([str(exe)], capture_output=True, text=True, timeout=300)
     assert run.returncode == 0, run.stderr
     assert np.isfinite(float(run.stdout))
     assert "runtime error" not in run.stderr
 
 
-def test_regeneration_is_byte_identical(tmp_path):
-    """Regenerate into a temporary folder without the cache and compare with generated/."""
-    out = tmp_path / "generated"
-    generate(robots(), out, use_cache=False, log=lambda s: None)
+def test_regeneration_is_byte_identical(fresh_generated):
+    """Regenerate into a temporary folder without the cache and compare with generated/: the session's
+    regeneration (conftest.py), which tests/test_batch.py, test_ik.py, test_jax.py, test_trajopt.py use."""
+    out = fresh_generated
     fresh = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     committed = {p.relative_to(GENERATED).as_posix(): p.read_bytes() for p in GENERATED.rglob("*") if p.is_file()}
     assert sorted(fresh) == sorted(committed)

@@ -20,7 +20,7 @@ from derive.description.model import load_models, parse_models
 from derive.description.robot import model_data
 from derive.resources import EXAMPLE_MODELS
 
-from util import robots
+from util import compile_objects, robots
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -120,15 +120,11 @@ def test_generated_headers_link_from_cpp(tmp_path):
         'int main() { double q[2] = {0.3, -0.7}, p[PLANAR_2R_NP] = {PLANAR_2R_DEFAULT_L1, PLANAR_2R_DEFAULT_L2, '
         'PLANAR_2R_DEFAULT_m1, PLANAR_2R_DEFAULT_m2, PLANAR_2R_DEFAULT_g}, M[4];\n'
         '  planar_2r_mass_matrix(q, p, M); std::printf("%.17g %.17g %.17g %.17g\\n", M[0], M[1], M[2], M[3]); }\n')
-    objects = []
-    for c in sorted(src.glob("*.c")):
-        obj = tmp_path / (c.stem + ".o")
-        subprocess.run([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{src}", "-c", str(c),
-                        "-o", str(obj)], check=True)
-        objects.append(str(obj))
+    objects = compile_objects([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{src}"],
+                              sorted(src.glob("*.c")), tmp_path)  # one source per process, CPUs at once
     exe = tmp_path / "main"
     subprocess.run([cxx, "-std=c++11", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{src}", str(tmp_path / "main.cpp"),
-                    *objects, "-lm", "-o", str(exe)], check=True)
+                    *map(str, objects), "-lm", "-o", str(exe)], check=True)
     printed = [float(x) for x in subprocess.run([str(exe)], check=True, capture_output=True, text=True).stdout.split()]
     py = load_module(ROOT / "generated" / "planar_2r" / "python" / "planar_2r.py", "planar_2r_cpp")
     assert printed == py.mass_matrix([0.3, -0.7]).reshape(-1).tolist()

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import ctypes
 import importlib.util
-import subprocess
 
 import casadi as ca
 import numpy as np
@@ -17,12 +16,11 @@ import pytest
 from derive.bench.ik import ik_sources, pose_errors, targets, verified
 from derive.cli import main
 from derive.errors import DeriveError
-from derive.codegen.generate import generate
 from derive.solvers.ik import solve_ik
 from derive.symbolic.ik import TOL_POSITION, TOL_ROTATION, joint_ranges
 from derive.reference import NumericRobot
 from derive.symbolic.spatial import exp_so3, log_so3
-from util import robots
+from util import build_library, robots
 
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 N_TARGETS = 150
@@ -153,10 +151,8 @@ def test_cli_prints_q_and_residuals(capsys):
 # ---- generated C and Python ----
 
 @pytest.fixture(scope="module")
-def generated(tmp_path_factory):
-    out = tmp_path_factory.mktemp("ik") / "generated"
-    generate(robots(), out, only=["panda", "ur5", "pendulum"], use_cache=False, log=lambda s: None)
-    return out
+def generated(fresh_copy):
+    return fresh_copy("ik")  # all robots generated without the cache (conftest.py): panda, ur5, pendulum used here
 
 
 def python_module(generated, robot: str):
@@ -171,9 +167,8 @@ class CIk:
 
     def __init__(self, generated, robot: str, build, extra=()):
         c_dir = generated / robot / "c"
-        lib = build / f"lib{robot}_ik{''.join(extra)}.so"
-        subprocess.run(["cc", *CFLAGS, "-O2", "-shared", "-fPIC", *extra, "-o", str(lib),
-                        *map(str, ik_sources(c_dir, robot)), "-lm"], check=True, capture_output=True, text=True)
+        lib = build_library(["cc", *CFLAGS, "-O2", "-fPIC", *extra], ik_sources(c_dir, robot),
+                            build / f"lib{robot}_ik{''.join(extra)}.so")
         self.real = ctypes.c_float if "-DDERIVE_FLOAT" in extra else ctypes.c_double
         self.np_real = np.float32 if self.real is ctypes.c_float else np.float64
         self.fn = getattr(ctypes.CDLL(str(lib)), f"{robot}_ik_tcp")
@@ -190,10 +185,23 @@ class CIk:
         return q.astype(float), residual.astype(float), status
 
 
+@pytest.fixture(scope="module")
+def c_ik(generated, tmp_path_factory):
+    """c_ik(robot, extra=()) -> CIk: each robot and set of flags built once for the module's tests."""
+    build, built = tmp_path_factory.mktemp("ik_c"), {}
+
+    def get(robot: str, extra=()) -> CIk:
+        if (robot, tuple(extra)) not in built:
+            built[robot, tuple(extra)] = CIk(generated, robot, build, extra)
+        return built[robot, tuple(extra)]
+
+    return get
+
+
 @pytest.mark.parametrize("robot", ["panda", "ur5"])
-def test_generated_c_ik_reaches_random_targets(robot, generated, tmp_path):
+def test_generated_c_ik_reaches_random_targets(robot, c_ik):
     r = robots()[robot]
-    c_ik = CIk(generated, robot, tmp_path)
+    c_ik = c_ik(robot)
     _, Ts = targets(r, N_TARGETS, seed=2)
     out = [c_ik(T) for T in Ts]
     assert all(status == 0 for _, _, status in out)
@@ -212,10 +220,10 @@ def test_generated_c_ik_reaches_random_targets(robot, generated, tmp_path):
         assert status == 2 and np.isfinite(q).all() and not np.isnan(residual).any()
 
 
-def test_generated_c_ik_at_the_ur5_wrist_singularity(generated, tmp_path):
+def test_generated_c_ik_at_the_ur5_wrist_singularity(c_ik):
     r = robots()["ur5"]
     ref = NumericRobot(r)
-    c_ik = CIk(generated, "ur5", tmp_path)
+    c_ik = c_ik("ur5")
     q_sing = np.array([0.5, -1.0, 1.2, 0.3, 0.0, 0.7])
     for q_target in (q_sing, q_sing + [0, 0, 0, 0, 1e-3, 0]):
         T = ref.frame_pose(q_target, "tcp")
@@ -223,13 +231,13 @@ def test_generated_c_ik_at_the_ur5_wrist_singularity(generated, tmp_path):
         assert status == 0 and np.isfinite(q).all() and verified(r, q[None], T[None]).all()
 
 
-def test_generated_float_c_and_python_ik_and_parameters(generated, tmp_path):
+def test_generated_float_c_and_python_ik_and_parameters(generated, c_ik):
     r = robots()["panda"]
     _, Ts = targets(r, 20, seed=3)
-    c_float = CIk(generated, "panda", tmp_path, extra=("-DDERIVE_FLOAT",))
+    c_float = c_ik("panda", extra=("-DDERIVE_FLOAT",))
     assert sum(c_float(T)[2] == 0 for T in Ts) >= 18   # single precision: a few may stall at ~1e-5
     py = python_module(generated, "panda")
-    c_double = CIk(generated, "panda", tmp_path)
+    c_double = c_ik("panda")
     for T in Ts[:5]:
         q_py, res_py, status_py = py.ik_tcp(T)
         q_c, res_c, status_c = c_double(T)
@@ -239,7 +247,7 @@ def test_generated_float_c_and_python_ik_and_parameters(generated, tmp_path):
         np.testing.assert_allclose(q_py, q_c, rtol=0, atol=1e-9)
         np.testing.assert_allclose(res_py, res_c, rtol=0, atol=1e-12)
     # a robot with parameters (p last among the inputs): the pendulum's bob, position only
-    pendulum = CIk(generated, "pendulum", tmp_path)
+    pendulum = c_ik("pendulum")
     T = np.eye(4)
     T[:3, 3] = [-np.sin(0.4), 0.0, -np.cos(0.4)]   # Ry(q) [0, 0, -l], l = 1
     q, residual, status = pendulum(T, w=[1, 1, 1, 0, 0, 0])
@@ -273,13 +281,13 @@ def assert_bad_input(result, mid, what: str) -> None:
 
 
 @pytest.mark.parametrize("robot", ["panda", "ur5"])
-def test_generated_c_and_python_ik_reject_bad_input(robot, generated, tmp_path):
+def test_generated_c_and_python_ik_reject_bad_input(robot, generated, c_ik):
     r = robots()[robot]
     _, _, slo, shi = joint_ranges(r)
     mid = 0.5 * (slo + shi)
     _, Ts = targets(r, 1, seed=4)
     T = Ts[0]
-    solvers = {"C": CIk(generated, robot, tmp_path), "C float": CIk(generated, robot, tmp_path, extra=("-DDERIVE_FLOAT",)),
+    solvers = {"C": c_ik(robot), "C float": c_ik(robot, extra=("-DDERIVE_FLOAT",)),
                "Python": python_module(generated, robot).ik_tcp}
     for name, solve in solvers.items():
         for what, call in bad_inputs(T, r.nv).items():
@@ -293,12 +301,12 @@ def test_generated_c_and_python_ik_reject_bad_input(robot, generated, tmp_path):
 
 
 @pytest.mark.parametrize("flags", [("-ffast-math",), ("-Ofast",), ("-ffast-math", "-DDERIVE_FLOAT")])
-def test_generated_c_ik_under_fast_math_never_reports_success_for_non_finite_input(flags, generated, tmp_path):
+def test_generated_c_ik_under_fast_math_never_reports_success_for_non_finite_input(flags, c_ik):
     """-ffast-math lets the compiler delete isfinite() and compare NaN below any tolerance: the
     checks read the bits instead, so a NaN target is still BAD_INPUT and a solve still solves."""
     r = robots()["panda"]
     _, _, slo, shi = joint_ranges(r)
-    c_ik = CIk(generated, "panda", tmp_path, extra=flags)
+    c_ik = c_ik("panda", extra=flags)
     _, Ts = targets(r, 10, seed=5)
     for what, call in bad_inputs(Ts[0], r.nv).items():
         q, residual, status = c_ik(**call)

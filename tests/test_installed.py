@@ -1,9 +1,10 @@
 """The installed tool: the wheel, in a fresh virtual environment, used from a folder of the user's own.
 
 Builds the wheel (pip wheel, hatchling), installs it with the pinned dependencies into a new
-venv, and runs `derive` there from a temporary folder on a models file that is none of the
-shipped ones: init, generate (other robots untouched), latex, simulate, ik. The generated C
-compiles clean, the generated Python imports and matches the numeric reference.
+venv (conftest.py's build_installed, in the background from the start of the session), and runs
+`derive` there from a temporary folder on a models file that is none of the shipped ones: init,
+generate (other robots untouched), latex, simulate, ik. The generated C compiles clean, the
+generated Python imports and matches the numeric reference.
 """
 
 from __future__ import annotations
@@ -13,7 +14,6 @@ import importlib.util
 import os
 import shutil
 import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -23,22 +23,16 @@ from derive.description.model import parse_models
 from derive.reference import NumericRobot
 
 from test_generate import MY_MODELS
+from util import compile_objects
 
 ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
-def installed(tmp_path_factory):
-    """(path of the venv's `derive` command, its python) with the wheel installed."""
-    base = tmp_path_factory.mktemp("installed")
-    pip = [sys.executable, "-m", "pip", "--disable-pip-version-check", "-q"]
-    subprocess.run(pip + ["wheel", "--no-deps", "-w", str(base / "dist"), str(ROOT)], check=True)
-    (wheel,) = (base / "dist").glob("derive_robotics-*.whl")
-    subprocess.run([sys.executable, "-m", "venv", str(base / "venv")], check=True)
-    python = base / "venv" / "bin" / "python"
-    subprocess.run([str(python), "-m", "pip", "--disable-pip-version-check", "-q", "install",
-                    "-c", str(ROOT / "constraints.txt"), str(wheel)], check=True)
-    return base / "venv" / "bin" / "derive", python
+def installed(installed_venv):
+    """(path of the venv's `derive` command, its python) with the wheel installed: conftest.py's
+    build_installed, begun in the background when the session started."""
+    return installed_venv()
 
 
 def run(installed, folder: Path, *argv: str, status: int = 0) -> subprocess.CompletedProcess:
@@ -79,9 +73,8 @@ def test_own_robot_from_any_folder(installed, tmp_path):
     # the C compiles clean, the Python imports and matches the reference
     c_dir = user / "generated" / "my_arm" / "c"
     cc = shutil.which("cc") or shutil.which("gcc")
-    for c in sorted(c_dir.glob("*.c")):
-        subprocess.run([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{c_dir}", "-c", str(c),
-                        "-o", str(tmp_path / (c.stem + ".o"))], check=True)
+    compile_objects([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{c_dir}"],
+                    sorted(c_dir.glob("*.c")), tmp_path)  # one source per process, CPUs at once
     spec = importlib.util.spec_from_file_location("my_arm", user / "generated" / "my_arm" / "python" / "my_arm.py")
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

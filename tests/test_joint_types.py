@@ -16,7 +16,6 @@ from __future__ import annotations
 import ctypes
 import importlib.util
 import json
-import subprocess
 from pathlib import Path
 
 import casadi as ca
@@ -33,7 +32,7 @@ from derive.description.joints import JOINT_TYPES
 from derive.description.robot import ModelError
 from derive.reference import NumericRobot
 from derive.reference.rnea import rpy_matrix
-from util import assert_close
+from util import assert_close, build_library
 
 TABLE_1 = {"revolute": (1, 5), "prismatic": (1, 5), "helical": (1, 5), "cylindrical": (2, 4), "universal": (2, 4),
            "spherical": (3, 3), "fixed": (0, 6)}
@@ -423,10 +422,9 @@ def test_generated_c_and_python_match_reference(tmp_path):
     spec.loader.exec_module(py)
     assert py.JOINTS == tuple(c.name for c in robot.coordinates)
     names = ["zoo_mass_matrix", "zoo_inverse_dynamics", "zoo_forward_dynamics", "zoo_jacobian_tcp"]
-    lib = tmp_path / "libzoo.so"
-    sources = [str(out / "zoo" / "c" / f"{n}.c") for n in names]
-    subprocess.run(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-shared", "-fPIC",
-                    "-o", str(lib), *sources, "-lm"], check=True, capture_output=True, text=True)
+    sources = [out / "zoo" / "c" / f"{n}.c" for n in names]
+    lib = build_library(["cc", "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-fPIC"], sources,
+                        tmp_path / "libzoo.so")
     c = ctypes.CDLL(str(lib))
     ptr = ctypes.POINTER(ctypes.c_double)
 

@@ -21,7 +21,6 @@ import dataclasses
 import importlib.util
 import json
 import re
-import subprocess
 from pathlib import Path
 
 import casadi as ca
@@ -287,13 +286,8 @@ def load_python(robot: str):
     return module
 
 
-@pytest.fixture(scope="module")
-def build(tmp_path_factory):
-    return tmp_path_factory.mktemp("regressor")
-
-
 @pytest.mark.parametrize("robot", SHIPPED)
-def test_generated_c_and_python(robot, build):
+def test_generated_c_and_python(robot, committed_library):
     """generated/: the manifest's pi and base parameters are derive's; Y pi = ID and Y_b pi_b = ID to 1e-12
     in the generated Python and C (double)."""
     manifest = json.loads((GENERATED / robot / "manifest.json").read_text())
@@ -318,11 +312,9 @@ def test_generated_c_and_python(robot, build):
     assert fns["base_regressor"]["rank"] == len(base) == d.base.rank
 
     py = load_python(robot)
-    sources = [GENERATED / robot / "c" / f"{robot}_{q}.c" for q in ("regressor", "base_regressor", "inverse_dynamics")]
-    lib = build / f"lib{robot}_regressor.so"
-    subprocess.run(["cc", "-std=c99", "-O1", "-shared", "-fPIC", "-o", str(lib), *map(str, sources), "-lm"],
-                   check=True, capture_output=True, text=True)
-    c = ctypes.CDLL(str(lib))
+    # regressor, base_regressor and inverse_dynamics from the session's -O1 build of generated/<robot>/c
+    # (conftest.py; tests/test_codegen.py checks the rest of it)
+    c = ctypes.CDLL(str(committed_library(robot)))
     ptr = ctypes.POINTER(ctypes.c_double)
 
     def call(name, shape, *args):

@@ -27,10 +27,8 @@ ROBOTS = ("cartpole", "pendulum", "planar_2r", "panda")
 
 
 @pytest.fixture(scope="module")
-def gen(tmp_path_factory):
-    out = tmp_path_factory.mktemp("trajopt") / "gen"
-    generate(robots(), out, only=ROBOTS, use_cache=False, log=lambda s: None)
-    return out
+def gen(fresh_copy):
+    return fresh_copy("trajopt")  # all robots generated without the cache (conftest.py): ROBOTS used here
 
 
 @pytest.fixture(scope="module")

@@ -18,7 +18,6 @@ import ctypes
 import dataclasses
 import importlib.util
 import json
-import subprocess
 from pathlib import Path
 
 import casadi as ca
@@ -30,7 +29,7 @@ from derive.codegen.program import build_program
 from derive.symbolic.model import SXModel
 from derive.description.model import load_models, parse_models, parse_robot
 from derive.description.urdf import example_robot_data_dir, import_urdf_named
-from util import assert_close
+from util import assert_close, build_library
 
 pin = pytest.importorskip("pinocchio")
 
@@ -106,9 +105,7 @@ class Case:
         spec.loader.exec_module(self.py)
         self.lib = None
         if compile_c:
-            lib = out / f"lib{robot.name}.so"
-            subprocess.run(["cc", *CFLAGS, "-o", str(lib), *map(str, sorted((folder / "c").glob("*.c"))), "-lm"],
-                           check=True, capture_output=True, text=True)
+            lib = build_library(["cc", *CFLAGS], sorted((folder / "c").glob("*.c")), out / f"lib{robot.name}.so")
             self.lib = ctypes.CDLL(str(lib))
         self.fn = {f["name"].removeprefix(robot.name + "_"): f for f in self.manifest["functions"]}
 

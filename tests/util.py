@@ -1,8 +1,14 @@
-"""Shared test helpers: seeded states, numeric evaluation of SX, relative comparison."""
+"""Shared test helpers: seeded states, numeric evaluation of SX, relative comparison, C builds one
+source per compiler process, as many at once as there are CPUs."""
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -63,3 +69,40 @@ def assert_close(actual, expected, rtol: float = RTOL, what: str = "") -> None:
     scale = max(np.abs(e).max(initial=0.0), 1e-12)
     err = np.abs(a - e).max(initial=0.0)
     assert err <= rtol * scale, f"{what}: max error {err:.3e} > {rtol:g} * {scale:.3e}"
+
+
+JOBS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
+def run_at_once(commands: list[list[str]], **kwargs) -> list[subprocess.CompletedProcess]:
+    """subprocess.run(argv, **kwargs) of every command, as many at a time as there are CPUs (as
+    derive's own C build does); the results in the order of ``commands``."""
+    if not commands:
+        return []
+    with ThreadPoolExecutor(max_workers=max(1, min(JOBS, len(commands)))) as pool:
+        return list(pool.map(lambda argv: subprocess.run(argv, **kwargs), commands))
+
+
+def compile_objects(argv: list[str], sources, out: Path) -> list[Path]:
+    """``argv -c source -o object`` for every source, one compiler process per source, CPUs at once: what
+    one ``argv sources...`` call compiles one source after the other. The objects (in ``out``) in source
+    order; CalledProcessError (stdout and stderr captured) of the first source that fails."""
+    sources = [Path(s) for s in sources]
+    objects = [Path(out) / f"{k:03d}_{s.stem}.o" for k, s in enumerate(sources)]
+    for result in run_at_once([[*argv, "-c", str(s), "-o", str(o)] for s, o in zip(sources, objects)],
+                              capture_output=True, text=True):
+        if result.returncode:
+            sys.stderr.write(result.stdout + result.stderr)  # the compiler's messages, in the test's report
+        result.check_returncode()
+    return objects
+
+
+def build_library(argv: list[str], sources, lib: Path) -> Path:
+    """The shared library ``lib`` of ``sources``: ``argv -shared -o lib sources... -lm``, its sources
+    compiled by compile_objects (argv carries -fPIC and the rest of the flags) next to ``lib``."""
+    lib = Path(lib)
+    folder = lib.parent / f"{lib.stem}.objects"
+    folder.mkdir(parents=True, exist_ok=True)
+    objects = compile_objects(argv, sources, folder)
+    subprocess.run([*argv, "-shared", "-o", str(lib), *map(str, objects), "-lm"], check=True, capture_output=True, text=True)
+    return lib
