@@ -79,8 +79,9 @@ def bench_large(args) -> str:
                 compiled = "n/a | n/a | n/a"
             rows.append(f"| {n} | {gen:.1f} | " + " | ".join(str(ops.get(q, "")) for q in SHOWN)
                         + f" | {len(sources)} | {compiled} | {parts} |")
-    rows += ["", f"Functions above {c_printer.SPLIT_ABOVE} instructions are split into parts of at most "
-             f"{c_printer.PART_SIZE} (`parts`: their number over the robot), which the compiler handles in time and",
+    rows += ["", f"Functions above {c_printer.SPLIT_ABOVE} instructions and output entries are split into parts of at "
+             f"most {c_printer.PART_SIZE} instructions or output stores (`parts`: their number over the robot), which the "
+             "compiler handles in time and",
              "memory linear in the size. Before the split, gcc -O2 did not finish a 20-dof chain's C within 600 s",
              "and took about 10 GB per process (the issue's figures). The Coriolis matrix is 1/2 d(C qd)/dqd of the",
              "Newton-Euler velocity terms where that is cheaper than the Christoffel symbols (20 dof: 64.6k ops",

@@ -114,10 +114,18 @@ class CBackend(Backend):
                 base, f=f)
         files[f"c/{robot.robot}.h"] = env.get_template(self.template("robot.h.jinja")).render(
             base, guard=f"{robot.robot.upper()}_DERIVE_H", headers=[f["header"] for f in functions])
+        if not self.complete(functions):  # a partial set (the zoo bench's ID, M and FD): no build files
+            return files
         build = self.build_context(robot, functions)
         for path, template in BUILD_FILES:
             files[f"c/{path.format(robot=robot.robot)}"] = env.get_template(self.template(template)).render(base, **build)
         return files
+
+    @staticmethod
+    def complete(functions: list[dict]) -> bool:
+        """Whether ``functions`` hold every function example/main.c calls (a robot's whole set does)."""
+        present = {f["quantity"] for f in functions if f["frame"] is None}
+        return all(quantity in present for quantity in EXAMPLE_SIGNATURES)
 
     @staticmethod
     def build_context(robot: RobotContext, functions: list[dict]) -> dict:
@@ -150,9 +158,9 @@ class CBackend(Backend):
                 {"build": "make", "variables": [f"{prefix}_{v}" for v in ("SRC", "INC", "CFLAGS", "LDLIBS", "EXAMPLE")],
                  "options": [f"{prefix}_FLOAT"]},
                 {"build": "example", "target": f"{robot.robot}_derive_example"}]
-        return [{"file": f"c/{name}", "source": self.support_source(name)} for name in self.support_files(functions)] + [
-            {"file": f"c/{path.format(robot=robot.robot)}", "source": f"templates/{self.name}/{template}", **use}
-            for (path, template), use in zip(BUILD_FILES, uses)]
+        build = [{"file": f"c/{path.format(robot=robot.robot)}", "source": f"templates/{self.name}/{template}", **use}
+                 for (path, template), use in zip(BUILD_FILES, uses)] if self.complete(functions) else []
+        return [{"file": f"c/{name}", "source": self.support_source(name)} for name in self.support_files(functions)] + build
 
 
 def translation_unit(files: dict[str, bytes], source: str) -> list[str]:
