@@ -115,13 +115,16 @@ def last_reads(prog: Program) -> dict[int, int]:
     return last
 
 
-def allocate(prog: Program, fixed=(), in_place: bool = False, oldest: bool = False) -> tuple[dict[int, int], int]:
+def allocate(prog: Program, fixed=(), in_place: bool = False, oldest: bool = False, span: range | None = None,
+             last: dict[int, int] | None = None) -> tuple[dict[int, int], int]:
     """Give each SSA temporary not in ``fixed`` a variable: with ``in_place``, that of its first
     argument dying there if any (the ufunc then writes where it reads), else a free (dead) one when it
     is assigned: the lowest, or with ``oldest`` the one dead the longest (the C printer's choice: it
     perturbs an optimising compiler's register allocation least); a temporary an output reads stays
-    live to the end. Returns (temporary -> variable, the number of variables)."""
-    last = last_reads(prog)
+    live to the end. ``span``: only the instructions in that range (a part of a split function, whose
+    temporaries living beyond it are in ``fixed``); ``last``: :func:`last_reads` if already known.
+    Returns (temporary -> variable, the number of variables)."""
+    last = last_reads(prog) if last is None else last
     free: list[int] = []
     queue: deque[int] = deque()  # with ``oldest``: free variables, longest dead first
     count = 0
@@ -130,7 +133,8 @@ def allocate(prog: Program, fixed=(), in_place: bool = False, oldest: bool = Fal
     def release(variable: int) -> None:
         queue.append(variable) if oldest else heapq.heappush(free, variable)
 
-    for j, ins in enumerate(prog.body):
+    for j in span if span is not None else range(len(prog.body)):
+        ins = prog.body[j]
         dying = []  # args dying here free their variables before the result takes one
         for a in sorted({a for a in ins.args if a[0] == "t"}, key=lambda a: a[1]) if oldest else ins.args:
             if a[0] == "t" and last[a[1]] == j and a[1] in register and register[a[1]] not in dying:

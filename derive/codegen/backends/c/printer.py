@@ -8,14 +8,17 @@ temporaries are live at once (276 there). The variable dead the longest is reuse
 Optimising compilers rename the variables back into SSA form, so -O2 code is the same either way.
 
 A function of more than :data:`SPLIT_ABOVE` instructions and output entries is split into parts of
-at most :data:`PART_SIZE` instructions, then parts of as many output stores (``static`` functions the compiler may not inline, ``DERIVE_NOINLINE``): an
-optimising compiler's time and memory grow faster than linearly with the size of one straight-line
-function (12-dof chain, gcc -O2: 8.7k operations compile in 1.7 s, 60k in 30-43 s and 780 MB), and
-linearly with the number of parts (the 60k in 8.6 s and 250 MB in parts of 4000, and 4 % fewer
-instructions per call). A temporary that one part computes and a later part reads is
-carried in the caller's work array ``W`` (its slots reused once dead, so the stack stays bounded)."""
+at most :data:`PART_SIZE` instructions, then parts of as many output stores (``static`` functions
+the compiler may not inline, ``DERIVE_NOINLINE``): an optimising compiler's time and memory grow
+faster than linearly with the size of one straight-line function (12-dof chain, gcc -O2: 8.7k
+operations compile in 1.7 s, 60k in 30-43 s and 780 MB), and linearly with the number of parts
+(the 60k in 8.6 s and 250 MB in parts of 4000, and 4 % fewer instructions per call). A temporary
+that one part computes and a later part reads (every output entry, which store parts write) is
+carried in the caller's work array ``W``, its slots reused once dead, so the stack stays bounded."""
 
 from __future__ import annotations
+
+import heapq
 
 from derive.codegen.backends.base import ExpressionPrinter, float_literal
 from derive.codegen.program import Program, allocate, last_reads
@@ -78,23 +81,22 @@ class CPrinter(ExpressionPrinter):
         # carried: read in a later part than the one computing it (an output: by a store part)
         carried = sorted(j for j, end in last.items() if (part[end] if end < n else final + 1) > part[j])
         self.slot, self.slots = {}, 0
-        free: list[int] = []
-        active: list[tuple[int, int]] = []  # (the last part reading it, or final + 1 for an output; slot)
+        free: list[int] = []  # a heap of the free slots
+        ending: dict[int, list[int]] = {}  # the last part reading a slot's value (final + 1: an output) -> slots
+        released = -1  # the slots of values last read in parts up to this one are free
         for j in carried:  # linear scan at part granularity: a slot is free after the part last reading it
-            keep = []
-            for stop, slot in active:
-                (free if stop < part[j] else keep).append(slot if stop < part[j] else (stop, slot))
-            active = keep
-            free.sort()
-            slot = free.pop(0) if free else self.slots
+            while released < part[j] - 1:
+                released += 1
+                for slot in ending.pop(released, ()):
+                    heapq.heappush(free, slot)
+            slot = heapq.heappop(free) if free else self.slots
             self.slots = max(self.slots, slot + 1)
             self.slot[j] = slot
-            active.append((part[last[j]] if last[j] < n else final + 1, slot))
+            ending.setdefault(part[last[j]] if last[j] < n else final + 1, []).append(slot)
         parts = []
         for p in range(final + 1):
             start, stop = p * size, min(n, (p + 1) * size)
-            outside = set(range(start)) | set(range(stop, n)) | set(self.slot)
-            self.register, self.work = allocate(prog, fixed=outside, oldest=True)
+            self.register, self.work = allocate(prog, fixed=self.slot, oldest=True, span=range(start, stop), last=last)
             body = [(self.temporary(k), self.rhs(prog.body[k])) for k in range(start, stop)]
             reads = {a[1] for ins in prog.body[start:stop] for a in ins.args if a[0] == "in"}
             parts.append({"body": body, "work": self.declarations(), "reads": reads, "writes": set(), "stores": [],
