@@ -191,6 +191,7 @@ def test_custom_bundles_from_models_yaml(tmp_path):
     ("[{quantities: [bias]}]", "bundles[0].name: missing"),
     ("[{name: t, quantities: [bias], extra: 1}]", "bundles[0].extra"),
     ("{name: t}", "bundles: expected a list"),
+    ("[{name: t, quantities: [inverse_dynamics_fext]}]\n    wrenches: []", "bundles[0].quantities[0]: 'inverse_dynamics_fext' needs"),
 ])
 def test_bad_bundles_are_refused_in_one_line(bundles, message):
     text = CUSTOM.split("    bundles:")[0] + f"    bundles: {bundles}\n"

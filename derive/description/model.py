@@ -383,6 +383,9 @@ class _Parser:
         for i, bundle in enumerate(robot.bundles or ()):
             for k, quantity in enumerate(bundle.quantities):
                 self.check_bundle_quantity(f"bundles[{i}].quantities[{k}]", quantity, known)
+                if quantity.endswith("_fext") and not robot.wrench_frames:
+                    raise self.error(f"bundles[{i}].quantities[{k}]", f"'{quantity}' needs frames taking external "
+                                     "wrenches: list them in wrenches: (by default the frame tcp, where there is one)")
         return robot
 
     def bundles(self, spec: Mapping) -> tuple[Bundle, ...] | None:
