@@ -198,11 +198,12 @@ def record_firmware(out: Path, entries: dict[str, dict], record_path: Path, log:
     record["robots"] = {k: record["robots"][k] for k in sorted(record["robots"])}
     _write_atomically(Path(record_path), (json.dumps(record, indent=2, sort_keys=True) + "\n").encode())
     for name, entry in entries.items():
-        text = with_firmware(robot_files(out / name), entry)
+        files = robot_files(out / name)
+        text = with_firmware(files, entry)
         _write_atomically(out / name / "manifest.json", text)
         manifest["robots"][name]["files"]["manifest.json"] = _sha(text)
-        log(f"{out / name / 'manifest.json'}: firmware figures of "
-            f"{len((firmware_section(robot_files(out / name), entry) or {}).get('functions', {}))} function(s)")
+        kept = json.loads(text).get("firmware", {}).get("functions", {})
+        log(f"{out / name / 'manifest.json'}: firmware figures of {len(kept)} function(s)")
     _write_atomically(out / "MANIFEST.json", (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
 
 

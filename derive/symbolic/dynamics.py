@@ -255,10 +255,15 @@ class NewtonEuler:
         minus gravity (zero velocity and acceleration -g for a fixed base)."""
         zero = ca.SX.zeros(3, 1)
         if not self.floating:
-            return zero, zero, -self.gravity if gravity else zero
+            return zero, zero, -self.root_gravity if gravity else zero
         w = qd[3:6]
         a = qdd[0:3] + ca.cross(w, qd[0:3])
-        return w, qdd[3:6], a - self.base_rotation.T @ self.gravity if gravity else a
+        return w, qdd[3:6], a - self.root_gravity if gravity else a
+
+    @cached_property
+    def root_gravity(self) -> ca.SX:
+        """g in root coordinates: the world's for a fixed base, R^T g for a floating one."""
+        return self.base_rotation.T @ self.gravity if self.floating else self.gravity
 
     def forward(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True) -> tuple[list, list, list]:
         """The RNEA's forward pass: per body its angular velocity w, angular acceleration dw and the
@@ -284,7 +289,7 @@ class NewtonEuler:
         """-g in each body's coordinates (index -1: the root's): what ``forward`` with gravity adds to a."""
         n = len(self.bodies)
         g = [None] * (n + 1)
-        g[-1] = -self.base_rotation.T @ self.gravity if self.floating else -self.gravity
+        g[-1] = -self.root_gravity
         for i, b in enumerate(self.bodies):
             g[i] = self.to_child(i, g[b.parent])
         return g

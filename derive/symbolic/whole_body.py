@@ -39,6 +39,10 @@ class WholeBody:
         self._jdot: dict[str, ca.SX] = {}  # per frame
 
     @cached_property
+    def _named_frames(self) -> dict:
+        return {f.name: f for f in self.robot.frames}
+
+    @cached_property
     def _rate(self) -> ca.SX:
         return configuration_rate(self.robot, self.sym)
 
@@ -99,9 +103,8 @@ class WholeBody:
         """[linear; angular] classical acceleration (6x1) of the frame's origin, world-aligned, without
         gravity, from the RNEA's forward pass without gravity (that of ``rnea(split=True)``, which
         bundles share): its body's a + dw x r + w x (w x r), rotated into the world."""
-        named = {f.name: f for f in self.robot.frames}
-        if frame in named:  # a named frame on a link
-            f = named[frame]
+        if frame in self._named_frames:  # a named frame on a link
+            f = self._named_frames[frame]
             body, R_bl, p_bl = self.ne.where[f.link]
             R_bf = R_bl @ rpy(*(self.sym.value(v) for v in f.origin.rpy))
             r = p_bl + R_bl @ ca.vertcat(*(self.sym.value(v) for v in f.origin.xyz))
