@@ -13,14 +13,14 @@ are in :mod:`derive.inspect.linearize`.
 
 from __future__ import annotations
 
+from typing import Callable
+
 import casadi as ca
 
 
-def ldlt_solve(M: ca.SX, b: ca.SX) -> ca.SX:
-    """Solve M x = b for symmetric positive definite M by unrolled LDL^T (no pivoting).
-
-    M = L D L^T with unit lower-triangular L; x = L^-T D^-1 L^-1 b.
-    """
+def ldlt_factor(M: ca.SX) -> tuple[list[list], list]:
+    """M = L D L^T for symmetric positive definite M (no pivoting): (L, D), L unit lower-triangular
+    as rows of scalars (None above the diagonal), D the diagonal."""
     n = M.shape[0]
     L = [[None] * n for _ in range(n)]
     D = [None] * n
@@ -29,6 +29,12 @@ def ldlt_solve(M: ca.SX, b: ca.SX) -> ca.SX:
         inv = 1 / D[j]
         for i in range(j + 1, n):
             L[i][j] = (M[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))) * inv
+    return L, D
+
+
+def ldlt_substitute(L: list[list], D: list, b: ca.SX) -> ca.SX:
+    """x = L^-T D^-1 L^-1 b from :func:`ldlt_factor`'s (L, D)."""
+    n = len(D)
     y = [None] * n
     for i in range(n):
         y[i] = b[i] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
@@ -39,15 +45,17 @@ def ldlt_solve(M: ca.SX, b: ca.SX) -> ca.SX:
     return ca.vertcat(*x)
 
 
-def ltdl_solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
-    """Solve M x = b for the mass matrix of a branched tree by M = L^T D L (Featherstone's LTDL,
-    RBDA section 6.5): unit lower-triangular L with L[k, i] != 0 only where i is an ancestor of k
-    (``parents[k]``: the index of k's parent coordinate, -1 at the root).
+def ldlt_solve(M: ca.SX, b: ca.SX) -> ca.SX:
+    """Solve M x = b for symmetric positive definite M by unrolled LDL^T (no pivoting).
 
-    Eliminating from the leaves up creates no fill-in, so the cost follows the tree, O(n d^2)
-    for depth d, where LDL^T from the root fills the whole matrix (a floating base couples every
-    coordinate to the base's six).
+    M = L D L^T with unit lower-triangular L; x = L^-T D^-1 L^-1 b.
     """
+    return ldlt_substitute(*ldlt_factor(M), b)
+
+
+def ltdl_factor(M: ca.SX, parents: tuple[int, ...]) -> dict:
+    """M = L^T D L for the mass matrix of a branched tree (Featherstone's LTDL, RBDA section 6.5):
+    {(k, i): entry} for i an ancestor of k (L's, unit diagonal) or k itself (D's)."""
     n = M.shape[0]
     H = {(k, i): M[k, i] for k in range(n) for i in _ancestors(k, parents, inclusive=True)}
     for k in reversed(range(n)):
@@ -60,6 +68,12 @@ def ltdl_solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
                 j = parents[j]
             H[k, i] = a
             i = parents[i]
+    return H
+
+
+def ltdl_substitute(H: dict, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
+    """x = M^-1 b from :func:`ltdl_factor`'s factor."""
+    n = len(parents)
     y = [b[k] for k in range(n)]
     for k in reversed(range(n)):  # L^T y = b, leaves first
         for i in _ancestors(k, parents):
@@ -71,6 +85,18 @@ def ltdl_solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
     return ca.vertcat(*x)
 
 
+def ltdl_solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
+    """Solve M x = b for the mass matrix of a branched tree by M = L^T D L (Featherstone's LTDL,
+    RBDA section 6.5): unit lower-triangular L with L[k, i] != 0 only where i is an ancestor of k
+    (``parents[k]``: the index of k's parent coordinate, -1 at the root).
+
+    Eliminating from the leaves up creates no fill-in, so the cost follows the tree, O(n d^2)
+    for depth d, where LDL^T from the root fills the whole matrix (a floating base couples every
+    coordinate to the base's six).
+    """
+    return ltdl_substitute(ltdl_factor(M, parents), b, parents)
+
+
 def _ancestors(k: int, parents: tuple[int, ...], inclusive: bool = False) -> list[int]:
     out = [k] if inclusive else []
     i = parents[k]
@@ -80,9 +106,21 @@ def _ancestors(k: int, parents: tuple[int, ...], inclusive: bool = False) -> lis
     return out
 
 
+def solver(M: ca.SX, parents: tuple[int, ...] | None = None) -> Callable[[ca.SX], ca.SX]:
+    """b -> M^-1 b with M factored once (LTDL along the tree where ``parents`` is given, LDL^T
+    otherwise): many right-hand sides share the factor's expressions instead of rebuilding them,
+    which cost O(n^3) scalar operations in Python per solve (a 20-joint chain's ODE Jacobians: 61
+    solves, 11 s)."""
+    if parents is None:
+        L, D = ldlt_factor(M)
+        return lambda b: ldlt_substitute(L, D, b)
+    H = ltdl_factor(M, parents)
+    return lambda b: ltdl_substitute(H, b, parents)
+
+
 def solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...] | None = None) -> ca.SX:
     """M^-1 b: LTDL along the tree where ``parents`` is given (a branched tree), LDL^T otherwise."""
-    return ldlt_solve(M, b) if parents is None else ltdl_solve(M, b, parents)
+    return solver(M, parents)(b)
 
 
 def forward_dynamics(M: ca.SX, bias: ca.SX, tau: ca.SX, parents: tuple[int, ...] | None = None) -> ca.SX:
@@ -91,7 +129,8 @@ def forward_dynamics(M: ca.SX, bias: ca.SX, tau: ca.SX, parents: tuple[int, ...]
 
 
 def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_fd: ca.SX,
-                  q_rate: ca.SX | None = None, parents: tuple[int, ...] | None = None) -> tuple[ca.SX, ca.SX]:
+                  q_rate: ca.SX | None = None, parents: tuple[int, ...] | None = None,
+                  mode: str = "reverse") -> tuple[ca.SX, ca.SX]:
     """A = df/dx and B = df/du of f = [qd; qdd(q, qd, u)] without differentiating the solve.
 
     From ID(q, qd, qdd(q, qd, u)) = u (implicit function theorem):
@@ -100,16 +139,24 @@ def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_
     by the same unrolled LDL^T (CSE shares the factorisation). ``tau_id`` is ID as an
     expression of q, qd and the symbol ``qdd``; ``qdd_fd`` the forward dynamics. ``q_rate`` is
     dq/dt as a function of q and qd when that is not qd itself (a floating base's quaternion):
-    the top rows of A are then its Jacobian.
+    the top rows of A are then its Jacobian. ``mode`` is the AD mode of dID/dx (:data:`AD_MODES`).
     """
     n, nq = qd.numel(), q.numel()
     x = ca.vertcat(q, qd)
-    dID = ca.substitute(ca.jacobian(tau_id, x), qdd, qdd_fd)
     eye = ca.SX.eye(n)
     top = ca.horzcat(ca.SX.zeros(n, n), eye) if q_rate is None else ca.jacobian(q_rate, x)
-    A = ca.vertcat(top, ca.horzcat(*[-solve(M, dID[:, k], parents) for k in range(nq + n)]))
-    B = ca.vertcat(ca.SX.zeros(nq, n), ca.horzcat(*[solve(M, eye[:, k], parents) for k in range(n)]))
+    dID = ca.substitute(ca.jacobian(tau_id, x, AD_MODES[mode]), qdd, qdd_fd)
+    inverse = solver(M, parents)
+    A = ca.vertcat(top, ca.horzcat(*[-inverse(dID[:, k]) for k in range(nq + n)]))
+    B = ca.vertcat(ca.SX.zeros(nq, n), ca.horzcat(*[inverse(eye[:, k]) for k in range(n)]))
     return A, B
+
+
+AD_MODES = {"reverse": {"allow_forward": False}, "forward": {"allow_reverse": False}}
+"""CasADi jacobian options of each AD mode of dID/dx in :func:`ode_jacobians`. Reverse mode takes one
+sweep per output (nv), forward mode one per input (nq + nv). On a chain reverse gives fewer
+operations (Panda's A: 8 473 instead of 9 981); on a short arm (UR5) or a branched floating base
+forward can (solo12), by a few per cent."""
 
 
 def ode_rhs(q: ca.SX, qd: ca.SX, qdd: ca.SX) -> ca.SX:

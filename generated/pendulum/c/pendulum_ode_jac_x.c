@@ -8,25 +8,25 @@ DERIVE_FN void pendulum_ode_jac_x(const DERIVE_REAL *x, const DERIVE_REAL *u, co
 {
     /* 16 ops: 8 mul, 5 add, 2 div, 1 trig */
     (void)u;
-    DERIVE_REAL w0, w1, w2;
-    w0 = p[4] / DERIVE_LIT(2.0);
-    w1 = p[0] * w0;
-    w2 = p[1] * p[4];
-    w1 = w1 + w2;
-    w2 = DERIVE_COS(x[0]);
-    w2 = p[5] * w2;
-    w1 = w1 * w2;
-    w2 = w0 * w0;
-    w0 = p[0] * w2;
-    w2 = p[2] + w0;
+    DERIVE_REAL w0, w1, w2, w3;
+    w0 = DERIVE_COS(x[0]);
+    w1 = p[4] / DERIVE_LIT(2.0);
+    w2 = p[0] * w1;
+    w3 = p[1] * p[4];
+    w2 = w2 + w3;
+    w3 = p[5] * w2;
+    w2 = w0 * w3;
+    w0 = w1 * w1;
+    w3 = p[0] * w0;
+    w1 = p[2] + w3;
     w0 = p[4] * p[4];
-    w0 = p[1] * w0;
-    w0 = p[3] + w0;
-    w2 = w2 + w0;
-    w0 = w1 / w2;
-    w1 = -w0;
+    w3 = p[1] * w0;
+    w0 = p[3] + w3;
+    w3 = w1 + w0;
+    w1 = w2 / w3;
+    w0 = -w1;
     A[0] = DERIVE_LIT(0.0);
     A[1] = DERIVE_LIT(1.0);
-    A[2] = w1;
+    A[2] = w0;
     A[3] = DERIVE_LIT(0.0);
 }

@@ -1353,21 +1353,21 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     u = u.tolist()
     p = p.tolist()
     cos = math.cos
-    t0 = p[4] / 2.0
-    t1 = p[0] * t0
-    t2 = p[1] * p[4]
-    t1 = t1 + t2
-    t2 = cos(x[0])
+    t0 = cos(x[0])
+    t1 = p[4] / 2.0
+    t2 = p[0] * t1
+    t3 = p[1] * p[4]
+    t2 = t2 + t3
     t2 = p[5] * t2
-    t1 = t1 * t2
-    t0 = t0 * t0
-    t0 = p[0] * t0
-    t0 = p[2] + t0
+    t0 = t0 * t2
+    t1 = t1 * t1
+    t1 = p[0] * t1
+    t1 = p[2] + t1
     t2 = p[4] * p[4]
     t2 = p[1] * t2
     t2 = p[3] + t2
-    t0 = t0 + t2
-    t0 = t1 / t0
+    t1 = t1 + t2
+    t0 = t0 / t1
     t0 = -t0
     _A = (0.0, 1.0,
           t0, 0.0)
@@ -1393,13 +1393,13 @@ def _ode_jac_x_chunk(x, t, s, y):
     s0, s1, s2 = s
     A_2, = y
     k0, = _ode_jac_x_constants
+    cos(x_0, t0)
     divide(p_4, k0, s0)
     multiply(p_0, s0, s1)
     multiply(p_1, p_4, s2)
     add(s1, s2, s1)
-    cos(x_0, t0)
-    multiply(p_5, t0, t0)
-    multiply(s1, t0, t0)
+    multiply(p_5, s1, s1)
+    multiply(t0, s1, t0)
     multiply(s0, s0, s0)
     multiply(p_0, s0, s0)
     add(p_2, s0, s0)
