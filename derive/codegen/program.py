@@ -139,13 +139,13 @@ def allocate(prog: Program, fixed=(), in_place: bool = False, oldest: bool = Fal
         for a in sorted({a for a in ins.args if a[0] == "t"}, key=lambda a: a[1]) if oldest else ins.args:
             if a[0] == "t" and last[a[1]] == j and a[1] in register and register[a[1]] not in dying:
                 dying.append(register[a[1]])
-                release(register[a[1]])
+        reuse = in_place and dying and j not in fixed
+        for variable in dying[1:] if reuse else dying:
+            release(variable)
         if j in fixed:
             continue
-        if in_place and dying:
+        if reuse:
             register[j] = dying[0]
-            free.remove(dying[0])
-            heapq.heapify(free)
         elif free or queue:
             register[j] = queue.popleft() if oldest else heapq.heappop(free)
         else:
