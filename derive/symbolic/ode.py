@@ -33,11 +33,13 @@ def ldlt_factor(M: ca.SX) -> tuple[list[list], list]:
 
 
 def ldlt_substitute(L: list[list], D: list, b: ca.SX) -> ca.SX:
-    """x = L^-T D^-1 L^-1 b from :func:`ldlt_factor`'s (L, D)."""
+    """x = L^-T D^-1 L^-1 b from :func:`ldlt_factor`'s (L, D); ``b`` may have several columns, solved
+    together row by row (each row one CasADi operation: the same scalar expressions as column by
+    column, built without a Python operation per entry)."""
     n = len(D)
     y = [None] * n
     for i in range(n):
-        y[i] = b[i] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
+        y[i] = b[i, :] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
     z = [y[i] / D[i] for i in range(n)]
     x = [None] * n
     for i in reversed(range(n)):
@@ -72,9 +74,10 @@ def ltdl_factor(M: ca.SX, parents: tuple[int, ...]) -> dict:
 
 
 def ltdl_substitute(H: dict, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
-    """x = M^-1 b from :func:`ltdl_factor`'s factor."""
+    """x = M^-1 b from :func:`ltdl_factor`'s factor; ``b`` may have several columns (row by row, as
+    :func:`ldlt_substitute`)."""
     n = len(parents)
-    y = [b[k] for k in range(n)]
+    y = [b[k, :] for k in range(n)]
     for k in reversed(range(n)):  # L^T y = b, leaves first
         for i in _ancestors(k, parents):
             y[i] = y[i] - H[k, i] * y[k]
@@ -107,10 +110,10 @@ def _ancestors(k: int, parents: tuple[int, ...], inclusive: bool = False) -> lis
 
 
 def solver(M: ca.SX, parents: tuple[int, ...] | None = None) -> Callable[[ca.SX], ca.SX]:
-    """b -> M^-1 b with M factored once (LTDL along the tree where ``parents`` is given, LDL^T
-    otherwise): many right-hand sides share the factor's expressions instead of rebuilding them,
-    which cost O(n^3) scalar operations in Python per solve (a 20-joint chain's ODE Jacobians: 61
-    solves, 11 s)."""
+    """B -> M^-1 B with M factored once (LTDL along the tree where ``parents`` is given, LDL^T
+    otherwise), B one or more right-hand sides as columns: they share the factor's expressions
+    instead of rebuilding them, which cost O(n^3) scalar operations in Python per solve (a 20-joint
+    chain's ODE Jacobians: 61 solves, 11 s), and are solved row by row for all columns at once."""
     if parents is None:
         L, D = ldlt_factor(M)
         return lambda b: ldlt_substitute(L, D, b)
@@ -147,8 +150,8 @@ def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_
     top = ca.horzcat(ca.SX.zeros(n, n), eye) if q_rate is None else ca.jacobian(q_rate, x)
     dID = ca.substitute(ca.jacobian(tau_id, x, AD_MODES[mode]), qdd, qdd_fd)
     inverse = solver(M, parents)
-    A = ca.vertcat(top, ca.horzcat(*[-inverse(dID[:, k]) for k in range(nq + n)]))
-    B = ca.vertcat(ca.SX.zeros(nq, n), ca.horzcat(*[inverse(eye[:, k]) for k in range(n)]))
+    A = ca.vertcat(top, -inverse(dID))
+    B = ca.vertcat(ca.SX.zeros(nq, n), inverse(eye))
     return A, B
 
 
