@@ -21,7 +21,7 @@ from derive.codegen.backends.c import printer as c_printer
 from derive.codegen.generate import generate
 from derive.description.model import parse_models
 
-SIZES = (6, 12, 20)
+SIZES = (6, 12, 20, 40)
 QUICK_SIZES = (6, 12)
 SHOWN = ("inverse_dynamics", "mass_matrix", "forward_dynamics", "coriolis_matrix", "ode_jac_x")
 

@@ -16,7 +16,8 @@ from derive.description.robot import Robot
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
 from derive.symbolic.model import SXModel
-from derive.symbolic.ode import ode_jacobians
+from derive.symbolic import derivatives
+from derive.symbolic.ode import inverse_dynamics_jacobian, ode_jacobians
 from derive.symbolic.regressor import Regressor, body_links
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
@@ -130,26 +131,27 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
 
 
 AD_COMPARE_MAX_NV = 12
-"""Up to this many velocities the ODE's A is built with both AD modes of dID/dx and the one with fewer
-operations kept (:func:`cheaper_ode_jacobians`); above it, reverse mode alone. Comparing costs a CSE
-of each (a 20-joint chain: 5.7 s), and past a short arm reverse mode wins on chains, by more as they
-grow (12 joints: 47 857 operations against 60 705), and is within a few per cent on branched floating
-bases (solo12: 30 400 against 29 377)."""
+"""Up to this many velocities the ODE's A is built with each way of computing dID/dx and the one with
+fewer operations kept (:func:`cheaper_ode_jacobians`). Above it, the analytic derivatives where they
+apply (a fixed base without mimic joints: a 20-joint chain's dID/dx 33 028 operations against
+91 738 by reverse AD, tiago_dual's 125 864 against 189 833), else reverse mode; comparing costs a
+CSE of each (a 20-joint chain: 5.7 s per candidate)."""
 
 
 def cheaper_ode_jacobians(model: SXModel, qdd_fd: ca.SX, inputs: list, in_xu) -> tuple[ca.SX, ca.SX]:
-    """The ODE's (A, B) with dID/dx by the AD mode whose A has fewer operations in the generated code
-    (up to :data:`AD_COMPARE_MAX_NV` velocities; reverse mode above)."""
+    """The ODE's (A, B) with dID/dx by the way (:func:`~derive.symbolic.ode.inverse_dynamics_jacobian`)
+    whose A has fewer operations in the generated code (up to :data:`AD_COMPARE_MAX_NV` velocities)."""
     ne, s, robot = model.newton_euler, model.sym, model.robot
-    tau_id = ne.inverse_dynamics(smooth=True)
     q_rate = model.configuration_rate if robot.floating else None
+    analytic = derivatives.worth_trying(ne)
 
     def jacobians(mode: str) -> tuple[ca.SX, ca.SX]:
-        return ode_jacobians(ne.mass_matrix, tau_id, s.q, s.qd, s.qdd, qdd_fd, q_rate, ne.dof_parents, mode)
+        dID = inverse_dynamics_jacobian(ne, mode, qdd_fd)
+        return ode_jacobians(ne.mass_matrix, dID, s.q, s.qd, q_rate, ne.dof_parents)
 
     if robot.nv > AD_COMPARE_MAX_NV:
-        return jacobians("reverse")
-    candidates = [jacobians("reverse"), jacobians("forward")]
+        return jacobians("analytic" if analytic else "reverse")
+    candidates = [jacobians(mode) for mode in ("reverse", "forward") + (("analytic",) if analytic else ())]  # ties: the first
     return min(candidates, key=lambda AB: build_program(inputs, [("A", in_xu(AB[0]))]).ops()["total"])
 
 

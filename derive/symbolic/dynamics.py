@@ -408,20 +408,30 @@ class NewtonEuler:
 
     @cached_property
     def coriolis_matrix(self) -> ca.SX:
-        """The Christoffel-symbol C(q, qd), by the cheaper of two exact forms: the symbols of M
-        (:func:`christoffel_coriolis`, O(n^3) terms), or 1/2 d(C qd)/dqd of the Newton-Euler velocity
+        """The Christoffel-symbol C(q, qd), by the cheapest of three exact forms: the symbols of M
+        (:func:`christoffel_coriolis`, O(n^3) terms); 1/2 d(C qd)/dqd of the Newton-Euler velocity
         terms rnea(q, qd, 0) without gravity (C qd = sum_jk c_ijk qd_j qd_k with c_ijk = c_ikj, so its
-        derivative is 2 C), which grows as n^2 and wins from about 8 generic joints; up to
-        :data:`CHRISTOFFEL_MAX_NV` coordinates both are built and the one with fewer operations
-        after CSE is kept."""
+        derivative is 2 C) by automatic differentiation, which grows as n^2 and wins from about 8
+        generic joints; or the same derivative from the tree's structure
+        (:mod:`derive.symbolic.derivatives`: O(n) per body plus a dot product per ancestor pair; fixed
+        bases without mimic joints), the cheapest on long chains. Up to :data:`CHRISTOFFEL_MAX_NV`
+        coordinates all are built and the one with fewer operations after CSE is kept; above, the
+        structural form where it applies, else automatic differentiation."""
+        from derive.symbolic import derivatives  # it imports this module for its types only
+
         self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
         q, qd = self.sym.q, self.sym.qd
-        velocity_terms = self.rnea(qd, ca.SX.zeros(self.sym.nv, 1), gravity=False)
-        by_derivative = 0.5 * ca.jacobian(velocity_terms, qd)
+        zeros = ca.SX.zeros(self.sym.nv, 1)
+        candidates = []
+        if derivatives.worth_trying(self):
+            candidates.append(0.5 * derivatives.inverse_dynamics_derivatives(self, zeros, actuators=False)[1])
+        if self.sym.nv > CHRISTOFFEL_MAX_NV and candidates:
+            return candidates[0]
+        candidates.append(0.5 * ca.jacobian(self.rnea(qd, zeros, gravity=False), qd))
         if self.sym.nv > CHRISTOFFEL_MAX_NV:
-            return by_derivative
-        by_symbols = christoffel_coriolis(self.mass_matrix, q, qd)
-        return by_symbols if graph_cost(by_symbols, q, qd) <= graph_cost(by_derivative, q, qd) else by_derivative
+            return candidates[-1]
+        candidates.append(christoffel_coriolis(self.mass_matrix, q, qd))
+        return min(reversed(candidates), key=lambda C: graph_cost(C, q, qd))
 
     def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False, split: bool = False) -> ca.SX:
         """RNEA plus the actuators' armature and friction (Coulomb as sign(qd), tanh(qd / eps) if ``smooth``);

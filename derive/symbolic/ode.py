@@ -17,6 +17,8 @@ from typing import Callable
 
 import casadi as ca
 
+from derive.symbolic import derivatives
+
 
 def ldlt_factor(M: ca.SX) -> tuple[list[list], list]:
     """M = L D L^T for symmetric positive definite M (no pivoting): (L, D), L unit lower-triangular
@@ -131,35 +133,43 @@ def forward_dynamics(M: ca.SX, bias: ca.SX, tau: ca.SX, parents: tuple[int, ...]
     return solve(M, tau - bias, parents)
 
 
-def ode_jacobians(M: ca.SX, tau_id: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, qdd_fd: ca.SX,
-                  q_rate: ca.SX | None = None, parents: tuple[int, ...] | None = None,
-                  mode: str = "reverse") -> tuple[ca.SX, ca.SX]:
+def ode_jacobians(M: ca.SX, dID: ca.SX, q: ca.SX, qd: ca.SX, q_rate: ca.SX | None = None,
+                  parents: tuple[int, ...] | None = None) -> tuple[ca.SX, ca.SX]:
     """A = df/dx and B = df/du of f = [qd; qdd(q, qd, u)] without differentiating the solve.
 
     From ID(q, qd, qdd(q, qd, u)) = u (implicit function theorem):
         dqdd/dx = -M^-1 dID/dx |_{qdd = FD},   dqdd/du = M^-1,
-    so A = [[0, I], [-M^-1 dID/dq, -M^-1 dID/dqd]] and B = [[0], [M^-1]], each column
-    by the same unrolled LDL^T (CSE shares the factorisation). ``tau_id`` is ID as an
-    expression of q, qd and the symbol ``qdd``; ``qdd_fd`` the forward dynamics. ``q_rate`` is
-    dq/dt as a function of q and qd when that is not qd itself (a floating base's quaternion):
-    the top rows of A are then its Jacobian. ``mode`` is the AD mode of dID/dx (:data:`AD_MODES`).
+    so A = [[0, I], [-M^-1 dID/dq, -M^-1 dID/dqd]] and B = [[0], [M^-1]], all columns by the
+    same unrolled LDL^T (or LTDL). ``dID`` is dID/dx (nv x (nq + nv)) at qdd = the forward dynamics
+    (:func:`inverse_dynamics_jacobian`). ``q_rate`` is dq/dt as a function of q and qd when that is
+    not qd itself (a floating base's quaternion): the top rows of A are then its Jacobian.
     """
     n, nq = qd.numel(), q.numel()
     x = ca.vertcat(q, qd)
     eye = ca.SX.eye(n)
     top = ca.horzcat(ca.SX.zeros(n, n), eye) if q_rate is None else ca.jacobian(q_rate, x)
-    dID = ca.substitute(ca.jacobian(tau_id, x, AD_MODES[mode]), qdd, qdd_fd)
     inverse = solver(M, parents)
     A = ca.vertcat(top, -inverse(dID))
     B = ca.vertcat(ca.SX.zeros(nq, n), inverse(eye))
     return A, B
 
 
+def inverse_dynamics_jacobian(ne, mode: str, qdd_fd: ca.SX) -> ca.SX:
+    """dID/dx (nv x (nq + nv)) of ``ne.inverse_dynamics(smooth=True)`` at qdd = ``qdd_fd``, by ``mode``:
+    "reverse" or "forward" automatic differentiation (:data:`AD_MODES`), or "analytic", from the
+    tree's structure (:mod:`derive.symbolic.derivatives`: fixed bases without mimic joints)."""
+    s = ne.sym
+    if mode == "analytic":
+        return ca.horzcat(*derivatives.inverse_dynamics_derivatives(ne, qdd_fd))
+    dID = ca.jacobian(ne.inverse_dynamics(smooth=True), ca.vertcat(s.q, s.qd), AD_MODES[mode])
+    return ca.substitute(dID, s.qdd, qdd_fd)
+
+
 AD_MODES = {"reverse": {"allow_forward": False}, "forward": {"allow_reverse": False}}
-"""CasADi jacobian options of each AD mode of dID/dx in :func:`ode_jacobians`. Reverse mode takes one
-sweep per output (nv), forward mode one per input (nq + nv). On a chain reverse gives fewer
-operations (Panda's A: 8 473 instead of 9 981); on a short arm (UR5) or a branched floating base
-forward can (solo12), by a few per cent."""
+"""CasADi jacobian options of each AD mode of dID/dx. Reverse mode takes one sweep per output (nv),
+forward mode one per input (nq + nv). On a chain reverse gives fewer operations (Panda's A: 8 473
+instead of 9 981); on a short arm (UR5) or a branched floating base forward can (solo12), by a few
+per cent. Both grow about 20x the RNEA's size on long chains, where the analytic form does not."""
 
 
 def ode_rhs(q: ca.SX, qd: ca.SX, qdd: ca.SX) -> ca.SX:

@@ -3,8 +3,8 @@
 Temporaries live in a bounded set of work variables ``w<k>``, reused once dead (the linear scan
 of :func:`derive.codegen.program.allocate`): without optimisation a compiler gives every local its
 own stack slot, so one ``const`` per SSA temporary would need tens of kB of stack in a debug build
-(the Panda's ode_jac_x: 10 305 temporaries, 80 kB at -O0); with reuse it needs as many slots as
-temporaries are live at once (276 there). The variable dead the longest is reused first.
+(the Panda's ode_jac_x: 8 473 temporaries, about 70 kB at -O0); with reuse it needs as many slots
+as temporaries are live at once (444 there: 3.6 kB at -O0 on x86-64). The variable dead the longest is reused first.
 Optimising compilers rename the variables back into SSA form, so -O2 code is the same either way.
 
 A function of more than :data:`SPLIT_ABOVE` instructions and output entries is split into parts of
@@ -26,7 +26,7 @@ from derive.codegen.program import Program, allocate, last_reads
 WORK_PER_LINE = 12
 SPLIT_ABOVE = 12000
 """Instructions plus output entries above which a function is split into parts (the shipped
-robots' largest, the Panda's ode_jac_x, has 9 981 + 196 and stays one function)."""
+robots' largest, the Panda's ode_jac_x, has 8 473 + 196 and stays one function)."""
 PART_SIZE = 4000
 """Most instructions per part of a split function."""
 
@@ -70,8 +70,9 @@ class CPrinter(ExpressionPrinter):
         arrays it reads and output arrays it writes (``reads``, ``writes``: to tell the unused
         parameters); after the computing parts, store parts writing at most ``size`` output entries
         each from W (one function with tens of thousands of stores takes gcc minutes: its alias walks).
-        Sets :attr:`slots`, the length of the work array W. ``size``: most instructions a part
-        (default :data:`PART_SIZE`)."""
+        Sets :attr:`slots`, the length of the work array W, and :attr:`computing`, the number of
+        computing parts (the store parts follow). ``size``: most instructions a part (default
+        :data:`PART_SIZE`)."""
         size = size or PART_SIZE
         self.part_size = size
         n = len(prog.body)
@@ -102,6 +103,7 @@ class CPrinter(ExpressionPrinter):
             parts.append({"body": body, "work": self.declarations(), "reads": reads, "writes": set(), "stores": [],
                           "uses_slots": any(k in self.slot for k in range(start, stop))
                           or any(a[0] == "t" and a[1] in self.slot for ins in prog.body[start:stop] for a in ins.args)})
+        self.computing = len(parts)
         stores = self.stores(prog, output_names)
         for first in range(0, len(prog.results), size):
             results = prog.results[first:first + size]
