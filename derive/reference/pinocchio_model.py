@@ -1,6 +1,6 @@
 """A Pinocchio model built directly from a derive Robot (no URDF), and a NumericRobot-like wrapper.
 
-Used by the tests (tests/pin_model.py re-exports it) and by ``derive bench pinocchio-cpp``; it imports
+Used by the tests (tests/pin_model.py re-exports it) and by ``derive bench pinocchio-cpp``; it needs
 pinocchio, so :mod:`derive.reference` itself does not import it.
 
 - Floating base: a ``JointModelFreeFlyer`` named ``root_joint`` (Pinocchio's q = [p, quaternion
@@ -37,7 +37,11 @@ from __future__ import annotations
 from typing import Mapping
 
 import numpy as np
-import pinocchio as pin
+
+try:
+    import pinocchio as pin
+except ImportError:  # importable without it (derive bench imports every benchmark module); building a model needs it
+    pin = None
 
 from derive.description import expr
 from derive.description.robot import FREE_FLYER, Robot
