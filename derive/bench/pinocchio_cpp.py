@@ -60,7 +60,8 @@ SAMPLE_NS = 1e7
 """Each timed sample loops over the states as many times as it takes to last about this long."""
 
 ERD = {"talos_reduced": "talos_data/robots/talos_reduced.urdf", "romeo": "romeo_description/urdf/romeo.urdf"}
-"""The example-robot-data trees measured (imported whole with a floating base, as ``derive bench zoo`` does)."""
+"""The example-robot-data trees measured: imported whole with a floating base, as ``derive bench zoo`` does,
+but without their URDF friction (Pinocchio's algorithms have none)."""
 QUICK = ("panda", "ur5", "chain12")
 
 PINOCCHIO_INSTANTIATED = True
