@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from derive.bench.large import generic_chain
+from derive.codegen.catalogue import function_specs
 from derive.description.model import parse_models
 from derive.symbolic import aba
 from derive.symbolic.model import ABA_COMPARE_MAX_NV, SXModel
@@ -34,6 +35,8 @@ def test_aba_equals_crba_and_ldlt(robot):
         assert np.abs(got - want).max() <= 1e-12 * np.abs(want).max()
         assert np.array_equal(generated, got if model.articulated else want)
     assert model.articulated == (s.nv > ABA_COMPARE_MAX_NV)  # the tree (9) keeps CRBA, the long chain takes the ABA
+    fd = next(spec for spec in function_specs(model) if spec.short_name == "forward_dynamics")
+    assert dict(fd.manifest)["algorithm"] == ("articulated-body algorithm" if model.articulated else "CRBA, then LTDL along the tree")
 
 
 def test_short_arms_keep_crba_and_ldlt():

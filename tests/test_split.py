@@ -63,11 +63,13 @@ def test_split_functions_compile_clean_and_equal_python(split_ur5, tmp_path):
             assert stores < entries if filled else stores == entries, fn["name"]
             assert parts == -(-fn["ops"]["total"] // 300) + -(-stores // 300), fn["name"]
             fills.update(f"{fn['name']}.{name}" for _, name in filled)
+            assert (fn["c"]["form"], fn["c"]["parts"]) == ("split", parts), fn["name"]
+            assert fn["c"]["zero_filled"] == [name for _, name in filled], fn["name"]
             split[fn["name"]] = fn
             slots = int(re.search(r"DERIVE_REAL W\[(\d+)\];", text).group(1))
             assert 0 < slots < fn["ops"]["total"] // 4, (fn["name"], slots)
         else:
-            assert parts == 0, fn["name"]
+            assert parts == 0 and fn["c"]["form"] == "whole", fn["name"]
     assert {"ur5_ode_jac_x", "ur5_coriolis_matrix"} <= set(split)
     assert {"ur5_regressor.Y", "ur5_ode_jac_x.A"} <= fills  # half zeros or more: a loop writes them
     sources = [str(split_ur5 / f["c"]["source"]) for f in split.values()]

@@ -68,24 +68,34 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
             "world_T_tcp (4x4) and its geometric Jacobian (6x{n}, [linear; angular], LOCAL_WORLD_ALIGNED) "
             "in one pass, sharing the transforms: what IK and control loops need each step.".format(n=n))
     add("mass_matrix", None, [q], [("M", ne.mass_matrix)],
-        f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.")
+        f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.",
+        (("algorithm", "CRBA"),))
     if not robot.floating:
-        add("coriolis_matrix", None, [q, qd], [("C", ne.coriolis_matrix)],
-            f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) from the Christoffel symbols of M; Mdot - 2C is skew-symmetric.")
+        C = ne.coriolis_matrix
+        how = ("from the Christoffel symbols of M" if ne.coriolis_algorithm == "Christoffel symbols of M" else
+               f"of the Christoffel symbols of M, as {ne.coriolis_algorithm}")
+        add("coriolis_matrix", None, [q, qd], [("C", C)],
+            f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) {how}; Mdot - 2C is skew-symmetric.",
+            (("algorithm", ne.coriolis_algorithm),))
     else:  # the Christoffel symbols need qd = dq/dt; the spatial factorisation does not
         add("coriolis_matrix", None, [q, qd], [("C", wb.coriolis_matrix)],
             f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) by the spatial factorisation sum_i J_i^T (I_i Jdot_i + "
-            "B_i J_i) (Pinocchio's computeCoriolisMatrix): C qd = the velocity terms of ID, Mdot - 2C skew-symmetric.")
+            "B_i J_i) (Pinocchio's computeCoriolisMatrix): C qd = the velocity terms of ID, Mdot - 2C skew-symmetric.",
+            (("algorithm", "spatial factorisation"),))
     add("gravity", None, [q], [("g", ne.gravity_vector)],
         "Gravity torques g(q) = dU/dq = rnea(q, 0, 0).")
     add("bias", None, [q, qd], [("h", ne.inverse_dynamics(ca.SX.zeros(n, 1)))],
         "Bias torques h(q, qd) = C(q, qd) qd + g(q) (plus the actuators' friction, if any) = inverse_dynamics(q, qd, 0), "
         "so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
-        "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.")
+        "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.", (("algorithm", "RNEA"),))
     qdd_fd = model.forward_dynamics()
+    fd_how = (("algorithm", model.forward_dynamics_algorithm),)
     add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
-        "Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve.")
+        "Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by "
+        + {"CRBA, then LDL^T": "an unrolled LDL^T solve.", "CRBA, then LTDL along the tree": "an unrolled LTDL solve "
+           "along the tree.", "articulated-body algorithm": "the articulated-body algorithm."}[model.forward_dynamics_algorithm],
+        fd_how)
     frames = robot.wrench_frames
     if frames:
         k = len(frames)
@@ -97,7 +107,7 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
             f"Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; {wrench_doc}.")
         add("forward_dynamics_fext", None, [q, qd, tau, ("w", w)],
             [("qdd", model.forward_dynamics(extra_torque=jtw))],
-            f"Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); {wrench_doc}.")
+            f"Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); {wrench_doc}.", fd_how)
     com_doc = ("the moving bodies (the floating base included)" if robot.floating else
                "the moving bodies (the root link is the world and does not count, as in Pinocchio)")
     add("com", None, [q], [("c", wb.com)], f"Centre of mass of {com_doc}, world coordinates (3).")
@@ -119,12 +129,14 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
                    "the quaternion's norm is not kept by f itself (rk4_step renormalises it).")
     else:
         ode_doc = f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd]."
-    add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))], ode_doc)
-    A, B = cheaper_ode_jacobians(model, qdd_fd, [("x", x), ("u", u), *extra], in_xu)
+    add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))], ode_doc, fd_how)
+    A, B, mode = cheaper_ode_jacobians(model, qdd_fd, [("x", x), ("u", u), *extra], in_xu)
     add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))],
-        f"df/dx ({nq + n}x{nq + n}, row-major) of the ODE x' = f(x, u): the linearisation's A.")
+        f"df/dx ({nq + n}x{nq + n}, row-major) of the ODE x' = f(x, u): the linearisation's A.",
+        (("algorithm", f"-M^-1 dID/dx at qdd = FD, dID/dx by {DID_DX[mode]}"),))
     add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))],
-        f"df/du ({nq + n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.")
+        f"df/du ({nq + n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.",
+        (("algorithm", "M^-1 by " + ("LDL^T" if ne.dof_parents is None else "LTDL along the tree")),))
     regressor_specs(model, add)
     bundle_specs(model, specs, add)
     return specs
@@ -138,7 +150,12 @@ apply (a fixed base without mimic joints: a 20-joint chain's dID/dx 33 028 opera
 CSE of each (a 20-joint chain: 5.7 s per candidate)."""
 
 
-def cheaper_ode_jacobians(model: SXModel, qdd_fd: ca.SX, inputs: list, in_xu) -> tuple[ca.SX, ca.SX]:
+DID_DX = {"reverse": "reverse-mode automatic differentiation", "forward": "forward-mode automatic differentiation",
+          "analytic": "the analytic RNEA derivatives"}
+"""How dID/dx was computed, for manifest.json, per mode of :func:`inverse_dynamics_jacobian`."""
+
+
+def cheaper_ode_jacobians(model: SXModel, qdd_fd: ca.SX, inputs: list, in_xu) -> tuple[ca.SX, ca.SX, str]:
     """The ODE's (A, B) with dID/dx by the way (:func:`~derive.symbolic.ode.inverse_dynamics_jacobian`)
     whose A has fewer operations in the generated code (up to :data:`AD_COMPARE_MAX_NV` velocities)."""
     ne, s, robot = model.newton_euler, model.sym, model.robot
@@ -150,9 +167,10 @@ def cheaper_ode_jacobians(model: SXModel, qdd_fd: ca.SX, inputs: list, in_xu) ->
         return ode_jacobians(ne.mass_matrix, dID, s.q, s.qd, q_rate, ne.dof_parents)
 
     if robot.nv > AD_COMPARE_MAX_NV:
-        return jacobians("analytic" if analytic else "reverse")
-    candidates = [jacobians(mode) for mode in ("reverse", "forward") + (("analytic",) if analytic else ())]  # ties: the first
-    return min(candidates, key=lambda AB: build_program(inputs, [("A", in_xu(AB[0]))]).ops()["total"])
+        mode = "analytic" if analytic else "reverse"
+        return (*jacobians(mode), mode)
+    candidates = [(*jacobians(mode), mode) for mode in ("reverse", "forward") + (("analytic",) if analytic else ())]
+    return min(candidates, key=lambda c: build_program(inputs, [("A", in_xu(c[0]))]).ops()["total"])  # ties: the first
 
 
 def bundle_specs(model: SXModel, specs: list[FunctionSpec], add) -> None:

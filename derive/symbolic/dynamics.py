@@ -422,16 +422,17 @@ class NewtonEuler:
         self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
         q, qd = self.sym.q, self.sym.qd
         zeros = ca.SX.zeros(self.sym.nv, 1)
-        candidates = []
+        candidates = []  # (C, how), cheapest last on ties
         if derivatives.worth_trying(self):
-            candidates.append(0.5 * derivatives.inverse_dynamics_derivatives(self, zeros, actuators=False)[1])
-        if self.sym.nv > CHRISTOFFEL_MAX_NV and candidates:
-            return candidates[0]
-        candidates.append(0.5 * ca.jacobian(self.rnea(qd, zeros, gravity=False), qd))
-        if self.sym.nv > CHRISTOFFEL_MAX_NV:
-            return candidates[-1]
-        candidates.append(christoffel_coriolis(self.mass_matrix, q, qd))
-        return min(reversed(candidates), key=lambda C: graph_cost(C, q, qd))
+            C = 0.5 * derivatives.inverse_dynamics_derivatives(self, zeros, actuators=False)[1]
+            candidates.append((C, "1/2 d(C qd)/dqd by the analytic RNEA derivatives"))
+        if not (self.sym.nv > CHRISTOFFEL_MAX_NV and candidates):
+            C = 0.5 * ca.jacobian(self.rnea(qd, zeros, gravity=False), qd)
+            candidates.append((C, "1/2 d(C qd)/dqd by automatic differentiation of the RNEA"))
+        if self.sym.nv <= CHRISTOFFEL_MAX_NV:
+            candidates.append((christoffel_coriolis(self.mass_matrix, q, qd), "Christoffel symbols of M"))
+        C, self.coriolis_algorithm = min(reversed(candidates), key=lambda c: graph_cost(c[0], q, qd))
+        return C
 
     def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False, split: bool = False) -> ca.SX:
         """RNEA plus the actuators' armature and friction (Coulomb as sign(qd), tanh(qd / eps) if ``smooth``);

@@ -111,6 +111,13 @@ class SXModel:
         by_ldl = forward_dynamics(ne.mass_matrix, ne.bias, s.tau, ne.dof_parents)
         return graph_cost(aba.forward_dynamics(ne, s.tau), s.q, s.qd, s.tau) < graph_cost(by_ldl, s.q, s.qd, s.tau)
 
+    @property
+    def forward_dynamics_algorithm(self) -> str:
+        """How the Newton-Euler route's forward dynamics are computed (manifest.json's ``algorithm``)."""
+        if self.articulated:
+            return "articulated-body algorithm"
+        return "CRBA, then LDL^T" if self.newton_euler.dof_parents is None else "CRBA, then LTDL along the tree"
+
     def ode_rhs(self, method: str = "newton-euler") -> ca.SX:
         """f(x, u) = [dq/dt; qdd] with x = [q; qd], u = tau (dq/dt = qd for a fixed base)."""
         return ca.vertcat(self.configuration_rate, self.forward_dynamics(method))

@@ -151,9 +151,16 @@ class CBackend(Backend):
     def manifest_entry(self, robot: RobotContext, f: dict) -> dict:
         """Header, source and the call's contract: ``returns`` ("void", or "int" for a status code),
         ``reads`` (the inputs) and ``writes`` (the outputs), each array in signature order with its
-        length in DERIVE_REALs, row-major (``nullable``: the caller may pass NULL)."""
-        return {"header": f"c/{f['header']}", "source": f"c/{f['source']}", "returns": f["c_returns"],
-                "reads": f["c_reads"], "writes": f["c_writes"]}
+        length in DERIVE_REALs, row-major (``nullable``: the caller may pass NULL); ``form``: "whole"
+        (one straight-line function), "split" (``parts`` static functions, ``zero_filled``: the outputs
+        whose zero entries one loop writes) or "template" (calls and loops around other functions)."""
+        entry = {"header": f"c/{f['header']}", "source": f"c/{f['source']}", "returns": f["c_returns"],
+                 "reads": f["c_reads"], "writes": f["c_writes"]}
+        if "parts" not in f:
+            return {**entry, "form": "template"}
+        if not f["parts"]:
+            return {**entry, "form": "whole"}
+        return {**entry, "form": "split", "parts": len(f["parts"]), "zero_filled": [name for name, _ in f["fills"]]}
 
     def manifest_support(self, robot: RobotContext, functions: list[dict]) -> list[dict]:
         """The support headers (verbatim copies), then the build files: ``build`` says which tool
