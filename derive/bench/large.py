@@ -82,10 +82,12 @@ def bench_large(args) -> str:
     rows += ["", f"Functions above {c_printer.SPLIT_ABOVE} instructions and output entries are split into parts of at "
              f"most {c_printer.PART_SIZE} instructions or output stores (`parts`: their number over the robot), which the "
              "compiler handles in time and",
-             "memory linear in the size. Before the split, gcc -O2 did not finish a 20-dof chain's C within 600 s",
-             "and took about 10 GB per process (the issue's figures). The Coriolis matrix is 1/2 d(C qd)/dqd of the",
-             "Newton-Euler velocity terms where that is cheaper than the Christoffel symbols (20 dof: 64.6k ops",
-             "instead of 180.6k). Measured on a shared 2-core machine: times are indicative."]
+             "memory linear in the size; outputs mostly of zeros have those written by a loop. Before the split, gcc -O2",
+             "did not finish a 20-dof chain's C within 600 s and took about 10 GB per process (the issue's figures).",
+             "Above 12 joints the forward dynamics are the articulated-body algorithm (O(n)), and the Coriolis matrix",
+             "and the ODE's dID/dx come from the analytic RNEA derivatives (O(n) per body plus a dot product per",
+             "ancestor pair) instead of automatic differentiation; manifest.json's `algorithm` says which form each",
+             "function takes. Measured on a shared 2-core machine: times are indicative."]
     return "\n".join(rows)
 
 
