@@ -13,18 +13,14 @@ armature adds to each joint's articulated inertia D_i, their friction to the joi
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
 import casadi as ca
 
 from derive.symbolic.spatial import skew
 
-if TYPE_CHECKING:
-    from derive.symbolic.dynamics import NewtonEuler
 
-
-def supported(ne: "NewtonEuler") -> bool:
-    """Whether :func:`forward_dynamics` handles the robot: a fixed base, no mimic joints."""
+def supported(ne) -> bool:
+    """Whether :func:`forward_dynamics` handles the robot of ``ne`` (a
+    :class:`~derive.symbolic.dynamics.NewtonEuler`): a fixed base, no mimic joints."""
     return not ne.floating and not ne.mimic
 
 
@@ -74,7 +70,7 @@ def _cross_force(a: ca.SX, f: ca.SX) -> ca.SX:
     return ca.vertcat(ca.cross(a[0:3], f[0:3]) + ca.cross(a[3:6], f[3:6]), ca.cross(a[0:3], f[3:6]))
 
 
-def forward_dynamics(ne: "NewtonEuler", tau: ca.SX) -> ca.SX:
+def forward_dynamics(ne, tau: ca.SX) -> ca.SX:
     """qdd(q, qd, tau) of the robot of ``ne`` (its actuators included: armature, smooth friction)."""
     if not supported(ne):
         raise ValueError("the articulated-body algorithm here needs a fixed base without mimic joints")

@@ -41,12 +41,7 @@ from __future__ import annotations
 
 import casadi as ca
 
-from typing import TYPE_CHECKING
-
 from derive.symbolic.spatial import skew
-
-if TYPE_CHECKING:  # dynamics uses this module for the Coriolis matrix
-    from derive.symbolic.dynamics import NewtonEuler
 
 
 WORTH_FROM_NV = 8
@@ -55,12 +50,14 @@ differentiation always gave fewer operations (Panda, 7: dID/dx 6 291 against 6 0
 UR5, 6: 4 583 against 2 513), from 12 on chains the analytic form wins (12: 16 251 against 32 289)."""
 
 
-def supported(ne: "NewtonEuler") -> bool:
-    """Whether :func:`inverse_dynamics_derivatives` handles this robot: a fixed base, no mimic joints."""
+def supported(ne) -> bool:
+    """Whether :func:`inverse_dynamics_derivatives` handles the robot of ``ne`` (a
+    :class:`~derive.symbolic.dynamics.NewtonEuler`, which uses this module and so is not imported
+    here): a fixed base, no mimic joints."""
     return not ne.floating and not ne.mimic
 
 
-def worth_trying(ne: "NewtonEuler") -> bool:
+def worth_trying(ne) -> bool:
     """Supported, and with at least :data:`WORTH_FROM_NV` velocities."""
     return supported(ne) and ne.sym.nv >= WORTH_FROM_NV
 
@@ -105,7 +102,7 @@ def _force_cross_matrix(m: ca.SX) -> ca.SX:
     return ca.blockcat([[w, ca.SX.zeros(3, 3)], [v, w]])
 
 
-def inverse_dynamics_derivatives(ne: "NewtonEuler", qdd: ca.SX, smooth: bool = True,
+def inverse_dynamics_derivatives(ne, qdd: ca.SX, smooth: bool = True,
                                  actuators: bool = True) -> tuple[ca.SX, ca.SX]:
     """(d tau / dq, d tau / dqd) of ``ne.inverse_dynamics(qdd, smooth)`` at the accelerations ``qdd``
     (a symbol or an expression, e.g. the forward dynamics), each nv x nv; without the actuators'
