@@ -34,6 +34,7 @@ import numpy as np
 from derive.bench.large import generic_chain
 from derive.bench.zoo import id_m_fd_specs
 from derive.codegen.backends.c import BACKEND as C_BACKEND
+from derive.codegen.catalogue import cheaper_ode_jacobians
 from derive.codegen.generate import check_constants, check_mass_matrix
 from derive.codegen.render import render_robot
 from derive.codegen.spec import FunctionSpec
@@ -44,7 +45,6 @@ from derive.errors import DeriveError
 from derive.reference import NumericRobot
 from derive.reference.pinocchio_model import build_model
 from derive.symbolic.model import SXModel
-from derive.symbolic.ode import ode_jacobians
 
 TITLE = "## Generated C against Pinocchio's C++: ns per call"
 FUNCTIONS = ("inverse_dynamics", "mass_matrix", "forward_dynamics", "ode_jac_x")
@@ -95,14 +95,17 @@ def _erd_robot(urdf: str) -> Robot:
 
 def specs(model: SXModel) -> list[FunctionSpec]:
     """The catalogue's mass_matrix, inverse_dynamics, forward_dynamics and ode_jac_x specs alone
-    (the expressions of :func:`derive.codegen.catalogue.function_specs`)."""
-    robot, s, ne = model.robot, model.sym, model.newton_euler
+    (the expressions of :func:`derive.codegen.catalogue.function_specs`, ode_jac_x by its own choice
+    of algorithm: :func:`derive.codegen.catalogue.cheaper_ode_jacobians`)."""
+    robot, s = model.robot, model.sym
     out = id_m_fd_specs(model)
     x, u = ca.SX.sym("x", robot.nq + robot.nv), ca.SX.sym("u", robot.nv)
-    A, _ = ode_jacobians(ne.mass_matrix, ne.inverse_dynamics(smooth=True), s.q, s.qd, s.qdd, model.forward_dynamics(),
-                         model.configuration_rate if robot.floating else None, ne.dof_parents)
-    A = ca.substitute(A, ca.vertcat(s.q, s.qd, s.tau), ca.vertcat(x, u))
-    return out + [FunctionSpec(robot.name, "ode_jac_x", None, (("x", x), ("u", u)), (("A", A),), "df/dx of the ODE.")]
+
+    def in_xu(e: ca.SX) -> ca.SX:
+        return ca.substitute(e, ca.vertcat(s.q, s.qd, s.tau), ca.vertcat(x, u))
+
+    A, _, _ = cheaper_ode_jacobians(model, model.forward_dynamics(), [("x", x), ("u", u)], in_xu)
+    return out + [FunctionSpec(robot.name, "ode_jac_x", None, (("x", x), ("u", u)), (("A", in_xu(A)),), "df/dx of the ODE.")]
 
 
 # ---------------------------------------------------------------------------------------------

@@ -1,0 +1,31 @@
+"""The benches that derive a few functions alone (the zoo's ID, M and FD; pinocchio-cpp's ode_jac_x too)
+must time the very expressions the catalogue generates: same inputs, same values at seeded states, on
+a short arm and on a chain long enough to take the articulated-body algorithm and the analytic
+derivatives."""
+
+from __future__ import annotations
+
+import casadi as ca
+import numpy as np
+import pytest
+
+from derive.bench.large import generic_chain
+from derive.bench.pinocchio_cpp import specs as bench_specs
+from derive.codegen.catalogue import function_specs
+from derive.description.model import parse_models
+from derive.symbolic.model import SXModel
+from util import robots
+
+
+@pytest.mark.parametrize("robot", [robots()["ur5"], parse_models(generic_chain(14))["chain14"]], ids=lambda r: r.name)
+def test_bench_specs_are_the_catalogues(robot):
+    model = SXModel(robot)
+    generated = {spec.short_name: spec for spec in function_specs(model)}
+    rng = np.random.default_rng(4)
+    for spec in bench_specs(model):
+        want = generated[spec.short_name]
+        assert [n for n, _ in spec.inputs] == [n for n, _ in want.inputs], spec.short_name
+        f = ca.Function("f", [x for _, x in spec.inputs], [e for _, e in spec.outputs])
+        g = ca.Function("g", [x for _, x in want.inputs], [e for _, e in want.outputs])
+        args = [rng.uniform(-1, 1, x.numel()) for _, x in spec.inputs]
+        assert np.array_equal(np.array(f(*args)), np.array(g(*args))), spec.short_name
