@@ -78,15 +78,15 @@ def forward_dynamics(ne, tau: ca.SX) -> ca.SX:
     n, qd = len(bodies), sym.qd
     drive = ne.drive
     friction = drive.torque(qd, ca.SX.zeros(n, 1), smooth=True) if drive.active else None
-    S, Q, v, c, IA, pA = [None] * n, [None] * n, [None] * n, [None] * n, [None] * n, [None] * n
+    S, Q, p, v, c, IA, pA = [None] * n, [None] * n, [None] * n, [None] * n, [None] * n, [None] * n, [None] * n
     for i, b in enumerate(bodies):
-        s_w, s_v = ne._motion_axes(i)
+        s_w, s_v = ne.motion_axes(i)
         S[i] = ca.vertcat(s_w, s_v)
-        Q[i] = b.E if ne._rot[i] is None else b.E @ ne._rot[i]  # child axes -> parent axes
+        Q[i], p[i] = ne.placement(i)  # child axes -> parent axes; the child's origin in the parent
         if b.parent >= 0:
             v_p = v[b.parent]
             w = Q[i].T @ v_p[0:3]
-            v[i] = ca.vertcat(w, Q[i].T @ (v_p[3:6] + ca.cross(v_p[0:3], ne._p[i]))) + S[i] * qd[i]
+            v[i] = ca.vertcat(w, Q[i].T @ (v_p[3:6] + ca.cross(v_p[0:3], p[i]))) + S[i] * qd[i]
             c[i] = _cross_motion(v[i], S[i] * qd[i])
         else:  # the world does not move
             v[i], c[i] = S[i] * qd[i], ca.SX.zeros(6, 1)
@@ -104,15 +104,15 @@ def forward_dynamics(ne, tau: ca.SX) -> ca.SX:
         inv_d = 1 / D[i]
         Ia = IA[i].minus_outer(U[i], inv_d)
         pa = pA[i] + Ia.apply(c[i]) + U[i] * (u[i] * inv_d)
-        P = Ia.to_parent(Q[i], ne._p[i])
+        P = Ia.to_parent(Q[i], p[i])
         IA[b.parent] = IA[b.parent] + P
         n_c, f_c = Q[i] @ pa[0:3], Q[i] @ pa[3:6]
-        pA[b.parent] = pA[b.parent] + ca.vertcat(n_c + ca.cross(ne._p[i], f_c), f_c)
+        pA[b.parent] = pA[b.parent] + ca.vertcat(n_c + ca.cross(p[i], f_c), f_c)
     a, qdd = [None] * n, [None] * n
     a_root = ca.vertcat(ca.SX.zeros(3, 1), -ne.gravity)
     for i, b in enumerate(bodies):
         a_p = a[b.parent] if b.parent >= 0 else a_root
-        a_in = ca.vertcat(Q[i].T @ a_p[0:3], Q[i].T @ (a_p[3:6] + ca.cross(a_p[0:3], ne._p[i]))) + c[i]
+        a_in = ca.vertcat(Q[i].T @ a_p[0:3], Q[i].T @ (a_p[3:6] + ca.cross(a_p[0:3], p[i]))) + c[i]
         qdd[i] = (u[i] - ca.dot(U[i], a_in)) / D[i]
         a[i] = a_in + S[i] * qdd[i]
     return ca.vertcat(*qdd)

@@ -118,9 +118,10 @@ def inverse_dynamics_derivatives(ne, qdd: ca.SX, smooth: bool = True,
     a_root = ca.vertcat(-ne.gravity, ca.SX.zeros(3, 1))
     for i, b in enumerate(bodies):
         R_p, o_p = (R[b.parent], o[b.parent]) if b.parent >= 0 else (ca.SX.eye(3), ca.SX.zeros(3, 1))
-        o[i] = o_p + R_p @ ne._p[i]
-        R[i] = R_p @ b.E if ne._rot[i] is None else R_p @ b.E @ ne._rot[i]
-        s_w, s_v = ne._motion_axes(i)
+        Q, p = ne.placement(i)
+        o[i] = o_p + R_p @ p
+        R[i] = R_p @ Q
+        s_w, s_v = ne.motion_axes(i)
         w = R[i] @ s_w
         S[i] = ca.vertcat(R[i] @ s_v + ca.cross(o[i], w), w)
         h = R[i] @ b.h

@@ -25,6 +25,7 @@ from functools import cached_property
 
 import casadi as ca
 
+from derive.symbolic import derivatives
 from derive.symbolic.actuators import Drive
 from derive.symbolic.kinematics import Kinematics, Motion, joint_motions, quaternion_matrix
 from derive.description.robot import Robot
@@ -223,7 +224,12 @@ class NewtonEuler:
         v = self._rot[i] @ v if self._rot[i] is not None else v
         return self.bodies[i].E @ v
 
-    def _motion_axes(self, i: int) -> tuple[ca.SX, ca.SX]:
+    def placement(self, i: int) -> tuple[ca.SX, ca.SX]:
+        """(Q, p) of body i: the rotation from its axes to its parent's (E, then the joint's turn) and
+        its origin in the parent's coordinates (with a prismatic or helical joint's slide)."""
+        return (self.bodies[i].E if self._rot[i] is None else self.bodies[i].E @ self._rot[i]), self._p[i]
+
+    def motion_axes(self, i: int) -> tuple[ca.SX, ca.SX]:
         """(s_w, s_v): joint motion subspace as angular and linear parts, body coordinates."""
         b = self.bodies[i]
         s = ca.SX(ca.DM(list(b.axis)))
@@ -274,7 +280,7 @@ class NewtonEuler:
         w[-1], dw[-1], a[-1] = self.root_motion(qd, qdd, gravity)
         qd, qdd = self.body_rates(qd[nb:]), self.body_rates(qdd[nb:])
         for i, b in enumerate(self.bodies):
-            s_w, s_v = self._motion_axes(i)
+            s_w, s_v = self.motion_axes(i)
             w_p, dw_p, a_p = w[b.parent], dw[b.parent], a[b.parent]
             p = self._p[i]
             w_in = self.to_child(i, w_p)
@@ -316,7 +322,7 @@ class NewtonEuler:
             t_0 = I @ dw_0 + ca.cross(w_0, I @ w_0) + ca.cross(h, a_0)
         for i in reversed(range(n)):
             b = self.bodies[i]
-            s_w, s_v = self._motion_axes(i)
+            s_w, s_v = self.motion_axes(i)
             if self.mimic:  # tau = G^T tau_bodies
                 tau[nb + self.index[i]] += self.scale[i] * (ca.dot(s_w, t[i]) + ca.dot(s_v, f[i]))
             else:
@@ -372,7 +378,7 @@ class NewtonEuler:
             M[3:6, 3:6] = I
         for i in range(n):
             m, h, I = comp[i]
-            s_w, s_v = self._motion_axes(i)
+            s_w, s_v = self.motion_axes(i)
             # spatial momentum of composite i for a unit rate of joint i, about its origin
             f = ca.cross(s_w, h) + m * s_v
             t = I @ s_w + ca.cross(h, s_v)
@@ -383,7 +389,7 @@ class NewtonEuler:
                 t = self.to_parent(j, t) + ca.cross(self._p[j], f_p)
                 f = f_p
                 j = self.bodies[j].parent
-                sj_w, sj_v = self._motion_axes(j)
+                sj_w, sj_v = self.motion_axes(j)
                 M[nb + i, nb + j] = M[nb + j, nb + i] = ca.dot(sj_w, t) + ca.dot(sj_v, f)
             if self.floating:
                 f_p = self.to_parent(j, f)
@@ -417,8 +423,6 @@ class NewtonEuler:
         bases without mimic joints), the cheapest on long chains. Up to :data:`CHRISTOFFEL_MAX_NV`
         coordinates all are built and the one with fewer operations after CSE is kept; above, the
         structural form where it applies, else automatic differentiation."""
-        from derive.symbolic import derivatives  # it imports this module for its types only
-
         self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
         q, qd = self.sym.q, self.sym.qd
         zeros = ca.SX.zeros(self.sym.nv, 1)
