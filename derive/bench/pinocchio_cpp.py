@@ -59,9 +59,10 @@ STATES = 64
 SAMPLE_NS = 1e7
 """Each timed sample loops over the states as many times as it takes to last about this long."""
 
-ERD = {"talos_reduced": "talos_data/robots/talos_reduced.urdf", "romeo": "romeo_description/urdf/romeo.urdf"}
-"""The example-robot-data trees measured: imported whole with a floating base, as ``derive bench zoo`` does,
-but without their URDF friction (Pinocchio's algorithms have none)."""
+ERD = {"talos_reduced": ("talos_data/robots/talos_reduced.urdf", True), "romeo": ("romeo_description/urdf/romeo.urdf", True),
+       "tiago_dual": ("tiago_description/robots/tiago_dual.urdf", False)}
+"""The example-robot-data trees measured, label -> (URDF, floating base): imported whole, as ``derive bench
+zoo`` does, but without their URDF friction (Pinocchio's algorithms have none)."""
 QUICK = ("panda", "ur5", "chain12")
 
 PINOCCHIO_INSTANTIATED = True
@@ -82,14 +83,14 @@ def cases() -> dict[str, Callable[[], Robot]]:
     out: dict[str, Callable[[], Robot]] = {name: (lambda name=name: load_models()[name]) for name in ("panda", "ur5")}
     for n in (12, 20, 40):
         out[f"chain{n}"] = lambda n=n: parse_models(generic_chain(n))[f"chain{n}"]
-    for label, urdf in ERD.items():
-        out[f"{label} (floating)"] = lambda urdf=urdf: _erd_robot(urdf)
+    for label, (urdf, floating) in ERD.items():
+        out[f"{label} (floating)" if floating else label] = lambda urdf=urdf, floating=floating: _erd_robot(urdf, floating)
     return out
 
 
-def _erd_robot(urdf: str) -> Robot:
+def _erd_robot(urdf: str, floating: bool) -> Robot:
     with contextlib.redirect_stderr(io.StringIO()):  # the importer's warnings about placeholder limits
-        name, entry = import_urdf_named("example-robot-data:" + urdf, floating=True, friction=False)
+        name, entry = import_urdf_named("example-robot-data:" + urdf, floating=floating, friction=False)
     return parse_robot(name, entry)
 
 
@@ -505,7 +506,8 @@ def section(results: list[Result], repeats: int, quick: bool, seconds: float) ->
         *table(results), "",
         f"{met} of {4 * len(done)} comparisons meet the {TARGET:g}x target. The chains are `derive bench large`'s "
         "generic chains (random placements, axes cycling z, y, x); talos_reduced and romeo are example-robot-data's "
-        "URDFs imported whole with a floating base (as in the zoo section), without their joints' `<dynamics>` friction "
+        "URDFs imported whole with a floating base (as in the zoo section), tiago_dual whole with its fixed base, all "
+        "without their joints' `<dynamics>` friction "
         "(`--no-friction`: Pinocchio's algorithms have none). Measured on a shared 2-core VM: times "
         f"are indicative, the ratios come from the same run; bench time {seconds:.0f} s."])
 
