@@ -92,10 +92,7 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     qdd_fd = model.forward_dynamics()
     fd_how = (("algorithm", model.forward_dynamics_algorithm),)
     add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
-        "Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by "
-        + {"CRBA, then LDL^T": "an unrolled LDL^T solve.", "CRBA, then LTDL along the tree": "an unrolled LTDL solve "
-           "along the tree.", "articulated-body algorithm": "the articulated-body algorithm."}[model.forward_dynamics_algorithm],
-        fd_how)
+        f"Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by {FD_DOC[model.forward_dynamics_algorithm]}.", fd_how)
     frames = robot.wrench_frames
     if frames:
         k = len(frames)
@@ -148,6 +145,11 @@ fewer operations kept (:func:`cheaper_ode_jacobians`). Above it, the analytic de
 apply (a fixed base without mimic joints: a 20-joint chain's dID/dx 33 028 operations against
 91 738 by reverse AD, tiago_dual's 125 864 against 189 833), else reverse mode; comparing costs a
 CSE of each (a 20-joint chain: 5.7 s per candidate)."""
+
+
+FD_DOC = {"CRBA, then LDL^T": "an unrolled LDL^T solve", "CRBA, then LTDL along the tree": "an unrolled LTDL solve along the tree",
+          "articulated-body algorithm": "the articulated-body algorithm"}
+"""The forward dynamics' docstring words per :attr:`~derive.symbolic.model.SXModel.forward_dynamics_algorithm`."""
 
 
 DID_DX = {"reverse": "reverse-mode automatic differentiation", "forward": "forward-mode automatic differentiation",

@@ -15,13 +15,13 @@ from __future__ import annotations
 
 import casadi as ca
 
+from derive.symbolic import derivatives
 from derive.symbolic.spatial import skew
 
 
-def supported(ne) -> bool:
-    """Whether :func:`forward_dynamics` handles the robot of ``ne`` (a
-    :class:`~derive.symbolic.dynamics.NewtonEuler`): a fixed base, no mimic joints."""
-    return not ne.floating and not ne.mimic
+supported = derivatives.supported
+"""Whether :func:`forward_dynamics` handles the robot of a NewtonEuler: a fixed base, no mimic joints
+(the same robots as the analytic derivatives)."""
 
 
 class _Articulated:
