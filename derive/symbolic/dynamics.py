@@ -426,14 +426,15 @@ class NewtonEuler:
         self.robot.require_fixed_base("the Coriolis matrix from Christoffel symbols")
         q, qd = self.sym.q, self.sym.qd
         zeros = ca.SX.zeros(self.sym.nv, 1)
-        candidates = []  # (C, how), cheapest last on ties
+        small = self.sym.nv <= CHRISTOFFEL_MAX_NV
+        candidates = []  # (C, how); on equal cost the last one wins
         if derivatives.worth_trying(self):
             C = 0.5 * derivatives.inverse_dynamics_derivatives(self, zeros, actuators=False)[1]
             candidates.append((C, "1/2 d(C qd)/dqd by the analytic RNEA derivatives"))
-        if not (self.sym.nv > CHRISTOFFEL_MAX_NV and candidates):
+        if small or not candidates:
             C = 0.5 * ca.jacobian(self.rnea(qd, zeros, gravity=False), qd)
             candidates.append((C, "1/2 d(C qd)/dqd by automatic differentiation of the RNEA"))
-        if self.sym.nv <= CHRISTOFFEL_MAX_NV:
+        if small:
             candidates.append((christoffel_coriolis(self.mass_matrix, q, qd), "Christoffel symbols of M"))
         C, self.coriolis_algorithm = min(reversed(candidates), key=lambda c: graph_cost(c[0], q, qd))
         return C

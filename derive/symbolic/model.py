@@ -84,15 +84,18 @@ class SXModel:
         """qdd(q, qd, tau) by LDL^T of M, never a symbolic inverse, or (Newton-Euler route, where it
         gives fewer operations: :attr:`articulated`) by the articulated-body algorithm. ``extra_torque``
         is added to tau (e.g. the joint torques sum J^T w of external wrenches)."""
+        tau = self.sym.tau if extra_torque is None else self.sym.tau + extra_torque
         if method == "newton-euler" and self.articulated:
-            tau = self.sym.tau if extra_torque is None else self.sym.tau + extra_torque
             return aba.forward_dynamics(self.newton_euler, tau)
+        return self._forward_dynamics_by_ldl(method, tau)
+
+    def _forward_dynamics_by_ldl(self, method: str, tau: ca.SX) -> ca.SX:
+        """M^-1 (tau - bias) of the route ``method`` by LDL^T of M (LTDL along a branched tree)."""
         if method == "newton-euler":
             bias = self.newton_euler.bias
         else:
             r = self.lagrangian
             bias = r.coriolis_matrix @ self.sym.qd + r.gravity_vector
-        tau = self.sym.tau if extra_torque is None else self.sym.tau + extra_torque
         return forward_dynamics(self.mass_matrix(method), bias, tau, self.newton_euler.dof_parents)
 
     @cached_property
@@ -108,7 +111,7 @@ class SXModel:
         if self.sym.nv > ABA_COMPARE_MAX_NV:
             return True
         s = self.sym
-        by_ldl = forward_dynamics(ne.mass_matrix, ne.bias, s.tau, ne.dof_parents)
+        by_ldl = self._forward_dynamics_by_ldl("newton-euler", s.tau)
         return graph_cost(aba.forward_dynamics(ne, s.tau), s.q, s.qd, s.tau) < graph_cost(by_ldl, s.q, s.qd, s.tau)
 
     @property

@@ -59,7 +59,13 @@ def ldlt_solve(M: ca.SX, b: ca.SX) -> ca.SX:
 
 def ltdl_factor(M: ca.SX, parents: tuple[int, ...]) -> dict:
     """M = L^T D L for the mass matrix of a branched tree (Featherstone's LTDL, RBDA section 6.5):
-    {(k, i): entry} for i an ancestor of k (L's, unit diagonal) or k itself (D's)."""
+    {(k, i): entry} for i an ancestor of k (L's, unit diagonal) or k itself (D's); ``parents[k]`` is
+    the index of k's parent coordinate, -1 at the root.
+
+    Eliminating from the leaves up creates no fill-in, so the cost follows the tree, O(n d^2)
+    for depth d, where LDL^T from the root fills the whole matrix (a floating base couples every
+    coordinate to the base's six).
+    """
     n = M.shape[0]
     H = {(k, i): M[k, i] for k in range(n) for i in _ancestors(k, parents, inclusive=True)}
     for k in reversed(range(n)):
@@ -88,18 +94,6 @@ def ltdl_substitute(H: dict, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
         for i in _ancestors(k, parents):
             x[k] = x[k] - H[k, i] * x[i]
     return ca.vertcat(*x)
-
-
-def ltdl_solve(M: ca.SX, b: ca.SX, parents: tuple[int, ...]) -> ca.SX:
-    """Solve M x = b for the mass matrix of a branched tree by M = L^T D L (Featherstone's LTDL,
-    RBDA section 6.5): unit lower-triangular L with L[k, i] != 0 only where i is an ancestor of k
-    (``parents[k]``: the index of k's parent coordinate, -1 at the root).
-
-    Eliminating from the leaves up creates no fill-in, so the cost follows the tree, O(n d^2)
-    for depth d, where LDL^T from the root fills the whole matrix (a floating base couples every
-    coordinate to the base's six).
-    """
-    return ltdl_substitute(ltdl_factor(M, parents), b, parents)
 
 
 def _ancestors(k: int, parents: tuple[int, ...], inclusive: bool = False) -> list[int]:

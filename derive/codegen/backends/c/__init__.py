@@ -185,15 +185,17 @@ thousands of stores (its alias analysis); functions small enough to stay whole k
 def zero_fills(prog: Program, sizes: list[int]) -> tuple[list[tuple[int, int]], Program]:
     """The outputs to fill with zeros by a loop (:data:`ZERO_FILL_MIN`), as (output index, length), and
     the program without their zero stores (a -0.0 keeps its store)."""
+    def zero(a: tuple) -> bool:
+        return a[0] == "c" and a[1] == 0.0 and math.copysign(1.0, a[1]) > 0
+
     zeros: dict[int, int] = {}
     for oi, _, a in prog.results:
-        if a[0] == "c" and a[1] == 0.0 and math.copysign(1.0, a[1]) > 0:
+        if zero(a):
             zeros[oi] = zeros.get(oi, 0) + 1
     filled = {oi for oi, count in zeros.items() if count >= ZERO_FILL_MIN and 2 * count >= sizes[oi]}
     if not filled:
         return [], prog
-    kept = [r for r in prog.results if not (r[0] in filled and r[2][0] == "c" and r[2][1] == 0.0
-                                            and math.copysign(1.0, r[2][1]) > 0)]
+    kept = [r for r in prog.results if not (r[0] in filled and zero(r[2]))]
     return [(oi, sizes[oi]) for oi in sorted(filled)], dataclasses.replace(prog, results=kept)
 
 
