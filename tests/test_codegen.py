@@ -115,6 +115,14 @@ def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
         return ref.regressor(q, qd, qdd)[:, [b["column"] for b in fn["base_parameters"]]]
     if kind == "ode_jac_u":
         return np.vstack([np.zeros((nq, nv)), np.linalg.inv(ref.crba(q))])
+    if kind == "inverse_dynamics_derivatives":  # complex step through the reference RNEA (friction smoothed)
+        h, eye = 1e-30, np.eye(nq + nv)
+
+        def rnea(x):
+            return ref.rnea(x[:nq], x[nq:], qdd.astype(complex), smooth=True)
+
+        x = np.concatenate([q, qd]).astype(complex)
+        return np.array([rnea(x + 1j * h * eye[k]).imag / h for k in range(nq + nv)]).T
     if kind == "ode_jac_x":  # complex step through the reference ABA
         h, x = 1e-30, np.concatenate([q, qd])
         eye = np.eye(nq + nv)

@@ -1,8 +1,9 @@
 """Analytical inverse-dynamics derivatives (derive.symbolic.derivatives) against automatic
 differentiation of the RNEA, at seeded random states: chains with revolute, prismatic and helical
 joints, a branched tree, multi-DOF joints, actuators with friction and parameters; the Coriolis
-matrix from them against the Christoffel symbols of M; and the ODE's A of a chain long enough to
-take the analytic form against the one by reverse automatic differentiation.
+matrix from them against the Christoffel symbols of M; the generated inverse_dynamics_derivatives of
+a chain long enough to take the analytic form against reverse automatic differentiation, and of every
+shipped fixed-base robot against Pinocchio's computeRNEADerivatives.
 """
 
 from __future__ import annotations
@@ -12,11 +13,14 @@ import numpy as np
 import pytest
 
 from derive.bench.large import generic_chain
-from derive.codegen.catalogue import AD_COMPARE_MAX_NV, function_specs
+from derive.codegen.catalogue import AD_COMPARE_MAX_NV, function_specs, template_functions
 from derive.description.model import parse_models
 from derive.symbolic import derivatives, dynamics
 from derive.symbolic.model import SXModel
-from derive.symbolic.ode import inverse_dynamics_jacobian, ode_jacobians
+from derive.symbolic.ode import inverse_dynamics_jacobian
+from pin_model import PinRobot
+from test_codegen import load_python
+from util import assert_close, params, robots, states
 
 TREE = """
 robots:
@@ -89,15 +93,30 @@ def test_long_chain_takes_the_analytic_forms_and_they_are_right():
     assert dynamics.graph_cost(ne.coriolis_matrix, s.q, s.qd) == dynamics.graph_cost(analytic, s.q, s.qd)
     by_ad = 0.5 * ca.jacobian(ne.rnea(s.qd, ca.SX.zeros(n, 1), gravity=False), s.qd)
     assert dynamics.graph_cost(analytic, s.q, s.qd) < dynamics.graph_cost(by_ad, s.q, s.qd)
-    # the ODE's A (generated ode_jac_x) takes the analytic dID/dx: the same matrix as by reverse AD
-    jac = {spec.short_name: spec for spec in function_specs(model)}["ode_jac_x"]
-    x, u = jac.inputs[0][1], jac.inputs[1][1]
-    by_reverse, _ = ode_jacobians(ne.mass_matrix, inverse_dynamics_jacobian(ne, "reverse", model.forward_dynamics()),
-                                  s.q, s.qd, None, ne.dof_parents)
-    f = ca.Function("f", [x, u], [jac.outputs[0][1]])
-    g = ca.Function("g", [s.q, s.qd, s.tau], [by_reverse])
+    # inverse_dynamics_derivatives (which the ODE Jacobians' template calls) takes the analytic dID/dx:
+    # the same matrix as by reverse AD; the ODE Jacobians are template functions, no expressions
+    specs = {spec.short_name: spec for spec in function_specs(model)}
+    assert "ode_jac_x" not in specs and "ode_jac_u" not in specs
+    assert {t.short_name for t in template_functions(model)} >= {"ode_jac_x", "ode_jac_u"}
+    did = specs["inverse_dynamics_derivatives"]
+    assert dict(did.manifest)["algorithm"] == "the analytic RNEA derivatives"
+    f = ca.Function("f", [x for _, x in did.inputs], [did.outputs[0][1]])
+    g = ca.Function("g", [s.q, s.qd, s.qdd], [inverse_dynamics_jacobian(ne, "reverse", s.qdd)])
     rng = np.random.default_rng(11)
     for _ in range(3):
-        q, qd, tau = rng.uniform(-2, 2, n), rng.normal(size=n), rng.normal(size=n)
-        got, want = np.array(f(np.concatenate([q, qd]), tau)), np.array(g(q, qd, tau))
+        q, qd, qdd = rng.uniform(-2, 2, n), rng.normal(size=n), rng.normal(size=n)
+        got, want = np.array(f(q, qd, qdd)), np.array(g(q, qd, qdd))
         assert np.abs(got - want).max() <= 1e-10 * np.abs(want).max()
+
+
+@pytest.mark.parametrize("name", [n for n, r in robots().items() if not r.floating])
+def test_generated_inverse_dynamics_derivatives_match_pinocchio(name):
+    """The generated inverse_dynamics_derivatives (C's arithmetic, in Python) of every shipped fixed-base
+    robot against Pinocchio's computeRNEADerivatives, at seeded states."""
+    robot = robots()[name]
+    py = load_python(name)
+    pin = PinRobot(robot, dict(zip((p.name for p in robot.parameters), params(robot))))
+    for q, qd, qdd in states(robot, seed=5):
+        args = (q, qd, qdd) + ((params(robot),) if robot.parameters else ())
+        assert_close(py.inverse_dynamics_derivatives(*args), pin.rnea_derivatives(q, qd, qdd), 1e-9,
+                     f"{name} inverse_dynamics_derivatives against Pinocchio")

@@ -1,19 +1,23 @@
 """A chain long enough for the large-robot forms, end to end: its forward dynamics by the
-articulated-body algorithm, its Coriolis matrix and ODE Jacobian from the analytic RNEA derivatives,
-split C functions (zero entries by a loop where an output is mostly zeros), generated in C and
-Python, against the numpy reference (complex step for ode_jac_x) and each other, at seeded states."""
+articulated-body algorithm, its Coriolis matrix and inverse-dynamics derivatives from the analytic
+RNEA derivatives, its ODE Jacobians as loops (LTDL factor and solve) around calls of
+forward_dynamics, inverse_dynamics_derivatives and mass_matrix, split C functions, generated in C,
+Python and JAX, against the numpy reference (complex step for the derivatives) and each other at
+seeded states, with a parameter away from its default; a batch of the Python template functions equals
+its states one by one bit for bit."""
 
 from __future__ import annotations
 
 import importlib.util
 import json
+import re
 from pathlib import Path
 
 import numpy as np
 
 from derive.bench.large import generic_chain
 from derive.codegen.backends import backends
-from derive.codegen.catalogue import function_specs
+from derive.codegen.catalogue import function_specs, template_functions
 from derive.codegen.render import render_robot
 from derive.description.model import parse_models
 from derive.reference import NumericRobot
@@ -22,15 +26,19 @@ from test_codegen import CFLAGS, CFunctions, reference
 from util import assert_close, build_library, states
 
 N = 13  # the fewest joints that take the large-robot forms (above 12)
-SHOWN = ("inverse_dynamics", "mass_matrix", "coriolis_matrix", "forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u")
+SHOWN = ("inverse_dynamics", "inverse_dynamics_derivatives", "mass_matrix", "coriolis_matrix", "forward_dynamics",
+         "ode_rhs", "ode_jac_x", "ode_jac_u")
 
 
 def test_large_chain_forms_match_the_reference(tmp_path):
     import ctypes
 
-    robot = parse_models(generic_chain(N))[f"chain{N}"]
-    specs = [s for s in function_specs(SXModel(robot)) if s.short_name in SHOWN]
-    files = render_robot(robot, specs, "0" * 16, backends=[b for b in backends() if b.name in ("c", "python")])
+    robot = parse_models(_with_parameter(generic_chain(N)))[f"chain{N}"]
+    model = SXModel(robot)
+    specs = [s for s in function_specs(model) if s.short_name in SHOWN]
+    templates = [t for t in template_functions(model) if t.short_name in SHOWN]
+    files = render_robot(robot, specs, "0" * 16, templates=templates,
+                         backends=[b for b in backends() if b.name in ("c", "python", "jax")])
     for rel, text in files.items():
         (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / rel).write_text(text)
@@ -38,19 +46,27 @@ def test_large_chain_forms_match_the_reference(tmp_path):
     by_name = {fn["quantity"]: fn for fn in manifest["functions"]}
     assert by_name["forward_dynamics"]["algorithm"] == "articulated-body algorithm"
     assert "analytic RNEA derivatives" in by_name["coriolis_matrix"]["algorithm"]
-    assert "analytic RNEA derivatives" in by_name["ode_jac_x"]["algorithm"]
-    assert by_name["ode_jac_x"]["c"]["form"] == "split"
+    assert "analytic RNEA derivatives" in by_name["inverse_dynamics_derivatives"]["algorithm"]
+    for quantity in ("ode_jac_x", "ode_jac_u"):
+        assert by_name[quantity]["c"]["form"] == "template" and by_name[quantity]["ops"] is None
+        assert "LTDL" in by_name[quantity]["algorithm"]
+    assert by_name["ode_jac_x"]["calls"] == [f"chain{N}_{q}" for q in ("forward_dynamics", "inverse_dynamics_derivatives",
+                                                                         "mass_matrix")]
+    assert {"file": "c/derive_ltdl.h", "source": "templates/c/support/derive_ltdl.h"} in manifest["support"]
     sources = [tmp_path / fn["c"]["source"] for fn in manifest["functions"]]
     lib = build_library(["cc", *CFLAGS, "-O1", "-fPIC", f"-I{tmp_path / 'c'}"], sources, tmp_path / "libchain.so")
     c = CFunctions(lib, manifest, ctypes.c_double)
     spec = importlib.util.spec_from_file_location("large_chain", Path(tmp_path / "python" / f"chain{N}.py"))
     py = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(py)
-    ref = NumericRobot(robot)
+    jx = _load_jax(tmp_path)
+    ref = NumericRobot(robot, {"m5": float(P[0])})
     rng = np.random.default_rng(3)
+    batch = {"x": [], "u": []}
     for q, qd, qdd in states(robot, n=2):
         tau = rng.normal(size=N) * 5
-        a = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "x": np.concatenate([q, qd]), "u": tau, "wrench_frames": []}
+        a = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "x": np.concatenate([q, qd]), "u": tau, "p": P,
+             "wrench_frames": []}
         for fn in manifest["functions"]:
             args = [a[i["name"]] for i in fn["inputs"]]
             want = np.asarray(reference(ref, fn, a), dtype=float).reshape(fn["outputs"][0]["shape"])
@@ -58,3 +74,35 @@ def test_large_chain_forms_match_the_reference(tmp_path):
             assert_close(got_c, want, what=f"C {fn['name']}")
             assert_close(np.asarray(getattr(py, fn["python"]["function"])(*args)).reshape(got_c.shape), got_c, rtol=1e-12,
                          what=f"Python vs C {fn['name']}")
+            if jx is not None:
+                assert_close(np.asarray(getattr(jx, fn["jax"]["function"])(*args)).reshape(got_c.shape), got_c,
+                             rtol=1e-12, what=f"JAX vs C {fn['name']}")
+        batch["x"].append(a["x"])
+        batch["u"].append(a["u"])
+    x, u = np.array(batch["x"]), np.array(batch["u"])
+    for name in ("ode_jac_x", "ode_jac_u"):
+        f = getattr(py, name)
+        together = f(x, u, P)
+        assert together.shape == (2,) + f(x[0], u[0], P).shape
+        for k in range(2):
+            assert np.array_equal(together[k], f(x[k], u[k], P)), name
+        assert np.array_equal(f(x, u[0], P)[1], f(x[1], u[0], P)), name  # batch shapes broadcast
+
+
+P = np.array([1.9])  # the parameter m5, away from its default
+
+
+def _with_parameter(text: str) -> str:
+    """The chain with the mass of link l5 a parameter m5 (default 1.5): the templates pass p on."""
+    text = text.replace("    links:\n", "    parameters: {m5: 1.5}\n    links:\n", 1)
+    return re.sub(r"(name: l5, mass: )[0-9.]+", r"\g<1>m5", text)
+
+
+def _load_jax(folder: Path):
+    """The JAX module, or None where the jax extra is not installed (CI installs it)."""
+    if importlib.util.find_spec("jax") is None:
+        return None
+    spec = importlib.util.spec_from_file_location("large_chain_jax", Path(folder / "jax" / f"chain{N}.py"))
+    jx = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(jx)
+    return jx

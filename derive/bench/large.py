@@ -23,7 +23,8 @@ from derive.description.model import parse_models
 
 SIZES = (6, 12, 20, 40)
 QUICK_SIZES = (6, 12)
-SHOWN = ("inverse_dynamics", "mass_matrix", "forward_dynamics", "coriolis_matrix", "ode_jac_x")
+SHOWN = ("inverse_dynamics", "mass_matrix", "forward_dynamics", "coriolis_matrix", "inverse_dynamics_derivatives",
+         "ode_jac_x")
 
 
 def generic_chain(n: int, seed: int = 0) -> str:
@@ -65,7 +66,7 @@ def bench_large(args) -> str:
             gen = time.perf_counter() - start
             folder = Path(tmp) / robot.name
             manifest = json.loads((folder / "manifest.json").read_text())
-            ops = {f["quantity"]: f["ops"]["total"] for f in manifest["functions"] if f["ops"] and not f["frame"]}
+            ops = {f["quantity"]: f["ops"]["total"] if f["ops"] else "loops" for f in manifest["functions"] if not f["frame"]}
             sources = sorted((folder / "c").glob("*.c"))
             parts = sum((folder / "c" / s.name).read_text().count("DERIVE_NOINLINE void") for s in sources)
             if have_time:
@@ -85,9 +86,11 @@ def bench_large(args) -> str:
              "memory linear in the size; outputs mostly of zeros have those written by a loop. Before the split, gcc -O2",
              "did not finish a 20-dof chain's C within 600 s and took about 10 GB per process (the issue's figures).",
              "Above 12 joints the forward dynamics are the articulated-body algorithm (O(n)), and the Coriolis matrix",
-             "and the ODE's dID/dx come from the analytic RNEA derivatives (O(n) per body plus a dot product per",
-             "ancestor pair) instead of automatic differentiation; manifest.json's `algorithm` says which form each",
-             "function takes. Measured on a shared 2-core machine: times are indicative."]
+             "and inverse_dynamics_derivatives come from the analytic RNEA derivatives (O(n) per body plus a dot",
+             "product per ancestor pair) instead of automatic differentiation, and the ODE Jacobians are loops",
+             "(`loops`: M's LTDL factor and solve) around calls of forward_dynamics, inverse_dynamics_derivatives",
+             "and mass_matrix instead of an unrolled O(n^3) solve; manifest.json's `algorithm` and `c.form` say",
+             "which form each function takes. Measured on a shared 2-core machine: times are indicative."]
     return "\n".join(rows)
 
 

@@ -1,7 +1,8 @@
 """Benchmark ``pinocchio-cpp`` (issue "Large robots"): the generated C per call against Pinocchio's C++.
 
 For each robot, only the four functions compared (inverse_dynamics, mass_matrix, forward_dynamics,
-ode_jac_x) are derived and rendered in C into a temporary folder, then compiled with ``cc -O2
+ode_jac_x; where ode_jac_x is a template, also the inverse_dynamics_derivatives it calls) are derived
+and rendered in C into a temporary folder, then compiled with ``cc -O2
 -std=c99`` (times recorded, each stage capped at :data:`CAP_S`). The robot's Pinocchio model
 (:func:`derive.reference.pinocchio_model.build_model`, the same q and v) is written out as C++
 statements (``addJoint`` with the exact joint model and placement, then the joint's aggregated
@@ -34,10 +35,11 @@ import numpy as np
 from derive.bench.large import generic_chain
 from derive.bench.zoo import id_m_fd_specs
 from derive.codegen.backends.c import BACKEND as C_BACKEND
-from derive.codegen.catalogue import cheaper_ode_jacobians
+from derive.codegen.catalogue import (cheaper_ode_jacobians, inverse_dynamics_derivatives_spec, ode_by_template,
+                                      ode_jacobian_templates)
 from derive.codegen.generate import check_constants, check_mass_matrix
 from derive.codegen.render import render_robot
-from derive.codegen.spec import FunctionSpec
+from derive.codegen.spec import FunctionSpec, TemplateFunction
 from derive.description.model import load_models, parse_models, parse_robot
 from derive.description.robot import Robot
 from derive.description.urdf import example_robot_data_dir, import_urdf_named
@@ -53,7 +55,7 @@ PINOCCHIO = {"inverse_dynamics": "rnea", "mass_matrix": "crba", "forward_dynamic
 TARGET = 2.0
 """The issue's target: the generated C per call within 2x of Pinocchio's C++."""
 CAP_S = 300
-"""Seconds allowed to each robot's generation, and again to compiling its four C files."""
+"""Seconds allowed to each robot's generation, and again to compiling its C files."""
 STATES = 64
 """Seeded random states (q in the joint box, v, qdd, tau normal), cycled through by every timing loop."""
 SAMPLE_NS = 1e7
@@ -94,19 +96,24 @@ def _erd_robot(urdf: str, floating: bool) -> Robot:
     return parse_robot(name, entry)
 
 
-def specs(model: SXModel) -> list[FunctionSpec]:
-    """The catalogue's mass_matrix, inverse_dynamics, forward_dynamics and ode_jac_x specs alone
-    (the expressions of :func:`derive.codegen.catalogue.function_specs`, ode_jac_x by its own choice
-    of algorithm: :func:`derive.codegen.catalogue.cheaper_ode_jacobians`)."""
+def specs(model: SXModel) -> tuple[list[FunctionSpec], list[TemplateFunction]]:
+    """The catalogue's mass_matrix, inverse_dynamics, forward_dynamics and ode_jac_x alone (the
+    expressions of :func:`derive.codegen.catalogue.function_specs`, ode_jac_x by its own choice of
+    form and algorithm: :func:`derive.codegen.catalogue.ode_by_template`, then the template and the
+    inverse_dynamics_derivatives it calls, else :func:`derive.codegen.catalogue.cheaper_ode_jacobians`),
+    as (expression specs, template functions)."""
     robot, s = model.robot, model.sym
     out = id_m_fd_specs(model)
+    if ode_by_template(model):
+        return out + [inverse_dynamics_derivatives_spec(model)], [
+            t for t in ode_jacobian_templates(model) if t.quantity == "ode_jac_x"]
     x, u = ca.SX.sym("x", robot.nq + robot.nv), ca.SX.sym("u", robot.nv)
 
     def in_xu(e: ca.SX) -> ca.SX:
         return ca.substitute(e, ca.vertcat(s.q, s.qd, s.tau), ca.vertcat(x, u))
 
     A, _, _ = cheaper_ode_jacobians(model, model.forward_dynamics(), [("x", x), ("u", u)], in_xu)
-    return out + [FunctionSpec(robot.name, "ode_jac_x", None, (("x", x), ("u", u)), (("A", in_xu(A)),), "df/dx of the ODE.")]
+    return out + [FunctionSpec(robot.name, "ode_jac_x", None, (("x", x), ("u", u)), (("A", in_xu(A)),), "df/dx of the ODE.")], []
 
 
 # ---------------------------------------------------------------------------------------------
@@ -336,7 +343,8 @@ def _generate(robot: Robot, folder: Path) -> None:
     """Derive and render the four functions in C into ``folder`` (run in a child process)."""
     model = SXModel(robot)
     check_mass_matrix(model)
-    files = render_robot(robot, specs(model), "0" * 16, backends=[C_BACKEND],
+    expressions, templates = specs(model)
+    files = render_robot(robot, expressions, "0" * 16, templates=templates, backends=[C_BACKEND],
                          progress=lambda spec, prog: check_constants(robot, spec, prog))
     for name, text in files.items():
         path = folder / name
@@ -371,12 +379,13 @@ def generate_capped(robot: Robot, folder: Path, cap: float) -> float | None:
 
 
 def compile_capped(c_dir: Path, robot: str, cap: float) -> float | None:
-    """Seconds of ``cc -O2 -std=c99 -c`` of the four files, one at a time, or None past ``cap`` seconds in all."""
+    """Seconds of ``cc -O2 -std=c99 -c`` of the generated files (the four functions and, for an ODE Jacobian
+    by template, the inverse_dynamics_derivatives it calls), one at a time, or None past ``cap`` seconds in all."""
     start = time.perf_counter()
-    for function in FUNCTIONS:
+    for source in sorted(c_dir.glob(f"{robot}_*.c")):
         left = cap - (time.perf_counter() - start)
         try:
-            subprocess.run(["cc", "-O2", "-std=c99", "-c", f"{robot}_{function}.c", "-o", f"{robot}_{function}.o"],
+            subprocess.run(["cc", "-O2", "-std=c99", "-c", source.name, "-o", source.with_suffix(".o").name],
                            cwd=c_dir, check=True, timeout=max(left, 1))
         except subprocess.TimeoutExpired:
             return None
@@ -396,7 +405,7 @@ def _relative(a, b) -> float:
 
 
 def run_harness(robot: Robot, c_dir: Path, repeats: int, flags: list[str]) -> Result:
-    """Build and run the timing program of ``robot`` (whose four objects are in ``c_dir``); check its values."""
+    """Build and run the timing program of ``robot`` (whose objects are in ``c_dir``); check its values."""
     import pinocchio as pin
 
     model = build_model(robot)
@@ -405,7 +414,8 @@ def run_harness(robot: Robot, c_dir: Path, repeats: int, flags: list[str]) -> Re
     (c_dir / "harness.cpp").write_text(source)
     xs = states(robot)
     xs.astype(np.float64).tofile(c_dir / "states.bin")
-    subprocess.run(["g++", "harness.cpp", *(f"{robot.name}_{f}.o" for f in FUNCTIONS), "-I.", *flags,
+    objects = sorted(p.name for p in c_dir.glob(f"{robot.name}_*.o"))
+    subprocess.run(["g++", "harness.cpp", *objects, "-I.", *flags,
                     "-lpinocchio_default", "-lm", "-o", "harness"], cwd=c_dir, check=True)
     out = subprocess.run(["./harness", str(len(xs)), str(repeats), "states.bin"], cwd=c_dir, check=True,
                          capture_output=True, text=True).stdout
@@ -487,7 +497,8 @@ def section(results: list[Result], repeats: int, quick: bool, seconds: float) ->
     return "\n".join([
         TITLE, "",
         f"Target (issue \"Large robots\"): the generated C per call within {TARGET:g}x of Pinocchio's C++ for ID, M, FD "
-        "and the ODE Jacobian. Per robot, only inverse_dynamics, mass_matrix, forward_dynamics and ode_jac_x are derived "
+        "and the ODE Jacobian. Per robot, only inverse_dynamics, mass_matrix, forward_dynamics and ode_jac_x (where it "
+        "is a template, loops around calls, also the inverse_dynamics_derivatives it calls) are derived "
         "and rendered in C (generate s: derivation, CSE and C rendering, in a child process) and compiled with "
         "`cc -O2 -std=c99 -c`, one file at a time (compile s)"
         + f"; each stage is capped at {CAP_S} s. Pinocchio {_pin_version()}'s model is built in C++ from the same "

@@ -15,16 +15,17 @@ import numpy as np
 from derive.description.robot import Robot
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
+from derive.symbolic.dynamics import graph_cost
 from derive.symbolic.model import SXModel
 from derive.symbolic import derivatives
-from derive.symbolic.ode import inverse_dynamics_jacobian, ode_jacobians
+from derive.symbolic.ode import AD_MODES, inverse_dynamics_jacobian, ode_jacobians
 from derive.symbolic.regressor import Regressor, body_links
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 
 QUANTITIES = ("fk", "jacobian", "fk_jacobian", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
-              "gravity", "inverse_dynamics", "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext",
-              "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor",
+              "gravity", "inverse_dynamics", "inverse_dynamics_derivatives", "forward_dynamics", "inverse_dynamics_fext",
+              "forward_dynamics_fext", "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor",
               "base_regressor", "bias", "bundle")
 
 IK_FRAMES = ("tcp",)      # the frames that have a generated fk_jacobian
@@ -34,14 +35,22 @@ IK_LIMIT = 1e30           # a missing joint limit: finite in float too, and neve
 POSITION_ROWS = (0, 1, 2)
 
 
+def parameter_input(model: SXModel) -> tuple[tuple, str]:
+    """The input every expression function ends with where the robot has parameters, ``(("p", p),)``
+    (else ``()``), and the sentence its docstring ends with."""
+    s = model.sym
+    if not s.p.numel():
+        return (), ""
+    return (("p", s.p),), f" p ({s.p.numel()}): parameters {', '.join(s.parameter_names)}."
+
+
 def function_specs(model: SXModel) -> list[FunctionSpec]:
     """Every expression function generated for a robot, in a fixed order."""
     robot: Robot = model.robot
     s = model.sym
     n, nq = robot.nv, robot.nq
     wb = model.whole_body
-    extra = (("p", s.p),) if s.p.numel() else ()
-    pdoc = f" p ({s.p.numel()}): parameters {', '.join(s.parameter_names)}." if extra else ""
+    extra, pdoc = parameter_input(model)
     q, qd, qdd, tau = ("q", s.q), ("qd", s.qd), ("qdd", s.qdd), ("tau", s.tau)
     ne = model.newton_euler
     specs: list[FunctionSpec] = []
@@ -89,6 +98,7 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
         "so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
         "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.", (("algorithm", "RNEA"),))
+    specs.append(inverse_dynamics_derivatives_spec(model))
     qdd_fd = model.forward_dynamics()
     fd_how = (("algorithm", model.forward_dynamics_algorithm),)
     add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
@@ -127,13 +137,12 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     else:
         ode_doc = f"First-order ODE x' = f(x, u) with x = [q; qd] ({2 * n}), u = tau ({n}): f = [qd; qdd]."
     add("ode_rhs", None, [("x", x), ("u", u)], [("xdot", in_xu(f))], ode_doc, fd_how)
-    A, B, mode = cheaper_ode_jacobians(model, qdd_fd, [("x", x), ("u", u), *extra], in_xu)
-    add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))],
-        f"df/dx ({nq + n}x{nq + n}, row-major) of the ODE x' = f(x, u): the linearisation's A.",
-        (("algorithm", f"-M^-1 dID/dx at qdd = FD, dID/dx by {DID_DX[mode]}"),))
-    add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))],
-        f"df/du ({nq + n}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B.",
-        (("algorithm", "M^-1 by " + ("LDL^T" if ne.dof_parents is None else "LTDL along the tree")),))
+    if not ode_by_template(model):  # else template_functions: loops around calls
+        A, B, mode = cheaper_ode_jacobians(model, qdd_fd, [("x", x), ("u", u), *extra], in_xu)
+        add("ode_jac_x", None, [("x", x), ("u", u)], [("A", in_xu(A))], ODE_JAC_DOC["ode_jac_x"].format(nx=nq + n),
+            (("algorithm", f"-M^-1 dID/dx at qdd = FD, dID/dx by {DID_DX[mode]}"),))
+        add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))], ODE_JAC_DOC["ode_jac_u"].format(nx=nq + n, n=n),
+            (("algorithm", "M^-1 by " + ("LDL^T" if ne.dof_parents is None else "LTDL along the tree")),))
     regressor_specs(model, add)
     bundle_specs(model, specs, add)
     return specs
@@ -145,6 +154,51 @@ fewer operations kept (:func:`cheaper_ode_jacobians`). Above it, the analytic de
 apply (a fixed base without mimic joints: a 20-joint chain's dID/dx 33 028 operations against
 91 738 by reverse AD, tiago_dual's 125 864 against 189 833), else reverse mode; comparing costs a
 CSE of each (a 20-joint chain: 5.7 s per candidate)."""
+
+
+ODE_JAC_DOC = {"ode_jac_x": "df/dx ({nx}x{nx}, row-major) of the ODE x' = f(x, u): the linearisation's A.",
+               "ode_jac_u": "df/du ({nx}x{n}, row-major) of the ODE x' = f(x, u): the linearisation's B."}
+"""The ODE Jacobians' docstrings, the same whichever form computes them."""
+
+
+def ode_by_template(model: SXModel) -> bool:
+    """Whether ode_jac_x and ode_jac_u are template functions (:func:`ode_jacobian_templates`): above
+    :data:`AD_COMPARE_MAX_NV` velocities where the analytic derivatives apply (a fixed base without mimic
+    joints). Their closed forms hold the whole LDL^T solve of 2 nv right-hand sides unrolled, O(nv^3)
+    straight-line operations (a 40-joint chain's A: 453 095, 56 s of gcc -O2; tiago_dual's 482 079, 74 s),
+    where the template calls forward_dynamics, inverse_dynamics_derivatives and mass_matrix and factors
+    and solves in loops."""
+    return model.robot.nv > AD_COMPARE_MAX_NV and derivatives.supported(model.newton_euler)
+
+
+def inverse_dynamics_derivatives_spec(model: SXModel) -> FunctionSpec:
+    """``inverse_dynamics_derivatives(q, qd, qdd)``: dID/dx (:func:`inverse_dynamics_derivatives`)."""
+    robot, s = model.robot, model.sym
+    n, nq = robot.nv, robot.nq
+    dID, mode = inverse_dynamics_derivatives(model)
+    extra, pdoc = parameter_input(model)
+    doc = (f"Partial derivatives of the inverse dynamics dtau = [dtau/dq, dtau/dqd] ({n}x{nq + n}, row-major) at "
+           "(q, qd, qdd)" + (" with respect to the coordinates q (the base quaternion's four included)" if robot.floating else "")
+           + ("; the actuators' Coulomb friction differentiated as its smoothing tanh(qd / eps), as forward_dynamics "
+              "and the ODE use it" if robot.actuated else "") + " (Pinocchio's computeRNEADerivatives).")
+    return FunctionSpec(robot.name, "inverse_dynamics_derivatives", None,
+                        (("q", s.q), ("qd", s.qd), ("qdd", s.qdd)) + extra, (("dtau", dID),), doc + pdoc,
+                        (("algorithm", DID_DX[mode]),))
+
+
+def inverse_dynamics_derivatives(model: SXModel) -> tuple[ca.SX, str]:
+    """dID/dx at the symbol qdd and how it was computed (a mode of
+    :func:`~derive.symbolic.ode.inverse_dynamics_jacobian`): up to :data:`AD_COMPARE_MAX_NV` velocities
+    the one of fewer instructions after CSE of reverse AD, forward AD and (from
+    :data:`~derive.symbolic.derivatives.WORTH_FROM_NV`) the analytic form; above it, the analytic form
+    where it applies, else reverse AD."""
+    ne, s = model.newton_euler, model.sym
+    analytic = derivatives.worth_trying(ne)
+    if model.robot.nv > AD_COMPARE_MAX_NV:
+        mode = "analytic" if analytic else "reverse"
+        return inverse_dynamics_jacobian(ne, mode, s.qdd), mode
+    candidates = [(inverse_dynamics_jacobian(ne, mode, s.qdd), mode) for mode in (*AD_MODES, *(("analytic",) if analytic else ()))]
+    return min(candidates, key=lambda c: graph_cost(c[0], s.q, s.qd, s.qdd))  # ties: the first
 
 
 FD_DOC = {"CRBA, then LDL^T": "an unrolled LDL^T solve", "CRBA, then LTDL along the tree": "an unrolled LTDL solve along the tree",
@@ -243,11 +297,17 @@ def regressor_specs(model: SXModel, add) -> None:
         manifest=(("rank", base.rank), ("base_parameters", base.manifest(pi))))
 
 
+def template_parameter(model: SXModel) -> tuple:
+    """A template function's last input where the robot has parameters, ``(("p", (np, 1)),)``, else ``()``."""
+    np_ = model.sym.p.numel()
+    return (("p", (np_, 1)),) if np_ else ()
+
+
 def template_functions(model: SXModel) -> list[TemplateFunction]:
     """Functions built from templates on top of the expression functions, in a fixed order."""
     robot = model.robot
     n = robot.nq + robot.nv
-    extra = (("p", (model.sym.p.numel(), 1)),) if model.sym.p.numel() else ()
+    extra = template_parameter(model)
     rk4 = TemplateFunction(
         robot.name, "rk4_step", None,
         (("x", (n, 1)), ("u", (robot.nv, 1)), ("dt", (1, 1))) + extra, (("x_next", (n, 1)),),
@@ -257,7 +317,36 @@ def template_functions(model: SXModel) -> list[TemplateFunction]:
             if robot.floating else "."),
         "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n), ("quaternion", 3 if robot.floating else -1)))
     manipulability = [t for f in robot.frames if (t := manipulability_function(model, f.name))]
-    return [rk4] + ik_functions(model) + manipulability
+    return ode_jacobian_templates(model) + [rk4] + ik_functions(model) + manipulability
+
+
+def ode_jacobian_templates(model: SXModel) -> list[TemplateFunction]:
+    """``ode_jac_x`` and ``ode_jac_u`` as loops around calls, where :func:`ode_by_template`: A = [[0, I],
+    -M^-1 dID/dx] at qdd = forward_dynamics(q, qd, u) with dID/dx from inverse_dynamics_derivatives, and
+    B = [[0], M^-1]; M from mass_matrix is factored M = L^T D L along the tree (Featherstone's LTDL, no
+    fill-in; ``parents`` the coordinates' parents) and the right-hand sides solved row by row. The
+    backends' ``ltdl`` support holds the factor and the solve; both write only into the output, the
+    rows of A and B that are zeros and ones serving as the factor's scratch until they are filled."""
+    if not ode_by_template(model):
+        return []
+    robot = model.robot
+    n = robot.nv
+    parents = model.newton_euler.dof_parents or tuple(range(-1, n - 1))
+    extra = template_parameter(model)
+    inputs = (("x", (2 * n, 1)), ("u", (n, 1))) + extra
+    context = (("n", n), ("parents", parents))
+    solve = "M = L^T D L along the tree (LTDL) and its solve in loops"
+    return [
+        TemplateFunction(robot.name, "ode_jac_x", None, inputs, (("A", (2 * n, 2 * n)),),
+                         ODE_JAC_DOC["ode_jac_x"].format(nx=2 * n), "ode_jac_x",
+                         calls=(("fd", "forward_dynamics"), ("did", "inverse_dynamics_derivatives"), ("mass", "mass_matrix")),
+                         context=context, support=("ltdl",),
+                         manifest=(("algorithm", "-M^-1 dID/dx at qdd = FD: calls forward_dynamics, "
+                                                 f"inverse_dynamics_derivatives and mass_matrix, then {solve}"),)),
+        TemplateFunction(robot.name, "ode_jac_u", None, inputs, (("B", (2 * n, n)),),
+                         ODE_JAC_DOC["ode_jac_u"].format(nx=2 * n, n=n), "ode_jac_u",
+                         calls=(("mass", "mass_matrix"),), context=context, support=("ltdl",),
+                         manifest=(("algorithm", f"M^-1: calls mass_matrix, then {solve}"),))]
 
 
 def ik_functions(model: SXModel) -> list[TemplateFunction]:
@@ -266,8 +355,8 @@ def ik_functions(model: SXModel) -> list[TemplateFunction]:
     no allocation. The algorithm is each backend's fixed ``ik`` support file."""
     robot = model.robot
     lo, hi, slo, shi = joint_ranges(robot)
-    n, np_ = model.sym.nv, model.sym.p.numel()
-    extra = (("p", (np_, 1)),) if np_ else ()
+    n = model.sym.nv
+    extra = template_parameter(model)
     out = []
     for frame in IK_FRAMES if not robot.floating else ():  # IK moves joints; a floating base has no limits to keep
         if frame not in {f.name for f in robot.frames} or not model.kinematics.ancestors[frame]:
@@ -299,13 +388,12 @@ def manipulability_function(model: SXModel, frame: str) -> TemplateFunction | No
         return None
     k = len(rows)
     row_names = ",".join("xyz"[r] for r in rows)
-    extra = (("p", (model.sym.p.numel(), 1)),) if model.sym.p.numel() else ()
     doc = (f"Manipulability of frame '{frame}' (lecture eq. 30) for its position rows with motion "
            f"({row_names}): mu = [mu1, mu2, mu3], mu1 = sqrt(lmax/lmin), mu2 = lmax/lmin, "
            f"mu3 = sqrt(det(J J^T)) (Yoshikawa; = sqrt(lmax lmin) for k = 2), l_i the eigenvalues of J J^T "
            f"with J the {k}x{robot.nv} task rows of jacobian_{frame}; mu1 = mu2 = inf at a singularity.")
     return TemplateFunction(
-        robot.name, "manipulability", frame, (("q", (robot.nq, 1)),) + extra, (("mu", (3, 1)),), doc,
+        robot.name, "manipulability", frame, (("q", (robot.nq, 1)),) + template_parameter(model), (("mu", (3, 1)),), doc,
         "manipulability", calls=(("jacobian", f"jacobian_{frame}"),),
         context=(("k", k), ("nv", robot.nv), ("rows", rows),
                  ("jacobian_size", 6 * robot.nv), ("task_size", k * robot.nv)),  # work buffers (reals)

@@ -210,6 +210,12 @@ class PinRobot:
             return np.array(pin.rnea(self.model, self.data, q, v, a, self.fext(q, wrenches)))
         return np.array(pin.rnea(self.model, self.data, q, v, a))
 
+    def rnea_derivatives(self, q, v, a) -> np.ndarray:
+        """[dtau/dq, dtau/dv] (nv x 2 nv) by computeRNEADerivatives: dq in the tangent space, which is
+        the coordinates' own derivative where nq = nv (no free flyer, no continuous joints)."""
+        dq, dv, _ = pin.computeRNEADerivatives(self.model, self.data, q, v, a)
+        return np.hstack([np.array(dq), np.array(dv)])
+
     def aba(self, q, v, tau, wrenches=None) -> np.ndarray:
         """Pinocchio's ABA; with mimic joints (which it refuses) M^-1 (tau - rnea(q, v, 0, fext))."""
         if self.mimic:

@@ -20,6 +20,7 @@
 #include "cartpole_gravity.h"
 #include "cartpole_bias.h"
 #include "cartpole_inverse_dynamics.h"
+#include "cartpole_inverse_dynamics_derivatives.h"
 #include "cartpole_forward_dynamics.h"
 #include "cartpole_inverse_dynamics_fext.h"
 #include "cartpole_forward_dynamics_fext.h"

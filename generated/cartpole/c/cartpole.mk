@@ -38,6 +38,7 @@ CARTPOLE_DERIVE_SRC := $(addprefix $(CARTPOLE_DERIVE_DIR)/,\
   cartpole_gravity.c \
   cartpole_ik_tcp.c \
   cartpole_inverse_dynamics.c \
+  cartpole_inverse_dynamics_derivatives.c \
   cartpole_inverse_dynamics_fext.c \
   cartpole_jacobian_tcp.c \
   cartpole_jdot_qd_tcp.c \

@@ -821,6 +821,104 @@ def _inverse_dynamics_chunk(x, t, s, y):
     add(t0, t1, tau_1)
 
 
+def inverse_dynamics_derivatives(q, qd, qdd):
+    """Partial derivatives of the inverse dynamics dtau = [dtau/dq, dtau/dqd] (2x4, row-major) at (q, qd, qdd) (Pinocchio's computeRNEADerivatives).
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    out dtau [2x4]
+    27 ops: 16 mul, 9 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd), 7, ((2, 4),), fixed=_inverse_dynamics_derivatives_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = sin(q[1])
+    t1 = t0 * qdd[0]
+    t2 = cos(q[1])
+    t3 = 9.81 * t2
+    t1 = t1 + t3
+    t3 = 0.1 * t1
+    t4 = (-0.05) * qd[1]
+    t4 = qd[1] * t4
+    t4 = t3 - t4
+    t4 = t4 * t2
+    t5 = qdd[0] * t2
+    t6 = 9.81 * t0
+    t5 = t5 - t6
+    t5 = 0.1 * t5
+    t6 = t0 * t5
+    t4 = t4 + t6
+    t6 = (-0.05) * qdd[1]
+    t5 = t5 + t6
+    t5 = t5 * t0
+    t2 = t2 * t3
+    t2 = t5 + t2
+    t2 = t4 - t2
+    t1 = (-0.05) * t1
+    t1 = -t1
+    t3 = (-0.1) * qd[1]
+    t0 = t0 * t3
+    t0 = -t0
+    _dtau = (0.0, t2, 0.0, t0,
+             0.0, t1, 0.0, 0.0)
+    return np.array(_dtau).reshape(2, 4)
+
+
+_inverse_dynamics_derivatives_constants = _constants(
+    9.81, 0.1, -0.05, -0.1)
+
+
+_inverse_dynamics_derivatives_fixed = (
+    {0: 0.0, 2: 0.0, 4: 0.0, 6: 0.0, 7: 0.0},
+)
+"""inverse_dynamics_derivatives's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _inverse_dynamics_derivatives_chunk(x, t, s, y):
+    """inverse_dynamics_derivatives on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1 = x
+    t0, t1, t2, t3, t4, t5, t6 = t
+    dtau_1, dtau_3, dtau_5 = y
+    k0, k1, k2, k3 = _inverse_dynamics_derivatives_constants
+    sin(q_1, t0)
+    multiply(t0, qdd_0, t1)
+    cos(q_1, t2)
+    multiply(k0, t2, t3)
+    add(t1, t3, t1)
+    multiply(k1, t1, t3)
+    multiply(k2, qd_1, t4)
+    multiply(qd_1, t4, t4)
+    subtract(t3, t4, t4)
+    multiply(t4, t2, t4)
+    multiply(qdd_0, t2, t5)
+    multiply(k0, t0, t6)
+    subtract(t5, t6, t5)
+    multiply(k1, t5, t5)
+    multiply(t0, t5, t6)
+    add(t4, t6, t4)
+    multiply(k2, qdd_1, t6)
+    add(t5, t6, t5)
+    multiply(t5, t0, t5)
+    multiply(t2, t3, t2)
+    add(t5, t2, t5)
+    subtract(t4, t5, dtau_1)
+    multiply(k2, t1, t1)
+    negative(t1, dtau_5)
+    multiply(k3, qd_1, t1)
+    multiply(t0, t1, t0)
+    negative(t0, dtau_3)
+
+
 def forward_dynamics(q, qd, tau):
     """Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve.
 

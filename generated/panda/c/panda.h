@@ -36,6 +36,7 @@
 #include "panda_gravity.h"
 #include "panda_bias.h"
 #include "panda_inverse_dynamics.h"
+#include "panda_inverse_dynamics_derivatives.h"
 #include "panda_forward_dynamics.h"
 #include "panda_inverse_dynamics_fext.h"
 #include "panda_forward_dynamics_fext.h"

@@ -46,6 +46,7 @@ PANDA_DERIVE_SRC := $(addprefix $(PANDA_DERIVE_DIR)/,\
   panda_gravity.c \
   panda_ik_tcp.c \
   panda_inverse_dynamics.c \
+  panda_inverse_dynamics_derivatives.c \
   panda_inverse_dynamics_fext.c \
   panda_jacobian_panda_hand.c \
   panda_jacobian_panda_leftfinger.c \

@@ -26,6 +26,7 @@
 #include "pendulum_gravity.h"
 #include "pendulum_bias.h"
 #include "pendulum_inverse_dynamics.h"
+#include "pendulum_inverse_dynamics_derivatives.h"
 #include "pendulum_forward_dynamics.h"
 #include "pendulum_inverse_dynamics_fext.h"
 #include "pendulum_forward_dynamics_fext.h"

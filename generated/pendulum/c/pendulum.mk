@@ -38,6 +38,7 @@ PENDULUM_DERIVE_SRC := $(addprefix $(PENDULUM_DERIVE_DIR)/,\
   pendulum_gravity.c \
   pendulum_ik_tcp.c \
   pendulum_inverse_dynamics.c \
+  pendulum_inverse_dynamics_derivatives.c \
   pendulum_inverse_dynamics_fext.c \
   pendulum_jacobian_tcp.c \
   pendulum_jdot_qd_tcp.c \

@@ -295,6 +295,32 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     return tau
 
 
+def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
+    """Partial derivatives of the inverse dynamics dtau = [dtau/dq, dtau/dqd] (1x2, row-major) at (q, qd, qdd) (Pinocchio's computeRNEADerivatives). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out dtau [1x2]
+    7 ops: 4 mul, 1 add, 1 div, 1 trig
+    """
+    q = _input(q, 1, "q")
+    qd = _input(qd, 1, "qd")
+    qdd = _input(qdd, 1, "qdd")
+    p = _input(p, 6, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = p[..., 4] / 2.0
+    t2 = p[..., 0] * t1
+    t3 = p[..., 1] * p[..., 4]
+    t4 = t2 + t3
+    t5 = p[..., 5] * t4
+    t6 = t0 * t5
+    dtau = _assemble([t6, 0.0], batch).reshape(batch + (1, 2))
+    return dtau
+
+
 def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     """Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (6): parameters m_r, m_s, I_r, I_s, l, g.
 

@@ -787,6 +787,67 @@ def _inverse_dynamics_chunk(x, t, s, y):
     add(t0, t1, tau_0)
 
 
+def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
+    """Partial derivatives of the inverse dynamics dtau = [dtau/dq, dtau/dqd] (1x2, row-major) at (q, qd, qdd) (Pinocchio's computeRNEADerivatives). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  qd [1]
+    in  qdd [1]
+    in  p [6]
+    out dtau [1x2]
+    7 ops: 4 mul, 1 add, 1 div, 1 trig
+    """
+    q = _array(q, 1, "q")
+    qd = _array(qd, 1, "qd")
+    qdd = _array(qdd, 1, "qdd")
+    p = _array(p, 6, "p")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd, p), 1, ((1, 2),), fixed=_inverse_dynamics_derivatives_fixed, pure=2)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos = math.cos
+    t0 = cos(q[0])
+    t1 = p[4] / 2.0
+    t1 = p[0] * t1
+    t2 = p[1] * p[4]
+    t1 = t1 + t2
+    t1 = p[5] * t1
+    t0 = t0 * t1
+    _dtau = (t0, 0.0)
+    return np.array(_dtau).reshape(1, 2)
+
+
+_inverse_dynamics_derivatives_constants = _constants(
+    2.0)
+
+
+_inverse_dynamics_derivatives_fixed = (
+    {1: 0.0},
+)
+"""inverse_dynamics_derivatives's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _inverse_dynamics_derivatives_chunk(x, t, s, y):
+    """inverse_dynamics_derivatives on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply = np.add, np.cos, np.divide, np.multiply
+    q_0, qd_0, qdd_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    s0, s1 = s
+    dtau_0, = y
+    k0, = _inverse_dynamics_derivatives_constants
+    cos(q_0, t0)
+    divide(p_4, k0, s0)
+    multiply(p_0, s0, s0)
+    multiply(p_1, p_4, s1)
+    add(s0, s1, s0)
+    multiply(p_5, s0, s0)
+    multiply(t0, s0, dtau_0)
+
+
 def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     """Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (6): parameters m_r, m_s, I_r, I_s, l, g.
 

@@ -25,6 +25,7 @@
 #include "planar_2r_gravity.h"
 #include "planar_2r_bias.h"
 #include "planar_2r_inverse_dynamics.h"
+#include "planar_2r_inverse_dynamics_derivatives.h"
 #include "planar_2r_forward_dynamics.h"
 #include "planar_2r_inverse_dynamics_fext.h"
 #include "planar_2r_forward_dynamics_fext.h"

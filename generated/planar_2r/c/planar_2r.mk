@@ -38,6 +38,7 @@ PLANAR_2R_DERIVE_SRC := $(addprefix $(PLANAR_2R_DERIVE_DIR)/,\
   planar_2r_gravity.c \
   planar_2r_ik_tcp.c \
   planar_2r_inverse_dynamics.c \
+  planar_2r_inverse_dynamics_derivatives.c \
   planar_2r_inverse_dynamics_fext.c \
   planar_2r_jacobian_tcp.c \
   planar_2r_jdot_qd_tcp.c \

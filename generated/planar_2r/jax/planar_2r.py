@@ -506,6 +506,101 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     return tau
 
 
+def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
+    """Partial derivatives of the inverse dynamics dtau = [dtau/dq, dtau/dqd] (2x4, row-major) at (q, qd, qdd) (Pinocchio's computeRNEADerivatives). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out dtau [2x4]
+    76 ops: 43 mul, 27 add, 2 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    qd = _input(qd, 2, "qd")
+    qdd = _input(qdd, 2, "qdd")
+    p = _input(p, 5, "p")
+    batch = _batch(q, qd, qdd, p)
+    t0 = jnp.sin(q[..., 1])
+    t1 = jnp.cos(q[..., 1])
+    t2 = jnp.cos(q[..., 0])
+    t3 = p[..., 4] * t2
+    t4 = t1 * t3
+    t5 = jnp.sin(q[..., 0])
+    t6 = p[..., 4] * t5
+    t7 = t0 * t6
+    t8 = t4 - t7
+    t9 = p[..., 3] * t8
+    t10 = t0 * t9
+    t11 = t1 * t6
+    t12 = t0 * t3
+    t13 = t11 + t12
+    t14 = p[..., 3] * t13
+    t15 = t1 * t14
+    t16 = t10 - t15
+    t17 = p[..., 0] * t16
+    t18 = p[..., 0] / 2.0
+    t19 = p[..., 0] - t18
+    t20 = p[..., 2] * t19
+    t21 = t20 * t6
+    t22 = p[..., 1] / 2.0
+    t23 = p[..., 1] - t22
+    t24 = p[..., 3] * t23
+    t25 = t24 * t13
+    t26 = t21 + t25
+    t27 = t17 - t26
+    t28 = -t25
+    t29 = qd[..., 0] * p[..., 0]
+    t30 = qd[..., 0] * t29
+    t31 = t6 - t30
+    t32 = t1 * t31
+    t33 = qdd[..., 0] * p[..., 0]
+    t34 = t3 + t33
+    t35 = t0 * t34
+    t36 = t32 + t35
+    t37 = p[..., 3] * t36
+    t38 = qd[..., 0] + qd[..., 1]
+    t39 = t38 * t24
+    t40 = t38 * t39
+    t41 = t37 - t40
+    t42 = t41 * t1
+    t43 = t34 * t1
+    t44 = t31 * t0
+    t45 = t43 - t44
+    t46 = p[..., 3] * t45
+    t47 = t0 * t46
+    t48 = t42 + t47
+    t49 = qdd[..., 0] + qdd[..., 1]
+    t50 = t49 * t24
+    t51 = t46 + t50
+    t52 = t51 * t0
+    t53 = t1 * t37
+    t54 = t52 + t53
+    t55 = t48 - t54
+    t56 = p[..., 0] * t55
+    t57 = t24 * t36
+    t58 = t56 - t57
+    t59 = -t57
+    t60 = t29 + t29
+    t61 = t0 * t60
+    t62 = t24 * t61
+    t63 = p[..., 3] * t61
+    t64 = t1 * t63
+    t65 = t1 * t60
+    t66 = p[..., 3] * t65
+    t67 = t39 + t39
+    t68 = t66 + t67
+    t69 = t0 * t68
+    t70 = t64 - t69
+    t71 = p[..., 0] * t70
+    t72 = t62 + t71
+    t73 = t0 * t67
+    t74 = p[..., 0] * t73
+    t75 = -t74
+    dtau = _assemble([t27, t58, t72, t75, t28, t59, t62, 0.0], batch).reshape(batch + (2, 4))
+    return dtau
+
+
 def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     """Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (5): parameters L1, L2, m1, m2, g.
 

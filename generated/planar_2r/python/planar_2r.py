@@ -1213,6 +1213,206 @@ def _inverse_dynamics_chunk(x, t, s, y):
     add(t0, t6, tau_0)
 
 
+def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
+    """Partial derivatives of the inverse dynamics dtau = [dtau/dq, dtau/dqd] (2x4, row-major) at (q, qd, qdd) (Pinocchio's computeRNEADerivatives). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  qd [2]
+    in  qdd [2]
+    in  p [5]
+    out dtau [2x4]
+    76 ops: 43 mul, 27 add, 2 div, 4 trig
+    """
+    q = _array(q, 2, "q")
+    qd = _array(qd, 2, "qd")
+    qdd = _array(qdd, 2, "qdd")
+    p = _array(p, 5, "p")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd, p), 9, ((2, 4),), fixed=_inverse_dynamics_derivatives_fixed, pure=1)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = sin(q[1])
+    t1 = cos(q[1])
+    t2 = cos(q[0])
+    t2 = p[4] * t2
+    t3 = t1 * t2
+    t4 = sin(q[0])
+    t4 = p[4] * t4
+    t5 = t0 * t4
+    t3 = t3 - t5
+    t3 = p[3] * t3
+    t3 = t0 * t3
+    t5 = t1 * t4
+    t6 = t0 * t2
+    t5 = t5 + t6
+    t6 = p[3] * t5
+    t6 = t1 * t6
+    t3 = t3 - t6
+    t3 = p[0] * t3
+    t6 = p[0] / 2.0
+    t6 = p[0] - t6
+    t6 = p[2] * t6
+    t6 = t6 * t4
+    t7 = p[1] / 2.0
+    t7 = p[1] - t7
+    t7 = p[3] * t7
+    t5 = t7 * t5
+    t6 = t6 + t5
+    t3 = t3 - t6
+    t5 = -t5
+    t6 = qd[0] * p[0]
+    t8 = qd[0] * t6
+    t4 = t4 - t8
+    t8 = t1 * t4
+    t9 = qdd[0] * p[0]
+    t2 = t2 + t9
+    t9 = t0 * t2
+    t8 = t8 + t9
+    t9 = p[3] * t8
+    t10 = qd[0] + qd[1]
+    t11 = t10 * t7
+    t10 = t10 * t11
+    t10 = t9 - t10
+    t10 = t10 * t1
+    t2 = t2 * t1
+    t4 = t4 * t0
+    t2 = t2 - t4
+    t2 = p[3] * t2
+    t4 = t0 * t2
+    t4 = t10 + t4
+    t10 = qdd[0] + qdd[1]
+    t10 = t10 * t7
+    t2 = t2 + t10
+    t2 = t2 * t0
+    t9 = t1 * t9
+    t2 = t2 + t9
+    t2 = t4 - t2
+    t2 = p[0] * t2
+    t4 = t7 * t8
+    t2 = t2 - t4
+    t4 = -t4
+    t6 = t6 + t6
+    t8 = t0 * t6
+    t7 = t7 * t8
+    t8 = p[3] * t8
+    t8 = t1 * t8
+    t1 = t1 * t6
+    t1 = p[3] * t1
+    t6 = t11 + t11
+    t1 = t1 + t6
+    t1 = t0 * t1
+    t1 = t8 - t1
+    t1 = p[0] * t1
+    t1 = t7 + t1
+    t0 = t0 * t6
+    t0 = p[0] * t0
+    t0 = -t0
+    _dtau = (t3, t2, t1, t0,
+             t5, t4, t7, 0.0)
+    return np.array(_dtau).reshape(2, 4)
+
+
+_inverse_dynamics_derivatives_constants = _constants(
+    2.0)
+
+
+_inverse_dynamics_derivatives_fixed = (
+    {7: 0.0},
+)
+"""inverse_dynamics_derivatives's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _inverse_dynamics_derivatives_chunk(x, t, s, y):
+    """inverse_dynamics_derivatives on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, divide, multiply, negative, sin, subtract = np.add, np.cos, np.divide, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, qd_0, qd_1, qdd_0, qdd_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8 = t
+    s0, = s
+    dtau_0, dtau_1, dtau_2, dtau_3, dtau_4, dtau_5, dtau_6 = y
+    k0, = _inverse_dynamics_derivatives_constants
+    sin(q_1, t0)
+    cos(q_1, t1)
+    cos(q_0, t2)
+    multiply(p_4, t2, t2)
+    multiply(t1, t2, t3)
+    sin(q_0, t4)
+    multiply(p_4, t4, t4)
+    multiply(t0, t4, t5)
+    subtract(t3, t5, t3)
+    multiply(p_3, t3, t3)
+    multiply(t0, t3, t3)
+    multiply(t1, t4, t5)
+    multiply(t0, t2, t6)
+    add(t5, t6, t5)
+    multiply(p_3, t5, t6)
+    multiply(t1, t6, t6)
+    subtract(t3, t6, t3)
+    multiply(p_0, t3, t3)
+    divide(p_0, k0, s0)
+    subtract(p_0, s0, s0)
+    multiply(p_2, s0, s0)
+    multiply(s0, t4, t6)
+    divide(p_1, k0, s0)
+    subtract(p_1, s0, s0)
+    multiply(p_3, s0, s0)
+    multiply(s0, t5, t5)
+    add(t6, t5, t6)
+    subtract(t3, t6, dtau_0)
+    negative(t5, dtau_4)
+    multiply(qd_0, p_0, t3)
+    multiply(qd_0, t3, t5)
+    subtract(t4, t5, t4)
+    multiply(t1, t4, t5)
+    multiply(qdd_0, p_0, t6)
+    add(t2, t6, t2)
+    multiply(t0, t2, t6)
+    add(t5, t6, t5)
+    multiply(p_3, t5, t6)
+    add(qd_0, qd_1, t7)
+    multiply(t7, s0, t8)
+    multiply(t7, t8, t7)
+    subtract(t6, t7, t7)
+    multiply(t7, t1, t7)
+    multiply(t2, t1, t2)
+    multiply(t4, t0, t4)
+    subtract(t2, t4, t2)
+    multiply(p_3, t2, t2)
+    multiply(t0, t2, t4)
+    add(t7, t4, t7)
+    add(qdd_0, qdd_1, t4)
+    multiply(t4, s0, t4)
+    add(t2, t4, t2)
+    multiply(t2, t0, t2)
+    multiply(t1, t6, t6)
+    add(t2, t6, t2)
+    subtract(t7, t2, t7)
+    multiply(p_0, t7, t7)
+    multiply(s0, t5, t5)
+    subtract(t7, t5, dtau_1)
+    negative(t5, dtau_5)
+    add(t3, t3, t3)
+    multiply(t0, t3, t2)
+    multiply(s0, t2, dtau_6)
+    multiply(p_3, t2, t2)
+    multiply(t1, t2, t2)
+    multiply(t1, t3, t1)
+    multiply(p_3, t1, t1)
+    add(t8, t8, t8)
+    add(t1, t8, t1)
+    multiply(t0, t1, t1)
+    subtract(t2, t1, t2)
+    multiply(p_0, t2, t2)
+    add(dtau_6, t2, dtau_2)
+    multiply(t0, t8, t0)
+    multiply(p_0, t0, t0)
+    negative(t0, dtau_3)
+
+
 def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     """Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (5): parameters L1, L2, m1, m2, g.
 

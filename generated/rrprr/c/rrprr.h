@@ -23,6 +23,7 @@
 #include "rrprr_gravity.h"
 #include "rrprr_bias.h"
 #include "rrprr_inverse_dynamics.h"
+#include "rrprr_inverse_dynamics_derivatives.h"
 #include "rrprr_forward_dynamics.h"
 #include "rrprr_inverse_dynamics_fext.h"
 #include "rrprr_forward_dynamics_fext.h"

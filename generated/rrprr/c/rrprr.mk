@@ -38,6 +38,7 @@ RRPRR_DERIVE_SRC := $(addprefix $(RRPRR_DERIVE_DIR)/,\
   rrprr_gravity.c \
   rrprr_ik_tcp.c \
   rrprr_inverse_dynamics.c \
+  rrprr_inverse_dynamics_derivatives.c \
   rrprr_inverse_dynamics_fext.c \
   rrprr_jacobian_tcp.c \
   rrprr_jdot_qd_tcp.c \

@@ -3703,6 +3703,2631 @@ def _inverse_dynamics_chunk(x, t, s, y):
     add(t0, t14, tau_2)
 
 
+def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
+    """Partial derivatives of the inverse dynamics dtau = [dtau/dq, dtau/dqd] (5x10, row-major) at (q, qd, qdd) (Pinocchio's computeRNEADerivatives). p (3): parameters L1, L2, L_tcp.
+
+    in  q [5]
+    in  qd [5]
+    in  qdd [5]
+    in  p [3]
+    out dtau [5x10]
+    1282 ops: 749 mul, 525 add, 0 div, 8 trig
+    """
+    q = _array(q, 5, "q")
+    qd = _array(qd, 5, "qd")
+    qdd = _array(qdd, 5, "qdd")
+    p = _array(p, 3, "p")
+    if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd, p), 130, ((5, 10),), fixed=_inverse_dynamics_derivatives_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    qd = qd.tolist()
+    qdd = qdd.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[0])
+    t1 = cos(q[3])
+    t2 = sin(q[3])
+    t3 = cos(q[2])
+    t4 = p[0] + q[1]
+    t5 = t3 * t4
+    t6 = t2 * t5
+    t7 = 0.3 * t6
+    t8 = 0.5 * t6
+    t8 = t7 + t8
+    t9 = t1 * t8
+    t10 = t1 * t5
+    t11 = 0.5 * t10
+    t12 = sin(q[4])
+    t13 = cos(q[4])
+    t14 = sin(q[2])
+    t15 = t14 * t4
+    t16 = t1 * t14
+    t17 = p[1] * t16
+    t17 = t15 + t17
+    t18 = t13 * t17
+    t19 = p[1] * t3
+    t19 = t10 + t19
+    t20 = t12 * t19
+    t18 = t18 + t20
+    t20 = 0.3 * t18
+    t21 = t13 * t16
+    t22 = t12 * t3
+    t21 = t21 + t22
+    t22 = 0.015 * t21
+    t20 = t20 + t22
+    t22 = t12 * t20
+    t23 = t13 * t19
+    t24 = t12 * t17
+    t23 = t23 - t24
+    t24 = 0.3 * t23
+    t25 = t13 * t3
+    t26 = t12 * t16
+    t25 = t25 - t26
+    t26 = 0.015 * t25
+    t24 = t24 + t26
+    t26 = t13 * t24
+    t22 = t22 + t26
+    t11 = t11 + t22
+    t26 = 0.05 * t3
+    t11 = t11 + t26
+    t26 = t2 * t11
+    t9 = t9 - t26
+    t26 = 0.012 * t3
+    t9 = t9 - t26
+    t26 = 9.81 * t9
+    t26 = t0 * t26
+    t27 = sin(q[0])
+    t28 = 0.8 * t4
+    t29 = 0.5 * t15
+    t30 = 0.6 * t15
+    t29 = t29 + t30
+    t30 = 0.05 * t16
+    t29 = t29 + t30
+    t30 = t12 * t24
+    t31 = t13 * t20
+    t30 = t30 - t31
+    t29 = t29 - t30
+    t31 = t14 * t29
+    t28 = t28 + t31
+    t31 = t2 * t8
+    t32 = 0.6 * t5
+    t31 = t31 + t32
+    t32 = t1 * t11
+    t31 = t31 + t32
+    t32 = t3 * t31
+    t28 = t28 + t32
+    t28 = t28 + 0.04000000000000001
+    t32 = 9.81 * t28
+    t32 = t32 + 0.9810000000000001
+    t32 = t27 * t32
+    t26 = t26 - t32
+    t32 = 0.3 * t1
+    t33 = 0.5 * t1
+    t33 = t32 + t33
+    t34 = t1 * t33
+    t34 = 1.4 + t34
+    t35 = 0.5 * t2
+    t36 = t12 * t2
+    t37 = 0.3 * t36
+    t38 = t12 * t37
+    t39 = t13 * t2
+    t40 = 0.3 * t39
+    t41 = t13 * t40
+    t38 = t38 + t41
+    t35 = t35 + t38
+    t41 = t2 * t35
+    t34 = t34 + t41
+    t41 = 9.81 * t34
+    t41 = t0 * t41
+    t42 = t2 * t33
+    t43 = t1 * t35
+    t42 = t42 - t43
+    t43 = t3 * t42
+    t44 = t13 * t37
+    t45 = t12 * t40
+    t44 = t44 - t45
+    t45 = t14 * t44
+    t43 = t43 - t45
+    t45 = 9.81 * t43
+    t45 = t27 * t45
+    t41 = t41 - t45
+    t45 = p[1] * t2
+    t46 = t12 * t45
+    t47 = 0.3 * t46
+    t48 = 0.015 * t36
+    t47 = t47 + t48
+    t49 = t13 * t47
+    t50 = t13 * t45
+    t51 = 0.3 * t50
+    t52 = 0.015 * t39
+    t51 = t51 + t52
+    t53 = t12 * t51
+    t49 = t49 - t53
+    t53 = t2 * t49
+    t54 = 9.81 * t53
+    t54 = t0 * t54
+    t55 = 0.05 * t2
+    t56 = (-0.012) - t55
+    t57 = t13 * t51
+    t58 = t12 * t47
+    t57 = t57 + t58
+    t56 = t56 - t57
+    t58 = t14 * t56
+    t59 = t1 * t49
+    t60 = t3 * t59
+    t58 = t58 + t60
+    t60 = 9.81 * t58
+    t60 = t27 * t60
+    t54 = t54 + t60
+    t54 = -t54
+    t60 = t12 * p[1]
+    t61 = 0.3 * t60
+    t62 = 0.015 * t12
+    t61 = t61 + t62
+    t62 = t12 * t61
+    t63 = t13 * p[1]
+    t64 = 0.3 * t63
+    t65 = 0.015 * t13
+    t64 = t64 + t65
+    t65 = t13 * t64
+    t62 = t62 + t65
+    t65 = t62 + 0.05
+    t66 = t2 * t65
+    t67 = 9.81 * t66
+    t67 = t0 * t67
+    t68 = t1 * t65
+    t69 = t3 * t68
+    t70 = t12 * t64
+    t71 = t13 * t61
+    t70 = t70 - t71
+    t71 = t14 * t70
+    t69 = t69 - t71
+    t71 = 9.81 * t69
+    t71 = t27 * t71
+    t67 = t67 + t71
+    t67 = -t67
+    t0 = 9.81 * t0
+    t71 = qdd[0] * t4
+    t0 = t0 + t71
+    t71 = qd[0] * qd[1]
+    t71 = t71 + t71
+    t0 = t0 + t71
+    t71 = 0.8 * t0
+    t72 = 0.04000000000000001 * qdd[0]
+    t71 = t71 + t72
+    t72 = t3 * t0
+    t73 = 0.6 * t72
+    t74 = t3 * qd[0]
+    t75 = 0.012 * t74
+    t76 = t74 * t75
+    t77 = 0.012 * qd[2]
+    t78 = qd[2] * t77
+    t76 = t76 + t78
+    t73 = t73 - t76
+    t27 = 9.81 * t27
+    t76 = qd[0] * t4
+    t78 = qd[0] * t76
+    t27 = t27 - t78
+    t27 = t27 + qdd[1]
+    t78 = t1 * t27
+    t79 = t2 * t72
+    t78 = t78 + t79
+    t79 = 0.5 * t78
+    t80 = t14 * qd[0]
+    t81 = t1 * t80
+    t82 = t2 * qd[2]
+    t81 = t81 - t82
+    t82 = 0.05 * t81
+    t83 = t81 * t82
+    t84 = t74 + qd[3]
+    t85 = 0.05 * t84
+    t86 = t84 * t85
+    t83 = t83 + t86
+    t79 = t79 - t83
+    t83 = t81 * p[1]
+    t86 = t81 * t83
+    t87 = t84 * p[1]
+    t88 = t84 * t87
+    t86 = t86 + t88
+    t78 = t78 - t86
+    t78 = 0.3 * t78
+    t86 = t12 * t84
+    t88 = t13 * t81
+    t86 = t86 + t88
+    t88 = 0.015 * t86
+    t89 = t86 * t88
+    t90 = t13 * t84
+    t91 = t12 * t81
+    t90 = t90 - t91
+    t91 = 0.015 * t90
+    t92 = t90 * t91
+    t89 = t89 + t92
+    t78 = t78 - t89
+    t78 = t79 + t78
+    t79 = t2 * t78
+    t89 = t1 * t72
+    t92 = t2 * t27
+    t89 = t89 - t92
+    t92 = 0.5 * t89
+    t93 = t3 * qdd[0]
+    t94 = t80 * qd[2]
+    t93 = t93 - t94
+    t94 = t93 + qdd[3]
+    t95 = 0.05 * t94
+    t92 = t92 + t95
+    t95 = t1 * qd[2]
+    t96 = t2 * t80
+    t95 = t95 + t96
+    t96 = t95 * t82
+    t92 = t92 + t96
+    t96 = t95 * t87
+    t97 = t14 * t0
+    t98 = t14 * qdd[0]
+    t99 = t74 * qd[2]
+    t98 = t98 + t99
+    t99 = t1 * t98
+    t100 = t2 * qdd[2]
+    t99 = t99 - t100
+    t100 = t95 * qd[3]
+    t99 = t99 - t100
+    t100 = t99 * p[1]
+    t100 = t97 + t100
+    t96 = t96 - t100
+    t100 = t12 * t96
+    t101 = t94 * p[1]
+    t101 = t89 + t101
+    t102 = t95 * t83
+    t101 = t101 + t102
+    t102 = t13 * t101
+    t100 = t100 + t102
+    t102 = 0.3 * t100
+    t103 = t13 * t94
+    t104 = t12 * t99
+    t103 = t103 - t104
+    t104 = t86 * qd[4]
+    t103 = t103 - t104
+    t104 = 0.015 * t103
+    t102 = t102 + t104
+    t104 = t95 + qd[4]
+    t105 = t104 * t88
+    t102 = t102 + t105
+    t105 = t13 * t102
+    t106 = t13 * t96
+    t107 = t12 * t101
+    t106 = t106 - t107
+    t107 = 0.3 * t106
+    t108 = t12 * t94
+    t109 = t13 * t99
+    t108 = t108 + t109
+    t109 = t90 * qd[4]
+    t108 = t108 + t109
+    t109 = 0.015 * t108
+    t107 = t107 - t109
+    t109 = t104 * t91
+    t107 = t107 + t109
+    t109 = t12 * t107
+    t105 = t105 - t109
+    t92 = t92 + t105
+    t109 = t1 * t92
+    t79 = t79 + t109
+    t73 = t73 + t79
+    t79 = t3 * t73
+    t109 = 0.012 * qdd[2]
+    t110 = 0.6 * t97
+    t109 = t109 - t110
+    t110 = t80 * t75
+    t109 = t109 + t110
+    t110 = t95 * t85
+    t111 = 0.5 * t97
+    t112 = 0.05 * t99
+    t111 = t111 + t112
+    t110 = t110 - t111
+    t111 = t13 * t107
+    t112 = t12 * t102
+    t111 = t111 + t112
+    t110 = t110 + t111
+    t109 = t109 + t110
+    t110 = t14 * t109
+    t79 = t79 - t110
+    t71 = t71 + t79
+    t79 = qd[0] * t9
+    t110 = qd[0] * t79
+    t71 = t71 - t110
+    t110 = qdd[0] * t28
+    t71 = t71 + t110
+    t110 = qdd[0] * t43
+    t112 = qd[0] * t34
+    t113 = qd[0] * t112
+    t110 = t110 - t113
+    t113 = qd[0] * t53
+    t114 = qd[0] * t113
+    t115 = qdd[0] * t58
+    t114 = t114 + t115
+    t115 = qd[0] * t66
+    t116 = qd[0] * t115
+    t117 = qdd[0] * t69
+    t116 = t116 + t117
+    t117 = 0.003 * t98
+    t118 = 0.00424 * qd[2]
+    t119 = t74 * t118
+    t120 = 0.00424 * t74
+    t121 = qd[2] * t120
+    t119 = t119 - t121
+    t117 = t117 + t119
+    t119 = t1 * qdd[2]
+    t121 = t2 * t98
+    t119 = t119 + t121
+    t121 = t81 * qd[3]
+    t119 = t119 + t121
+    t121 = 0.002 * t119
+    t122 = 0.009000000000000001 * t84
+    t123 = t81 * t122
+    t124 = 0.009000000000000001 * t81
+    t125 = t84 * t124
+    t123 = t123 - t125
+    t121 = t121 + t123
+    t119 = t119 + qdd[4]
+    t119 = 0.001 * t119
+    t123 = 0.0027500000000000003 * t90
+    t125 = t86 * t123
+    t126 = 0.0027500000000000003 * t86
+    t127 = t90 * t126
+    t125 = t125 - t127
+    t119 = t119 + t125
+    t119 = t121 + t119
+    t121 = t2 * t119
+    t125 = 0.009000000000000001 * t99
+    t127 = 0.002 * t95
+    t128 = t84 * t127
+    t129 = t95 * t122
+    t128 = t128 - t129
+    t125 = t125 + t128
+    t97 = 0.05 * t97
+    t97 = t125 + t97
+    t108 = 0.0027500000000000003 * t108
+    t125 = 0.001 * t104
+    t128 = t90 * t125
+    t129 = t104 * t123
+    t128 = t128 - t129
+    t108 = t108 + t128
+    t106 = 0.015 * t106
+    t106 = t108 - t106
+    t108 = t13 * t106
+    t103 = 0.0027500000000000003 * t103
+    t128 = t104 * t126
+    t129 = t86 * t125
+    t128 = t128 - t129
+    t103 = t103 + t128
+    t100 = 0.015 * t100
+    t100 = t103 + t100
+    t103 = t12 * t100
+    t103 = t108 - t103
+    t97 = t97 + t103
+    t103 = p[1] * t111
+    t97 = t97 - t103
+    t103 = t1 * t97
+    t103 = t121 + t103
+    t103 = t117 + t103
+    t108 = t109 * t4
+    t103 = t103 - t108
+    t29 = t0 * t29
+    t29 = t103 + t29
+    t103 = t2 * t14
+    t108 = 0.001 * t103
+    t109 = 0.002 * t103
+    t108 = t108 + t109
+    t109 = t2 * t108
+    t111 = 0.003 * t14
+    t109 = t109 + t111
+    t111 = 0.05 * t15
+    t117 = 0.009000000000000001 * t16
+    t111 = t111 + t117
+    t117 = 0.015 * t18
+    t121 = 0.0027500000000000003 * t21
+    t117 = t117 + t121
+    t121 = t13 * t117
+    t111 = t111 + t121
+    t121 = p[1] * t30
+    t111 = t111 - t121
+    t121 = 0.015 * t23
+    t128 = 0.0027500000000000003 * t25
+    t121 = t121 + t128
+    t128 = t12 * t121
+    t111 = t111 - t128
+    t128 = t1 * t111
+    t109 = t109 + t128
+    t128 = qdd[0] * t109
+    t29 = t29 + t128
+    t128 = t95 * t10
+    t129 = t81 * t6
+    t128 = t128 - t129
+    t128 = 0.05 * t128
+    t129 = t83 * t7
+    t130 = t82 * t6
+    t129 = t129 + t130
+    t128 = t128 - t129
+    t129 = t122 * t103
+    t128 = t128 + t129
+    t129 = qd[3] * t108
+    t128 = t128 + t129
+    t129 = t86 * t103
+    t130 = t104 * t21
+    t129 = t129 - t130
+    t129 = 0.0027500000000000003 * t129
+    t130 = t91 * t6
+    t131 = t126 * t103
+    t130 = t130 + t131
+    t131 = t90 * t6
+    t132 = t104 * t18
+    t131 = t131 + t132
+    t131 = 0.015 * t131
+    t130 = t130 + t131
+    t129 = t129 - t130
+    t130 = t125 * t21
+    t129 = t129 + t130
+    t130 = qd[4] * t117
+    t129 = t129 + t130
+    t130 = t12 * t129
+    t128 = t128 - t130
+    t130 = t95 * t22
+    t131 = t81 * t7
+    t130 = t130 - t131
+    t130 = p[1] * t130
+    t128 = t128 + t130
+    t130 = t123 * t103
+    t131 = t88 * t6
+    t130 = t130 - t131
+    t131 = t104 * t23
+    t132 = t86 * t6
+    t131 = t131 - t132
+    t131 = 0.015 * t131
+    t130 = t130 + t131
+    t131 = t125 * t25
+    t130 = t130 - t131
+    t131 = t104 * t25
+    t132 = t90 * t103
+    t131 = t131 - t132
+    t131 = 0.0027500000000000003 * t131
+    t130 = t130 + t131
+    t131 = qd[4] * t121
+    t130 = t130 - t131
+    t131 = t13 * t130
+    t128 = t128 + t131
+    t131 = t127 * t3
+    t128 = t128 - t131
+    t131 = t95 * t3
+    t132 = t84 * t103
+    t131 = t131 - t132
+    t131 = 0.009000000000000001 * t131
+    t128 = t128 + t131
+    t131 = t1 * t128
+    t132 = t75 * t15
+    t131 = t131 - t132
+    t132 = t82 * t10
+    t133 = t85 * t15
+    t132 = t132 - t133
+    t133 = t122 * t16
+    t132 = t132 - t133
+    t133 = t83 * t22
+    t132 = t132 + t133
+    t133 = t87 * t30
+    t132 = t132 + t133
+    t23 = t88 * t23
+    t18 = t91 * t18
+    t18 = t23 - t18
+    t23 = t123 * t21
+    t18 = t18 - t23
+    t21 = t90 * t21
+    t23 = t86 * t25
+    t21 = t21 - t23
+    t21 = 0.001 * t21
+    t18 = t18 + t21
+    t21 = t126 * t25
+    t18 = t18 + t21
+    t21 = t132 + t18
+    t23 = qd[3] * t111
+    t21 = t21 - t23
+    t23 = t84 * t16
+    t25 = t81 * t3
+    t23 = t23 - t25
+    t23 = 0.002 * t23
+    t21 = t21 + t23
+    t23 = t124 * t3
+    t21 = t21 + t23
+    t23 = t2 * t21
+    t23 = t131 + t23
+    t25 = t118 * t3
+    t23 = t23 - t25
+    t25 = qd[2] * t3
+    t25 = 0.003 * t25
+    t23 = t23 + t25
+    t10 = 0.05 * t10
+    t25 = t12 * t117
+    t10 = t10 + t25
+    t22 = p[1] * t22
+    t10 = t10 + t22
+    t22 = t13 * t121
+    t10 = t10 + t22
+    t22 = 0.009000000000000001 * t3
+    t10 = t10 + t22
+    t22 = 0.00424 * t3
+    t10 = t10 + t22
+    t22 = qd[2] * t10
+    t22 = t23 - t22
+    t23 = qd[0] * t22
+    t23 = t29 + t23
+    t23 = t3 * t23
+    t25 = t73 * t4
+    t29 = 0.00424 * t93
+    t73 = 0.003 * t80
+    t93 = qd[2] * t73
+    t131 = t80 * t118
+    t93 = t93 - t131
+    t29 = t29 + t93
+    t93 = 0.012 * t27
+    t29 = t29 - t93
+    t93 = 0.009000000000000001 * t94
+    t131 = t95 * t124
+    t132 = t81 * t127
+    t131 = t131 - t132
+    t93 = t93 + t131
+    t89 = 0.05 * t89
+    t89 = t93 + t89
+    t93 = t13 * t100
+    t131 = t12 * t106
+    t93 = t93 + t131
+    t89 = t89 + t93
+    t93 = p[1] * t105
+    t89 = t89 + t93
+    t29 = t29 + t89
+    t25 = t25 + t29
+    t29 = t118 * t14
+    t75 = t75 * t5
+    t89 = t80 * t15
+    t93 = t74 * t5
+    t89 = t89 + t93
+    t89 = 0.012 * t89
+    t75 = t75 + t89
+    t89 = qd[2] * t14
+    t89 = 0.00424 * t89
+    t75 = t75 + t89
+    t29 = t29 - t75
+    t75 = t127 * t16
+    t89 = t87 * t7
+    t93 = t85 * t6
+    t89 = t89 + t93
+    t15 = t95 * t15
+    t6 = t84 * t6
+    t6 = t15 + t6
+    t6 = 0.05 * t6
+    t6 = t89 + t6
+    t6 = t75 - t6
+    t15 = t124 * t103
+    t6 = t6 - t15
+    t15 = t81 * t103
+    t75 = t95 * t16
+    t15 = t15 - t75
+    t15 = 0.009000000000000001 * t15
+    t6 = t6 + t15
+    t15 = t13 * t129
+    t6 = t6 + t15
+    t15 = t95 * t30
+    t7 = t84 * t7
+    t7 = t15 - t7
+    t7 = p[1] * t7
+    t6 = t6 + t7
+    t7 = t12 * t130
+    t6 = t6 + t7
+    t7 = t29 + t6
+    t15 = qd[2] * t109
+    t7 = t7 + t15
+    t15 = qd[0] * t7
+    t15 = t25 + t15
+    t25 = t0 * t31
+    t15 = t15 + t25
+    t25 = qdd[0] * t10
+    t15 = t15 + t25
+    t15 = t14 * t15
+    t15 = t23 - t15
+    t23 = t12 * t52
+    t25 = t13 * t48
+    t29 = p[1] * t44
+    t25 = t25 + t29
+    t23 = t23 - t25
+    t25 = t1 * t23
+    t29 = qdd[0] * t25
+    t30 = t0 * t44
+    t29 = t29 - t30
+    t30 = qd[4] * t52
+    t31 = t88 * t1
+    t75 = t86 * t1
+    t89 = t104 * t39
+    t75 = t75 + t89
+    t89 = 0.015 * t75
+    t31 = t31 + t89
+    t30 = t30 - t31
+    t31 = t13 * t30
+    t89 = t83 * t32
+    t93 = t82 * t1
+    t89 = t89 + t93
+    t93 = t95 * t2
+    t103 = t81 * t1
+    t93 = t93 + t103
+    t103 = 0.05 * t93
+    t89 = t89 + t103
+    t103 = t104 * t36
+    t105 = t90 * t1
+    t103 = t103 - t105
+    t105 = 0.015 * t103
+    t118 = t91 * t1
+    t105 = t105 - t118
+    t118 = qd[4] * t48
+    t105 = t105 - t118
+    t118 = t12 * t105
+    t89 = t89 + t118
+    t118 = t81 * t32
+    t131 = t95 * t38
+    t118 = t118 + t131
+    t118 = p[1] * t118
+    t89 = t89 + t118
+    t31 = t31 - t89
+    t89 = t1 * t31
+    t89 = t77 + t89
+    t118 = t87 * t44
+    t82 = t82 * t2
+    t131 = t83 * t38
+    t82 = t82 + t131
+    t82 = t118 - t82
+    t118 = t91 * t36
+    t131 = t88 * t39
+    t118 = t118 - t131
+    t82 = t82 + t118
+    t131 = qd[3] * t23
+    t82 = t82 - t131
+    t131 = t2 * t82
+    t89 = t89 + t131
+    t131 = t12 * t48
+    t55 = t55 + t131
+    t38 = p[1] * t38
+    t38 = t55 + t38
+    t55 = t13 * t52
+    t38 = t38 + t55
+    t38 = (-0.012) - t38
+    t55 = qd[2] * t38
+    t55 = t89 - t55
+    t89 = qd[0] * t55
+    t29 = t29 + t89
+    t29 = t3 * t29
+    t89 = t13 * t105
+    t131 = t87 * t32
+    t85 = t85 * t1
+    t85 = t131 + t85
+    t131 = t84 * t1
+    t132 = 0.05 * t131
+    t85 = t85 + t132
+    t85 = t89 - t85
+    t44 = t95 * t44
+    t32 = t84 * t32
+    t32 = t44 - t32
+    t32 = p[1] * t32
+    t32 = t85 + t32
+    t44 = t12 * t30
+    t32 = t32 + t44
+    t44 = qd[2] * t25
+    t44 = t32 + t44
+    t85 = qd[0] * t44
+    t42 = t0 * t42
+    t42 = t85 + t42
+    t85 = qdd[0] * t38
+    t42 = t42 + t85
+    t42 = t14 * t42
+    t29 = t29 - t42
+    t42 = t0 * t56
+    t56 = 0.001 * t1
+    t85 = 0.002 * t1
+    t56 = t56 + t85
+    t85 = t2 * t56
+    t89 = 0.009000000000000001 * t2
+    t132 = 0.015 * t50
+    t133 = 0.0027500000000000003 * t39
+    t132 = t132 + t133
+    t133 = t13 * t132
+    t89 = t89 + t133
+    t133 = p[1] * t57
+    t89 = t89 + t133
+    t133 = 0.015 * t46
+    t134 = 0.0027500000000000003 * t36
+    t133 = t133 + t134
+    t134 = t12 * t133
+    t89 = t89 + t134
+    t134 = t1 * t89
+    t85 = t85 - t134
+    t134 = qdd[0] * t85
+    t42 = t42 + t134
+    t134 = t122 * t1
+    t135 = qd[3] * t56
+    t134 = t134 + t135
+    t135 = t104 * t50
+    t135 = 0.015 * t135
+    t136 = t126 * t1
+    t135 = t135 - t136
+    t75 = 0.0027500000000000003 * t75
+    t75 = t135 + t75
+    t135 = t125 * t39
+    t75 = t75 - t135
+    t135 = qd[4] * t132
+    t75 = t75 - t135
+    t135 = t12 * t75
+    t134 = t134 - t135
+    t135 = t95 * t49
+    t135 = p[1] * t135
+    t134 = t134 + t135
+    t135 = t123 * t1
+    t136 = t104 * t46
+    t136 = 0.015 * t136
+    t135 = t135 + t136
+    t136 = t125 * t36
+    t135 = t135 - t136
+    t103 = 0.0027500000000000003 * t103
+    t103 = t135 + t103
+    t135 = qd[4] * t133
+    t103 = t103 - t135
+    t135 = t13 * t103
+    t134 = t134 + t135
+    t131 = 0.009000000000000001 * t131
+    t131 = t134 - t131
+    t134 = t1 * t131
+    t134 = t120 + t134
+    t122 = t122 * t2
+    t135 = t83 * t49
+    t122 = t122 + t135
+    t135 = t87 * t57
+    t122 = t122 + t135
+    t50 = t91 * t50
+    t46 = t88 * t46
+    t46 = t50 + t46
+    t50 = t123 * t39
+    t46 = t46 + t50
+    t39 = t90 * t39
+    t50 = t86 * t36
+    t39 = t39 + t50
+    t39 = 0.001 * t39
+    t39 = t46 - t39
+    t36 = t126 * t36
+    t36 = t39 + t36
+    t39 = t122 + t36
+    t46 = qd[3] * t89
+    t39 = t39 + t46
+    t46 = t84 * t2
+    t46 = 0.002 * t46
+    t39 = t39 - t46
+    t46 = t2 * t39
+    t46 = t134 + t46
+    t50 = 0.003 * t74
+    t46 = t46 - t50
+    t50 = p[1] * t49
+    t122 = t12 * t132
+    t50 = t50 - t122
+    t122 = t13 * t133
+    t50 = t50 + t122
+    t122 = qd[2] * t50
+    t46 = t46 - t122
+    t122 = qd[0] * t46
+    t42 = t42 + t122
+    t42 = t3 * t42
+    t122 = 0.00424 * t80
+    t122 = t122 - t73
+    t93 = 0.009000000000000001 * t93
+    t134 = t127 * t2
+    t135 = t124 * t1
+    t134 = t134 + t135
+    t93 = t93 - t134
+    t134 = t13 * t75
+    t93 = t93 + t134
+    t57 = t95 * t57
+    t57 = p[1] * t57
+    t57 = t93 + t57
+    t93 = t12 * t103
+    t57 = t57 + t93
+    t93 = t122 + t57
+    t122 = qd[2] * t85
+    t93 = t93 + t122
+    t122 = qd[0] * t93
+    t59 = t0 * t59
+    t59 = t122 + t59
+    t122 = qdd[0] * t50
+    t59 = t59 + t122
+    t59 = t14 * t59
+    t42 = t42 - t59
+    t59 = 0.015 * t60
+    t122 = 0.0027500000000000003 * t12
+    t59 = t59 + t122
+    t122 = t13 * t59
+    t134 = p[1] * t70
+    t122 = t122 - t134
+    t134 = 0.015 * t63
+    t135 = 0.0027500000000000003 * t13
+    t134 = t134 + t135
+    t135 = t12 * t134
+    t122 = t122 - t135
+    t135 = t1 * t122
+    t136 = qdd[0] * t135
+    t137 = t0 * t70
+    t136 = t136 - t137
+    t137 = t95 * t62
+    t137 = p[1] * t137
+    t138 = t125 * t12
+    t139 = t104 * t60
+    t139 = 0.015 * t139
+    t140 = t104 * t12
+    t140 = 0.0027500000000000003 * t140
+    t139 = t139 + t140
+    t138 = t138 - t139
+    t139 = qd[4] * t59
+    t138 = t138 + t139
+    t139 = t12 * t138
+    t137 = t137 - t139
+    t139 = t104 * t63
+    t139 = 0.015 * t139
+    t125 = t125 * t13
+    t125 = t139 - t125
+    t104 = t104 * t13
+    t104 = 0.0027500000000000003 * t104
+    t104 = t125 + t104
+    t125 = qd[4] * t134
+    t104 = t104 - t125
+    t125 = t13 * t104
+    t125 = t137 + t125
+    t125 = t125 - t127
+    t127 = 0.009000000000000001 * t95
+    t125 = t125 + t127
+    t127 = t1 * t125
+    t83 = t83 * t62
+    t87 = t87 * t70
+    t83 = t83 + t87
+    t63 = t88 * t63
+    t60 = t91 * t60
+    t60 = t63 - t60
+    t63 = t123 * t12
+    t60 = t60 - t63
+    t63 = t90 * t12
+    t87 = t86 * t13
+    t63 = t63 - t87
+    t63 = 0.001 * t63
+    t60 = t60 + t63
+    t63 = t126 * t13
+    t60 = t60 + t63
+    t63 = t83 + t60
+    t83 = qd[3] * t122
+    t63 = t63 - t83
+    t83 = 0.002 * t81
+    t63 = t63 - t83
+    t63 = t63 + t124
+    t83 = t2 * t63
+    t83 = t127 + t83
+    t87 = t12 * t59
+    t62 = p[1] * t62
+    t62 = t87 + t62
+    t87 = t13 * t134
+    t62 = t62 + t87
+    t62 = t62 + 0.009000000000000001
+    t87 = qd[2] * t62
+    t83 = t83 - t87
+    t87 = qd[0] * t83
+    t87 = t136 + t87
+    t87 = t3 * t87
+    t88 = t13 * t138
+    t70 = t95 * t70
+    t70 = p[1] * t70
+    t70 = t88 + t70
+    t88 = t12 * t104
+    t70 = t70 + t88
+    t88 = qd[2] * t135
+    t88 = t70 + t88
+    t91 = qd[0] * t88
+    t0 = t0 * t68
+    t0 = t91 + t0
+    t68 = qdd[0] * t62
+    t0 = t0 + t68
+    t0 = t14 * t0
+    t0 = t87 - t0
+    t68 = 0.001 * t2
+    t87 = qdd[0] * t68
+    t91 = 0.001 * qd[3]
+    t123 = t1 * t91
+    t124 = qd[0] * t123
+    t87 = t87 + t124
+    t87 = t3 * t87
+    t124 = qd[2] * t68
+    t126 = qd[0] * t124
+    t126 = t14 * t126
+    t87 = t87 - t126
+    t126 = t78 * t5
+    t127 = t72 * t8
+    t126 = t126 + t127
+    t127 = t119 * t14
+    t126 = t126 + t127
+    t127 = t98 * t108
+    t126 = t126 + t127
+    t127 = qdd[2] * t111
+    t126 = t126 - t127
+    t127 = t27 * t11
+    t126 = t126 - t127
+    t127 = qd[2] * t128
+    t126 = t126 - t127
+    t127 = t80 * t21
+    t126 = t126 + t127
+    t126 = t1 * t126
+    t127 = t92 * t5
+    t8 = t27 * t8
+    t8 = t127 + t8
+    t127 = t97 * t14
+    t8 = t8 + t127
+    t127 = qdd[2] * t108
+    t8 = t8 + t127
+    t127 = t98 * t111
+    t8 = t8 + t127
+    t11 = t72 * t11
+    t8 = t8 + t11
+    t11 = t80 * t128
+    t8 = t8 + t11
+    t11 = qd[2] * t21
+    t8 = t8 + t11
+    t8 = t2 * t8
+    t8 = t126 - t8
+    t11 = t72 * t33
+    t11 = t11 - t92
+    t92 = qdd[2] * t23
+    t11 = t11 - t92
+    t92 = t27 * t35
+    t11 = t11 + t92
+    t92 = qd[2] * t31
+    t11 = t11 - t92
+    t92 = t80 * t82
+    t11 = t11 + t92
+    t11 = t1 * t11
+    t33 = t27 * t33
+    t33 = t78 + t33
+    t78 = t98 * t23
+    t33 = t33 + t78
+    t35 = t72 * t35
+    t33 = t33 - t35
+    t35 = t80 * t31
+    t33 = t33 + t35
+    t35 = qd[2] * t82
+    t33 = t33 + t35
+    t33 = t2 * t33
+    t11 = t11 - t33
+    t33 = t98 * t56
+    t33 = t33 - t97
+    t35 = qdd[2] * t89
+    t33 = t33 + t35
+    t35 = t27 * t49
+    t33 = t33 - t35
+    t35 = qd[2] * t131
+    t33 = t33 - t35
+    t35 = t80 * t39
+    t33 = t33 + t35
+    t33 = t1 * t33
+    t35 = qdd[2] * t56
+    t35 = t119 + t35
+    t78 = t98 * t89
+    t35 = t35 - t78
+    t49 = t72 * t49
+    t35 = t35 + t49
+    t49 = t80 * t131
+    t35 = t35 + t49
+    t49 = qd[2] * t39
+    t35 = t35 + t49
+    t35 = t2 * t35
+    t33 = t33 - t35
+    t35 = t80 * t63
+    t49 = qdd[2] * t122
+    t27 = t27 * t65
+    t27 = t49 + t27
+    t49 = qd[2] * t125
+    t27 = t27 + t49
+    t27 = t35 - t27
+    t27 = t1 * t27
+    t35 = t98 * t122
+    t49 = t72 * t65
+    t35 = t35 + t49
+    t49 = t80 * t125
+    t35 = t35 + t49
+    t49 = qd[2] * t63
+    t35 = t35 + t49
+    t35 = t2 * t35
+    t27 = t27 - t35
+    t35 = 0.001 * t98
+    t49 = qd[2] * t91
+    t35 = t35 - t49
+    t35 = t1 * t35
+    t49 = 0.001 * qdd[2]
+    t65 = t80 * t91
+    t49 = t49 + t65
+    t49 = t2 * t49
+    t35 = t35 - t49
+    t49 = t106 * t3
+    t65 = t102 * t17
+    t72 = t100 * t16
+    t65 = t65 + t72
+    t72 = t107 * t19
+    t65 = t65 + t72
+    t49 = t49 - t65
+    t65 = t101 * t20
+    t49 = t49 + t65
+    t65 = t81 * t129
+    t49 = t49 - t65
+    t65 = t94 * t117
+    t49 = t49 + t65
+    t65 = t96 * t24
+    t49 = t49 + t65
+    t65 = t84 * t130
+    t49 = t49 + t65
+    t65 = t99 * t121
+    t49 = t49 - t65
+    t49 = t13 * t49
+    t16 = t106 * t16
+    t17 = t107 * t17
+    t16 = t16 - t17
+    t17 = t102 * t19
+    t16 = t16 + t17
+    t17 = t96 * t20
+    t16 = t16 - t17
+    t17 = t84 * t129
+    t16 = t16 + t17
+    t17 = t99 * t117
+    t16 = t16 + t17
+    t17 = t100 * t3
+    t16 = t16 + t17
+    t17 = t101 * t24
+    t16 = t16 + t17
+    t17 = t81 * t130
+    t16 = t16 + t17
+    t17 = t94 * t121
+    t16 = t16 + t17
+    t16 = t12 * t16
+    t16 = t49 - t16
+    t17 = t107 * t2
+    t19 = t101 * t37
+    t17 = t17 - t19
+    t19 = t81 * t105
+    t17 = t17 - t19
+    t19 = t94 * t48
+    t17 = t17 - t19
+    t19 = t96 * t40
+    t17 = t17 - t19
+    t19 = t84 * t30
+    t17 = t17 + t19
+    t19 = t99 * t52
+    t17 = t17 + t19
+    t17 = t13 * t17
+    t19 = t96 * t37
+    t20 = t102 * t2
+    t19 = t19 - t20
+    t20 = t84 * t105
+    t19 = t19 + t20
+    t20 = t99 * t48
+    t19 = t19 - t20
+    t20 = t101 * t40
+    t19 = t19 - t20
+    t20 = t81 * t30
+    t19 = t19 + t20
+    t20 = t94 * t52
+    t19 = t19 - t20
+    t19 = t12 * t19
+    t17 = t17 - t19
+    t19 = t102 * t45
+    t20 = t100 * t2
+    t19 = t19 + t20
+    t20 = t101 * t51
+    t19 = t19 - t20
+    t20 = t81 * t75
+    t19 = t19 - t20
+    t20 = t94 * t132
+    t19 = t19 - t20
+    t20 = t96 * t47
+    t19 = t19 + t20
+    t20 = t84 * t103
+    t19 = t19 + t20
+    t20 = t99 * t133
+    t19 = t19 - t20
+    t19 = t13 * t19
+    t20 = t107 * t45
+    t24 = t106 * t2
+    t20 = t20 - t24
+    t24 = t96 * t51
+    t20 = t20 + t24
+    t24 = t84 * t75
+    t20 = t20 + t24
+    t24 = t99 * t132
+    t20 = t20 - t24
+    t24 = t101 * t47
+    t20 = t20 + t24
+    t24 = t81 * t103
+    t20 = t20 + t24
+    t24 = t94 * t133
+    t20 = t20 + t24
+    t20 = t12 * t20
+    t19 = t19 - t20
+    t20 = t107 * p[1]
+    t20 = t106 - t20
+    t24 = t101 * t61
+    t20 = t20 + t24
+    t24 = t81 * t138
+    t20 = t20 - t24
+    t24 = t94 * t59
+    t20 = t20 + t24
+    t24 = t96 * t64
+    t20 = t20 + t24
+    t24 = t84 * t104
+    t20 = t20 + t24
+    t24 = t99 * t134
+    t20 = t20 - t24
+    t13 = t13 * t20
+    t20 = t102 * p[1]
+    t24 = t96 * t61
+    t20 = t20 - t24
+    t24 = t84 * t138
+    t20 = t20 + t24
+    t24 = t99 * t59
+    t20 = t20 + t24
+    t20 = t20 + t100
+    t24 = t101 * t64
+    t20 = t20 + t24
+    t24 = t81 * t104
+    t20 = t20 + t24
+    t24 = t94 * t134
+    t20 = t20 + t24
+    t12 = t12 * t20
+    t12 = t13 - t12
+    t7 = t3 * t7
+    t9 = t76 * t9
+    t7 = t7 - t9
+    t9 = t4 * t79
+    t7 = t7 - t9
+    t9 = t14 * t22
+    t7 = t7 + t9
+    t9 = t28 + t28
+    t13 = qd[1] * t9
+    t7 = t7 + t13
+    t13 = t3 * t44
+    t20 = 0.08000000000000002 * qd[0]
+    t13 = t13 - t20
+    t20 = t76 * t34
+    t13 = t13 - t20
+    t20 = t4 * t112
+    t13 = t13 - t20
+    t20 = t14 * t55
+    t13 = t13 + t20
+    t20 = t43 + t43
+    t22 = qd[1] * t20
+    t13 = t13 + t22
+    t22 = t3 * t93
+    t24 = t76 * t53
+    t22 = t22 + t24
+    t24 = t4 * t113
+    t22 = t22 + t24
+    t24 = t14 * t46
+    t22 = t22 + t24
+    t24 = t58 + t58
+    t28 = qd[1] * t24
+    t22 = t22 + t28
+    t28 = t3 * t88
+    t30 = t76 * t66
+    t28 = t28 + t30
+    t4 = t4 * t115
+    t4 = t28 + t4
+    t28 = t14 * t83
+    t4 = t4 + t28
+    t28 = t69 + t69
+    t30 = qd[1] * t28
+    t4 = t4 + t30
+    t30 = t3 * t124
+    t34 = t14 * t123
+    t30 = t30 + t34
+    t9 = qd[0] * t9
+    t20 = qd[0] * t20
+    t24 = qd[0] * t24
+    t28 = qd[0] * t28
+    t34 = t74 * t109
+    t37 = t77 * t5
+    t5 = qd[2] * t5
+    t5 = 0.012 * t5
+    t5 = t37 + t5
+    t37 = t120 * t14
+    t5 = t5 + t37
+    t5 = t34 - t5
+    t34 = t2 * t128
+    t5 = t5 - t34
+    t21 = t1 * t21
+    t5 = t5 + t21
+    t14 = t74 * t14
+    t21 = t80 * t3
+    t14 = t14 - t21
+    t14 = 0.00424 * t14
+    t5 = t5 + t14
+    t3 = t73 * t3
+    t3 = t5 + t3
+    t5 = t80 * t10
+    t3 = t3 - t5
+    t5 = 0.012 * t80
+    t10 = t74 * t25
+    t5 = t5 + t10
+    t10 = t2 * t31
+    t5 = t5 - t10
+    t10 = t1 * t82
+    t5 = t5 + t10
+    t10 = t80 * t38
+    t5 = t5 - t10
+    t10 = t74 * t85
+    t14 = t2 * t131
+    t10 = t10 - t14
+    t14 = t1 * t39
+    t10 = t10 + t14
+    t14 = t80 * t50
+    t10 = t10 - t14
+    t14 = t74 * t135
+    t21 = t2 * t125
+    t14 = t14 - t21
+    t1 = t1 * t63
+    t1 = t14 + t1
+    t14 = t80 * t62
+    t1 = t1 - t14
+    t14 = t74 * t68
+    t2 = t2 * t91
+    t2 = t14 - t2
+    t14 = t81 * t108
+    t6 = t14 + t6
+    t14 = t95 * t111
+    t6 = t6 - t14
+    t14 = t95 * t23
+    t14 = t32 - t14
+    t21 = t81 * t56
+    t21 = t21 + t57
+    t23 = t95 * t89
+    t21 = t21 + t23
+    t23 = t95 * t122
+    t23 = t70 - t23
+    t25 = 0.001 * t81
+    t31 = t90 * t117
+    t18 = t31 + t18
+    t31 = t86 * t121
+    t18 = t18 - t31
+    t31 = t90 * t48
+    t31 = t118 - t31
+    t32 = t86 * t52
+    t31 = t31 + t32
+    t32 = t90 * t132
+    t32 = t36 - t32
+    t34 = t86 * t133
+    t32 = t32 - t34
+    t34 = t90 * t59
+    t34 = t34 + t60
+    t36 = t86 * t134
+    t34 = t34 - t36
+    _dtau = (t26, t71, t15, t8, t16, t7, t9, t3, t6, t18,
+             t41, t110, t29, t11, t17, t13, t20, t5, t14, t31,
+             t54, t114, t42, t33, t19, t22, t24, t10, t21, t32,
+             t67, t116, t0, t27, t12, t4, t28, t1, t23, t34,
+             0.0, 0.0, t87, t35, 0.0, t30, 0.0, t2, t25, 0.0)
+    return np.array(_dtau).reshape(5, 10)
+
+
+_inverse_dynamics_derivatives_constants = _constants(
+    0.3, 0.5, 0.015, 0.05, 0.012, 9.81, 0.8, 0.6, 0.04000000000000001, 0.9810000000000001, 1.4, -0.012,
+    0.003, 0.00424, 0.002, 0.009000000000000001, 0.001, 0.0027500000000000003, 0.08000000000000002)
+
+
+_inverse_dynamics_derivatives_fixed = (
+    {40: 0.0, 41: 0.0, 44: 0.0, 46: 0.0, 49: 0.0},
+)
+"""inverse_dynamics_derivatives's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _inverse_dynamics_derivatives_chunk(x, t, s, y):
+    """inverse_dynamics_derivatives on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, cos, multiply, negative, sin, subtract = np.add, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    (q_0, q_1, q_2, q_3, q_4, qd_0, qd_1, qd_2, qd_3, qd_4, qdd_0, qdd_1, qdd_2, qdd_3, qdd_4, p_0, p_1,
+     p_2) = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47, t48, t49, t50, t51, t52, t53, t54, t55, t56, t57, t58, t59, t60, t61,
+     t62, t63, t64, t65, t66, t67, t68, t69, t70, t71, t72, t73, t74, t75, t76, t77, t78, t79, t80, t81,
+     t82, t83, t84, t85, t86, t87, t88, t89, t90, t91, t92, t93, t94, t95, t96, t97, t98, t99, t100, t101,
+     t102, t103, t104, t105, t106, t107, t108, t109, t110, t111, t112, t113, t114, t115, t116, t117, t118,
+     t119, t120, t121, t122, t123, t124, t125, t126, t127, t128, t129) = t
+    (dtau_0, dtau_1, dtau_2, dtau_3, dtau_4, dtau_5, dtau_6, dtau_7, dtau_8, dtau_9, dtau_10, dtau_11,
+     dtau_12, dtau_13, dtau_14, dtau_15, dtau_16, dtau_17, dtau_18, dtau_19, dtau_20, dtau_21, dtau_22,
+     dtau_23, dtau_24, dtau_25, dtau_26, dtau_27, dtau_28, dtau_29, dtau_30, dtau_31, dtau_32, dtau_33,
+     dtau_34, dtau_35, dtau_36, dtau_37, dtau_38, dtau_39, dtau_42, dtau_43, dtau_45, dtau_47, dtau_48) = y
+    k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18 = _inverse_dynamics_derivatives_constants
+    cos(q_0, t0)
+    cos(q_3, t1)
+    sin(q_3, t2)
+    cos(q_2, t3)
+    add(p_0, q_1, t4)
+    multiply(t3, t4, t5)
+    multiply(t2, t5, t6)
+    multiply(k0, t6, t7)
+    multiply(k1, t6, t8)
+    add(t7, t8, t8)
+    multiply(t1, t8, t9)
+    multiply(t1, t5, t10)
+    multiply(k1, t10, t11)
+    sin(q_4, t12)
+    cos(q_4, t13)
+    sin(q_2, t14)
+    multiply(t14, t4, t15)
+    multiply(t1, t14, t16)
+    multiply(p_1, t16, t17)
+    add(t15, t17, t17)
+    multiply(t13, t17, t18)
+    multiply(p_1, t3, t19)
+    add(t10, t19, t19)
+    multiply(t12, t19, t20)
+    add(t18, t20, t18)
+    multiply(k0, t18, t20)
+    multiply(t13, t16, t21)
+    multiply(t12, t3, t22)
+    add(t21, t22, t21)
+    multiply(k2, t21, t22)
+    add(t20, t22, t20)
+    multiply(t12, t20, t22)
+    multiply(t13, t19, t23)
+    multiply(t12, t17, t24)
+    subtract(t23, t24, t23)
+    multiply(k0, t23, t24)
+    multiply(t13, t3, t25)
+    multiply(t12, t16, t26)
+    subtract(t25, t26, t25)
+    multiply(k2, t25, t26)
+    add(t24, t26, t24)
+    multiply(t13, t24, t26)
+    add(t22, t26, t22)
+    add(t11, t22, t11)
+    multiply(k3, t3, t26)
+    add(t11, t26, t11)
+    multiply(t2, t11, t26)
+    subtract(t9, t26, t9)
+    multiply(k4, t3, t26)
+    subtract(t9, t26, t9)
+    multiply(k5, t9, t26)
+    multiply(t0, t26, t26)
+    sin(q_0, t27)
+    multiply(k6, t4, t28)
+    multiply(k1, t15, t29)
+    multiply(k7, t15, t30)
+    add(t29, t30, t29)
+    multiply(k3, t16, t30)
+    add(t29, t30, t29)
+    multiply(t12, t24, t30)
+    multiply(t13, t20, t31)
+    subtract(t30, t31, t30)
+    subtract(t29, t30, t29)
+    multiply(t14, t29, t31)
+    add(t28, t31, t28)
+    multiply(t2, t8, t31)
+    multiply(k7, t5, t32)
+    add(t31, t32, t31)
+    multiply(t1, t11, t32)
+    add(t31, t32, t31)
+    multiply(t3, t31, t32)
+    add(t28, t32, t28)
+    add(t28, k8, t28)
+    multiply(k5, t28, t32)
+    add(t32, k9, t32)
+    multiply(t27, t32, t32)
+    subtract(t26, t32, dtau_0)
+    multiply(k0, t1, t26)
+    multiply(k1, t1, t32)
+    add(t26, t32, t32)
+    multiply(t1, t32, t33)
+    add(k10, t33, t33)
+    multiply(k1, t2, t34)
+    multiply(t12, t2, t35)
+    multiply(k0, t35, t36)
+    multiply(t12, t36, t37)
+    multiply(t13, t2, t38)
+    multiply(k0, t38, t39)
+    multiply(t13, t39, t40)
+    add(t37, t40, t37)
+    add(t34, t37, t34)
+    multiply(t2, t34, t40)
+    add(t33, t40, t33)
+    multiply(k5, t33, t40)
+    multiply(t0, t40, t40)
+    multiply(t2, t32, t41)
+    multiply(t1, t34, t42)
+    subtract(t41, t42, t41)
+    multiply(t3, t41, t42)
+    multiply(t13, t36, t43)
+    multiply(t12, t39, t44)
+    subtract(t43, t44, t43)
+    multiply(t14, t43, t44)
+    subtract(t42, t44, t42)
+    multiply(k5, t42, t44)
+    multiply(t27, t44, t44)
+    subtract(t40, t44, dtau_10)
+    multiply(p_1, t2, t40)
+    multiply(t12, t40, t44)
+    multiply(k0, t44, t45)
+    multiply(k2, t35, t46)
+    add(t45, t46, t45)
+    multiply(t13, t45, t47)
+    multiply(t13, t40, t48)
+    multiply(k0, t48, t49)
+    multiply(k2, t38, t50)
+    add(t49, t50, t49)
+    multiply(t12, t49, t51)
+    subtract(t47, t51, t47)
+    multiply(t2, t47, t51)
+    multiply(k5, t51, t52)
+    multiply(t0, t52, t52)
+    multiply(k3, t2, t53)
+    subtract(k11, t53, t54)
+    multiply(t13, t49, t55)
+    multiply(t12, t45, t56)
+    add(t55, t56, t55)
+    subtract(t54, t55, t54)
+    multiply(t14, t54, t56)
+    multiply(t1, t47, t57)
+    multiply(t3, t57, t58)
+    add(t56, t58, t56)
+    multiply(k5, t56, t58)
+    multiply(t27, t58, t58)
+    add(t52, t58, t52)
+    negative(t52, dtau_20)
+    multiply(t12, p_1, t52)
+    multiply(k0, t52, t58)
+    multiply(k2, t12, t59)
+    add(t58, t59, t58)
+    multiply(t12, t58, t59)
+    multiply(t13, p_1, t60)
+    multiply(k0, t60, t61)
+    multiply(k2, t13, t62)
+    add(t61, t62, t61)
+    multiply(t13, t61, t62)
+    add(t59, t62, t59)
+    add(t59, k3, t62)
+    multiply(t2, t62, t63)
+    multiply(k5, t63, t64)
+    multiply(t0, t64, t64)
+    multiply(t1, t62, t65)
+    multiply(t3, t65, t66)
+    multiply(t12, t61, t67)
+    multiply(t13, t58, t68)
+    subtract(t67, t68, t67)
+    multiply(t14, t67, t68)
+    subtract(t66, t68, t66)
+    multiply(k5, t66, t68)
+    multiply(t27, t68, t68)
+    add(t64, t68, t64)
+    negative(t64, dtau_30)
+    multiply(k5, t0, t0)
+    multiply(qdd_0, t4, t64)
+    add(t0, t64, t0)
+    multiply(qd_0, qd_1, t64)
+    add(t64, t64, t64)
+    add(t0, t64, t0)
+    multiply(k6, t0, t64)
+    multiply(k8, qdd_0, t68)
+    add(t64, t68, t64)
+    multiply(t3, t0, t68)
+    multiply(k7, t68, t69)
+    multiply(t3, qd_0, t70)
+    multiply(k4, t70, t71)
+    multiply(t70, t71, t72)
+    multiply(k4, qd_2, t73)
+    multiply(qd_2, t73, t74)
+    add(t72, t74, t72)
+    subtract(t69, t72, t69)
+    multiply(k5, t27, t27)
+    multiply(qd_0, t4, t72)
+    multiply(qd_0, t72, t74)
+    subtract(t27, t74, t27)
+    add(t27, qdd_1, t27)
+    multiply(t1, t27, t74)
+    multiply(t2, t68, t75)
+    add(t74, t75, t74)
+    multiply(k1, t74, t75)
+    multiply(t14, qd_0, t76)
+    multiply(t1, t76, t77)
+    multiply(t2, qd_2, t78)
+    subtract(t77, t78, t77)
+    multiply(k3, t77, t78)
+    multiply(t77, t78, t79)
+    add(t70, qd_3, t80)
+    multiply(k3, t80, t81)
+    multiply(t80, t81, t82)
+    add(t79, t82, t79)
+    subtract(t75, t79, t75)
+    multiply(t77, p_1, t79)
+    multiply(t77, t79, t82)
+    multiply(t80, p_1, t83)
+    multiply(t80, t83, t84)
+    add(t82, t84, t82)
+    subtract(t74, t82, t74)
+    multiply(k0, t74, t74)
+    multiply(t12, t80, t82)
+    multiply(t13, t77, t84)
+    add(t82, t84, t82)
+    multiply(k2, t82, t84)
+    multiply(t82, t84, t85)
+    multiply(t13, t80, t86)
+    multiply(t12, t77, t87)
+    subtract(t86, t87, t86)
+    multiply(k2, t86, t87)
+    multiply(t86, t87, t88)
+    add(t85, t88, t85)
+    subtract(t74, t85, t74)
+    add(t75, t74, t75)
+    multiply(t2, t75, t74)
+    multiply(t1, t68, t85)
+    multiply(t2, t27, t88)
+    subtract(t85, t88, t85)
+    multiply(k1, t85, t88)
+    multiply(t3, qdd_0, t89)
+    multiply(t76, qd_2, t90)
+    subtract(t89, t90, t89)
+    add(t89, qdd_3, t90)
+    multiply(k3, t90, t91)
+    add(t88, t91, t88)
+    multiply(t1, qd_2, t91)
+    multiply(t2, t76, t92)
+    add(t91, t92, t91)
+    multiply(t91, t78, t92)
+    add(t88, t92, t88)
+    multiply(t91, t83, t92)
+    multiply(t14, t0, t93)
+    multiply(t14, qdd_0, t94)
+    multiply(t70, qd_2, t95)
+    add(t94, t95, t94)
+    multiply(t1, t94, t95)
+    multiply(t2, qdd_2, t96)
+    subtract(t95, t96, t95)
+    multiply(t91, qd_3, t96)
+    subtract(t95, t96, t95)
+    multiply(t95, p_1, t96)
+    add(t93, t96, t96)
+    subtract(t92, t96, t92)
+    multiply(t12, t92, t96)
+    multiply(t90, p_1, t97)
+    add(t85, t97, t97)
+    multiply(t91, t79, t98)
+    add(t97, t98, t97)
+    multiply(t13, t97, t98)
+    add(t96, t98, t96)
+    multiply(k0, t96, t98)
+    multiply(t13, t90, t99)
+    multiply(t12, t95, t100)
+    subtract(t99, t100, t99)
+    multiply(t82, qd_4, t100)
+    subtract(t99, t100, t99)
+    multiply(k2, t99, t100)
+    add(t98, t100, t98)
+    add(t91, qd_4, t100)
+    multiply(t100, t84, t101)
+    add(t98, t101, t98)
+    multiply(t13, t98, t101)
+    multiply(t13, t92, t102)
+    multiply(t12, t97, t103)
+    subtract(t102, t103, t102)
+    multiply(k0, t102, t103)
+    multiply(t12, t90, t104)
+    multiply(t13, t95, t105)
+    add(t104, t105, t104)
+    multiply(t86, qd_4, t105)
+    add(t104, t105, t104)
+    multiply(k2, t104, t105)
+    subtract(t103, t105, t103)
+    multiply(t100, t87, t105)
+    add(t103, t105, t103)
+    multiply(t12, t103, t105)
+    subtract(t101, t105, t101)
+    add(t88, t101, t88)
+    multiply(t1, t88, t105)
+    add(t74, t105, t74)
+    add(t69, t74, t69)
+    multiply(t3, t69, t74)
+    multiply(k4, qdd_2, t105)
+    multiply(k7, t93, t106)
+    subtract(t105, t106, t105)
+    multiply(t76, t71, t106)
+    add(t105, t106, t105)
+    multiply(t91, t81, t106)
+    multiply(k1, t93, t107)
+    multiply(k3, t95, t108)
+    add(t107, t108, t107)
+    subtract(t106, t107, t106)
+    multiply(t13, t103, t107)
+    multiply(t12, t98, t108)
+    add(t107, t108, t107)
+    add(t106, t107, t106)
+    add(t105, t106, t105)
+    multiply(t14, t105, t106)
+    subtract(t74, t106, t74)
+    add(t64, t74, t64)
+    multiply(qd_0, t9, t74)
+    multiply(qd_0, t74, t106)
+    subtract(t64, t106, t64)
+    multiply(qdd_0, t28, t106)
+    add(t64, t106, dtau_1)
+    multiply(qdd_0, t42, t64)
+    multiply(qd_0, t33, t106)
+    multiply(qd_0, t106, t108)
+    subtract(t64, t108, dtau_11)
+    multiply(qd_0, t51, t64)
+    multiply(qd_0, t64, t108)
+    multiply(qdd_0, t56, t109)
+    add(t108, t109, dtau_21)
+    multiply(qd_0, t63, t108)
+    multiply(qd_0, t108, t109)
+    multiply(qdd_0, t66, t110)
+    add(t109, t110, dtau_31)
+    multiply(k12, t94, t109)
+    multiply(k13, qd_2, t110)
+    multiply(t70, t110, t111)
+    multiply(k13, t70, t112)
+    multiply(qd_2, t112, t113)
+    subtract(t111, t113, t111)
+    add(t109, t111, t109)
+    multiply(t1, qdd_2, t111)
+    multiply(t2, t94, t113)
+    add(t111, t113, t111)
+    multiply(t77, qd_3, t113)
+    add(t111, t113, t111)
+    multiply(k14, t111, t113)
+    multiply(k15, t80, t114)
+    multiply(t77, t114, t115)
+    multiply(k15, t77, t116)
+    multiply(t80, t116, t117)
+    subtract(t115, t117, t115)
+    add(t113, t115, t113)
+    add(t111, qdd_4, t111)
+    multiply(k16, t111, t111)
+    multiply(k17, t86, t115)
+    multiply(t82, t115, t117)
+    multiply(k17, t82, t118)
+    multiply(t86, t118, t119)
+    subtract(t117, t119, t117)
+    add(t111, t117, t111)
+    add(t113, t111, t113)
+    multiply(t2, t113, t111)
+    multiply(k15, t95, t117)
+    multiply(k14, t91, t119)
+    multiply(t80, t119, t120)
+    multiply(t91, t114, t121)
+    subtract(t120, t121, t120)
+    add(t117, t120, t117)
+    multiply(k3, t93, t93)
+    add(t117, t93, t117)
+    multiply(k17, t104, t104)
+    multiply(k16, t100, t93)
+    multiply(t86, t93, t120)
+    multiply(t100, t115, t121)
+    subtract(t120, t121, t120)
+    add(t104, t120, t104)
+    multiply(k2, t102, t102)
+    subtract(t104, t102, t104)
+    multiply(t13, t104, t102)
+    multiply(k17, t99, t99)
+    multiply(t100, t118, t120)
+    multiply(t82, t93, t121)
+    subtract(t120, t121, t120)
+    add(t99, t120, t99)
+    multiply(k2, t96, t96)
+    add(t99, t96, t99)
+    multiply(t12, t99, t96)
+    subtract(t102, t96, t102)
+    add(t117, t102, t117)
+    multiply(p_1, t107, t107)
+    subtract(t117, t107, t117)
+    multiply(t1, t117, t96)
+    add(t111, t96, t111)
+    add(t109, t111, t109)
+    multiply(t105, t4, t105)
+    subtract(t109, t105, t109)
+    multiply(t0, t29, t29)
+    add(t109, t29, t109)
+    multiply(t2, t14, t29)
+    multiply(k16, t29, t96)
+    multiply(k14, t29, t102)
+    add(t96, t102, t96)
+    multiply(t2, t96, t102)
+    multiply(k12, t14, t105)
+    add(t102, t105, t102)
+    multiply(k3, t15, t105)
+    multiply(k15, t16, t107)
+    add(t105, t107, t105)
+    multiply(k2, t18, t107)
+    multiply(k17, t21, t111)
+    add(t107, t111, t107)
+    multiply(t13, t107, t111)
+    add(t105, t111, t105)
+    multiply(p_1, t30, t111)
+    subtract(t105, t111, t105)
+    multiply(k2, t23, t111)
+    multiply(k17, t25, t120)
+    add(t111, t120, t111)
+    multiply(t12, t111, t120)
+    subtract(t105, t120, t105)
+    multiply(t1, t105, t120)
+    add(t102, t120, t102)
+    multiply(qdd_0, t102, t120)
+    add(t109, t120, t109)
+    multiply(t91, t10, t120)
+    multiply(t77, t6, t121)
+    subtract(t120, t121, t120)
+    multiply(k3, t120, t120)
+    multiply(t79, t7, t121)
+    multiply(t78, t6, t122)
+    add(t121, t122, t121)
+    subtract(t120, t121, t120)
+    multiply(t114, t29, t121)
+    add(t120, t121, t120)
+    multiply(qd_3, t96, t121)
+    add(t120, t121, t120)
+    multiply(t82, t29, t121)
+    multiply(t100, t21, t122)
+    subtract(t121, t122, t121)
+    multiply(k17, t121, t121)
+    multiply(t87, t6, t122)
+    multiply(t118, t29, t123)
+    add(t122, t123, t122)
+    multiply(t86, t6, t123)
+    multiply(t100, t18, t124)
+    add(t123, t124, t123)
+    multiply(k2, t123, t123)
+    add(t122, t123, t122)
+    subtract(t121, t122, t121)
+    multiply(t93, t21, t122)
+    add(t121, t122, t121)
+    multiply(qd_4, t107, t122)
+    add(t121, t122, t121)
+    multiply(t12, t121, t122)
+    subtract(t120, t122, t120)
+    multiply(t91, t22, t122)
+    multiply(t77, t7, t123)
+    subtract(t122, t123, t122)
+    multiply(p_1, t122, t122)
+    add(t120, t122, t120)
+    multiply(t115, t29, t122)
+    multiply(t84, t6, t123)
+    subtract(t122, t123, t122)
+    multiply(t100, t23, t123)
+    multiply(t82, t6, t124)
+    subtract(t123, t124, t123)
+    multiply(k2, t123, t123)
+    add(t122, t123, t122)
+    multiply(t93, t25, t123)
+    subtract(t122, t123, t122)
+    multiply(t100, t25, t123)
+    multiply(t86, t29, t124)
+    subtract(t123, t124, t123)
+    multiply(k17, t123, t123)
+    add(t122, t123, t122)
+    multiply(qd_4, t111, t123)
+    subtract(t122, t123, t122)
+    multiply(t13, t122, t123)
+    add(t120, t123, t120)
+    multiply(t119, t3, t123)
+    subtract(t120, t123, t120)
+    multiply(t91, t3, t123)
+    multiply(t80, t29, t124)
+    subtract(t123, t124, t123)
+    multiply(k15, t123, t123)
+    add(t120, t123, t120)
+    multiply(t1, t120, t123)
+    multiply(t71, t15, t124)
+    subtract(t123, t124, t123)
+    multiply(t78, t10, t124)
+    multiply(t81, t15, t125)
+    subtract(t124, t125, t124)
+    multiply(t114, t16, t125)
+    subtract(t124, t125, t124)
+    multiply(t79, t22, t125)
+    add(t124, t125, t124)
+    multiply(t83, t30, t125)
+    add(t124, t125, t124)
+    multiply(t84, t23, t23)
+    multiply(t87, t18, t18)
+    subtract(t23, t18, t23)
+    multiply(t115, t21, t18)
+    subtract(t23, t18, t23)
+    multiply(t86, t21, t21)
+    multiply(t82, t25, t18)
+    subtract(t21, t18, t21)
+    multiply(k16, t21, t21)
+    add(t23, t21, t23)
+    multiply(t118, t25, t25)
+    add(t23, t25, t23)
+    add(t124, t23, t124)
+    multiply(qd_3, t105, t18)
+    subtract(t124, t18, t124)
+    multiply(t80, t16, t18)
+    multiply(t77, t3, t21)
+    subtract(t18, t21, t18)
+    multiply(k14, t18, t18)
+    add(t124, t18, t124)
+    multiply(t116, t3, t18)
+    add(t124, t18, t124)
+    multiply(t2, t124, t18)
+    add(t123, t18, t123)
+    multiply(t110, t3, t18)
+    subtract(t123, t18, t123)
+    multiply(qd_2, t3, t18)
+    multiply(k12, t18, t18)
+    add(t123, t18, t123)
+    multiply(k3, t10, t10)
+    multiply(t12, t107, t18)
+    add(t10, t18, t10)
+    multiply(p_1, t22, t22)
+    add(t10, t22, t10)
+    multiply(t13, t111, t18)
+    add(t10, t18, t10)
+    multiply(k15, t3, t18)
+    add(t10, t18, t10)
+    multiply(k13, t3, t18)
+    add(t10, t18, t10)
+    multiply(qd_2, t10, t18)
+    subtract(t123, t18, t123)
+    multiply(qd_0, t123, t18)
+    add(t109, t18, t109)
+    multiply(t3, t109, t109)
+    multiply(t69, t4, t69)
+    multiply(k13, t89, t89)
+    multiply(k12, t76, t18)
+    multiply(qd_2, t18, t21)
+    multiply(t76, t110, t22)
+    subtract(t21, t22, t21)
+    add(t89, t21, t89)
+    multiply(k4, t27, t21)
+    subtract(t89, t21, t89)
+    multiply(k15, t90, t21)
+    multiply(t91, t116, t22)
+    multiply(t77, t119, t25)
+    subtract(t22, t25, t22)
+    add(t21, t22, t21)
+    multiply(k3, t85, t85)
+    add(t21, t85, t21)
+    multiply(t13, t99, t22)
+    multiply(t12, t104, t25)
+    add(t22, t25, t22)
+    add(t21, t22, t21)
+    multiply(p_1, t101, t101)
+    add(t21, t101, t21)
+    add(t89, t21, t89)
+    add(t69, t89, t69)
+    multiply(t110, t14, t110)
+    multiply(t71, t5, t71)
+    multiply(t76, t15, t21)
+    multiply(t70, t5, t22)
+    add(t21, t22, t21)
+    multiply(k4, t21, t21)
+    add(t71, t21, t71)
+    multiply(qd_2, t14, t21)
+    multiply(k13, t21, t21)
+    add(t71, t21, t71)
+    subtract(t110, t71, t110)
+    multiply(t119, t16, t21)
+    multiply(t83, t7, t22)
+    multiply(t81, t6, t25)
+    add(t22, t25, t22)
+    multiply(t91, t15, t15)
+    multiply(t80, t6, t6)
+    add(t15, t6, t15)
+    multiply(k3, t15, t15)
+    add(t22, t15, t22)
+    subtract(t21, t22, t21)
+    multiply(t116, t29, t6)
+    subtract(t21, t6, t21)
+    multiply(t77, t29, t29)
+    multiply(t91, t16, t6)
+    subtract(t29, t6, t29)
+    multiply(k15, t29, t29)
+    add(t21, t29, t21)
+    multiply(t13, t121, t6)
+    add(t21, t6, t21)
+    multiply(t91, t30, t30)
+    multiply(t80, t7, t7)
+    subtract(t30, t7, t30)
+    multiply(p_1, t30, t30)
+    add(t21, t30, t21)
+    multiply(t12, t122, t6)
+    add(t21, t6, t21)
+    add(t110, t21, t110)
+    multiply(qd_2, t102, t6)
+    add(t110, t6, t110)
+    multiply(qd_0, t110, t6)
+    add(t69, t6, t69)
+    multiply(t0, t31, t31)
+    add(t69, t31, t69)
+    multiply(qdd_0, t10, t6)
+    add(t69, t6, t69)
+    multiply(t14, t69, t69)
+    subtract(t109, t69, dtau_2)
+    multiply(t12, t50, t6)
+    multiply(t13, t46, t7)
+    multiply(p_1, t43, t15)
+    add(t7, t15, t7)
+    subtract(t6, t7, t6)
+    multiply(t1, t6, t7)
+    multiply(qdd_0, t7, t15)
+    multiply(t0, t43, t22)
+    subtract(t15, t22, t15)
+    multiply(qd_4, t50, t22)
+    multiply(t84, t1, t25)
+    multiply(t82, t1, t29)
+    multiply(t100, t38, t30)
+    add(t29, t30, t29)
+    multiply(k2, t29, t30)
+    add(t25, t30, t25)
+    subtract(t22, t25, t22)
+    multiply(t13, t22, t25)
+    multiply(t79, t26, t30)
+    multiply(t78, t1, t31)
+    add(t30, t31, t30)
+    multiply(t91, t2, t31)
+    multiply(t77, t1, t69)
+    add(t31, t69, t31)
+    multiply(k3, t31, t69)
+    add(t30, t69, t30)
+    multiply(t100, t35, t69)
+    multiply(t86, t1, t71)
+    subtract(t69, t71, t69)
+    multiply(k2, t69, t71)
+    multiply(t87, t1, t85)
+    subtract(t71, t85, t71)
+    multiply(qd_4, t46, t85)
+    subtract(t71, t85, t71)
+    multiply(t12, t71, t85)
+    add(t30, t85, t30)
+    multiply(t77, t26, t85)
+    multiply(t91, t37, t89)
+    add(t85, t89, t85)
+    multiply(p_1, t85, t85)
+    add(t30, t85, t30)
+    subtract(t25, t30, t25)
+    multiply(t1, t25, t30)
+    add(t73, t30, t30)
+    multiply(t83, t43, t85)
+    multiply(t78, t2, t78)
+    multiply(t79, t37, t89)
+    add(t78, t89, t78)
+    subtract(t85, t78, t85)
+    multiply(t87, t35, t78)
+    multiply(t84, t38, t89)
+    subtract(t78, t89, t78)
+    add(t85, t78, t85)
+    multiply(qd_3, t6, t89)
+    subtract(t85, t89, t85)
+    multiply(t2, t85, t89)
+    add(t30, t89, t30)
+    multiply(t12, t46, t89)
+    add(t53, t89, t53)
+    multiply(p_1, t37, t37)
+    add(t53, t37, t53)
+    multiply(t13, t50, t37)
+    add(t53, t37, t53)
+    subtract(k11, t53, t53)
+    multiply(qd_2, t53, t37)
+    subtract(t30, t37, t30)
+    multiply(qd_0, t30, t37)
+    add(t15, t37, t15)
+    multiply(t3, t15, t15)
+    multiply(t13, t71, t37)
+    multiply(t83, t26, t89)
+    multiply(t81, t1, t81)
+    add(t89, t81, t89)
+    multiply(t80, t1, t81)
+    multiply(k3, t81, t101)
+    add(t89, t101, t89)
+    subtract(t37, t89, t37)
+    multiply(t91, t43, t43)
+    multiply(t80, t26, t26)
+    subtract(t43, t26, t43)
+    multiply(p_1, t43, t43)
+    add(t37, t43, t37)
+    multiply(t12, t22, t26)
+    add(t37, t26, t37)
+    multiply(qd_2, t7, t26)
+    add(t37, t26, t26)
+    multiply(qd_0, t26, t43)
+    multiply(t0, t41, t41)
+    add(t43, t41, t43)
+    multiply(qdd_0, t53, t41)
+    add(t43, t41, t43)
+    multiply(t14, t43, t43)
+    subtract(t15, t43, dtau_12)
+    multiply(t0, t54, t54)
+    multiply(k16, t1, t15)
+    multiply(k14, t1, t41)
+    add(t15, t41, t15)
+    multiply(t2, t15, t41)
+    multiply(k15, t2, t43)
+    multiply(k2, t48, t89)
+    multiply(k17, t38, t101)
+    add(t89, t101, t89)
+    multiply(t13, t89, t101)
+    add(t43, t101, t43)
+    multiply(p_1, t55, t101)
+    add(t43, t101, t43)
+    multiply(k2, t44, t101)
+    multiply(k17, t35, t109)
+    add(t101, t109, t101)
+    multiply(t12, t101, t109)
+    add(t43, t109, t43)
+    multiply(t1, t43, t109)
+    subtract(t41, t109, t41)
+    multiply(qdd_0, t41, t109)
+    add(t54, t109, t54)
+    multiply(t114, t1, t109)
+    multiply(qd_3, t15, t125)
+    add(t109, t125, t109)
+    multiply(t100, t48, t125)
+    multiply(k2, t125, t125)
+    multiply(t118, t1, t126)
+    subtract(t125, t126, t125)
+    multiply(k17, t29, t29)
+    add(t125, t29, t125)
+    multiply(t93, t38, t29)
+    subtract(t125, t29, t125)
+    multiply(qd_4, t89, t29)
+    subtract(t125, t29, t125)
+    multiply(t12, t125, t29)
+    subtract(t109, t29, t109)
+    multiply(t91, t47, t29)
+    multiply(p_1, t29, t29)
+    add(t109, t29, t109)
+    multiply(t115, t1, t29)
+    multiply(t100, t44, t126)
+    multiply(k2, t126, t126)
+    add(t29, t126, t29)
+    multiply(t93, t35, t126)
+    subtract(t29, t126, t29)
+    multiply(k17, t69, t69)
+    add(t29, t69, t29)
+    multiply(qd_4, t101, t69)
+    subtract(t29, t69, t29)
+    multiply(t13, t29, t69)
+    add(t109, t69, t109)
+    multiply(k15, t81, t81)
+    subtract(t109, t81, t109)
+    multiply(t1, t109, t69)
+    add(t112, t69, t69)
+    multiply(t114, t2, t114)
+    multiply(t79, t47, t81)
+    add(t114, t81, t114)
+    multiply(t83, t55, t81)
+    add(t114, t81, t114)
+    multiply(t87, t48, t48)
+    multiply(t84, t44, t44)
+    add(t48, t44, t48)
+    multiply(t115, t38, t44)
+    add(t48, t44, t48)
+    multiply(t86, t38, t38)
+    multiply(t82, t35, t44)
+    add(t38, t44, t38)
+    multiply(k16, t38, t38)
+    subtract(t48, t38, t48)
+    multiply(t118, t35, t35)
+    add(t48, t35, t48)
+    add(t114, t48, t114)
+    multiply(qd_3, t43, t35)
+    add(t114, t35, t114)
+    multiply(t80, t2, t35)
+    multiply(k14, t35, t35)
+    subtract(t114, t35, t114)
+    multiply(t2, t114, t35)
+    add(t69, t35, t69)
+    multiply(k12, t70, t35)
+    subtract(t69, t35, t69)
+    multiply(p_1, t47, t35)
+    multiply(t12, t89, t38)
+    subtract(t35, t38, t35)
+    multiply(t13, t101, t38)
+    add(t35, t38, t35)
+    multiply(qd_2, t35, t38)
+    subtract(t69, t38, t69)
+    multiply(qd_0, t69, t38)
+    add(t54, t38, t54)
+    multiply(t3, t54, t54)
+    multiply(k13, t76, t38)
+    subtract(t38, t18, t38)
+    multiply(k15, t31, t31)
+    multiply(t119, t2, t44)
+    multiply(t116, t1, t81)
+    add(t44, t81, t44)
+    subtract(t31, t44, t31)
+    multiply(t13, t125, t44)
+    add(t31, t44, t31)
+    multiply(t91, t55, t55)
+    multiply(p_1, t55, t55)
+    add(t31, t55, t31)
+    multiply(t12, t29, t44)
+    add(t31, t44, t31)
+    add(t38, t31, t38)
+    multiply(qd_2, t41, t44)
+    add(t38, t44, t38)
+    multiply(qd_0, t38, t44)
+    multiply(t0, t57, t57)
+    add(t44, t57, t44)
+    multiply(qdd_0, t35, t55)
+    add(t44, t55, t44)
+    multiply(t14, t44, t44)
+    subtract(t54, t44, dtau_22)
+    multiply(k2, t52, t44)
+    multiply(k17, t12, t54)
+    add(t44, t54, t44)
+    multiply(t13, t44, t54)
+    multiply(p_1, t67, t55)
+    subtract(t54, t55, t54)
+    multiply(k2, t60, t55)
+    multiply(k17, t13, t57)
+    add(t55, t57, t55)
+    multiply(t12, t55, t57)
+    subtract(t54, t57, t54)
+    multiply(t1, t54, t57)
+    multiply(qdd_0, t57, t81)
+    multiply(t0, t67, t126)
+    subtract(t81, t126, t81)
+    multiply(t91, t59, t126)
+    multiply(p_1, t126, t126)
+    multiply(t93, t12, t127)
+    multiply(t100, t52, t128)
+    multiply(k2, t128, t128)
+    multiply(t100, t12, t129)
+    multiply(k17, t129, t129)
+    add(t128, t129, t128)
+    subtract(t127, t128, t127)
+    multiply(qd_4, t44, t128)
+    add(t127, t128, t127)
+    multiply(t12, t127, t128)
+    subtract(t126, t128, t126)
+    multiply(t100, t60, t128)
+    multiply(k2, t128, t128)
+    multiply(t93, t13, t93)
+    subtract(t128, t93, t128)
+    multiply(t100, t13, t100)
+    multiply(k17, t100, t100)
+    add(t128, t100, t128)
+    multiply(qd_4, t55, t93)
+    subtract(t128, t93, t128)
+    multiply(t13, t128, t93)
+    add(t126, t93, t126)
+    subtract(t126, t119, t126)
+    multiply(k15, t91, t93)
+    add(t126, t93, t126)
+    multiply(t1, t126, t93)
+    multiply(t79, t59, t79)
+    multiply(t83, t67, t83)
+    add(t79, t83, t79)
+    multiply(t84, t60, t84)
+    multiply(t87, t52, t87)
+    subtract(t84, t87, t84)
+    multiply(t115, t12, t115)
+    subtract(t84, t115, t84)
+    multiply(t86, t12, t52)
+    multiply(t82, t13, t60)
+    subtract(t52, t60, t52)
+    multiply(k16, t52, t52)
+    add(t84, t52, t84)
+    multiply(t118, t13, t118)
+    add(t84, t118, t84)
+    add(t79, t84, t79)
+    multiply(qd_3, t54, t52)
+    subtract(t79, t52, t79)
+    multiply(k14, t77, t52)
+    subtract(t79, t52, t79)
+    add(t79, t116, t79)
+    multiply(t2, t79, t52)
+    add(t93, t52, t93)
+    multiply(t12, t44, t52)
+    multiply(p_1, t59, t59)
+    add(t52, t59, t52)
+    multiply(t13, t55, t59)
+    add(t52, t59, t52)
+    add(t52, k15, t52)
+    multiply(qd_2, t52, t59)
+    subtract(t93, t59, t93)
+    multiply(qd_0, t93, t59)
+    add(t81, t59, t81)
+    multiply(t3, t81, t81)
+    multiply(t13, t127, t59)
+    multiply(t91, t67, t67)
+    multiply(p_1, t67, t67)
+    add(t59, t67, t59)
+    multiply(t12, t128, t60)
+    add(t59, t60, t59)
+    multiply(qd_2, t57, t60)
+    add(t59, t60, t60)
+    multiply(qd_0, t60, t67)
+    multiply(t0, t65, t0)
+    add(t67, t0, t67)
+    multiply(qdd_0, t52, t0)
+    add(t67, t0, t67)
+    multiply(t14, t67, t67)
+    subtract(t81, t67, dtau_32)
+    multiply(k16, t2, t0)
+    multiply(qdd_0, t0, t65)
+    multiply(k16, qd_3, t67)
+    multiply(t1, t67, t81)
+    multiply(qd_0, t81, t83)
+    add(t65, t83, t65)
+    multiply(t3, t65, t65)
+    multiply(qd_2, t0, t83)
+    multiply(qd_0, t83, t87)
+    multiply(t14, t87, t87)
+    subtract(t65, t87, dtau_42)
+    multiply(t75, t5, t65)
+    multiply(t68, t8, t87)
+    add(t65, t87, t65)
+    multiply(t113, t14, t87)
+    add(t65, t87, t65)
+    multiply(t94, t96, t87)
+    add(t65, t87, t65)
+    multiply(qdd_2, t105, t87)
+    subtract(t65, t87, t65)
+    multiply(t27, t11, t87)
+    subtract(t65, t87, t65)
+    multiply(qd_2, t120, t87)
+    subtract(t65, t87, t65)
+    multiply(t76, t124, t87)
+    add(t65, t87, t65)
+    multiply(t1, t65, t65)
+    multiply(t88, t5, t87)
+    multiply(t27, t8, t8)
+    add(t87, t8, t87)
+    multiply(t117, t14, t8)
+    add(t87, t8, t87)
+    multiply(qdd_2, t96, t8)
+    add(t87, t8, t87)
+    multiply(t94, t105, t8)
+    add(t87, t8, t87)
+    multiply(t68, t11, t11)
+    add(t87, t11, t87)
+    multiply(t76, t120, t8)
+    add(t87, t8, t87)
+    multiply(qd_2, t124, t8)
+    add(t87, t8, t87)
+    multiply(t2, t87, t87)
+    subtract(t65, t87, dtau_3)
+    multiply(t68, t32, t8)
+    subtract(t8, t88, t8)
+    multiply(qdd_2, t6, t11)
+    subtract(t8, t11, t8)
+    multiply(t27, t34, t11)
+    add(t8, t11, t8)
+    multiply(qd_2, t25, t11)
+    subtract(t8, t11, t8)
+    multiply(t76, t85, t11)
+    add(t8, t11, t8)
+    multiply(t1, t8, t8)
+    multiply(t27, t32, t32)
+    add(t75, t32, t75)
+    multiply(t94, t6, t11)
+    add(t75, t11, t75)
+    multiply(t68, t34, t34)
+    subtract(t75, t34, t75)
+    multiply(t76, t25, t11)
+    add(t75, t11, t75)
+    multiply(qd_2, t85, t11)
+    add(t75, t11, t75)
+    multiply(t2, t75, t75)
+    subtract(t8, t75, dtau_13)
+    multiply(t94, t15, t8)
+    subtract(t8, t117, t8)
+    multiply(qdd_2, t43, t11)
+    add(t8, t11, t8)
+    multiply(t27, t47, t11)
+    subtract(t8, t11, t8)
+    multiply(qd_2, t109, t11)
+    subtract(t8, t11, t8)
+    multiply(t76, t114, t11)
+    add(t8, t11, t8)
+    multiply(t1, t8, t8)
+    multiply(qdd_2, t15, t11)
+    add(t113, t11, t113)
+    multiply(t94, t43, t11)
+    subtract(t113, t11, t113)
+    multiply(t68, t47, t47)
+    add(t113, t47, t113)
+    multiply(t76, t109, t11)
+    add(t113, t11, t113)
+    multiply(qd_2, t114, t11)
+    add(t113, t11, t113)
+    multiply(t2, t113, t113)
+    subtract(t8, t113, dtau_23)
+    multiply(t76, t79, t8)
+    multiply(qdd_2, t54, t11)
+    multiply(t27, t62, t27)
+    add(t11, t27, t11)
+    multiply(qd_2, t126, t27)
+    add(t11, t27, t11)
+    subtract(t8, t11, t8)
+    multiply(t1, t8, t8)
+    multiply(t94, t54, t11)
+    multiply(t68, t62, t68)
+    add(t11, t68, t11)
+    multiply(t76, t126, t27)
+    add(t11, t27, t11)
+    multiply(qd_2, t79, t27)
+    add(t11, t27, t11)
+    multiply(t2, t11, t11)
+    subtract(t8, t11, dtau_33)
+    multiply(k16, t94, t94)
+    multiply(qd_2, t67, t8)
+    subtract(t94, t8, t94)
+    multiply(t1, t94, t94)
+    multiply(k16, qdd_2, t8)
+    multiply(t76, t67, t11)
+    add(t8, t11, t8)
+    multiply(t2, t8, t8)
+    subtract(t94, t8, dtau_43)
+    multiply(t104, t3, t8)
+    multiply(t98, t17, t11)
+    multiply(t99, t16, t27)
+    add(t11, t27, t11)
+    multiply(t103, t19, t27)
+    add(t11, t27, t11)
+    subtract(t8, t11, t8)
+    multiply(t97, t20, t11)
+    add(t8, t11, t8)
+    multiply(t77, t121, t11)
+    subtract(t8, t11, t8)
+    multiply(t90, t107, t11)
+    add(t8, t11, t8)
+    multiply(t92, t24, t11)
+    add(t8, t11, t8)
+    multiply(t80, t122, t11)
+    add(t8, t11, t8)
+    multiply(t95, t111, t11)
+    subtract(t8, t11, t8)
+    multiply(t13, t8, t8)
+    multiply(t104, t16, t16)
+    multiply(t103, t17, t17)
+    subtract(t16, t17, t16)
+    multiply(t98, t19, t19)
+    add(t16, t19, t16)
+    multiply(t92, t20, t20)
+    subtract(t16, t20, t16)
+    multiply(t80, t121, t121)
+    add(t16, t121, t16)
+    multiply(t95, t107, t11)
+    add(t16, t11, t16)
+    multiply(t99, t3, t11)
+    add(t16, t11, t16)
+    multiply(t97, t24, t24)
+    add(t16, t24, t16)
+    multiply(t77, t122, t122)
+    add(t16, t122, t16)
+    multiply(t90, t111, t11)
+    add(t16, t11, t16)
+    multiply(t12, t16, t16)
+    subtract(t8, t16, dtau_4)
+    multiply(t103, t2, t8)
+    multiply(t97, t36, t11)
+    subtract(t8, t11, t8)
+    multiply(t77, t71, t11)
+    subtract(t8, t11, t8)
+    multiply(t90, t46, t11)
+    subtract(t8, t11, t8)
+    multiply(t92, t39, t11)
+    subtract(t8, t11, t8)
+    multiply(t80, t22, t11)
+    add(t8, t11, t8)
+    multiply(t95, t50, t11)
+    add(t8, t11, t8)
+    multiply(t13, t8, t8)
+    multiply(t92, t36, t36)
+    multiply(t98, t2, t11)
+    subtract(t36, t11, t36)
+    multiply(t80, t71, t71)
+    add(t36, t71, t36)
+    multiply(t95, t46, t11)
+    subtract(t36, t11, t36)
+    multiply(t97, t39, t39)
+    subtract(t36, t39, t36)
+    multiply(t77, t22, t22)
+    add(t36, t22, t36)
+    multiply(t90, t50, t11)
+    subtract(t36, t11, t36)
+    multiply(t12, t36, t36)
+    subtract(t8, t36, dtau_14)
+    multiply(t98, t40, t8)
+    multiply(t99, t2, t11)
+    add(t8, t11, t8)
+    multiply(t97, t49, t11)
+    subtract(t8, t11, t8)
+    multiply(t77, t125, t11)
+    subtract(t8, t11, t8)
+    multiply(t90, t89, t11)
+    subtract(t8, t11, t8)
+    multiply(t92, t45, t11)
+    add(t8, t11, t8)
+    multiply(t80, t29, t11)
+    add(t8, t11, t8)
+    multiply(t95, t101, t11)
+    subtract(t8, t11, t8)
+    multiply(t13, t8, t8)
+    multiply(t103, t40, t40)
+    multiply(t104, t2, t11)
+    subtract(t40, t11, t40)
+    multiply(t92, t49, t49)
+    add(t40, t49, t40)
+    multiply(t80, t125, t125)
+    add(t40, t125, t40)
+    multiply(t95, t89, t11)
+    subtract(t40, t11, t40)
+    multiply(t97, t45, t45)
+    add(t40, t45, t40)
+    multiply(t77, t29, t29)
+    add(t40, t29, t40)
+    multiply(t90, t101, t11)
+    add(t40, t11, t40)
+    multiply(t12, t40, t40)
+    subtract(t8, t40, dtau_24)
+    multiply(t103, p_1, t103)
+    subtract(t104, t103, t104)
+    multiply(t97, t58, t8)
+    add(t104, t8, t104)
+    multiply(t77, t127, t8)
+    subtract(t104, t8, t104)
+    multiply(t90, t44, t8)
+    add(t104, t8, t104)
+    multiply(t92, t61, t8)
+    add(t104, t8, t104)
+    multiply(t80, t128, t8)
+    add(t104, t8, t104)
+    multiply(t95, t55, t8)
+    subtract(t104, t8, t104)
+    multiply(t13, t104, t13)
+    multiply(t98, p_1, t98)
+    multiply(t92, t58, t92)
+    subtract(t98, t92, t98)
+    multiply(t80, t127, t80)
+    add(t98, t80, t98)
+    multiply(t95, t44, t95)
+    add(t98, t95, t98)
+    add(t98, t99, t98)
+    multiply(t97, t61, t97)
+    add(t98, t97, t98)
+    multiply(t77, t128, t128)
+    add(t98, t128, t98)
+    multiply(t90, t55, t90)
+    add(t98, t90, t98)
+    multiply(t12, t98, t12)
+    subtract(t13, t12, dtau_34)
+    multiply(t3, t110, t110)
+    multiply(t72, t9, t9)
+    subtract(t110, t9, t110)
+    multiply(t4, t74, t74)
+    subtract(t110, t74, t110)
+    multiply(t14, t123, t123)
+    add(t110, t123, t110)
+    add(t28, t28, t28)
+    multiply(qd_1, t28, t8)
+    add(t110, t8, dtau_5)
+    multiply(t3, t26, t26)
+    multiply(k18, qd_0, t8)
+    subtract(t26, t8, t26)
+    multiply(t72, t33, t33)
+    subtract(t26, t33, t26)
+    multiply(t4, t106, t106)
+    subtract(t26, t106, t26)
+    multiply(t14, t30, t30)
+    add(t26, t30, t26)
+    add(t42, t42, t42)
+    multiply(qd_1, t42, t8)
+    add(t26, t8, dtau_15)
+    multiply(t3, t38, t38)
+    multiply(t72, t51, t51)
+    add(t38, t51, t38)
+    multiply(t4, t64, t64)
+    add(t38, t64, t38)
+    multiply(t14, t69, t69)
+    add(t38, t69, t38)
+    add(t56, t56, t56)
+    multiply(qd_1, t56, t8)
+    add(t38, t8, dtau_25)
+    multiply(t3, t60, t60)
+    multiply(t72, t63, t72)
+    add(t60, t72, t60)
+    multiply(t4, t108, t4)
+    add(t60, t4, t60)
+    multiply(t14, t93, t93)
+    add(t60, t93, t60)
+    add(t66, t66, t66)
+    multiply(qd_1, t66, t4)
+    add(t60, t4, dtau_35)
+    multiply(t3, t83, t83)
+    multiply(t14, t81, t81)
+    add(t83, t81, dtau_45)
+    multiply(qd_0, t28, dtau_6)
+    multiply(qd_0, t42, dtau_16)
+    multiply(qd_0, t56, dtau_26)
+    multiply(qd_0, t66, dtau_36)
+    multiply(t70, t102, t102)
+    multiply(t73, t5, t73)
+    multiply(qd_2, t5, t5)
+    multiply(k4, t5, t5)
+    add(t73, t5, t73)
+    multiply(t112, t14, t112)
+    add(t73, t112, t73)
+    subtract(t102, t73, t102)
+    multiply(t2, t120, t120)
+    subtract(t102, t120, t102)
+    multiply(t1, t124, t124)
+    add(t102, t124, t102)
+    multiply(t70, t14, t14)
+    multiply(t76, t3, t4)
+    subtract(t14, t4, t14)
+    multiply(k13, t14, t14)
+    add(t102, t14, t102)
+    multiply(t18, t3, t18)
+    add(t102, t18, t102)
+    multiply(t76, t10, t10)
+    subtract(t102, t10, dtau_7)
+    multiply(k4, t76, t3)
+    multiply(t70, t7, t7)
+    add(t3, t7, t3)
+    multiply(t2, t25, t25)
+    subtract(t3, t25, t3)
+    multiply(t1, t85, t85)
+    add(t3, t85, t3)
+    multiply(t76, t53, t53)
+    subtract(t3, t53, dtau_17)
+    multiply(t70, t41, t41)
+    multiply(t2, t109, t109)
+    subtract(t41, t109, t41)
+    multiply(t1, t114, t114)
+    add(t41, t114, t41)
+    multiply(t76, t35, t35)
+    subtract(t41, t35, dtau_27)
+    multiply(t70, t57, t57)
+    multiply(t2, t126, t126)
+    subtract(t57, t126, t57)
+    multiply(t1, t79, t1)
+    add(t57, t1, t57)
+    multiply(t76, t52, t76)
+    subtract(t57, t76, dtau_37)
+    multiply(t70, t0, t70)
+    multiply(t2, t67, t2)
+    subtract(t70, t2, dtau_47)
+    multiply(t77, t96, t96)
+    add(t96, t21, t96)
+    multiply(t91, t105, t105)
+    subtract(t96, t105, dtau_8)
+    multiply(t91, t6, t6)
+    subtract(t37, t6, dtau_18)
+    multiply(t77, t15, t15)
+    add(t15, t31, t15)
+    multiply(t91, t43, t43)
+    add(t15, t43, dtau_28)
+    multiply(t91, t54, t91)
+    subtract(t59, t91, dtau_38)
+    multiply(k16, t77, dtau_48)
+    multiply(t86, t107, t107)
+    add(t107, t23, t107)
+    multiply(t82, t111, t111)
+    subtract(t107, t111, dtau_9)
+    multiply(t86, t46, t46)
+    subtract(t78, t46, t78)
+    multiply(t82, t50, t50)
+    add(t78, t50, dtau_19)
+    multiply(t86, t89, t89)
+    subtract(t48, t89, t48)
+    multiply(t82, t101, t101)
+    subtract(t48, t101, dtau_29)
+    multiply(t86, t44, t86)
+    add(t86, t84, t86)
+    multiply(t82, t55, t82)
+    subtract(t86, t82, dtau_39)
+
+
 def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     """Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by an unrolled LDL^T solve. p (3): parameters L1, L2, L_tcp.
 

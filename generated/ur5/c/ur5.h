@@ -32,6 +32,7 @@
 #include "ur5_gravity.h"
 #include "ur5_bias.h"
 #include "ur5_inverse_dynamics.h"
+#include "ur5_inverse_dynamics_derivatives.h"
 #include "ur5_forward_dynamics.h"
 #include "ur5_inverse_dynamics_fext.h"
 #include "ur5_forward_dynamics_fext.h"

@@ -44,6 +44,7 @@ UR5_DERIVE_SRC := $(addprefix $(UR5_DERIVE_DIR)/,\
   ur5_gravity.c \
   ur5_ik_tcp.c \
   ur5_inverse_dynamics.c \
+  ur5_inverse_dynamics_derivatives.c \
   ur5_inverse_dynamics_fext.c \
   ur5_jacobian_base.c \
   ur5_jacobian_base_link.c \

@@ -23,7 +23,8 @@ from derive.codegen.program import Program
 MATH_FUNCTIONS = [("SIN", "sin"), ("COS", "cos"), ("TAN", "tan"), ("SQRT", "sqrt"), ("EXP", "exp"),
                   ("LOG", "log"), ("FABS", "fabs"), ("ASIN", "asin"), ("ACOS", "acos"), ("ATAN", "atan"),
                   ("TANH", "tanh"), ("POW", "pow"), ("ATAN2", "atan2"), ("FMIN", "fmin"), ("FMAX", "fmax")]
-SUPPORT = {"ik": ("derive_linalg.h", "derive_ik.h"), "manipulability": ("derive_linalg.h", "derive_manipulability.h")}
+SUPPORT = {"ik": ("derive_linalg.h", "derive_ik.h"), "manipulability": ("derive_linalg.h", "derive_manipulability.h"),
+           "ltdl": ("derive_ltdl.h",)}
 """Fixed algorithms -> the header-only support files (templates/c/support/) that implement them."""
 
 HEADER_NOTES = {

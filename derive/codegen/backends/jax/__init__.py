@@ -10,7 +10,7 @@ ufuncs, the outputs assembled entry by entry with ``.at[..., k].set``), so ``jax
 when imported.
 
 Template-bodied functions are provided where ``templates/jax/<template>.py.jinja`` exists
-(``rk4_step``, ``manipulability_<frame>``). IK is not: its Levenberg-Marquardt is a data-dependent
+(``rk4_step``, ``manipulability_<frame>``, the ODE Jacobians of large robots). IK is not: its Levenberg-Marquardt is a data-dependent
 loop with early exits, seeded restarts and a status code, which does not trace into one jit-able
 or differentiable graph without a different algorithm (fixed iteration count, ``lax.while_loop``),
 so it would be a second IK with its own results rather than a translation of the first. Such a
@@ -25,7 +25,7 @@ import jinja2
 from derive.codegen.backends.base import Backend, Function, RobotContext, float_literal
 from derive.codegen.backends.jax.printer import JaxPrinter
 
-SUPPORT = {"manipulability": ("manipulability.py",)}
+SUPPORT = {"manipulability": ("manipulability.py",), "ltdl": ("ltdl.py",)}
 """Fixed algorithms -> the sections (templates/jax/support/) inserted verbatim into the module."""
 
 

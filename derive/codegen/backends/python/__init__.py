@@ -17,7 +17,7 @@ gives bit for bit the per-state results, and one state those of the C code:
   each writing into a preallocated row; the module's ``_batch`` runs it over the batch chunk by
   chunk and lays the output rows out as (..., *s).
 
-Template functions: ``rk4_step`` and ``manipulability_<frame>`` are batched as well; ``ik_<frame>``
+Template functions: ``rk4_step``, ``manipulability_<frame>`` and the ODE Jacobians of large robots are batched as well; ``ik_<frame>``
 (:data:`LOOPS`), iterative per state, solves a batch one state after the other.
 """
 
@@ -28,7 +28,7 @@ import jinja2
 from derive.codegen.backends.base import Backend, Function, RobotContext, float_literal
 from derive.codegen.backends.python.printer import BATCH_DEFINITIONS, PARAMETERS, SCALAR, ChunkPrinter, StatePrinter, functions
 
-SUPPORT = {"ik": ("ik.py",), "manipulability": ("manipulability.py",)}
+SUPPORT = {"ik": ("ik.py",), "manipulability": ("manipulability.py",), "ltdl": ("ltdl.py",)}
 """Fixed algorithms -> the sections (templates/python/support/) inserted verbatim into the module."""
 
 LOOPS = {"ik"}
