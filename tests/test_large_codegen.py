@@ -1,9 +1,10 @@
-"""A chain long enough for the large-robot forms, end to end: its forward dynamics by the
+"""A chain long enough for the large-robot forms, and a tree of two branches, end to end: its forward dynamics by the
 articulated-body algorithm, its Coriolis matrix and inverse-dynamics derivatives from the analytic
 RNEA derivatives, its ODE Jacobians as loops (LTDL factor and solve) around calls of
 forward_dynamics, inverse_dynamics_derivatives and mass_matrix, split C functions, generated in C,
 Python and JAX, against the numpy reference (complex step for the derivatives) and each other at
-seeded states, with a parameter away from its default; a batch of the Python template functions equals
+seeded states, with a parameter away from its default, and against Pinocchio (computeRNEADerivatives,
+computeABADerivatives); a batch of the Python template functions equals
 its states one by one bit for bit."""
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import re
 from pathlib import Path
 
 import numpy as np
+import pytest
 
 from derive.bench.large import generic_chain
 from derive.codegen.backends import backends
@@ -22,6 +24,7 @@ from derive.codegen.render import render_robot
 from derive.description.model import parse_models
 from derive.reference import NumericRobot
 from derive.symbolic.model import SXModel
+from pin_model import PinRobot
 from test_codegen import CFLAGS, CFunctions, reference
 from util import assert_close, build_library, states
 
@@ -30,10 +33,15 @@ SHOWN = ("inverse_dynamics", "inverse_dynamics_derivatives", "mass_matrix", "cor
          "ode_rhs", "ode_jac_x", "ode_jac_u")
 
 
-def test_large_chain_forms_match_the_reference(tmp_path):
+@pytest.mark.parametrize("shape", ["chain", "tree"])
+def test_large_robot_forms_match_the_reference(shape, tmp_path):
     import ctypes
 
-    robot = parse_models(_with_parameter(generic_chain(N)))[f"chain{N}"]
+    text = _with_parameter(generic_chain(N))
+    if shape == "tree":  # joint q8 on link l3 instead of l7: two branches, LTDL along the tree
+        text, count = re.subn(r"(name: q8, type: revolute, parent: )l7", r"\g<1>l3", text)
+        assert count == 1
+    robot = parse_models(text)[f"chain{N}"]
     model = SXModel(robot)
     specs = [s for s in function_specs(model) if s.short_name in SHOWN]
     templates = [t for t in template_functions(model) if t.short_name in SHOWN]
@@ -53,6 +61,8 @@ def test_large_chain_forms_match_the_reference(tmp_path):
     assert by_name["ode_jac_x"]["calls"] == [f"chain{N}_{q}" for q in ("forward_dynamics", "inverse_dynamics_derivatives",
                                                                          "mass_matrix")]
     assert {"file": "c/derive_ltdl.h", "source": "templates/c/support/derive_ltdl.h"} in manifest["support"]
+    assert ("L^T D L along the tree" in by_name["ode_jac_u"]["algorithm"]) and (
+        (SXModel(robot).newton_euler.dof_parents is None) == (shape == "chain"))
     sources = [tmp_path / fn["c"]["source"] for fn in manifest["functions"]]
     lib = build_library(["cc", *CFLAGS, "-O1", "-fPIC", f"-I{tmp_path / 'c'}"], sources, tmp_path / "libchain.so")
     c = CFunctions(lib, manifest, ctypes.c_double)
@@ -61,6 +71,7 @@ def test_large_chain_forms_match_the_reference(tmp_path):
     spec.loader.exec_module(py)
     jx = _load_jax(tmp_path)
     ref = NumericRobot(robot, {"m5": float(P[0])})
+    pin = PinRobot(robot, {"m5": float(P[0])})
     rng = np.random.default_rng(3)
     batch = {"x": [], "u": []}
     for q, qd, qdd in states(robot, n=2):
@@ -77,6 +88,12 @@ def test_large_chain_forms_match_the_reference(tmp_path):
             if jx is not None:
                 assert_close(np.asarray(getattr(jx, fn["jax"]["function"])(*args)).reshape(got_c.shape), got_c,
                              rtol=1e-12, what=f"JAX vs C {fn['name']}")
+        # and Pinocchio: computeRNEADerivatives, and computeABADerivatives' dqdd/dx and M^-1
+        dqdd, minv = pin.aba_derivatives(q, qd, tau)
+        assert_close(c(by_name["inverse_dynamics_derivatives"], a)[0], pin.rnea_derivatives(q, qd, qdd), 1e-9,
+                     "C inverse_dynamics_derivatives against Pinocchio")
+        assert_close(c(by_name["ode_jac_x"], a)[0][N:], dqdd, 1e-9, "C ode_jac_x against Pinocchio")
+        assert_close(c(by_name["ode_jac_u"], a)[0][N:], minv, 1e-9, "C ode_jac_u against Pinocchio")
         batch["x"].append(a["x"])
         batch["u"].append(a["u"])
     x, u = np.array(batch["x"]), np.array(batch["u"])

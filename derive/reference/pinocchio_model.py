@@ -216,6 +216,12 @@ class PinRobot:
         dq, dv, _ = pin.computeRNEADerivatives(self.model, self.data, q, v, a)
         return np.hstack([np.array(dq), np.array(dv)])
 
+    def aba_derivatives(self, q, v, tau) -> tuple[np.ndarray, np.ndarray]:
+        """computeABADerivatives: ([dqdd/dq, dqdd/dv] (nv x 2 nv, tangent space), M^-1 (symmetrised))."""
+        pin.computeABADerivatives(self.model, self.data, q, v, tau)
+        minv = np.array(self.data.Minv)
+        return np.hstack([np.array(self.data.ddq_dq), np.array(self.data.ddq_dv)]), np.triu(minv) + np.triu(minv, 1).T
+
     def aba(self, q, v, tau, wrenches=None) -> np.ndarray:
         """Pinocchio's ABA; with mimic joints (which it refuses) M^-1 (tau - rnea(q, v, 0, fext))."""
         if self.mimic:
