@@ -116,18 +116,17 @@ def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
     if kind == "ode_jac_u":
         return np.vstack([np.zeros((nq, nv)), np.linalg.inv(ref.crba(q))])
     if kind == "inverse_dynamics_derivatives":  # complex step through the reference RNEA (friction smoothed)
-        h, eye = 1e-30, np.eye(nq + nv)
-
-        def rnea(x):
-            return ref.rnea(x[:nq], x[nq:], qdd.astype(complex), smooth=True)
-
-        x = np.concatenate([q, qd]).astype(complex)
-        return np.array([rnea(x + 1j * h * eye[k]).imag / h for k in range(nq + nv)]).T
+        return complex_step(lambda x: ref.rnea(x[:nq], x[nq:], qdd.astype(complex), smooth=True), np.concatenate([q, qd]))
     if kind == "ode_jac_x":  # complex step through the reference ABA
-        h, x = 1e-30, np.concatenate([q, qd])
-        eye = np.eye(nq + nv)
-        return np.array([f(x + 1j * h * eye[k], tau.astype(complex)).imag / h for k in range(nq + nv)]).T
+        return complex_step(lambda x: f(x, tau.astype(complex)), np.concatenate([q, qd]))
     raise AssertionError(kind)
+
+
+def complex_step(g, x: np.ndarray, h: float = 1e-30) -> np.ndarray:
+    """dg/dx of a function g that takes complex arguments, column by column by the complex step:
+    Im g(x + i h e_k) / h, exact to rounding (no subtraction)."""
+    eye = np.eye(len(x))
+    return np.array([g(x + 1j * h * eye[k]).imag / h for k in range(len(x))]).T
 
 
 @pytest.mark.parametrize("robot", ROBOTS)
