@@ -4,6 +4,9 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip --disable-pip-version-check -q
+# `make test` runs pytest in TEST_WORKERS processes (pytest-xdist): one per CPU, at most 4 (each
+# holds up to ~2 GB); `make test TEST_WORKERS=0` runs the suite in one process.
+TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$((n < 4 ? n : 4)))
 
 .PHONY: derive test check bench firmware-check clean venv venv-test
 
@@ -12,7 +15,7 @@ derive: $(VENV)/.core
 
 test: $(VENV)/.test
 	$(PY) -m derive generate --check --prune
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n $(TEST_WORKERS)
 
 bench: $(VENV)/.test
 	$(PY) -m derive bench

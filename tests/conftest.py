@@ -1,44 +1,169 @@
 """Fixtures shared by several test modules.
 
-fresh_generated: the shipped robots generated once per session into a temporary folder, without
+`make test` runs the suite in parallel (pytest-xdist, ``-n``): each worker process runs these
+session fixtures itself, so everything expensive in them is made once for the whole run, by the
+first worker that asks, in a folder that every worker of the run shares (shared_folder), under a
+file lock; the other workers wait for it and use it (made_once). A plain ``pytest`` run (no
+``-n``) makes them in its own temporary folder as before.
+
+fresh_generated: the shipped robots generated once per run into a temporary folder, without
 the cache (what ``generate(load_models(), out, use_cache=False)`` writes into an empty folder), for
 the modules that test freshly generated code rather than the committed generated/. Each module
 takes its own copy (fresh_copy), so nothing one module writes there (a build, a __pycache__) is
-seen by another; the session's folder itself is only read.
+seen by another; the shared folder itself is only read.
 
-committed_library: the committed generated/<robot>/c built once per session into a shared library
+committed_library: the committed generated/<robot>/c built once per run into a shared library
 (strict C99, -Wall -Wextra -Werror -pedantic, -O1), double or float: tests/test_codegen.py and
 tests/test_regressor.py call the same build.
 
 installed_venv: tests/test_installed.py's wheel and fresh venv (~35 s of pip), started in a thread
-when the session starts if that module has tests to run, so that it runs on a second CPU while the
-modules before it run on the first; the module's fixture waits for it.
+when the session starts if that module has tests to run (by the first worker to start, under
+xdist), so that it runs on a CPU of its own while other modules run; the module's fixture waits
+for it.
+
+Under xdist with ``-n`` alone (its ``--dist load``), a worker takes a whole module at a time (its
+module fixtures and caches are set up once, and its last tests, such as the test_zz_report ones,
+see what the earlier ones recorded), the modules of HEAVY first, so that none of them is left for
+the end; the tests of the SPREAD modules, which share nothing costly but the session fixtures,
+go one by one to whichever worker is free. Naming another ``--dist`` gets xdist's own.
 """
 
 from __future__ import annotations
 
+import fcntl
+import os
 import shutil
+import signal
 import subprocess
 import sys
+import traceback
 from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
+from typing import Callable, TypeVar
 
 import pytest
 
 from derive.codegen.generate import generate
 from util import build_library, robots
 
+# pytest-xdist's workers ignore SIGINT, and an ignored signal is inherited by every process a test
+# starts (derive then keeps it ignored, as a background job must): give the tests' processes Python's
+# ordinary Ctrl-C back.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
 STRICT = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
+
+T = TypeVar("T")
+
+# The longest modules (pytest --durations), longest first: started first under xdist, so that the
+# run does not end waiting for one of them.
+HEAVY = ("test_cuda.py", "test_compiled.py", "test_batch.py", "test_jax.py", "test_codegen.py",
+         "test_urdf_trees.py", "test_simulate.py", "test_whole_robots.py", "test_bad_input_corpus.py",
+         "test_trajopt.py", "test_regressor.py", "test_ode.py")
+# Modules whose tests are spread one by one over the workers: long, and nothing but the session
+# fixtures (shared by all workers) is costly to set up for them.
+SPREAD = frozenset({"test_jax.py", "test_codegen.py", "test_batch.py"})
+
+
+def pytest_collection_modifyitems(items: list) -> None:
+    """Under xdist, every worker orders its collection the same way: the HEAVY modules first, in
+    that order, then the others as collected (a stable sort: tests keep their order in a module)."""
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        rank = {name: k for k, name in enumerate(HEAVY)}
+        items.sort(key=lambda item: rank.get(item.path.name, len(HEAVY)))
+
+
+@pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist's, called only where it runs
+def pytest_xdist_make_scheduler(config, log):
+    """For ``-n`` alone (xdist's default --dist load): ModuleScheduling."""
+    if config.getvalue("dist") != "load":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class ModuleScheduling(LoadScopeScheduling):
+        """Work units of whole modules, in the order collected (pytest_collection_modifyitems), a
+        SPREAD module's tests one unit each."""
+
+        def _split_scope(self, nodeid: str) -> str:
+            module = nodeid.split("::", 1)[0]
+            return nodeid if Path(module).name in SPREAD else module
+
+    config.option.loadscopereorder = False  # keep the collection's order, not the largest units first
+    return ModuleScheduling(config, log)
+
+
+def shared_folder(tmp_path_factory) -> Path:
+    """The temporary folder that every process of this run shares: under pytest-xdist the parent of
+    the worker's own (pytest-N, made by the controller for this run alone, holding popen-gw0, ...),
+    otherwise the session's own."""
+    base = tmp_path_factory.getbasetemp()
+    return base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base
+
+
+def _lock(path: Path, wait: bool = True):
+    """An exclusive flock on ``path`` (created if missing): the open file, whose closing releases it;
+    None when ``wait`` is False and another process (or thread) holds it."""
+    file = open(path, "a")
+    try:
+        fcntl.flock(file, fcntl.LOCK_EX if wait else fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        file.close()
+        return None
+    return file
+
+
+def _make(folder: Path, make: Callable[[Path], T]) -> T:
+    """make(folder) unless a process of this run did (its ``.done`` record) or failed (``.error``:
+    raised here too, not tried again). Called with folder's lock held."""
+    done, error = folder.with_name(folder.name + ".done"), folder.with_name(folder.name + ".error")
+    if error.is_file():
+        raise RuntimeError(f"{folder}: failed in another process of this test run:\n{error.read_text()}")
+    if not done.is_file():
+        try:
+            make(folder)
+        except BaseException:
+            error.write_text(traceback.format_exc())
+            raise
+        done.touch()
+    return folder
+
+
+def made_once(folder: Path, make: Callable[[Path], object]) -> Path:
+    """``folder`` as make(folder) fills it, made once for the whole run: by the first process to
+    ask, while the others wait for it (a flock on ``<folder>.lock``). Its error, where it failed,
+    is raised in every process that asks, without trying again."""
+    lock = _lock(folder.with_name(folder.name + ".lock"))
+    try:
+        return _make(folder, make)
+    finally:
+        lock.close()
+
+
+def begin_once(pool: ThreadPoolExecutor, folder: Path, make: Callable[[Path], object]) -> Callable[[], Path]:
+    """made_once(folder, make) begun now in ``pool`` when no other process of the run is making it
+    (then this one holds the lock until it is done); returns the function that waits for it."""
+    lock = _lock(folder.with_name(folder.name + ".lock"), wait=False)
+    if lock is None:  # another worker is making it: wait for it when asked
+        return lambda: made_once(folder, make)
+
+    def work() -> Path:
+        try:
+            return _make(folder, make)
+        finally:
+            lock.close()
+
+    return pool.submit(work).result
 
 
 @pytest.fixture(scope="session")
 def fresh_generated(tmp_path_factory) -> Path:
     """generated/ as derive writes it now: every shipped robot, derived without the cache. Read only."""
-    out = tmp_path_factory.mktemp("fresh") / "generated"
-    generate(robots(), out, use_cache=False, log=lambda s: None)
-    return out
+    fresh = made_once(shared_folder(tmp_path_factory) / "fresh",
+                      lambda folder: generate(robots(), folder / "generated", use_cache=False, log=lambda s: None))
+    return fresh / "generated"
 
 
 @pytest.fixture(scope="session")
@@ -56,15 +181,15 @@ def fresh_copy(fresh_generated, tmp_path_factory):
 @pytest.fixture(scope="session")
 def committed_library(tmp_path_factory):
     """committed_library(robot, extra=()) -> the shared library of every C file of generated/<robot>/c,
-    built with STRICT -O1 -fPIC and ``extra`` (say -DDERIVE_FLOAT) once per session."""
-    folder, built = tmp_path_factory.mktemp("committed_c"), {}
+    built with STRICT -O1 -fPIC and ``extra`` (say -DDERIVE_FLOAT) once per run."""
+    folder = shared_folder(tmp_path_factory) / "committed_c"
+    folder.mkdir(exist_ok=True)
 
     def get(robot: str, extra=()) -> Path:
-        key = (robot, tuple(extra))
-        if key not in built:
-            built[key] = build_library(["cc", *STRICT, "-O1", "-fPIC", *extra], sorted((GENERATED / robot / "c").glob("*.c")),
-                                       folder / f"lib{robot}{'_'.join(extra)}.so")
-        return built[key]
+        name = f"lib{robot}{'_'.join(extra)}"
+        made = made_once(folder / name, lambda lib: build_library(
+            ["cc", *STRICT, "-O1", "-fPIC", *extra], sorted((GENERATED / robot / "c").glob("*.c")), lib / f"{name}.so"))
+        return made / f"{name}.so"
 
     return get
 
@@ -92,11 +217,17 @@ def build_installed(base: Path) -> tuple[Path, Path]:
 @pytest.fixture(scope="session", autouse=True)
 def installed_venv(request, tmp_path_factory):
     """A function that waits for build_installed (begun in a thread at the session's first test when
-    tests/test_installed.py has tests to run) and returns its result or raises its error; None when
-    that module does not run."""
+    tests/test_installed.py has tests to run, by the first worker to start) and returns its result
+    or raises its error; None when that module does not run."""
     if not any(item.path.name == "test_installed.py" for item in request.session.items):
         yield None
         return
-    base = tmp_path_factory.mktemp("installed")
+    base = shared_folder(tmp_path_factory) / "installed"
     with ThreadPoolExecutor(max_workers=1) as pool:  # leaving it waits for the build
-        yield pool.submit(build_installed, base).result
+        wait = begin_once(pool, base, build_installed)
+
+        def result() -> tuple[Path, Path]:
+            wait()
+            return base / "venv" / "bin" / "derive", base / "venv" / "bin" / "python"
+
+        yield result

@@ -14,10 +14,11 @@ from pathlib import Path
 import pytest
 
 PACKAGE = Path(__file__).resolve().parent.parent / "derive"
-BASE = {"errors", "resources"}
+BASE = {"errors", "resources", "filesystem"}
 ALLOWED = {
     "errors": set(),
     "resources": set(),
+    "filesystem": {"errors"},
     "description": BASE,
     "symbolic": BASE | {"description"},
     "reference": BASE | {"description"},
@@ -34,7 +35,7 @@ ALLOWED = {
     "__main__": {"cli"},
 }
 DEFERRED_OK = {"matplotlib", "scipy"}  # heavy optional dependencies, imported where used on purpose
-GENERATION = ("description", "symbolic", "codegen", "errors", "resources")
+GENERATION = ("description", "symbolic", "codegen", "errors", "resources", "filesystem")
 
 
 def modules() -> dict[str, Path]:

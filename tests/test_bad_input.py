@@ -135,7 +135,7 @@ def test_a_massless_last_link_is_refused_not_divided_by_zero(tmp_path, output, c
     before = files_of(output)
     assert main(["--models", str(tmp_path / "m.yaml"), "generate", "--out", str(output)]) == 2
     err = capsys.readouterr().err.splitlines()
-    assert err == ["derive: error: robot 'arm': joints (q2): coordinate 'q2' moves no mass or inertia, so M(q) is "
+    assert err == [f"derive: error: {tmp_path / 'm.yaml'}: robot 'arm': joints (q2): coordinate 'q2' moves no mass or inertia, so M(q) is "
                    "singular and forward dynamics do not exist; give the links it moves a mass (links[i].mass) or "
                    "inertia about its axis"]
     assert files_of(output) == before

@@ -100,7 +100,7 @@ def test_cycle_is_one_line_error_at_once(tmp_path, case):
     assert isinstance(err, ModelError), err
     text = str(err)
     assert "\n" not in text
-    assert text.startswith(f"robot 'odd': {path} joints: the joints "), text
+    assert text.startswith(f"{path}: robot 'odd': joints: the joints "), text
     assert "form a cycle through the links" in text and "a URDF must be a tree" in text
     for name in members:
         assert name in text, (name, text)
@@ -119,7 +119,7 @@ def test_deep_branch_is_no_recursion(tmp_path):
     parts += [joint(f"f{i}", f"b{i - 1}", f"b{i}", "fixed") for i in range(1, n)]
     path = write(tmp_path, robot(*parts))
     start = time.perf_counter()
-    err = one_line(r"^robot 'odd': joints\[jb\]: moves a branch with mass \(3.999 kg\) that does not lead to the tip "
+    err = one_line(r"^.*/robot\.urdf: robot 'odd': joints\[jb\]: moves a branch with mass \(3.999 kg\) that does not lead to the tip "
                    r"'l0'; lock it \(--lock jb\)", path, chain="l0")
     assert time.perf_counter() - start < 5.0, err
     entry = import_urdf(path, lock="jb", chain="l0")
@@ -157,7 +157,7 @@ def test_exporter_default_limits_are_absent_with_a_warning(tmp_path, capsys):
     assert "imported without limits" in lines[0] and "imported without effort limit" in lines[2]
     # real but wrong numbers are still refused by the model's validation
     path = write(tmp_path, robot(*ARM).replace('velocity="1"', 'velocity="-1"', 1))
-    one_line(r"^robot 'odd': joints\[0\].limits.velocity: must be positive, got -1.0", path, "tool")
+    one_line(r"^.*/robot\.urdf: robot 'odd': joints\[0\].limits.velocity: must be positive, got -1.0", path, "tool")
     # real limits are copied exactly, and give no warning
     entry = import_urdf(write(tmp_path, robot(*ARM)), "tool")
     assert entry["joints"][0]["limits"] == {"lower": -2.0, "upper": 2.0, "velocity": 1.0, "effort": 10.0}
@@ -182,7 +182,7 @@ def test_mimic_on_a_fixed_joint_is_ignored(tmp_path, capsys):
     path = write(tmp_path, robot(*parts))
     finger = import_urdf(path, "tool")["joints"][-1]
     assert finger["name"] == "finger_joint" and finger["mimic"] == {"joint": "j2", "multiplier": -2.0, "offset": 0.3}
-    err = one_line(r"^robot 'odd': joints\[finger_joint\]\.mimic: mimics 'j2', a locked joint: lock it "
+    err = one_line(r"^.*/robot\.urdf: robot 'odd': joints\[finger_joint\]\.mimic: mimics 'j2', a locked joint: lock it "
                    r"\(--lock j2,finger_joint=0.1\)", path, "tool", "j2")
     lock = re.search(r"--lock (\S+)\)", str(err)).group(1)
     tip_off_branch = import_urdf(path, "l1", lock)  # the suggested command imports
@@ -236,11 +236,11 @@ def test_inertia_noise_is_accepted_and_real_errors_are_not(tmp_path):
     }
     for inertia, why in bad.values():
         path = write(tmp_path, robot(*ARM).replace(ARM[2], link("l2", inertia=inertia)))
-        one_line(rf"^robot 'odd': links\[2\] \(l2\)\.inertia: {why}", path, "tool")
+        one_line(rf"^.*/robot\.urdf: robot 'odd': links\[2\] \(l2\)\.inertia: {why}", path, "tool")
     # a massless link with a real inertia, merged into another: named as written in the URDF
     parts = ARM + (link("cam", 0.0, 'ixx="0.001" ixy="0" ixz="0" iyy="0.001" iyz="0" izz="0.001"'),
                    joint("cam_mount", "l2", "cam", "fixed"))
-    one_line(r"^robot 'odd': links\[cam\]\.inertia \(merged into 'l2'\): a massless link must have zero inertia",
+    one_line(r"^.*/robot\.urdf: robot 'odd': links\[cam\]\.inertia \(merged into 'l2'\): a massless link must have zero inertia",
              write(tmp_path, robot(*parts)), "tool")
     # ... while one with noise is a massless link
     parts = ARM + (link("cam", 0.0, NOISE), joint("cam_mount", "l2", "cam", "fixed"))

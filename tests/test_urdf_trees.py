@@ -187,10 +187,14 @@ def compare(robot, side: TreePin, states: int = N_STATES, seed: int = 0) -> dict
         worst["gravity"] = max(worst["gravity"], rel(nr.gravity(q), side.gravity(q)))
         rigid = nr.rnea(q, qd, qdd) - nr.friction(qd)  # Pinocchio's rnea has no joint friction
         worst["rnea"] = max(worst["rnea"], rel(rigid, side.rnea(q, qd, qdd)))
-    # <dynamics damping friction> as Pinocchio reads it (model.damping, model.friction) for joints with coordinates
-    for joint, (k, _, _), ours in zip(side.joints, side.drive, robot.moving_joints):
-        if ours.mimic is None:
-            assert (nr.viscous[k], nr.coulomb[k]) == (side.model.damping[joint.idx_v], side.model.friction[joint.idx_v])
+    # <dynamics damping friction> as Pinocchio reads it (model.damping, model.friction, every joint of the full
+    # tree), reduced through the mimic map (G^T D G: a mimic joint's own friction reaches its leader's coordinate)
+    want_viscous, want_coulomb = np.zeros(nr.nv), np.zeros(nr.nv)
+    for joint, (k, a, _) in zip(side.joints, side.drive):
+        want_viscous[k] += a * a * side.model.damping[joint.idx_v]
+        want_coulomb[k] += abs(a) * side.model.friction[joint.idx_v]
+    assert np.allclose(nr.viscous, want_viscous, rtol=1e-15, atol=0), (nr.viscous, want_viscous)
+    assert np.allclose(nr.coulomb, want_coulomb, rtol=1e-15, atol=0), (nr.coulomb, want_coulomb)
     return worst
 
 
@@ -382,7 +386,7 @@ def test_synthetic_tree_against_pinocchio(pin, tmp_path):
 
 def test_chain_keeps_the_path_only_import(tmp_path):
     path = write(tmp_path, TREE_URDF)
-    err = import_error(r"^robot 'tree_bot': joints\[l_shoulder\]: moves a branch with mass \(3.2 kg\) that does not lead "
+    err = import_error(r"^.*/robot\.urdf: robot 'tree_bot': joints\[l_shoulder\]: moves a branch with mass \(3.2 kg\) that does not lead "
                        r"to the tip 'r_tool'; lock it \(--lock l_shoulder,l_elbow,l_finger_a_joint,l_finger_b_joint\)",
                        path, chain="r_tool")
     lock = re.search(r"--lock (\S+)\)", str(err)).group(1)
@@ -441,31 +445,31 @@ def import_error(match: str, *args, **kwargs) -> ModelError:
 
 def test_errors_of_the_new_options(tmp_path):
     path = write(tmp_path, TREE_URDF)
-    import_error(r"^robot 'tree_bot': chain: unknown link 'flange' \(links: world, torso, ", path, chain="flange")
-    import_error(r"^robot 'tree_bot': tip: 'camera' is not the --chain link 'r_tool'; --chain puts the frame 'tcp' at "
+    import_error(r"^.*/robot\.urdf: robot 'tree_bot': chain: unknown link 'flange' \(links: world, torso, ", path, chain="flange")
+    import_error(r"^.*/robot\.urdf: robot 'tree_bot': tip: 'camera' is not the --chain link 'r_tool'; --chain puts the frame 'tcp' at "
                  r"its link \(give --chain alone\)$", path, "camera", chain="r_tool")
     # floating joints: only world -> base with an identity origin
     inner = TREE_URDF.replace('name="l_elbow" type="continuous"', 'name="l_elbow" type="floating"')
-    import_error(r"^robot 'tree_bot': joints\[l_elbow\]: floating joints are not supported but as the only joint of a "
+    import_error(r"^.*/robot\.urdf: robot 'tree_bot': joints\[l_elbow\]: floating joints are not supported but as the only joint of a "
                  r"massless root link \(the world\) to the base, .*\(--lock l_elbow\)", write(tmp_path, inner))
     offset = TREE_URDF.replace('name="world_torso" type="fixed"', 'name="world_torso" type="floating"')
-    import_error(r"^robot 'tree_bot': joints\[world_torso\].origin: a floating joint read as the floating base must have "
+    import_error(r"^.*/robot\.urdf: robot 'tree_bot': joints\[world_torso\].origin: a floating joint read as the floating base must have "
                  r"the identity origin", write(tmp_path, offset))
-    import_error(r"^robot 'tree_bot': lock\[world_torso\]: a floating joint is locked at its origin only",
+    import_error(r"^.*/robot\.urdf: robot 'tree_bot': lock\[world_torso\]: a floating joint is locked at its origin only",
                  write(tmp_path, offset), lock="world_torso=0.2")
     heavy_world = offset.replace('<link name="world"/>', '<link name="world"><inertial><mass value="1"/>'
                                  '<inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>')
     import_error(r"joints\[world_torso\]: floating joints are not supported but as the only joint of a massless root",
                  write(tmp_path, heavy_world))
     planar = TREE_URDF.replace('name="l_elbow" type="continuous"', 'name="l_elbow" type="planar"')
-    import_error(r"^robot 'tree_bot': joints\[l_elbow\]: planar joints are not supported \(", write(tmp_path, planar))
-    import_error(r"^robot 'tree_bot': tip: 'world' is the world above the floating joint 'world_torso'",
+    import_error(r"^.*/robot\.urdf: robot 'tree_bot': joints\[l_elbow\]: planar joints are not supported \(", write(tmp_path, planar))
+    import_error(r"^.*/robot\.urdf: robot 'tree_bot': tip: 'world' is the world above the floating joint 'world_torso'",
                  write(tmp_path, TREE_URDF.replace('name="world_torso" type="fixed"', 'name="world_torso" type="floating"')
                        .replace('<origin xyz="0 0 0.5"/></joint>', '</joint>', 1)), "world")
     # nothing moves: a hint at --floating
     rigid = '<robot name="brick"><link name="a"><inertial><mass value="1"/><inertia ixx="1" ixy="0" ixz="0" iyy="1" ' \
             'iyz="0" izz="1"/></inertial></link></robot>'
-    import_error(r"^robot 'brick': joints: no moving joint is left to import .*\(--floating\)$", write(tmp_path, rigid))
+    import_error(r"^.*/robot\.urdf: robot 'brick': joints: no moving joint is left to import .*\(--floating\)$", write(tmp_path, rigid))
     assert parse_robot("brick", import_urdf(write(tmp_path, rigid), floating=True)).nv == 6
 
 

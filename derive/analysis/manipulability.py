@@ -139,9 +139,16 @@ def symbolic(model, frame: str = "tcp", task: str = "position") -> dict[str, sp.
 # --------------------------------------------------------------------------- poses
 
 
+MAX_POSES = 1000
+"""Most poses of :func:`default_poses`: each is printed (and drawn as an ellipse); a map of mu3 over the
+workspace is the figure's other panel."""
+
+
 def default_poses(robot: Robot, n: int = 6) -> np.ndarray:
     """n configurations from the middle of the joint box towards 80 % of its upper corner:
-    for the 2R arm from stretched (singular) to folded, as figure 9 compares."""
+    for the 2R arm from stretched (singular) to folded, as figure 9 compares. 1 <= n <= MAX_POSES."""
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= n <= MAX_POSES:
+        raise DeriveError(f"robot '{robot.name}': the number of poses must be an integer in 1 .. {MAX_POSES}, got {n!r}")
     lo, hi = joint_box(robot)
     mid = (lo + hi) / 2
     return mid + np.linspace(0, 1, n)[:, None] * 0.8 * (hi - mid)

@@ -53,6 +53,12 @@ from derive.errors import DeriveError
 MAX_NODES = 2_000_000
 CHECK_STEP = 0.01  # m: default largest motion of any point of the arm between two collision checks
 CHECK_CHUNK = 100_000  # configurations per batched FK + collision call
+MAX_PIECES = 100_000
+"""Most collision checks along one grid edge (its bound on the arm's motion / the check step): a check
+step far below the arm's size would check each edge at millions of configurations."""
+MAX_LENGTH = 1e6
+"""Largest obstacle coordinate, radius or margin, in m: a thousand kilometres is beyond any arm, and the
+squared distances of the collision tests stay finite."""
 
 
 # --------------------------------------------------------------------------- grid search
@@ -259,6 +265,8 @@ def parse_obstacle(text: str) -> Circle | Box:
         v = []
     if not all(math.isfinite(x) for x in v):
         raise DeriveError(f"obstacle '{text}': every coordinate must be a finite number")
+    if any(abs(x) > MAX_LENGTH for x in v):
+        raise DeriveError(f"obstacle '{text}': every coordinate and radius must be within {MAX_LENGTH:g} m")
     if kind == "circle" and len(v) in (3, 4) and v[-1] > 0:
         return Circle(tuple(v[:-1]), v[-1])
     if kind == "box" and len(v) in (4, 6):
@@ -396,7 +404,7 @@ class PlanResult:
 
 def plan(robot: Robot, start, goal, obstacles=(), frame: str = "tcp", resolution: int | None = None,
          connectivity: str = "full", margin: float = 0.0, arm: Arm | None = None,
-         check_step: float | None = None) -> PlanResult:
+         check_step: float | None = None, progress=None) -> PlanResult:
     """A collision-free joint path from ``start`` to ``goal`` by A* on a grid over the joint box.
 
     ``resolution`` grid points per joint (default: about 40000 nodes in all). Nodes and the
@@ -404,6 +412,7 @@ def plan(robot: Robot, start, goal, obstacles=(), frame: str = "tcp", resolution
     :func:`default_check_step`). The grid path runs between the nodes nearest to start and
     goal; start and goal are joined to it, replacing those nodes where the direct motion is
     free, and the whole path is verified at ``check_step`` before success is reported.
+    ``progress(done, total)`` is called as the grid's nodes are checked.
     """
     arm = arm or Arm(robot, frame)
     obstacles = list(obstacles)
@@ -417,8 +426,9 @@ def plan(robot: Robot, start, goal, obstacles=(), frame: str = "tcp", resolution
             raise DeriveError(f"robot '{robot.name}': {name} {q.tolist()} is not finite")
         if np.any(q < lo - 1e-12) or np.any(q > hi + 1e-12):
             raise DeriveError(f"robot '{robot.name}': {name} {q.tolist()} is outside the joint box {lo.tolist()} .. {hi.tolist()}")
-    if not (math.isfinite(margin) and margin >= 0):
-        raise DeriveError(f"robot '{robot.name}': the margin must be a finite number >= 0, got {margin:g}")
+    if not (math.isfinite(margin) and 0 <= margin <= MAX_LENGTH):
+        raise DeriveError(f"robot '{robot.name}': the margin must be a finite number >= 0 (at most {MAX_LENGTH:g} m), "
+                          f"got {margin:g}")
     step_m = default_check_step(obstacles, margin) if check_step is None else float(check_step)
     check = MotionCheck(arm, obstacles, margin, step_m)
     per = resolution if resolution is not None else max(3, round(40000 ** (1.0 / n)))
@@ -426,14 +436,24 @@ def plan(robot: Robot, start, goal, obstacles=(), frame: str = "tcp", resolution
         raise DeriveError(f"robot '{robot.name}': a grid of {per}^{n} nodes is not searchable (2 .. {MAX_NODES} nodes); "
                           "choose another --resolution")
     axes = [np.linspace(a, b, per) for a, b in zip(lo, hi)]
+    step = (hi - lo) / (per - 1)
+    pieces = float(arm.displacement_bound(step)[0]) / check.step  # the longest (diagonal) grid edge
+    if pieces > MAX_PIECES:
+        raise DeriveError(f"robot '{robot.name}': a check step of {check.step:g} m would check every grid edge at "
+                          f"{pieces:.3g} configurations (more than {MAX_PIECES}); choose a larger --check-step "
+                          "or a larger --resolution")
     hit = collisions(arm, np.vstack([start, goal]), obstacles, margin)
     for name, k in (("start", 0), ("goal", 1)):
         if hit[k] >= 0:
             raise DeriveError(f"robot '{robot.name}': the {name} configuration collides with obstacle "
                               f"{hit[k] + 1} ({obstacles[hit[k]].describe()})")
     grid = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, n)
-    free = (check.collide(grid) < 0).reshape((per,) * n)
-    step = (hi - lo) / (per - 1)
+    free = np.empty(len(grid), dtype=bool)
+    for k in range(0, len(grid), CHECK_CHUNK):
+        free[k:k + CHECK_CHUNK] = check.collide(grid[k:k + CHECK_CHUNK]) < 0
+        if progress:
+            progress(min(k + CHECK_CHUNK, len(grid)), len(grid))
+    free = free.reshape((per,) * n)
     snap = [tuple(int(i) for i in np.clip(np.round((q - lo) / step), 0, per - 1)) for q in (start, goal)]
     refused = [0]
 

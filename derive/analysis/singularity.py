@@ -43,6 +43,8 @@ from derive.symbolic.kinematics import Kinematics
 from derive.symbolic.symbols import make_symbols
 
 ROW_NAMES = ("x", "y", "z", "wx", "wy", "wz")
+MAX_STARTS = 10_000
+"""Most random starts of :func:`find_singularities`: each is a Newton search of milliseconds to a second."""
 TASKS = {"position": (0, 1, 2), "orientation": (3, 4, 5), "full": (0, 1, 2, 3, 4, 5)}
 
 
@@ -182,6 +184,9 @@ def find_singularities(tj: TaskJacobian, starts: int = 24, seed: int = 0, rtol: 
     """
     from scipy.optimize import Bounds, minimize
 
+    if isinstance(starts, bool) or not isinstance(starts, (int, np.integer)) or not 1 <= starts <= MAX_STARTS:
+        raise DeriveError(f"robot '{tj.robot.name}': the number of starts must be an integer in 1 .. {MAX_STARTS} "
+                          f"(each is a Newton search), got {starts!r}")
     lo, hi = joint_box(tj.robot)
     angle = np.array([c.unit == "rad" for c in tj.robot.coordinates])
     bounds = None if angle.all() else Bounds(np.where(angle, -np.inf, lo), np.where(angle, np.inf, hi))

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -29,6 +30,13 @@ from derive.symbolic.kinematics import Kinematics, joint_motions
 from derive.symbolic.symbols import make_symbols
 
 AXIS_NAMES = "xyz"
+MAX_SAMPLES = 10_000_000
+"""Most configurations a workspace samples: FK costs microseconds each, so 1e7 of them take minutes."""
+KEPT_SAMPLES = 200_000
+"""Samples a :class:`Workspace` keeps (for the figures and :meth:`Manipulability.batch`); beyond that a
+seeded random subset is kept, while the extents and the reach cover every sample."""
+CHUNK = 65_536
+"""Configurations sampled and mapped through FK at a time: memory stays bounded whatever the count."""
 
 
 def joint_box(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
@@ -37,17 +45,44 @@ def joint_box(robot: Robot) -> tuple[np.ndarray, np.ndarray]:
     return np.array(lo), np.array(hi)
 
 
+def sample_count(robot: Robot, n: int, method: str = "grid") -> int:
+    """How many configurations :func:`sample_configurations` returns for ``n``: n, or round(n^(1/nv))^nv on a grid."""
+    if method == "random":
+        return n
+    if method != "grid":
+        raise DeriveError(f"sampling method '{method}': expected grid or random")
+    return _grid_points(robot, n) ** robot.nv
+
+
+def _grid_points(robot: Robot, n: int) -> int:
+    return max(2, round(n ** (1.0 / robot.nv)))
+
+
 def sample_configurations(robot: Robot, n: int, method: str = "grid", seed: int = 0) -> np.ndarray:
     """About ``n`` configurations (rows) in the joint box: a regular grid of round(n^(1/nv))
     points per joint (limits included), or ``n`` uniform random samples."""
+    total = sample_count(robot, n, method)
+    if total <= 0:
+        return np.zeros((0, robot.nv))
+    return np.vstack(list(_sample_chunks(robot, n, method, seed, total)))
+
+
+def _sample_chunks(robot: Robot, n: int, method: str, seed: int, chunk: int | None = None):
+    """The configurations of :func:`sample_configurations`, ``chunk`` (default :data:`CHUNK`) rows at a
+    time, in the same order (numpy's generator draws the same stream in pieces as at once)."""
+    chunk = chunk or CHUNK
     lo, hi = joint_box(robot)
+    total = sample_count(robot, n, method)
     if method == "random":
-        return np.random.default_rng(seed).uniform(lo, hi, size=(n, robot.nv))
-    if method != "grid":
-        raise DeriveError(f"sampling method '{method}': expected grid or random")
-    per = max(2, round(n ** (1.0 / robot.nv)))
-    axes = [np.linspace(a, b, per) for a, b in zip(lo, hi)]
-    return np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.nv)
+        rng = np.random.default_rng(seed)
+        for start in range(0, total, chunk):
+            yield rng.uniform(lo, hi, size=(min(chunk, total - start), robot.nv))
+        return
+    per = _grid_points(robot, n)
+    axes = np.array([np.linspace(a, b, per) for a, b in zip(lo, hi)])  # (nv, per)
+    for start in range(0, total, chunk):
+        index = np.unravel_index(np.arange(start, min(start + chunk, total)), (per,) * robot.nv)  # C order, as meshgrid "ij"
+        yield np.column_stack([axes[k][i] for k, i in enumerate(index)])
 
 
 class Arm:
@@ -174,38 +209,84 @@ def _speed_bounds(robot: Robot, chain: list[str]) -> np.ndarray:
 
 @dataclass
 class Workspace:
-    """Samples of the configuration space and their images: ``points[i] = FK(q[i])``."""
+    """Samples of the configuration space and their images: ``points[i] = FK(q[i])``.
+
+    ``q`` and ``points`` hold at most :data:`KEPT_SAMPLES` of the ``count`` samples (all of them
+    when there are no more); ``lower``, ``upper`` (the box of the points) and ``reach_range``
+    (least and greatest distance from the base) cover every sample.
+    """
 
     robot: Robot
     frame: str
     q: np.ndarray  # (N, nv)
     points: np.ndarray  # (N, 3)
     base: np.ndarray  # (3,), the root's origin
+    count: int = 0  # samples mapped through FK (0: len(q))
+    lower: np.ndarray | None = None  # (3,) smallest coordinates over every sample (None: of points)
+    upper: np.ndarray | None = None
+    reach_range: tuple[float, float] | None = None
+
+    def __post_init__(self):
+        self.count = self.count or len(self.q)
+        if self.lower is None:
+            self.lower, self.upper = self.points.min(axis=0), self.points.max(axis=0)
+        if self.reach_range is None:
+            self.reach_range = (float(self.reach.min()), float(self.reach.max()))
 
     @cached_property
     def plane(self) -> tuple[int, ...]:
         """Axes along which the points move (all three unless the robot is planar)."""
-        extent = self.points.max(axis=0) - self.points.min(axis=0)
+        extent = self.upper - self.lower
         return tuple(i for i in range(3) if extent[i] > 1e-9 * max(extent.max(), 1e-300))
 
     @property
     def reach(self) -> np.ndarray:
-        """Distance of every sample from the base origin."""
+        """Distance of every kept sample from the base origin."""
         return np.linalg.norm(self.points - self.base, axis=1)
 
     def summary(self) -> str:
-        r = self.reach
-        lo, hi = self.points.min(axis=0), self.points.max(axis=0)
+        lo, hi = self.lower, self.upper
         box = ", ".join(f"{AXIS_NAMES[i]} in [{lo[i]:.4g}, {hi[i]:.4g}]" for i in range(3))
         kind = "planar in " + "".join(AXIS_NAMES[i] for i in self.plane) if len(self.plane) < 3 else "spatial"
-        return (f"{self.robot.name}/{self.frame}: {len(self.q)} configurations -> workspace ({kind})\n"
-                f"  {box}\n  distance from the base: {r.min():.4g} .. {r.max():.4g}")
+        return (f"{self.robot.name}/{self.frame}: {self.count} configurations -> workspace ({kind})\n"
+                f"  {box}\n  distance from the base: {self.reach_range[0]:.4g} .. {self.reach_range[1]:.4g}")
 
 
 def workspace(robot: Robot, frame: str = "tcp", n: int = 40000, method: str = "grid", seed: int = 0,
-              arm: Arm | None = None) -> Workspace:
-    """Sample the configuration space and map the samples through FK."""
+              arm: Arm | None = None, keep: int = KEPT_SAMPLES,
+              progress: Callable[[int, int], None] | None = None) -> Workspace:
+    """Sample the configuration space (:func:`sample_configurations`) and map the samples through FK.
+
+    The samples go through FK :data:`CHUNK` at a time, so memory stays bounded; at most ``keep``
+    of them are kept (a seeded random subset when there are more), the extents cover all.
+    ``progress(done, total)`` is called after every chunk. At most :data:`MAX_SAMPLES` samples.
+    """
+    if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < 1:
+        raise DeriveError(f"robot '{robot.name}': the number of samples must be an integer >= 1, got {n!r}")
+    total = sample_count(robot, n, method)
+    if n > MAX_SAMPLES:
+        raise DeriveError(f"robot '{robot.name}': {n} samples are more than {MAX_SAMPLES} (FK of each costs "
+                          "microseconds: hours of work); sample fewer")
     arm = arm or Arm(robot, frame)
-    Q = sample_configurations(robot, n, method, seed)
-    sk = arm.skeleton(Q)
-    return Workspace(robot, frame, Q, sk[:, -1, :], sk[0, 0, :])
+    kept = None if total <= keep else np.sort(np.random.default_rng(seed).choice(total, keep, replace=False))
+    Qs, Ps = [], []
+    lower, upper = np.full(3, np.inf), np.full(3, -np.inf)
+    rmin, rmax, done, base = np.inf, -np.inf, 0, None
+    for Q in _sample_chunks(robot, n, method, seed):
+        sk = arm.skeleton(Q)
+        P = sk[:, -1, :]
+        base = sk[0, 0, :] if base is None else base
+        lower, upper = np.minimum(lower, P.min(axis=0)), np.maximum(upper, P.max(axis=0))
+        r = np.linalg.norm(P - base, axis=1)
+        rmin, rmax = min(rmin, float(r.min())), max(rmax, float(r.max()))
+        if kept is None:
+            Qs.append(Q)
+            Ps.append(P)
+        else:
+            pick = kept[(kept >= done) & (kept < done + len(Q))] - done
+            Qs.append(Q[pick])
+            Ps.append(P[pick])
+        done += len(Q)
+        if progress:
+            progress(done, total)
+    return Workspace(robot, frame, np.vstack(Qs), np.vstack(Ps), base, total, lower, upper, (rmin, rmax))

@@ -18,6 +18,7 @@ import time
 from pathlib import Path
 
 from derive.errors import DeriveError
+from derive.filesystem import write_atomically
 from derive.resources import CHECKOUT
 
 ROOT = CHECKOUT
@@ -63,9 +64,7 @@ def run(args) -> int:
     if args.names and out.exists():  # keep other sections, replace the ones rerun
         old = out.read_text()
         sections = _merge(old, sections)
-        out.write_text(header + "\n".join(sections))
-    else:
-        out.write_text(header + "\n".join(sections))
+    write_atomically(out, header + "\n".join(sections), "the benchmark results")
     print(f"[bench] results written to {out}")
     return 0
 

@@ -37,7 +37,7 @@ from derive.bench.zoo import id_m_fd_specs
 from derive.codegen.backends.c import BACKEND as C_BACKEND
 from derive.codegen.catalogue import (cheaper_ode_jacobians, inverse_dynamics_derivatives_spec, ode_by_template,
                                       ode_jacobian_templates)
-from derive.codegen.generate import check_constants, check_mass_matrix
+from derive.codegen.checks import check_constants, check_mass_matrix
 from derive.codegen.render import render_robot
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 from derive.description.model import load_models, parse_models, parse_robot

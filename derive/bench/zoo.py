@@ -26,7 +26,8 @@ from typing import Callable, Iterable
 
 import numpy as np
 
-from derive.codegen.generate import check_constants, check_mass_matrix, render
+from derive.codegen.checks import check_constants, check_mass_matrix
+from derive.codegen.generate import render
 from derive.codegen.render import render_robot
 from derive.codegen.spec import FunctionSpec
 from derive.description.model import parse_robot

@@ -4,6 +4,9 @@ Each command group is one module of this package with ``add_parser(subparsers)``
 (argument parsing and printing only; the work is done by the domain packages).
 Bad input ends with one line on stderr naming the robot, the field and the
 problem, exit status 2, and no traceback; nothing is written.
+
+SIGINT (Ctrl-C), SIGTERM and SIGHUP end every command within a fraction of a second with
+130, 143 or 129, nothing left behind (see :mod:`derive.cli.signals`).
 """
 
 from __future__ import annotations
@@ -13,9 +16,8 @@ import importlib
 import os
 import signal
 import sys
-import threading
 
-from derive.codegen.generate import remove_temporaries
+from derive.cli.signals import MESSAGES, EndOnSignals
 from derive.errors import DeriveError
 
 COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.inspect", "derive.cli.analysis",
@@ -50,29 +52,35 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _terminate(signum, frame):
-    """SIGTERM: remove the temporary folders of a generation under way and exit 128 + signum at
-    once. Raising an exception instead is not enough: a signal handled inside a CasADi call can
-    be swallowed there, and the generation would run on to completion."""
-    remove_temporaries()
-    os.write(2, b"derive: terminated; the output folder is left as it was\n")
-    os._exit(128 + signum)
+# ---- signals: SIGINT, SIGTERM (and SIGHUP) end every command at once ----
+#
+# What runs when a signal arrives: CPython's C-level handler only sets a flag and writes the
+# signal's number to the wakeup fd; the Python handler runs later, in the main thread, at the
+# next bytecode boundary or wherever C code calls PyErr_CheckSignals. Inside CasADi that is too
+# late or never: IPOPT's iteration callback calls it and turns the KeyboardInterrupt into a
+# failed solve (the IK restarts and exits 0, or exit 1 "after -2033791744 iterations"), and
+# pure C++ work (a jacobian, a Function of a big graph, a fold) never calls it, for seconds or
+# minutes. So the Python handler does not raise: it ends the process itself (_end). For C code
+# that stays away from Python, a watchdog thread waits on the wakeup fd and ends the process
+# GRACE s after the signal if the main thread has not; it can, because CasADi's SWIG layer
+# releases the GIL around its C++ calls (as numpy's loops, ctypes' CDLL calls and waits do).
 
 
 def main(argv: list[str] | None = None) -> int:
     """Run one command. Exit status: 0 done, 1 ran but found no solution (or stale output for
     ``generate --check``), 2 bad input (one line on stderr), 3 a fault
-    of derive itself (one line; DERIVE_DEBUG=1 shows the traceback), 130 interrupted."""
-    previous = signal.signal(signal.SIGTERM, _terminate) if threading.current_thread() is threading.main_thread() else None
+    of derive itself (one line; DERIVE_DEBUG=1 shows the traceback), 130 / 143 / 129 ended by SIGINT /
+    SIGTERM / SIGHUP."""
+    ending = EndOnSignals()
     try:
         args = build_parser().parse_args(argv)
         return args.func(args)
     except DeriveError as exc:
         print(f"derive: error: {exc}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
-        print("derive: interrupted; the output folder is left as it was", file=sys.stderr)
-        return 130
+    except KeyboardInterrupt:  # main() called from another thread: no handler of ours
+        print(MESSAGES[signal.SIGINT].decode().rstrip(), file=sys.stderr)
+        return 128 + signal.SIGINT
     except BrokenPipeError:  # output piped into `head` and friends: stop quietly
         os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
         return 0
@@ -91,8 +99,7 @@ def main(argv: list[str] | None = None) -> int:
               "command; DERIVE_DEBUG=1 shows the traceback)", file=sys.stderr)
         return 3
     finally:
-        if previous is not None:
-            signal.signal(signal.SIGTERM, previous)
+        ending.close()
 
 
 if __name__ == "__main__":

@@ -12,10 +12,11 @@ from typing import Mapping
 import numpy as np
 
 from derive.analysis.grubler import mechanism_from_robot, parse_mechanism, read_yaml, report
-from derive.analysis.manipulability import Manipulability, default_poses
-from derive.analysis.planning import parse_obstacle, plan
-from derive.analysis.singularity import TaskJacobian, analyse, eval_number, find_singularities, redundancy
-from derive.analysis.workspace import Arm, workspace
+from derive.analysis.manipulability import MAX_POSES, Manipulability, default_poses
+from derive.analysis.planning import MAX_LENGTH, MAX_NODES, parse_obstacle, plan
+from derive.analysis.singularity import MAX_STARTS, TaskJacobian, analyse, eval_number, find_singularities, redundancy
+from derive.analysis.workspace import MAX_SAMPLES, Arm, workspace
+from derive.cli.common import Progress, check_count, check_number, check_seed, integer, png_path
 from derive.description.model import load_models, load_robot
 from derive.description.robot import Robot
 from derive.errors import DeriveError
@@ -74,7 +75,12 @@ def workspace_command(args) -> int:
     robot = load_robot(args.robot_name, args.models)
     if args.samples < 2:
         raise DeriveError(f"--samples: need at least 2, got {args.samples}")
-    ws = workspace(robot, args.frame, args.samples, args.method, args.seed)
+    check_count(args.samples, "--samples", 2, MAX_SAMPLES, "FK of each sample costs microseconds: 1e7 take minutes",
+                f"robot '{robot.name}'")
+    check_seed(args.seed)
+    progress = Progress(f"workspace {robot.name}")
+    ws = workspace(robot, args.frame, args.samples, args.method, args.seed,
+                   progress=lambda done, total: progress(done, total, f"{done} of {total} configurations"))
     print(ws.summary())
     if args.png:
         print(f"wrote {plot_workspace(ws, args.png)}")
@@ -87,8 +93,9 @@ def workspace_command(args) -> int:
 def singularities_command(args) -> int:
     robot = load_robot(args.robot_name, args.models)
     q = parse_q(robot, args.q) if args.q else None  # every option is checked before anything is printed
-    if q is None and args.starts < 1:
-        raise DeriveError(f"robot '{robot.name}': --starts must be at least 1, got {args.starts}")
+    if q is None:
+        check_count(args.starts, "--starts", 1, MAX_STARTS, "each start is a Newton search", f"robot '{robot.name}'")
+    check_seed(args.seed)
     tj = TaskJacobian(robot, args.frame, args.task)
     names = [c.name for c in robot.coordinates]
     print(f"{robot.name}/{args.frame}: task rows {tj.row_names} (k = {tj.k}), nv = {tj.nv}")
@@ -103,7 +110,9 @@ def singularities_command(args) -> int:
             print(f"  cannot move along: {fmt(info.lost_directions[:, k])}  ({tj.row_names})")
         return 0
     print(f"searching singular configurations from {args.starts} random starts ...", flush=True)
-    found, free = find_singularities(tj, args.starts, args.seed)
+    progress = Progress(f"singularities {robot.name}")
+    found, free = find_singularities(tj, args.starts, args.seed,
+                                     progress=lambda n, total, q, s: progress(n, total, f"{n} of {total} starts"))
     if free:
         print(f"  the singular values do not depend on {', '.join(names[i] for i in free)} (set to 0 below)")
     if not found:
@@ -119,8 +128,9 @@ def singularities_command(args) -> int:
 
 def manipulability_command(args) -> int:
     robot = load_robot(args.robot_name, args.models)
-    if not args.q and args.poses < 1:
-        raise DeriveError(f"robot '{robot.name}': --poses must be at least 1, got {args.poses}")
+    if not args.q:
+        check_count(args.poses, "--poses", 1, MAX_POSES, "each pose is printed; the figure maps mu3 over the "
+                    "whole workspace", f"robot '{robot.name}'")
     qs = [parse_q(robot, text) for text in args.q] if args.q else list(default_poses(robot, args.poses))
     man = Manipulability(robot, args.frame, args.task)
     print(f"{robot.name}/{args.frame}: task rows {man.tj.row_names} (k = {man.tj.k}), nv = {robot.nv}; "
@@ -145,11 +155,20 @@ def plan_command(args) -> int:
     if args.resolution is not None and args.resolution < 2:
         raise DeriveError(f"robot '{robot.name}': --resolution must be at least 2 grid points per joint, "
                           f"got {args.resolution}")
+    if args.resolution is not None and args.resolution ** robot.nv > MAX_NODES:
+        most = int(round(MAX_NODES ** (1 / robot.nv)))
+        while most ** robot.nv > MAX_NODES:
+            most -= 1
+        raise DeriveError(f"robot '{robot.name}': --resolution {args.resolution} gives {args.resolution}^{robot.nv} grid "
+                          f"nodes, more than {MAX_NODES}; at most {most} per joint for {robot.nv} joints")
     if args.check_step is not None and not (np.isfinite(args.check_step) and args.check_step > 0):
         raise DeriveError(f"robot '{robot.name}': --check-step must be a finite length > 0 m, got {args.check_step:g}")
+    check_number(args.margin, "--margin", 0.0, MAX_LENGTH, unit="m", who=f"robot '{robot.name}'")
     arm = Arm(robot, args.frame)
+    progress = Progress(f"plan {robot.name}")
     result = plan(robot, start, goal, obstacles, args.frame, args.resolution,
-                  "axis" if args.connectivity == 4 else "full", args.margin, arm, args.check_step)
+                  "axis" if args.connectivity == 4 else "full", args.margin, arm, args.check_step,
+                  progress=lambda done, total: progress(done, total, f"{done} of {total} grid nodes checked"))
     print(f"{robot.name}: {result.message}")
     print(f"collision checks: {result.resolution}")
     if result.success:
@@ -174,10 +193,11 @@ def add_parser(sub) -> None:
                                    "workspace's extent and optionally draw both spaces side by side.")
     p.add_argument("robot_name")
     p.add_argument("--frame", default="tcp", help="frame whose positions form the workspace (default tcp)")
-    p.add_argument("--samples", type=int, default=40000, help="number of configurations (default 40000)")
+    p.add_argument("--samples", type=integer, default=40000,
+                   help=f"number of configurations, 2 .. {MAX_SAMPLES:.0e} (default 40000)")
     p.add_argument("--method", choices=("grid", "random"), default="grid")
-    p.add_argument("--seed", type=int, default=0, help="seed of the random sampling")
-    p.add_argument("--png", help="write configuration space | workspace to this PNG")
+    p.add_argument("--seed", type=integer, default=0, help="seed of the random sampling (>= 0)")
+    p.add_argument("--png", type=png_path, help="write configuration space | workspace to this .png file")
     p.set_defaults(func=workspace_command)
 
     p = sub.add_parser("singularities", help="rank, singular values and null space of J; search for singularities",
@@ -187,8 +207,8 @@ def add_parser(sub) -> None:
     p.add_argument("--frame", default="tcp")
     p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y,wz")
     p.add_argument("--q", nargs="+", help="configuration: values separated by commas or spaces (pi allowed: 0 pi/2)")
-    p.add_argument("--starts", type=int, default=24, help="random starts of the search (>= 1, default 24)")
-    p.add_argument("--seed", type=int, default=0)
+    p.add_argument("--starts", type=integer, default=24, help=f"random starts of the search (1 .. {MAX_STARTS}, default 24)")
+    p.add_argument("--seed", type=integer, default=0, help="seed of the random starts (>= 0)")
     p.set_defaults(func=singularities_command)
 
     p = sub.add_parser("manipulability", help="manipulability ellipsoids and measures mu1, mu2, mu3 (eq. 30)",
@@ -199,8 +219,9 @@ def add_parser(sub) -> None:
     p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y")
     p.add_argument("--q", action="append", nargs="+", help="configuration: values separated by commas or spaces "
                    "(repeatable; pi allowed)")
-    p.add_argument("--poses", type=int, default=6, help="without --q: this many poses across the joint box (>= 1, default 6)")
-    p.add_argument("--png", help="write the ellipses and the mu3 map to this PNG")
+    p.add_argument("--poses", type=integer, default=6,
+                   help=f"without --q: this many poses across the joint box (1 .. {MAX_POSES}, default 6)")
+    p.add_argument("--png", type=png_path, help="write the ellipses and the mu3 map to this .png file")
     p.set_defaults(func=manipulability_command)
 
     p = sub.add_parser("plan", help="A* over a configuration-space grid around workspace obstacles",
@@ -215,11 +236,12 @@ def add_parser(sub) -> None:
     p.add_argument("--goal", required=True, nargs="+", help="goal configuration")
     p.add_argument("--obstacle", action="append", help="circle:x,y,r | box:xmin,ymin,xmax,ymax (3-D forms too; repeatable)")
     p.add_argument("--frame", default="tcp", help="the chain to this frame is checked (default tcp)")
-    p.add_argument("--resolution", type=int, help="grid points per joint, >= 2 (default: about 40000 nodes)")
+    p.add_argument("--resolution", type=integer, help=f"grid points per joint, >= 2, at most {MAX_NODES} nodes in all "
+                   "(default: about 40000 nodes)")
     p.add_argument("--connectivity", type=int, choices=(4, 8), default=8,
                    help="8: all neighbours incl. diagonals (default); 4: along the axes only")
-    p.add_argument("--margin", type=float, default=0.0, help="clearance added to every obstacle [m], >= 0")
+    p.add_argument("--margin", type=float, default=0.0, help=f"clearance added to every obstacle [m], 0 .. {MAX_LENGTH:g}")
     p.add_argument("--check-step", type=float, help="largest motion of any point of the arm between two collision "
                    "checks along an edge [m], > 0 (default 0.01, or half the smallest obstacle if smaller)")
-    p.add_argument("--png", help="write the path in configuration space | workspace to this PNG")
+    p.add_argument("--png", type=png_path, help="write the path in configuration space | workspace to this .png file")
     p.set_defaults(func=plan_command)

@@ -8,7 +8,7 @@ import sys
 from pathlib import Path
 
 from derive.bench import firmware
-from derive.cli.common import robots_of
+from derive.cli.common import path_arg, robots_of
 from derive.codegen.generate import default_output, firmware_record_path, record_firmware
 from derive.description.model import local_models_path
 from derive.errors import DeriveError
@@ -69,7 +69,7 @@ def add_parser(sub) -> None:
                                    "and print text and stack per robot. --record keeps the figures in firmware.json "
                                    "beside the models file and in each robot's manifest.json.")
     f.add_argument("robots", nargs="*", metavar="ROBOT", help="robots to check (default: all of the models file)")
-    f.add_argument("--out", help="the generated folder (default: ./generated)")
+    f.add_argument("--out", type=path_arg, help="the generated folder (default: ./generated)")
     f.add_argument("--record", action="store_true",
                    help="write the figures into firmware.json and the manifests (derive generate keeps them "
                         "while a function's source is unchanged)")

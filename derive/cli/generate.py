@@ -3,14 +3,14 @@
 from __future__ import annotations
 
 import re
-import shutil
 import sys
 from pathlib import Path
 
-from derive.cli.common import robots_of
+from derive.cli.common import path_arg, robots_of
 from derive.codegen.generate import check, default_output, firmware_record_path, generate
 from derive.description.model import MODELS_FILE, load_models, local_models_path
 from derive.errors import DeriveError
+from derive.filesystem import write_atomically
 from derive.resources import EXAMPLE_MODELS
 
 ROBOT_KEY = re.compile(r"^  ([A-Za-z_][A-Za-z0-9_]*):\s*$")
@@ -49,6 +49,8 @@ def cmd_generate(args) -> int:
 def cmd_init(args) -> int:
     """Write ./models.yaml (or --out) with shipped example robots to start from."""
     target = Path(args.out or MODELS_FILE)
+    if target.is_dir():
+        raise DeriveError(f"{target}: is a folder; --out names the models file to write (e.g. {target / MODELS_FILE})")
     if target.exists() and not args.force:
         raise DeriveError(f"{target}: exists already; choose another --out, or --force to overwrite it")
     shipped = load_models(EXAMPLE_MODELS)
@@ -60,11 +62,9 @@ def cmd_init(args) -> int:
         text = _select(text, args.robot)
     try:
         target.parent.mkdir(parents=True, exist_ok=True)
-        tmp = target.with_name(f".{target.name}.tmp")
-        tmp.write_text(text)
-        shutil.move(tmp, target)
     except OSError as exc:
-        raise DeriveError(f"{target}: cannot write ({exc.strerror})") from None
+        raise DeriveError(f"{target}: cannot write the models file ({exc.strerror or exc})") from None
+    write_atomically(target, text, "the models file")
     names = ", ".join(load_models(target))
     print(f"wrote {target} with {names}; edit it, then run `derive generate`")
     return 0
@@ -93,7 +93,7 @@ def add_parser(sub) -> None:
                                    "./generated (or --out). Other robots already in that folder are left as "
                                    "they are; --prune removes those the models file no longer names.")
     g.add_argument("--robot", action="append", help="only this robot (repeatable)")
-    g.add_argument("--out", help="output folder (default: ./generated)")
+    g.add_argument("--out", type=path_arg, help="output folder (default: ./generated)")
     g.add_argument("--check", action="store_true", help="exit 1 and name the stale files if the output is out of date")
     g.add_argument("--prune", action="store_true",
                    help="remove (with --check: report) robots in the output folder that the models file does not name")
@@ -104,6 +104,6 @@ def add_parser(sub) -> None:
                        description="Write ./models.yaml (or --out) holding shipped robots (all, or those named "
                                    "with --robot) to edit into your own.")
     i.add_argument("--robot", action="append", help="a shipped robot to include (repeatable; default: all)")
-    i.add_argument("--out", help=f"file to write (default: ./{MODELS_FILE})")
+    i.add_argument("--out", type=path_arg, help=f"file to write (default: ./{MODELS_FILE})")
     i.add_argument("--force", action="store_true", help="overwrite an existing file")
     i.set_defaults(func=cmd_init)

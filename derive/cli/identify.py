@@ -8,19 +8,24 @@
 
 from __future__ import annotations
 
+import os
 import sys
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
+from derive.cli.common import path_arg
 from derive.description.files import load_yaml, read_text
-from derive.description.model import default_models_path, load_robot, parse_robot
+from derive.description.model import default_models_path, load_robot, parse_models, parse_robot
+from derive.description.robot import robot_name
 from derive.description.urdf import dump_entry
 from derive.errors import DeriveError
-from derive.plot.excite import plot_excitation
+from derive.filesystem import write_atomically
+from derive.plot.excite import render_excitation
 from derive.solvers.excite import check_options, excite
-from derive.solvers.identify import identified_entry, identify, read_measurements, regressor_along
+from derive.solvers.identify import (identified_entry, identify_file, open_measurements, regressor_along,
+                                     scan_measurements)
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.dynamics import NewtonEuler
 from derive.symbolic.regressor import Regressor
@@ -36,10 +41,11 @@ def add_parser(sub) -> None:
                                    "torque residual per joint, and writes the robot with the identified values as a "
                                    "models file that `derive --models FILE generate` uses.")
     i.add_argument("robot_name", metavar="ROBOT")
-    i.add_argument("data", metavar="DATA.csv")
+    i.add_argument("data", metavar="DATA.csv", type=path_arg)
     i.add_argument("--physical", action="store_true",
                    help="physically consistent standard parameters (pseudo-inertia LMI per body, actuators >= 0)")
-    i.add_argument("--out", metavar="MODELS", help="models file to write (default ./<robot>_identified.yaml)")
+    i.add_argument("--out", metavar="MODELS", type=path_arg,
+                   help="models file to write (default ./<robot>_identified.yaml)")
     i.add_argument("--name", help="name of the identified robot (default <robot>_identified)")
     i.set_defaults(func=cmd_identify)
 
@@ -63,7 +69,7 @@ def add_parser(sub) -> None:
     e.add_argument("--samples", type=int, default=100, help="samples of one period in the objective (default 100)")
     e.add_argument("--seed", type=int, default=0, help="seed of the random start (default 0)")
     e.add_argument("--iterations", type=int, default=200, help="SLSQP iterations at most (default 200)")
-    e.add_argument("--out", help="output folder (default ./excite_out/<robot>/)")
+    e.add_argument("--out", type=path_arg, help="output folder (default ./excite_out/<robot>/)")
     e.set_defaults(func=cmd_excite)
 
 
@@ -87,39 +93,84 @@ def cmd_base_parameters(args) -> int:
     return 0
 
 
+def _output_path(out: Path, command: str, what: str) -> Path:
+    """Refuse, before the work, an output path that cannot be written: a folder, or below a file."""
+    if out.is_dir():
+        raise DeriveError(f"{command}: {out}: is a folder; --out names the {what} to write")
+    for parent in out.parents:
+        if parent.exists():
+            if not parent.is_dir():
+                raise DeriveError(f"{command}: {out}: {parent} is not a folder")
+            break
+    return out
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.exists() and b.exists() and os.path.samefile(a, b)
+    except OSError:
+        return False
+
+
 def cmd_identify(args) -> int:
     robot = load_robot(args.robot_name, args.models)
-    data = read_measurements(args.data, list(robot.velocity_names))
-    if robot.floating and data.q.shape[1] != robot.nq:
+    if robot.floating:
         raise DeriveError(f"identify {robot.name}: floating bases are not supported by the CSV reader yet")
-    print(f"identifying {robot.name} from {data.q.shape[0]} samples of {args.data} ...", file=sys.stderr, flush=True)
+    source_path = Path(args.models) if args.models else default_models_path()
+    models = load_yaml(read_text(source_path, "models file"), f"models file {source_path}")
+    raw = models.get("robots") if isinstance(models, dict) else None
+    raw = raw.get(robot.name) if isinstance(raw, dict) else None
+    if not isinstance(raw, dict):  # load_robot read it a moment ago
+        raise DeriveError(f"identify {robot.name}: {source_path} changed while it was read: run again")
+    name = robot_name(args.name) if args.name is not None else f"{robot.name}_identified"
+    out = _output_path(Path(args.out) if args.out else Path(f"{robot.name}_identified.yaml"), "identify",
+                       "models file")
+    if _same_file(out, Path(args.data)):
+        raise DeriveError(f"identify: --out {out} is the data file {args.data}: choose another --out")
+    if _same_file(out, source_path):
+        raise DeriveError(f"identify: --out {out} is the models file {source_path} that holds {robot.name} (its "
+                          "other robots would be lost): choose another --out")
+    log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
+    mf = open_measurements(args.data, list(robot.velocity_names))
+    if mf.derives:
+        scan_measurements(mf, log)
     reg, bp = regressor_of(robot)
     pi0 = np.asarray(reg.values(), dtype=float)
-    result = identify(regressor_along(reg, robot), bp, pi0, data, physical=args.physical, bodies=len(reg.bodies))
+    result = identify_file(regressor_along(reg, robot), bp, pi0, mf, physical=args.physical, bodies=len(reg.bodies),
+                           log=log)
     print(result.report(list(robot.velocity_names)))
-    name = args.name or f"{robot.name}_identified"
-    out = Path(args.out) if args.out else Path(f"{robot.name}_identified.yaml")
-    source_path = Path(args.models) if args.models else default_models_path()
-    raw = load_yaml(read_text(source_path, "models file"), f"models file {source_path}")["robots"][robot.name]
-    command = f"derive identify {robot.name} {args.data}" + (" --physical" if args.physical else "")
-    entry = identified_entry(raw, robot, list(reg.names), result.standard, f"{args.data}, identified by `{command}`")
+    shown = " ".join(str(args.data).replace("`", "'").split())  # the entry's source and comments: one line each
+    command = f"derive identify {robot.name} {shown}" + (" --physical" if args.physical else "")
+    entry = identified_entry(raw, robot, list(reg.names), result.standard, f"{shown}, identified by `{command}`")
     try:
         parse_robot(name, entry)
     except DeriveError as exc:
-        raise DeriveError(f"identify {robot.name}: the standard parameters reproducing the identified base "
-                          f"parameters are not physical ({exc}); rerun with --physical") from None
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_name(f".{out.name}.tmp")
-    tmp.write_text("robots:\n" + dump_entry(name, entry, generator="derive identify"))
-    tmp.replace(out)
+        fix = "check the data's units" if args.physical else \
+            "rerun with --physical (physically consistent values), or check the data's units"
+        raise DeriveError(f"identify {robot.name}: {args.data}: the standard parameters reproducing the identified "
+                          f"base parameters do not make a valid model ({exc}); {fix}") from None
+    text = "robots:\n" + dump_entry(name, entry, generator="derive identify")
+    if name not in parse_models(text, source=str(out)):  # what is written loads back
+        raise DeriveError(f"identify {robot.name}: the models file for {out} does not hold robot '{name}'")
+    if not out.parent.is_dir():
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DeriveError(f"identify: {out.parent}: cannot create the folder ({exc.strerror or exc})") from None
+    write_atomically(out, text, "models file")
     print(f"wrote {out} (robot '{name}'): derive --models {out} generate")
     return 0
 
 
 def cmd_excite(args) -> int:
     robot = load_robot(args.robot_name, args.models)
-    check_options(robot.name, args.period, args.harmonics, args.samples)
+    check_options(robot.name, args.period, args.harmonics, args.samples, args.seed, args.iterations)
     robot.require_fixed_base("derive excite")
+    out = Path(args.out) if args.out else Path("excite_out") / robot.name
+    if out.exists() and not out.is_dir():
+        raise DeriveError(f"excite {robot.name}: --out {out} is a file; it names the folder to write "
+                          "excitation.csv and excitation.png into")
+    _output_path(out / "excitation.csv", f"excite {robot.name}", "folder")
     print(f"deriving the base regressor of {robot.name} ...", file=sys.stderr, flush=True)
     reg, bp = regressor_of(robot)
     s = reg.sym
@@ -131,9 +182,14 @@ def cmd_excite(args) -> int:
     ex = excite(robot, Yb, s.q, s.qd, s.qdd, tau_id, period=args.period, harmonics=args.harmonics,
                 samples=args.samples, seed=args.seed, max_iterations=args.iterations,
                 log=lambda m: print(m, file=sys.stderr, flush=True))
-    out = Path(args.out) if args.out else Path("excite_out") / robot.name
-    csv = ex.write_csv(out / "excitation.csv")
+    csv, png = ex.csv(), render_excitation(ex)  # both made before either is written
+    if not out.is_dir():
+        try:
+            out.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DeriveError(f"excite {robot.name}: {out}: cannot create the folder ({exc.strerror or exc})") from None
+    csv_path = write_atomically(out / "excitation.csv", csv, "excitation CSV")
+    png_path = write_atomically(out / "excitation.png", png, "excitation plot")
     print(ex.summary())
-    png = plot_excitation(ex, out / "excitation.png")
-    print(f"wrote {csv} and {png}")
+    print(f"wrote {csv_path} and {png_path}")
     return 0 if ex.limits_ok else 1

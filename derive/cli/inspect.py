@@ -8,14 +8,19 @@ from pathlib import Path
 
 import sympy as sp
 
+from derive.cli.common import check_count, integer, path_arg, png_path
 from derive.description.model import load_robot
 from derive.errors import DeriveError
+from derive.filesystem import write_atomically
 from derive.inspect.latex import Options, compile_pdf, document_context, render_tex
 from derive.inspect.sympy_model import load
-from derive.plot.latex import render_png
+from derive.plot.figure import write_png
+from derive.plot.latex import equations_png
 
 MIN_WIDTH = 10
 """Narrowest ``latex --width``: below it every term would sit on a line of its own whatever the width."""
+MAX_WIDTH = 10_000
+"""Widest ``latex --width``: far beyond any page; a line is never longer than that."""
 
 
 def cmd_eom(args) -> int:
@@ -43,6 +48,7 @@ def cmd_latex(args) -> int:
     robot = load_robot(args.robot_name, args.models)
     if args.width < MIN_WIDTH:
         raise DeriveError(f"robot '{robot.name}': --width must be at least {MIN_WIDTH} characters, got {args.width}")
+    check_count(args.width, "--width", MIN_WIDTH, MAX_WIDTH, "characters per line", f"robot '{robot.name}'")
     frames = (robot.root,) + tuple(j.child for j in robot.joints) + tuple(f.name for f in robot.frames)
     for frame in args.fk + args.jacobian:
         if frame not in frames:
@@ -53,17 +59,21 @@ def cmd_latex(args) -> int:
                       jacobian=tuple(args.jacobian), energy=args.energy)
     context = document_context(m, options)
     text = render_tex(context)
+    png = equations_png(context) if args.png else None  # drawn before anything is written
     if args.out:
         out = Path(args.out)
-        out.parent.mkdir(parents=True, exist_ok=True)
-        out.write_text(text)
+        try:
+            out.parent.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise DeriveError(f"latex --out {out}: cannot create its folder ({exc.strerror or exc})") from None
+        write_atomically(out, text, "LaTeX document")
         print(f"wrote {out}", file=sys.stderr)
         if args.pdf:
             print(f"wrote {compile_pdf(out)}", file=sys.stderr)
     else:
         sys.stdout.write(text)
-    if args.png:
-        print(f"wrote {render_png(context, args.png)}", file=sys.stderr)
+    if png is not None:
+        print(f"wrote {write_png(args.png, png)}", file=sys.stderr)
     return 0
 
 
@@ -74,8 +84,8 @@ def add_parser(sub) -> None:
 
     p = sub.add_parser("latex", help="write a robot's M, C, g (and FK/Jacobian) as a LaTeX document")
     p.add_argument("robot_name")
-    p.add_argument("--out", help="write the .tex here (default: print it)")
-    p.add_argument("--png", help="also draw the equations to this PNG (matplotlib mathtext)")
+    p.add_argument("--out", type=path_arg, help="write the .tex here (default: print it)")
+    p.add_argument("--png", type=png_path, help="also draw the equations to this .png file (matplotlib mathtext)")
     p.add_argument("--pdf", action="store_true", help="also run pdflatex on --out (needs a LaTeX install)")
     p.add_argument("--method", choices=("lagrange", "newton-euler"), default="newton-euler",
                    help="derivation route (identical equations; default newton-euler, shorter before simplification)")
@@ -85,5 +95,6 @@ def add_parser(sub) -> None:
     p.add_argument("--fk", action="append", default=[], metavar="FRAME", help="add world_T_FRAME (repeatable)")
     p.add_argument("--jacobian", action="append", default=[], metavar="FRAME", help="add FRAME's Jacobian (repeatable)")
     p.add_argument("--energy", action="store_true", help="add the kinetic and potential energies")
-    p.add_argument("--width", type=int, default=64, help=f"visible characters per line (>= {MIN_WIDTH}, default 64)")
+    p.add_argument("--width", type=integer, default=64,
+                   help=f"visible characters per line ({MIN_WIDTH} .. {MAX_WIDTH}, default 64)")
     p.set_defaults(func=cmd_latex)

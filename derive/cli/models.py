@@ -4,16 +4,49 @@ from __future__ import annotations
 
 import sys
 
-from derive.cli.common import robots_of
-from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import_urdf_named
+import numpy as np
+
+from derive.cli.common import path_arg, robots_of
+from derive.description.model import parse_robot
+from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import_urdf_named, relock_command, resolve_urdf
+from derive.reference import NumericRobot
+
+
+def warn_unmoved(name: str, entry: dict, shown: str, samples: int = 3) -> None:
+    """One warning line if an imported entry has a coordinate that moves no mass or inertia (M(q) singular
+    at every q: ``derive generate`` refuses it, kinematics still work, e.g. a massless path to a --tip),
+    with the import command that locks its joint.
+
+    The numeric reference's M(q) at ``samples`` seeded configurations, as
+    :func:`derive.codegen.checks.check_mass_matrix` judges it: a diagonal entry at most 1e-12 of the largest.
+    """
+    robot = parse_robot(name, entry)
+    ref = NumericRobot(robot)
+    rng = np.random.default_rng(0)
+    diag = np.min([np.diag(ref.crba(ref.random_configuration(rng))) for _ in range(samples)], axis=0)
+    scale = max(float(np.max(np.abs(diag), initial=0.0)), 1e-300)
+    joint_diag = diag[robot.nv - len(robot.joint_coordinates):]  # a floating base's six come first
+    still = [c for c, d in zip(robot.joint_coordinates, joint_diag) if d <= 1e-12 * scale]
+    if still:
+        c = still[0]
+        joints = list(dict.fromkeys(x.joint for x in still))
+        others = f" (and {len(still) - 1} more)" if len(still) > 1 else ""
+        relock = relock_command(entry.get("source", ""), joints)
+        print(f"warning: {shown}: robot '{name}': joints ({c.joint}): coordinate '{c.name}'{others} moves no mass or "
+              "inertia: M(q) is singular, so `derive generate` will refuse the robot (kinematics work); give the links "
+              "it moves a mass in the URDF" + (f", or lock {'them' if len(joints) > 1 else 'it'}: {relock}" if relock else ""),
+              file=sys.stderr)
 
 
 def cmd_import_urdf(args) -> int:
-    """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--no-friction] [--name NAME] [--out models.yaml]``."""
+    """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--no-friction]
+    [--fix-inertia] [--name NAME] [--out models.yaml]``."""
     name, entry = import_urdf_named(args.file, getattr(args, "tip", None), lock=getattr(args, "lock", None),
                                     name=getattr(args, "name", None), chain=getattr(args, "chain", None),
                                     floating=bool(getattr(args, "floating", False)),
-                                    friction=not getattr(args, "no_friction", False))
+                                    friction=not getattr(args, "no_friction", False),
+                                    fix_inertia=bool(getattr(args, "fix_inertia", False)))
+    warn_unmoved(name, entry, resolve_urdf(args.file, name)[1])
     if args.out:
         append_entry(args.out, name, entry)
         print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
@@ -28,9 +61,13 @@ def cmd_info(args) -> int:
         r = robots[name]
         base = f", nv = {r.nv}, floating base ({', '.join(c.name for c in r.base_coordinates)})" if r.floating else ""
         print(f"{r.name}: nq = {r.nq}{base}, joints {', '.join(j.summary for j in r.moving_joints)}")
+        own = {j.name: a for j, a in r.mimic_actuators}
         for j in r.moving_joints:
             if j.mimic is not None:
-                print(f"  mimic: {j.name} = {j.mimic.multiplier:g} {j.mimic.joint} + {j.mimic.offset:g} (no entry in q)")
+                friction = (f"; its own actuator (viscous {own[j.name].viscous}, coulomb {own[j.name].coulomb}, armature "
+                            f"{own[j.name].armature}) acts on {j.mimic.joint} through the mimic map") if j.name in own else ""
+                print(f"  mimic: {j.name} = {j.mimic.multiplier:g} {j.mimic.joint} + {j.mimic.offset:g} (no entry in q)"
+                      + friction)
         for j in r.moving_joints:
             if j.gimbal_lock:
                 print(f"  gimbal lock: {j.gimbal_lock}")
@@ -53,7 +90,7 @@ def add_parser(sub) -> None:
                                    "are dropped (named in the description). "
                                    f"FILE may be '{ERD_PREFIX}<path under robots/>' for the installed "
                                    "example-robot-data URDFs.")
-    u.add_argument("file", metavar="FILE")
+    u.add_argument("file", metavar="FILE", type=path_arg)
     u.add_argument("--tip", metavar="LINK", help="URDF link that becomes the frame 'tcp' (none without it)")
     u.add_argument("--chain", metavar="LINK", help="import only the root-to-LINK chain (the frame 'tcp' at LINK): "
                                                    "moving branches off it with mass must be locked, massless ones are dropped "
@@ -61,10 +98,17 @@ def add_parser(sub) -> None:
     u.add_argument("--lock", metavar="JOINT[=VALUE],...", help="joints to make fixed (default value 0)")
     u.add_argument("--no-friction", action="store_true",
                    help="ignore the URDF's <dynamics damping friction> (by default: viscous and Coulomb friction)")
+    u.add_argument("--fix-inertia", action="store_true",
+                   help="repair impossible inertias instead of refusing them, with one warning per link on stderr: a "
+                        "massless link's inertia becomes zero; one that is not positive semi-definite or breaks the "
+                        "triangle inequality becomes the nearest physical one (negative principal moments -> 0, the "
+                        "two smaller raised equally until I1 + I2 >= I3)")
     u.add_argument("--floating", action="store_true",
                    help="floating base: the URDF root link moves freely (base: floating, Pinocchio's JointModelFreeFlyer)")
     u.add_argument("--name", help="robot name (default: the URDF robot name made a C identifier)")
-    u.add_argument("--out", metavar="MODELS", help="append to this models file instead of printing (created if missing)")
+    u.add_argument("--out", metavar="MODELS", type=path_arg,
+                   help="append to this models file instead of printing (created if missing; written atomically: on "
+                        "any failure the file is left as it was)")
     u.set_defaults(func=cmd_import_urdf)
 
     i = sub.add_parser("info", help="summarise robots of models.yaml")

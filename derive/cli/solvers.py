@@ -13,23 +13,28 @@ trajopt writes <out>/trajectory.csv (t, q_<joint>..., qd_..., qdd_..., tau_...) 
 
 from __future__ import annotations
 
+import io
 import sys
-import tempfile
 import time
 from pathlib import Path
 
 import casadi as ca
 import numpy as np
 
+from derive.cli.common import Progress, check_count, check_number, check_seed, integer, path_arg
 from derive.codegen.generate import default_output, generate
+from derive.description.files import read_bytes, read_text
 from derive.description.model import load_models, load_robot
 from derive.errors import DeriveError
-from derive.plot.simulate import plot_simulation
-from derive.plot.trajopt import plot_trajopt
+from derive.filesystem import temporary_directory, write_atomically
+from derive.plot.figure import write_png
+from derive.plot.simulate import simulation_png
+from derive.plot.trajopt import trajopt_png
 from derive.solvers.ik import problem, solve_ik
 from derive.solvers.simulate import METHODS as SIMULATE_METHODS
 from derive.solvers.simulate import (check_times, check_vector, is_stale, numeric_reference, simulate, summary,
                                      with_parameters, write_csv)
+from derive.solvers.trajopt import MAX_INTERVALS, MAX_SUBSTEPS
 from derive.solvers.trajopt import METHODS as TRAJOPT_METHODS
 from derive.solvers.trajopt import TrajectoryOptimizer, Waypoint
 from derive.solvers.trajopt_examples import SWING_UPS, point_to_point_duration, swing_up, velocity_reversals
@@ -59,8 +64,8 @@ def add_simulate(sub) -> None:
     p.add_argument("--rtol", type=float, default=1e-10, help="adaptive integrators' rtol (default 1e-10)")
     p.add_argument("--atol", type=float, default=1e-12, help="adaptive integrators' atol (default 1e-12)")
     p.add_argument("--param", action="append", default=[], metavar="NAME=VALUE", help="override a parameter")
-    p.add_argument("--out", help="output folder (default: simulate_out/<robot>/)")
-    p.add_argument("--generated", help="folder holding <robot>/python/ (default: ./generated; where it lacks the current model, the code is generated afresh into a temporary folder)")
+    p.add_argument("--out", type=path_arg, help="output folder (default: simulate_out/<robot>/)")
+    p.add_argument("--generated", type=path_arg, help="folder holding <robot>/python/ (default: ./generated; where it lacks the current model, the code is generated afresh into a temporary folder)")
     p.set_defaults(func=cmd_simulate)
 
 
@@ -104,28 +109,41 @@ def _generated_for(robot, folder: str | None, scratch: Path) -> Path:
 
 
 def cmd_simulate(args) -> int:
+    """Run the simulation, draw it, then write <out>/<robot>.csv and .png (each atomically): a run or a
+    figure that fails writes nothing."""
     robot = load_robot(args.robot_name, args.models)
     # every option is checked before anything is printed, run or written
-    check_times(robot.name, args.t, args.dt, args.rtol, args.atol)
+    check_times(robot.name, args.t, args.dt, args.rtol, args.atol, robot.nv)
     for values, what in ((args.q0, "q0"), (args.qd0, "qd0"), (args.tau, "tau")):
         check_vector(values, robot.nv, what, robot.name)
     params = parse_params(args.param)
     with_parameters(robot, params)
     numeric_reference(robot, check_vector(args.q0, robot.nv, "q0", robot.name), params)
-    with tempfile.TemporaryDirectory() as scratch:
-        generated = _generated_for(robot, args.generated, Path(scratch))
+    out = Path(args.out) if args.out else Path("simulate_out") / robot.name
+    if out.exists() and not out.is_dir():
+        raise DeriveError(f"simulate --out {out}: not a folder")
+    progress = Progress(f"simulate {robot.name}")
+    with temporary_directory(prefix="derive-simulate-") as scratch:  # removed on SIGTERM too
+        generated = _generated_for(robot, args.generated, scratch)
         print(f"simulating {robot.name} for {args.t:g} s ({args.method}) ...", flush=True)
         traj = simulate(robot, args.q0, args.qd0, args.tau, t_end=args.t, dt=args.dt, method=args.method,
-                        params=params, generated=generated, rtol=args.rtol, atol=args.atol)
-    out = Path(args.out) if args.out else Path("simulate_out") / robot.name
+                        params=params, generated=generated, rtol=args.rtol, atol=args.atol,
+                        progress=lambda stage, done: progress(done, 1.0, f"{stage}, t = {done * args.t:.4g} of {args.t:g} s"))
+    png = simulation_png(traj)  # drawn before anything is written
+    text = summary(traj)
     csv_path = write_csv(traj, out / f"{robot.name}.csv")
-    png_path = plot_simulation(traj, out / f"{robot.name}.png")
-    print(summary(traj))
+    png_path = write_png(out / f"{robot.name}.png", png)
+    print(text)
     print(f"wrote {csv_path} and {png_path}")
     return 0
 
 
 # ---- derive ik ROBOT --xyz X Y Z [--rpy R P Y] [--q0 ...] ----
+
+MAX_MAGNITUDE = 1e6
+"""Largest |value| of an IK option: a target coordinate (m, beyond any arm's reach), an angle, a joint
+value (rad or m) or a weight; their squares stay finite and the steps of the solver above rounding."""
+
 
 def add_ik(sub) -> None:
     k = sub.add_parser("ik", help="inverse kinematics of one target: print q and the residuals",
@@ -133,7 +151,8 @@ def add_ik(sub) -> None:
                                    "--xyz alone is a position-only target; with --rpy (URDF roll-pitch-yaw, "
                                    "R = Rz(Y) Ry(P) Rx(R)) a full pose. Exit 0 if solved, 1 if not.")
     k.add_argument("robot_name", metavar="ROBOT")
-    k.add_argument("--xyz", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"), help="position (m)")
+    k.add_argument("--xyz", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
+                   help=f"position (m, within {MAX_MAGNITUDE:g})")
     k.add_argument("--rpy", nargs=3, type=float, metavar=("R", "P", "Y"), help="orientation (rad)")
     k.add_argument("--q0", nargs="+", type=float, help="start (default: mid-range)")
     k.add_argument("--frame", default="tcp", help="frame to place (default: tcp)")
@@ -141,7 +160,7 @@ def add_ik(sub) -> None:
     k.add_argument("--method", choices=("auto", "lm", "opti"), default="auto")
     k.add_argument("--rest", nargs="+", type=float, help="rest posture to stay near (redundant arms)")
     k.add_argument("--timeout", type=float, default=0.1, help="wall-time cap in s (default 0.1)")
-    k.add_argument("--seed", type=int, default=0, help="seed of the restarts")
+    k.add_argument("--seed", type=integer, default=0, help="seed of the restarts (>= 0)")
     k.set_defaults(func=cmd_ik)
 
 
@@ -150,6 +169,16 @@ def cmd_ik(args) -> int:
     robot = load_robot(args.robot_name, args.models)
     if not (np.isfinite(args.timeout) and args.timeout > 0):
         raise DeriveError(f"robot '{robot.name}': --timeout must be a finite number of seconds > 0, got {args.timeout:g}")
+    who = f"robot '{robot.name}'"
+    for v in args.xyz:  # nan and inf: solve_ik's check of the target
+        if np.isfinite(v):
+            check_number(v, "--xyz", -MAX_MAGNITUDE, MAX_MAGNITUDE, unit="m", who=who)
+    for values, option in ((args.rpy, "--rpy"), (args.q0, "--q0"), (args.rest, "--rest")):
+        for v in values or ():
+            check_number(v, option, -MAX_MAGNITUDE, MAX_MAGNITUDE, who=who)
+    for v in args.weights or ():
+        check_number(v, "--weights", 0.0, MAX_MAGNITUDE, who=who)
+    check_seed(args.seed)
     if args.rpy is None and args.weights is None:
         target, what = np.array(args.xyz), "position"
     else:
@@ -186,7 +215,7 @@ def add_trajopt(sub) -> None:
     t.add_argument("--from", dest="start", help="start joint positions, one per coordinate of q, comma-separated (at rest)")
     t.add_argument("--to", dest="goal", help="goal joint positions, comma-separated (at rest)")
     t.add_argument("--method", choices=TRAJOPT_METHODS, help="transcription (default hermite-simpson)")
-    t.add_argument("--intervals", type=int, help="N (default 100 for swing-ups, 50 otherwise)")
+    t.add_argument("--intervals", type=integer, help=f"N, 2 .. {MAX_INTERVALS} (default 100 for swing-ups, 50 otherwise)")
     t.add_argument("--duration", type=float, help="final time T, or its first guess with --free-time")
     t.add_argument("--free-time", action="store_true", help="optimise T too")
     t.add_argument("--time-weight", type=float, help="w_T of the cost w_T T + integral |tau|^2 (needs --free-time)")
@@ -195,9 +224,10 @@ def add_trajopt(sub) -> None:
     t.add_argument("--torque-limit", help="override the model's effort limits: one value or one per joint")
     t.add_argument("--passive", help="unactuated joints (or single coordinates of multi-DOF joints), comma-separated")
     t.add_argument("--waypoint", action="append", help="S:X,Y,Z[@FRAME]: FRAME (default tcp) at X,Y,Z at time S*T")
-    t.add_argument("--guess", help="initial path: .npy or .csv of joint positions (M x nq), e.g. a planner's")
-    t.add_argument("--substeps", type=int, help="RK4 steps per interval of the independent check (default 20)")
-    t.add_argument("--out", help="output folder (default ./trajopt_out/<robot>/)")
+    t.add_argument("--guess", type=path_arg, help="initial path: .npy or .csv of joint positions (M x nq), e.g. a planner's")
+    t.add_argument("--substeps", type=integer,
+                   help=f"RK4 steps per interval of the independent check, 1 .. {MAX_SUBSTEPS} (default 20)")
+    t.add_argument("--out", type=path_arg, help="output folder (default ./trajopt_out/<robot>/)")
     t.set_defaults(func=cmd_trajopt)
 
 
@@ -222,16 +252,17 @@ def parse_waypoint(text: str) -> Waypoint:
 def read_path(file: str, joints: tuple[str, ...]) -> np.ndarray:
     """An (M, nv) path from .npy or .csv; a CSV with q_<joint> columns (as trajopt writes) gives those.
 
-    Anything else (an unreadable file, text that is not comma-separated numbers under an optional
-    header, a pickled .npy) is a one-line DeriveError; the shape is checked by the optimiser.
+    The file is read through the input guards (a regular file of bounded size: a FIFO or /dev/zero is
+    refused at once). Anything else (text that is not comma-separated numbers under an optional header,
+    a pickled .npy) is a one-line DeriveError; the shape is checked by the optimiser.
     """
     path = Path(file)
-    if not path.is_file():
+    if not path.exists():
         raise DeriveError(f"trajopt: --guess {file}: no such file")
     try:
         if path.suffix == ".npy":
-            return np.load(path, allow_pickle=False)
-        lines = [line for line in path.read_text().splitlines() if line.strip()]
+            return np.load(io.BytesIO(read_bytes(path, "--guess path")), allow_pickle=False)
+        lines = [line for line in read_text(path, "--guess path").splitlines() if line.strip()]
         if not lines:
             raise ValueError("empty")
         head = [x.strip() for x in lines[0].split(",")]
@@ -244,6 +275,8 @@ def read_path(file: str, joints: tuple[str, ...]) -> np.ndarray:
             data = np.loadtxt(lines[1:], delimiter=",", ndmin=2)
             if not data.size:
                 raise ValueError("no rows") from None
+    except DeriveError as exc:
+        raise DeriveError(f"trajopt: --guess: {exc}") from None
     except (OSError, ValueError, UnicodeDecodeError, EOFError):
         raise DeriveError(f"trajopt: --guess {file}: not a .npy array or a CSV of numbers "
                           f"(M rows of {len(joints)} joint positions, optionally under a header)") from None
@@ -255,7 +288,18 @@ def cmd_trajopt(args) -> int:
     robots = load_models(args.models)
     if args.robot not in robots:
         raise DeriveError(f"trajopt: no robot {args.robot!r} (known: {', '.join(robots)})")
-    opt = TrajectoryOptimizer(robots[args.robot], log=lambda s: print(s, flush=True))
+    # sizes before the (slow) optimiser is built; the lower bounds and the other numbers (duration,
+    # weights, torque limits, waypoints) are checked by TrajectoryOptimizer.solve before it transcribes
+    if args.intervals is not None:
+        check_count(args.intervals, "--intervals", None, MAX_INTERVALS, who=f"trajopt {args.robot}")
+    if args.substeps is not None:
+        check_count(args.substeps, "--substeps", None, MAX_SUBSTEPS, who=f"trajopt {args.robot}")
+    out = Path(args.out) if args.out else Path("trajopt_out") / args.robot
+    if out.exists() and not out.is_dir():
+        raise DeriveError(f"trajopt --out {out}: not a folder")
+    progress = Progress(f"trajopt {args.robot}")
+    opt = TrajectoryOptimizer(robots[args.robot], log=lambda s: print(s, flush=True),
+                              progress=lambda i, most: progress(i, most, f"IPOPT iteration {i}, at most {most}"))
     options = {k: v for k, v in {
         "method": args.method, "intervals": args.intervals, "duration": args.duration,
         "time_weight": args.time_weight, "accel_weight": args.accel_weight, "substeps": args.substeps,
@@ -281,11 +325,16 @@ def cmd_trajopt(args) -> int:
     if not res.success:  # well formed but not met (infeasible, not converged): exit 1, nothing written
         print(f"derive: trajopt {args.robot}: no solution: {res.reason}", file=sys.stderr)
         return 1
-    out = Path(args.out) if args.out else Path("trajopt_out") / args.robot
-    out.mkdir(parents=True, exist_ok=True)
-    res.write_csv(out / "trajectory.csv")
-    plot_trajopt(res, out / "trajectory.png", dict(zip(opt.joints, opt.limits(options.get("torque_limit"))["effort"])))
+    # everything computed (the CSV text, the figure) before anything is written; each file atomically
+    text = res.csv_text()
+    png = trajopt_png(res, dict(zip(opt.joints, opt.limits(options.get("torque_limit"))["effort"])))
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise DeriveError(f"trajopt --out {out}: cannot create the folder ({exc.strerror or exc})") from None
+    csv_path = write_atomically(out / "trajectory.csv", text, "CSV")
+    png_path = write_png(out / "trajectory.png", png)
     if args.swing_up:
         print(f"velocity reversals (pumps): {', '.join(f'{j} {velocity_reversals(res.qd[:, i])}' for i, j in enumerate(opt.joints))}")
-    print(f"wrote {out / 'trajectory.csv'} and {out / 'trajectory.png'}")
+    print(f"wrote {csv_path} and {png_path}")
     return 0

@@ -15,49 +15,50 @@
   translation unit. Generation copies a robot's figures into its manifest.json (``firmware``) for
   the functions whose translation unit still has that hash, and leaves out the others, so a
   figure never outlives its source and a fresh generation reproduces the same files.
+- Runs into one output folder take turns: each holds an advisory lock (``flock``) on the folder
+  that holds the output for its whole run, and reads MANIFEST.json only once it has it, so the
+  second run merges onto what the first wrote. A temporary folder beside the output is removed
+  only by a run that holds that lock (its owner is then gone, whatever its pid or PID namespace).
+- Links in the output folder stay links (never followed); files derive does not manage are
+  carried over as hard links where the file system allows (else copied), so they are kept whole.
+- An output folder that cannot be renamed (a mount point: a Docker volume, a bind mount) is
+  updated in place instead, robot folder by robot folder, each in one atomic exchange, with
+  MANIFEST.json written last.
 """
 
 from __future__ import annotations
 
+import contextlib
 import ctypes
 import errno
+import fcntl
 import hashlib
 import json
-import math
 import os
 import re
 import shutil
+import stat
+import sys
 import tempfile
 import time
 from importlib.metadata import version
 from pathlib import Path
 from typing import Callable, Iterable
 
-import casadi as ca
-import numpy as np
 
 from derive.codegen.backends.c import translation_unit_hash
 from derive.codegen.catalogue import function_specs, template_functions
+from derive.codegen.checks import check_constants, check_mass_matrix
 from derive.codegen.render import render_robot
 from derive.errors import DeriveError
+from derive.description.files import InputFileError, read_text
 from derive.description.model import default_models_path
+from derive.filesystem import forget, register, write_atomically
 from derive.description.robot import Robot, model_data
 from derive.resources import PACKAGE, TEMPLATES
 from derive.symbolic.model import SXModel
 
 TOOLS = ("sympy", "casadi", "numpy", "jinja2")
-
-
-ACTIVE_TEMPORARIES: set[Path] = set()
-"""Temporary folders of generations under way in this process: a SIGTERM handler removes them
-(see :func:`remove_temporaries`) even where the signal cannot unwind the Python stack."""
-
-
-def remove_temporaries() -> None:
-    """Remove the temporary folders of generations under way (for signal handlers)."""
-    for path in list(ACTIVE_TEMPORARIES):
-        shutil.rmtree(path, ignore_errors=True)
-        ACTIVE_TEMPORARIES.discard(path)
 
 
 def default_output() -> Path:
@@ -69,7 +70,7 @@ def tool_versions() -> dict[str, str]:
     return {t: version(t) for t in TOOLS}
 
 
-GENERATOR_SOURCES = ("errors.py", "resources.py", "description", "symbolic", "codegen")
+GENERATOR_SOURCES = ("errors.py", "resources.py", "filesystem.py", "description", "symbolic", "codegen")
 """What generated/ depends on, under derive/: the description, the symbolic derivation and code
 generation (with every backend), plus the templates. The solvers, analysis, inspection and the
 command line are left out: editing them does not make generated/ stale."""
@@ -101,21 +102,82 @@ def _sha(text: str | bytes) -> str:
     return hashlib.sha256(text.encode() if isinstance(text, str) else text).hexdigest()
 
 
-def _read_manifest(out: Path) -> dict:
+ROBOT_NAME = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+"""A robot's name, as the models file allows it: also its folder under the output."""
+
+
+def manifest_problem(manifest) -> str | None:
+    """Why ``manifest`` (MANIFEST.json, loaded) is not one derive wrote, or None."""
+    if not isinstance(manifest, dict):
+        return f"a JSON {type(manifest).__name__}, not an object"
+    robots = manifest.get("robots")
+    if not isinstance(robots, dict):
+        return "its 'robots' is not an object"
+    for name, entry in robots.items():
+        if not ROBOT_NAME.match(name):
+            return f"robot name {name!r} is not a robot's name"
+        if not isinstance(entry, dict) or not all(isinstance(entry.get(k), str) for k in ("model_hash", "generator_hash")):
+            return f"robots.{name} has no model_hash and generator_hash"
+        files = entry.get("files")
+        if not isinstance(files, dict) or not all(isinstance(v, str) for v in files.values()):
+            return f"robots.{name}.files is not an object of sha256 strings"
+        for rel in files:
+            parts = rel.split("/")
+            if not rel or rel.startswith("/") or any(part in ("", ".", "..") for part in parts):
+                return f"robots.{name}.files names {rel!r}, not a path inside the robot's folder"
+    return None
+
+
+def _load_manifest(out: Path) -> tuple[dict, str | None]:
+    """(MANIFEST.json of ``out``, why it cannot be used or None); ({}, None) where there is none."""
+    path = out / "MANIFEST.json"
+    if not os.path.lexists(path):
+        return {}, None
     try:
-        return json.loads((out / "MANIFEST.json").read_text())
-    except (OSError, ValueError):
-        return {}
+        data = json.loads(read_text(path, "manifest"))
+    except InputFileError as exc:
+        return {}, str(exc)
+    except ValueError as exc:
+        return {}, f"{path}: not valid JSON ({exc})"
+    problem = manifest_problem(data)
+    return (data, None) if problem is None else ({}, f"{path}: not a derive manifest ({problem})")
+
+
+def _read_manifest(out: Path) -> dict:
+    """MANIFEST.json of ``out`` if it is one derive wrote, else {}."""
+    return _load_manifest(out)[0]
+
+
+def _regular(path: Path) -> bool:
+    """A regular file, not a link to one: what derive writes in a robot's folder."""
+    try:
+        return stat.S_ISREG(os.lstat(path).st_mode)
+    except OSError:
+        return False
+
+
+def _entries(robot_dir: Path) -> set[str]:
+    """Paths under ``robot_dir`` of everything but folders (links and special files included), links not followed."""
+    found = set()
+    for root, dirs, names in os.walk(robot_dir):
+        base = Path(root)
+        for d in list(dirs):
+            if (base / d).is_symlink():
+                names.append(d)
+                dirs.remove(d)
+        found |= {(base / n).relative_to(robot_dir).as_posix() for n in names}
+    return found
 
 
 def _intact(out: Path, name: str, entry: dict) -> bool:
-    for rel, digest in entry.get("files", {}).items():
-        path = out / name / rel
-        if not path.is_file() or _sha(path.read_bytes()) != digest:
-            return False
     robot_dir = out / name
-    present = {p.relative_to(robot_dir).as_posix() for p in robot_dir.rglob("*") if p.is_file()} if robot_dir.is_dir() else set()
-    return present == set(entry.get("files", {}))
+    if not robot_dir.is_dir() or robot_dir.is_symlink():
+        return False
+    for rel, digest in entry.get("files", {}).items():
+        path = robot_dir / rel
+        if not _regular(path) or _sha(path.read_bytes()) != digest:
+            return False
+    return _entries(robot_dir) == set(entry.get("files", {}))
 
 
 FIRMWARE_RECORD = "firmware.json"
@@ -128,11 +190,11 @@ def firmware_record_path(models: str | Path | None = None) -> Path:
 
 
 def read_firmware_record(path: Path) -> dict:
-    """The recorded figures, ``{"robots": {robot: entry}}``; empty when there is no such file."""
-    try:
-        text = Path(path).read_text()
-    except FileNotFoundError:
+    """The recorded figures, ``{"robots": {robot: entry}}``; empty when there is no such file.
+    Read through the input files' guards: a FIFO, a device or an oversized file is refused."""
+    if not os.path.lexists(path):
         return {"robots": {}}
+    text = read_text(path, "firmware record")
     try:
         record = json.loads(text)
     except ValueError as exc:
@@ -178,15 +240,21 @@ def with_firmware(files: dict[str, bytes], entry: dict | None) -> bytes:
 
 
 def robot_files(robot_dir: Path) -> dict[str, bytes]:
-    """{path under the robot's folder: bytes} of every file in it."""
-    return {p.relative_to(robot_dir).as_posix(): p.read_bytes() for p in sorted(Path(robot_dir).rglob("*")) if p.is_file()}
+    """{path under the robot's folder: bytes} of every regular file in it (links are not followed)."""
+    robot_dir = Path(robot_dir)
+    return {rel: (robot_dir / rel).read_bytes() for rel in sorted(_entries(robot_dir)) if _regular(robot_dir / rel)}
 
 
 def record_firmware(out: Path, entries: dict[str, dict], record_path: Path, log: Callable[[str], None] = print) -> None:
     """Write measured figures: ``entries`` ({robot: entry}) replace those robots' entries of the record
     at ``record_path``, then the robots' manifest.json under ``out`` take them (and MANIFEST.json
     their new sha256), as ``derive generate`` would. The robots' folders must be as derive wrote them."""
-    out = Path(out)
+    out = output_folder(Path(out))
+    with output_lock(out, log):
+        _record_firmware(out, entries, record_path, log)
+
+
+def _record_firmware(out: Path, entries: dict[str, dict], record_path: Path, log: Callable[[str], None]) -> None:
     manifest = _read_manifest(out)
     for name in entries:
         entry = manifest.get("robots", {}).get(name)
@@ -196,75 +264,15 @@ def record_firmware(out: Path, entries: dict[str, dict], record_path: Path, log:
     record = read_firmware_record(record_path)
     record["robots"] = {**record["robots"], **entries}
     record["robots"] = {k: record["robots"][k] for k in sorted(record["robots"])}
-    _write_atomically(Path(record_path), (json.dumps(record, indent=2, sort_keys=True) + "\n").encode())
+    write_atomically(Path(record_path), json.dumps(record, indent=2, sort_keys=True) + "\n", "the firmware record")
     for name, entry in entries.items():
         files = robot_files(out / name)
         text = with_firmware(files, entry)
-        _write_atomically(out / name / "manifest.json", text)
+        write_atomically(out / name / "manifest.json", text, "the robot's manifest")
         manifest["robots"][name]["files"]["manifest.json"] = _sha(text)
         kept = json.loads(text).get("firmware", {}).get("functions", {})
         log(f"{out / name / 'manifest.json'}: firmware figures of {len(kept)} function(s)")
-    _write_atomically(out / "MANIFEST.json", (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
-
-
-def _write_atomically(path: Path, data: bytes) -> None:
-    tmp = path.with_name(f".{path.name}.tmp-{os.getpid()}")
-    try:
-        tmp.write_bytes(data)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
-def check_mass_matrix(model: SXModel, samples: int = 3) -> None:
-    """Refuse a robot whose M(q) is singular at every q, where forward dynamics and the ODE do not
-    exist (their code would divide by zero): a coordinate that moves no mass or inertia."""
-    robot = model.robot
-    s = model.sym
-    f = ca.Function("M", [s.q, s.p], [model.newton_euler.mass_matrix])
-    lo, hi = robot.joint_box()
-    rng = np.random.default_rng(0)
-    p = np.array([par.default for par in robot.parameters], dtype=float)
-    Ms = []
-    for _ in range(samples):
-        q = rng.uniform(lo, hi)
-        if robot.floating:  # a unit quaternion
-            q[3:7] = rng.normal(size=4)
-            q[3:7] /= np.linalg.norm(q[3:7])
-        Ms.append(np.array(f(q, p)))
-    diag = np.min([np.diag(M) for M in Ms], axis=0)
-    scale = max(float(np.max(np.abs(diag), initial=0.0)), 1e-300)
-    for c, d in zip(robot.coordinates, diag):
-        if not np.isfinite(d):
-            raise DeriveError(f"robot '{robot.name}': joints ({c.joint}): M(q) is not finite at the default "
-                              "parameters (overflowing masses, inertias or lengths?)")
-        if d <= 1e-12 * scale:
-            raise DeriveError(f"robot '{robot.name}': joints ({c.joint}): coordinate '{c.name}' moves no mass or "
-                              "inertia, so M(q) is singular and forward dynamics do not exist; give the links it "
-                              "moves a mass (links[i].mass) or inertia about its axis")
-    if all(np.isfinite(M).all() for M in Ms):
-        eig = [np.linalg.eigh(M) for M in Ms]
-        if all(w[0] <= 1e-12 * max(w[-1], 1e-300) for w, _ in eig):
-            v = eig[0][1]
-            names = robot.velocity_names
-            moving = [names[int(k)] for k in np.argsort(-np.abs(v[:, 0]))[:3] if abs(v[int(k), 0]) > 1e-6]
-            raise DeriveError(f"robot '{robot.name}': M(q) is singular at every q tried: the coordinates "
-                              f"{', '.join(moving)} move the same way (e.g. a joint about the same axis through the "
-                              "same point as a massless floating base's turn), so forward dynamics do not exist")
-
-
-def check_constants(robot: Robot, spec, prog) -> None:
-    """Refuse code with a non-finite constant (it would print DERIVE_LIT(inf) in C, a bare inf in Python)."""
-    for ins in prog.body:
-        for a in ins.args:
-            if a[0] == "c" and not math.isfinite(a[1]):
-                raise DeriveError(f"robot '{robot.name}': {spec.name}: a constant of the derived expression is "
-                                  f"{a[1]} (overflowing or degenerate numbers in the model)")
-    for _, _, a in prog.results:
-        if a[0] == "c" and not math.isfinite(a[1]):
-            raise DeriveError(f"robot '{robot.name}': {spec.name}: an output is the constant {a[1]} "
-                              "(overflowing or degenerate numbers in the model)")
+    write_atomically(out / "MANIFEST.json", json.dumps(manifest, indent=2, sort_keys=True) + "\n", "the manifest")
 
 
 def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, str]:
@@ -297,67 +305,171 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
     With ``prune``, robots that ``out`` holds but ``robots`` does not are removed (and logged).
     ``firmware``: the firmware record whose figures go into the manifests (default: the one
     beside the default models file, :func:`firmware_record_path`).
+    Another run into the same folder is waited for (a line is logged), then merged onto.
     """
     shown = Path(out)
     out = output_folder(shown)
-    record = read_firmware_record(firmware or firmware_record_path())
     try:
-        return _generate(robots, out, shown, only, use_cache, log, prune, record["robots"])
+        with output_lock(out, log):
+            record = read_firmware_record(firmware or firmware_record_path())
+            return _generate(robots, out, shown, only, use_cache, log, prune, record["robots"])
     except OSError as exc:
-        raise DeriveError(f"{exc.filename or out}: cannot write the generated code ({exc.strerror or exc})") from None
+        where = f" at {exc.filename}" if exc.filename and ".tmp-" not in os.fspath(exc.filename) else ""
+        raise DeriveError(f"{shown}: cannot write the generated code ({exc.strerror or exc}{where}); "
+                          "the output folder is left as it was") from None
 
 
 def output_folder(out: Path) -> Path:
-    """The real folder behind ``out``: a symbolic link is written through (its target is replaced,
-    the link stays). Refuses a file, or a folder that is not a derive output."""
-    out = Path(out)
+    """The real folder behind ``out`` (absolute): a symbolic link is written through (its target is
+    replaced, the link stays). Refuses a file, or a folder that is not a derive output."""
+    out = Path(os.path.abspath(out))
     if out.is_symlink():
         out = out.resolve()
+    if out.parent == out:
+        raise DeriveError(f"output {out}: the root of the file system cannot be an output folder")
     if out.exists() and not out.is_dir():
         raise DeriveError(f"output {out}: exists and is not a folder")
-    if out.is_dir() and any(out.iterdir()) and not (out / "MANIFEST.json").is_file():
+    if out.is_dir() and any(out.iterdir()) and not os.path.lexists(out / "MANIFEST.json"):
         raise DeriveError(f"output {out}: not empty and holds no MANIFEST.json, so it is not a derive output "
                           "folder; refusing to replace it (choose an empty or new folder)")
     return out
+
+
+@contextlib.contextmanager
+def output_lock(out: Path, log: Callable[[str], None] = print, shared: bool = False):
+    """Hold the advisory lock of output folder ``out`` for the block: ``flock`` on the folder that holds
+    it (where the run's temporary folder lives too), exclusive to write, ``shared`` to read. Works
+    across processes, users and PID namespaces on one machine; the kernel releases it on every exit
+    path, a kill included. Waits for the holder, after logging one line."""
+    parent = out.parent
+    if shared and not parent.is_dir():
+        yield
+        return
+    parent.mkdir(parents=True, exist_ok=True)
+    fd = os.open(parent, os.O_RDONLY | getattr(os, "O_DIRECTORY", 0) | getattr(os, "O_CLOEXEC", 0))
+    try:
+        mode = fcntl.LOCK_SH if shared else fcntl.LOCK_EX
+        try:
+            fcntl.flock(fd, mode | fcntl.LOCK_NB)
+        except BlockingIOError:
+            log(f"waiting for another derive run writing into {parent} to finish ...")
+            fcntl.flock(fd, mode)
+        except OSError as exc:
+            if exc.errno not in (errno.ENOLCK, errno.EOPNOTSUPP, errno.EINVAL):
+                raise
+            log(f"warning: {parent}: its file system has no locks ({exc.strerror}); concurrent derive runs "
+                "into it are not serialised")
+        yield
+    finally:
+        os.close(fd)
+
+
+def _makedirs(base: Path, rel: str) -> Path:
+    """Create the folders of ``rel`` under the existing ``base`` without ever recreating ``base``:
+    a run whose temporary folder was removed under it fails instead of writing a partial tree."""
+    folder = base
+    for part in Path(rel).parts:
+        folder = folder / part
+        try:
+            folder.mkdir()
+        except FileExistsError:
+            if not folder.is_dir() or folder.is_symlink():
+                raise
+    return folder
+
+
+def _put(path: Path, data: bytes) -> None:
+    """Write a new file at ``path`` (a hard link there is replaced, never written through)."""
+    path.unlink(missing_ok=True)
+    with open(path, "xb") as f:
+        f.write(data)
+
+
+def _carry(src: Path, dst: Path) -> None:
+    """Put ``src`` (a file, link or folder tree) at the new path ``dst`` as it is, links never followed:
+    links recreated, regular files hard-linked (copied where the file system refuses), folders made
+    with their modes, FIFOs recreated. A socket or device is refused."""
+    stack = [(Path(src), Path(dst))]
+    folders = []
+    while stack:
+        s, d = stack.pop()
+        st = os.lstat(s)
+        if stat.S_ISLNK(st.st_mode):
+            os.symlink(os.readlink(s), d)
+        elif stat.S_ISDIR(st.st_mode):
+            os.mkdir(d)
+            folders.append((s, d))
+            stack.extend((s / n, d / n) for n in sorted(os.listdir(s), reverse=True))
+        elif stat.S_ISREG(st.st_mode):
+            try:
+                os.link(s, d, follow_symlinks=False)
+            except OSError:
+                shutil.copy2(s, d, follow_symlinks=False)
+        elif stat.S_ISFIFO(st.st_mode):
+            os.mkfifo(d, stat.S_IMODE(st.st_mode))
+        else:
+            raise DeriveError(f"{s}: a socket or device file in the output folder cannot be carried over to the "
+                              "new tree; move it out of the folder")
+    for s, d in reversed(folders):
+        shutil.copystat(s, d, follow_symlinks=False)
+
+
+def _mount_point(path: Path) -> bool:
+    """Whether ``path`` is a mount point (a volume, a bind mount): it cannot be renamed or exchanged."""
+    if os.path.ismount(path):
+        return True
+    real = os.path.realpath(path)
+    try:
+        with open("/proc/self/mountinfo", encoding="utf-8", errors="replace") as f:
+            lines = f.read().splitlines()
+    except OSError:
+        return False
+    unescape = lambda text: re.sub(r"\\([0-7]{3})", lambda m: chr(int(m[1], 8)), text)  # noqa: E731
+    return any(len(fields) > 4 and unescape(fields[4]) == real for fields in map(str.split, lines))
 
 
 def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figures: dict) -> dict:
     _recover(out, log)
     names = sorted(robots) if only is None else sorted(only)
     ghash = generator_hash()
-    old = _read_manifest(out)
+    old, problem = _load_manifest(out)
+    if problem:
+        log(f"warning: {problem}; the folders it would name are kept as files derive does not manage")
     old_robots = old.get("robots", {})
     pruned = sorted(k for k in old_robots if k not in robots) if prune else []
     kept = {k: v for k, v in old_robots.items() if k not in names and k not in pruned}
     new_robots = dict(kept)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out.parent))
-    ACTIVE_TEMPORARIES.add(tmp)
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it 0700; the output folder is an ordinary one
+    in_place = out.is_dir() and _mount_point(out)
+    where = out if in_place else out.parent
     try:
+        tmp = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=where))
+    except OSError as exc:
+        raise DeriveError(f"{shown}: cannot write the generated code: no temporary folder can be made in {where} "
+                          f"({exc.strerror or exc}); the output folder is left as it was") from None
+    register(tmp, True)
+    try:
+        made = os.stat(tmp)
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o777 & ~umask)  # mkdtemp makes it 0700; the output folder is an ordinary one
         start = time.perf_counter()
-        # carry over the robots not being regenerated, untouched
-        for name in kept:
-            if (out / name).is_dir():
-                shutil.copytree(out / name, tmp / name)
-        # and anything else a user keeps in the folder that derive does not manage
-        managed = set(old_robots) | set(names) | {"MANIFEST.json"}
-        for entry in sorted(out.iterdir()) if out.is_dir() else ():
-            if entry.name not in managed:
-                (shutil.copytree if entry.is_dir() else shutil.copy2)(entry, tmp / entry.name)
+        if not in_place:
+            # carry over, untouched, the robots not being regenerated and anything else a user keeps there
+            skip = set(names) | set(pruned) | {"MANIFEST.json"}
+            for entry in sorted(out.iterdir()) if out.is_dir() else ():
+                if entry.name not in skip:
+                    _carry(entry, tmp / entry.name)
         for k, name in enumerate(names, 1):
             robot = robots[name]
             mhash = model_hash(robot)
             prev = old_robots.get(name)
             if (use_cache and prev and prev.get("model_hash") == mhash and prev.get("generator_hash") == ghash
                     and _intact(out, name, prev)):
-                shutil.copytree(out / name, tmp / name)
+                _carry(out / name, tmp / name)
                 new_robots[name] = prev
                 text = with_firmware(robot_files(tmp / name), figures.get(name))
                 if text != (tmp / name / "manifest.json").read_bytes():  # the record changed
-                    (tmp / name / "manifest.json").write_bytes(text)
+                    _put(tmp / name / "manifest.json", text)
                     new_robots[name] = {**prev, "files": {**prev["files"], "manifest.json": _sha(text)}}
                     log(f"[{k}/{len(names)}] {name}: unchanged, kept; firmware figures updated")
                     continue
@@ -366,56 +478,106 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figur
             log(f"[{k}/{len(names)}] {name}: deriving")
             files = {rel: text.encode() for rel, text in render(robot, mhash, log).items()}
             files["manifest.json"] = with_firmware(files, figures.get(name))
+            (tmp / name).mkdir()
             for rel, data in files.items():
-                path = tmp / name / rel
-                path.parent.mkdir(parents=True, exist_ok=True)
-                path.write_bytes(data)
+                _put(_makedirs(tmp / name, str(Path(rel).parent)) / Path(rel).name, data)
             new_robots[name] = {"model_hash": mhash, "generator_hash": ghash, "files": {rel: _sha(data) for rel, data in sorted(files.items())}}
         manifest = {"tools": tool_versions(),
                     "robots": {k: new_robots[k] for k in sorted(new_robots)}}
-        (tmp / "MANIFEST.json").write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
-        _swap(tmp, out)
+        _put(tmp / "MANIFEST.json", (json.dumps(manifest, indent=2, sort_keys=True) + "\n").encode())
+        now = os.stat(tmp)
+        if (now.st_dev, now.st_ino) != (made.st_dev, made.st_ino):
+            raise FileNotFoundError(errno.ENOENT, "removed by another process during the run", str(tmp))
+        if in_place:
+            _replace_contents(tmp, out, names, pruned)
+        else:
+            try:
+                _swap(tmp, out)
+            except OSError as exc:
+                if exc.errno not in (errno.EBUSY, errno.EXDEV):
+                    raise
+                _replace_contents(_moved_inside(tmp, out, names), out, names, pruned)  # a bind mount
         for name in pruned:
             log(f"pruned {shown / name}/ (robot not in the models file)")
         others = f"; {len(kept)} other robot(s) left as they were" if kept else ""
         log(f"generated {len(names)} robot(s) into {shown} in {time.perf_counter() - start:.1f} s{others}")
         return manifest
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    except FileNotFoundError as exc:
+        inside = [os.fspath(f) for f in (exc.filename, exc.filename2) if f is not None]
+        if os.path.lexists(tmp) and not any(f == str(tmp) or f.startswith(f"{tmp}/") for f in inside):
+            raise
+        raise DeriveError(f"{shown}: the temporary folder of this run ({tmp}) was removed by another process "
+                          "during the run; nothing was written, the output folder is left as it was") from None
     finally:
-        ACTIVE_TEMPORARIES.discard(tmp)
+        shutil.rmtree(tmp, ignore_errors=True)
+        forget(tmp)
 
 
-STALE = re.compile(r"^\.(?P<name>.+)\.(?:tmp|old)-(?P<pid>\d+)(?:-.*)?$")
+def _moved_inside(tmp: Path, out: Path, names: list[str]) -> Path:
+    """A copy, inside ``out``, of the new robots' folders and MANIFEST.json built in ``tmp`` beside it
+    (for an output that turned out not to be renameable: a bind mount on the same file system)."""
+    inner = Path(tempfile.mkdtemp(prefix=f".{out.name}.tmp-{os.getpid()}-", dir=out))
+    register(inner, True)
+    for name in names:
+        shutil.copytree(tmp / name, inner / name, symlinks=True)
+    shutil.copy2(tmp / "MANIFEST.json", inner / "MANIFEST.json")
+    return inner
 
 
-def process_alive(pid: int) -> bool:
-    """Whether process ``pid`` exists (a temporary folder named after it may still be in use)."""
+def _replace_contents(tmp: Path, out: Path, names: list[str], pruned: list[str]) -> None:
+    """Update ``out`` in place from ``tmp`` (inside it): each robot's folder in one exchange (or two
+    renames, the old one kept in ``tmp`` as ``.old-<robot>`` until the new one is in place, which
+    :func:`_recover` puts back after a kill), pruned robots moved into ``tmp``, MANIFEST.json last.
+    Files derive does not manage are not touched."""
     try:
-        os.kill(pid, 0)
-    except ProcessLookupError:
-        return False
-    except OSError:  # exists, but another user's
-        return True
-    return True
+        for name in names:
+            new, target = tmp / name, out / name
+            if not os.path.lexists(target):
+                os.rename(new, target)
+            elif not (target.is_dir() and not target.is_symlink() and _exchange(new, target)):
+                os.rename(target, tmp / f".old-{name}")
+                os.rename(new, target)
+        for name in pruned:
+            if os.path.lexists(out / name):
+                os.rename(out / name, tmp / f".pruned-{name}")
+        os.replace(tmp / "MANIFEST.json", out / "MANIFEST.json")
+    finally:
+        shutil.rmtree(tmp, ignore_errors=True)
+        forget(tmp)
+
+
+STALE = re.compile(r"^\.(?P<name>.+)\.(?:tmp|old)-\d+(?:-.*)?$")
+"""A temporary folder (``.<output>.tmp-<pid>-<random>``) or backup (``.<output>.old-<pid>``) of a run."""
 
 
 def _recover(out: Path, log: Callable[[str], None]) -> None:
-    """Undo what a killed run left beside ``out``: restore ``out`` from its backup if a kill fell
-    between the two renames of the fallback swap, and remove temporary folders of dead runs."""
-    if not out.parent.is_dir():
-        return
-    for entry in sorted(out.parent.iterdir()):
-        m = STALE.match(entry.name)
-        if not m or m["name"] != out.name or not entry.is_dir() or process_alive(int(m["pid"])):
-            continue
-        if ".old-" in entry.name and not out.exists():
-            os.rename(entry, out)
-            log(f"restored {out} from {entry.name}, left by an interrupted run")
-            continue
-        shutil.rmtree(entry, ignore_errors=True)
-        log(f"removed {entry}, left by an interrupted run")
+    """Undo what a killed run left beside (or, for a mount point, inside) ``out``: restore ``out``
+    from its backup if a kill fell between the two renames of a fallback swap, and remove the
+    temporary folders. Called with the output's lock held, so no run that made them is alive
+    (whatever its pid or PID namespace)."""
+    if out.parent.is_dir():
+        for entry in sorted(out.parent.iterdir()):
+            m = STALE.match(entry.name)
+            if not m or m["name"] != out.name or not entry.is_dir() or entry.is_symlink():
+                continue
+            if ".old-" in entry.name and not os.path.lexists(out):
+                os.rename(entry, out)
+                log(f"restored {out} from {entry.name}, left by an interrupted run")
+                continue
+            shutil.rmtree(entry, ignore_errors=True)
+            log(f"removed {entry}, left by an interrupted run")
+    if out.is_dir() and not out.is_symlink():
+        for entry in sorted(out.iterdir()):
+            m = STALE.match(entry.name)
+            if not m or m["name"] != out.name or not entry.is_dir() or entry.is_symlink():
+                continue
+            for old in sorted(entry.glob(".old-*")):
+                robot = out / old.name[len(".old-"):]
+                if not os.path.lexists(robot):
+                    os.rename(old, robot)
+                    log(f"restored {robot} from {old}, left by an interrupted run")
+            shutil.rmtree(entry, ignore_errors=True)
+            log(f"removed {entry}, left by an interrupted run")
 
 
 def _exchange(a: Path, b: Path) -> bool:
@@ -437,12 +599,11 @@ def _swap(tmp: Path, out: Path) -> None:
     """Replace ``out`` by ``tmp`` so that one of them is in place at every instant: an atomic
     exchange where the system has one; else two renames, with :func:`_recover` restoring the
     backup on the next run if a kill falls between them."""
-    if not out.exists():
+    if not os.path.lexists(out):
         os.rename(tmp, out)
         return
     if _exchange(tmp, out):
-        shutil.rmtree(tmp, ignore_errors=True)  # tmp now holds the old tree
-        return
+        return  # tmp now holds the old tree; the caller removes it
     backup = out.with_name(f".{out.name}.old-{os.getpid()}")
     os.rename(out, backup)
     os.rename(tmp, out)
@@ -458,10 +619,19 @@ def check(robots: dict[str, Robot], out: Path, prune: bool = False, firmware: Pa
     """
     out = Path(out)
     record_path = firmware or firmware_record_path()
+    real = Path(os.path.abspath(out))
+    real = real.resolve() if real.is_symlink() else real
+    with output_lock(real, log=lambda line: print(line, file=sys.stderr), shared=True):
+        return _check(robots, out, prune, record_path)
+
+
+def _check(robots: dict[str, Robot], out: Path, prune: bool, record_path: Path) -> list[str]:
     figures = read_firmware_record(record_path)["robots"]
-    manifest = _read_manifest(out)
+    manifest, problem = _load_manifest(out)
+    if problem:
+        return [f"{problem}; `derive generate` writes a new one"]
     if not manifest:
-        return [f"{out}/MANIFEST.json (missing or unreadable)"]
+        return [f"{out}/MANIFEST.json (missing)"]
     problems = []
     ghash = generator_hash()
     entries = manifest.get("robots", {})
@@ -477,17 +647,19 @@ def check(robots: dict[str, Robot], out: Path, prune: bool = False, firmware: Pa
             problems.append(f"{out}/{name}/ (derive, its templates or tool versions changed since generation)")
         else:
             robot_dir = out / name
+            if robot_dir.is_symlink():
+                problems.append(f"{robot_dir} (a link, not the folder derive generated)")
+                continue
             found = len(problems)
             for rel, digest in entry.get("files", {}).items():
                 path = robot_dir / rel
-                if not path.is_file():
-                    problems.append(f"{path} (missing)")
+                if not _regular(path):
+                    problems.append(f"{path} (missing)" if not os.path.lexists(path) else f"{path} (not a regular file)")
                 elif _sha(path.read_bytes()) != digest:
                     problems.append(f"{path} (edited by hand)")
-            if robot_dir.is_dir():
-                for path in sorted(robot_dir.rglob("*")):
-                    if path.is_file() and path.relative_to(robot_dir).as_posix() not in entry.get("files", {}):
-                        problems.append(f"{path} (not generated by derive)")
+            if robot_dir.is_dir() and not robot_dir.is_symlink():
+                for rel in sorted(_entries(robot_dir) - set(entry.get("files", {}))):
+                    problems.append(f"{robot_dir / rel} (not generated by derive)")
             if len(problems) == found:
                 files = robot_files(robot_dir)
                 if with_firmware(files, figures.get(name)) != files["manifest.json"]:

@@ -92,7 +92,8 @@ FLOATING_CONVENTION = ("q = [base position (3, world); base orientation quaterni
 
 ACTUATOR_CONVENTION = ("M includes the armature (reflected rotor inertia armature + gear_ratio^2 motor_inertia) on its "
                        "diagonal; inverse_dynamics adds viscous qd + coulomb sign(qd); forward_dynamics, the ODE and its "
-                       "Jacobians subtract viscous qd + coulomb tanh(qd / coulomb_smoothing)")
+                       "Jacobians subtract viscous qd + coulomb tanh(qd / coulomb_smoothing); a mimic joint's own "
+                       "actuator is in its leader's entry (a^2 armature and viscous, |a| coulomb, a its multiplier)")
 
 
 def actuator_table(robot: Robot) -> dict:
@@ -104,10 +105,18 @@ def actuator_table(robot: Robot) -> dict:
         return float(evaluate(v, env))
 
     acts = [c.actuator for c in robot.joint_coordinates]
-    return {"coulomb_smoothing": robot.smoothing,
-            "armature": [0.0] * nb + [num(a.armature) + num(a.gear_ratio) ** 2 * num(a.motor_inertia) for a in acts],
-            "viscous": [0.0] * nb + [num(a.viscous) for a in acts],
-            "coulomb": [0.0] * nb + [num(a.coulomb) for a in acts]}
+    table = {"coulomb_smoothing": robot.smoothing,
+             "armature": [0.0] * nb + [num(a.armature) + num(a.gear_ratio) ** 2 * num(a.motor_inertia) for a in acts],
+             "viscous": [0.0] * nb + [num(a.viscous) for a in acts],
+             "coulomb": [0.0] * nb + [num(a.coulomb) for a in acts]}
+    # a mimic joint's own actuator acts on its leader's entry through G: a^2 armature and viscous, |a| coulomb
+    column = {c.name: nb + i for i, c in enumerate(robot.joint_coordinates)}
+    for joint, a in robot.mimic_actuators:
+        k, m = column[joint.mimic.joint], float(joint.mimic.multiplier)
+        table["armature"][k] += m * m * (num(a.armature) + num(a.gear_ratio) ** 2 * num(a.motor_inertia))
+        table["viscous"][k] += m * m * num(a.viscous)
+        table["coulomb"][k] += abs(m) * num(a.coulomb)
+    return table
 
 
 def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,

@@ -13,6 +13,8 @@ import ast
 import math
 from typing import Any, Callable, Mapping
 
+from derive.description.numbers import MIN_MAGNITUDE, tiny
+
 Value = "float | str"
 
 FUNCTIONS = ("sin", "cos", "tan", "sqrt", "atan2")
@@ -96,6 +98,10 @@ def parse(text: str) -> ast.expr:
         elif isinstance(node, ast.Constant):
             if isinstance(node.value, bool) or not isinstance(node.value, (int, float)):
                 raise ExpressionError(f"'{text}' contains the non-numeric constant {node.value!r}")
+            if isinstance(node.value, float) and tiny(node.value):  # it would be a literal of the generated code
+                raise ExpressionError(f"'{text}': the constant {node.value:g} is not 0 but smaller than "
+                                      f"{MIN_MAGNITUDE:.3g} in magnitude (the smallest normal float: the generated "
+                                      "code must build in single precision too)")
         elif isinstance(node, ast.BinOp):
             if type(node.op) not in _BINOPS:
                 raise ExpressionError(f"'{text}' uses an operator other than + - * / **")

@@ -107,6 +107,9 @@ def load_yaml(text: str, source: str) -> Any:
         raise InputFileError(f"{source}{where}: malformed YAML: {problem}") from None
     except (RecursionError, MemoryError):
         raise InputFileError(f"{source}: YAML nested too deeply") from None
+    except (ValueError, OverflowError) as exc:  # a scalar its constructor cannot build: an int of 5000 digits,
+        # a date such as 2024-13-45 (PyYAML raises these unwrapped)
+        raise InputFileError(f"{source}: malformed YAML: {str(exc).splitlines()[0].split(';')[0]}") from None
     nodes, depth = _size(data)
     if depth > MAX_YAML_DEPTH:
         raise InputFileError(f"{source}: YAML nested deeper than {MAX_YAML_DEPTH} levels")

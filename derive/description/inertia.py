@@ -106,3 +106,27 @@ def check_inertia(inertia, mass: float | None = None, *, strict: bool = False, w
     problem = inertia_problem(inertia, mass, strict=strict)
     if problem:
         raise DeriveError(f"{what}: {problem}")
+
+
+def nearest_physical(inertia, mass: float) -> np.ndarray:
+    """A physical inertia about the COM near ``inertia`` (what ``import-urdf --fix-inertia`` writes).
+
+    A massless body gets zero inertia. Otherwise, in the principal axes of the symmetric part:
+    negative moments become 0, then if the triangle inequality I1 + I2 >= I3 fails, the two smaller
+    moments are raised by the same amount until it holds with equality (a flat body keeps its largest
+    moment: ixx = 0.002 with the other moments 0 becomes the disk 0.001, 0.001, 0.002). A physical
+    tensor is returned unchanged.
+    """
+    m = np.asarray(inertia, dtype=float)
+    if inertia_problem(m, mass) is None:
+        return m
+    if mass == 0:
+        return np.zeros((3, 3))
+    eig, axes = np.linalg.eigh((m + m.T) / 2)
+    e = np.maximum(eig, 0.0)
+    short = e[2] - e[0] - e[1]
+    if short > 0:
+        e[0] += short / 2
+        e[1] += short / 2
+    out = axes @ np.diag(e) @ axes.T
+    return (out + out.T) / 2

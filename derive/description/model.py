@@ -3,11 +3,14 @@
 No CAS lives here. Numeric fields hold a float or a parameter expression string
 (see :mod:`derive.description.expr`); the symbolic side and the numeric reference each
 evaluate them in their own algebra. The dataclasses and conventions are in
-:mod:`derive.description.robot`.
+:mod:`derive.description.robot`. Every number, as written and as evaluated, is 0 or has a
+magnitude in [FLT_MIN, 1e12] (:mod:`derive.description.numbers`, shared with the URDF reader);
+an axis component is 0 or at least 2^-63 of the axis's largest.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import os
 from pathlib import Path
@@ -18,8 +21,9 @@ from derive.description.dh import dh_to_tree
 from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
+from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
 from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, ModelError, Origin, Parameter, Robot, Value, Vec3,
-                                      identifier, shown)
+                                      identifier, import_command, shown)
 from derive.resources import EXAMPLE_MODELS
 
 
@@ -27,8 +31,6 @@ from derive.resources import EXAMPLE_MODELS
 
 
 MODELS_FILE = "models.yaml"
-MAX_MAGNITUDE = 1e12
-"""Largest magnitude of a model's number (mass, length, inertia, gravity) in SI units."""
 
 
 def local_models_path() -> Path | None:
@@ -74,6 +76,8 @@ def parse_models(text: str, source: str | None = None) -> dict[str, Robot]:
             robot = parse_robot(str(name), spec)
         except ModelError as exc:
             raise exc.in_file(source) from None
+        if source:
+            robot = dataclasses.replace(robot, file=str(source))
         other = folded.get(robot.name.lower())
         if other is not None:
             raise ModelError(robot.name, "name", f"differs from robot '{other}' only by case: their files and "
@@ -129,8 +133,9 @@ class _Parser:
         if isinstance(raw, bool) or raw is None:
             raise self.error(where, f"expected a number or parameter expression, got {raw!r}")
         if isinstance(raw, (int, float)):
-            if not math.isfinite(raw):
-                raise self.error(where, f"must be finite, got {raw}")
+            problem = magnitude_problem(raw)
+            if problem:
+                raise self.error(where, problem)
             return float(raw)
         if isinstance(raw, str):
             try:
@@ -141,13 +146,17 @@ class _Parser:
         raise self.error(where, f"expected a number or parameter expression, got {type(raw).__name__}")
 
     def number(self, where: str, raw: Any) -> float:
-        if isinstance(raw, str):  # YAML 1.1 reads 1e-3 (no dot) as a string
-            try:
-                raw = float(raw)
-            except ValueError:
-                raise self.error(where, f"expected a finite number, got {raw!r}") from None
-        if isinstance(raw, bool) or not isinstance(raw, (int, float)) or not math.isfinite(raw):
+        """A plain number (no parameter), within the bounds of :mod:`derive.description.numbers`."""
+        if isinstance(raw, str):  # YAML 1.1 reads 1e-3 (no dot) as a string: a C-locale decimal, nothing more
+            value = decimal(raw.strip())
+            if value is None:
+                raise self.error(where, f"expected a finite number, got {shown(raw)!r}")
+            raw = value
+        if isinstance(raw, bool) or not isinstance(raw, (int, float)):
             raise self.error(where, f"expected a finite number, got {raw!r}")
+        problem = magnitude_problem(raw)
+        if problem:
+            raise self.error(where, problem)
         return float(raw)
 
     def vec3(self, where: str, raw: Any, default: Vec3 = (0.0, 0.0, 0.0)) -> Vec3:
@@ -212,14 +221,18 @@ class _Parser:
         )
 
     def unit_vector(self, where: str, raw: Any) -> tuple:
-        """A nonzero 3-vector of numbers, normalised (kept as written when already unit)."""
+        """A nonzero 3-vector of numbers, normalised (kept as written when already unit); robust for any
+        components within the bounds (:func:`derive.description.numbers.unit_vector`)."""
         if not isinstance(raw, (list, tuple)) or len(raw) != 3:
-            raise self.error(where, f"expected 3 numbers, got {raw!r}")
+            raise self.error(where, f"expected 3 numbers, got {shown(raw)!r}")
         v = [self.number(f"{where}[{i}]", a) for i, a in enumerate(raw)]
-        norm = math.sqrt(sum(a * a for a in v))
-        if norm < 1e-12:
+        small = axis_component_problem(v)
+        if small:
+            raise self.error(f"{where}[{small[0]}]", small[1])
+        unit = unit_vector(v)
+        if unit is None:
             raise self.error(where, "must not be the zero vector")
-        return tuple(a / norm for a in v) if norm != 1.0 else tuple(v)
+        return unit
 
     def joint(self, where: str, raw: Any) -> Joint:
         self.check_keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "axis2", "pitch", "limits",
@@ -271,9 +284,15 @@ class _Parser:
         return Actuator(**{k: self.value(f"{where}.{k}", v) for k, v in raw.items()})
 
     def joint_actuator(self, where: str, raw: Any, dof: int, mimic: bool) -> Actuator | tuple[Actuator, ...]:
-        """One mapping for all coordinates, or a list with one per coordinate (as limits)."""
-        if dof == 0 or mimic:
-            raise self.error(where, "only a joint with coordinates (not fixed, not a mimic) has an actuator")
+        """One mapping for all coordinates, or a list with one per coordinate (as limits).
+
+        A mimic joint (1 DOF, no coordinate) has one mapping: its own drive and friction, acting on its
+        own motion q_m = a q_J + b and so entering its leader's coordinate through G (G^T D G)."""
+        if dof == 0:
+            raise self.error(where, "only a moving joint has an actuator (this one is fixed)")
+        if mimic and not isinstance(raw, Mapping):
+            raise self.error(where, "a mimic joint has one actuator mapping {armature, gear_ratio, motor_inertia, "
+                                    "viscous, coulomb} (its own motion)")
         if isinstance(raw, list):
             if len(raw) != dof:
                 raise self.error(where, f"expected {dof} actuators (one per coordinate), got {len(raw)}")
@@ -541,9 +560,9 @@ class _Parser:
                 raise self.error(where, f"{v!r}: {exc}") from None
             if not math.isfinite(out):
                 raise self.error(where, f"{v!r} evaluates to {out}")
-            if abs(out) > MAX_MAGNITUDE:
-                raise self.error(where, f"{v!r} = {out:g} is larger than {MAX_MAGNITUDE:g} in magnitude: products of "
-                                 "such numbers overflow in the dynamics")
+            problem = magnitude_problem(out)
+            if problem:
+                raise self.error(where, f"{v!r} = {problem}" if isinstance(v, str) else problem)
             return out
 
         for i, link in enumerate(robot.links):
@@ -557,13 +576,17 @@ class _Parser:
             inertia = [[num(f"{where}.inertia[{r}][{c}]", link.inertia[r][c]) for c in range(3)] for r in range(3)]
             problem = inertia_problem(inertia, mass)
             if problem:
+                command = import_command(robot.source)
+                if command and "--fix-inertia" not in command:  # an imported robot: the importer can repair it
+                    problem += f"; re-import it with the inertia repaired: {command} --fix-inertia"
                 raise self.error(where + ".inertia", problem)
         for i, j in enumerate(robot.joints):
             for k in range(3):
                 num(f"joints ({j.name}).origin.xyz[{k}]", j.origin.xyz[k])
                 num(f"joints ({j.name}).origin.rpy[{k}]", j.origin.rpy[k])
-            for c in j.coordinates:
-                a, where = c.actuator, f"joints ({j.name}).actuator" + (f" ({c.name})" if c.name != j.name else "")
+            acting = [(c.name, c.actuator) for c in j.coordinates] + ([(j.name, j.actuators[0])] if j.mimic else [])
+            for cname, a in acting:
+                where = f"joints ({j.name}).actuator" + (f" ({cname})" if cname != j.name else "")
                 for key in ("armature", "motor_inertia", "viscous", "coulomb"):
                     if num(f"{where}.{key}", getattr(a, key)) < 0:
                         raise self.error(f"{where}.{key}", f"must be >= 0, got {num(where, getattr(a, key)):g}")

@@ -20,7 +20,7 @@ from __future__ import annotations
 import keyword
 import math
 import re
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, field
 from typing import Any
 
 from derive.description.joints import COORDINATE_SUFFIXES, JOINT_TYPES
@@ -46,7 +46,9 @@ class ModelError(DeriveError):
         where = f"robot '{robot}'" if robot else "models file"
         if source:
             where = f"{source}: {where}" if robot else f"models file {source}"
-        super().__init__(f"{where}: {field_path}: {problem}" if field_path else f"{where}: {problem}")
+        text = f"{where}: {field_path}: {problem}" if field_path else f"{where}: {problem}"
+        # one line whatever the names hold (a URDF name may carry &#10; or a line separator)
+        super().__init__("".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text))
 
     def in_file(self, source: str | None) -> "ModelError":
         """The same error, naming the file it came from (if known)."""
@@ -91,7 +93,8 @@ class Actuator:
     The reflected rotor inertia ``armature + gear_ratio**2 * motor_inertia`` (kg m^2 for a
     turn, kg for a slide) adds to M's diagonal, as Pinocchio's ``model.armature``; friction
     ``viscous * qd + coulomb * sign(qd)`` adds to the joint torque (URDF's ``<dynamics
-    damping friction>``). Values are numbers or parameter expressions.
+    damping friction>``). Values are numbers or parameter expressions. A mimic joint's actuator
+    acts on its own motion (see :attr:`Robot.mimic_actuators`).
     """
 
     armature: Value = 0.0
@@ -129,7 +132,8 @@ class Coordinate:
 class Mimic:
     """A joint that follows another: q_this = multiplier * q_joint + offset (URDF's ``<mimic>``).
     The mimic joint has no entry in q; its motion and inertia enter the dynamics through the
-    chain rule (M = G^T M_full G, tau = G^T tau_full with G = d q_full / d q)."""
+    chain rule (M = G^T M_full G, tau = G^T tau_full with G = d q_full / d q), and so do its own
+    actuator's armature and friction (G^T D G)."""
 
     joint: str
     multiplier: float = 1.0
@@ -271,11 +275,21 @@ class Robot:
     wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
     coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
     bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
+    file: str = field(default="", compare=False)  # the models file it was read from ("" if none): for messages only
+
+    @property
+    def mimic_actuators(self) -> tuple[tuple[Joint, Actuator], ...]:
+        """(mimic joint, its actuator) for every mimic joint with a non-ideal actuator. A mimic joint has no
+        coordinate: its drive and friction act on its own motion q_m = a q_J + b, i.e. through G on its
+        leader's coordinate J: armature and viscous friction a^2 times theirs (G^T D G), the Coulomb force
+        a f_c sign(a qd_J) (= |a| f_c sign(qd_J))."""
+        return tuple((j, j.actuators[0]) for j in self.joints
+                     if j.mimic is not None and j.actuator is not None and not j.actuators[0].ideal)
 
     @property
     def actuated(self) -> bool:
-        """Any coordinate with armature or friction (else every function is that of ideal joints)."""
-        return any(not c.actuator.ideal for c in self.joint_coordinates)
+        """Any coordinate or mimic joint with armature or friction (else every function is that of ideal joints)."""
+        return any(not c.actuator.ideal for c in self.joint_coordinates) or bool(self.mimic_actuators)
 
     @property
     def smoothing(self) -> float:
@@ -397,6 +411,7 @@ def model_data(robot: Robot) -> dict:
     so models without such joints keep the hash they had before those types existed.
     """
     data = asdict(robot)
+    del data["file"]  # where the model was read from is no part of it
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
     for key in ("wrenches", "coulomb_smoothing", "bundles"):
@@ -424,6 +439,13 @@ RESERVED_ROBOT_NAMES = {
 }
 """Robot names (compared case-insensitively) whose generated header or module would shadow another."""
 RESERVED_PREFIX = "derive_"  # the support files: derive_real.h, derive_ik.h, derive_linalg.h, ...
+
+
+def import_command(source: Any) -> str | None:
+    """The ``derive import-urdf ...`` command recorded in a robot's ``source`` (what import-urdf writes:
+    ``"<file>, imported by `derive import-urdf ...`"``), or None."""
+    parts = str(source or "").split("`")
+    return next((p for p in parts[1::2] if p.startswith("derive import-urdf ")), None)
 
 
 def shown(name: Any, width: int = 40) -> str:

@@ -22,7 +22,8 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
 - a moving joint with ``<mimic joint= multiplier= offset=>`` becomes a models.yaml
   ``mimic`` joint (no entry in q) when the joint it follows keeps its coordinate;
   otherwise (that joint locked, dropped, fixed, unknown or itself a mimic) it must be
-  locked (``mimic`` on a fixed joint is ignored);
+  locked (``mimic`` on a fixed joint is ignored). Its own ``<dynamics>`` stays its
+  actuator (G^T D G in the coordinates, as MuJoCo applies it);
 - fixed joints are merged: the child's mass properties are added to the parent
   (parallel-axis theorem) and the child survives as a named frame on its moving
   ancestor. The URDF root link always stays (but a world dropped above a
@@ -30,8 +31,12 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
   free-flying body (Pinocchio's ``JointModelFreeFlyer`` above the root link);
 - inertias are re-expressed in the link frame (no ``inertia_rpy``).
 
-Numbers that come straight from the URDF are copied exactly (``float(text)``);
-only composed or merged values are computed. Of those, only what is the rounding
+Numbers are read as urdfdom reads them (C-locale decimals, :mod:`derive.description.numbers`:
+no ``1_0``, no other digits than ASCII, no hex, inf or nan) and bounded like a models file's
+(at most 1e12 in magnitude; a nonzero one below FLT_MIN, or an axis component below 2^-63 of
+the axis, is rounding residue: read as 0 with a warning; a position limit beyond 1e12 is an
+exporter's "unbounded": dropped with a warning). Every error names the file. Numbers that come
+straight from the URDF are copied exactly; only composed or merged values are computed. Of those, only what is the rounding
 of an exact angle is snapped: an angle within a few ulps of a multiple of pi/2
 becomes that multiple, a vector component within a few ulps of the vector's
 length (e.g. 0.1 * cos(pi/2) = 6e-18) becomes 0. Nothing else moves, so the
@@ -42,8 +47,10 @@ one-line warning on stderr: ``<limit>`` attributes that are all zero (or a zero
 velocity or effort) and ``<mimic>`` on a fixed joint (ignored, as Pinocchio does).
 Inertias are also judged against the robot's scale: a tensor that is itself
 rounding noise (e.g. -2e-22 kg m^2 where the largest link has 0.1 kg m^2) is
-clamped to the nearest physical one; real errors are still refused. The joints
-must form a tree: a cycle is a one-line error naming the file and the cycle.
+clamped to the nearest physical one; real errors are still refused (naming the way
+forward: ``--fix-inertia`` repairs them with a warning per link). The joints must form a
+tree: a cycle is a one-line error naming the file and the cycle. ``--out`` appends to a
+models file atomically (:func:`append_entry`).
 """
 
 from __future__ import annotations
@@ -63,9 +70,12 @@ import numpy as np
 import yaml
 
 from derive.description.files import InputFileError, read_bytes, read_text
-from derive.description.inertia import inertia_problem
+from derive.description.inertia import inertia_problem, nearest_physical
 from derive.description.model import parse_models, parse_robot
-from derive.description.robot import C_KEYWORDS, ModelError, identifier
+from derive.description.numbers import (MAX_MAGNITUDE, MIN_MAGNITUDE, axis_component_problem, decimal, decimals,
+                                       magnitude_problem, tiny, unit_vector)
+from derive.description.robot import C_KEYWORDS, ModelError, identifier, import_command, shown
+from derive.filesystem import write_atomically
 
 ERD = "example-robot-data"
 ERD_PREFIX = ERD + ":"
@@ -163,8 +173,7 @@ def matrix_rpy(m: np.ndarray) -> tuple[float, float, float]:
 
 
 def axis_angle(axis, angle: float) -> np.ndarray:
-    k = np.asarray(axis, dtype=float)
-    k = k / np.linalg.norm(k)
+    k = np.array(unit_vector(axis), dtype=float)  # robust for any nonzero finite axis (1e200 included)
     kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
     return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * kx @ kx
 
@@ -259,50 +268,79 @@ class _Joint:
     dynamics: tuple[float, float] = (0.0, 0.0)  # <dynamics damping= friction=>: viscous, Coulomb
 
 
+def _printable(text: str) -> str:
+    """``text`` for a one-line message: characters that do not print (tabs, line or paragraph separators,
+    controls) as their escapes."""
+    return "".join(c if c.isprintable() else c.encode("unicode_escape").decode("ascii") for c in text)
+
+
 class _Reader:
+    """Reads the elements of one URDF; every error and warning names the file (``path``, as shown)."""
+
     def __init__(self, robot: str, path: str):
         self.robot, self.path = robot, path
 
     def error(self, where: str, problem: str) -> ModelError:
-        return ModelError(self.robot, where, problem)
+        return ModelError(self.robot, where, problem, self.path)
 
-    def floats(self, where: str, text: str | None, n: int, default: tuple) -> tuple:
+    def floats(self, where: str, el: ET.Element | None, attr: str, n: int, default: tuple,
+               huge: bool = False) -> tuple:
+        """The ``n`` numbers of attribute ``attr`` of ``el`` (``default`` if either is missing).
+
+        Read as urdfdom reads them (:func:`derive.description.numbers.decimal`) and bounded like every
+        number of a model (:func:`derive.description.numbers.magnitude_problem`): a nonzero number below
+        FLT_MIN is flushed to 0 with a warning (rounding residue), a non-finite or too large one refused;
+        with ``huge`` too large ones are returned as read (limits: the caller drops them).
+        """
+        text = None if el is None else el.get(attr)
         if text is None:
             return default
-        parts = text.split()
-        try:
-            vals = tuple(float(t) for t in parts)
-        except ValueError:
-            raise self.error(where, f"expected {n} numbers, got {text!r}") from None
-        if len(vals) != n or not all(math.isfinite(v) for v in vals):
-            raise self.error(where, f"expected {n} finite numbers, got {text!r}")
-        return vals
+        snippet = f'<{el.tag} {attr}="{_printable(shown(text, 60))}">'
+        parts = decimals(text)
+        vals = []
+        for token in parts:
+            value = decimal(token)
+            if value is None:
+                raise self.error(where, f"{snippet}: '{_printable(shown(token))}' is not a number (URDF numbers are decimals "
+                                        "such as 0.25, -1.5e-3)")
+            vals.append(value)
+        if len(vals) != n:
+            raise self.error(where, f"{snippet}: expected {'a number' if n == 1 else f'{n} numbers'}, "
+                                    f"got {len(vals)}")
+        for i, value in enumerate(vals):
+            if tiny(value):
+                self.warn(where, f"{snippet}: {value:g} is below the smallest normal float ({MIN_MAGNITUDE:.3g}): "
+                                 "read as 0")
+                vals[i] = 0.0
+                continue
+            problem = magnitude_problem(value)
+            if problem and not (huge and math.isfinite(value)):
+                raise self.error(where, f"{snippet}: {problem}")
+        return tuple(vals)
 
-    def number(self, where: str, text: str | None, default: float | None = None) -> float | None:
-        if text is None:
-            return default
-        return self.floats(where, text, 1, (default,))[0]
+    def number(self, where: str, el: ET.Element | None, attr: str, default: float | None = None,
+               huge: bool = False) -> float | None:
+        return self.floats(where, el, attr, 1, (default,), huge)[0]
 
     def origin(self, where: str, el: ET.Element | None) -> Pose:
         if el is None:
             return Pose()
-        return Pose(self.floats(where + ".xyz", el.get("xyz"), 3, (0.0, 0.0, 0.0)),
-                    self.floats(where + ".rpy", el.get("rpy"), 3, (0.0, 0.0, 0.0)))
+        return Pose(self.floats(where + ".xyz", el, "xyz", 3, (0.0, 0.0, 0.0)),
+                    self.floats(where + ".rpy", el, "rpy", 3, (0.0, 0.0, 0.0)))
 
     def inertial(self, name: str, el: ET.Element | None) -> _Inertial:
         out = _Inertial()
         if el is None:
             return out
         where = f"links[{name}].inertial"
-        mass = el.find("mass")
-        out.mass = self.number(where + ".mass", None if mass is None else mass.get("value"), 0.0)
+        out.mass = self.number(where + ".mass", el.find("mass"), "value", 0.0)
         if out.mass < 0:
             raise self.error(where + ".mass", f"must be >= 0, got {out.mass}")
         origin = self.origin(where + ".origin", el.find("origin"))
         out.com, out.rpy = origin.xyz, origin.rpy
         inertia = el.find("inertia")
         if inertia is not None:
-            out.inertia = {k: self.number(f"{where}.inertia.{k}", inertia.get(k), 0.0) for k in out.inertia}
+            out.inertia = {k: self.number(f"{where}.inertia.{k}", inertia, k, 0.0) for k in out.inertia}
         return out
 
     def joint(self, el: ET.Element) -> _Joint:
@@ -323,21 +361,27 @@ class _Reader:
             if sub is None or not sub.get("link"):
                 raise self.error(f"{where}.{key}", "missing")
             ends[key] = sub.get("link")
-        axis_el = el.find("axis")
-        axis = self.floats(where + ".axis", None if axis_el is None else axis_el.get("xyz"), 3, (1.0, 0.0, 0.0))
+        axis = self.floats(where + ".axis", el.find("axis"), "xyz", 3, (1.0, 0.0, 0.0))
+        small = axis_component_problem(axis)
+        while small:  # a component no computation can see (a turn below 1e-19 rad): 0, as rounding residue
+            i, why = small
+            self.warn(where + ".axis", f'<axis xyz="{_printable(shown(el.find("axis").get("xyz"), 60))}">: '
+                                       f"{why.split('; write 0')[0]}: read as 0")
+            axis = tuple(0.0 if k == i else a for k, a in enumerate(axis))
+            small = axis_component_problem(axis)
         one_dof = jtype not in ("fixed", "floating")
-        if one_dof and math.sqrt(sum(a * a for a in axis)) < 1e-12:
+        if one_dof and unit_vector(axis) is None:
             raise self.error(where + ".axis", "must not be the zero vector")
         limits = self.limits(where + ".limit", el.find("limit"), jtype) if one_dof else {}
         # <mimic> on a fixed joint couples nothing: ignored, as Pinocchio and urdfdom do (talos' grippers)
         mimic = el.find("mimic") if one_dof else None
         if mimic is not None:
-            mimic = (mimic.get("joint") or "?", self.number(where + ".mimic.multiplier", mimic.get("multiplier"), 1.0),
-                     self.number(where + ".mimic.offset", mimic.get("offset"), 0.0))
+            mimic = (mimic.get("joint") or "?", self.number(where + ".mimic.multiplier", mimic, "multiplier", 1.0),
+                     self.number(where + ".mimic.offset", mimic, "offset", 0.0))
         dyn = el.find("dynamics") if one_dof else None
         dynamics = (0.0, 0.0)
         if dyn is not None:
-            dynamics = tuple(self.number(f"{where}.dynamics.{k}", dyn.get(k), 0.0) for k in ("damping", "friction"))
+            dynamics = tuple(self.number(f"{where}.dynamics.{k}", dyn, k, 0.0) for k in ("damping", "friction"))
             for k, v in zip(("damping", "friction"), dynamics):
                 if not v >= 0:
                     raise self.error(f"{where}.dynamics.{k}", f"must be >= 0, got {v:g}")
@@ -351,14 +395,22 @@ class _Reader:
         ``<limit lower="0" upper="0" effort="0" velocity="0"/>`` for "not given". All
         written values zero (lower = upper = 0 and no effort or velocity) is read as no
         limits; a zero velocity or effort next to real position limits is dropped (a
-        joint that may not move or push is no joint). Each drop prints one warning line.
-        Negative velocities or efforts stay, for the model's validation to refuse.
+        joint that may not move or push is no joint). Others write "unbounded" as a huge
+        number (iris: ``lower="-1e+16" upper="1e+16"``): a limit beyond MAX_MAGNITUDE
+        (1e12) is dropped too. Each drop prints one warning line. Negative velocities or
+        efforts stay, for the model's validation to refuse.
         """
         if lim is None:
             return {}
         keys = ("velocity", "effort") if jtype == "continuous" else ("lower", "upper", "velocity", "effort")  # continuous: no position limits
-        raw = {key: self.number(f"{where}.{key}", lim.get(key)) for key in keys}
+        raw = {key: self.number(f"{where}.{key}", lim, key, huge=True) for key in keys}
         limits = {k: v for k, v in raw.items() if v is not None}
+        huge = [k for k, v in limits.items() if abs(v) > MAX_MAGNITUDE]
+        if huge:
+            self.warn(where, f"{' = '.join(f'{k} = {limits[k]:g}' for k in huge)}: beyond {MAX_MAGNITUDE:g}, an "
+                             f"exporter's placeholder for no limit: imported without {' and '.join(huge)} limit")
+            for k in huge:
+                del limits[k]
         if limits and all(v == 0 for v in limits.values()):
             self.warn(where, f"{' = '.join(limits)} = 0 is an exporter's placeholder: imported without limits")
             return {}
@@ -370,7 +422,7 @@ class _Reader:
         return limits
 
     def warn(self, where: str, problem: str) -> None:
-        print(f"warning: {self.path}: {where}: {problem}", file=sys.stderr)
+        print(_printable(f"warning: {self.path}: {where}: {problem}"), file=sys.stderr)
 
 
 def _read(path: Path, robot: str | None, shown: str | None = None) -> tuple[str, dict[str, _Inertial], list[_Joint]]:
@@ -411,8 +463,16 @@ def parse_lock(lock: str | Iterable[str] | Mapping[str, float] | None, robot: st
     """``"a,b=0.3"`` or ``["a", "b=0.3"]`` or ``{"b": 0.3}`` -> {name: (value, spelling)}."""
     if lock is None:
         return {}
+    def bounded(name: str, v: float, text: str) -> float:
+        if not math.isfinite(v):
+            raise ModelError(robot, f"lock[{name}]", f"the value {shown(text)!r} is not finite")
+        problem = magnitude_problem(v)
+        if problem:
+            raise ModelError(robot, f"lock[{name}]", f"the value {problem}")
+        return float(v)
+
     if isinstance(lock, Mapping):
-        return {str(k): (float(v), f"{k}={v}") for k, v in lock.items()}
+        return {str(k): (bounded(str(k), float(v), str(v)), f"{k}={v}") for k, v in lock.items()}
     items = lock.split(",") if isinstance(lock, str) else list(lock)
     out: dict[str, tuple[float, str]] = {}
     for item in items:
@@ -420,14 +480,14 @@ def parse_lock(lock: str | Iterable[str] | Mapping[str, float] | None, robot: st
         if not item:
             continue
         name, eq, value = item.partition("=")
-        name = name.strip()
-        try:
-            v = float(value) if eq else 0.0
-        except ValueError:
-            raise ModelError(robot, f"lock[{name}]", f"the value {value.strip()!r} is not a number") from None
-        if not math.isfinite(v):
-            raise ModelError(robot, f"lock[{name}]", f"the value {value.strip()!r} is not finite")
-        out[name] = (v, f"{name}={value.strip()}" if eq else name)
+        name, value = name.strip(), value.strip()
+        if value.lower().lstrip("+-") in ("inf", "infinity", "nan"):
+            v = float(value)
+        else:
+            v = decimal(value) if eq else 0.0  # a C-locale decimal, as in the URDF (no 1_0, no other digits)
+        if v is None:
+            raise ModelError(robot, f"lock[{name}]", f"the value {shown(value)!r} is not a number")
+        out[name] = (bounded(name, v, value), f"{name}={value}" if eq else name)
     return out
 
 
@@ -464,7 +524,7 @@ def _lock_spelling(j: _Joint) -> str:
 
 
 def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, lock: dict, name: str | None,
-             friction: bool = True) -> str:
+             friction: bool = True, fix_inertia: bool = False) -> str:
     """The ``derive import-urdf`` command line that reproduces an import."""
     cmd = f"derive import-urdf {spelling}"
     if chain is not None:
@@ -479,7 +539,22 @@ def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, 
         cmd += f" --name {name}"
     if not friction:
         cmd += " --no-friction"
+    if fix_inertia:
+        cmd += " --fix-inertia"
     return cmd
+
+
+def relock_command(source: str, joints: Iterable[str]) -> str | None:
+    """The ``derive import-urdf`` command of an imported robot's ``source`` with ``joints`` added to its
+    ``--lock`` list (the way forward when a coordinate moves no mass); None if it was not imported so."""
+    command = import_command(source)
+    if command is None:
+        return None
+    joints = [j for j in joints if j]
+    match = re.search(r" --lock (\S+)", command)
+    if match:
+        return command[:match.end()] + "," + ",".join(joints) + command[match.end():]
+    return command + " --lock " + ",".join(joints)
 
 
 def _inertia_dict(m: np.ndarray) -> dict:
@@ -566,7 +641,8 @@ def _clamp_inertia_noise(inertia: dict, mass: float, floor: float) -> dict:
 
 
 def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
-                chain: str | None = None, floating: bool = False, friction: bool = True) -> dict:
+                chain: str | None = None, floating: bool = False, friction: bool = True,
+                fix_inertia: bool = False) -> dict:
     """Read a URDF and return one models.yaml robot entry (a plain dict).
 
     ``path`` may be ``example-robot-data:<path under robots/>``. By default the
@@ -590,15 +666,69 @@ def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: 
     joint with an identity origin (``world`` -> ``base``) is read the same way:
     the root is dropped and its child is the floating base. A moving joint's
     ``<dynamics damping= friction=>`` becomes its ``actuator: {viscous, coulomb}``
-    (where non-zero) unless ``friction`` is False. ``name`` defaults to
-    the URDF robot name made a C identifier. Raises
-    :class:`derive.description.model.ModelError` on any problem.
+    (where non-zero) unless ``friction`` is False; a mimic joint keeps its own too
+    (acting on its own motion, they reach its leader's coordinate through the mimic
+    map G: G^T D G). ``name`` defaults to the URDF robot name made a C identifier.
+
+    ``fix_inertia`` repairs impossible inertias instead of refusing them, with one
+    warning per link on stderr: a massless link's inertia becomes zero, any other
+    the nearest physical one (:func:`derive.description.inertia.nearest_physical`).
+    Raises :class:`derive.description.model.ModelError` on any problem; it names
+    the URDF and, for data defects, the way forward.
     """
-    return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating, friction=friction)[1]
+    return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating, friction=friction,
+                             fix_inertia=fix_inertia)[1]
+
+
+def _fix_inertias(reader: "_Reader", links: dict[str, _Inertial], floor: float) -> list[str]:
+    """``--fix-inertia``: every link's impossible inertia replaced in place (one warning per link); the
+    names of the links repaired. Rounding noise (within ``floor``, which the import clamps silently
+    anyway) is left alone.
+    """
+    fixed = []
+    for name, inr in links.items():
+        m = inr.matrix()
+        if inertia_problem(m, inr.mass) is None:
+            continue
+        if inr.mass == 0:
+            if not any(abs(v) > floor for v in inr.inertia.values()):
+                continue
+            inr.inertia = {k: 0.0 for k in inr.inertia}
+            fixed.append(name)
+            reader.warn(f"links[{name}].inertial.inertia", "a massless link must have zero inertia: set to zero "
+                                                            "(--fix-inertia)")
+            continue
+        if inertia_problem(_matrix(_clamp_inertia_noise(dict(inr.inertia), inr.mass, floor)), inr.mass) is None:
+            continue
+        problem = inertia_problem(m, inr.mass)
+        inr.inertia = _inertia_dict(nearest_physical(m, inr.mass))
+        fixed.append(name)
+        shown_values = ", ".join(f"{k}={v:.6g}" for k, v in inr.inertia.items())
+        reader.warn(f"links[{name}].inertial.inertia", f"{problem}: replaced by the nearest physical inertia "
+                                                        f"({shown_values}) (--fix-inertia)")
+    return fixed
+
+
+def _matrix(i: Mapping[str, float]) -> np.ndarray:
+    return np.array([[i["ixx"], i["ixy"], i["ixz"]], [i["ixy"], i["iyy"], i["iyz"]], [i["ixz"], i["iyz"], i["izz"]]],
+                    dtype=float)
+
+
+def _flush_tiny(node: Any) -> Any:
+    """The entry with every computed number below FLT_MIN in magnitude made 0 (rounding residue of
+    composing or merging; the URDF's own numbers were flushed, with a warning, when read)."""
+    if isinstance(node, dict):
+        return {k: _flush_tiny(v) for k, v in node.items()}
+    if isinstance(node, list):
+        return [_flush_tiny(v) for v in node]
+    if isinstance(node, float) and tiny(node):
+        return 0.0
+    return node
 
 
 def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
-                      chain: str | None = None, floating: bool = False, friction: bool = True) -> tuple[str, dict]:
+                      chain: str | None = None, floating: bool = False, friction: bool = True,
+                      fix_inertia: bool = False) -> tuple[str, dict]:
     """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
@@ -608,7 +738,12 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
     floating_flag = bool(floating)
 
     def error(where: str, problem: str) -> ModelError:
-        return ModelError(robot, where, problem)
+        return ModelError(robot, where, problem, spelling)
+
+    repaired: list[str] = []
+    if fix_inertia:
+        largest = max((abs(float(np.trace(inr.matrix()))) for inr in links.values()), default=0.0)
+        repaired = _fix_inertias(_Reader(robot, spelling), links, NOISE * largest)
 
     # ---- tree structure
     parent_joint: dict[str, _Joint] = {}
@@ -624,12 +759,12 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
             raise error(f"joints[{j.name}].child", f"link '{j.child}' already has parent joint '{parent_joint[j.child].name}'")
         parent_joint[j.child] = j
     if not links:
-        raise error(spelling, "the URDF has no <link>")
+        raise error("links", "the URDF has no <link>")
     roots = [n for n in links if n not in parent_joint]
     cycle = _find_cycle(links, parent_joint)
     if cycle:
         where = f" detached from the root link '{roots[0]}'" if len(roots) == 1 else "" if roots else ", so no link is the root"
-        raise error(f"{spelling} joints", f"the joints {', '.join(repr(j.name) for j in cycle)} form a cycle through the links "
+        raise error("joints", f"the joints {', '.join(repr(j.name) for j in cycle)} form a cycle through the links "
                     f"{', '.join(repr(j.child) for j in cycle)}{where}; a URDF must be a tree")
     if len(roots) != 1:
         raise error("links", f"links {', '.join(repr(r) for r in roots)} have no parent joint; exactly one root link is allowed")
@@ -644,7 +779,10 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
     for link in reversed(tree):
         behind[link] = links[link].mass + math.fsum(behind[j.child] for j in children[link])
 
-    locks = parse_lock(lock, robot)
+    try:
+        locks = parse_lock(lock, robot)
+    except ModelError as exc:
+        raise exc.in_file(spelling) from None
     by_name = {j.name: j for j in joints}
     for jname, (value, _) in locks.items():
         j = by_name.get(jname)
@@ -775,8 +913,7 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
                 if j.type == "revolute":
                     motion = Pose.from_matrix(axis_angle(j.axis, value), (0.0, 0.0, 0.0))
                 else:
-                    a = np.array(j.axis, dtype=float)
-                    motion = Pose(tuple(_snap_vector(a / np.linalg.norm(a) * value)))
+                    motion = Pose(tuple(_snap_vector(np.array(unit_vector(j.axis)) * value)))
                 origin = origin * motion
         placed = pose[j.parent] * origin
         if moves(j):
@@ -787,7 +924,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
                 entry["limits"] = dict(j.limits)
             if j.mimic is not None:
                 entry["mimic"] = {"joint": j.mimic[0], "multiplier": j.mimic[1], "offset": j.mimic[2]}
-            elif friction and any(j.dynamics):  # URDF damping and friction: viscous and Coulomb friction
+            if friction and any(j.dynamics):  # URDF damping and friction: viscous and Coulomb friction
+                # (a mimic joint's act on its own motion: through G on its leader's coordinate, G^T D G)
                 entry["actuator"] = {k: v for k, v in zip(("viscous", "coulomb"), j.dynamics) if v}
             out_joints.append(entry)
         else:
@@ -799,7 +937,11 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
     largest = max((abs(float(np.trace(inr.matrix()))) for inr in links.values()), default=0.0)
     for s in survivors:
         parts = [(n, pose[n], links[n]) for n in body if body[n] == s]
-        out_links.append({"name": s, **_merge_mass(robot, s, parts, NOISE * largest)})
+        try:
+            out_links.append({"name": s, **_merge_mass(robot, s, parts, NOISE * largest)})
+        except ModelError as exc:
+            raise ModelError(robot, exc.field, f"{exc.problem}: give it a mass in the URDF, or import with "
+                             "--fix-inertia (sets a massless link's inertia to zero, with a warning)", spelling) from None
     for link in out_links:
         if "inertia" in link:
             i = link["inertia"]
@@ -851,11 +993,13 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         notes.append(f"floating base {root}")
     if locks:
         notes.append("locked " + ", ".join(f"{n} = {v:g}" for n, (v, _) in locks.items()))
+    if repaired:
+        notes.append("repaired the inertia of " + ", ".join(repaired))
     if dropped:
         notes.append("dropped the massless moving " + ("branches " if len(dropped) > 1 else "branch ") + ", ".join(dropped))
     description = f"{urdf_name} imported from URDF" + (f" ({'; '.join(notes)})" if notes else "")
     command = _command(spelling, tip, chain, floating_flag, locks, name if name and name != c_identifier(urdf_name) else None,
-                       friction or not any(any(j.dynamics) for j in order))
+                       friction or not any(any(j.dynamics) for j in order), bool(repaired))
     entry = {
         "description": description,
         "source": f"{origin_text}, imported by `{command}`",
@@ -865,10 +1009,16 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         "joints": out_joints,
         "frames": frames,
     }
+    entry = _flush_tiny(entry)
     try:
         parse_robot(robot, entry)  # the entry must load as it is
     except ModelError as exc:
-        raise ModelError(robot, exc.field, f"{exc.problem} (in the imported entry)") from None
+        problem, hint = exc.problem, ""
+        if exc.field.endswith(".inertia"):
+            problem = problem.split("; re-import it")[0]
+            hint = (": correct the link's <inertial> in the URDF, or import with --fix-inertia (the nearest "
+                    "physical inertia, with a warning)")
+        raise ModelError(robot, exc.field, f"{problem} (in the imported entry){hint}", spelling) from None
     return robot, entry
 
 
@@ -915,7 +1065,7 @@ def _block_scalar(v: Any) -> str:
         try:
             if yaml.safe_load(f"k: {v}") == {"k": v}:
                 return v
-        except yaml.YAMLError:
+        except (yaml.YAMLError, ValueError, OverflowError):  # e.g. a date that is no date
             pass
     return _flow(v)
 
@@ -955,11 +1105,17 @@ def dump_entry(name: str, entry: Mapping, indent: str = "  ", generator: str = "
 
 
 def append_entry(models_path: str | Path, name: str, entry: Mapping) -> None:
-    """Append ``entry`` under ``robots:`` of a models file; refuses to replace an existing robot."""
+    """Append ``entry`` under ``robots:`` of a models file; refuses to replace an existing robot.
+
+    The new text is validated first and then written all at once (:func:`derive.filesystem.write_atomically`:
+    a temporary file beside it, fsync'ed and renamed over it): on any failure (a full disk, a kill) the file
+    is byte-identical to what it was, or still absent, and the error names it.
+    """
     path = Path(models_path)
-    if not path.exists():  # a new models file
-        path.write_text("# derive robot models (see README.md, 'Writing a model')\nrobots:\n" + dump_entry(name, entry))
-        parse_models(path.read_text(), source=str(path))
+    if not path.exists() and not path.is_symlink():  # a new models file
+        new_text = "# derive robot models (see README.md, 'Writing a model')\nrobots:\n" + dump_entry(name, entry)
+        parse_models(new_text, source=str(path))
+        write_atomically(path, new_text, "models file")
         return
     text = read_text(path, "models file")
     existing = parse_models(text, source=str(path))
@@ -969,4 +1125,4 @@ def append_entry(models_path: str | Path, name: str, entry: Mapping) -> None:
     robots = parse_models(new_text, source=str(path))
     if name not in robots or list(robots)[:-1] != list(existing):
         raise ModelError(name, str(path), "'robots:' is not the last top-level key; cannot append safely")
-    path.write_text(new_text)
+    write_atomically(path, new_text, "models file")

@@ -2,20 +2,19 @@
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
-from derive.plot.figure import save_figure
+from derive.filesystem import write_atomically
 from derive.solvers.excite import Excitation
 
 
-def plot_excitation(ex: Excitation, path: str | Path) -> Path:
-    """q, qd, qdd and tau of one period (matplotlib, Agg) to ``path``; returns it."""
-    import matplotlib
+def render_excitation(ex: Excitation) -> bytes:
+    """q, qd, qdd and tau of one period as PNG bytes (a matplotlib Figure on the Agg canvas, no pyplot)."""
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(4, 1, sharex=True, figsize=(8, 10))
+    fig = Figure(figsize=(8, 10))
+    axes = fig.subplots(4, 1, sharex=True)
     for ax, data, label in zip(axes, (ex.q, ex.qd, ex.qdd, ex.tau),
                                ("q [rad, m]", "qd [rad/s, m/s]", "qdd [rad/s^2, m/s^2]", "tau [Nm, N]")):
         for i, j in enumerate(ex.joints):
@@ -27,6 +26,13 @@ def plot_excitation(ex: Excitation, path: str | Path) -> Path:
     axes[0].set_title(f"{ex.robot}: excitation, T = {ex.period:g} s, {ex.harmonics} harmonics, "
                       f"cond(W_b) = {ex.condition:.3g} (random start {ex.random_condition:.3g})")
     fig.tight_layout()
-    save_figure(fig, path, dpi=100)
-    plt.close(fig)
-    return Path(path)
+    png = io.BytesIO()
+    fig.savefig(png, format="png", dpi=100)
+    return png.getvalue()
+
+
+def plot_excitation(ex: Excitation, path: str | Path) -> Path:
+    """:func:`render_excitation` written to ``path`` atomically (its folder created); returns it."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    return write_atomically(path, render_excitation(ex), "excitation plot")

@@ -7,9 +7,11 @@ matrices come entry by entry.
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 
 from derive.errors import DeriveError
+from derive.plot.figure import write_png
 
 PNG_MAX_LINES = 400  # beyond this the PNG is cut (the .tex holds everything)
 
@@ -40,34 +42,34 @@ def mathtext_lines(context: dict) -> list[tuple[str, str]]:
     return out
 
 
-def render_png(context: dict, path: str | Path, dpi: int = 110) -> Path:
-    """Draw the document's lines (a :func:`derive.inspect.latex.document_context`) with mathtext to ``path``.
+def equations_png(context: dict, dpi: int = 110) -> bytes:
+    """The document's lines (a :func:`derive.inspect.latex.document_context`) drawn with mathtext, as PNG bytes.
 
     At most PNG_MAX_LINES lines are drawn; the .tex holds the rest. A line mathtext
     cannot parse is a DeriveError naming the robot.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from matplotlib.figure import Figure
 
     lines = mathtext_lines(context)
     if len(lines) > PNG_MAX_LINES:
         lines = lines[:PNG_MAX_LINES] + [("text", f"... {len(lines) - PNG_MAX_LINES} more lines in the .tex")]
     step = 0.42  # inches per line: room for \frac
-    fig = plt.figure(figsize=(11, step * (len(lines) + 1)))
+    fig = Figure(figsize=(11, step * (len(lines) + 1)))
     for k, (kind, text) in enumerate(lines):
         y = 1 - (k + 0.8) / (len(lines) + 1)
         if kind == "math":
             fig.text(0.03, y, f"${text}$", fontsize=12, va="center")
         else:
             fig.text(0.01, y, text, fontsize=12, va="center", weight="bold" if kind == "head" else "normal")
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
+    buffer = io.BytesIO()
     try:
-        fig.savefig(path, dpi=dpi)
+        fig.savefig(buffer, format="png", dpi=dpi)
     except ValueError as exc:  # mathtext parse errors surface at draw time
-        raise DeriveError(f"robot '{context['robot']}': mathtext cannot render the equations: {exc}") from None
-    finally:
-        plt.close(fig)
-    return path
+        reason = " ".join(str(exc).split())[:300]
+        raise DeriveError(f"robot '{context['robot']}': mathtext cannot render the equations: {reason}") from None
+    return buffer.getvalue()
+
+
+def render_png(context: dict, path: str | Path, dpi: int = 110) -> Path:
+    """:func:`equations_png` written to ``path`` (atomically, creating its folder); returns it."""
+    return write_png(path, equations_png(context, dpi))

@@ -6,22 +6,24 @@ from pathlib import Path
 
 import numpy as np
 
-from derive.plot.figure import save_figure
+from derive.plot.figure import figure_bytes, new_figure, write_png
 from derive.solvers.simulate import Trajectory
 
+MAX_DRAWN = 20_000
+"""Samples drawn per curve: a longer run is drawn at every k-th sample (the figure is 800 pixels wide)."""
 
-def plot_simulation(traj: Trajectory, path: str | Path) -> Path:
-    """q(t), qd(t) and the relative energy drift, one panel each (matplotlib Agg), to ``path``; returns it."""
-    import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True)
+def simulation_png(traj: Trajectory) -> bytes:
+    """q(t), qd(t) and the relative energy drift, one panel each, as PNG bytes."""
+    stride = max(1, -(-len(traj.t) // MAX_DRAWN))
+    pick = slice(None, None, stride)
+    t = traj.t[pick]
+    fig = new_figure(1, height=8, width=8, layout="tight")
+    axes = fig.subplots(3, 1, sharex=True)
     for k, name in enumerate(traj.joints):
-        axes[0].plot(traj.t, traj.q[:, k], label=name)
-        axes[1].plot(traj.t, traj.qd[:, k], label=f"d{name}")
-    axes[2].plot(traj.t, (traj.balance - traj.balance[0]) / traj.energy_scale)
+        axes[0].plot(t, traj.q[pick, k], label=name)
+        axes[1].plot(t, traj.qd[pick, k], label=f"d{name}")
+    axes[2].plot(t, ((traj.balance - traj.balance[0]) / traj.energy_scale)[pick])
     axes[0].set_ylabel("q")
     axes[1].set_ylabel("qd")
     axes[2].set_ylabel("energy drift (rel.)")
@@ -31,7 +33,9 @@ def plot_simulation(traj: Trajectory, path: str | Path) -> Path:
     for ax in axes:
         ax.grid(True, alpha=0.3)
     fig.suptitle(f"{traj.robot}: {traj.method}, tau = {np.array2string(traj.tau, precision=3)}")
-    fig.tight_layout()
-    save_figure(fig, path, dpi=100)
-    plt.close(fig)
-    return Path(path)
+    return figure_bytes(fig, f"robot '{traj.robot}': the figure of the simulation", dpi=100)
+
+
+def plot_simulation(traj: Trajectory, path: str | Path) -> Path:
+    """:func:`simulation_png` written to ``path`` (atomically); returns it."""
+    return write_png(path, simulation_png(traj))

@@ -6,22 +6,18 @@ from pathlib import Path
 
 import numpy as np
 
-from derive.plot.figure import save_figure
+from derive.plot.figure import figure_bytes, new_figure, write_png
 from derive.solvers.trajopt import TrajoptResult
 
 
-def plot_trajopt(result: TrajoptResult, path: str | Path, limits: dict | None = None) -> Path:
-    """Joint positions, velocities and torques over time (matplotlib, Agg) to ``path``; returns it.
+def trajopt_png(result: TrajoptResult, limits: dict | None = None) -> bytes:
+    """Joint positions, velocities and torques over time as PNG bytes.
 
     ``limits`` maps joints to effort limits, drawn dotted in the torque panel.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     r = result
-    fig, axes = plt.subplots(3, 1, sharex=True, figsize=(8, 8))
+    fig = new_figure(1, height=8, width=8, layout="tight")
+    axes = fig.subplots(3, 1, sharex=True)
     for ax, data, label in zip(axes, (r.q, r.qd, r.tau), ("q [rad, m]", "qd [rad/s, m/s]", "tau [Nm, N]")):
         for i, j in enumerate(r.joints):
             ax.plot(r.t, data[:, i], label=j)
@@ -37,7 +33,9 @@ def plot_trajopt(result: TrajoptResult, path: str | Path, limits: dict | None = 
     axes[-1].set_xlabel("t [s]")
     axes[0].set_title(f"{r.robot}: {r.method}, N = {len(r.t) - 1}, T = {r.duration:.3f} s, "
                       f"IPOPT {r.stats.get('iterations', 0)} it, {r.stats.get('solve_time', 0):.3f} s")
-    fig.tight_layout()
-    save_figure(fig, path, dpi=100)
-    plt.close(fig)
-    return Path(path)
+    return figure_bytes(fig, f"trajopt {r.robot}: the figure of the trajectory", dpi=100)
+
+
+def plot_trajopt(result: TrajoptResult, path: str | Path, limits: dict | None = None) -> Path:
+    """:func:`trajopt_png` written to ``path`` (atomically); returns it."""
+    return write_png(path, trajopt_png(result, limits))

@@ -14,7 +14,8 @@ def plot_workspace(ws: Workspace, path: str | Path) -> Path:
     """Configuration space (left) and workspace (right), as the lecture's figure 4.
 
     Every sample is coloured by its distance from the base in both panels, so bands
-    in the configuration space can be followed into the workspace. Planar robots get
+    in the configuration space can be followed into the workspace (the samples the
+    Workspace kept; the reach circles and the title cover them all). Planar robots get
     one workspace panel in their plane with the innermost and outermost reach drawn;
     spatial ones get the xy, xz and yz projections of the point cloud.
     """
@@ -42,11 +43,13 @@ def plot_workspace(ws: Workspace, path: str | Path) -> Path:
         ax.set_ylabel(f"{AXIS_NAMES[b]} [m]")
         if len(planes) == 1:
             t = np.linspace(0, 2 * np.pi, 400)
-            for rad, style in ((r.min(), "--"), (r.max(), "-")):
+            rmin, rmax = ws.reach_range
+            for rad, style in ((rmin, "--"), (rmax, "-")):
                 ax.plot(ws.base[a] + rad * np.cos(t), ws.base[b] + rad * np.sin(t), style, color="k", lw=0.8)
-            ax.set_title(f"workspace of '{ws.frame}': reach {r.min():.3g} .. {r.max():.3g} m", fontsize=10)
+            ax.set_title(f"workspace of '{ws.frame}': reach {rmin:.3g} .. {rmax:.3g} m", fontsize=10)
         else:
             ax.set_title(f"workspace of '{ws.frame}', {AXIS_NAMES[a]}{AXIS_NAMES[b]} projection", fontsize=10)
     fig.colorbar(sc, ax=list(axes), shrink=0.8, label="distance from base [m]")
-    fig.suptitle(f"{robot.name}: {len(ws.q)} configurations through FK", fontsize=11)
+    drawn = "" if len(ws.q) == ws.count else f" ({len(ws.q)} of them drawn)"
+    fig.suptitle(f"{robot.name}: {ws.count} configurations through FK{drawn}", fontsize=11)
     return save_figure(fig, path)

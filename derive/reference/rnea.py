@@ -337,13 +337,27 @@ class NumericRobot:
             self.inertia[body] = self.inertia[body] + spatial_inertia(mass, com, inertia_com)
         self.total_mass = sum(mass for _, mass, _ in self.masses)  # what moves (floating: the root too)
 
-        # Actuators per entry of v (none for a floating base's six): armature, viscous and Coulomb friction.
+        # Actuators per body and DOF of its joint (none for a floating base's six): armature, viscous and
+        # Coulomb friction acting on the body's OWN joint rate (a mimic joint's: a qd[dofs]). In v they are
+        # G^T diag(.) G (G the constant map v -> the bodies' rates): per entry of v the armature and the
+        # viscous friction add up times scale^2; the Coulomb force is G^T f_c sign(G v) (:meth:`friction`).
+        self.body_armature, self.body_viscous, self.body_coulomb = [], [], []
+        if robot.floating:
+            for values in (self.body_armature, self.body_viscous, self.body_coulomb):
+                values.append(np.zeros(6))
+        for joint in robot.joints:
+            if joint.dof == 0:
+                continue
+            acts = joint.actuators
+            self.body_armature.append(np.array([num(a.armature) + num(a.gear_ratio) ** 2 * num(a.motor_inertia)
+                                                for a in acts]))
+            self.body_viscous.append(np.array([num(a.viscous) for a in acts]))
+            self.body_coulomb.append(np.array([num(a.coulomb) for a in acts]))
         self.armature, self.viscous, self.coulomb = np.zeros(self.nv), np.zeros(self.nv), np.zeros(self.nv)
-        first = 6 if robot.floating else 0
-        for k, c in enumerate(robot.joint_coordinates):
-            a = c.actuator
-            self.armature[first + k] = num(a.armature) + num(a.gear_ratio) ** 2 * num(a.motor_inertia)
-            self.viscous[first + k], self.coulomb[first + k] = num(a.viscous), num(a.coulomb)
+        for i in range(n):  # the diagonals of G^T diag(.) G; the Coulomb coefficient of sign(v): |scale| f_c
+            self.armature[self.dofs[i]] += self.scale[i] ** 2 * self.body_armature[i]
+            self.viscous[self.dofs[i]] += self.scale[i] ** 2 * self.body_viscous[i]
+            self.coulomb[self.dofs[i]] += abs(self.scale[i]) * self.body_coulomb[i]
         self.smoothing = robot.smoothing
 
         # Every placeable frame: (body, constant pose in the body frame).
@@ -573,9 +587,17 @@ class NumericRobot:
         return tau + self.armature * qdd + self.friction(qd, smooth)
 
     def friction(self, qd, smooth: bool = False) -> np.ndarray:
-        """Joint friction f_v qd + f_c sign(qd), or f_c tanh(qd / eps) if ``smooth`` (what forward dynamics uses)."""
+        """Joint friction G^T (f_v r + f_c sign(r)) with r = G qd each body's own joint rate, or f_c tanh(r / eps)
+        if ``smooth`` (what forward dynamics uses): f_v qd + f_c sign(qd) without mimic joints. A mimic
+        joint's friction acts on its own rate r = a qd_J and adds a times its force to J's entry."""
         qd = self._v(qd, "qd")
-        return self.viscous * qd + self.coulomb * (np.tanh(qd / self.smoothing) if smooth else np.sign(qd))
+        out = np.zeros(self.nv, dtype=np.result_type(qd, float))
+        for i in range(self.nb):
+            rate = self.body_rate(i, qd)
+            force = self.body_viscous[i] * rate + self.body_coulomb[i] * (
+                np.tanh(rate / self.smoothing) if smooth else np.sign(rate))
+            out[self.dofs[i]] += self.scale[i] * force
+        return out
 
     def gravity(self, q) -> np.ndarray:
         """Generalized gravity g(q) = rnea(q, 0, 0)."""

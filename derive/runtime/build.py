@@ -1,17 +1,31 @@
 """Build a robot's generated C into one shared library, cached by content.
 
-- :func:`signatures` reads generated/<robot>/manifest.json into one :class:`Signature` per function.
+- :func:`read_generated` reads generated/<robot>/ once into a :class:`Snapshot`: its manifest.json
+  and the bytes of its C sources (c/*.c, c/*.h), read again until the manifest is the same before
+  and after the sources (a ``derive generate`` into the folder at the same time changes it), and
+  checked for being one robot's code of one model.
+- :func:`signatures` reads the manifest into one :class:`Signature` per function.
 - :func:`wrapper_source` writes the small C file compiled beside the generated code (in the build
   folder, never in generated/): per function ``<robot>_<fn>_batch``, the loop over n states with
   one stride per input (its length, or 0 to broadcast one value such as p), and
   ``<robot>_<fn>_obj``, the one-state fast path that :mod:`derive.runtime.loader` calls with the
-  addresses of the Python objects themselves (see there for why).
+  addresses of the Python objects themselves (see there for why); and the library's own record
+  (:func:`record`: robot, nq, nv, model hash, each function's input and output lengths, the hash of
+  the sources), as const data behind ``<robot>_rt_record()``, and an ``#error`` unless the
+  sources' ``<ROBOT>_NQ`` and ``<ROBOT>_NV`` are the manifest's.
 - :func:`library` returns ``$XDG_CACHE_HOME/derive/compiled/<hash>/lib<robot>.so`` (default
-  ~/.cache/derive/compiled/), the hash being the sha256 of the C sources, the wrapper, the compiler
-  (its path and ``--version``) and the flags. A present folder is reused as it is; a missing one is
-  built in a temporary folder beside it and renamed into place in one step, so two processes
-  building at once each finish with a complete library (the first rename wins, the other build is
-  discarded).
+  ~/.cache/derive/compiled/), the hash being the sha256 of the snapshot's source bytes, the
+  wrapper, the compiler (its path and ``--version``) and the flags. The library is compiled from a
+  copy of exactly the bytes hashed (written into the build folder, compiled there), so a
+  ``derive generate`` during the build cannot put other code under this hash. A present library
+  is used only if the record in its file is the expected one (else it is rebuilt and replaced).
+
+Builds of one hash take turns: the builder holds an advisory lock (``flock``) on
+``.<hash>.lock`` in the cache for the whole build, and whoever waited finds the library built. A
+build runs in the temporary folder ``.<hash>.tmp-*`` beside the library's folder and is renamed
+into place in one step. A temporary folder is removed as left by a dead build only by a process
+that holds its hash's lock, so liveness never rests on a pid (which says nothing across PID
+namespaces, say a container sharing the cache).
 
 The compiler is ``$CC`` (else cc, gcc or clang, the first found); the flags are
 ``-std=c99 -O2 $CFLAGS -fPIC``, linked with ``-shared ... -lm``.
@@ -19,27 +33,44 @@ The compiler is ``$CC`` (else cc, gcc or clang, the first found); the flags are
 
 from __future__ import annotations
 
+import contextlib
 import errno
+import fcntl
 import hashlib
 import json
+import mmap
 import os
 import re
 import shlex
 import shutil
+import stat
 import subprocess
 import tempfile
+import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Iterator
 
-from derive.codegen.generate import process_alive
+from derive.description.files import InputFileError, read_bytes
 from derive.errors import DeriveError
+from derive.filesystem import forget, register
 
 BUILDS = 0
 """Libraries built by this process (a cache hit builds none)."""
 
 HEAD = object.__basicsize__
 """sizeof(PyObject) of this Python (16 on a standard 64-bit build): where an object's own fields start."""
+
+READS = 5
+"""Readings of generated/<robot>/ before :func:`read_generated` gives up on one that keeps changing."""
+
+RECORD_MARK = b"derive.compiled record:"
+"""What precedes the record (JSON, then a NUL) in the library's read-only data."""
+
+LEGACY_AGE = 86400.0
+"""Seconds after which a temporary build folder named as before the locks (``.<16 hex>.tmp-<pid>-*``,
+no lock to ask) is removed: no build lasts a day."""
 
 
 @dataclass(frozen=True)
@@ -61,16 +92,125 @@ class Signature:
     doc: str
 
 
-def _python_name(name: str, what: str) -> str:
-    if not name.isidentifier() or name.startswith("_") or name in {"def", "return", "if", "else", "None", "lambda"}:
+@dataclass(frozen=True)
+class Snapshot:
+    """One reading of generated/<robot>/: its manifest and the bytes of its C sources, consistent."""
+    robot: str
+    folder: Path                            # generated/<robot>
+    manifest: dict
+    sources: tuple[tuple[str, bytes], ...]  # (name, bytes) of each c/*.c and c/*.h, by name
+    sources_hash: str                       # sha256 of exactly those names and bytes
+
+
+# ---- reading generated/<robot>/ ----
+
+def _read_sources(cdir: Path) -> tuple[tuple[str, bytes], ...]:
+    try:
+        names = sorted(n for n in os.listdir(cdir) if n.endswith((".c", ".h")))
+    except OSError as exc:
+        raise InputFileError(f"{cdir}: cannot read the generated C ({exc.strerror or exc})") from None
+    out = []
+    for name in names:
+        path = cdir / name
+        try:
+            if stat.S_ISDIR(os.stat(path).st_mode):
+                continue
+        except OSError as exc:
+            raise InputFileError(f"{path}: cannot read generated C source ({exc.strerror or exc})") from None
+        out.append((name, read_bytes(path, "generated C source")))
+    return tuple(out)
+
+
+def _sources_hash(sources: tuple[tuple[str, bytes], ...]) -> str:
+    h = hashlib.sha256()
+    for name, data in sources:
+        h.update(f"\0{name}\0{len(data)}\0".encode())
+        h.update(data)
+    return h.hexdigest()
+
+
+_ORIGIN = re.compile(rb"robot '([^'\n]*)' \(model ([0-9a-f]+)\)")
+
+
+def _inconsistency(robot: str, mpath: Path, manifest, cdir: Path, sources) -> str | None:
+    """Why the manifest and the sources are not one robot's code of one model, or None."""
+    if not isinstance(manifest, dict):
+        return f"{mpath} is not a JSON object (run `derive generate`)"
+    if manifest.get("robot") != robot:
+        return f"{mpath} is the manifest of robot '{manifest.get('robot')}'"
+    model = manifest.get("model_hash")
+    for name, data in sources:
+        m = _ORIGIN.search(data[:600])  # the header the renderer writes: "robot 'r' (model h)"
+        if m and (m[1].decode(errors="replace") != robot or m[2].decode() != model):
+            return (f"{cdir / name} is the code of robot '{m[1].decode(errors='replace')}' model {m[2].decode()}, "
+                    f"but {mpath} of model {model} (run `derive generate`)")
+    return None
+
+
+def read_generated(robot: str, folder: str | Path) -> Snapshot:
+    """generated/<robot>/ (``folder``) read into a :class:`Snapshot`; a one-line DeriveError when it
+    is missing, unreadable, or not one model's code (after :data:`READS` readings, if it keeps changing)."""
+    folder = Path(folder)
+    mpath, cdir = folder / "manifest.json", folder / "c"
+    if not mpath.is_file() or not cdir.is_dir():
+        raise DeriveError(f"robot '{robot}': no generated code at {folder} (run `derive generate`, "
+                          "or pass generated=<the folder holding it>)")
+    error: DeriveError | None = None
+    for attempt in range(READS):
+        if attempt:
+            time.sleep(0.02 * 2 ** attempt)  # a generate swapping the folder in is done within moments
+        try:
+            before = read_bytes(mpath, "manifest")
+            sources = _read_sources(cdir)
+            after = read_bytes(mpath, "manifest")
+        except InputFileError as exc:  # a file gone while a generate swaps the folder, or truly unreadable
+            error = DeriveError(f"robot '{robot}': {exc}")
+            continue
+        if before != after:
+            error = DeriveError(f"robot '{robot}': {folder} changed while it was read, {READS} times "
+                                "(a `derive generate` into it under way?); try again once it has finished")
+            continue
+        try:
+            manifest = json.loads(before)
+        except ValueError as exc:
+            error = DeriveError(f"robot '{robot}': cannot read {mpath} ({exc}); run `derive generate`")
+            continue
+        reason = _inconsistency(robot, mpath, manifest, cdir, sources)
+        if reason:
+            error = DeriveError(f"robot '{robot}': {reason}")
+            continue
+        return Snapshot(robot, folder, manifest, sources, _sources_hash(sources))
+    assert error is not None
+    raise error
+
+
+# ---- the functions of the manifest ----
+
+def _python_name(name, what: str) -> str:
+    if not isinstance(name, str) or not name.isidentifier() or name.startswith("_") or \
+            name in {"def", "return", "if", "else", "None", "lambda"}:
         raise DeriveError(f"manifest: {what} '{name}' is not usable as a Python name")
     return name
 
 
+def _length(value, where: str) -> int:
+    if type(value) is not int or value < 0:
+        raise DeriveError(f"{where}: {value!r} is not a length")
+    return value
+
+
 def signatures(manifest: dict) -> list[Signature]:
     """The functions of a robot's manifest.json, checked for consistency between its C and Python entries."""
+    robot = manifest.get("robot", "?") if isinstance(manifest, dict) else "?"
+    try:
+        return _signatures(manifest, robot)
+    except (KeyError, TypeError, ValueError, AttributeError, IndexError) as exc:
+        raise DeriveError(f"robot '{robot}': manifest: malformed function entry ({type(exc).__name__}: {exc}); "
+                          "run `derive generate`") from None
+
+
+def _signatures(manifest: dict, robot: str) -> list[Signature]:
     out = []
-    robot = manifest.get("robot", "?")
     for f in manifest.get("functions", []):
         c, py = f["c"], f["python"]
         where = f"robot '{robot}': manifest: function {f['name']}"
@@ -78,7 +218,7 @@ def signatures(manifest: dict) -> list[Signature]:
             raise DeriveError(f"{where}: {len(c['reads'])} C inputs for {len(f['inputs'])} inputs")
         inputs = []
         for spec, read in zip(f["inputs"], c["reads"]):
-            rows, cols = spec["shape"]
+            rows, cols = (_length(d, f"{where}: input {spec['name']}") for d in spec["shape"])
             if rows * cols != read["length"]:
                 raise DeriveError(f"{where}: input {spec['name']} is {rows}x{cols} but {read['length']} long in C")
             inputs.append(Argument(_python_name(spec["name"], "input"), (rows,) if cols == 1 else (rows, cols),
@@ -92,7 +232,7 @@ def signatures(manifest: dict) -> list[Signature]:
             raise DeriveError(f"{where}: {len(c['writes'])} C outputs for {len(arrays)} Python values")
         outputs = []
         for ret, write in zip(arrays, c["writes"]):
-            shape = tuple(int(d) for d in ret["shape"])
+            shape = tuple(_length(d, f"{where}: output {ret['name']}") for d in ret["shape"])
             size = 1
             for d in shape:
                 size *= d
@@ -100,7 +240,7 @@ def signatures(manifest: dict) -> list[Signature]:
                 raise DeriveError(f"{where}: output {ret['name']} has shape {shape} but is {write['length']} long in C")
             outputs.append(Argument(_python_name(ret["name"], "output"), shape, write["length"]))
         name = _python_name(py["function"], "function")
-        if not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", f["name"]):
+        if not isinstance(f["name"], str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", f["name"]):
             raise DeriveError(f"{where}: not a C identifier")
         doc = "\n".join([f"{f['name']} of the generated C, compiled; inputs take any leading batch shape.", ""]
                         + [f"in  {a.name} {list(a.shape)}" + (" (or None)" if a.nullable else "") for a in inputs]
@@ -109,22 +249,72 @@ def signatures(manifest: dict) -> list[Signature]:
         out.append(Signature(name, f["name"], tuple(inputs), tuple(outputs), status, doc))
     names = [s.cname for s in out]
     for s in out:
-        for suffix in ("_batch", "_obj"):
+        for suffix in ("_batch", "_obj", "_rt_record"):
             if s.cname + suffix in names:
                 raise DeriveError(f"robot '{robot}': the generated function {s.cname}{suffix} clashes with the "
                                   f"compiled wrapper of {s.cname}")
     return out
 
 
-def wrapper_source(robot: str, sigs: list[Signature]) -> str:
-    """The C file compiled with the robot's generated code: the batch loops and the one-state fast paths."""
+# ---- the library's own record, and the wrapper ----
+
+def record(robot: str, manifest: dict, sigs: list[Signature], sources_hash: str | None) -> str:
+    """What a library says of itself (JSON): the robot, nq, nv, the model hash, per function its C
+    name, input and output lengths and status, and (None for the loader's check, which leaves it
+    out) the hash of the sources it was compiled from."""
+    data = {"robot": robot, "nq": manifest.get("nq"), "nv": manifest.get("nv"), "model_hash": manifest.get("model_hash"),
+            "functions": [[s.cname, [a.length for a in s.inputs], [a.length for a in s.outputs], s.status] for s in sigs]}
+    if sources_hash is not None:
+        data["sources"] = sources_hash
+    return json.dumps(data, sort_keys=True, separators=(",", ":"))
+
+
+def file_record(lib: Path) -> str | None:
+    """The record in the library file ``lib`` (its bytes, without loading it), or None when the
+    file is missing, unreadable or holds no single record."""
+    try:
+        with open(lib, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                return None
+            with mmap.mmap(f.fileno(), 0, access=mmap.ACCESS_READ) as m:
+                found = set()
+                at = m.find(RECORD_MARK)
+                while at >= 0 and len(found) < 2:
+                    end = m.find(b"\0", at)
+                    if end < 0:
+                        return None
+                    found.add(m[at + len(RECORD_MARK):end])
+                    at = m.find(RECORD_MARK, end)
+    except (OSError, ValueError):  # ValueError: an empty file cannot be mapped
+        return None
+    if len(found) != 1:
+        return None
+    try:
+        return found.pop().decode()
+    except UnicodeDecodeError:
+        return None
+
+
+def _bytes_array(data: bytes) -> list[str]:
+    """``data`` as the lines of a C array initialiser (numbers: no string-literal length limit)."""
+    return ["    " + ", ".join(str(b) for b in data[k:k + 24]) + "," for k in range(0, len(data), 24)]
+
+
+def wrapper_source(robot: str, sigs: list[Signature], manifest: dict | None = None, rec: str | None = None) -> str:
+    """The C file compiled with the robot's generated code: the batch loops, the one-state fast
+    paths and the record ``rec`` (default: :func:`record` of ``manifest``, without a sources hash)."""
+    manifest = manifest or {}
+    rec = rec if rec is not None else record(robot, manifest, sigs, None)
+    prefix = robot.upper()
+    nq, nv = manifest.get("nq"), manifest.get("nv")
     lines = [
         f"/* Built by derive.runtime for robot '{robot}' into the build folder (not part of generated/).",
         " * <robot>_<fn>_batch: the generated function over n states, inputs advancing by their stride",
         " * (their length, or 0 for one value shared by all states), outputs contiguous, row-major.",
         " * <robot>_<fn>_obj: one state, given the addresses of the Python objects; returns 0 (-1 for",
         " * a status) unless each input is a C-contiguous aligned float64 numpy array of exactly the",
-        " * state's shape (or a Python float for a length-1 input), so Python falls back to _batch. */",
+        " * state's shape (or a Python float for a length-1 input), so Python falls back to _batch.",
+        " * <robot>_rt_record: what this library is (JSON), checked by the loader before any call. */",
         "#include <stddef.h>",
         "#include <stdint.h>",
         f'#include "{robot}.h"',
@@ -132,6 +322,22 @@ def wrapper_source(robot: str, sigs: list[Signature]) -> str:
         "#ifdef DERIVE_FLOAT",
         "#error derive.compiled calls the generated code with float64 arrays: do not define DERIVE_FLOAT",
         "#endif",
+    ]
+    if type(nq) is int and type(nv) is int:
+        lines += [f"#if !defined({prefix}_NQ) || !defined({prefix}_NV) || {prefix}_NQ != {nq} || {prefix}_NV != {nv}",
+                  f"#error derive.compiled: {robot}.h is not the code of this manifest.json (nq {nq}, nv {nv})",
+                  "#endif"]
+    mark = RECORD_MARK + rec.encode()
+    lines += [
+        "",
+        f"const char {robot}_rt_record_text[{len(mark) + 1}] = {{",
+        *_bytes_array(mark + b"\0"),
+        "};",
+        "",
+        f"const char *{robot}_rt_record(void)",
+        "{",
+        f"    return {robot}_rt_record_text + {len(RECORD_MARK)};",
+        "}",
         "",
         "/* The PyObject header of the Python that built this library (its last field is the type), then",
         " * the leading fields of numpy's array object (PyArrayObject_fields: numpy's C ABI, which the",
@@ -257,13 +463,10 @@ def cache_root() -> Path:
     return root / "derive" / "compiled"
 
 
-def content_hash(robot: str, cdir: Path, wrapper: str, cc: list[str], cflags: list[str]) -> str:
+def content_hash(robot: str, snapshot: Snapshot, wrapper: str, cc: list[str], cflags: list[str]) -> str:
     h = hashlib.sha256()
     h.update(json.dumps({"robot": robot, "compiler": compiler_identity(cc), "flags": cflags, "link": ["-shared", "-lm"]}).encode())
-    for path in sorted(cdir.iterdir()):
-        if path.suffix in (".c", ".h") and path.is_file():
-            h.update(f"\0{path.name}\0".encode())
-            h.update(path.read_bytes())
+    h.update(b"\0sources\0" + snapshot.sources_hash.encode())
     h.update(b"\0wrapper\0" + wrapper.encode())
     return h.hexdigest()
 
@@ -276,73 +479,197 @@ def _first_error(stderr: str) -> str:
     return (lines[0][:400] if lines else "no message")
 
 
-def _run(argv: list[str], robot: str) -> None:
+def _run(argv: list[str], robot: str, copy: Path | None = None, origin: Path | None = None) -> None:
+    """Run the compiler; a failure is one line, the copy's paths (``copy``) named as the originals'."""
     try:
         r = subprocess.run(argv, capture_output=True, text=True)
     except OSError as exc:
         raise DeriveError(f"cannot compile robot '{robot}': {argv[0]}: {exc.strerror or exc}") from None
     if r.returncode != 0:
-        raise DeriveError(f"cannot compile robot '{robot}': {_first_error(r.stderr + r.stdout)}")
+        message = _first_error(r.stderr + r.stdout)
+        if copy is not None and origin is not None:
+            message = message.replace(f"{copy}{os.sep}", f"{origin}{os.sep}")
+        raise DeriveError(f"cannot compile robot '{robot}': {message}")
 
 
-_STALE = re.compile(r"^\.[0-9a-f]+\.tmp-(?P<pid>\d+)-")
+# ---- locks and the temporary folders of builds ----
+
+@contextlib.contextmanager
+def _lock(root: Path, digest: str, wait: bool = True) -> Iterator[bool | None]:
+    """Hold the advisory lock of builds of ``digest``: yields True once held (waiting for it when
+    ``wait``), False when another process holds it (``wait`` False), None where the file system
+    has no flock (then nothing is serialised and no temporary folder is judged dead).
+
+    The lock file ``.<digest>.lock`` is removed by its holder on release (before unlocking); a
+    waiter that then holds a removed file takes the new one, so none is left behind."""
+    path = root / f".{digest}.lock"
+    flags_ = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    while True:
+        try:
+            fd = os.open(path, flags_, 0o666)
+        except OSError:
+            yield None
+            return
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            os.close(fd)
+            yield False
+            return
+        except OSError:  # ENOLCK, EOPNOTSUPP: no locks here
+            os.close(fd)
+            yield None
+            return
+        except BaseException:  # KeyboardInterrupt while waiting
+            os.close(fd)
+            raise
+        try:
+            st, mine = os.stat(path, follow_symlinks=False), os.fstat(fd)
+            held = (st.st_dev, st.st_ino) == (mine.st_dev, mine.st_ino)
+        except OSError:
+            held = False
+        if held:
+            break
+        os.close(fd)  # its holder removed it as we waited: the lock is the file now there
+    register(path, False)  # a signal handler ending the process at once removes it too
+    try:
+        yield True
+    finally:
+        with contextlib.suppress(OSError):
+            os.unlink(path)
+        forget(path)
+        os.close(fd)
 
 
-def _remove_stale(root: Path) -> None:
-    """Remove the temporary folders of builds whose process is gone."""
-    for entry in root.iterdir():
-        m = _STALE.match(entry.name)
-        if not m or not entry.is_dir():
+_TEMPORARY = re.compile(r"^\.(?P<digest>[0-9a-f]{64})\.tmp-")
+_LOCK_FILE = re.compile(r"^\.(?P<digest>[0-9a-f]{64})\.lock$")
+_LEGACY = re.compile(r"^\.[0-9a-f]{16}\.tmp-")
+
+
+def _remove_stale(root: Path, own: str | None) -> None:
+    """Remove what dead builds left in the cache: temporary folders (``own``'s, whose lock the
+    caller holds, and any other whose lock is free) and lock files nobody holds. Never raises."""
+    try:
+        entries = list(os.scandir(root))
+    except OSError:
+        return
+    now = time.time()
+    for entry in entries:
+        name = entry.name
+        try:
+            folder = entry.is_dir(follow_symlinks=False)
+        except OSError:
             continue
-        if not process_alive(int(m["pid"])):
-            shutil.rmtree(entry, ignore_errors=True)
+        m = _TEMPORARY.match(name)
+        if m and folder:
+            if m["digest"] == own:
+                shutil.rmtree(entry.path, ignore_errors=True)
+                continue
+            with _lock(root, m["digest"], wait=False) as held:
+                if held:
+                    shutil.rmtree(entry.path, ignore_errors=True)
+            continue
+        m = _LOCK_FILE.match(name)
+        if m and m["digest"] != own:
+            with _lock(root, m["digest"], wait=False):
+                pass  # held: nobody else had it, and releasing it removed the file
+            continue
+        if _LEGACY.match(name) and folder:
+            with contextlib.suppress(OSError):
+                if now - entry.stat(follow_symlinks=False).st_mtime > LEGACY_AGE:
+                    shutil.rmtree(entry.path, ignore_errors=True)
 
 
-def library(robot: str, cdir: Path, sigs: list[Signature]) -> Path:
-    """The shared library of ``robot``'s generated C in ``cdir``: from the cache, or built into it."""
-    global BUILDS
+# ---- the build ----
+
+def library(robot: str, source: Snapshot | str | Path, sigs: list[Signature]) -> Path:
+    """The shared library of ``robot``'s generated C: ``source`` a :class:`Snapshot`, or the c/
+    folder (read here). From the cache when the record in its file is the expected one, else
+    built (or rebuilt) into it."""
+    snap = source if isinstance(source, Snapshot) else read_generated(robot, Path(source).parent)
     cc = compiler(robot)
     cflags = flags(robot)
-    wrapper = wrapper_source(robot, sigs)
+    expected = record(robot, snap.manifest, sigs, snap.sources_hash)
+    wrapper = wrapper_source(robot, sigs, snap.manifest, expected)
     root = cache_root()
-    digest = content_hash(robot, cdir, wrapper, cc, cflags)
+    digest = content_hash(robot, snap, wrapper, cc, cflags)
     final = root / digest
     lib = final / f"lib{robot}.so"
-    if lib.is_file():
+    if file_record(lib) == expected:
         return lib
     try:
         root.mkdir(parents=True, exist_ok=True)
-        _remove_stale(root)
-        tmp = Path(tempfile.mkdtemp(prefix=f".{digest[:16]}.tmp-{os.getpid()}-", dir=root))
     except OSError as exc:
         raise DeriveError(f"cannot compile robot '{robot}': cannot write the build cache {root} ({exc.strerror or exc})") from None
+    with _lock(root, digest) as held:
+        if file_record(lib) == expected:  # built by the process we waited for
+            return lib
+        _remove_stale(root, digest if held else None)
+        _build(robot, snap, wrapper, cc, cflags, final, lib, expected, replace=bool(held))
+    return lib
+
+
+def _build(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: list[str], final: Path, lib: Path,
+           expected: str, replace: bool) -> None:
+    """Compile ``snap``'s sources (a copy of their bytes) with the wrapper in a temporary folder
+    beside ``final`` and rename it into place (``replace``: over a present ``final`` whose library
+    is not the expected one; only under the digest's lock)."""
+    global BUILDS
+    root = final.parent
+    cdir = snap.folder / "c"
+    prefix = f".{final.name}.tmp-"
     try:
+        tmp = Path(tempfile.mkdtemp(prefix=prefix, dir=root))
+    except OSError as exc:
+        raise DeriveError(f"cannot compile robot '{robot}': cannot write the build cache {root} ({exc.strerror or exc})") from None
+    register(tmp, True)
+    aside = None
+    try:
+        copy = tmp / "src"
+        copy.mkdir()
+        for name, data in snap.sources:
+            (copy / name).write_bytes(data)
         src = tmp / f"{robot}_runtime.c"
         src.write_text(wrapper)
-        sources = sorted(cdir.glob("*.c")) + [src]
+        sources = [copy / name for name, _ in snap.sources if name.endswith(".c")] + [src]
         objects = [tmp / f"{k:03d}_{s.stem}.o" for k, s in enumerate(sources)]
-        jobs = [cc + cflags + [f"-I{cdir}", "-c", str(s), "-o", str(o)] for s, o in zip(sources, objects)]
+        jobs = [cc + cflags + [f"-I{copy}", "-c", str(s), "-o", str(o)] for s, o in zip(sources, objects)]
         pool = ThreadPoolExecutor(max_workers=max(1, min(len(jobs), os.cpu_count() or 1)))
         try:
-            for future in [pool.submit(_run, job, robot) for job in jobs]:
+            for future in [pool.submit(_run, job, robot, copy, cdir) for job in jobs]:
                 future.result()  # the first failure, in source order
         finally:
             pool.shutdown(wait=True, cancel_futures=True)
-        _run(cc + cflags + ["-shared", "-o", str(tmp / lib.name)] + [str(o) for o in objects] + ["-lm"], robot)
+        built = tmp / lib.name
+        _run(cc + cflags + ["-shared", "-o", str(built)] + [str(o) for o in objects] + ["-lm"], robot, copy, cdir)
         for o in objects:
             o.unlink()
+        shutil.rmtree(copy)
+        if file_record(built) != expected:
+            raise DeriveError(f"cannot compile robot '{robot}': the library built from {cdir} does not hold its "
+                              f"record (do CFLAGS strip its data?)")
+        with open(built, "rb") as f:  # on disk before the rename makes it the cache's
+            os.fsync(f.fileno())
         os.chmod(tmp, 0o755)
         BUILDS += 1
+        if replace and os.path.lexists(final):  # a library that is not what its hash says: replaced
+            aside = Path(tempfile.mkdtemp(prefix=prefix, dir=root))
+            os.rename(final, aside / "old")
         try:
             os.rename(tmp, final)
         except OSError as exc:
-            if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY) or not lib.is_file():
+            if exc.errno not in (errno.EEXIST, errno.ENOTEMPTY, errno.EISDIR) or file_record(lib) != expected:
                 raise
-            shutil.rmtree(tmp, ignore_errors=True)  # another process built the same library first
+            shutil.rmtree(tmp, ignore_errors=True)  # a process that takes no lock built the same library first
+        forget(tmp)
     except OSError as exc:
         shutil.rmtree(tmp, ignore_errors=True)
+        forget(tmp)
         raise DeriveError(f"cannot compile robot '{robot}': {exc.filename or root}: {exc.strerror or exc}") from None
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
+        forget(tmp)
         raise
-    return lib
+    finally:
+        if aside is not None:
+            shutil.rmtree(aside, ignore_errors=True)

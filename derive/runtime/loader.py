@@ -22,13 +22,22 @@ holds them) and of freshly ``np.empty``-ed outputs; the C reads the data pointer
 array struct (numpy's C ABI, the fields the PyArray_DATA/NDIM/DIMS/DESCR/FLAGS macros of every
 numpy extension read) after checking the exact type, dtype (the float64 singleton), shape and
 C-contiguous/aligned flags, and answers "not mine" otherwise; Python then takes the general path
-(``np.asarray``, shape checks, broadcasting, ``<robot>_<fn>_batch``). That path is taken for
-everything else: lists, other dtypes, non-contiguous views, batches. The library is loaded as
+(``np.asarray``, type and shape checks, broadcasting, ``<robot>_<fn>_batch``). That path is taken for
+everything else: lists, other dtypes or byte orders, non-contiguous views, misaligned bytes,
+batches; it hands the C only native float64, C-contiguous, aligned copies (or the arrays
+themselves where they are that already). Numbers only, as in the generated Python: None for an
+input that is not IK's q0 or w, complex numbers, text or objects are a TypeError, a wrong shape a
+ValueError, each naming the function and the argument. The library is loaded as
 ``PyDLL`` for the one-state calls (no GIL release and reacquire around a sub-microsecond call)
 and as ``CDLL`` for the batch loops and IK (the GIL is released, so threads can run them in
 parallel). Before any ``_obj`` function is used, the loader checks the C's reading of the structs
 on known objects (arrays accepted and refused, a float); if any answer is wrong, every call takes
 the general path, which is correct, only slower.
+
+Before that, and before any other call into it, the loader compares the library's own record
+(``<robot>_rt_record``: robot, nq, nv, model hash, every function's input and output lengths;
+see :mod:`derive.runtime.build`) with the module it builds from the manifest: a library that is
+not this code is refused in one line, never called.
 """
 
 from __future__ import annotations
@@ -36,6 +45,7 @@ from __future__ import annotations
 import ctypes
 import json
 import math
+import re
 import types
 from pathlib import Path
 
@@ -43,7 +53,7 @@ import numpy as np
 
 from derive.codegen.generate import default_output
 from derive.errors import DeriveError
-from derive.runtime.build import Argument, Signature, library, signatures
+from derive.runtime.build import Argument, Signature, library, read_generated, record, signatures
 
 _LOADED: dict[tuple[str, str], types.ModuleType] = {}
 
@@ -55,31 +65,25 @@ def compiled(robot: str, generated: str | Path | None = None) -> types.ModuleTyp
     Raises a one-line :class:`DeriveError` when the robot's generated code is missing, no C
     compiler is found or compiling fails.
     """
+    if not isinstance(robot, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", robot):
+        raise DeriveError(f"derive.compiled: {robot!r} is not a robot name (letters, digits and _, as in models.yaml)")
     folder = Path(generated) if generated is not None else default_output()
-    rdir = folder / robot
-    mpath = rdir / "manifest.json"
-    if not mpath.is_file() or not (rdir / "c").is_dir():
-        raise DeriveError(f"robot '{robot}': no generated code at {rdir} (run `derive generate`, "
-                          "or pass generated=<the folder holding it>)")
-    try:
-        manifest = json.loads(mpath.read_text())
-    except (OSError, ValueError) as exc:
-        raise DeriveError(f"robot '{robot}': cannot read {mpath} ({exc}); run `derive generate`") from None
-    if manifest.get("robot") != robot:
-        raise DeriveError(f"robot '{robot}': {mpath} is the manifest of robot '{manifest.get('robot')}'")
-    sigs = signatures(manifest)
-    path = library(robot, rdir / "c", sigs)
+    snap = read_generated(robot, folder / robot)
+    sigs = signatures(snap.manifest)
+    path = library(robot, snap, sigs)
     key = (robot, str(path))
     if key not in _LOADED:
-        _LOADED[key] = _module(robot, manifest, sigs, path)
+        _LOADED[key] = _module(robot, snap.manifest, sigs, path)
     return _LOADED[key]
 
 
 def _module(robot: str, manifest: dict, sigs: list[Signature], path: Path) -> types.ModuleType:
     try:
-        pylib, clib = ctypes.PyDLL(str(path)), ctypes.CDLL(str(path))
+        clib = ctypes.CDLL(str(path))
     except OSError as exc:
         raise DeriveError(f"robot '{robot}': cannot load {path} ({exc})") from None
+    _check_record(robot, manifest, sigs, path, clib)
+    pylib = ctypes.PyDLL(str(path))  # the same library, already loaded
     fast = _init_fast(robot, pylib)
     mod = types.ModuleType(f"derive.compiled.{robot}",
                            f"Robot '{robot}': its generated C, compiled into {path}, called through ctypes.")
@@ -100,6 +104,34 @@ def _module(robot: str, manifest: dict, sigs: list[Signature], path: Path) -> ty
         fn.__module__ = mod.__name__
         setattr(mod, s.name, fn)
     return mod
+
+
+def _check_record(robot: str, manifest: dict, sigs: list[Signature], path: Path, lib: ctypes.CDLL) -> None:
+    """Before any call into the library: its own record (robot, nq, nv, model hash, every function's
+    input and output lengths) must be the module's, else a one-line DeriveError."""
+    want = json.loads(record(robot, manifest, sigs, None))
+    try:
+        get = getattr(lib, f"{robot}_rt_record")
+        get.argtypes = []
+        get.restype = ctypes.c_char_p
+        have = json.loads(get().decode())
+        have.pop("sources", None)
+    except (AttributeError, ValueError, UnicodeDecodeError):
+        have = None
+    if have != want:
+        if not isinstance(have, dict):
+            what = "holds no record of what it is"
+        else:
+            keys = [k for k in sorted(set(want) | set(have)) if want.get(k) != have.get(k)]
+            what = "is not this module's code: " + "; ".join(
+                f"{k} {_brief(have.get(k))} in the library, {_brief(want.get(k))} in the manifest" for k in keys)
+        raise DeriveError(f"robot '{robot}': {path} {what} (it changed after it was checked? "
+                          "call derive.compiled again)")
+
+
+def _brief(value) -> str:
+    text = json.dumps(value)
+    return text if len(text) <= 60 else f"{text[:57]}..."
 
 
 def _init_fast(robot: str, lib: ctypes.PyDLL) -> bool:
@@ -187,6 +219,39 @@ def _shape_error(s: Signature, a: Argument, x: np.ndarray) -> ValueError:
                       f"got shape {x.shape}")
 
 
+REAL_KINDS = "biuf"
+"""numpy dtype kinds taken as numbers (bool, signed and unsigned integers, floats), as float64;
+anything else (None, complex, text, objects) is a TypeError, not NaN or a dropped imaginary part."""
+
+
+def _given(value, x: np.ndarray) -> str:
+    if value is None:
+        return "None"
+    if x.dtype.kind == "c":
+        return f"complex numbers ({x.dtype})"
+    if x.dtype.kind in "USa":
+        return f"text ({x.dtype})"
+    if x.dtype.kind == "O" and x.ndim:
+        return "an array of Python objects (None, or not all numbers?)"
+    return f"{type(value).__name__} ({x.dtype})"
+
+
+def _real(s: Signature, a: Argument, value) -> np.ndarray:
+    """``value`` as a float64 array of native byte order; a TypeError or ValueError naming the function and argument."""
+    try:
+        x = np.asarray(value)
+    except (TypeError, ValueError) as exc:  # a ragged list, say
+        raise ValueError(f"{s.name}: {a.name} is not an array of numbers ({exc})") from None
+    if x.dtype is _FLOAT64:
+        return x
+    if x.dtype.kind not in REAL_KINDS:
+        raise TypeError(f"{s.name}: {a.name} must be real numbers (bool, int or float), got {_given(value, x)}")
+    return x.astype(_FLOAT64)  # native byte order too
+
+
+_FLOAT64 = np.dtype(np.float64)
+
+
 def _pointer(x: np.ndarray) -> int:
     return x.ctypes.data
 
@@ -202,7 +267,7 @@ def _general(s: Signature, batch, pointer):
                 arrays.append(None)
                 shapes.append(())
                 continue
-            x = np.asarray(value, dtype=np.float64)
+            x = _real(s, a, value)
             k = len(a.shape)
             if x.ndim < k:  # fewer axes than one state: one state, of any shape with the right size (as the Python)
                 if x.size != a.length:
@@ -232,11 +297,14 @@ def _general(s: Signature, batch, pointer):
                 argv += [None, 0]
                 continue
             if math.prod(sh) == 1:  # one value for every state: stride 0
-                x, stride = np.ascontiguousarray(x.reshape(a.shape)), 0
+                x, stride = x.reshape(a.shape), 0
             elif sh == shape:
-                x, stride = np.ascontiguousarray(x), a.length
+                stride = a.length
             else:
-                x, stride = np.ascontiguousarray(np.broadcast_to(x, shape + a.shape)), a.length
+                x, stride = np.broadcast_to(x, shape + a.shape), a.length
+            flags = x.flags
+            if not (flags.c_contiguous and flags.aligned):  # a view, or misaligned bytes (np.frombuffer)
+                x = np.array(x, order="C")
             keep.append(x)
             argv += [pointer(x), stride]
         results = [np.empty(shape + a.shape) for a in outputs]

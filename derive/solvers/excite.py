@@ -16,6 +16,7 @@ is reported next to the optimised one.
 
 from __future__ import annotations
 
+import io
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -24,6 +25,7 @@ import casadi as ca
 import numpy as np
 
 from derive.errors import DeriveError
+from derive.filesystem import write_atomically
 
 
 @dataclass
@@ -49,12 +51,18 @@ class Excitation:
         names = ["t"] + [f"{k}_{j}" for k in ("q", "qd", "qdd", "tau") for j in self.joints]
         return names, np.column_stack([self.t, self.q, self.qd, self.qdd, self.tau])
 
+    def csv(self) -> str:
+        """The trajectory as CSV text: a header (t, q_<c>..., qd_<c>..., qdd_<c>..., tau_<c>...), one sample a line."""
+        names, rows = self.table()
+        text = io.StringIO()
+        np.savetxt(text, rows, delimiter=",", header=",".join(names), comments="", fmt="%.12g")
+        return text.getvalue()
+
     def write_csv(self, path: str | Path) -> Path:
+        """Write :meth:`csv` to ``path`` atomically (the old file stays whole on any failure); returns it."""
         path = Path(path)
         path.parent.mkdir(parents=True, exist_ok=True)
-        names, rows = self.table()
-        np.savetxt(path, rows, delimiter=",", header=",".join(names), comments="", fmt="%.12g")
-        return path
+        return write_atomically(path, self.csv(), "excitation CSV")
 
     def summary(self) -> str:
         return (f"{self.robot}: excitation of period {self.period:g} s, {self.harmonics} harmonics, "
@@ -197,10 +205,22 @@ def random_coefficients(rng, n, m, harmonics, period, lo, hi, vmax, amax, P, V, 
     return x.T.reshape(-1)
 
 
-def check_options(robot: str, period: float, harmonics: int, samples: int) -> None:
-    if not (np.isfinite(period) and period > 0):
-        raise DeriveError(f"excite {robot}: --period must be a positive number of seconds, got {period:g}")
+MAX_SEED = 2**63 - 1
+MAX_ITERATIONS = 100_000
+PERIOD_RANGE = (0.01, 3600.0)  # s: a controller repeats the period; beyond an hour is not an excitation
+
+
+def check_options(robot: str, period: float, harmonics: int, samples: int, seed: int = 0,
+                  max_iterations: int = 200) -> None:
+    """One-line DeriveError for an option of ``derive excite`` out of its range."""
+    if not (math.isfinite(period) and PERIOD_RANGE[0] <= period <= PERIOD_RANGE[1]):
+        raise DeriveError(f"excite {robot}: --period must be {PERIOD_RANGE[0]:g} to {PERIOD_RANGE[1]:g} s, "
+                          f"got {period:g}")
     if harmonics < 1 or harmonics > 20:
         raise DeriveError(f"excite {robot}: --harmonics must be 1 to 20, got {harmonics}")
     if samples < 10 or samples > 2000:
         raise DeriveError(f"excite {robot}: --samples must be 10 to 2000, got {samples}")
+    if seed < 0 or seed > MAX_SEED:
+        raise DeriveError(f"excite {robot}: --seed must be 0 to 2^63 - 1, got {seed}")
+    if max_iterations < 1 or max_iterations > MAX_ITERATIONS:
+        raise DeriveError(f"excite {robot}: --iterations must be 1 to {MAX_ITERATIONS:,}, got {max_iterations}")

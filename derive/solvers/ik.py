@@ -250,6 +250,15 @@ def solve_ik(model, target, q0=None, frame: str = "tcp", *, weights=None, method
         raise DeriveError(f"robot '{robot.name}': p must have {prob.p_default.size} elements, got {pv.size}")
     if method not in ("auto", "lm", "opti"):
         raise DeriveError(f"solve_ik: method must be 'auto', 'lm' or 'opti', got {method!r}")
+    if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+        raise DeriveError(f"robot '{robot.name}': seed must be an integer >= 0, got {seed!r}")
+    if isinstance(max_iterations, bool) or not isinstance(max_iterations, (int, np.integer)) or max_iterations < 1:
+        raise DeriveError(f"robot '{robot.name}': max_iterations must be an integer >= 1, got {max_iterations!r}")
+    for what, x in (("timeout", timeout), ("tol_position", tol_position), ("tol_rotation", tol_rotation)):
+        if not (isinstance(x, (int, float, np.integer, np.floating)) and np.isfinite(x) and x > 0):
+            raise DeriveError(f"robot '{robot.name}': {what} must be a finite number > 0, got {x!r}")
+    if not (isinstance(rest_weight, (int, float, np.integer, np.floating)) and np.isfinite(rest_weight) and rest_weight >= 0):
+        raise DeriveError(f"robot '{robot.name}': rest_weight must be a finite number >= 0, got {rest_weight!r}")
     lo, hi = prob.lower, prob.upper
     mid = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (np.where(np.isfinite(lo), lo, 0.0) + np.where(np.isfinite(hi), hi, 0.0)), np.clip(0.0, lo, hi))
     q = mid if q0 is None else np.asarray(q0, dtype=float).reshape(-1)

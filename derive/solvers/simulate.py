@@ -22,11 +22,13 @@ from __future__ import annotations
 import csv
 import dataclasses
 import importlib.util
+import io
 import json
 import math
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Callable
 
 import numpy as np
 
@@ -34,6 +36,7 @@ from derive.codegen.generate import default_output, model_hash
 from derive.description.model import check_values
 from derive.description.robot import ModelError, Parameter, Robot
 from derive.errors import DeriveError
+from derive.filesystem import write_chunks_atomically
 from derive.reference import NumericRobot
 
 METHODS = ("rk4", "RK45", "DOP853", "LSODA", "Radau", "BDF")
@@ -112,20 +115,34 @@ def check_vector(values, n: int, what: str, robot: str) -> np.ndarray:
 
 
 MAX_STEPS = 10_000_000
-"""Most samples a run may produce (t / dt): the CSV of a longer run would not fit in memory."""
+"""Most samples a run may produce (t / dt): at tens of microseconds per step, hours of work."""
+MEMORY_BUDGET = 2**30
+"""Bytes the samples of one run may take (t, q, qd, the energies and their temporaries: 8 (3 nv + 6) per sample)."""
 
 
-def check_times(robot: str, t_end: float, dt: float, rtol: float = 1e-10, atol: float = 1e-12) -> int:
-    """The number of steps t_end / dt, after checking t, dt, rtol and atol; DeriveError naming the bad one."""
+def sample_bytes(nv: int) -> int:
+    """Bytes a run holds per sample of an nv-joint robot (see MEMORY_BUDGET)."""
+    return 8 * (3 * nv + 6)
+
+
+def check_times(robot: str, t_end: float, dt: float, rtol: float = 1e-10, atol: float = 1e-12, nv: int = 1) -> int:
+    """The number of steps t_end / dt, after checking t, dt, rtol and atol and that the samples of an
+    ``nv``-joint robot fit MEMORY_BUDGET; DeriveError naming the bad one."""
     for name, v in (("t", t_end), ("dt", dt), ("rtol", rtol), ("atol", atol)):
         if not (math.isfinite(v) and v > 0):
             raise DeriveError(f"robot '{robot}': simulate --{name} must be positive and finite, got {v:g}")
     if dt > t_end:
         raise DeriveError(f"robot '{robot}': simulate --dt {dt:g} is longer than --t {t_end:g}: no step to take")
-    steps = int(round(t_end / dt))
+    ratio = t_end / dt
+    steps = int(round(ratio)) if ratio < 2**62 else 2**62
     if steps > MAX_STEPS:
-        raise DeriveError(f"robot '{robot}': simulate --t {t_end:g} / --dt {dt:g} = {steps:.3g} steps, "
+        raise DeriveError(f"robot '{robot}': simulate --t {t_end:g} / --dt {dt:g} = {ratio:.3g} steps, "
                           f"more than {MAX_STEPS:.0e}; shorten --t or lengthen --dt")
+    need = (steps + 1) * sample_bytes(nv)
+    if need > MEMORY_BUDGET:
+        raise DeriveError(f"robot '{robot}': simulate --t {t_end:g} / --dt {dt:g} = {steps} steps: {steps + 1} samples "
+                          f"of {nv} joints would hold {need / 2**30:.2g} GiB (more than the budget of {MEMORY_BUDGET / 2**30:g} GiB); "
+                          "shorten --t or lengthen --dt")
     return steps
 
 
@@ -176,9 +193,14 @@ def numeric_reference(robot: Robot, q0, params: dict[str, float] | None = None) 
     return ref
 
 
+PROGRESS_STEPS = 2000
+"""The progress callback of :func:`simulate` is called every this many steps (or right-hand sides)."""
+
+
 def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: float = 1e-3, method: str = "rk4",
              params: dict[str, float] | None = None, generated: str | Path | None = None,
-             rtol: float = 1e-10, atol: float = 1e-12) -> Trajectory:
+             rtol: float = 1e-10, atol: float = 1e-12,
+             progress: Callable[[str, float], None] | None = None) -> Trajectory:
     """Integrate the generated ODE from (q0, qd0) over [0, t_end] with constant tau; samples every dt.
 
     Args:
@@ -187,11 +209,15 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
             (adaptive, rtol/atol; the solution is sampled every dt).
         params: parameter overrides, name -> value (the rest keep their defaults).
         generated: folder holding <robot>/ (default: ./generated, :func:`derive.codegen.generate.default_output`).
+        progress: called now and then as progress(stage, fraction done): stage "integrating" or "energies".
+
+    A state, an energy or a drift that is no longer finite (a torque of 1e300, a run that
+    diverges) is a DeriveError naming the time: every number of a returned Trajectory is finite.
     """
     robot.require_fixed_base("derive simulate")
     if method not in METHODS:
         raise DeriveError(f"simulate: unknown method {method!r} (known: {', '.join(METHODS)})")
-    steps = check_times(robot.name, t_end, dt, rtol, atol)
+    steps = check_times(robot.name, t_end, dt, rtol, atol, robot.nv)
     mod = load_generated(robot.name, generated)
     if mod.NQ != mod.NV:
         raise DeriveError(f"robot '{robot.name}': simulate needs nq == nv, got nq = {mod.NQ}, nv = {mod.NV}")
@@ -203,56 +229,112 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
     extra = (p,) if p.size else ()
     t = np.arange(steps + 1) * dt
     x0 = np.concatenate([q0, qd0])
+    report = progress or (lambda stage, done: None)
     start = time.perf_counter()
-    try:
-        xs = _integrate(mod, method, x0, tau, t, dt, extra, rtol, atol, robot.name)
-    except DeriveError:
-        raise
-    except (ZeroDivisionError, OverflowError, FloatingPointError, ValueError) as exc:  # math.sin(inf), x / 0
-        raise DeriveError(f"robot '{robot.name}': the generated dynamics failed during the run ({method}, "
-                          f"dt = {dt:g}): {type(exc).__name__}: {exc}") from None
-    wall = time.perf_counter() - start
-    bad = ~np.all(np.isfinite(xs), axis=1)
-    if bad.any():
-        raise DeriveError(f"robot '{robot.name}': the state is no longer finite at t = {t[np.argmax(bad)]:g} s "
-                          f"({method}, dt = {dt:g}); nothing written")
-    q, qd = xs[:, :n], xs[:, n:]
-    kinetic = np.array([ref.kinetic_energy(a, b) for a, b in zip(q, qd)])
-    potential = np.array([ref.potential_energy(a) for a in q])
-    return Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall)
+    # overflow to inf or nan is checked below, once: numpy's warnings would only repeat it
+    with np.errstate(all="ignore"):
+        try:
+            xs = _integrate(mod, method, x0, tau, t, dt, extra, rtol, atol, robot.name, report)
+        except DeriveError:
+            raise
+        except (ZeroDivisionError, OverflowError, FloatingPointError, ValueError) as exc:  # math.sin(inf), x / 0
+            raise DeriveError(f"robot '{robot.name}': the generated dynamics failed during the run ({method}, "
+                              f"dt = {dt:g}): {type(exc).__name__}: {exc}; nothing written") from None
+        wall = time.perf_counter() - start
+        bad = ~np.all(np.isfinite(xs), axis=1)
+        if bad.any():
+            raise DeriveError(f"robot '{robot.name}': the state is no longer finite at t = {t[np.argmax(bad)]:g} s "
+                              f"({method}, dt = {dt:g}); nothing written")
+        q, qd = xs[:, :n], xs[:, n:]
+        kinetic, potential = np.empty(len(t)), np.empty(len(t))
+        for k in range(len(t)):
+            try:
+                kinetic[k], potential[k] = ref.kinetic_energy(q[k], qd[k]), ref.potential_energy(q[k])
+            except (OverflowError, ValueError, ZeroDivisionError):
+                kinetic[k] = potential[k] = math.nan
+            if k % PROGRESS_STEPS == 0:
+                report("energies", k / len(t))
+        traj = Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall)
+        _check_finite(traj, dt)
+    return traj
+
+
+def _check_finite(traj: Trajectory, dt: float) -> None:
+    """A DeriveError naming the first time where an energy, the balance or the drift is not a finite number."""
+    for what, values in (("the kinetic energy", traj.kinetic), ("the potential energy", traj.potential),
+                         ("the energy E = T + U", traj.energy), ("the energy balance E - tau.(q - q0)", traj.balance)):
+        bad = ~np.isfinite(values)
+        if bad.any():
+            raise DeriveError(f"robot '{traj.robot}': {what} is no longer a finite number at t = {traj.t[np.argmax(bad)]:g} s "
+                              f"({traj.method}, dt = {dt:g}, tau = {np.array2string(traj.tau, precision=3)}); "
+                              "nothing written")
+    if not (math.isfinite(traj.energy_scale) and math.isfinite(traj.energy_drift)):
+        raise DeriveError(f"robot '{traj.robot}': the energy drift is not a finite number (energies up to "
+                          f"{np.abs(traj.energy).max():.3g} J); nothing written")
 
 
 def _integrate(mod, method: str, x0: np.ndarray, tau: np.ndarray, t: np.ndarray, dt: float, extra: tuple,
-               rtol: float, atol: float, robot: str) -> np.ndarray:
-    """States (len(t), 2 nv) from x0 by the generated rk4_step or scipy's solve_ivp on ode_rhs."""
+               rtol: float, atol: float, robot: str, report: Callable[[str, float], None]) -> np.ndarray:
+    """States (len(t), 2 nv) from x0 by the generated rk4_step or scipy's solve_ivp on ode_rhs.
+
+    RK4 stops at the first state that is not finite (the rest stays nan)."""
     n, steps = len(x0) // 2, len(t) - 1
     if method == "rk4":
-        xs = np.empty((steps + 1, 2 * n))
+        xs = np.full((steps + 1, 2 * n), np.nan)
         xs[0] = x = x0
         for k in range(1, steps + 1):
             xs[k] = x = mod.rk4_step(x, tau, dt, *extra)
-    else:
-        from scipy.integrate import solve_ivp
+            if not np.isfinite(x).all():
+                break
+            if k % PROGRESS_STEPS == 0:
+                report("integrating", k / steps)
+        return xs
+    from scipy.integrate import solve_ivp
 
-        jac = {"jac": lambda _, x: mod.ode_jac_x(x, tau, *extra)} if method in IMPLICIT else {}
-        sol = solve_ivp(lambda _, x: mod.ode_rhs(x, tau, *extra), (0.0, t[-1]), x0, method=method, t_eval=t,
-                        rtol=rtol, atol=atol, **jac)
-        if not sol.success:
-            raise DeriveError(f"robot '{robot}': {method} failed at t = {sol.t[-1]:g}: {sol.message}")
-        xs = sol.y.T
-    return xs
+    calls = [0]
+
+    def rhs(time_, x):
+        calls[0] += 1
+        if calls[0] % PROGRESS_STEPS == 0:
+            report("integrating", time_ / t[-1])
+        return mod.ode_rhs(x, tau, *extra)
+
+    jac = {"jac": lambda _, x: mod.ode_jac_x(x, tau, *extra)} if method in IMPLICIT else {}
+    sol = solve_ivp(rhs, (0.0, t[-1]), x0, method=method, t_eval=t, rtol=rtol, atol=atol, **jac)
+    if not sol.success:
+        raise DeriveError(f"robot '{robot}': {method} failed at t = {sol.t[-1]:g}: {sol.message}; nothing written")
+    return sol.y.T
+
+
+CSV_CHUNK = 10_000
+"""Rows formatted at a time when a CSV is written."""
+
+
+def csv_header(traj: Trajectory) -> list[str]:
+    """Columns t, q..., dq..., T, U, E."""
+    return ["t", *traj.joints, *(f"d{j}" for j in traj.joints), "T", "U", "E"]
 
 
 def write_csv(traj: Trajectory, path: str | Path) -> Path:
-    """Columns t, q..., dq..., T, U, E (one row per sample)."""
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    with path.open("w", newline="") as fh:
-        w = csv.writer(fh)
-        w.writerow(["t", *traj.joints, *(f"d{j}" for j in traj.joints), "T", "U", "E"])
-        for row in np.column_stack([traj.t, traj.q, traj.qd, traj.kinetic, traj.potential, traj.energy]):
-            w.writerow([repr(float(v)) for v in row])
-    return path
+    """Columns t, q..., dq..., T, U, E (one row per sample), written atomically: the rows go, a chunk
+    at a time, into a temporary file beside ``path`` that then replaces it (an old file stays as it
+    was on any failure; the DeriveError names ``path``)."""
+
+    def chunks():  # CSV_CHUNK rows at a time: the text of a long run need not fit in memory
+        buffer = io.StringIO()
+        csv.writer(buffer).writerow(csv_header(traj))
+        yield buffer.getvalue()
+        for k in range(0, len(traj.t), CSV_CHUNK):
+            part = slice(k, k + CSV_CHUNK)
+            rows = np.column_stack([traj.t[part], traj.q[part], traj.qd[part], traj.kinetic[part],
+                                    traj.potential[part], traj.energy[part]])
+            buffer = io.StringIO()
+            w = csv.writer(buffer)
+            for row in rows:
+                w.writerow([repr(float(v)) for v in row])
+            yield buffer.getvalue()
+
+    return write_chunks_atomically(Path(path), chunks(), "CSV", make_folder=True)
 
 
 def summary(traj: Trajectory) -> str:

@@ -32,7 +32,6 @@ the figure of a result is :func:`derive.plot.trajopt.plot_trajopt`.
 from __future__ import annotations
 
 import math
-import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -44,6 +43,7 @@ import numpy as np
 from derive.codegen.generate import default_output, generate
 from derive.description.model import Robot, load_robot
 from derive.errors import DeriveError
+from derive.filesystem import temporary_directory, write_atomically
 from derive.solvers.simulate import is_stale, load_generated
 from derive.symbolic.model import SXModel
 
@@ -52,6 +52,25 @@ TOL = 1e-3
 """Largest |q_integrated - q_optimised| at the knots (rad or m) a successful result may have."""
 LIMIT_TOL = 1e-6
 """Allowed excess over a limit, relative to max(1, |limit|): IPOPT's bound relaxation is 1e-8."""
+MAX_INTERVALS = 10_000
+"""Most intervals N of a transcription (the examples use 50 to 100)."""
+NLP_MEMORY_BUDGET = 4 * 2**30
+"""Bytes the expanded NLP may take (CasADi's SX graph, its derivatives, IPOPT's matrices), estimated by
+:func:`nlp_bytes`: a request above it is refused before anything is built."""
+NLP_BYTES_PER_OP = 1024
+"""Bytes per interval, per RNEA evaluation, per RNEA instruction and per joint (measured: about 530 for
+the planar 2R arm, 710 for the Panda, with hermite-simpson)."""
+EVALUATIONS = {"trapezoidal": 1, "hermite-simpson": 2, "rk4": 4}
+"""RNEA evaluations per interval of each transcription (knots, midpoints, RK4 stages)."""
+MAX_SUBSTEPS = 10_000
+DURATION_RANGE = (1e-3, 1e5)
+"""Shortest and longest T (s): outside, the transcription's scaling (h = T / N, qdd ~ 1 / T^2) leaves floats."""
+MAX_WEIGHT = 1e6
+"""Largest cost weight w_T, w_E or w_A: the weights are relative, and a huge one only breaks IPOPT's scaling."""
+MAX_COORDINATE = 1e6
+"""Largest |value| of a start, goal, boundary velocity (rad, m, rad/s, m/s) or waypoint coordinate (m)."""
+MAX_CHECK_STEPS = 200_000
+"""Most RK4 steps (intervals x substeps) of the independent check: 8 forward-dynamics calls each, in Python."""
 
 
 @dataclass(frozen=True)
@@ -117,9 +136,14 @@ class TrajoptResult:
         names = ["t"] + [f"{k}_{j}" for k in ("q", "qd", "qdd", "tau") for j in self.joints]
         return names, np.column_stack([self.t, self.q, self.qd, self.qdd, self.tau])
 
-    def write_csv(self, path: Path) -> None:
+    def csv_text(self) -> str:
+        """The CSV of :meth:`table`: a header line, then one line per knot (10 significant digits)."""
         names, rows = self.table()
-        np.savetxt(path, rows, delimiter=",", header=",".join(names), comments="", fmt="%.10g")
+        return "\n".join([",".join(names)] + [",".join(f"{v:.10g}" for v in row) for row in rows]) + "\n"
+
+    def write_csv(self, path: Path) -> Path:
+        """:meth:`csv_text` written to ``path`` atomically (an old file stays as it was on failure); returns it."""
+        return write_atomically(path, self.csv_text(), "CSV")
 
     def summary(self) -> str:
         s = self.stats
@@ -142,10 +166,12 @@ class TrajectoryOptimizer:
     """Transcribes and solves trajectory problems of one robot; the CasADi functions are built once."""
 
     def __init__(self, robot: Robot | str, p: Sequence[float] | None = None,
-                 forward_dynamics: Callable | None = None, log: Callable[[str], None] = lambda s: None):
-        robot.require_fixed_base("trajectory optimisation")
+                 forward_dynamics: Callable | None = None, log: Callable[[str], None] = lambda s: None,
+                 progress: Callable[[int, int], None] | None = None):
+        """``log`` gets a line per stage; ``progress(iteration, max_iter)`` is called after every IPOPT iteration."""
         self.robot = load_robot(robot) if isinstance(robot, str) else robot
-        self.log = log
+        self.robot.require_fixed_base("trajectory optimisation")
+        self.log, self.progress = log, progress
         self.model = SXModel(self.robot)
         s = self.model.sym
         self.joints = s.joint_names
@@ -159,6 +185,10 @@ class TrajectoryOptimizer:
         self._nlps: dict[tuple, dict] = {}
 
     # ---- model data ----
+
+    def nlp_bytes(self, intervals: int, method: str) -> int:
+        """Estimated memory of the expanded NLP of ``intervals`` intervals (see NLP_BYTES_PER_OP)."""
+        return intervals * EVALUATIONS[method] * self.rnea.n_instructions() * self.robot.nv * NLP_BYTES_PER_OP
 
     def limits(self, torque_limit=None) -> dict[str, np.ndarray]:
         """lower, upper, velocity, effort per coordinate of q (inf where the model has none).
@@ -246,12 +276,28 @@ class TrajectoryOptimizer:
         for what, n, least in (("intervals", intervals, 2), ("substeps", substeps, 1), ("max_iter", max_iter, 1)):
             if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or n < least:
                 raise bad(f"{what} must be an integer >= {least}, got {n!r}")
+        for what, n, most in (("intervals", intervals, MAX_INTERVALS), ("substeps", substeps, MAX_SUBSTEPS)):
+            if n > most:
+                raise bad(f"{what} must be at most {most}, got {n}")
+        if intervals * substeps > MAX_CHECK_STEPS:
+            raise bad(f"intervals x substeps = {intervals} x {substeps} RK4 steps of the independent check are more "
+                      f"than {MAX_CHECK_STEPS} (minutes of forward dynamics in Python); use fewer substeps")
+        need = self.nlp_bytes(intervals, method)
+        if need > NLP_MEMORY_BUDGET:
+            per = need / intervals
+            raise bad(f"{intervals} intervals ({method}) would need about {need / 2**30:.3g} GiB for the NLP "
+                      f"({per / 2**20:.3g} MiB per interval for this robot; budget {NLP_MEMORY_BUDGET / 2**30:g} GiB); "
+                      f"use at most {int(NLP_MEMORY_BUDGET // per)} intervals")
         for what, x in (("duration", duration), ("tol", tol)):
             if not _real(x) or not x > 0 or not math.isfinite(x):
                 raise bad(f"{what} must be a finite number > 0, got {x!r}")
+        if not DURATION_RANGE[0] <= duration <= DURATION_RANGE[1]:
+            raise bad(f"duration must be within {DURATION_RANGE[0]:g} .. {DURATION_RANGE[1]:g} s, got {duration:g}")
         for what, x in (("time_weight", time_weight), ("effort_weight", effort_weight), ("accel_weight", accel_weight)):
             if not _real(x) or not x >= 0 or not math.isfinite(x):
                 raise bad(f"{what} must be a finite number >= 0, got {x!r}")
+            if x > MAX_WEIGHT:
+                raise bad(f"{what} must be at most {MAX_WEIGHT:g} (the weights are relative), got {x:g}")
         if not (time_weight > 0 or effort_weight > 0):
             raise bad("time_weight and effort_weight must not both be 0")
         if time_weight and not free_time:
@@ -276,11 +322,12 @@ class TrajectoryOptimizer:
         passive = {c for j in passive for c in (by_joint.get(j) or [j])}
         for w in waypoints:
             try:
-                ok = 0.0 <= w.s <= 1.0 and len(w.position) == 3 and all(math.isfinite(float(x)) for x in w.position)
+                ok = 0.0 <= w.s <= 1.0 and len(w.position) == 3 and all(abs(float(x)) <= MAX_COORDINATE
+                                                                         for x in w.position)
             except (TypeError, ValueError):
                 ok = False
             if not ok:
-                raise bad(f"a waypoint needs s in [0, 1] and 3 finite coordinates, got {w}")
+                raise bad(f"a waypoint needs s in [0, 1] and 3 finite coordinates within {MAX_COORDINATE:g} m, got {w}")
             self.fk_position(w.frame)
         vec = self.vector
         start, goal = vec(start, "start"), vec(goal, "goal")
@@ -315,6 +362,11 @@ class TrajectoryOptimizer:
             opti.set_value(nlp["T"], duration)
         self._set_guess(nlp, start, goal, B, guess, duration)
         self.log(f"{name}: {method}, N = {intervals}: solving")
+        if self.progress is not None:
+            progress = self.progress
+            opti.callback(lambda i: progress(int(i), max_iter))
+        else:
+            opti.callback()
         try:
             sol = opti.solve()
         except RuntimeError as exc:  # IPOPT did not converge: judge its last iterate all the same
@@ -352,6 +404,10 @@ class TrajectoryOptimizer:
         if not np.all(np.isfinite(a)):
             i = int(np.flatnonzero(~np.isfinite(a))[0])
             raise DeriveError(f"trajopt {self.robot.name}: {what} {self.joints[i]} = {a[i]:g} is not a finite number")
+        if np.any(np.abs(a) > MAX_COORDINATE):
+            i = int(np.argmax(np.abs(a)))
+            raise DeriveError(f"trajopt {self.robot.name}: {what} {self.joints[i]} = {a[i]:g} is beyond "
+                              f"{MAX_COORDINATE:g} (rad or m)")
         return a
 
     def _precheck(self, start, goal, start_qd, goal_qd, lim, active) -> str:
@@ -487,10 +543,17 @@ class TrajectoryOptimizer:
     # ---- the independent check ----
 
     def _check(self, res: TrajoptResult, start, goal, start_qd, goal_qd, lim, waypoints, substeps, tol) -> None:
-        sim_q, sim_qd = simulate(self.forward_dynamics, res, substeps, restart=True)
-        res.integration_error = float(np.abs(sim_q - res.q).max())
-        res.velocity_error = float(np.abs(sim_qd - res.qd).max())
-        res.drift = float(np.abs(simulate(self.forward_dynamics, res, substeps)[0] - res.q).max())
+        # an iterate IPOPT gave up on can make the integration overflow: that is a failed check, not a fault
+        with np.errstate(all="ignore"):
+            try:
+                sim_q, sim_qd = simulate(self.forward_dynamics, res, substeps, restart=True)
+                res.integration_error = float(np.abs(sim_q - res.q).max())
+                res.velocity_error = float(np.abs(sim_qd - res.qd).max())
+                res.drift = float(np.abs(simulate(self.forward_dynamics, res, substeps)[0] - res.q).max())
+            except (ValueError, OverflowError, ZeroDivisionError, FloatingPointError):  # math.sin(inf) and friends
+                res.integration_error = res.velocity_error = res.drift = math.inf
+            if math.isnan(res.integration_error):
+                res.integration_error = math.inf
         excess = []
         for X, lo, hi, what in ((res.q, lim["lower"], lim["upper"], "position"),
                                 (res.qd, -lim["velocity"], lim["velocity"], "velocity"),
@@ -598,9 +661,9 @@ def generated_forward_dynamics(robot: Robot, p: np.ndarray, log: Callable[[str],
         module = load_generated(name, root)
     else:
         log(f"{name}: {root / name} is missing or stale: generating it into a temporary folder for the check")
-        with tempfile.TemporaryDirectory() as tmp:
-            generate({name: robot}, Path(tmp) / "gen", log=lambda s: None)
-            module = load_generated(name, Path(tmp) / "gen")
+        with temporary_directory(prefix="derive-trajopt-") as tmp:  # removed by the signal handlers too
+            generate({name: robot}, tmp / "gen", log=lambda s: None)
+            module = load_generated(name, tmp / "gen")
     fd = module.forward_dynamics
     if module.PARAMETERS:
         return lambda q, qd, tau: fd(q, qd, tau, p)

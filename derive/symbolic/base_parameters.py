@@ -39,6 +39,7 @@ from dataclasses import dataclass
 import casadi as ca
 import numpy as np
 
+from derive.description.expr import evaluate
 from derive.description.robot import Robot
 from derive.errors import DeriveError
 from derive.symbolic.dynamics import NewtonEuler
@@ -209,11 +210,12 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     order = [j for j in preference(len(reg.bodies), n) if live[j]]
     Rg = np.linalg.qr(Wn[:, order], mode="r")
     dist = np.abs(np.diag(Rg))
-    keep = dist > RANK_TOL * (d[0] if d.size else 1.0)
+    threshold = RANK_TOL * (d[0] if d.size else 1.0)
+    keep = dist > threshold
     columns = tuple(sorted(order[k] for k in np.flatnonzero(keep)))
     if len(columns) != rank or (keep.any() and (~keep).any() and dist[keep].min() < GAP * dist[~keep].max()):
-        raise DeriveError(f"robot '{robot.name}': no clear numerical rank of the regressor (pivoted QR: {rank}, "
-                          f"chosen columns: {len(columns)}); its geometry may be nearly degenerate")
+        raise _degenerate(robot, params, names, "no clear numerical rank of the regressor (pivoted QR: "
+                          f"{rank}, chosen columns: {len(columns)})", _borderline(order, dist, threshold))
     dependent = [j for j in range(n) if j not in columns]
     B = np.linalg.lstsq(Wn[:, list(columns)], Wn[:, dependent], rcond=None)[0]
     B[np.abs(B) < SNAP] = 0.0
@@ -228,9 +230,69 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     rank2 = int(np.sum(s2 > RANK_TOL * s2[0])) if s2.size else 0
     err = np.abs(W2[:, list(columns)] @ K - W2).max() / max(np.abs(W2).max(), 1e-300)
     if rank2 != rank or err > 1e-9:
-        raise DeriveError(f"robot '{robot.name}': the base parameters found at one set of states do not hold at "
-                          f"another (rank {rank} vs {rank2}, residual {err:.1e}); its geometry may be nearly degenerate")
+        Wn2 = W2 / np.where(live, np.linalg.norm(W2, axis=0), 1.0)
+        dist2 = np.abs(np.diag(np.linalg.qr(Wn2[:, order], mode="r")))
+        column_err = np.abs(W2[:, list(columns)] @ K - W2).max(axis=0) / max(np.abs(W2).max(), 1e-300)
+        involved = (_borderline(order, dist, threshold)
+                    + _borderline(order, dist2, RANK_TOL * (s2[0] if s2.size else 1.0)))
+        involved += [(j, float(column_err[j])) for j in np.argsort(-column_err) if column_err[j] > 1e-9]
+        raise _degenerate(robot, params, names, f"the base parameters found at one set of states do not hold at "
+                          f"another (rank {rank} vs {rank2}, residual {err:.1e})", involved)
     return BaseParameters(robot.name, names, columns, _names(names, columns, K), K, seed, count)
+
+
+def _borderline(order: list[int], dist: np.ndarray, threshold: float) -> list[tuple[int, float]]:
+    """(column, distance / threshold) of the columns near the rank tolerance: neither clearly independent
+    of the columns before them nor clearly dependent (within a factor GAP of the threshold)."""
+    near = [(order[k], float(x / threshold)) for k, x in enumerate(dist) if threshold / GAP < x < threshold * GAP]
+    return sorted(near, key=lambda item: abs(math.log(max(item[1], 1e-300))))
+
+
+def _suspects(robot: Robot, params: dict | None) -> list[str]:
+    """Joint axes and origins with a component nearly but not exactly zero: 1e-5 of the axis' largest, or
+    1e-6 m or rad; what usually makes a model nearly degenerate (an axis almost parallel to another)."""
+    env = {**robot.parameter_defaults, **(params or {})}
+    out = []
+    for j in robot.joints:
+        for name, vec, tol, relative in (("axis", j.axis, 1e-5, True), ("axis2", j.axis2, 1e-5, True),
+                                         ("origin xyz", j.origin.xyz, 1e-6, False),
+                                         ("origin rpy", j.origin.rpy, 1e-6, False)):
+            if vec is None or j.type == "fixed" and name.startswith("axis"):
+                continue
+            try:
+                v = [float(evaluate(x, env)) for x in vec]
+            except (ValueError, TypeError, ArithmeticError):
+                continue
+            scale = max(abs(x) for x in v) if relative else 1.0
+            if any(0.0 < abs(x) < tol * scale for x in v):
+                out.append(f"joint {j.name} {name} [{', '.join(f'{x:.3g}' for x in v)}]")
+    return out
+
+
+def _degenerate(robot: Robot, params: dict | None, names: tuple[str, ...], problem: str,
+                involved: list[tuple[int, float]]) -> DeriveError:
+    """The refusal of a nearly degenerate model: the robot, the parameters and joints involved, the fix."""
+    seen: list[int] = []
+    for j, _ in involved:
+        if j not in seen:
+            seen.append(j)
+    shown = [names[j] for j in seen[:6]] + (["..."] if len(seen) > 6 else [])
+    moved_by = {j.child: j.name for j in robot.joints}
+    moved_by.update({c.name: c.joint for c in robot.joint_coordinates})
+    joints: list[str] = []
+    for j in seen:
+        joint = moved_by.get(names[j].partition("_")[2])
+        if joint and joint not in joints:
+            joints.append(joint)
+    text = f"robot '{robot.name}': {problem}: its geometry is nearly degenerate"
+    if shown:
+        text += (f"; the regressor columns of {', '.join(shown)} are nearly, not exactly, dependent on the others"
+                 + (f" (links moved by joint{'s' * (len(joints) > 1)} {', '.join(joints)})" if joints else ""))
+    suspects = _suspects(robot, params)
+    if suspects:
+        text += f"; suspect {'; '.join(suspects[:4])}"
+    return DeriveError(text + ": make nearly parallel joint axes exactly parallel and nearly zero offsets exactly 0 "
+                       "(or clearly apart, beyond about 1e-6)")
 
 
 def _names(parameters: tuple[str, ...], columns: tuple[int, ...], K: np.ndarray) -> tuple[str, ...]:

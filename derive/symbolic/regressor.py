@@ -11,7 +11,9 @@ parameters in Pinocchio's order (``pinocchio.Inertia.toDynamicParameters()``)
 inertia armature + gear_ratio^2 motor_inertia, the viscous and the Coulomb friction coefficients
 (columns qdd_k, qd_k and sign(qd_k)). A multi-DOF joint is one body: the massless bodies between
 its elementary motions have no parameters. A mimic joint's body is a body like any other; its
-columns enter its leader's row times the multiplier (tau = G^T tau_bodies).
+columns enter its leader's row times the multiplier (tau = G^T tau_bodies). A mimic joint's own
+actuator (multiplier a) has no parameters of its own: it adds a^2 I_a, a^2 f_v and |a| f_c to its
+leader's (a f_c sign(a qd) = |a| f_c sign(qd)), the values that inverse dynamics needs.
 
 Y is derived from a linear-in-parameters Newton-Euler recursion, not by differentiating inverse
 dynamics: body i's wrench at its origin is linear in its parameters,
@@ -86,10 +88,18 @@ class Regressor:
             m, h, I = self.ne.root_mass if i < 0 else (self.ne.bodies[i].m, self.ne.bodies[i].h, self.ne.bodies[i].I_o)
             out += _body_parameters(m, h, I)
         value = self.sym.value
+        acting = {c.name: [c.actuator] for c in self.robot.joint_coordinates}
+        scale = {c.name: [1.0] for c in self.robot.joint_coordinates}
+        for joint, a in self.robot.mimic_actuators:  # a mimic joint's own actuator, through G
+            acting[joint.mimic.joint].append(a)
+            scale[joint.mimic.joint].append(float(joint.mimic.multiplier))
         for c in self.robot.joint_coordinates:
-            a = c.actuator
-            out += [value(a.armature) + value(a.gear_ratio) ** 2 * value(a.motor_inertia), value(a.viscous),
-                    value(a.coulomb)]
+            terms = [[value(a.armature) + value(a.gear_ratio) ** 2 * value(a.motor_inertia), value(a.viscous),
+                      value(a.coulomb)] for a in acting[c.name]]
+            own = terms[0]
+            for s, (ia, fv, fc) in zip(scale[c.name][1:], terms[1:]):
+                own = [own[0] + s * s * ia, own[1] + s * s * fv, own[2] + abs(s) * fc]
+            out += own
         return ca.vertcat(*[ca.SX(v) for v in out])
 
     def parameter_vector(self, params: dict | None = None) -> list[float]:

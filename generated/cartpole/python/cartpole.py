@@ -28,14 +28,61 @@ PARAMETERS = {}
 DEFAULT_P = np.array([])
 
 
-def _array(value, n, name):
-    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of one element."""
-    v = np.asarray(value, dtype=float)
+_FLOAT = np.dtype(float)
+
+
+def _array(value, n, function, name):
+    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of
+    one element. Numbers only (bool, int, float): None, complex or text is a TypeError, a wrong
+    shape a ValueError, each naming the function and the argument."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype is not _FLOAT:
+        if v.dtype.kind not in "biuf":
+            raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+        v = v.astype(float)
     if v.ndim == 0 and n == 1:
         return v.reshape(1)
     if v.ndim == 0 or v.shape[-1] != n:
-        raise ValueError(f"{name} must have {n} elements in its last axis, got shape {v.shape}")
+        raise ValueError(f"{function}: {name} must have {n} elements in its last axis, got shape {v.shape}")
     return v
+
+
+def _given(value, v):
+    """What a value that is not real numbers is, for an error message."""
+    if value is None:
+        return "None"
+    if v.dtype.kind == "c":
+        return f"complex numbers ({v.dtype})"
+    if v.dtype.kind in "USa":
+        return f"text ({v.dtype})"
+    if v.dtype.kind == "O" and v.ndim:
+        return "an array of Python objects (None, or not all numbers?)"
+    return f"{type(value).__name__} ({v.dtype})"
+
+
+def _real(value, function, name):
+    """value as a float array of any shape: numbers only (see _array)."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:  # a ragged list
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+    return v.astype(float, copy=False)
+
+
+def _matrix(value, rows, cols, function, name):
+    """value as a float array (..., rows, cols), or one state given flat (rows * cols,); numbers only (see _array)."""
+    v = _real(value, function, name)
+    if v.shape[-2:] == (rows, cols):
+        return v
+    if v.shape == (rows * cols,):
+        return v.reshape(rows, cols)
+    raise ValueError(f"{function}: {name} must have shape (..., {rows}, {cols}) (or {rows * cols} elements for one "
+                     f"state), got shape {v.shape}")
 
 
 _CHUNK = 16384
@@ -245,12 +292,10 @@ def _ik_batch(solve, n, T, *vectors):
     when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
     (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
     (...) an int array, each state's entries those solve gives for it alone."""
-    T = np.asarray(T, dtype=float)
+    T = np.asarray(T, dtype=float)  # checked by the caller (_matrix, _array): (..., 4, 4) and (..., k)
     vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
     if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
         return None
-    if T.shape[-2:] != (4, 4):
-        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
     shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
     T = np.broadcast_to(T, shape + (4, 4))
     vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]
@@ -285,7 +330,7 @@ def fk_tcp(q):
     out T [4x4]
     5 ops: 0 mul, 3 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "fk_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_tcp_chunk, (q,), 0, ((4, 4),), fixed=_fk_tcp_fixed)
     # one state: Python floats
@@ -330,7 +375,7 @@ def jacobian_tcp(q):
     out J [6x2]
     6 ops: 0 mul, 4 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "jacobian_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_tcp_chunk, (q,), 1, ((6, 2),), fixed=_jacobian_tcp_fixed)
     # one state: Python floats
@@ -380,8 +425,8 @@ def jdot_qd_tcp(q, qd):
     out a [6]
     5 ops: 3 mul, 0 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
+    q = _array(q, 2, "jdot_qd_tcp", "q")
+    qd = _array(qd, 2, "jdot_qd_tcp", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_tcp_chunk, (q, qd), 2, ((6,),), fixed=_jdot_qd_tcp_fixed)
     # one state: Python floats
@@ -426,9 +471,9 @@ def frame_acceleration_tcp(q, qd, qdd):
     out a [6]
     13 ops: 7 mul, 4 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
+    q = _array(q, 2, "frame_acceleration_tcp", "q")
+    qd = _array(qd, 2, "frame_acceleration_tcp", "qd")
+    qdd = _array(qdd, 2, "frame_acceleration_tcp", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 6, ((6,),), fixed=_frame_acceleration_tcp_fixed)
     # one state: Python floats
@@ -490,7 +535,7 @@ def fk_jacobian_tcp(q):
     out J [6x2]
     7 ops: 0 mul, 5 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "fk_jacobian_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_jacobian_tcp_chunk, (q,), 1, ((4, 4), (6, 2),), fixed=_fk_jacobian_tcp_fixed)
     # one state: Python floats
@@ -548,7 +593,7 @@ def mass_matrix(q):
     out M [2x2]
     2 ops: 1 mul, 0 add, 0 div, 1 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "mass_matrix", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_mass_matrix_chunk, (q,), 1, ((2, 2),), fixed=_mass_matrix_fixed)
     # one state: Python floats
@@ -592,8 +637,8 @@ def coriolis_matrix(q, qd):
     out C [2x2]
     4 ops: 2 mul, 1 add, 0 div, 1 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
+    q = _array(q, 2, "coriolis_matrix", "q")
+    qd = _array(qd, 2, "coriolis_matrix", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_coriolis_matrix_chunk, (q, qd), 1, ((2, 2),), fixed=_coriolis_matrix_fixed)
     # one state: Python floats
@@ -640,7 +685,7 @@ def gravity(q):
     out g [2]
     9 ops: 5 mul, 2 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "gravity", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_gravity_chunk, (q,), 4, ((2,),))
     # one state: Python floats
@@ -690,8 +735,8 @@ def bias(q, qd):
     out h [2]
     12 ops: 7 mul, 3 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
+    q = _array(q, 2, "bias", "q")
+    qd = _array(qd, 2, "bias", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bias_chunk, (q, qd), 4, ((2,),))
     # one state: Python floats
@@ -749,9 +794,9 @@ def inverse_dynamics(q, qd, qdd):
     out tau [2]
     22 ops: 13 mul, 7 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
+    q = _array(q, 2, "inverse_dynamics", "q")
+    qd = _array(qd, 2, "inverse_dynamics", "qd")
+    qdd = _array(qdd, 2, "inverse_dynamics", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_chunk, (q, qd, qdd), 5, ((2,),))
     # one state: Python floats
@@ -830,9 +875,9 @@ def inverse_dynamics_derivatives(q, qd, qdd):
     out dtau [2x4]
     27 ops: 16 mul, 9 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
+    q = _array(q, 2, "inverse_dynamics_derivatives", "q")
+    qd = _array(qd, 2, "inverse_dynamics_derivatives", "qd")
+    qdd = _array(qdd, 2, "inverse_dynamics_derivatives", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd), 7, ((2, 4),), fixed=_inverse_dynamics_derivatives_fixed)
     # one state: Python floats
@@ -928,9 +973,9 @@ def forward_dynamics(q, qd, tau):
     out qdd [2]
     23 ops: 12 mul, 7 add, 2 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    tau = _array(tau, 2, "tau")
+    q = _array(q, 2, "forward_dynamics", "q")
+    qd = _array(qd, 2, "forward_dynamics", "qd")
+    tau = _array(tau, 2, "forward_dynamics", "tau")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_chunk, (q, qd, tau), 4, ((2,),))
     # one state: Python floats
@@ -1012,10 +1057,10 @@ def inverse_dynamics_fext(q, qd, qdd, w):
     out tau [2]
     30 ops: 15 mul, 13 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    w = _array(w, 6, "w")
+    q = _array(q, 2, "inverse_dynamics_fext", "q")
+    qd = _array(qd, 2, "inverse_dynamics_fext", "qd")
+    qdd = _array(qdd, 2, "inverse_dynamics_fext", "qdd")
+    w = _array(w, 6, "inverse_dynamics_fext", "w")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w), 6, ((2,),))
     # one state: Python floats
@@ -1112,10 +1157,10 @@ def forward_dynamics_fext(q, qd, tau, w):
     out qdd [2]
     31 ops: 14 mul, 13 add, 2 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    tau = _array(tau, 2, "tau")
-    w = _array(w, 6, "w")
+    q = _array(q, 2, "forward_dynamics_fext", "q")
+    qd = _array(qd, 2, "forward_dynamics_fext", "qd")
+    tau = _array(tau, 2, "forward_dynamics_fext", "tau")
+    w = _array(w, 6, "forward_dynamics_fext", "w")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w), 6, ((2,),))
     # one state: Python floats
@@ -1211,7 +1256,7 @@ def com(q):
     out c [3]
     9 ops: 3 mul, 2 add, 2 div, 2 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "com", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_chunk, (q,), 2, ((3,),), fixed=_com_fixed)
     # one state: Python floats
@@ -1266,7 +1311,7 @@ def com_jacobian(q):
     out J [3x2]
     7 ops: 2 mul, 1 add, 2 div, 2 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "com_jacobian", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_jacobian_chunk, (q,), 1, ((3, 2),), fixed=_com_jacobian_fixed)
     # one state: Python floats
@@ -1319,7 +1364,7 @@ def centroidal_map(q):
     out A [6x2]
     18 ops: 6 mul, 8 add, 2 div, 2 trig
     """
-    q = _array(q, 2, "q")
+    q = _array(q, 2, "centroidal_map", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_centroidal_map_chunk, (q,), 3, ((6, 2),), fixed=_centroidal_map_fixed)
     # one state: Python floats
@@ -1398,8 +1443,8 @@ def ode_rhs(x, u):
     out xdot [4]
     23 ops: 12 mul, 7 add, 2 div, 2 trig
     """
-    x = _array(x, 4, "x")
-    u = _array(u, 2, "u")
+    x = _array(x, 4, "ode_rhs", "x")
+    u = _array(u, 2, "ode_rhs", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_rhs_chunk, (x, u), 4, ((4,),))
     # one state: Python floats
@@ -1480,8 +1525,8 @@ def ode_jac_x(x, u):
     out A [4x4]
     57 ops: 30 mul, 19 add, 6 div, 2 trig
     """
-    x = _array(x, 4, "x")
-    u = _array(u, 2, "u")
+    x = _array(x, 4, "ode_jac_x", "x")
+    u = _array(u, 2, "ode_jac_x", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_x_chunk, (x, u), 10, ((4, 4),), fixed=_ode_jac_x_fixed)
     # one state: Python floats
@@ -1638,8 +1683,8 @@ def ode_jac_u(x, u):
     out B [4x2]
     10 ops: 4 mul, 3 add, 2 div, 1 trig
     """
-    x = _array(x, 4, "x")
-    u = _array(u, 2, "u")
+    x = _array(x, 4, "ode_jac_u", "x")
+    u = _array(u, 2, "ode_jac_u", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_u_chunk, (x, u), 3, ((4, 2),), fixed=_ode_jac_u_fixed)
     # one state: Python floats
@@ -1703,9 +1748,9 @@ def regressor(q, qd, qdd):
     out Y [2x26]
     22 ops: 11 mul, 7 add, 0 div, 2 trig, 2 other
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
+    q = _array(q, 2, "regressor", "q")
+    qd = _array(qd, 2, "regressor", "qd")
+    qdd = _array(qdd, 2, "regressor", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_regressor_chunk, (q, qd, qdd), 6, ((2, 26),), fixed=_regressor_fixed)
     # one state: Python floats
@@ -1800,9 +1845,9 @@ def base_regressor(q, qd, qdd):
     out Y_b [2x8]
     19 ops: 9 mul, 6 add, 0 div, 2 trig, 2 other
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
+    q = _array(q, 2, "base_regressor", "q")
+    qd = _array(qd, 2, "base_regressor", "qd")
+    qdd = _array(qdd, 2, "base_regressor", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_base_regressor_chunk, (q, qd, qdd), 5, ((2, 8),), fixed=_base_regressor_fixed)
     # one state: Python floats
@@ -1889,8 +1934,8 @@ def bundle_control(q, qd):
     out jdot_qd_tcp [6]
     21 ops: 11 mul, 8 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
+    q = _array(q, 2, "bundle_control", "q")
+    qd = _array(qd, 2, "bundle_control", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_control_chunk, (q, qd), 2, ((2, 2), (2,), (4, 4), (6, 2), (6,),), fixed=_bundle_control_fixed)
     # one state: Python floats
@@ -1996,9 +2041,9 @@ def bundle_computed_torque(q, qd, qdd):
     out frame_acceleration_tcp [6]
     36 ops: 18 mul, 16 add, 0 div, 2 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
+    q = _array(q, 2, "bundle_computed_torque", "q")
+    qd = _array(qd, 2, "bundle_computed_torque", "qd")
+    qdd = _array(qdd, 2, "bundle_computed_torque", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_computed_torque_chunk, (q, qd, qdd), 6, ((2,), (4, 4), (6, 2), (6,),), fixed=_bundle_computed_torque_fixed)
     # one state: Python floats
@@ -2130,8 +2175,9 @@ def rk4_step(x, u, dt):
     out x_next [4]
     cost: the arithmetic of cartpole_ode_rhs per call, plus loops
     """
-    x = _array(x, 4, "x")
-    dt = _array(dt, 1, "dt")
+    x = _array(x, 4, "rk4_step", "x")
+    u = _array(u, 2, "rk4_step", "u")
+    dt = _array(dt, 1, "rk4_step", "dt")
     h = float(dt[0]) if dt.ndim == 1 else dt  # a batch of steps (..., 1) broadcasts against x (..., n)
     k1 = ode_rhs(x, u)
     k2 = ode_rhs(x + 0.5 * h * k1, u)
@@ -2152,6 +2198,9 @@ def ik_tcp(T, q0=None, w=None):
     batch: T (..., 4, 4) and q0, w (..., k) or None broadcast; solved one state after the other
     (a Python loop: the solver iterates per state); status is then an int array (...).
     """
+    T = _matrix(T, 4, 4, "ik_tcp", "T")
+    q0 = None if q0 is None else _array(q0, 2, "ik_tcp", "q0")
+    w = None if w is None else _array(w, 6, "ik_tcp", "w")
     batch = _ik_batch(ik_tcp, 2, T, q0, w)
     if batch is not None:  # a batch: one state after the other
         return batch
@@ -2172,4 +2221,5 @@ def manipulability_tcp(q):
     out mu [3]
     cost: the arithmetic of cartpole_jacobian_tcp per call, plus loops
     """
+    q = _array(q, 2, "manipulability_tcp", "q")
     return _manipulability(jacobian_tcp(q).take([0, 2], axis=-2))

@@ -28,14 +28,61 @@ PARAMETERS = {}
 DEFAULT_P = np.array([])
 
 
-def _array(value, n, name):
-    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of one element."""
-    v = np.asarray(value, dtype=float)
+_FLOAT = np.dtype(float)
+
+
+def _array(value, n, function, name):
+    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of
+    one element. Numbers only (bool, int, float): None, complex or text is a TypeError, a wrong
+    shape a ValueError, each naming the function and the argument."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype is not _FLOAT:
+        if v.dtype.kind not in "biuf":
+            raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+        v = v.astype(float)
     if v.ndim == 0 and n == 1:
         return v.reshape(1)
     if v.ndim == 0 or v.shape[-1] != n:
-        raise ValueError(f"{name} must have {n} elements in its last axis, got shape {v.shape}")
+        raise ValueError(f"{function}: {name} must have {n} elements in its last axis, got shape {v.shape}")
     return v
+
+
+def _given(value, v):
+    """What a value that is not real numbers is, for an error message."""
+    if value is None:
+        return "None"
+    if v.dtype.kind == "c":
+        return f"complex numbers ({v.dtype})"
+    if v.dtype.kind in "USa":
+        return f"text ({v.dtype})"
+    if v.dtype.kind == "O" and v.ndim:
+        return "an array of Python objects (None, or not all numbers?)"
+    return f"{type(value).__name__} ({v.dtype})"
+
+
+def _real(value, function, name):
+    """value as a float array of any shape: numbers only (see _array)."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:  # a ragged list
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+    return v.astype(float, copy=False)
+
+
+def _matrix(value, rows, cols, function, name):
+    """value as a float array (..., rows, cols), or one state given flat (rows * cols,); numbers only (see _array)."""
+    v = _real(value, function, name)
+    if v.shape[-2:] == (rows, cols):
+        return v
+    if v.shape == (rows * cols,):
+        return v.reshape(rows, cols)
+    raise ValueError(f"{function}: {name} must have shape (..., {rows}, {cols}) (or {rows * cols} elements for one "
+                     f"state), got shape {v.shape}")
 
 
 _CHUNK = 16384
@@ -245,12 +292,10 @@ def _ik_batch(solve, n, T, *vectors):
     when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
     (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
     (...) an int array, each state's entries those solve gives for it alone."""
-    T = np.asarray(T, dtype=float)
+    T = np.asarray(T, dtype=float)  # checked by the caller (_matrix, _array): (..., 4, 4) and (..., k)
     vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
     if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
         return None
-    if T.shape[-2:] != (4, 4):
-        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
     shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
     T = np.broadcast_to(T, shape + (4, 4))
     vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]
@@ -285,7 +330,7 @@ def fk_tcp(q):
     out T [4x4]
     159 ops: 92 mul, 53 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "fk_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_tcp_chunk, (q,), 30, ((4, 4),), fixed=_fk_tcp_fixed)
     # one state: Python floats
@@ -645,7 +690,7 @@ def jacobian_tcp(q):
     out J [6x7]
     193 ops: 102 mul, 79 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "jacobian_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_tcp_chunk, (q,), 28, ((6, 7),), fixed=_jacobian_tcp_fixed)
     # one state: Python floats
@@ -1077,8 +1122,8 @@ def jdot_qd_tcp(q, qd):
     out a [6]
     361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "jdot_qd_tcp", "q")
+    qd = _array(qd, 7, "jdot_qd_tcp", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_tcp_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
@@ -1836,9 +1881,9 @@ def frame_acceleration_tcp(q, qd, qdd):
     out a [6]
     376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "frame_acceleration_tcp", "q")
+    qd = _array(qd, 7, "frame_acceleration_tcp", "qd")
+    qdd = _array(qdd, 7, "frame_acceleration_tcp", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
@@ -2626,7 +2671,7 @@ def fk_panda_link8(q):
     out T [4x4]
     143 ops: 80 mul, 49 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "fk_panda_link8", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_panda_link8_chunk, (q,), 28, ((4, 4),), fixed=_fk_panda_link8_fixed)
     # one state: Python floats
@@ -2953,7 +2998,7 @@ def jacobian_panda_link8(q):
     out J [6x7]
     193 ops: 102 mul, 79 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "jacobian_panda_link8", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_panda_link8_chunk, (q,), 28, ((6, 7),), fixed=_jacobian_panda_link8_fixed)
     # one state: Python floats
@@ -3385,8 +3430,8 @@ def jdot_qd_panda_link8(q, qd):
     out a [6]
     325 ops: 197 mul, 114 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "jdot_qd_panda_link8", "q")
+    qd = _array(qd, 7, "jdot_qd_panda_link8", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_panda_link8_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
@@ -4071,9 +4116,9 @@ def frame_acceleration_panda_link8(q, qd, qdd):
     out a [6]
     340 ops: 202 mul, 124 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "frame_acceleration_panda_link8", "q")
+    qd = _array(qd, 7, "frame_acceleration_panda_link8", "qd")
+    qdd = _array(qdd, 7, "frame_acceleration_panda_link8", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_panda_link8_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
@@ -4788,7 +4833,7 @@ def fk_panda_hand(q):
     out T [4x4]
     159 ops: 92 mul, 53 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "fk_panda_hand", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_panda_hand_chunk, (q,), 30, ((4, 4),), fixed=_fk_panda_hand_fixed)
     # one state: Python floats
@@ -5148,7 +5193,7 @@ def jacobian_panda_hand(q):
     out J [6x7]
     193 ops: 102 mul, 79 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "jacobian_panda_hand", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_panda_hand_chunk, (q,), 28, ((6, 7),), fixed=_jacobian_panda_hand_fixed)
     # one state: Python floats
@@ -5580,8 +5625,8 @@ def jdot_qd_panda_hand(q, qd):
     out a [6]
     361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "jdot_qd_panda_hand", "q")
+    qd = _array(qd, 7, "jdot_qd_panda_hand", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_panda_hand_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
@@ -6339,9 +6384,9 @@ def frame_acceleration_panda_hand(q, qd, qdd):
     out a [6]
     376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "frame_acceleration_panda_hand", "q")
+    qd = _array(qd, 7, "frame_acceleration_panda_hand", "qd")
+    qdd = _array(qdd, 7, "frame_acceleration_panda_hand", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_panda_hand_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
@@ -7129,7 +7174,7 @@ def fk_panda_leftfinger(q):
     out T [4x4]
     159 ops: 92 mul, 53 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "fk_panda_leftfinger", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_panda_leftfinger_chunk, (q,), 30, ((4, 4),), fixed=_fk_panda_leftfinger_fixed)
     # one state: Python floats
@@ -7489,7 +7534,7 @@ def jacobian_panda_leftfinger(q):
     out J [6x7]
     193 ops: 102 mul, 79 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "jacobian_panda_leftfinger", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_panda_leftfinger_chunk, (q,), 28, ((6, 7),), fixed=_jacobian_panda_leftfinger_fixed)
     # one state: Python floats
@@ -7921,8 +7966,8 @@ def jdot_qd_panda_leftfinger(q, qd):
     out a [6]
     361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "jdot_qd_panda_leftfinger", "q")
+    qd = _array(qd, 7, "jdot_qd_panda_leftfinger", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_panda_leftfinger_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
@@ -8680,9 +8725,9 @@ def frame_acceleration_panda_leftfinger(q, qd, qdd):
     out a [6]
     376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "frame_acceleration_panda_leftfinger", "q")
+    qd = _array(qd, 7, "frame_acceleration_panda_leftfinger", "qd")
+    qdd = _array(qdd, 7, "frame_acceleration_panda_leftfinger", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_panda_leftfinger_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
@@ -9470,7 +9515,7 @@ def fk_panda_rightfinger(q):
     out T [4x4]
     159 ops: 92 mul, 53 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "fk_panda_rightfinger", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_panda_rightfinger_chunk, (q,), 30, ((4, 4),), fixed=_fk_panda_rightfinger_fixed)
     # one state: Python floats
@@ -9830,7 +9875,7 @@ def jacobian_panda_rightfinger(q):
     out J [6x7]
     193 ops: 102 mul, 79 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "jacobian_panda_rightfinger", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_panda_rightfinger_chunk, (q,), 28, ((6, 7),), fixed=_jacobian_panda_rightfinger_fixed)
     # one state: Python floats
@@ -10262,8 +10307,8 @@ def jdot_qd_panda_rightfinger(q, qd):
     out a [6]
     361 ops: 221 mul, 126 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "jdot_qd_panda_rightfinger", "q")
+    qd = _array(qd, 7, "jdot_qd_panda_rightfinger", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_panda_rightfinger_chunk, (q, qd), 38, ((6,),))
     # one state: Python floats
@@ -11021,9 +11066,9 @@ def frame_acceleration_panda_rightfinger(q, qd, qdd):
     out a [6]
     376 ops: 226 mul, 136 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "frame_acceleration_panda_rightfinger", "q")
+    qd = _array(qd, 7, "frame_acceleration_panda_rightfinger", "qd")
+    qdd = _array(qdd, 7, "frame_acceleration_panda_rightfinger", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_panda_rightfinger_chunk, (q, qd, qdd), 38, ((6,),))
     # one state: Python floats
@@ -11812,7 +11857,7 @@ def fk_jacobian_tcp(q):
     out J [6x7]
     231 ops: 126 mul, 91 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "fk_jacobian_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_jacobian_tcp_chunk, (q,), 28, ((4, 4), (6, 7),), fixed=_fk_jacobian_tcp_fixed)
     # one state: Python floats
@@ -12329,7 +12374,7 @@ def mass_matrix(q):
     out M [7x7]
     471 ops: 237 mul, 222 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "mass_matrix", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_mass_matrix_chunk, (q,), 46, ((7, 7),), fixed=_mass_matrix_fixed)
     # one state: Python floats
@@ -13359,8 +13404,8 @@ def coriolis_matrix(q, qd):
     out C [7x7]
     2180 ops: 1195 mul, 973 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "coriolis_matrix", "q")
+    qd = _array(qd, 7, "coriolis_matrix", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_coriolis_matrix_chunk, (q, qd), 199, ((7, 7),), fixed=_coriolis_matrix_fixed)
     # one state: Python floats
@@ -17794,7 +17839,7 @@ def gravity(q):
     out g [7]
     214 ops: 120 mul, 82 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "gravity", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_gravity_chunk, (q,), 33, ((7,),))
     # one state: Python floats
@@ -18260,8 +18305,8 @@ def bias(q, qd):
     out h [7]
     788 ops: 438 mul, 338 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "bias", "q")
+    qd = _array(qd, 7, "bias", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bias_chunk, (q, qd), 79, ((7,),))
     # one state: Python floats
@@ -19890,9 +19935,9 @@ def inverse_dynamics(q, qd, qdd):
     out tau [7]
     810 ops: 447 mul, 351 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "inverse_dynamics", "q")
+    qd = _array(qd, 7, "inverse_dynamics", "qd")
+    qdd = _array(qdd, 7, "inverse_dynamics", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_chunk, (q, qd, qdd), 84, ((7,),))
     # one state: Python floats
@@ -21568,9 +21613,9 @@ def inverse_dynamics_derivatives(q, qd, qdd):
     out dtau [7x14]
     6025 ops: 3335 mul, 2678 add, 0 div, 12 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "inverse_dynamics_derivatives", "q")
+    qd = _array(qd, 7, "inverse_dynamics_derivatives", "qd")
+    qdd = _array(qdd, 7, "inverse_dynamics_derivatives", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd), 402, ((7, 14),), fixed=_inverse_dynamics_derivatives_fixed)
     # one state: Python floats
@@ -33725,9 +33770,9 @@ def forward_dynamics(q, qd, tau):
     out qdd [7]
     1527 ops: 829 mul, 658 add, 28 div, 12 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    tau = _array(tau, 7, "tau")
+    q = _array(q, 7, "forward_dynamics", "q")
+    qd = _array(qd, 7, "forward_dynamics", "qd")
+    tau = _array(tau, 7, "forward_dynamics", "tau")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_chunk, (q, qd, tau), 80, ((7,),))
     # one state: Python floats
@@ -36843,10 +36888,10 @@ def inverse_dynamics_fext(q, qd, qdd, w):
     out tau [7]
     1056 ops: 586 mul, 456 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
-    w = _array(w, 6, "w")
+    q = _array(q, 7, "inverse_dynamics_fext", "q")
+    qd = _array(qd, 7, "inverse_dynamics_fext", "qd")
+    qdd = _array(qdd, 7, "inverse_dynamics_fext", "qdd")
+    w = _array(w, 6, "inverse_dynamics_fext", "w")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w), 85, ((7,),))
     # one state: Python floats
@@ -39016,10 +39061,10 @@ def forward_dynamics_fext(q, qd, tau, w):
     out qdd [7]
     1773 ops: 968 mul, 763 add, 28 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    tau = _array(tau, 7, "tau")
-    w = _array(w, 6, "w")
+    q = _array(q, 7, "forward_dynamics_fext", "q")
+    qd = _array(qd, 7, "forward_dynamics_fext", "qd")
+    tau = _array(tau, 7, "forward_dynamics_fext", "tau")
+    w = _array(w, 6, "forward_dynamics_fext", "w")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w), 103, ((7,),))
     # one state: Python floats
@@ -42627,7 +42672,7 @@ def com(q):
     out c [3]
     278 ops: 149 mul, 112 add, 3 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "com", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_chunk, (q,), 21, ((3,),))
     # one state: Python floats
@@ -43220,7 +43265,7 @@ def com_jacobian(q):
     out J [3x7]
     674 ops: 358 mul, 282 add, 20 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "com_jacobian", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_jacobian_chunk, (q,), 65, ((3, 7),), fixed=_com_jacobian_fixed)
     # one state: Python floats
@@ -44617,7 +44662,7 @@ def centroidal_map(q):
     out A [6x7]
     2085 ops: 1114 mul, 954 add, 3 div, 14 trig
     """
-    q = _array(q, 7, "q")
+    q = _array(q, 7, "centroidal_map", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_centroidal_map_chunk, (q,), 181, ((6, 7),), fixed=_centroidal_map_fixed)
     # one state: Python floats
@@ -48859,8 +48904,8 @@ def ode_rhs(x, u):
     out xdot [14]
     1527 ops: 829 mul, 658 add, 28 div, 12 trig
     """
-    x = _array(x, 14, "x")
-    u = _array(u, 7, "u")
+    x = _array(x, 14, "ode_rhs", "x")
+    u = _array(u, 7, "ode_rhs", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_rhs_chunk, (x, u), 80, ((14,),))
     # one state: Python floats
@@ -51982,8 +52027,8 @@ def ode_jac_x(x, u):
     out A [14x14]
     8473 ops: 4477 mul, 3865 add, 119 div, 12 trig
     """
-    x = _array(x, 14, "x")
-    u = _array(u, 7, "u")
+    x = _array(x, 14, "ode_jac_x", "x")
+    u = _array(u, 7, "ode_jac_x", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_x_chunk, (x, u), 444, ((14, 14),), fixed=_ode_jac_x_fixed)
     # one state: Python floats
@@ -69054,8 +69099,8 @@ def ode_jac_u(x, u):
     out B [14x7]
     1059 ops: 525 mul, 468 add, 54 div, 12 trig
     """
-    x = _array(x, 14, "x")
-    u = _array(u, 7, "u")
+    x = _array(x, 14, "ode_jac_u", "x")
+    u = _array(u, 7, "ode_jac_u", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_u_chunk, (x, u), 53, ((14, 7),), fixed=_ode_jac_u_fixed)
     # one state: Python floats
@@ -71255,9 +71300,9 @@ def regressor(q, qd, qdd):
     out Y [7x91]
     1581 ops: 868 mul, 694 add, 0 div, 12 trig, 7 other
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "regressor", "q")
+    qd = _array(qd, 7, "regressor", "qd")
+    qdd = _array(qdd, 7, "regressor", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_regressor_chunk, (q, qd, qdd), 51, ((7, 91),), fixed=_regressor_fixed)
     # one state: Python floats
@@ -74538,9 +74583,9 @@ def base_regressor(q, qd, qdd):
     out Y_b [7x62]
     1270 ops: 711 mul, 540 add, 0 div, 12 trig, 7 other
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "base_regressor", "q")
+    qd = _array(qd, 7, "base_regressor", "qd")
+    qdd = _array(qdd, 7, "base_regressor", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_base_regressor_chunk, (q, qd, qdd), 52, ((7, 62),), fixed=_base_regressor_fixed)
     # one state: Python floats
@@ -77187,8 +77232,8 @@ def bundle_control(q, qd):
     out jdot_qd_tcp [6]
     1566 ops: 857 mul, 695 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
+    q = _array(q, 7, "bundle_control", "q")
+    qd = _array(qd, 7, "bundle_control", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_control_chunk, (q, qd), 85, ((7, 7), (7,), (4, 4), (6, 7), (6,),), fixed=_bundle_control_fixed)
     # one state: Python floats
@@ -80452,9 +80497,9 @@ def bundle_computed_torque(q, qd, qdd):
     out frame_acceleration_tcp [6]
     1129 ops: 629 mul, 486 add, 0 div, 14 trig
     """
-    q = _array(q, 7, "q")
-    qd = _array(qd, 7, "qd")
-    qdd = _array(qdd, 7, "qdd")
+    q = _array(q, 7, "bundle_computed_torque", "q")
+    qd = _array(qd, 7, "bundle_computed_torque", "qd")
+    qdd = _array(qdd, 7, "bundle_computed_torque", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_computed_torque_chunk, (q, qd, qdd), 91, ((7,), (4, 4), (6, 7), (6,),), fixed=_bundle_computed_torque_fixed)
     # one state: Python floats
@@ -82803,8 +82848,9 @@ def rk4_step(x, u, dt):
     out x_next [14]
     cost: the arithmetic of panda_ode_rhs per call, plus loops
     """
-    x = _array(x, 14, "x")
-    dt = _array(dt, 1, "dt")
+    x = _array(x, 14, "rk4_step", "x")
+    u = _array(u, 7, "rk4_step", "u")
+    dt = _array(dt, 1, "rk4_step", "dt")
     h = float(dt[0]) if dt.ndim == 1 else dt  # a batch of steps (..., 1) broadcasts against x (..., n)
     k1 = ode_rhs(x, u)
     k2 = ode_rhs(x + 0.5 * h * k1, u)
@@ -82825,6 +82871,9 @@ def ik_tcp(T, q0=None, w=None):
     batch: T (..., 4, 4) and q0, w (..., k) or None broadcast; solved one state after the other
     (a Python loop: the solver iterates per state); status is then an int array (...).
     """
+    T = _matrix(T, 4, 4, "ik_tcp", "T")
+    q0 = None if q0 is None else _array(q0, 7, "ik_tcp", "q0")
+    w = None if w is None else _array(w, 6, "ik_tcp", "w")
     batch = _ik_batch(ik_tcp, 7, T, q0, w)
     if batch is not None:  # a batch: one state after the other
         return batch
@@ -82845,6 +82894,7 @@ def manipulability_tcp(q):
     out mu [3]
     cost: the arithmetic of panda_jacobian_tcp per call, plus loops
     """
+    q = _array(q, 7, "manipulability_tcp", "q")
     return _manipulability(jacobian_tcp(q).take([0, 1, 2], axis=-2))
 
 
@@ -82855,6 +82905,7 @@ def manipulability_panda_link8(q):
     out mu [3]
     cost: the arithmetic of panda_jacobian_panda_link8 per call, plus loops
     """
+    q = _array(q, 7, "manipulability_panda_link8", "q")
     return _manipulability(jacobian_panda_link8(q).take([0, 1, 2], axis=-2))
 
 
@@ -82865,6 +82916,7 @@ def manipulability_panda_hand(q):
     out mu [3]
     cost: the arithmetic of panda_jacobian_panda_hand per call, plus loops
     """
+    q = _array(q, 7, "manipulability_panda_hand", "q")
     return _manipulability(jacobian_panda_hand(q).take([0, 1, 2], axis=-2))
 
 
@@ -82875,6 +82927,7 @@ def manipulability_panda_leftfinger(q):
     out mu [3]
     cost: the arithmetic of panda_jacobian_panda_leftfinger per call, plus loops
     """
+    q = _array(q, 7, "manipulability_panda_leftfinger", "q")
     return _manipulability(jacobian_panda_leftfinger(q).take([0, 1, 2], axis=-2))
 
 
@@ -82885,4 +82938,5 @@ def manipulability_panda_rightfinger(q):
     out mu [3]
     cost: the arithmetic of panda_jacobian_panda_rightfinger per call, plus loops
     """
+    q = _array(q, 7, "manipulability_panda_rightfinger", "q")
     return _manipulability(jacobian_panda_rightfinger(q).take([0, 1, 2], axis=-2))

@@ -28,14 +28,61 @@ PARAMETERS = {"m_r": 1.0, "m_s": 2.0, "I_r": 0.0833333333333333, "I_s": 0.002, "
 DEFAULT_P = np.array([1.0, 2.0, 0.0833333333333333, 0.002, 1.0, 9.81])
 
 
-def _array(value, n, name):
-    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of one element."""
-    v = np.asarray(value, dtype=float)
+_FLOAT = np.dtype(float)
+
+
+def _array(value, n, function, name):
+    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of
+    one element. Numbers only (bool, int, float): None, complex or text is a TypeError, a wrong
+    shape a ValueError, each naming the function and the argument."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype is not _FLOAT:
+        if v.dtype.kind not in "biuf":
+            raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+        v = v.astype(float)
     if v.ndim == 0 and n == 1:
         return v.reshape(1)
     if v.ndim == 0 or v.shape[-1] != n:
-        raise ValueError(f"{name} must have {n} elements in its last axis, got shape {v.shape}")
+        raise ValueError(f"{function}: {name} must have {n} elements in its last axis, got shape {v.shape}")
     return v
+
+
+def _given(value, v):
+    """What a value that is not real numbers is, for an error message."""
+    if value is None:
+        return "None"
+    if v.dtype.kind == "c":
+        return f"complex numbers ({v.dtype})"
+    if v.dtype.kind in "USa":
+        return f"text ({v.dtype})"
+    if v.dtype.kind == "O" and v.ndim:
+        return "an array of Python objects (None, or not all numbers?)"
+    return f"{type(value).__name__} ({v.dtype})"
+
+
+def _real(value, function, name):
+    """value as a float array of any shape: numbers only (see _array)."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:  # a ragged list
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+    return v.astype(float, copy=False)
+
+
+def _matrix(value, rows, cols, function, name):
+    """value as a float array (..., rows, cols), or one state given flat (rows * cols,); numbers only (see _array)."""
+    v = _real(value, function, name)
+    if v.shape[-2:] == (rows, cols):
+        return v
+    if v.shape == (rows * cols,):
+        return v.reshape(rows, cols)
+    raise ValueError(f"{function}: {name} must have shape (..., {rows}, {cols}) (or {rows * cols} elements for one "
+                     f"state), got shape {v.shape}")
 
 
 _CHUNK = 16384
@@ -245,12 +292,10 @@ def _ik_batch(solve, n, T, *vectors):
     when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
     (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
     (...) an int array, each state's entries those solve gives for it alone."""
-    T = np.asarray(T, dtype=float)
+    T = np.asarray(T, dtype=float)  # checked by the caller (_matrix, _array): (..., 4, 4) and (..., k)
     vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
     if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
         return None
-    if T.shape[-2:] != (4, 4):
-        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
     shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
     T = np.broadcast_to(T, shape + (4, 4))
     vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]
@@ -268,8 +313,8 @@ def fk_tcp(q, p=DEFAULT_P):
     out T [4x4]
     7 ops: 2 mul, 3 add, 0 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "fk_tcp", "q")
+    p = _array(p, 6, "fk_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_tcp_chunk, (q, p), 1, ((4, 4),), fixed=_fk_tcp_fixed)
     # one state: Python floats
@@ -321,8 +366,8 @@ def jacobian_tcp(q, p=DEFAULT_P):
     out J [6]
     5 ops: 2 mul, 1 add, 0 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "jacobian_tcp", "q")
+    p = _array(p, 6, "jacobian_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_tcp_chunk, (q, p), 1, ((6,),), fixed=_jacobian_tcp_fixed)
     # one state: Python floats
@@ -367,9 +412,9 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     out a [6]
     6 ops: 4 mul, 0 add, 0 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "jdot_qd_tcp", "q")
+    qd = _array(qd, 1, "jdot_qd_tcp", "qd")
+    p = _array(p, 6, "jdot_qd_tcp", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 2, ((6,),), fixed=_jdot_qd_tcp_fixed)
     # one state: Python floats
@@ -418,10 +463,10 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     out a [6]
     11 ops: 7 mul, 2 add, 0 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    qdd = _array(qdd, 1, "qdd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "frame_acceleration_tcp", "q")
+    qd = _array(qd, 1, "frame_acceleration_tcp", "qd")
+    qdd = _array(qdd, 1, "frame_acceleration_tcp", "qdd")
+    p = _array(p, 6, "frame_acceleration_tcp", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 6, ((6,),), fixed=_frame_acceleration_tcp_fixed)
     # one state: Python floats
@@ -481,8 +526,8 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     out J [6]
     7 ops: 2 mul, 3 add, 0 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "fk_jacobian_tcp", "q")
+    p = _array(p, 6, "fk_jacobian_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_jacobian_tcp_chunk, (q, p), 1, ((4, 4), (6,),), fixed=_fk_jacobian_tcp_fixed)
     # one state: Python floats
@@ -537,8 +582,8 @@ def mass_matrix(q, p=DEFAULT_P):
     out M [1]
     8 ops: 4 mul, 3 add, 1 div, 0 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "mass_matrix", "q")
+    p = _array(p, 6, "mass_matrix", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_mass_matrix_chunk, (q, p), 0, ((1,),), pure=2)
     # one state: Python floats
@@ -588,9 +633,9 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     out C [1]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "coriolis_matrix", "q")
+    qd = _array(qd, 1, "coriolis_matrix", "qd")
+    p = _array(p, 6, "coriolis_matrix", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_coriolis_matrix_chunk, (q, qd, p), 0, ((1,),), fixed=_coriolis_matrix_fixed)
     # one state: Python floats
@@ -621,8 +666,8 @@ def gravity(q, p=DEFAULT_P):
     out g [1]
     7 ops: 4 mul, 1 add, 1 div, 1 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "gravity", "q")
+    p = _array(p, 6, "gravity", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_gravity_chunk, (q, p), 1, ((1,),), pure=2)
     # one state: Python floats
@@ -671,9 +716,9 @@ def bias(q, qd, p=DEFAULT_P):
     out h [1]
     7 ops: 4 mul, 1 add, 1 div, 1 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "bias", "q")
+    qd = _array(qd, 1, "bias", "qd")
+    p = _array(p, 6, "bias", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bias_chunk, (q, qd, p), 1, ((1,),), pure=2)
     # one state: Python floats
@@ -724,10 +769,10 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     out tau [1]
     16 ops: 9 mul, 5 add, 1 div, 1 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    qdd = _array(qdd, 1, "qdd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "inverse_dynamics", "q")
+    qd = _array(qd, 1, "inverse_dynamics", "qd")
+    qdd = _array(qdd, 1, "inverse_dynamics", "qdd")
+    p = _array(p, 6, "inverse_dynamics", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_chunk, (q, qd, qdd, p), 2, ((1,),), pure=3)
     # one state: Python floats
@@ -797,10 +842,10 @@ def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
     out dtau [1x2]
     7 ops: 4 mul, 1 add, 1 div, 1 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    qdd = _array(qdd, 1, "qdd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "inverse_dynamics_derivatives", "q")
+    qd = _array(qd, 1, "inverse_dynamics_derivatives", "qd")
+    qdd = _array(qdd, 1, "inverse_dynamics_derivatives", "qdd")
+    p = _array(p, 6, "inverse_dynamics_derivatives", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd, p), 1, ((1, 2),), fixed=_inverse_dynamics_derivatives_fixed, pure=2)
     # one state: Python floats
@@ -858,10 +903,10 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     out qdd [1]
     16 ops: 8 mul, 5 add, 2 div, 1 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    tau = _array(tau, 1, "tau")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "forward_dynamics", "q")
+    qd = _array(qd, 1, "forward_dynamics", "qd")
+    tau = _array(tau, 1, "forward_dynamics", "tau")
+    p = _array(p, 6, "forward_dynamics", "p")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_chunk, (q, qd, tau, p), 1, ((1,),), pure=3)
     # one state: Python floats
@@ -932,11 +977,11 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     out tau [1]
     24 ops: 13 mul, 8 add, 1 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    qdd = _array(qdd, 1, "qdd")
-    w = _array(w, 6, "w")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "inverse_dynamics_fext", "q")
+    qd = _array(qd, 1, "inverse_dynamics_fext", "qd")
+    qdd = _array(qdd, 1, "inverse_dynamics_fext", "qdd")
+    w = _array(w, 6, "inverse_dynamics_fext", "w")
+    p = _array(p, 6, "inverse_dynamics_fext", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w, p), 3, ((1,),), pure=3)
     # one state: Python floats
@@ -1024,11 +1069,11 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     out qdd [1]
     24 ops: 12 mul, 8 add, 2 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    tau = _array(tau, 1, "tau")
-    w = _array(w, 6, "w")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "forward_dynamics_fext", "q")
+    qd = _array(qd, 1, "forward_dynamics_fext", "qd")
+    tau = _array(tau, 1, "forward_dynamics_fext", "tau")
+    w = _array(w, 6, "forward_dynamics_fext", "w")
+    p = _array(p, 6, "forward_dynamics_fext", "p")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w, p), 3, ((1,),), pure=3)
     # one state: Python floats
@@ -1113,8 +1158,8 @@ def com(q, p=DEFAULT_P):
     out c [3]
     13 ops: 4 mul, 4 add, 3 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "com", "q")
+    p = _array(p, 6, "com", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_chunk, (q, p), 1, ((3,),), fixed=_com_fixed, pure=2)
     # one state: Python floats
@@ -1180,8 +1225,8 @@ def com_jacobian(q, p=DEFAULT_P):
     out J [3]
     12 ops: 4 mul, 3 add, 3 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "com_jacobian", "q")
+    p = _array(p, 6, "com_jacobian", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_jacobian_chunk, (q, p), 1, ((3,),), fixed=_com_jacobian_fixed, pure=2)
     # one state: Python floats
@@ -1245,8 +1290,8 @@ def centroidal_map(q, p=DEFAULT_P):
     out A [6]
     23 ops: 10 mul, 8 add, 3 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "centroidal_map", "q")
+    p = _array(p, 6, "centroidal_map", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_centroidal_map_chunk, (q, p), 2, ((6,),), fixed=_centroidal_map_fixed, pure=3)
     # one state: Python floats
@@ -1333,9 +1378,9 @@ def ode_rhs(x, u, p=DEFAULT_P):
     out xdot [2]
     16 ops: 8 mul, 5 add, 2 div, 1 trig
     """
-    x = _array(x, 2, "x")
-    u = _array(u, 1, "u")
-    p = _array(p, 6, "p")
+    x = _array(x, 2, "ode_rhs", "x")
+    u = _array(u, 1, "ode_rhs", "u")
+    p = _array(p, 6, "ode_rhs", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_rhs_chunk, (x, u, p), 1, ((2,),), pure=3)
     # one state: Python floats
@@ -1404,9 +1449,9 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     out A [2x2]
     16 ops: 8 mul, 5 add, 2 div, 1 trig
     """
-    x = _array(x, 2, "x")
-    u = _array(u, 1, "u")
-    p = _array(p, 6, "p")
+    x = _array(x, 2, "ode_jac_x", "x")
+    u = _array(u, 1, "ode_jac_x", "u")
+    p = _array(p, 6, "ode_jac_x", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_x_chunk, (x, u, p), 1, ((2, 2),), fixed=_ode_jac_x_fixed, pure=3)
     # one state: Python floats
@@ -1481,9 +1526,9 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     out B [2]
     9 ops: 4 mul, 3 add, 2 div, 0 trig
     """
-    x = _array(x, 2, "x")
-    u = _array(u, 1, "u")
-    p = _array(p, 6, "p")
+    x = _array(x, 2, "ode_jac_u", "x")
+    u = _array(u, 1, "ode_jac_u", "u")
+    p = _array(p, 6, "ode_jac_u", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_u_chunk, (x, u, p), 0, ((2,),), fixed=_ode_jac_u_fixed, pure=2)
     # one state: Python floats
@@ -1543,10 +1588,10 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     out Y [1x13]
     7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    qdd = _array(qdd, 1, "qdd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "regressor", "q")
+    qd = _array(qd, 1, "regressor", "qd")
+    qdd = _array(qdd, 1, "regressor", "qdd")
+    p = _array(p, 6, "regressor", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_regressor_chunk, (q, qd, qdd, p), 1, ((1, 13),), fixed=_regressor_fixed)
     # one state: Python floats
@@ -1601,10 +1646,10 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     out Y_b [1x5]
     7 ops: 2 mul, 2 add, 0 div, 2 trig, 1 other
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    qdd = _array(qdd, 1, "qdd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "base_regressor", "q")
+    qd = _array(qd, 1, "base_regressor", "qd")
+    qdd = _array(qdd, 1, "base_regressor", "qdd")
+    p = _array(p, 6, "base_regressor", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_base_regressor_chunk, (q, qd, qdd, p), 1, ((1, 5),))
     # one state: Python floats
@@ -1655,9 +1700,9 @@ def bundle_control(q, qd, p=DEFAULT_P):
     out jdot_qd_tcp [6]
     24 ops: 14 mul, 7 add, 1 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "bundle_control", "q")
+    qd = _array(qd, 1, "bundle_control", "qd")
+    p = _array(p, 6, "bundle_control", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_control_chunk, (q, qd, p), 1, ((1,), (1,), (4, 4), (6,), (6,),), fixed=_bundle_control_fixed, pure=3)
     # one state: Python floats
@@ -1766,10 +1811,10 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     out frame_acceleration_tcp [6]
     31 ops: 18 mul, 10 add, 1 div, 2 trig
     """
-    q = _array(q, 1, "q")
-    qd = _array(qd, 1, "qd")
-    qdd = _array(qdd, 1, "qdd")
-    p = _array(p, 6, "p")
+    q = _array(q, 1, "bundle_computed_torque", "q")
+    qd = _array(qd, 1, "bundle_computed_torque", "qd")
+    qdd = _array(qdd, 1, "bundle_computed_torque", "qdd")
+    p = _array(p, 6, "bundle_computed_torque", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_computed_torque_chunk, (q, qd, qdd, p), 4, ((1,), (4, 4), (6,), (6,),), fixed=_bundle_computed_torque_fixed, pure=3)
     # one state: Python floats
@@ -1888,8 +1933,10 @@ def rk4_step(x, u, dt, p=DEFAULT_P):
     out x_next [2]
     cost: the arithmetic of pendulum_ode_rhs per call, plus loops
     """
-    x = _array(x, 2, "x")
-    dt = _array(dt, 1, "dt")
+    x = _array(x, 2, "rk4_step", "x")
+    u = _array(u, 1, "rk4_step", "u")
+    dt = _array(dt, 1, "rk4_step", "dt")
+    p = _array(p, 6, "rk4_step", "p")
     h = float(dt[0]) if dt.ndim == 1 else dt  # a batch of steps (..., 1) broadcasts against x (..., n)
     k1 = ode_rhs(x, u, p)
     k2 = ode_rhs(x + 0.5 * h * k1, u, p)
@@ -1911,6 +1958,10 @@ def ik_tcp(T, q0=None, w=None, p=DEFAULT_P):
     batch: T (..., 4, 4) and q0, w, p (..., k) or None broadcast; solved one state after the other
     (a Python loop: the solver iterates per state); status is then an int array (...).
     """
+    T = _matrix(T, 4, 4, "ik_tcp", "T")
+    q0 = None if q0 is None else _array(q0, 1, "ik_tcp", "q0")
+    w = None if w is None else _array(w, 6, "ik_tcp", "w")
+    p = _array(p, 6, "ik_tcp", "p")
     batch = _ik_batch(ik_tcp, 1, T, q0, w, p)
     if batch is not None:  # a batch: one state after the other
         return batch

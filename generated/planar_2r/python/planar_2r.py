@@ -28,14 +28,61 @@ PARAMETERS = {"L1": 1.0, "L2": 0.7, "m1": 1.0, "m2": 0.7, "g": 9.81}
 DEFAULT_P = np.array([1.0, 0.7, 1.0, 0.7, 9.81])
 
 
-def _array(value, n, name):
-    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of one element."""
-    v = np.asarray(value, dtype=float)
+_FLOAT = np.dtype(float)
+
+
+def _array(value, n, function, name):
+    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of
+    one element. Numbers only (bool, int, float): None, complex or text is a TypeError, a wrong
+    shape a ValueError, each naming the function and the argument."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype is not _FLOAT:
+        if v.dtype.kind not in "biuf":
+            raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+        v = v.astype(float)
     if v.ndim == 0 and n == 1:
         return v.reshape(1)
     if v.ndim == 0 or v.shape[-1] != n:
-        raise ValueError(f"{name} must have {n} elements in its last axis, got shape {v.shape}")
+        raise ValueError(f"{function}: {name} must have {n} elements in its last axis, got shape {v.shape}")
     return v
+
+
+def _given(value, v):
+    """What a value that is not real numbers is, for an error message."""
+    if value is None:
+        return "None"
+    if v.dtype.kind == "c":
+        return f"complex numbers ({v.dtype})"
+    if v.dtype.kind in "USa":
+        return f"text ({v.dtype})"
+    if v.dtype.kind == "O" and v.ndim:
+        return "an array of Python objects (None, or not all numbers?)"
+    return f"{type(value).__name__} ({v.dtype})"
+
+
+def _real(value, function, name):
+    """value as a float array of any shape: numbers only (see _array)."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:  # a ragged list
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+    return v.astype(float, copy=False)
+
+
+def _matrix(value, rows, cols, function, name):
+    """value as a float array (..., rows, cols), or one state given flat (rows * cols,); numbers only (see _array)."""
+    v = _real(value, function, name)
+    if v.shape[-2:] == (rows, cols):
+        return v
+    if v.shape == (rows * cols,):
+        return v.reshape(rows, cols)
+    raise ValueError(f"{function}: {name} must have shape (..., {rows}, {cols}) (or {rows * cols} elements for one "
+                     f"state), got shape {v.shape}")
 
 
 _CHUNK = 16384
@@ -245,12 +292,10 @@ def _ik_batch(solve, n, T, *vectors):
     when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
     (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
     (...) an int array, each state's entries those solve gives for it alone."""
-    T = np.asarray(T, dtype=float)
+    T = np.asarray(T, dtype=float)  # checked by the caller (_matrix, _array): (..., 4, 4) and (..., k)
     vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
     if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
         return None
-    if T.shape[-2:] != (4, 4):
-        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
     shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
     T = np.broadcast_to(T, shape + (4, 4))
     vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]
@@ -286,8 +331,8 @@ def fk_tcp(q, p=DEFAULT_P):
     out T [4x4]
     17 ops: 8 mul, 5 add, 0 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "fk_tcp", "q")
+    p = _array(p, 5, "fk_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_tcp_chunk, (q, p), 6, ((4, 4),), fixed=_fk_tcp_fixed)
     # one state: Python floats
@@ -359,8 +404,8 @@ def jacobian_tcp(q, p=DEFAULT_P):
     out J [6x2]
     18 ops: 8 mul, 6 add, 0 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "jacobian_tcp", "q")
+    p = _array(p, 5, "jacobian_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_tcp_chunk, (q, p), 7, ((6, 2),), fixed=_jacobian_tcp_fixed)
     # one state: Python floats
@@ -436,9 +481,9 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     out a [6]
     25 ops: 14 mul, 7 add, 0 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "jdot_qd_tcp", "q")
+    qd = _array(qd, 2, "jdot_qd_tcp", "qd")
+    p = _array(p, 5, "jdot_qd_tcp", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 9, ((6,),), fixed=_jdot_qd_tcp_fixed)
     # one state: Python floats
@@ -525,10 +570,10 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     out a [6]
     32 ops: 18 mul, 10 add, 0 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "frame_acceleration_tcp", "q")
+    qd = _array(qd, 2, "frame_acceleration_tcp", "qd")
+    qdd = _array(qdd, 2, "frame_acceleration_tcp", "qdd")
+    p = _array(p, 5, "frame_acceleration_tcp", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 10, ((6,),), fixed=_frame_acceleration_tcp_fixed)
     # one state: Python floats
@@ -629,8 +674,8 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     out J [6x2]
     19 ops: 8 mul, 7 add, 0 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "fk_jacobian_tcp", "q")
+    p = _array(p, 5, "fk_jacobian_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_jacobian_tcp_chunk, (q, p), 6, ((4, 4), (6, 2),), fixed=_fk_jacobian_tcp_fixed)
     # one state: Python floats
@@ -714,8 +759,8 @@ def mass_matrix(q, p=DEFAULT_P):
     out M [2x2]
     25 ops: 12 mul, 8 add, 4 div, 1 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "mass_matrix", "q")
+    p = _array(p, 5, "mass_matrix", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_mass_matrix_chunk, (q, p), 1, ((2, 2),), pure=5)
     # one state: Python floats
@@ -803,9 +848,9 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     out C [2x2]
     11 ops: 5 mul, 4 add, 1 div, 1 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "coriolis_matrix", "q")
+    qd = _array(qd, 2, "coriolis_matrix", "qd")
+    p = _array(p, 5, "coriolis_matrix", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_coriolis_matrix_chunk, (q, qd, p), 2, ((2, 2),), fixed=_coriolis_matrix_fixed, pure=1)
     # one state: Python floats
@@ -869,8 +914,8 @@ def gravity(q, p=DEFAULT_P):
     out g [2]
     28 ops: 15 mul, 7 add, 2 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "gravity", "q")
+    p = _array(p, 5, "gravity", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_gravity_chunk, (q, p), 7, ((2,),), pure=1)
     # one state: Python floats
@@ -961,9 +1006,9 @@ def bias(q, qd, p=DEFAULT_P):
     out h [2]
     35 ops: 19 mul, 10 add, 2 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "bias", "q")
+    qd = _array(qd, 2, "bias", "qd")
+    p = _array(p, 5, "bias", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bias_chunk, (q, qd, p), 7, ((2,),), pure=1)
     # one state: Python floats
@@ -1070,10 +1115,10 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     out tau [2]
     56 ops: 31 mul, 17 add, 4 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "inverse_dynamics", "q")
+    qd = _array(qd, 2, "inverse_dynamics", "qd")
+    qdd = _array(qdd, 2, "inverse_dynamics", "qdd")
+    p = _array(p, 5, "inverse_dynamics", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_chunk, (q, qd, qdd, p), 9, ((2,),), pure=3)
     # one state: Python floats
@@ -1223,10 +1268,10 @@ def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
     out dtau [2x4]
     76 ops: 43 mul, 27 add, 2 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "inverse_dynamics_derivatives", "q")
+    qd = _array(qd, 2, "inverse_dynamics_derivatives", "qd")
+    qdd = _array(qdd, 2, "inverse_dynamics_derivatives", "qdd")
+    p = _array(p, 5, "inverse_dynamics_derivatives", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd, p), 9, ((2, 4),), fixed=_inverse_dynamics_derivatives_fixed, pure=1)
     # one state: Python floats
@@ -1423,10 +1468,10 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     out qdd [2]
     66 ops: 34 mul, 21 add, 7 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    tau = _array(tau, 2, "tau")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "forward_dynamics", "q")
+    qd = _array(qd, 2, "forward_dynamics", "qd")
+    tau = _array(tau, 2, "forward_dynamics", "tau")
+    p = _array(p, 5, "forward_dynamics", "p")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_chunk, (q, qd, tau, p), 8, ((2,),), pure=5)
     # one state: Python floats
@@ -1597,11 +1642,11 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     out tau [2]
     78 ops: 43 mul, 27 add, 4 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    w = _array(w, 6, "w")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "inverse_dynamics_fext", "q")
+    qd = _array(qd, 2, "inverse_dynamics_fext", "qd")
+    qdd = _array(qdd, 2, "inverse_dynamics_fext", "qdd")
+    w = _array(w, 6, "inverse_dynamics_fext", "w")
+    p = _array(p, 5, "inverse_dynamics_fext", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w, p), 11, ((2,),), pure=3)
     # one state: Python floats
@@ -1797,11 +1842,11 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     out qdd [2]
     88 ops: 46 mul, 31 add, 7 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    tau = _array(tau, 2, "tau")
-    w = _array(w, 6, "w")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "forward_dynamics_fext", "q")
+    qd = _array(qd, 2, "forward_dynamics_fext", "qd")
+    tau = _array(tau, 2, "forward_dynamics_fext", "tau")
+    w = _array(w, 6, "forward_dynamics_fext", "w")
+    p = _array(p, 5, "forward_dynamics_fext", "p")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w, p), 11, ((2,),), pure=5)
     # one state: Python floats
@@ -2014,8 +2059,8 @@ def com(q, p=DEFAULT_P):
     out c [3]
     31 ops: 14 mul, 9 add, 4 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "com", "q")
+    p = _array(p, 5, "com", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_chunk, (q, p), 8, ((3,),), fixed=_com_fixed, pure=3)
     # one state: Python floats
@@ -2117,8 +2162,8 @@ def com_jacobian(q, p=DEFAULT_P):
     out J [3x2]
     35 ops: 14 mul, 11 add, 6 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "com_jacobian", "q")
+    p = _array(p, 5, "com_jacobian", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_jacobian_chunk, (q, p), 8, ((3, 2),), fixed=_com_jacobian_fixed, pure=3)
     # one state: Python floats
@@ -2230,8 +2275,8 @@ def centroidal_map(q, p=DEFAULT_P):
     out A [6x2]
     64 ops: 30 mul, 24 add, 6 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "centroidal_map", "q")
+    p = _array(p, 5, "centroidal_map", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_centroidal_map_chunk, (q, p), 12, ((6, 2),), fixed=_centroidal_map_fixed, pure=4)
     # one state: Python floats
@@ -2405,9 +2450,9 @@ def ode_rhs(x, u, p=DEFAULT_P):
     out xdot [4]
     66 ops: 34 mul, 21 add, 7 div, 4 trig
     """
-    x = _array(x, 4, "x")
-    u = _array(u, 2, "u")
-    p = _array(p, 5, "p")
+    x = _array(x, 4, "ode_rhs", "x")
+    u = _array(u, 2, "ode_rhs", "u")
+    p = _array(p, 5, "ode_rhs", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_rhs_chunk, (x, u, p), 8, ((4,),), pure=5)
     # one state: Python floats
@@ -2577,9 +2622,9 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     out A [4x4]
     145 ops: 73 mul, 53 add, 15 div, 4 trig
     """
-    x = _array(x, 4, "x")
-    u = _array(u, 2, "u")
-    p = _array(p, 5, "p")
+    x = _array(x, 4, "ode_jac_x", "x")
+    u = _array(u, 2, "ode_jac_x", "u")
+    p = _array(p, 5, "ode_jac_x", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_x_chunk, (x, u, p), 15, ((4, 4),), fixed=_ode_jac_x_fixed, pure=6)
     # one state: Python floats
@@ -2914,9 +2959,9 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     out B [4x2]
     35 ops: 15 mul, 11 add, 8 div, 1 trig
     """
-    x = _array(x, 4, "x")
-    u = _array(u, 2, "u")
-    p = _array(p, 5, "p")
+    x = _array(x, 4, "ode_jac_u", "x")
+    u = _array(u, 2, "ode_jac_u", "u")
+    p = _array(p, 5, "ode_jac_u", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_u_chunk, (x, u, p), 4, ((4, 2),), fixed=_ode_jac_u_fixed, pure=5)
     # one state: Python floats
@@ -3033,10 +3078,10 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     out Y [2x26]
     38 ops: 18 mul, 14 add, 0 div, 4 trig, 2 other
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "regressor", "q")
+    qd = _array(qd, 2, "regressor", "qd")
+    qdd = _array(qdd, 2, "regressor", "qdd")
+    p = _array(p, 5, "regressor", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_regressor_chunk, (q, qd, qdd, p), 8, ((2, 26),), fixed=_regressor_fixed)
     # one state: Python floats
@@ -3160,10 +3205,10 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     out Y_b [2x11]
     35 ops: 16 mul, 13 add, 0 div, 4 trig, 2 other
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "base_regressor", "q")
+    qd = _array(qd, 2, "base_regressor", "qd")
+    qdd = _array(qdd, 2, "base_regressor", "qdd")
+    p = _array(p, 5, "base_regressor", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_base_regressor_chunk, (q, qd, qdd, p), 9, ((2, 11),), fixed=_base_regressor_fixed)
     # one state: Python floats
@@ -3281,9 +3326,9 @@ def bundle_control(q, qd, p=DEFAULT_P):
     out jdot_qd_tcp [6]
     82 ops: 46 mul, 28 add, 4 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "bundle_control", "q")
+    qd = _array(qd, 2, "bundle_control", "qd")
+    p = _array(p, 5, "bundle_control", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_control_chunk, (q, qd, p), 11, ((2, 2), (2,), (4, 4), (6, 2), (6,),), fixed=_bundle_control_fixed, pure=6)
     # one state: Python floats
@@ -3516,10 +3561,10 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     out frame_acceleration_tcp [6]
     88 ops: 50 mul, 30 add, 4 div, 4 trig
     """
-    q = _array(q, 2, "q")
-    qd = _array(qd, 2, "qd")
-    qdd = _array(qdd, 2, "qdd")
-    p = _array(p, 5, "p")
+    q = _array(q, 2, "bundle_computed_torque", "q")
+    qd = _array(qd, 2, "bundle_computed_torque", "qd")
+    qdd = _array(qdd, 2, "bundle_computed_torque", "qdd")
+    p = _array(p, 5, "bundle_computed_torque", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_computed_torque_chunk, (q, qd, qdd, p), 13, ((2,), (4, 4), (6, 2), (6,),), fixed=_bundle_computed_torque_fixed, pure=3)
     # one state: Python floats
@@ -3757,8 +3802,10 @@ def rk4_step(x, u, dt, p=DEFAULT_P):
     out x_next [4]
     cost: the arithmetic of planar_2r_ode_rhs per call, plus loops
     """
-    x = _array(x, 4, "x")
-    dt = _array(dt, 1, "dt")
+    x = _array(x, 4, "rk4_step", "x")
+    u = _array(u, 2, "rk4_step", "u")
+    dt = _array(dt, 1, "rk4_step", "dt")
+    p = _array(p, 5, "rk4_step", "p")
     h = float(dt[0]) if dt.ndim == 1 else dt  # a batch of steps (..., 1) broadcasts against x (..., n)
     k1 = ode_rhs(x, u, p)
     k2 = ode_rhs(x + 0.5 * h * k1, u, p)
@@ -3780,6 +3827,10 @@ def ik_tcp(T, q0=None, w=None, p=DEFAULT_P):
     batch: T (..., 4, 4) and q0, w, p (..., k) or None broadcast; solved one state after the other
     (a Python loop: the solver iterates per state); status is then an int array (...).
     """
+    T = _matrix(T, 4, 4, "ik_tcp", "T")
+    q0 = None if q0 is None else _array(q0, 2, "ik_tcp", "q0")
+    w = None if w is None else _array(w, 6, "ik_tcp", "w")
+    p = _array(p, 5, "ik_tcp", "p")
     batch = _ik_batch(ik_tcp, 2, T, q0, w, p)
     if batch is not None:  # a batch: one state after the other
         return batch
@@ -3801,4 +3852,6 @@ def manipulability_tcp(q, p=DEFAULT_P):
     out mu [3]
     cost: the arithmetic of planar_2r_jacobian_tcp per call, plus loops
     """
+    q = _array(q, 2, "manipulability_tcp", "q")
+    p = _array(p, 5, "manipulability_tcp", "p")
     return _manipulability(jacobian_tcp(q, p).take([0, 1], axis=-2))

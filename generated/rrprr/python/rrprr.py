@@ -28,14 +28,61 @@ PARAMETERS = {"L1": 0.4, "L2": 0.3, "L_tcp": 0.1}
 DEFAULT_P = np.array([0.4, 0.3, 0.1])
 
 
-def _array(value, n, name):
-    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of one element."""
-    v = np.asarray(value, dtype=float)
+_FLOAT = np.dtype(float)
+
+
+def _array(value, n, function, name):
+    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of
+    one element. Numbers only (bool, int, float): None, complex or text is a TypeError, a wrong
+    shape a ValueError, each naming the function and the argument."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype is not _FLOAT:
+        if v.dtype.kind not in "biuf":
+            raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+        v = v.astype(float)
     if v.ndim == 0 and n == 1:
         return v.reshape(1)
     if v.ndim == 0 or v.shape[-1] != n:
-        raise ValueError(f"{name} must have {n} elements in its last axis, got shape {v.shape}")
+        raise ValueError(f"{function}: {name} must have {n} elements in its last axis, got shape {v.shape}")
     return v
+
+
+def _given(value, v):
+    """What a value that is not real numbers is, for an error message."""
+    if value is None:
+        return "None"
+    if v.dtype.kind == "c":
+        return f"complex numbers ({v.dtype})"
+    if v.dtype.kind in "USa":
+        return f"text ({v.dtype})"
+    if v.dtype.kind == "O" and v.ndim:
+        return "an array of Python objects (None, or not all numbers?)"
+    return f"{type(value).__name__} ({v.dtype})"
+
+
+def _real(value, function, name):
+    """value as a float array of any shape: numbers only (see _array)."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:  # a ragged list
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+    return v.astype(float, copy=False)
+
+
+def _matrix(value, rows, cols, function, name):
+    """value as a float array (..., rows, cols), or one state given flat (rows * cols,); numbers only (see _array)."""
+    v = _real(value, function, name)
+    if v.shape[-2:] == (rows, cols):
+        return v
+    if v.shape == (rows * cols,):
+        return v.reshape(rows, cols)
+    raise ValueError(f"{function}: {name} must have shape (..., {rows}, {cols}) (or {rows * cols} elements for one "
+                     f"state), got shape {v.shape}")
 
 
 _CHUNK = 16384
@@ -245,12 +292,10 @@ def _ik_batch(solve, n, T, *vectors):
     when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
     (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
     (...) an int array, each state's entries those solve gives for it alone."""
-    T = np.asarray(T, dtype=float)
+    T = np.asarray(T, dtype=float)  # checked by the caller (_matrix, _array): (..., 4, 4) and (..., k)
     vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
     if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
         return None
-    if T.shape[-2:] != (4, 4):
-        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
     shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
     T = np.broadcast_to(T, shape + (4, 4))
     vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]
@@ -286,8 +331,8 @@ def fk_tcp(q, p=DEFAULT_P):
     out T [4x4]
     62 ops: 36 mul, 18 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "fk_tcp", "q")
+    p = _array(p, 3, "fk_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_tcp_chunk, (q, p), 17, ((4, 4),), fixed=_fk_tcp_fixed)
     # one state: Python floats
@@ -448,8 +493,8 @@ def jacobian_tcp(q, p=DEFAULT_P):
     out J [6x5]
     63 ops: 35 mul, 22 add, 0 div, 6 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "jacobian_tcp", "q")
+    p = _array(p, 3, "jacobian_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_tcp_chunk, (q, p), 9, ((6, 5),), fixed=_jacobian_tcp_fixed)
     # one state: Python floats
@@ -618,9 +663,9 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     out a [6]
     155 ops: 95 mul, 52 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "jdot_qd_tcp", "q")
+    qd = _array(qd, 5, "jdot_qd_tcp", "qd")
+    p = _array(p, 3, "jdot_qd_tcp", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_tcp_chunk, (q, qd, p), 26, ((6,),))
     # one state: Python floats
@@ -962,10 +1007,10 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     out a [6]
     168 ops: 100 mul, 60 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    qdd = _array(qdd, 5, "qdd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "frame_acceleration_tcp", "q")
+    qd = _array(qd, 5, "frame_acceleration_tcp", "qd")
+    qdd = _array(qdd, 5, "frame_acceleration_tcp", "qdd")
+    p = _array(p, 3, "frame_acceleration_tcp", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd, p), 26, ((6,),))
     # one state: Python floats
@@ -1334,8 +1379,8 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     out J [6x5]
     91 ops: 52 mul, 31 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "fk_jacobian_tcp", "q")
+    p = _array(p, 3, "fk_jacobian_tcp", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_jacobian_tcp_chunk, (q, p), 13, ((4, 4), (6, 5),), fixed=_fk_jacobian_tcp_fixed)
     # one state: Python floats
@@ -1568,8 +1613,8 @@ def mass_matrix(q, p=DEFAULT_P):
     out M [5x5]
     86 ops: 45 mul, 35 add, 0 div, 6 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "mass_matrix", "q")
+    p = _array(p, 3, "mass_matrix", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_mass_matrix_chunk, (q, p), 14, ((5, 5),), fixed=_mass_matrix_fixed, pure=3)
     # one state: Python floats
@@ -1794,9 +1839,9 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     out C [5x5]
     255 ops: 143 mul, 106 add, 0 div, 6 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "coriolis_matrix", "q")
+    qd = _array(qd, 5, "coriolis_matrix", "qd")
+    p = _array(p, 3, "coriolis_matrix", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_coriolis_matrix_chunk, (q, qd, p), 35, ((5, 5),), fixed=_coriolis_matrix_fixed, pure=4)
     # one state: Python floats
@@ -2354,8 +2399,8 @@ def gravity(q, p=DEFAULT_P):
     out g [5]
     91 ops: 52 mul, 31 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "gravity", "q")
+    p = _array(p, 3, "gravity", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_gravity_chunk, (q, p), 21, ((5,),), fixed=_gravity_fixed)
     # one state: Python floats
@@ -2578,9 +2623,9 @@ def bias(q, qd, p=DEFAULT_P):
     out h [5]
     251 ops: 147 mul, 96 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "bias", "q")
+    qd = _array(qd, 5, "bias", "qd")
+    p = _array(p, 3, "bias", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bias_chunk, (q, qd, p), 45, ((5,),))
     # one state: Python floats
@@ -3121,10 +3166,10 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     out tau [5]
     274 ops: 157 mul, 109 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    qdd = _array(qdd, 5, "qdd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "inverse_dynamics", "q")
+    qd = _array(qd, 5, "inverse_dynamics", "qd")
+    qdd = _array(qdd, 5, "inverse_dynamics", "qdd")
+    p = _array(p, 3, "inverse_dynamics", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_chunk, (q, qd, qdd, p), 46, ((5,),))
     # one state: Python floats
@@ -3713,10 +3758,10 @@ def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
     out dtau [5x10]
     1282 ops: 749 mul, 525 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    qdd = _array(qdd, 5, "qdd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "inverse_dynamics_derivatives", "q")
+    qd = _array(qd, 5, "inverse_dynamics_derivatives", "qd")
+    qdd = _array(qdd, 5, "inverse_dynamics_derivatives", "qdd")
+    p = _array(p, 3, "inverse_dynamics_derivatives", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd, p), 130, ((5, 10),), fixed=_inverse_dynamics_derivatives_fixed)
     # one state: Python floats
@@ -6338,10 +6383,10 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     out qdd [5]
     444 ops: 252 mul, 169 add, 15 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    tau = _array(tau, 5, "tau")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "forward_dynamics", "q")
+    qd = _array(qd, 5, "forward_dynamics", "qd")
+    tau = _array(tau, 5, "forward_dynamics", "tau")
+    p = _array(p, 3, "forward_dynamics", "p")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_chunk, (q, qd, tau, p), 45, ((5,),), pure=3)
     # one state: Python floats
@@ -7273,11 +7318,11 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     out tau [5]
     370 ops: 213 mul, 149 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    qdd = _array(qdd, 5, "qdd")
-    w = _array(w, 6, "w")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "inverse_dynamics_fext", "q")
+    qd = _array(qd, 5, "inverse_dynamics_fext", "qd")
+    qdd = _array(qdd, 5, "inverse_dynamics_fext", "qdd")
+    w = _array(w, 6, "inverse_dynamics_fext", "w")
+    p = _array(p, 3, "inverse_dynamics_fext", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w, p), 48, ((5,),))
     # one state: Python floats
@@ -8060,11 +8105,11 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     out qdd [5]
     540 ops: 308 mul, 209 add, 15 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    tau = _array(tau, 5, "tau")
-    w = _array(w, 6, "w")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "forward_dynamics_fext", "q")
+    qd = _array(qd, 5, "forward_dynamics_fext", "qd")
+    tau = _array(tau, 5, "forward_dynamics_fext", "tau")
+    w = _array(w, 6, "forward_dynamics_fext", "w")
+    p = _array(p, 3, "forward_dynamics_fext", "p")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w, p), 56, ((5,),), pure=3)
     # one state: Python floats
@@ -9186,8 +9231,8 @@ def com(q, p=DEFAULT_P):
     out c [3]
     70 ops: 36 mul, 25 add, 3 div, 6 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "com", "q")
+    p = _array(p, 3, "com", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_chunk, (q, p), 10, ((3,),))
     # one state: Python floats
@@ -9360,8 +9405,8 @@ def com_jacobian(q, p=DEFAULT_P):
     out J [3x5]
     175 ops: 91 mul, 65 add, 13 div, 6 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "com_jacobian", "q")
+    p = _array(p, 3, "com_jacobian", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_jacobian_chunk, (q, p), 20, ((3, 5),), fixed=_com_jacobian_fixed)
     # one state: Python floats
@@ -9752,8 +9797,8 @@ def centroidal_map(q, p=DEFAULT_P):
     out A [6x5]
     647 ops: 356 mul, 280 add, 3 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "centroidal_map", "q")
+    p = _array(p, 3, "centroidal_map", "p")
     if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_centroidal_map_chunk, (q, p), 76, ((6, 5),), fixed=_centroidal_map_fixed)
     # one state: Python floats
@@ -11098,9 +11143,9 @@ def ode_rhs(x, u, p=DEFAULT_P):
     out xdot [10]
     444 ops: 252 mul, 169 add, 15 div, 8 trig
     """
-    x = _array(x, 10, "x")
-    u = _array(u, 5, "u")
-    p = _array(p, 3, "p")
+    x = _array(x, 10, "ode_rhs", "x")
+    u = _array(u, 5, "ode_rhs", "u")
+    p = _array(p, 3, "ode_rhs", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_rhs_chunk, (x, u, p), 45, ((10,),), pure=3)
     # one state: Python floats
@@ -12034,9 +12079,9 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     out A [10x10]
     2110 ops: 1128 mul, 909 add, 65 div, 8 trig
     """
-    x = _array(x, 10, "x")
-    u = _array(u, 5, "u")
-    p = _array(p, 3, "p")
+    x = _array(x, 10, "ode_jac_x", "x")
+    u = _array(u, 5, "ode_jac_x", "u")
+    p = _array(p, 3, "ode_jac_x", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_x_chunk, (x, u, p), 158, ((10, 10),), fixed=_ode_jac_x_fixed, pure=3)
     # one state: Python floats
@@ -16324,9 +16369,9 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     out B [10x5]
     289 ops: 141 mul, 114 add, 28 div, 6 trig
     """
-    x = _array(x, 10, "x")
-    u = _array(u, 5, "u")
-    p = _array(p, 3, "p")
+    x = _array(x, 10, "ode_jac_u", "x")
+    u = _array(u, 5, "ode_jac_u", "u")
+    p = _array(p, 3, "ode_jac_u", "p")
     if x.ndim > 1 or u.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_u_chunk, (x, u, p), 22, ((10, 5),), fixed=_ode_jac_u_fixed, pure=3)
     # one state: Python floats
@@ -16961,10 +17006,10 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     out Y [5x65]
     501 ops: 264 mul, 224 add, 0 div, 8 trig, 5 other
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    qdd = _array(qdd, 5, "qdd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "regressor", "q")
+    qd = _array(qd, 5, "regressor", "qd")
+    qdd = _array(qdd, 5, "regressor", "qdd")
+    p = _array(p, 3, "regressor", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_regressor_chunk, (q, qd, qdd, p), 32, ((5, 65),), fixed=_regressor_fixed)
     # one state: Python floats
@@ -18055,10 +18100,10 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     out Y_b [5x40]
     400 ops: 213 mul, 174 add, 0 div, 8 trig, 5 other
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    qdd = _array(qdd, 5, "qdd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "base_regressor", "q")
+    qd = _array(qd, 5, "base_regressor", "qd")
+    qdd = _array(qdd, 5, "base_regressor", "qdd")
+    p = _array(p, 3, "base_regressor", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_base_regressor_chunk, (q, qd, qdd, p), 32, ((5, 40),), fixed=_base_regressor_fixed)
     # one state: Python floats
@@ -18937,9 +18982,9 @@ def bundle_control(q, qd, p=DEFAULT_P):
     out jdot_qd_tcp [6]
     478 ops: 280 mul, 190 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "bundle_control", "q")
+    qd = _array(qd, 5, "bundle_control", "qd")
+    p = _array(p, 3, "bundle_control", "p")
     if q.ndim > 1 or qd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_control_chunk, (q, qd, p), 52, ((5, 5), (5,), (4, 4), (6, 5), (6,),), fixed=_bundle_control_fixed, pure=3)
     # one state: Python floats
@@ -19986,10 +20031,10 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     out frame_acceleration_tcp [6]
     422 ops: 245 mul, 169 add, 0 div, 8 trig
     """
-    q = _array(q, 5, "q")
-    qd = _array(qd, 5, "qd")
-    qdd = _array(qdd, 5, "qdd")
-    p = _array(p, 3, "p")
+    q = _array(q, 5, "bundle_computed_torque", "q")
+    qd = _array(qd, 5, "bundle_computed_torque", "qd")
+    qdd = _array(qdd, 5, "bundle_computed_torque", "qdd")
+    p = _array(p, 3, "bundle_computed_torque", "p")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_computed_torque_chunk, (q, qd, qdd, p), 53, ((5,), (4, 4), (6, 5), (6,),), fixed=_bundle_computed_torque_fixed)
     # one state: Python floats
@@ -20907,8 +20952,10 @@ def rk4_step(x, u, dt, p=DEFAULT_P):
     out x_next [10]
     cost: the arithmetic of rrprr_ode_rhs per call, plus loops
     """
-    x = _array(x, 10, "x")
-    dt = _array(dt, 1, "dt")
+    x = _array(x, 10, "rk4_step", "x")
+    u = _array(u, 5, "rk4_step", "u")
+    dt = _array(dt, 1, "rk4_step", "dt")
+    p = _array(p, 3, "rk4_step", "p")
     h = float(dt[0]) if dt.ndim == 1 else dt  # a batch of steps (..., 1) broadcasts against x (..., n)
     k1 = ode_rhs(x, u, p)
     k2 = ode_rhs(x + 0.5 * h * k1, u, p)
@@ -20930,6 +20977,10 @@ def ik_tcp(T, q0=None, w=None, p=DEFAULT_P):
     batch: T (..., 4, 4) and q0, w, p (..., k) or None broadcast; solved one state after the other
     (a Python loop: the solver iterates per state); status is then an int array (...).
     """
+    T = _matrix(T, 4, 4, "ik_tcp", "T")
+    q0 = None if q0 is None else _array(q0, 5, "ik_tcp", "q0")
+    w = None if w is None else _array(w, 6, "ik_tcp", "w")
+    p = _array(p, 3, "ik_tcp", "p")
     batch = _ik_batch(ik_tcp, 5, T, q0, w, p)
     if batch is not None:  # a batch: one state after the other
         return batch
@@ -20951,4 +21002,6 @@ def manipulability_tcp(q, p=DEFAULT_P):
     out mu [3]
     cost: the arithmetic of rrprr_jacobian_tcp per call, plus loops
     """
+    q = _array(q, 5, "manipulability_tcp", "q")
+    p = _array(p, 3, "manipulability_tcp", "p")
     return _manipulability(jacobian_tcp(q, p).take([0, 1, 2], axis=-2))

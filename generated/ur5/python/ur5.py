@@ -28,14 +28,61 @@ PARAMETERS = {}
 DEFAULT_P = np.array([])
 
 
-def _array(value, n, name):
-    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of one element."""
-    v = np.asarray(value, dtype=float)
+_FLOAT = np.dtype(float)
+
+
+def _array(value, n, function, name):
+    """value as a float array (..., n): 1-D is one state, more axes a batch; a number is one state of
+    one element. Numbers only (bool, int, float): None, complex or text is a TypeError, a wrong
+    shape a ValueError, each naming the function and the argument."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype is not _FLOAT:
+        if v.dtype.kind not in "biuf":
+            raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+        v = v.astype(float)
     if v.ndim == 0 and n == 1:
         return v.reshape(1)
     if v.ndim == 0 or v.shape[-1] != n:
-        raise ValueError(f"{name} must have {n} elements in its last axis, got shape {v.shape}")
+        raise ValueError(f"{function}: {name} must have {n} elements in its last axis, got shape {v.shape}")
     return v
+
+
+def _given(value, v):
+    """What a value that is not real numbers is, for an error message."""
+    if value is None:
+        return "None"
+    if v.dtype.kind == "c":
+        return f"complex numbers ({v.dtype})"
+    if v.dtype.kind in "USa":
+        return f"text ({v.dtype})"
+    if v.dtype.kind == "O" and v.ndim:
+        return "an array of Python objects (None, or not all numbers?)"
+    return f"{type(value).__name__} ({v.dtype})"
+
+
+def _real(value, function, name):
+    """value as a float array of any shape: numbers only (see _array)."""
+    try:
+        v = np.asarray(value)
+    except ValueError as exc:  # a ragged list
+        raise ValueError(f"{function}: {name} is not an array of numbers ({exc})") from None
+    if v.dtype.kind not in "biuf":
+        raise TypeError(f"{function}: {name} must be real numbers (bool, int or float), got {_given(value, v)}")
+    return v.astype(float, copy=False)
+
+
+def _matrix(value, rows, cols, function, name):
+    """value as a float array (..., rows, cols), or one state given flat (rows * cols,); numbers only (see _array)."""
+    v = _real(value, function, name)
+    if v.shape[-2:] == (rows, cols):
+        return v
+    if v.shape == (rows * cols,):
+        return v.reshape(rows, cols)
+    raise ValueError(f"{function}: {name} must have shape (..., {rows}, {cols}) (or {rows * cols} elements for one "
+                     f"state), got shape {v.shape}")
 
 
 _CHUNK = 16384
@@ -245,12 +292,10 @@ def _ik_batch(solve, n, T, *vectors):
     when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
     (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
     (...) an int array, each state's entries those solve gives for it alone."""
-    T = np.asarray(T, dtype=float)
+    T = np.asarray(T, dtype=float)  # checked by the caller (_matrix, _array): (..., 4, 4) and (..., k)
     vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
     if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
         return None
-    if T.shape[-2:] != (4, 4):
-        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
     shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
     T = np.broadcast_to(T, shape + (4, 4))
     vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]
@@ -285,7 +330,7 @@ def fk_tcp(q):
     out T [4x4]
     123 ops: 68 mul, 43 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "fk_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_tcp_chunk, (q,), 24, ((4, 4),), fixed=_fk_tcp_fixed)
     # one state: Python floats
@@ -572,7 +617,7 @@ def jacobian_tcp(q):
     out J [6x6]
     148 ops: 75 mul, 63 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "jacobian_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_tcp_chunk, (q,), 26, ((6, 6),), fixed=_jacobian_tcp_fixed)
     # one state: Python floats
@@ -917,8 +962,8 @@ def jdot_qd_tcp(q, qd):
     out a [6]
     283 ops: 172 mul, 99 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
+    q = _array(q, 6, "jdot_qd_tcp", "q")
+    qd = _array(qd, 6, "jdot_qd_tcp", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_tcp_chunk, (q, qd), 35, ((6,),))
     # one state: Python floats
@@ -1519,9 +1564,9 @@ def frame_acceleration_tcp(q, qd, qdd):
     out a [6]
     304 ops: 181 mul, 111 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "frame_acceleration_tcp", "q")
+    qd = _array(qd, 6, "frame_acceleration_tcp", "qd")
+    qdd = _array(qdd, 6, "frame_acceleration_tcp", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_tcp_chunk, (q, qd, qdd), 36, ((6,),))
     # one state: Python floats
@@ -2164,7 +2209,7 @@ def fk_base_link(q):
     out T [4x4]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "fk_base_link", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_base_link_chunk, (q,), 0, ((4, 4),), fixed=_fk_base_link_fixed)
     # one state: Python floats
@@ -2196,7 +2241,7 @@ def jacobian_base_link(q):
     out J [6x6]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "jacobian_base_link", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_base_link_chunk, (q,), 0, ((6, 6),), fixed=_jacobian_base_link_fixed)
     # one state: Python floats
@@ -2233,8 +2278,8 @@ def jdot_qd_base_link(q, qd):
     out a [6]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
+    q = _array(q, 6, "jdot_qd_base_link", "q")
+    qd = _array(qd, 6, "jdot_qd_base_link", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_base_link_chunk, (q, qd), 0, ((6,),), fixed=_jdot_qd_base_link_fixed)
     # one state: Python floats
@@ -2265,9 +2310,9 @@ def frame_acceleration_base_link(q, qd, qdd):
     out a [6]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "frame_acceleration_base_link", "q")
+    qd = _array(qd, 6, "frame_acceleration_base_link", "qd")
+    qdd = _array(qdd, 6, "frame_acceleration_base_link", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_base_link_chunk, (q, qd, qdd), 0, ((6,),), fixed=_frame_acceleration_base_link_fixed)
     # one state: Python floats
@@ -2298,7 +2343,7 @@ def fk_base(q):
     out T [4x4]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "fk_base", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_base_chunk, (q,), 0, ((4, 4),), fixed=_fk_base_fixed)
     # one state: Python floats
@@ -2330,7 +2375,7 @@ def jacobian_base(q):
     out J [6x6]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "jacobian_base", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_base_chunk, (q,), 0, ((6, 6),), fixed=_jacobian_base_fixed)
     # one state: Python floats
@@ -2367,8 +2412,8 @@ def jdot_qd_base(q, qd):
     out a [6]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
+    q = _array(q, 6, "jdot_qd_base", "q")
+    qd = _array(qd, 6, "jdot_qd_base", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_base_chunk, (q, qd), 0, ((6,),), fixed=_jdot_qd_base_fixed)
     # one state: Python floats
@@ -2399,9 +2444,9 @@ def frame_acceleration_base(q, qd, qdd):
     out a [6]
     0 ops: 0 mul, 0 add, 0 div, 0 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "frame_acceleration_base", "q")
+    qd = _array(qd, 6, "frame_acceleration_base", "qd")
+    qdd = _array(qdd, 6, "frame_acceleration_base", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_base_chunk, (q, qd, qdd), 0, ((6,),), fixed=_frame_acceleration_base_fixed)
     # one state: Python floats
@@ -2432,7 +2477,7 @@ def fk_ee_link(q):
     out T [4x4]
     123 ops: 68 mul, 43 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "fk_ee_link", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_ee_link_chunk, (q,), 24, ((4, 4),), fixed=_fk_ee_link_fixed)
     # one state: Python floats
@@ -2719,7 +2764,7 @@ def jacobian_ee_link(q):
     out J [6x6]
     148 ops: 75 mul, 63 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "jacobian_ee_link", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jacobian_ee_link_chunk, (q,), 26, ((6, 6),), fixed=_jacobian_ee_link_fixed)
     # one state: Python floats
@@ -3064,8 +3109,8 @@ def jdot_qd_ee_link(q, qd):
     out a [6]
     283 ops: 172 mul, 99 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
+    q = _array(q, 6, "jdot_qd_ee_link", "q")
+    qd = _array(qd, 6, "jdot_qd_ee_link", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_jdot_qd_ee_link_chunk, (q, qd), 35, ((6,),))
     # one state: Python floats
@@ -3666,9 +3711,9 @@ def frame_acceleration_ee_link(q, qd, qdd):
     out a [6]
     304 ops: 181 mul, 111 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "frame_acceleration_ee_link", "q")
+    qd = _array(qd, 6, "frame_acceleration_ee_link", "qd")
+    qdd = _array(qdd, 6, "frame_acceleration_ee_link", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_frame_acceleration_ee_link_chunk, (q, qd, qdd), 36, ((6,),))
     # one state: Python floats
@@ -4312,7 +4357,7 @@ def fk_jacobian_tcp(q):
     out J [6x6]
     178 ops: 92 mul, 74 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "fk_jacobian_tcp", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_fk_jacobian_tcp_chunk, (q,), 23, ((4, 4), (6, 6),), fixed=_fk_jacobian_tcp_fixed)
     # one state: Python floats
@@ -4726,7 +4771,7 @@ def mass_matrix(q):
     out M [6x6]
     226 ops: 112 mul, 104 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "mass_matrix", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_mass_matrix_chunk, (q,), 29, ((6, 6),), fixed=_mass_matrix_fixed)
     # one state: Python floats
@@ -5247,8 +5292,8 @@ def coriolis_matrix(q, qd):
     out C [6x6]
     708 ops: 376 mul, 322 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
+    q = _array(q, 6, "coriolis_matrix", "q")
+    qd = _array(qd, 6, "coriolis_matrix", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_coriolis_matrix_chunk, (q, qd), 58, ((6, 6),), fixed=_coriolis_matrix_fixed)
     # one state: Python floats
@@ -6723,7 +6768,7 @@ def gravity(q):
     out g [6]
     124 ops: 72 mul, 42 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "gravity", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_gravity_chunk, (q,), 22, ((6,),), fixed=_gravity_fixed)
     # one state: Python floats
@@ -7010,8 +7055,8 @@ def bias(q, qd):
     out h [6]
     394 ops: 231 mul, 153 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
+    q = _array(q, 6, "bias", "q")
+    qd = _array(qd, 6, "bias", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bias_chunk, (q, qd), 60, ((6,),))
     # one state: Python floats
@@ -7838,9 +7883,9 @@ def inverse_dynamics(q, qd, qdd):
     out tau [6]
     427 ops: 247 mul, 170 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "inverse_dynamics", "q")
+    qd = _array(qd, 6, "inverse_dynamics", "qd")
+    qdd = _array(qdd, 6, "inverse_dynamics", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_chunk, (q, qd, qdd), 65, ((6,),))
     # one state: Python floats
@@ -8736,9 +8781,9 @@ def inverse_dynamics_derivatives(q, qd, qdd):
     out dtau [6x12]
     2513 ops: 1423 mul, 1080 add, 0 div, 10 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "inverse_dynamics_derivatives", "q")
+    qd = _array(qd, 6, "inverse_dynamics_derivatives", "qd")
+    qdd = _array(qdd, 6, "inverse_dynamics_derivatives", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_derivatives_chunk, (q, qd, qdd), 267, ((6, 12),), fixed=_inverse_dynamics_derivatives_fixed)
     # one state: Python floats
@@ -13837,9 +13882,9 @@ def forward_dynamics(q, qd, tau):
     out qdd [6]
     797 ops: 443 mul, 323 add, 21 div, 10 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    tau = _array(tau, 6, "tau")
+    q = _array(q, 6, "forward_dynamics", "q")
+    qd = _array(qd, 6, "forward_dynamics", "qd")
+    tau = _array(tau, 6, "forward_dynamics", "tau")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_chunk, (q, qd, tau), 61, ((6,),))
     # one state: Python floats
@@ -15480,10 +15525,10 @@ def inverse_dynamics_fext(q, qd, qdd, w):
     out tau [6]
     611 ops: 347 mul, 252 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
-    w = _array(w, 6, "w")
+    q = _array(q, 6, "inverse_dynamics_fext", "q")
+    qd = _array(qd, 6, "inverse_dynamics_fext", "qd")
+    qdd = _array(qdd, 6, "inverse_dynamics_fext", "qdd")
+    w = _array(w, 6, "inverse_dynamics_fext", "w")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_inverse_dynamics_fext_chunk, (q, qd, qdd, w), 66, ((6,),))
     # one state: Python floats
@@ -16749,10 +16794,10 @@ def forward_dynamics_fext(q, qd, tau, w):
     out qdd [6]
     981 ops: 543 mul, 405 add, 21 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    tau = _array(tau, 6, "tau")
-    w = _array(w, 6, "w")
+    q = _array(q, 6, "forward_dynamics_fext", "q")
+    qd = _array(qd, 6, "forward_dynamics_fext", "qd")
+    tau = _array(tau, 6, "forward_dynamics_fext", "tau")
+    w = _array(w, 6, "forward_dynamics_fext", "w")
     if q.ndim > 1 or qd.ndim > 1 or tau.ndim > 1 or w.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_forward_dynamics_fext_chunk, (q, qd, tau, w), 80, ((6,),))
     # one state: Python floats
@@ -18760,7 +18805,7 @@ def com(q):
     out c [3]
     108 ops: 56 mul, 41 add, 3 div, 8 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "com", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_chunk, (q,), 14, ((3,),))
     # one state: Python floats
@@ -19008,7 +19053,7 @@ def com_jacobian(q):
     out J [3x6]
     241 ops: 121 mul, 98 add, 14 div, 8 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "com_jacobian", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_com_jacobian_chunk, (q,), 39, ((3, 6),), fixed=_com_jacobian_fixed)
     # one state: Python floats
@@ -19531,7 +19576,7 @@ def centroidal_map(q):
     out A [6x6]
     857 ops: 457 mul, 385 add, 3 div, 12 trig
     """
-    q = _array(q, 6, "q")
+    q = _array(q, 6, "centroidal_map", "q")
     if q.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_centroidal_map_chunk, (q,), 117, ((6, 6),), fixed=_centroidal_map_fixed)
     # one state: Python floats
@@ -21297,8 +21342,8 @@ def ode_rhs(x, u):
     out xdot [12]
     797 ops: 443 mul, 323 add, 21 div, 10 trig
     """
-    x = _array(x, 12, "x")
-    u = _array(u, 6, "u")
+    x = _array(x, 12, "ode_rhs", "x")
+    u = _array(u, 6, "ode_rhs", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_rhs_chunk, (x, u), 61, ((12,),))
     # one state: Python floats
@@ -22942,8 +22987,8 @@ def ode_jac_x(x, u):
     out A [12x12]
     3817 ops: 2007 mul, 1713 add, 87 div, 10 trig
     """
-    x = _array(x, 12, "x")
-    u = _array(u, 6, "u")
+    x = _array(x, 12, "ode_jac_x", "x")
+    u = _array(u, 6, "ode_jac_x", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_x_chunk, (x, u), 211, ((12, 12),), fixed=_ode_jac_x_fixed)
     # one state: Python floats
@@ -30657,8 +30702,8 @@ def ode_jac_u(x, u):
     out B [12x6]
     592 ops: 287 mul, 255 add, 40 div, 10 trig
     """
-    x = _array(x, 12, "x")
-    u = _array(u, 6, "u")
+    x = _array(x, 12, "ode_jac_u", "x")
+    u = _array(u, 6, "ode_jac_u", "u")
     if x.ndim > 1 or u.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_ode_jac_u_chunk, (x, u), 30, ((12, 6),), fixed=_ode_jac_u_fixed)
     # one state: Python floats
@@ -31906,9 +31951,9 @@ def regressor(q, qd, qdd):
     out Y [6x78]
     892 ops: 474 mul, 402 add, 0 div, 10 trig, 6 other
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "regressor", "q")
+    qd = _array(qd, 6, "regressor", "qd")
+    qdd = _array(qdd, 6, "regressor", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_regressor_chunk, (q, qd, qdd), 37, ((6, 78),), fixed=_regressor_fixed)
     # one state: Python floats
@@ -33834,9 +33879,9 @@ def base_regressor(q, qd, qdd):
     out Y_b [6x52]
     712 ops: 380 mul, 316 add, 0 div, 10 trig, 6 other
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "base_regressor", "q")
+    qd = _array(qd, 6, "base_regressor", "qd")
+    qdd = _array(qdd, 6, "base_regressor", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_base_regressor_chunk, (q, qd, qdd), 39, ((6, 52),), fixed=_base_regressor_fixed)
     # one state: Python floats
@@ -35386,8 +35431,8 @@ def bundle_control(q, qd):
     out jdot_qd_tcp [6]
     850 ops: 475 mul, 363 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
+    q = _array(q, 6, "bundle_control", "q")
+    qd = _array(qd, 6, "bundle_control", "qd")
     if q.ndim > 1 or qd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_control_chunk, (q, qd), 70, ((6, 6), (6,), (4, 4), (6, 6), (6,),), fixed=_bundle_control_fixed)
     # one state: Python floats
@@ -37200,9 +37245,9 @@ def bundle_computed_torque(q, qd, qdd):
     out frame_acceleration_tcp [6]
     669 ops: 379 mul, 278 add, 0 div, 12 trig
     """
-    q = _array(q, 6, "q")
-    qd = _array(qd, 6, "qd")
-    qdd = _array(qdd, 6, "qdd")
+    q = _array(q, 6, "bundle_computed_torque", "q")
+    qd = _array(qd, 6, "bundle_computed_torque", "qd")
+    qdd = _array(qdd, 6, "bundle_computed_torque", "qdd")
     if q.ndim > 1 or qd.ndim > 1 or qdd.ndim > 1:  # a batch: numpy, chunk by chunk
         return _batch(_bundle_computed_torque_chunk, (q, qd, qdd), 77, ((6,), (4, 4), (6, 6), (6,),), fixed=_bundle_computed_torque_fixed)
     # one state: Python floats
@@ -38619,8 +38664,9 @@ def rk4_step(x, u, dt):
     out x_next [12]
     cost: the arithmetic of ur5_ode_rhs per call, plus loops
     """
-    x = _array(x, 12, "x")
-    dt = _array(dt, 1, "dt")
+    x = _array(x, 12, "rk4_step", "x")
+    u = _array(u, 6, "rk4_step", "u")
+    dt = _array(dt, 1, "rk4_step", "dt")
     h = float(dt[0]) if dt.ndim == 1 else dt  # a batch of steps (..., 1) broadcasts against x (..., n)
     k1 = ode_rhs(x, u)
     k2 = ode_rhs(x + 0.5 * h * k1, u)
@@ -38641,6 +38687,9 @@ def ik_tcp(T, q0=None, w=None):
     batch: T (..., 4, 4) and q0, w (..., k) or None broadcast; solved one state after the other
     (a Python loop: the solver iterates per state); status is then an int array (...).
     """
+    T = _matrix(T, 4, 4, "ik_tcp", "T")
+    q0 = None if q0 is None else _array(q0, 6, "ik_tcp", "q0")
+    w = None if w is None else _array(w, 6, "ik_tcp", "w")
     batch = _ik_batch(ik_tcp, 6, T, q0, w)
     if batch is not None:  # a batch: one state after the other
         return batch
@@ -38661,6 +38710,7 @@ def manipulability_tcp(q):
     out mu [3]
     cost: the arithmetic of ur5_jacobian_tcp per call, plus loops
     """
+    q = _array(q, 6, "manipulability_tcp", "q")
     return _manipulability(jacobian_tcp(q).take([0, 1, 2], axis=-2))
 
 
@@ -38671,4 +38721,5 @@ def manipulability_ee_link(q):
     out mu [3]
     cost: the arithmetic of ur5_jacobian_ee_link per call, plus loops
     """
+    q = _array(q, 6, "manipulability_ee_link", "q")
     return _manipulability(jacobian_ee_link(q).take([0, 1, 2], axis=-2))

@@ -114,12 +114,10 @@ def _ik_batch(solve, n, T, *vectors):
     when every input is one state (T 4x4, the vectors 1-D or None). T (..., 4, 4) and the vectors
     (..., k) or None broadcast against each other; returns q (..., n), residual (..., 2) and status
     (...) an int array, each state's entries those solve gives for it alone."""
-    T = np.asarray(T, dtype=float)
+    T = np.asarray(T, dtype=float)  # checked by the caller (_matrix, _array): (..., 4, 4) and (..., k)
     vectors = [None if v is None else np.asarray(v, dtype=float) for v in vectors]
     if T.ndim <= 2 and all(v is None or v.ndim <= 1 for v in vectors):
         return None
-    if T.shape[-2:] != (4, 4):
-        raise ValueError(f"T must have shape (..., 4, 4) in a batch, got shape {T.shape}")
     shape = np.broadcast_shapes(T.shape[:-2], *(v.shape[:-1] for v in vectors if v is not None))
     T = np.broadcast_to(T, shape + (4, 4))
     vectors = [None if v is None else np.broadcast_to(v, shape + v.shape[-1:]) for v in vectors]

@@ -119,6 +119,15 @@ class CPrinter(ExpressionPrinter):
         return parts
 
 
+FLT_MIN = 1.1754943508222875e-38
+"""The smallest normal float: a nonzero constant below it (a product of two tiny model numbers, say)
+would be a float literal that compilers truncate to zero with a warning, fatal under -Werror."""
+
+
 def literal(x: float) -> str:
-    """A real constant in the precision the code is compiled for."""
+    """A real constant in the precision the code is compiled for. A nonzero constant too small for a
+    float literal is a double literal converted to DERIVE_REAL (rounding to 0 in a float build,
+    exact in double), which compilers accept without a warning."""
+    if x != 0 and abs(x) < FLT_MIN:
+        return f"((DERIVE_REAL){float_literal(x)})"
     return f"DERIVE_LIT({float_literal(x)})"

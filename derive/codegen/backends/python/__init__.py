@@ -19,6 +19,11 @@ gives bit for bit the per-state results, and one state those of the C code:
 
 Template functions: ``rk4_step``, ``manipulability_<frame>`` and the ODE Jacobians of large robots are batched as well; ``ik_<frame>``
 (:data:`LOOPS`), iterative per state, solves a batch one state after the other.
+
+Every function first checks its inputs (the module's ``_array``, and ``_matrix`` for IK's T): numbers
+only (bool, int, float; None, complex or text is a TypeError) of the right last axis (a ValueError),
+each error naming the function and the argument; IK's q0 and w may be None. The check converts an
+input once (``np.asarray``) and loops over nothing, so one state's call costs about the same.
 """
 
 from __future__ import annotations
@@ -51,6 +56,18 @@ ENTRIES_PER_LINE = 8
 
 def _args(spec, optional=()) -> list[str]:
     return [("p=DEFAULT_P" if n == "p" else f"{n}=None" if n in optional else n) for n, _ in spec.inputs]
+
+
+def _checks(t) -> list[str]:
+    """A template function's first lines: each input through the module's ``_array`` (a vector),
+    or ``_matrix`` (a matrix), an optional one only when given (not None)."""
+    lines = []
+    for n, (r, c) in t.inputs:
+        if r * c == 0:
+            continue
+        call = f'_matrix({n}, {r}, {c}, "{t.short_name}", "{n}")' if c > 1 else f'_array({n}, {r}, "{t.short_name}", "{n}")'
+        lines.append(f"{n} = None if {n} is None else {call}" if n in t.optional else f"{n} = {call}")
+    return lines
 
 
 def _returns(outputs, status: bool = False) -> list[dict]:
@@ -141,7 +158,8 @@ class PythonBackend(Backend):
         t = fn.spec
         context = self.literals(t.context, float_literal, float_literal)
         return {**fn.common, **context, **dict(t.calls), "py_args": _args(t, t.optional),
-                "py_template": self.template(f"{t.template}.py.jinja"),
+                "py_template": self.template(f"{t.template}.py.jinja"), "py_checks": _checks(t),
+                "py_matrix": any(c > 1 for _, (_, c) in t.inputs),
                 "py_support": [s for algorithm in t.support for s in SUPPORT[algorithm]], "py_loops": t.template in LOOPS,
                 "py_returns": _returns(t.outputs, t.status),
                 "p_arg": ", p" if "p" in [n for n, _ in t.inputs] else ""}
@@ -156,6 +174,7 @@ class PythonBackend(Backend):
             robot.data(), functions=functions, support=self.sections(functions),
             loops=[f["short_name"] for f in functions if f.get("py_loops")],
             elementwise=any(BATCH_DEFINITIONS[k].startswith("_batch") for k in used),
+            matrices=any(f.get("py_matrix") for f in functions),
             chunk_size=CHUNK, chunk_floats=f"{CHUNK_FLOATS:_}",
             batch_definitions=[BATCH_DEFINITIONS[k] for k in used])
         return {f"python/{robot.robot}.py": text}
