@@ -75,6 +75,18 @@ def outputs(value, fn: dict) -> tuple:
     return value if len(fn["python"]["returns"]) > 1 else (value,)
 
 
+SAMPLE_STRIDE, SAMPLE_EDGE = 16, 64
+
+
+def sample(shape: tuple) -> np.ndarray:
+    """Flat indices of the states of a batch ``shape`` checked one by one: all of a small batch; of
+    a large one every SAMPLE_STRIDE-th and the first and last SAMPLE_EDGE."""
+    n = int(np.prod(shape))
+    if n <= 4 * SAMPLE_EDGE:
+        return np.arange(n)
+    return np.unique(np.r_[0:SAMPLE_EDGE, SAMPLE_EDGE:n - SAMPLE_EDGE:SAMPLE_STRIDE, n - SAMPLE_EDGE:n])
+
+
 def per_state(f, args: list, shape: tuple, fn: dict) -> list[np.ndarray]:
     """f called on each state of the batch alone, stacked to shape + each output's shape."""
     returns = fn["python"]["returns"]
@@ -95,7 +107,8 @@ def assert_bits(got: np.ndarray, want: np.ndarray, what: str) -> None:
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_batches_equal_the_states_one_by_one_bit_for_bit(robot, generated):
     """Batches (7,), (3, 4) and (10000,) of seeded states: each output (..., *shape), float64 (status
-    an int array), equal in its bits to calling the function on each state alone."""
+    an int array), equal in its bits to calling the function on each state alone (of the 10 000,
+    745 of them: sample)."""
     module, manifest = load(generated, robot)
     rng = np.random.default_rng(15)
     checked = 0
@@ -109,14 +122,19 @@ def test_batches_equal_the_states_one_by_one_bit_for_bit(robot, generated):
                 warnings.simplefilter("error")  # a batch of valid states raises no numpy warning
                 got = outputs(f(*args), fn)
             assert isinstance(got, tuple) and len(got) == len(returns), fn["name"]
-            want = per_state(f, args, shape, fn)
+            # of the large batch (several chunks where a function needs many registers), every
+            # SAMPLE_STRIDE-th state and the first and last SAMPLE_EDGE (one by one, a panda batch
+            # of 10 000 took 30 s): each alone in its bits
+            pick = sample(shape)
+            want = per_state(f, [None if x is None else x.reshape((-1,) + x.shape[len(shape):])[pick] for x in args],
+                             pick.shape, fn)
             for g, w, declared in zip(got, want, returns):
                 what = f"{fn['name']} batch {shape} -> {declared['name']}"
                 assert isinstance(g, np.ndarray), what
                 assert g.shape == shape + tuple(declared["shape"]), f"{what}: shape {g.shape}"
                 assert g.dtype == (np.dtype(int) if declared["shape"] == [] else np.float64), what
                 assert g.flags.c_contiguous, what
-                assert_bits(g, w, what)
+                assert_bits(g.reshape((-1,) + g.shape[len(shape):])[pick], w, what)
             checked += 1
     assert checked == sum(2 if fn["quantity"] == "ik" else 3 for fn in manifest["functions"])
 

@@ -131,7 +131,7 @@ def complex_step(g, x: np.ndarray, h: float = 1e-30) -> np.ndarray:
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_generated_c_python_casadi_match_reference(robot, committed_library):
-    """All of generated/<robot>/c built (conftest.py: -std=c99 -Wall -Wextra -Werror -pedantic -O1), double and float."""
+    """All of generated/<robot>/c built (conftest.py: -std=c99 -Wall -Wextra -Werror -pedantic), double (-O1) and float (-O0)."""
     manifest = json.loads((GENERATED / robot / "manifest.json").read_text())
     c_double = CFunctions(committed_library(robot), manifest, ctypes.c_double)
     c_float = CFunctions(committed_library(robot, ["-DDERIVE_FLOAT"]), manifest, ctypes.c_float)

@@ -9,14 +9,13 @@ a missing compiler is a failure.
 from __future__ import annotations
 
 import importlib.util
+import json
 import os
 import shutil
 import subprocess
 from pathlib import Path
 
 import pytest
-
-from util import run_at_once
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
@@ -46,16 +45,25 @@ def nvcc():
 
 def test_every_generated_c_file_compiles_as_cuda_device_code(nvcc, tmp_path):
     """DERIVE_FN is __host__ __device__ under nvcc: all of a robot's functions (IK, RK4 and the
-    support headers included) compile as CUDA. One nvcc per source, as many at once as there are CPUs
-    (each spends ~1 s on the CUDA headers; one nvcc for all of them compiles one after the other)."""
+    support headers included) compile as CUDA, and every one of them is in the object. One nvcc for
+    one translation unit that includes every source (each nvcc spends ~2 s on the CUDA headers: 27
+    of them took 70 s of CPU, this one 3 s); that each source stands alone is the strict C build's
+    test (tests/test_codegen.py, one compiler per source)."""
     exe, _ = nvcc
     src = GENERATED / "planar_2r" / "c"
-    sources = sorted(str(p) for p in src.glob("*.c"))
-    results = run_at_once([[str(exe), "-x", "cu", "-rdc=true", "-Werror", "all-warnings", f"-I{src}", "-c", source]
-                           for source in sources], cwd=tmp_path, capture_output=True, text=True)
-    for source, res in zip(sources, results):
-        assert res.returncode == 0, f"{source}: {res.stderr[-3000:]}"
-    assert len(list(tmp_path.glob("*.o"))) == len(sources)
+    sources = sorted(src.glob("*.c"))
+    unit = tmp_path / "all.cu"
+    unit.write_text("".join(f'#include "{s}"\n' for s in sources))
+    obj = tmp_path / "all.o"
+    res = subprocess.run([str(exe), "-x", "cu", "-rdc=true", "-Werror", "all-warnings", f"-I{src}", "-c", str(unit),
+                          "-o", str(obj)], cwd=tmp_path, capture_output=True, text=True)
+    assert res.returncode == 0, res.stderr[-3000:]
+    manifest = json.loads((GENERATED / "planar_2r" / "manifest.json").read_text())
+    symbols = subprocess.run(["nm", "--defined-only", str(obj)], capture_output=True, text=True, check=True).stdout
+    defined = {line.split()[-1] for line in symbols.splitlines() if line.strip()}
+    names = [fn["name"] for fn in manifest["functions"]]
+    assert len(names) == len(sources) and all(any(d.startswith(f"_Z{len(n)}{n}") or d == n for d in defined)
+                                               for n in names), sorted(defined)
 
 
 def test_example_batch_kernel_builds(nvcc, tmp_path):

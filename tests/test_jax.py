@@ -8,6 +8,7 @@ flavour leaves out; generating needs no jax.
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import json
 import os
@@ -36,7 +37,7 @@ ROOT = Path(__file__).resolve().parent.parent
 MODELS = load_models()
 ROBOTS = sorted(MODELS)
 RTOL = 1e-12  # the issue's target: the same arithmetic, so agreement to rounding
-N_STATES = 5
+N_STATES = 2  # one state at a time: the shapes and values of unbatched calls; values at more states: the batches
 BATCH = 16
 # jit compiles each function once per shape: every function of the small robots; of the others
 # (ode_jac_x, rk4_step of panda: 20-50 s on a small CPU) these
@@ -56,8 +57,10 @@ def load_module(path: Path, name: str):
     return mod
 
 
+@functools.cache
 def modules(generated: Path, robot: str):
-    """(jax module, numpy module, manifest) of one robot, from the same folder."""
+    """(jax module, numpy module, manifest) of one robot, from the same folder; loaded once per module
+    (panda's 1 MB JAX module takes seconds to compile to bytecode), read only by the tests."""
     folder = generated / robot
     jx = load_module(folder / "jax" / f"{robot}.py", f"{robot}_jax_flavour")
     py = load_module(folder / "python" / f"{robot}.py", f"{robot}_numpy_flavour")
@@ -176,12 +179,16 @@ def test_batches_match_numpy(robot, generated):
 
 @pytest.mark.parametrize("robot", ROBOTS)
 def test_jit_and_vmap_give_the_same(robot, generated):
-    """jax.jit(f) on a batch equals numpy to 1e-12; jax.vmap(f) over the batch equals f on the batch."""
+    """jax.jit(f) on a batch equals numpy to 1e-12; jax.vmap(f) over the batch equals f on the batch:
+    every function of the small robots, JIT_ALWAYS of the others (every quantity is among the small
+    robots'; jit compiles and vmap traces op by op, both a matter of the operations used, not of size)."""
     jx, py, manifest = modules(generated, robot)
     rng = np.random.default_rng(13)
     a = inputs(robot, rng, (BATCH,))
     jitted = 0
     for fn in provided(manifest):
+        if robot not in SMALL and fn["quantity"] not in JIT_ALWAYS:
+            continue  # its batches: test_batches_match_numpy
         f = getattr(jx, fn["jax"]["function"])
         args = call_args(fn, a)
         batched = f(*args)
@@ -189,9 +196,8 @@ def test_jit_and_vmap_give_the_same(robot, generated):
         mapped = jax.vmap(f)(*args)
         check(mapped, want, fn, f"vmap {fn['name']}")
         check(mapped, batched, fn, f"vmap vs batch {fn['name']}")
-        if robot in SMALL or fn["quantity"] in JIT_ALWAYS:
-            check(jax.jit(f)(*args), want, fn, f"jit {fn['name']}")
-            jitted += 1
+        check(jax.jit(f)(*args), want, fn, f"jit {fn['name']}")
+        jitted += 1
     assert jitted >= 4
 
 
@@ -210,14 +216,15 @@ def test_grad_of_inverse_dynamics_matches_the_ode_jacobian(robot, generated):
 
     grad_s = jax.grad(s, argnums=(0, 1))
     jit_grad_s = jax.jit(grad_s)  # w and qdd arguments, not constants of a closure: one compile for both states
-    for _ in range(2):
+    for k in range(2):
         a = inputs(robot, rng)
         q, qd, tau = a["q"], a["qd"], a["tau"]
         qdd = py.forward_dynamics(q, qd, tau)
         w = rng.normal(size=nv)
 
-        gq, gqd = grad_s(q, qd, w, qdd)
         jgq, jgqd = jit_grad_s(q, qd, w, qdd)
+        # grad without jit (an op-by-op trace, slow on the larger robots) at the first state
+        gq, gqd = grad_s(q, qd, w, qdd) if k == 0 else (jgq, jgqd)
         M = np.reshape(py.mass_matrix(q), (nv, nv))  # (1,) for a 1 x 1 M
         A = py.ode_jac_x(np.concatenate([q, qd]), tau)[nq:, :]  # d FD / d [q, qd]
         want_q, want_qd = -(M @ A[:, :nq]).T @ w, -(M @ A[:, nq:]).T @ w
