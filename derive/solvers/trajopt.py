@@ -41,6 +41,7 @@ import casadi as ca
 import numpy as np
 
 from derive.codegen.generate import default_output, generate
+from derive.description.joints import wrap_angle
 from derive.description.model import Robot, load_robot
 from derive.errors import DeriveError
 from derive.filesystem import temporary_directory, write_atomically
@@ -110,6 +111,7 @@ class TrajoptResult:
     velocity_error: float = math.inf
     drift: float = math.inf
     limit_violation: float = math.inf
+    continuous: tuple[int, ...] = ()  # entries of q that are continuous joints' angles
 
     @property
     def duration(self) -> float:
@@ -132,9 +134,15 @@ class TrajoptResult:
         return a * (2 * s - 1) * (s - 1) + c * 4 * s * (1 - s) + b * s * (2 * s - 1)
 
     def table(self) -> tuple[list[str], np.ndarray]:
-        """CSV header and rows: t, q_<joint>..., qd_<joint>..., qdd_<joint>..., tau_<joint>...."""
+        """CSV header and rows: t, q_<joint>..., qd_<joint>..., qdd_<joint>..., tau_<joint>....
+
+        A continuous joint's q is wrapped to (-pi, pi] here (what the joint reads); ``q`` itself
+        keeps the optimised angle, which winds as far as the motion from start to goal goes."""
         names = ["t"] + [f"{k}_{j}" for k in ("q", "qd", "qdd", "tau") for j in self.joints]
-        return names, np.column_stack([self.t, self.q, self.qd, self.qdd, self.tau])
+        q = np.array(self.q, dtype=float, copy=True)
+        if self.continuous and len(q):
+            q[:, list(self.continuous)] = wrap_angle(q[:, list(self.continuous)])
+        return names, np.column_stack([self.t, q, self.qd, self.qdd, self.tau])
 
     def csv_text(self) -> str:
         """The CSV of :meth:`table`: a header line, then one line per knot (10 significant digits)."""
@@ -387,7 +395,7 @@ class TrajectoryOptimizer:
             tau=(B @ U).T, tau_mid=(B @ v(nlp["Uc"])).T if "Uc" in nlp else None,
             stats={"return_status": st["return_status"], "iterations": st["iter_count"],
                    "solve_time": solve_time, "build_time": build_time,
-                   "cost": float(sol.value(opti.f))})
+                   "cost": float(sol.value(opti.f))}, continuous=self.robot.continuous_indices)
         self._check(res, start, goal, start_qd, goal_qd, lim, waypoints, substeps, tol)
         self.log(res.summary())
         return res
