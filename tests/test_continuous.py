@@ -259,6 +259,10 @@ def test_trajopt_keeps_the_optimised_angle_and_writes_it_wrapped(gen):
     column = rows[:, names.index("q_turn")]
     assert in_range(column) and column[-1] == pytest.approx(3.6 - 2 * math.pi, abs=1e-6)
     np.testing.assert_array_equal(rows[:, names.index("q_elbow")], res.q[:, 1])
+    # that CSV's wrapped path is a guess again: its jump of 2 pi is taken out
+    again = opt.solve(np.array([2.8, 0.0]), np.array([3.6, 0.0]), intervals=20, duration=1.0, accel_weight=1.0,
+                      guess=rows[:, 1:3])
+    assert again.success and again.q[-1, 0] == pytest.approx(3.6, abs=1e-6) and np.all(np.diff(again.q[:, 0]) > -1e-6)
 
 
 def test_workspace_samples_each_turn_once():

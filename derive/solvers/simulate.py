@@ -13,6 +13,9 @@ origin). Without friction a constant torque does the work tau . (q - q0), so
 E - tau . (q - q0) is conserved; its drift, relative to max(|E0|, max T), is
 the check on the integration (and on the generated dynamics).
 
+A continuous joint's angle is integrated as it winds (the work tau . (q - q0) counts the turns)
+and drawn so; the CSV gives it wrapped to (-pi, pi] (:attr:`Trajectory.q_wrapped`).
+
 The figure of a run is :func:`derive.plot.simulate.plot_simulation`; its benchmark
 is in :mod:`derive.bench.simulate`.
 """

@@ -25,6 +25,9 @@ LDL^T of CRBA's M, not this NLP's graph) integrated by RK4 in fine steps under t
 transcription's u(t) must reproduce the optimised knots; ``success`` comes from that check and
 the limits, not from IPOPT's status.
 
+A continuous joint has no position bound; it moves from its start to its goal angle as given
+(3.6 is not -2.68), and the CSV (:meth:`TrajoptResult.table`) gives its angle wrapped to (-pi, pi].
+
 The worked examples (swing-ups, the Panda's move) are in :mod:`derive.solvers.trajopt_examples`,
 the figure of a result is :func:`derive.plot.trajopt.plot_trajopt`.
 """
@@ -265,8 +268,8 @@ class TrajectoryOptimizer:
             start_qd, goal_qd: boundary velocities (default 0: at rest, and then held, qdd = 0).
             waypoints: TCP (or other frame) positions to pass through.
             guess: None (linear interpolation in joint space on a quintic time law), an (M, nv)
-                path (e.g. from a planner; resampled by arc length), or a previous TrajoptResult
-                with the same N (warm start).
+                path (e.g. from a planner; resampled by arc length; a continuous joint's jumps
+                of 2 pi between rows removed), or a previous TrajoptResult with the same N (warm start).
             substeps: RK4 steps per interval of the independent check (>= 1).
             tol: largest integration error (rad or m) of a successful result.
 
@@ -612,6 +615,10 @@ def _path_guess(guess, opt: TrajectoryOptimizer) -> np.ndarray:
     if not np.all(np.isfinite(path)):
         row = int(np.argwhere(~np.isfinite(path))[0, 0])
         raise DeriveError(f"trajopt {name}: a path guess must be finite, row {row} is not")
+    turns = list(opt.robot.continuous_indices)
+    if turns:  # a continuous joint's angles as a CSV of trajopt has them, wrapped: made a path again
+        path = path.copy()
+        path[:, turns] = np.unwrap(path[:, turns], axis=0)
     return path
 
 
