@@ -89,6 +89,11 @@ def test_continuous_joint_parses_as_an_unbounded_revolute():
     assert (turn.limits.lower, turn.limits.upper, turn.limits.velocity, turn.limits.effort) == (None, None, 3.0, 20.0)
     assert ROBOT.joint_box() == ((-math.pi, -2.5), (math.pi, 2.5))
     assert ROBOT.continuous_indices == (0,)
+    # a mimic joint following the turn at half its rate, or as a rack: q and q + 2 pi differ, nothing is wrapped
+    for jtype, multiplier, wrapped in (("revolute", 0.5, ()), ("prismatic", 1.0, ()), ("revolute", -2.0, (0,))):
+        follower = parse_models(MODELS.replace("type: revolute, parent: l1", f"type: {jtype}, parent: l1").replace(
+            "limits: {lower: -2.5, upper: 2.5}", f"mimic: {{joint: turn, multiplier: {multiplier}}}"))["spinner"]
+        assert follower.continuous_indices == wrapped, (jtype, multiplier)
     assert mechanism_from_robot(ROBOT).dof == 2
     np.testing.assert_array_equal(ROBOT.wrap([[22.4, 22.4], [-math.pi, -math.pi]]), [[22.4 - 8 * math.pi, 22.4],
                                                                                      [math.pi, -math.pi]])

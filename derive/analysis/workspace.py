@@ -81,7 +81,7 @@ def _sample_chunks(robot: Robot, n: int, method: str, seed: int, chunk: int | No
             yield robot.wrap(rng.uniform(lo, hi, size=(min(chunk, total - start), robot.nv)))  # [-pi, pi) -> (-pi, pi]
         return
     per = _grid_points(robot, n)
-    turns = [c.continuous for c in robot.coordinates]
+    turns = [i in robot.continuous_indices for i in range(robot.nv)]
     axes = np.array([np.linspace(a, b, per + 1)[1:] if turn else np.linspace(a, b, per)  # (nv, per)
                      for a, b, turn in zip(lo, hi, turns)])
     for start in range(0, total, chunk):

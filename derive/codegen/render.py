@@ -133,7 +133,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
     ctx = RobotContext(robot.name, model_hash, [c.name for c in robot.coordinates], robot.nq, robot.nv,
                        [(p.name, p.default) for p in robot.parameters])
     files: dict[str, str] = {}
-    continuous = [c.name for c in robot.coordinates if c.continuous]
+    continuous = [robot.coordinates[i].name for i in robot.continuous_indices]
     per_backend = {}
     for b in backends:
         contexts = [b.function_context(fn) if fn.program is not None else b.template_context(fn) for fn in functions]

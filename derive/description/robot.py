@@ -25,7 +25,7 @@ from typing import Any
 
 import numpy as np
 
-from derive.description.joints import COORDINATE_SUFFIXES, JOINT_TYPES, wrap_angle
+from derive.description.joints import COORDINATE_SUFFIXES, JOINT_TYPES, motion_type, wrap_angle
 
 from derive.errors import DeriveError
 
@@ -376,8 +376,13 @@ class Robot:
 
     @property
     def continuous_indices(self) -> tuple[int, ...]:
-        """Indices in q of the continuous joints' angles (what :meth:`wrap` wraps)."""
-        return tuple(i for i, c in enumerate(self.coordinates) if c.continuous)
+        """Indices in q of the continuous joints' angles (what :meth:`wrap` wraps): those whose
+        configuration repeats every 2 pi, i.e. all but a leader that a mimic joint follows other than
+        as a turn by an integer multiple (a rack, a screw or a half-rate turn: 2 pi would move it)."""
+        aperiodic = {j.mimic.joint for j in self.joints if j.mimic is not None
+                     and (motion_type(j.type) != "revolute"
+                          or float(j.mimic.multiplier) != round(float(j.mimic.multiplier)))}
+        return tuple(i for i, c in enumerate(self.coordinates) if c.continuous and c.joint not in aperiodic)
 
     def wrap(self, q):
         """q (..., nq) with the continuous joints' angles wrapped to (-pi, pi]: the same configuration
