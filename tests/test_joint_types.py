@@ -28,7 +28,7 @@ from derive.symbolic.model import SXModel
 from derive.cli import main
 from derive.codegen.generate import generate
 from derive.description.model import load_models, parse_models
-from derive.description.joints import JOINT_TYPES
+from derive.description.joints import JOINT_TYPES, MOVES_AS
 from derive.description.robot import ModelError
 from derive.reference import NumericRobot
 from derive.reference.rnea import rpy_matrix
@@ -41,6 +41,7 @@ TABLE_1 = {"revolute": (1, 5), "prismatic": (1, 5), "helical": (1, 5), "cylindri
 A = "[0.6, 0, 0.8]"  # an unaligned unit axis: exercises Rodrigues, not Rx/Ry/Rz
 UNDER_TEST = {
     "revolute": f"type: revolute, axis: {A}",
+    "continuous": f"type: continuous, axis: {A}, limits: {{velocity: 2, effort: 5}}",
     "prismatic": f"type: prismatic, axis: {A}",
     "helical": f"type: helical, axis: {A}, pitch: h",
     "cylindrical": f"type: cylindrical, axis: {A}, limits: [{{lower: -3, upper: 3}}, {{lower: -0.5, upper: 0.5}}]",
@@ -133,7 +134,8 @@ def case(request):
 
 
 def test_dof_and_constraints_follow_table_1():
-    assert set(JOINT_TYPES) == set(TABLE_1) == {j.type for j in ROBOTS["example"].joints}
+    assert set(JOINT_TYPES) - set(MOVES_AS) == set(TABLE_1) == {j.type for j in ROBOTS["example"].joints}
+    assert ROBOTS["continuous"].joints[1].summary == "jt (continuous, 1 DOF, 5 constraints)"  # a revolute's motion
     for jtype, (dof, constraints) in TABLE_1.items():
         joint = ROBOTS[jtype].joints[1]
         assert (joint.type, joint.dof, joint.constraints) == (jtype, dof, constraints)
@@ -236,6 +238,7 @@ def pinocchio_model(robot, pin):
             composite.addJoint(pin.JointModelPrismaticUnaligned(a))
             return composite
         return {"revolute": lambda: pin.JointModelRevoluteUnaligned(a),
+                "continuous": lambda: pin.JointModelRevoluteUnaligned(a),  # one angle, not (cos, sin)
                 "prismatic": lambda: pin.JointModelPrismaticUnaligned(a),
                 "helical": lambda: pin.JointModelHelicalUnaligned(a, num(j.pitch)),
                 "universal": lambda: pin.JointModelUniversal(a, np.array(j.axis2)),
@@ -385,8 +388,8 @@ def test_spherical_gimbal_lock_is_reported_and_real():
     ("type: spherical, limits: [{lower: -1}, {lower: -1}]",
      "joints[1].limits: expected 3 limits (one per coordinate), got 2"),
     ("type: cylindrical, limits: [{lower: 1, upper: 0}, {}]", "joints[1].limits[0]: lower (1.0) is above upper (0.0)"),
-    ("type: screw", "joints[1].type: unknown joint type 'screw' (known: revolute, prismatic, helical, cylindrical, "
-                    "universal, spherical, fixed)"),
+    ("type: screw", "joints[1].type: unknown joint type 'screw' (known: revolute, continuous, prismatic, helical, "
+                    "cylindrical, universal, spherical, fixed)"),
 ])
 def test_bad_joint_fields_give_one_line_errors(joint, message):
     with pytest.raises(ModelError) as err:

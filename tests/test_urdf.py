@@ -365,7 +365,7 @@ def test_zoo_against_pinocchio(pin, tmp_path):
     assert [j.name for j in robot.joints] == ["j1", "j2", "j3"]
     assert {f.name for f in robot.frames} == {"tcp", "base", "camera", "link2b", "slider", "link4"}
     j2 = next(j for j in robot.joints if j.name == "j2")
-    assert j2.type == "revolute" and (j2.limits.lower, j2.limits.upper) == (None, None)
+    assert j2.type == "continuous" and (j2.limits.lower, j2.limits.upper) == (None, None)
     assert (j2.limits.velocity, j2.limits.effort) == (3.0, 20.0)
     assert all(link.inertia_rpy == (0.0, 0.0, 0.0) for link in robot.links)
     assert entry["description"] == ("zoo-bot imported from URDF (tip tool; locked slide_lock = 0.04, wrist_lock = 0.3; "

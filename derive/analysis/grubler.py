@@ -35,7 +35,7 @@ from derive.errors import DeriveError
 
 JOINT_DOF = JOINT_TYPES  # the lecture's Table 1, as the model parser knows it
 """The lecture's Table 1 (plus the rigid 'fixed' joint)."""
-PLANAR_JOINTS = ("revolute", "prismatic", "fixed")
+PLANAR_JOINTS = ("revolute", "continuous", "prismatic", "fixed")
 SPACES = {"planar": 3, "spatial": 6}
 
 

@@ -1,7 +1,8 @@
 """Configuration space and workspace (lecture section 2.4, figure 4).
 
 The configuration space is the box of joint values q (within the joint limits;
-revolute joints without limits span [-pi, pi], prismatic ones [-1, 1] m). The
+revolute joints without limits span [-pi, pi], prismatic ones [-1, 1] m; a continuous
+joint spans (-pi, pi], each of its configurations once). The
 workspace is its image under forward kinematics, x = FK(q) (eq. 11, 23): the
 positions the frame reaches in at least one configuration. It is sampled on a
 grid or at random; FK is the derived CasADi expression, evaluated for all
@@ -60,7 +61,8 @@ def _grid_points(robot: Robot, n: int) -> int:
 
 def sample_configurations(robot: Robot, n: int, method: str = "grid", seed: int = 0) -> np.ndarray:
     """About ``n`` configurations (rows) in the joint box: a regular grid of round(n^(1/nv))
-    points per joint (limits included), or ``n`` uniform random samples."""
+    points per joint (limits included; a continuous joint's in (-pi, pi], -pi being pi), or
+    ``n`` uniform random samples."""
     total = sample_count(robot, n, method)
     if total <= 0:
         return np.zeros((0, robot.nv))
@@ -76,10 +78,12 @@ def _sample_chunks(robot: Robot, n: int, method: str, seed: int, chunk: int | No
     if method == "random":
         rng = np.random.default_rng(seed)
         for start in range(0, total, chunk):
-            yield rng.uniform(lo, hi, size=(min(chunk, total - start), robot.nv))
+            yield robot.wrap(rng.uniform(lo, hi, size=(min(chunk, total - start), robot.nv)))  # [-pi, pi) -> (-pi, pi]
         return
     per = _grid_points(robot, n)
-    axes = np.array([np.linspace(a, b, per) for a, b in zip(lo, hi)])  # (nv, per)
+    turns = [i in robot.continuous_indices for i in range(robot.nv)]
+    axes = np.array([np.linspace(a, b, per + 1)[1:] if turn else np.linspace(a, b, per)  # (nv, per)
+                     for a, b, turn in zip(lo, hi, turns)])
     for start in range(0, total, chunk):
         index = np.unravel_index(np.arange(start, min(start + chunk, total)), (per,) * robot.nv)  # C order, as meshgrid "ij"
         yield np.column_stack([axes[k][i] for k, i in enumerate(index)])

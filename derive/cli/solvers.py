@@ -197,8 +197,9 @@ def cmd_ik(args) -> int:
     width = max(map(len, names))
     print(f"{robot.name}: {what} target for frame '{args.frame}': "
           f"{'solved' if result.success else 'NOT solved (best q found)'}")
-    for name, value in zip(names, result.q):
-        print(f"  {name:<{width}} = {value: .9f}")
+    for i, (name, value) in enumerate(zip(names, result.q)):
+        wrapped = i in robot.continuous_indices
+        print(f"  {name:<{width}} = {value: .9f}" + ("  (continuous: wrapped to (-pi, pi])" if wrapped else ""))
     print(f"position error {result.position_error:.3e} m, rotation error {result.rotation_error:.3e} rad "
           f"(tolerances {TOL_POSITION:g} m, {TOL_ROTATION:g} rad)")
     print(f"{result.iterations} iterations, {result.restarts} restarts, {1e3 * elapsed:.2f} ms")

@@ -366,6 +366,7 @@ def ik_functions(model: SXModel) -> list[TemplateFunction]:
                    "lambda_min": LAMBDA_MIN, "lambda_min_float": IK_LAMBDA_MIN_FLOAT, "lambda_stall": LAMBDA_STALL}
         for key, values in (("lower", lo), ("upper", hi), ("sample_lower", slo), ("sample_upper", shi)):
             context[key] = tuple(float(np.clip(v, -IK_LIMIT, IK_LIMIT)) for v in values)
+        context["wrap"] = robot.continuous_indices  # entries of q returned wrapped to (-pi, pi]
         out.append(TemplateFunction(
             robot.name, "ik", frame,
             (("T", (4, 4)), ("q0", (n, 1)), ("w", (6, 1))) + extra, (("q", (n, 1)), ("residual", (2, 1))),
@@ -373,7 +374,9 @@ def ik_functions(model: SXModel) -> list[TemplateFunction]:
             f"(4x4), Levenberg-Marquardt on e = [p_T - p; log(R_T R^T)] weighted by w (6; position only: "
             f"1 1 1 0 0 0) with seeded restarts, at most {IK_MAX_ITERATIONS} iterations. residual = "
             f"[position error (m), rotation error (rad)] of the weighted rows; success when below "
-            f"{TOL_POSITION:g} m and {TOL_ROTATION:g} rad.",
+            f"{TOL_POSITION:g} m and {TOL_ROTATION:g} rad." + (
+                f" The angles of the continuous joints ({', '.join(robot.coordinates[i].name for i in robot.continuous_indices)}) "
+                "are returned wrapped to (-pi, pi]." if robot.continuous_indices else ""),
             "ik", calls=(("fkj", f"fk_jacobian_{frame}"),), context=tuple(context.items()),
             support=("ik",), optional=("q0", "w"), status=True))
     return out

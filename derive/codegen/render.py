@@ -96,6 +96,11 @@ ACTUATOR_CONVENTION = ("M includes the armature (reflected rotor inertia armatur
                        "actuator is in its leader's entry (a^2 armature and viscous, |a| coulomb, a its multiplier)")
 
 
+CONTINUOUS_CONVENTION = ("continuous joints ({names}): unbounded revolute joints, one angle each in q (q and q + 2 pi "
+                        "are one configuration); every function takes any angle; ik_<frame> returns them wrapped to "
+                        "(-pi, pi] (fmod, exact), as do derive ik and the CSVs of derive simulate and trajopt")
+
+
 def actuator_table(robot: Robot) -> dict:
     """Per entry of v, the actuator values at the parameter defaults (a floating base's six are 0)."""
     env = robot.parameter_defaults
@@ -128,6 +133,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
     ctx = RobotContext(robot.name, model_hash, [c.name for c in robot.coordinates], robot.nq, robot.nv,
                        [(p.name, p.default) for p in robot.parameters])
     files: dict[str, str] = {}
+    continuous = [robot.coordinates[i].name for i in robot.continuous_indices]
     per_backend = {}
     for b in backends:
         contexts = [b.function_context(fn) if fn.program is not None else b.template_context(fn) for fn in functions]
@@ -142,8 +148,10 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         "velocities": list(robot.velocity_names),
         "wrench_frames": list(robot.wrench_frames),
         "conventions": CONVENTIONS | ({"floating_base": FLOATING_CONVENTION} if robot.floating else {})
-        | ({"actuators": ACTUATOR_CONVENTION} if robot.actuated else {}),
+        | ({"actuators": ACTUATOR_CONVENTION} if robot.actuated else {})
+        | ({"continuous_joints": CONTINUOUS_CONVENTION.format(names=", ".join(continuous))} if continuous else {}),
         **({"actuators": actuator_table(robot)} if robot.actuated else {}),
+        **({"continuous": continuous} if continuous else {}),
         "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
                     "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
         "frames": [fr.name for fr in robot.frames],

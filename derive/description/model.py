@@ -269,7 +269,7 @@ class _Parser:
             child=str(raw["child"]),
             origin=self.origin(where + ".origin", raw.get("origin")),
             axis=axis,
-            limits=self.joint_limits(where + ".limits", raw.get("limits"), JOINT_TYPES[jtype]),
+            limits=self.joint_limits(where + ".limits", raw.get("limits"), JOINT_TYPES[jtype], jtype),
             pitch=pitch,
             axis2=axis2,
             mimic=self.mimic(f"{where}.mimic", raw["mimic"], jtype) if "mimic" in raw else None,
@@ -311,10 +311,19 @@ class _Parser:
                      self.number(f"{where}.multiplier", raw.get("multiplier", 1.0)),
                      self.number(f"{where}.offset", raw.get("offset", 0.0)))
 
-    def joint_limits(self, where: str, raw: Any, dof: int) -> Limits | tuple[Limits, ...]:
-        """One mapping for a 1-DOF joint; for a multi-DOF joint a list (one per coordinate) or one mapping for all."""
+    def joint_limits(self, where: str, raw: Any, dof: int, jtype: str = "") -> Limits | tuple[Limits, ...]:
+        """One mapping for a 1-DOF joint; for a multi-DOF joint a list (one per coordinate) or one mapping for all.
+
+        A continuous joint takes velocity and effort only: position limits are refused rather than
+        ignored, since they would silently change its joint box, IK and trajopt bounds."""
         if dof <= 1:
-            return self.limits(where, raw)
+            limits = self.limits(where, raw)
+            if jtype == "continuous":
+                for key in ("lower", "upper"):
+                    if getattr(limits, key) is not None:
+                        raise self.error(f"{where}.{key}", "a continuous joint has no position limits (velocity and "
+                                                           "effort may be given): drop it, or make the joint revolute")
+            return limits
         if isinstance(raw, list):
             if len(raw) != dof:
                 raise self.error(where, f"expected {dof} limits (one per coordinate), got {len(raw)}")

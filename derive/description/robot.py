@@ -23,7 +23,9 @@ import re
 from dataclasses import asdict, dataclass, field
 from typing import Any
 
-from derive.description.joints import COORDINATE_SUFFIXES, JOINT_TYPES
+import numpy as np
+
+from derive.description.joints import COORDINATE_SUFFIXES, JOINT_TYPES, motion_type, wrap_angle
 
 from derive.errors import DeriveError
 
@@ -116,7 +118,7 @@ IDEAL = Actuator()
 class Coordinate:
     """One entry of q: ``name`` (a C identifier), its ``joint`` and that joint's ``type``.
 
-    ``unit`` is "rad" for angles (revolute, helical and the turns of multi-DOF
+    ``unit`` is "rad" for angles (revolute, continuous, helical and the turns of multi-DOF
     joints) and "m" for lengths (prismatic, the slide of a cylindrical joint).
     """
 
@@ -126,6 +128,11 @@ class Coordinate:
     unit: str
     limits: Limits = Limits()
     actuator: Actuator = IDEAL
+
+    @property
+    def continuous(self) -> bool:
+        """An unbounded turn (a continuous joint): q and q + 2 pi are one configuration."""
+        return self.type == "continuous"
 
 
 @dataclass(frozen=True)
@@ -360,11 +367,31 @@ class Robot:
 
     def joint_box(self, angle: float = math.pi, length: float = 1.0) -> tuple[tuple[float, ...], tuple[float, ...]]:
         """(lower, upper) of each entry of q: its limits, or +-``angle`` (rad) / +-``length`` (m)
-        where a limit is missing (``math.inf`` for an unbounded box)."""
+        where a limit is missing (``math.inf`` for an unbounded box). A continuous joint has none:
+        +-pi (the default) covers each of its configurations once."""
         coords = self.coordinates
         lower = tuple(-(angle if c.unit == "rad" else length) if c.limits.lower is None else c.limits.lower for c in coords)
         upper = tuple((angle if c.unit == "rad" else length) if c.limits.upper is None else c.limits.upper for c in coords)
         return lower, upper
+
+    @property
+    def continuous_indices(self) -> tuple[int, ...]:
+        """Indices in q of the continuous joints' angles (what :meth:`wrap` wraps): those whose
+        configuration repeats every 2 pi, i.e. all but a leader that a mimic joint follows other than
+        as a turn by an integer multiple (a rack, a screw or a half-rate turn: 2 pi would move it)."""
+        aperiodic = {j.mimic.joint for j in self.joints if j.mimic is not None
+                     and (motion_type(j.type) != "revolute"
+                          or float(j.mimic.multiplier) != round(float(j.mimic.multiplier)))}
+        return tuple(i for i, c in enumerate(self.coordinates) if c.continuous and c.joint not in aperiodic)
+
+    def wrap(self, q):
+        """q (..., nq) with the continuous joints' angles wrapped to (-pi, pi]: the same configuration
+        (:func:`derive.description.joints.wrap_angle`); the other entries as they are, a copy."""
+        out = np.array(q, dtype=float, copy=True)
+        index = list(self.continuous_indices)
+        if index:
+            out[..., index] = wrap_angle(out[..., index])
+        return out
 
     def gimbal_locked(self, q, tol: float = 1e-6) -> tuple[str, ...]:
         """Names of the spherical joints in gimbal lock at ``q``: |cos(<joint>_y)| <= tol."""

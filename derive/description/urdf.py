@@ -3,8 +3,9 @@
 Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
 :func:`derive.description.model.parse_robot` accepts:
 
-- ``revolute``/``prismatic``/``fixed`` joints are kept; ``continuous`` becomes a
-  revolute joint without position limits; ``planar`` is refused; ``floating`` only
+- ``revolute``/``continuous``/``prismatic``/``fixed`` joints are kept (a continuous
+  joint without position limits: its <limit> gives velocity and effort only); ``planar``
+  is refused; ``floating`` only
   as the one joint from a massless root link (a ``world``) to the base, with an
   identity origin: the root is dropped and the base floats (as ``--floating``);
 - by default the whole tree is imported: every moving joint, in Pinocchio's order
@@ -385,7 +386,7 @@ class _Reader:
             for k, v in zip(("damping", "friction"), dynamics):
                 if not v >= 0:
                     raise self.error(f"{where}.dynamics.{k}", f"must be >= 0, got {v:g}")
-        return _Joint(name, "revolute" if jtype == "continuous" else jtype, ends["parent"], ends["child"],
+        return _Joint(name, jtype, ends["parent"], ends["child"],
                       self.origin(where + ".origin", el.find("origin")), axis, limits, mimic, dynamics)
 
     def limits(self, where: str, lim: ET.Element | None, jtype: str) -> dict:
@@ -910,7 +911,7 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         if j.name in locks:
             value = locks[j.name][0]
             if value != 0:
-                if j.type == "revolute":
+                if j.type in ("revolute", "continuous"):
                     motion = Pose.from_matrix(axis_angle(j.axis, value), (0.0, 0.0, 0.0))
                 else:
                     motion = Pose(tuple(_snap_vector(np.array(unit_vector(j.axis)) * value)))

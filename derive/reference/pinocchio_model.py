@@ -6,6 +6,8 @@ pinocchio, so :mod:`derive.reference` itself does not import it.
 - Floating base: a ``JointModelFreeFlyer`` named ``root_joint`` (Pinocchio's q = [p, quaternion
   x y z w], v = [linear, angular] in the root frame), the root link's mass on it.
 - revolute / prismatic: RX/RY/RZ, PX/PY/PZ about a coordinate axis, else the Unaligned models;
+  continuous: the same revolute models (one angle in q, as derive has it; Pinocchio's own
+  unbounded joints hold (cos, sin) in q instead);
   helical: ``JointModelHelicalUnaligned``; spherical: ``JointModelSphericalZYX``; universal:
   ``JointModelUniversal``; cylindrical (no Pinocchio model): a revolute then a prismatic joint
   about the same axis, with a massless body between them (the same motion, Rot(a, q1) Trans(a q2)).
@@ -87,6 +89,8 @@ def build_model(robot: Robot, params: Mapping[str, float] | None = None) -> pin.
         axis = np.array(joint.axis, dtype=float)
         if joint.type in ("revolute", "prismatic"):
             chain = [_axis_model(joint.type, axis)]
+        elif joint.type == "continuous":  # as revolute (one angle, not Pinocchio's (cos, sin) of RUBX..)
+            chain = [_axis_model("revolute", axis)]
         elif joint.type == "helical":
             if joint.mimic is not None:
                 raise ValueError(f"pin_model: mimic joint '{joint.name}' is helical: Pinocchio 4.1 gets helical mimic "

@@ -54,6 +54,7 @@ from typing import Mapping
 import numpy as np
 
 from derive.description import expr
+from derive.description.joints import motion_type
 from derive.description.robot import Origin, Robot
 
 COMPLEX_STEP = 1e-30
@@ -152,7 +153,7 @@ class JointModel:
     ``v_J = S(q) qd`` is the child's spatial velocity relative to the joint frame and
     ``c_J = Sdot qd`` (Featherstone's eq. 4.43; nonzero only where S depends on q).
 
-    - revolute ``a``: T = Rot(a, q); S = [a; 0].
+    - revolute ``a`` (and continuous, the same motion): T = Rot(a, q); S = [a; 0].
     - prismatic ``a``: T = Trans(a q); S = [0; a].
     - helical ``a``, pitch h: T = Rot(a, q) Trans(h a q); S = [a; h a].
     - cylindrical ``a``: T = Rot(a, q1) Trans(a q2); S = [[a, 0]; [0, a]].
@@ -300,7 +301,7 @@ class NumericRobot:
             self.parent.append(body)
             self.tree_pose.append(joint_pose)
             self.joint_model.append(JointModel(
-                joint.type, np.array(joint.axis, dtype=float),
+                motion_type(joint.type), np.array(joint.axis, dtype=float),
                 None if joint.axis2 is None else np.array(joint.axis2, dtype=float),
                 0.0 if joint.pitch is None else num(joint.pitch)))
             dof = owned[joint.name if joint.mimic is None else joint.mimic.joint]

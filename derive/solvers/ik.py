@@ -30,6 +30,9 @@ Time: ``timeout`` caps the wall time of a solve (LM stops early enough to leave 
 IPOPT solve, itself capped at OPTI_WALL_TIME); building the CasADi functions, once
 per robot and frame in a process, is not counted.
 
+The angles of continuous joints (unbounded) are returned wrapped to (-pi, pi] (the same
+pose); with a rest posture each is first taken to its turn nearest the rest angle.
+
 ``success`` is decided here, never by a solver's status: position error (the norm
 of the weighted position rows) < tol_position, rotation error < tol_rotation and q
 within the limits. A failed solve returns the q with the smallest E found.
@@ -46,6 +49,7 @@ import numpy as np
 from numpy.random import default_rng
 
 from derive.errors import DeriveError
+from derive.description.joints import wrap_angle
 from derive.description.model import Robot, load_robot
 from derive.symbolic.ode import ldlt_solve
 from derive.symbolic.ik import (ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges,
@@ -319,13 +323,18 @@ def solve_ik(model, target, q0=None, frame: str = "tcp", *, weights=None, method
             q = rng.uniform(prob.sample_lower, prob.sample_upper)
             restarts += 1
     E, q, errs = best
+    turns = list(robot.continuous_indices)
     if ok(errs) and rest is not None:
+        if turns:  # each continuous joint's turn nearest the rest posture: the same pose, less to move
+            q = q.copy()
+            q[turns] = q_rest[turns] + wrap_angle(q[turns] - q_rest[turns])
         towards_rest = opti("rest", tuple(bool(x) for x in w > 0))
         moved = np.clip(towards_rest(q, q_rest, T, w, pv, rest_weight).full().reshape(-1), lo, hi)
         iterations += prob.opti_iterations(towards_rest)
         moved_errs = errors(prob.residual(moved, context).full().reshape(-1)[1:])
         if ok(moved_errs) and np.sum((moved - q_rest) ** 2) < np.sum((q - q_rest) ** 2):
             q, errs = moved, moved_errs
+    q = robot.wrap(q)  # continuous joints to (-pi, pi]: the same pose (they have no limits to leave)
     within = bool(np.all(q >= lo) and np.all(q <= hi))
     return IkResult(q=q, success=ok(errs) and within, position_error=errs[0], rotation_error=errs[1],
                     iterations=iterations, restarts=restarts)

@@ -13,6 +13,9 @@ origin). Without friction a constant torque does the work tau . (q - q0), so
 E - tau . (q - q0) is conserved; its drift, relative to max(|E0|, max T), is
 the check on the integration (and on the generated dynamics).
 
+A continuous joint's angle is integrated as it winds (the work tau . (q - q0) counts the turns)
+and drawn so; the CSV gives it wrapped to (-pi, pi] (:attr:`Trajectory.q_wrapped`).
+
 The figure of a run is :func:`derive.plot.simulate.plot_simulation`; its benchmark
 is in :mod:`derive.bench.simulate`.
 """
@@ -33,6 +36,7 @@ from typing import Callable
 import numpy as np
 
 from derive.codegen.generate import default_output, model_hash
+from derive.description.joints import wrap_angle
 from derive.description.model import check_values
 from derive.description.robot import ModelError, Parameter, Robot
 from derive.errors import DeriveError
@@ -49,6 +53,9 @@ class Trajectory:
 
     t (N,), q and qd (N, nv), kinetic T, potential U and E = T + U (N,);
     ``balance`` = E - tau . (q - q0), constant for exact dynamics without friction.
+    ``q`` is the integration state: a continuous joint's angle as it winds up (the work
+    tau . (q - q0) needs the turns); ``continuous`` indexes those angles, which
+    :meth:`q_wrapped` (and so the CSV) gives in (-pi, pi].
     """
 
     robot: str
@@ -61,6 +68,15 @@ class Trajectory:
     kinetic: np.ndarray
     potential: np.ndarray
     wall_time: float
+    continuous: tuple[int, ...] = ()
+
+    @property
+    def q_wrapped(self) -> np.ndarray:
+        """q with the continuous joints' angles wrapped to (-pi, pi] (what the joint reads)."""
+        q = np.array(self.q, dtype=float, copy=True)
+        if self.continuous:
+            q[:, list(self.continuous)] = wrap_angle(q[:, list(self.continuous)])
+        return q
 
     @property
     def energy(self) -> np.ndarray:
@@ -254,7 +270,8 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
                 kinetic[k] = potential[k] = math.nan
             if k % PROGRESS_STEPS == 0:
                 report("energies", k / len(t))
-        traj = Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall)
+        traj = Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall,
+                          robot.continuous_indices)
         _check_finite(traj, dt)
     return traj
 
@@ -316,9 +333,12 @@ def csv_header(traj: Trajectory) -> list[str]:
 
 
 def write_csv(traj: Trajectory, path: str | Path) -> Path:
-    """Columns t, q..., dq..., T, U, E (one row per sample), written atomically: the rows go, a chunk
+    """Columns t, q..., dq..., T, U, E (one row per sample; a continuous joint's angle wrapped to
+    (-pi, pi], :attr:`Trajectory.q_wrapped`), written atomically: the rows go, a chunk
     at a time, into a temporary file beside ``path`` that then replaces it (an old file stays as it
     was on any failure; the DeriveError names ``path``)."""
+
+    q = traj.q_wrapped
 
     def chunks():  # CSV_CHUNK rows at a time: the text of a long run need not fit in memory
         buffer = io.StringIO()
@@ -326,7 +346,7 @@ def write_csv(traj: Trajectory, path: str | Path) -> Path:
         yield buffer.getvalue()
         for k in range(0, len(traj.t), CSV_CHUNK):
             part = slice(k, k + CSV_CHUNK)
-            rows = np.column_stack([traj.t[part], traj.q[part], traj.qd[part], traj.kinetic[part],
+            rows = np.column_stack([traj.t[part], q[part], traj.qd[part], traj.kinetic[part],
                                     traj.potential[part], traj.energy[part]])
             buffer = io.StringIO()
             w = csv.writer(buffer)

@@ -25,6 +25,9 @@ LDL^T of CRBA's M, not this NLP's graph) integrated by RK4 in fine steps under t
 transcription's u(t) must reproduce the optimised knots; ``success`` comes from that check and
 the limits, not from IPOPT's status.
 
+A continuous joint has no position bound; it moves from its start to its goal angle as given
+(3.6 is not -2.68), and the CSV (:meth:`TrajoptResult.table`) gives its angle wrapped to (-pi, pi].
+
 The worked examples (swing-ups, the Panda's move) are in :mod:`derive.solvers.trajopt_examples`,
 the figure of a result is :func:`derive.plot.trajopt.plot_trajopt`.
 """
@@ -41,6 +44,7 @@ import casadi as ca
 import numpy as np
 
 from derive.codegen.generate import default_output, generate
+from derive.description.joints import wrap_angle
 from derive.description.model import Robot, load_robot
 from derive.errors import DeriveError
 from derive.filesystem import temporary_directory, write_atomically
@@ -110,6 +114,7 @@ class TrajoptResult:
     velocity_error: float = math.inf
     drift: float = math.inf
     limit_violation: float = math.inf
+    continuous: tuple[int, ...] = ()  # entries of q that are continuous joints' angles
 
     @property
     def duration(self) -> float:
@@ -132,9 +137,15 @@ class TrajoptResult:
         return a * (2 * s - 1) * (s - 1) + c * 4 * s * (1 - s) + b * s * (2 * s - 1)
 
     def table(self) -> tuple[list[str], np.ndarray]:
-        """CSV header and rows: t, q_<joint>..., qd_<joint>..., qdd_<joint>..., tau_<joint>...."""
+        """CSV header and rows: t, q_<joint>..., qd_<joint>..., qdd_<joint>..., tau_<joint>....
+
+        A continuous joint's q is wrapped to (-pi, pi] here (what the joint reads); ``q`` itself
+        keeps the optimised angle, which winds as far as the motion from start to goal goes."""
         names = ["t"] + [f"{k}_{j}" for k in ("q", "qd", "qdd", "tau") for j in self.joints]
-        return names, np.column_stack([self.t, self.q, self.qd, self.qdd, self.tau])
+        q = np.array(self.q, dtype=float, copy=True)
+        if self.continuous and len(q):
+            q[:, list(self.continuous)] = wrap_angle(q[:, list(self.continuous)])
+        return names, np.column_stack([self.t, q, self.qd, self.qdd, self.tau])
 
     def csv_text(self) -> str:
         """The CSV of :meth:`table`: a header line, then one line per knot (10 significant digits)."""
@@ -257,8 +268,8 @@ class TrajectoryOptimizer:
             start_qd, goal_qd: boundary velocities (default 0: at rest, and then held, qdd = 0).
             waypoints: TCP (or other frame) positions to pass through.
             guess: None (linear interpolation in joint space on a quintic time law), an (M, nv)
-                path (e.g. from a planner; resampled by arc length), or a previous TrajoptResult
-                with the same N (warm start).
+                path (e.g. from a planner; resampled by arc length; a continuous joint's jumps
+                of 2 pi between rows removed), or a previous TrajoptResult with the same N (warm start).
             substeps: RK4 steps per interval of the independent check (>= 1).
             tol: largest integration error (rad or m) of a successful result.
 
@@ -387,7 +398,7 @@ class TrajectoryOptimizer:
             tau=(B @ U).T, tau_mid=(B @ v(nlp["Uc"])).T if "Uc" in nlp else None,
             stats={"return_status": st["return_status"], "iterations": st["iter_count"],
                    "solve_time": solve_time, "build_time": build_time,
-                   "cost": float(sol.value(opti.f))})
+                   "cost": float(sol.value(opti.f))}, continuous=self.robot.continuous_indices)
         self._check(res, start, goal, start_qd, goal_qd, lim, waypoints, substeps, tol)
         self.log(res.summary())
         return res
@@ -604,6 +615,10 @@ def _path_guess(guess, opt: TrajectoryOptimizer) -> np.ndarray:
     if not np.all(np.isfinite(path)):
         row = int(np.argwhere(~np.isfinite(path))[0, 0])
         raise DeriveError(f"trajopt {name}: a path guess must be finite, row {row} is not")
+    turns = list(opt.robot.continuous_indices)
+    if turns:  # a continuous joint's angles as a CSV of trajopt has them, wrapped: made a path again
+        path = path.copy()
+        path[:, turns] = np.unwrap(path[:, turns], axis=0)
     return path
 
 

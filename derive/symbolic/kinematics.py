@@ -19,6 +19,7 @@ from functools import cached_property
 
 import casadi as ca
 
+from derive.description.joints import motion_type
 from derive.description.robot import Joint, Robot, Value
 from derive.symbolic.spatial import axis_angle, homogeneous, rpy, skew
 from derive.symbolic.symbols import Symbols
@@ -57,15 +58,17 @@ _X, _Y, _Z = (1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0)
 def joint_motions(joint: Joint) -> tuple[Motion, ...]:
     """The joint's motion as elementary motions in q order: the joint transform is their product.
 
+    revolute and continuous: Rot(axis, q);
     cylindrical: Rot(axis, q_rot) Trans(axis q_trans); universal: Rot(axis, q_1) Rot(axis2, q_2);
     spherical: Rz(q_z) Ry(q_y) Rx(q_x) (ZYX Euler angles); fixed: none.
     """
+    kind = motion_type(joint.type)  # a continuous joint turns as a revolute one
     if joint.mimic is not None:
-        return (Motion(joint.mimic.joint, joint.type, joint.axis, joint.pitch, joint.name, joint.mimic.multiplier,
+        return (Motion(joint.mimic.joint, kind, joint.axis, joint.pitch, joint.name, joint.mimic.multiplier,
                        joint.mimic.offset),)
     names = [c.name for c in joint.coordinates]
-    if joint.type in ("revolute", "prismatic", "helical"):
-        return (Motion(names[0], joint.type, joint.axis, joint.pitch),)
+    if kind in ("revolute", "prismatic", "helical"):
+        return (Motion(names[0], kind, joint.axis, joint.pitch),)
     kinds = {"cylindrical": (("revolute", joint.axis), ("prismatic", joint.axis)),
              "universal": (("revolute", joint.axis), ("revolute", joint.axis2)),
              "spherical": (("revolute", _Z), ("revolute", _Y), ("revolute", _X))}.get(joint.type, ())
