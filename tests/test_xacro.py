@@ -150,8 +150,8 @@ def test_xacro_errors_are_one_line(xacro, case, tmp_path, capsys):
         argv, line = [f], f"{f}: xacro: mismatched tag: line 4, column 2"
     elif case == "arg-on-plain-urdf":
         f = str(FIXTURES / "arm.urdf")
-        argv, line = [f, "--arg", "a=1"], (f"{f}: --arg is for xacro files; this one is plain URDF (no xacro "
-                                           "namespace, no .xacro suffix)")
+        argv, line = [f, "--arg", "a=1"], (f"{f}: --arg is for xacro files; this one is plain URDF (no .xacro "
+                                           "name, no xacro element or substitution)")
     elif case == "arg-malformed":
         argv, line = [str(XACRO), "--arg", "upper_length"], f"{XACRO}: --arg 'upper_length': expected NAME=VALUE"
     else:

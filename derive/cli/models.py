@@ -92,7 +92,7 @@ def add_parser(sub) -> None:
                                    "links behind fixed joints become named frames; moving branches without any mass "
                                    "are dropped (named in the description). "
                                    f"FILE may be '{ERD_PREFIX}<path under robots/>' for the installed "
-                                   "example-robot-data URDFs. A xacro file (a .xacro name or the xacro namespace) is "
+                                   "example-robot-data URDFs. A xacro file (a .xacro name, or xacro elements or substitutions in it) is "
                                    f"expanded first, without ROS (needs the extra: {XACRO_EXTRA}).")
     u.add_argument("file", metavar="FILE", type=path_arg)
     u.add_argument("--tip", metavar="LINK", help="URDF link that becomes the frame 'tcp' (none without it)")

@@ -454,7 +454,7 @@ def _read(path: Path, robot: str | None, shown: str | None = None, xacro_args: M
         text = expand_xacro(path, text, shown or str(path), xacro_args, packages)
     elif xacro_args or packages:
         raise XacroError(f"{shown or path}: {'--arg' if xacro_args else '--package-path'} is for xacro files; this "
-                         "one is plain URDF (no xacro namespace, no .xacro suffix)")
+                         "one is plain URDF (no .xacro name, no xacro element or substitution)")
     expanded = " (as xacro expands it)" if xacro else ""
     try:
         root = ET.fromstring(text)
@@ -699,7 +699,7 @@ def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: 
     warning per link on stderr: a massless link's inertia becomes zero, any other
     the nearest physical one (:func:`derive.description.inertia.nearest_physical`).
 
-    A xacro file (a ``.xacro`` name or the xacro namespace) is expanded first with the ``xacro`` package
+    A xacro file (a ``.xacro`` name, or xacro elements or substitutions in it) is expanded first with the ``xacro`` package
     (:mod:`derive.description.xacro_expand`): ``xacro_args`` are its arguments (``{"NAME": "VALUE"}`` or
     ``["NAME=VALUE", ...]``), ``package_paths`` the folders of the ROS packages its ``$(find NAME)`` and
     ``package://NAME`` name (``{"NAME": DIR}`` or ``["NAME=DIR", ...]``); the entry's ``source`` records them.

@@ -10,13 +10,13 @@ folders given here.
 - ``args`` are xacro's ``NAME:=VALUE`` arguments (``--arg NAME=VALUE``); one that the file
   neither declares nor reads is named in a warning (a misspelling would otherwise pass silently).
 - ``packages`` maps a ROS package name to its folder (``--package-path NAME=DIR``): ``$(find NAME)``
-  and ``${find('NAME')}`` give DIR, and an include or ``xacro.load_yaml`` of ``package://NAME/REST``
+  gives DIR, and an include or ``xacro.load_yaml`` of ``package://NAME/REST``
   reads DIR/REST. A package not given falls back to xacro's own lookup (ament, where ROS is
   installed) and otherwise is one line naming the option. ``$(dirname)`` is the folder of the file
   being expanded.
 - Every file xacro opens for an include goes through derive's guards
-  (:func:`derive.description.files.read_bytes`: a regular file, at most 16 MiB, UTF-8), and so does
-  the expanded text.
+  (:func:`derive.description.files.read_bytes`: a regular file, at most 16 MiB, UTF-8), and the
+  expanded text is held to the same 16 MiB.
 - Any xacro error (an undefined arg, an unknown package, a bad macro, malformed XML) is one line
   naming the file, the included file and the macro it came from; a missing ``xacro`` package is one
   line naming the extra to install.
@@ -196,7 +196,7 @@ def _hooks(xacro: Any, shown: str, packages: Mapping[str, Path]) -> Iterator[Non
 
     ros_warning, ros_location = xacro.warning, xacro.print_location
     sa._eval_find = find
-    sa._eval_dict["find"] = find
+    sa._eval_dict["find"] = find  # find() inside $(eval ...), the same answer
     xacro.parse = parse
     xacro.abs_filename_spec = abs_filename
     xacro.substitution_args_context = _Context(lambda: xacro.filestack)
