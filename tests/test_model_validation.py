@@ -95,12 +95,19 @@ CASES = {
         joints="[{name: j1, type: revolute, parent: base, child: l1}, "
                "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j2}}]"),
         ["robot 'arm'", "joints (j2).mimic.joint", "not itself"]),
-    "mimic_of_a_mimic": (robot_yaml(
+    # a mimic of a mimic composes (tests/test_mimic_chain.py); a cycle of them reaches no coordinate
+    "mimic_cycle": (robot_yaml(
         links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}, {{name: l3, mass: 1.0}}]",
         joints="[{name: j1, type: revolute, parent: base, child: l1}, "
-               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j1}}, "
+               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j3}}, "
                "{name: j3, type: revolute, parent: l2, child: l3, mimic: {joint: j2}}]"),
-        ["robot 'arm'", "joints (j3).mimic.joint", "which mimics another joint"]),
+        ["robot 'arm'", "joints (j2).mimic.joint", "the mimic joints 'j2', 'j3' follow each other in a cycle"]),
+    "mimic_chain_to_unknown_joint": (robot_yaml(
+        links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}, {{name: l3, mass: 1.0}}]",
+        joints="[{name: j1, type: revolute, parent: base, child: l1}, "
+               "{name: j2, type: revolute, parent: l1, child: l2, mimic: {joint: j7}}, "
+               "{name: j3, type: revolute, parent: l2, child: l3, mimic: {joint: j2}}]"),
+        ["robot 'arm'", "joints (j2).mimic.joint", "unknown joint 'j7'"]),
     "mimic_on_a_spherical_joint": (robot_yaml(
         links=f"[{{name: base}}, {GOOD_LINK}, {{name: l2, mass: 1.0}}]",
         joints="[{name: j1, type: revolute, parent: base, child: l1}, "

@@ -8,6 +8,7 @@ import numpy as np
 
 from derive.cli.common import path_arg, robots_of
 from derive.description.model import parse_robot
+from derive.description.xacro_expand import EXTRA as XACRO_EXTRA
 from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import_urdf_named, relock_command, resolve_urdf
 from derive.reference import NumericRobot
 
@@ -40,12 +41,14 @@ def warn_unmoved(name: str, entry: dict, shown: str, samples: int = 3) -> None:
 
 def cmd_import_urdf(args) -> int:
     """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--no-friction]
-    [--fix-inertia] [--name NAME] [--out models.yaml]``."""
+    [--fix-inertia] [--name NAME] [--arg NAME=VALUE ...] [--package-path NAME=DIR ...] [--out models.yaml]``."""
     name, entry = import_urdf_named(args.file, getattr(args, "tip", None), lock=getattr(args, "lock", None),
                                     name=getattr(args, "name", None), chain=getattr(args, "chain", None),
                                     floating=bool(getattr(args, "floating", False)),
                                     friction=not getattr(args, "no_friction", False),
-                                    fix_inertia=bool(getattr(args, "fix_inertia", False)))
+                                    fix_inertia=bool(getattr(args, "fix_inertia", False)),
+                                    xacro_args=getattr(args, "xacro_arg", None),
+                                    package_paths=getattr(args, "package_path", None))
     warn_unmoved(name, entry, resolve_urdf(args.file, name)[1])
     if args.out:
         append_entry(args.out, name, entry)
@@ -89,7 +92,8 @@ def add_parser(sub) -> None:
                                    "links behind fixed joints become named frames; moving branches without any mass "
                                    "are dropped (named in the description). "
                                    f"FILE may be '{ERD_PREFIX}<path under robots/>' for the installed "
-                                   "example-robot-data URDFs.")
+                                   "example-robot-data URDFs. A xacro file (a .xacro name, or xacro elements or substitutions in it) is "
+                                   f"expanded first, without ROS (needs the extra: {XACRO_EXTRA}).")
     u.add_argument("file", metavar="FILE", type=path_arg)
     u.add_argument("--tip", metavar="LINK", help="URDF link that becomes the frame 'tcp' (none without it)")
     u.add_argument("--chain", metavar="LINK", help="import only the root-to-LINK chain (the frame 'tcp' at LINK): "
@@ -105,6 +109,11 @@ def add_parser(sub) -> None:
                         "two smaller raised equally until I1 + I2 >= I3)")
     u.add_argument("--floating", action="store_true",
                    help="floating base: the URDF root link moves freely (base: floating, Pinocchio's JointModelFreeFlyer)")
+    u.add_argument("--arg", dest="xacro_arg", action="append", metavar="NAME=VALUE",
+                   help="a xacro argument (xacro's NAME:=VALUE); repeat for more")
+    u.add_argument("--package-path", dest="package_path", action="append", metavar="NAME=DIR",
+                   help="the folder of ROS package NAME, for the xacro file's $(find NAME) and package://NAME; "
+                        "repeat for more")
     u.add_argument("--name", help="robot name (default: the URDF robot name made a C identifier)")
     u.add_argument("--out", metavar="MODELS", type=path_arg,
                    help="append to this models file instead of printing (created if missing; written atomically: on "

@@ -22,8 +22,8 @@ from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
 from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
-from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, ModelError, Origin, Parameter, Robot, Value, Vec3,
-                                      identifier, import_command, shown)
+from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
+                                      compose_mimics, identifier, import_command, shown)
 from derive.resources import EXAMPLE_MODELS
 
 
@@ -392,18 +392,7 @@ class _Parser:
             raise self.error("joints", "no moving joint: a robot needs at least one degree of freedom")
         self.check_names(robot)
         self.check_values(robot)
-        joints = {j.name: j for j in robot.joints}
-        for j in robot.joints:
-            if j.mimic is None:
-                continue
-            target = joints.get(j.mimic.joint)
-            where = f"joints ({j.name}).mimic.joint"
-            if target is None:
-                raise self.error(where, f"unknown joint '{shown(j.mimic.joint)}'")
-            if target is j or target.mimic is not None or target.dof != 1:
-                what = ("itself" if target is j else f"'{target.name}', which mimics another joint" if target.mimic
-                        else f"'{target.name}', a {target.type} joint")
-                raise self.error(where, f"a joint can only mimic a 1-DOF joint with its own coordinate, not {what}")
+        robot = self.resolve_mimics(robot)
         known = robot.frame_names
         for i, frame in enumerate(robot.wrench_frames):
             if frame not in known:
@@ -415,6 +404,39 @@ class _Parser:
                     raise self.error(f"bundles[{i}].quantities[{k}]", f"'{quantity}' needs frames taking external "
                                      "wrenches: list them in wrenches: (by default the frame tcp, where there is one)")
         return robot
+
+    def resolve_mimics(self, robot: Robot) -> Robot:
+        """``robot`` with every mimic of a mimic composed into one mimic of its chain's root
+        (:func:`derive.description.robot.compose_mimics`), as the URDF importer composes them; each joint
+        keeps its own actuator. The root must be a 1-DOF joint with its own coordinate; a cycle is refused.
+        """
+        joints = {j.name: j for j in robot.joints}
+        try:
+            composed = compose_mimics({j.name: j.mimic for j in robot.joints if j.mimic is not None})
+        except MimicCycle as exc:
+            if len(exc.joints) == 1:
+                raise self.error(f"joints ({exc.joints[0]}).mimic.joint", "a joint can only mimic a 1-DOF joint with "
+                                 "its own coordinate, not itself") from None
+            raise self.error(f"joints ({exc.joints[0]}).mimic.joint", f"{exc}: one of them must follow a joint with "
+                             "its own coordinate") from None
+        for name, (mimic, chain) in composed.items():
+            where = f"joints ({name}).mimic.joint"
+            via = f" (through {', '.join(repr(x) for x in chain[:-1])})" if len(chain) > 1 else ""
+            target = joints.get(mimic.joint)
+            if target is None:
+                raise self.error(where, f"unknown joint '{shown(mimic.joint)}'{via}")
+            if target.dof != 1:
+                raise self.error(where, f"a joint can only mimic a 1-DOF joint with its own coordinate, not "
+                                 f"'{target.name}', a {target.type} joint{via}")
+            for key, value in (("multiplier", mimic.multiplier), ("offset", mimic.offset)):
+                problem = magnitude_problem(value)
+                if problem and len(chain) > 1:
+                    raise self.error(f"joints ({name}).mimic.{key}", f"composed through {', '.join(chain[:-1])}: "
+                                     f"{problem}")
+        if not any(len(chain) > 1 for _, chain in composed.values()):
+            return robot
+        return dataclasses.replace(robot, joints=tuple(
+            dataclasses.replace(j, mimic=composed[j.name][0]) if j.name in composed else j for j in robot.joints))
 
     def bundles(self, spec: Mapping) -> tuple[Bundle, ...] | None:
         raw = spec.get("bundles")

@@ -147,6 +147,44 @@ class Mimic:
     offset: float = 0.0
 
 
+class MimicCycle(DeriveError):
+    """Mimic joints that follow each other round in a circle: none of them reaches a coordinate."""
+
+    def __init__(self, joints: list[str]):
+        self.joints = joints
+        super().__init__(f"the mimic joints {', '.join(repr(j) for j in joints)} follow each other in a cycle")
+
+
+def compose_mimics(mimics: dict[str, Mimic]) -> dict[str, tuple[Mimic, tuple[str, ...]]]:
+    """Each mimic joint as one mimic of the first joint of its chain that mimics nothing, with the chain.
+
+    q_C = m2 q_B + o2 and q_B = m1 q_A + o1 give q_C = m2 (m1 q_A + o1) + o2 = (m2 m1) q_A + (m2 o1 + o2),
+    for chains of any length (the chain rule of a linear map: G stays constant). ``mimics`` maps a joint to
+    its own mimic; the result maps it to ``(composed mimic, (the joints it passes through, in order, ending
+    with the root))``: a direct mimic comes back unchanged, with a chain of one. Whether the root has a
+    coordinate is the caller's to judge. Raises :class:`MimicCycle` (the joints of the cycle, in the order
+    they follow each other) if a chain comes back onto itself (a joint mimicking itself is a cycle of one).
+    """
+    out: dict[str, tuple[Mimic, tuple[str, ...]]] = {}
+    for start in mimics:
+        path = [start]  # start, the joint it follows, ...
+        while path[-1] in mimics and path[-1] not in out:
+            nxt = mimics[path[-1]].joint
+            if nxt in path:
+                raise MimicCycle(path[path.index(nxt):])
+            path.append(nxt)
+        # compose from the far end back to start (memoised: each joint is resolved once)
+        for k in range(len(path) - 2, -1, -1):
+            own = mimics[path[k]]
+            if path[k + 1] in out:
+                inner, chain = out[path[k + 1]]
+                out[path[k]] = (Mimic(inner.joint, own.multiplier * inner.multiplier,
+                                      own.multiplier * inner.offset + own.offset), (path[k + 1],) + chain)
+            else:
+                out[path[k]] = (own, (own.joint,))
+    return out
+
+
 @dataclass(frozen=True)
 class Joint:
     """A joint (see :data:`JOINT_TYPES`).

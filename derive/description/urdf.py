@@ -22,9 +22,11 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
   lock motion is folded into the fixed transform;
 - a moving joint with ``<mimic joint= multiplier= offset=>`` becomes a models.yaml
   ``mimic`` joint (no entry in q) when the joint it follows keeps its coordinate;
-  otherwise (that joint locked, dropped, fixed, unknown or itself a mimic) it must be
-  locked (``mimic`` on a fixed joint is ignored). Its own ``<dynamics>`` stays its
-  actuator (G^T D G in the coordinates, as MuJoCo applies it);
+  a mimic of a mimic is composed into one mimic of the chain's root (q_C = m2 (m1 q_A
+  + o1) + o2, chains of any length; a cycle is refused, naming its joints); otherwise
+  (the root locked, dropped, fixed or unknown) it must be locked (``mimic`` on a fixed
+  joint is ignored). Its own ``<dynamics>`` stays its actuator (G^T D G in the
+  coordinates, as MuJoCo applies it);
 - fixed joints are merged: the child's mass properties are added to the parent
   (parallel-axis theorem) and the child survives as a named frame on its moving
   ancestor. The URDF root link always stays (but a world dropped above a
@@ -75,7 +77,11 @@ from derive.description.inertia import inertia_problem, nearest_physical
 from derive.description.model import parse_models, parse_robot
 from derive.description.numbers import (MAX_MAGNITUDE, MIN_MAGNITUDE, axis_component_problem, decimal, decimals,
                                        magnitude_problem, tiny, unit_vector)
-from derive.description.robot import C_KEYWORDS, ModelError, identifier, import_command, shown
+from derive.description.xacro_expand import XacroError, assignments, is_xacro, package_folders
+from derive.description.xacro_expand import command_options as xacro_command
+from derive.description.xacro_expand import expand as expand_xacro
+from derive.description.robot import (C_KEYWORDS, Mimic, MimicCycle, ModelError, compose_mimics, identifier,
+                                      import_command, shown)
 from derive.filesystem import write_atomically
 
 ERD = "example-robot-data"
@@ -426,24 +432,42 @@ class _Reader:
         print(_printable(f"warning: {self.path}: {where}: {problem}"), file=sys.stderr)
 
 
-def _read(path: Path, robot: str | None, shown: str | None = None) -> tuple[str, dict[str, _Inertial], list[_Joint]]:
-    """(URDF robot name, links in file order, joints in file order); warnings name the file as ``shown``."""
-    who = robot or c_identifier(path.stem)
+def _stem(path: Path) -> str:
+    """The file name without ``.xacro`` and ``.urdf`` (``arm.urdf.xacro`` -> ``arm``)."""
+    name = path.name
+    for suffix in (".xacro", ".urdf"):
+        if name.endswith(suffix) and len(name) > len(suffix):
+            name = name[:-len(suffix)]
+    return name
+
+
+def _read(path: Path, robot: str | None, shown: str | None = None, xacro_args: Mapping[str, str] | None = None,
+          packages: Mapping[str, Path] | None = None) -> tuple[str, dict[str, _Inertial], list[_Joint], bool]:
+    """(URDF robot name, links in file order, joints in file order, whether the file was xacro); warnings
+    name the file as ``shown``. A xacro file is expanded first (:mod:`derive.description.xacro_expand`)."""
+    who = robot or c_identifier(_stem(path))
     try:
         text = read_bytes(path, "URDF")
     except InputFileError as exc:
         raise ModelError(who, "", str(exc)) from None
+    xacro = is_xacro(path, text)
+    if xacro:
+        text = expand_xacro(path, text, shown or str(path), xacro_args, packages)
+    elif xacro_args or packages:
+        raise XacroError(f"{shown or path}: {'--arg' if xacro_args else '--package-path'} is for xacro files; this "
+                         "one is plain URDF (no .xacro name, no xacro element or substitution)")
+    expanded = " (as xacro expands it)" if xacro else ""
     try:
         root = ET.fromstring(text)
     except (RecursionError, MemoryError):
-        raise ModelError(who, str(path), "XML nested too deeply") from None
+        raise ModelError(who, str(path), f"XML nested too deeply{expanded}") from None
     except ET.ParseError as exc:
         line, col = exc.position
         msg = str(exc).split(":")[0]
-        raise ModelError(who, f"{path} line {line}, column {col + 1}", f"malformed XML: {msg}") from None
+        raise ModelError(who, f"{path} line {line}, column {col + 1}{expanded}", f"malformed XML: {msg}") from None
     if root.tag != "robot":
-        raise ModelError(who, str(path), f"not a URDF: the root element is <{root.tag}>, not <robot>")
-    urdf_name = root.get("name") or path.stem
+        raise ModelError(who, str(path), f"not a URDF: the root element is <{root.tag}>, not <robot>{expanded}")
+    urdf_name = root.get("name") or _stem(path)
     reader = _Reader(robot or c_identifier(urdf_name), shown or str(path))
     links: dict[str, _Inertial] = {}
     for el in root.findall("link"):
@@ -454,7 +478,7 @@ def _read(path: Path, robot: str | None, shown: str | None = None) -> tuple[str,
             raise reader.error(f"links[{name}]", "duplicate link name")
         links[name] = reader.inertial(name, el.find("inertial"))
     joints = [reader.joint(el) for el in root.findall("joint")]
-    return urdf_name, links, joints
+    return urdf_name, links, joints, xacro
 
 
 # --------------------------------------------------------------------------- import
@@ -525,9 +549,10 @@ def _lock_spelling(j: _Joint) -> str:
 
 
 def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, lock: dict, name: str | None,
-             friction: bool = True, fix_inertia: bool = False) -> str:
-    """The ``derive import-urdf`` command line that reproduces an import."""
-    cmd = f"derive import-urdf {spelling}"
+             friction: bool = True, fix_inertia: bool = False, xacro: str = "") -> str:
+    """The ``derive import-urdf`` command line that reproduces an import (``xacro``: its --arg and
+    --package-path options)."""
+    cmd = f"derive import-urdf {spelling}{xacro}"
     if chain is not None:
         cmd += f" --chain {chain}"
     elif tip is not None:
@@ -643,7 +668,7 @@ def _clamp_inertia_noise(inertia: dict, mass: float, floor: float) -> dict:
 
 def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
                 chain: str | None = None, floating: bool = False, friction: bool = True,
-                fix_inertia: bool = False) -> dict:
+                fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None) -> dict:
     """Read a URDF and return one models.yaml robot entry (a plain dict).
 
     ``path`` may be ``example-robot-data:<path under robots/>``. By default the
@@ -674,11 +699,18 @@ def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: 
     ``fix_inertia`` repairs impossible inertias instead of refusing them, with one
     warning per link on stderr: a massless link's inertia becomes zero, any other
     the nearest physical one (:func:`derive.description.inertia.nearest_physical`).
+
+    A xacro file (a ``.xacro`` name, or xacro elements or substitutions in it) is expanded first with the ``xacro`` package
+    (:mod:`derive.description.xacro_expand`): ``xacro_args`` are its arguments (``{"NAME": "VALUE"}`` or
+    ``["NAME=VALUE", ...]``), ``package_paths`` the folders of the ROS packages its ``$(find NAME)`` and
+    ``package://NAME`` name (``{"NAME": DIR}`` or ``["NAME=DIR", ...]``); the entry's ``source`` records them.
+
     Raises :class:`derive.description.model.ModelError` on any problem; it names
-    the URDF and, for data defects, the way forward.
+    the URDF and, for data defects, the way forward (a xacro expansion:
+    :class:`derive.description.xacro_expand.XacroError`, naming the file).
     """
     return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating, friction=friction,
-                             fix_inertia=fix_inertia)[1]
+                             fix_inertia=fix_inertia, xacro_args=xacro_args, package_paths=package_paths)[1]
 
 
 def _fix_inertias(reader: "_Reader", links: dict[str, _Inertial], floor: float) -> list[str]:
@@ -729,12 +761,18 @@ def _flush_tiny(node: Any) -> Any:
 
 def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
                       chain: str | None = None, floating: bool = False, friction: bool = True,
-                      fix_inertia: bool = False) -> tuple[str, dict]:
+                      fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None) -> tuple[str, dict]:
     """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
     file, spelling, origin_text = resolve_urdf(path, name)
-    urdf_name, links, joints = _read(file, name, spelling)
+    try:
+        xacro_args = assignments(xacro_args, "--arg", "VALUE")
+        package_text = assignments(package_paths, "--package-path", "DIR")  # as given, for the command
+        packages = package_folders(package_text)
+    except XacroError as exc:
+        raise XacroError(f"{spelling}: {exc}") from None
+    urdf_name, links, joints, xacro = _read(file, name, spelling, xacro_args, packages)
     robot = name or c_identifier(urdf_name)
     floating_flag = bool(floating)
 
@@ -760,7 +798,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
             raise error(f"joints[{j.name}].child", f"link '{j.child}' already has parent joint '{parent_joint[j.child].name}'")
         parent_joint[j.child] = j
     if not links:
-        raise error("links", "the URDF has no <link>")
+        raise error("links", "the xacro file expands to no <link> (does it only define macros?)" if xacro
+                    else "the URDF has no <link>")
     roots = [n for n in links if n not in parent_joint]
     cycle = _find_cycle(links, parent_joint)
     if cycle:
@@ -869,22 +908,34 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         order.append(j)
         stack.extend(reversed(children[j.child]))
     kept = {j.name for j in order if moves(j)}
-    stuck: list[tuple[_Joint, str]] = []  # a mimic joint follows a joint that keeps its own coordinate
+    # A mimic of a mimic is one mimic of the chain's root (q_C = m2 (m1 q_A + o1) + o2); the chain runs
+    # through moving joints only: a locked or fixed one ends it (and is judged below, as the root).
+    try:
+        composed = compose_mimics({j.name: Mimic(*j.mimic) for j in joints
+                                   if j.mimic is not None and moves(j) and j.mimic[0] != j.name})
+    except MimicCycle as exc:
+        pairs = ", ".join(f"{a} mimics {b}" for a, b in zip(exc.joints, exc.joints[1:] + exc.joints[:1]))
+        raise error(f"joints[{exc.joints[0]}].mimic", f"{exc} ({pairs}): none of them has a coordinate; lock them "
+                    f"(--lock {lock_list(exc.joints)}) or remove one <mimic>") from None
+    stuck: list[tuple[_Joint, str, str]] = []  # a mimic joint follows a joint that keeps its own coordinate
     for j in order:
         if j.mimic is None or not moves(j):
             continue
-        target = by_name.get(j.mimic[0])
+        if j.name not in composed:  # it mimics itself
+            target, chain = j, (j.name,)
+        else:
+            leader, chain = composed[j.name]
+            target = by_name.get(leader.joint)
         problem = ("an unknown joint" if target is None else "itself" if target is j else
                    "a fixed joint" if target.type == "fixed" else "a locked joint" if target.name in locks else
-                   "a mimic joint" if target.mimic is not None else
                    "a joint of a dropped massless branch" if target.name not in kept else None)
         if problem:
-            stuck.append((j, problem))
+            stuck.append((j, "".join(f", which mimics '{x}'" for x in chain[1:]), problem))
     if stuck:
-        j, problem = stuck[0]
+        j, via, problem = stuck[0]
         others = f" (and {len(stuck) - 1} more mimic joint{'s' * (len(stuck) > 2)} alike)" if len(stuck) > 1 else ""
-        raise error(f"joints[{j.name}].mimic", f"mimics '{j.mimic[0]}', {problem}{others}: lock "
-                    f"{'them' if others else 'it'} (--lock {lock_list(m.name for m, _ in stuck)})")
+        raise error(f"joints[{j.name}].mimic", f"mimics '{j.mimic[0]}'{via}, {problem}{others}: lock "
+                    f"{'them' if others else 'it'} (--lock {lock_list(m.name for m, _, _ in stuck)})")
     if off_path:
         # every joint that would still move mass off the path once the branch tops are locked, so that
         # the suggested command works as given
@@ -924,7 +975,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
             if j.limits:
                 entry["limits"] = dict(j.limits)
             if j.mimic is not None:
-                entry["mimic"] = {"joint": j.mimic[0], "multiplier": j.mimic[1], "offset": j.mimic[2]}
+                leader = composed[j.name][0]  # a mimic of a mimic: of the chain's root
+                entry["mimic"] = {"joint": leader.joint, "multiplier": leader.multiplier, "offset": leader.offset}
             if friction and any(j.dynamics):  # URDF damping and friction: viscous and Coulomb friction
                 # (a mimic joint's act on its own motion: through G on its leader's coordinate, G^T D G)
                 entry["actuator"] = {k: v for k, v in zip(("viscous", "coulomb"), j.dynamics) if v}
@@ -998,9 +1050,10 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         notes.append("repaired the inertia of " + ", ".join(repaired))
     if dropped:
         notes.append("dropped the massless moving " + ("branches " if len(dropped) > 1 else "branch ") + ", ".join(dropped))
-    description = f"{urdf_name} imported from URDF" + (f" ({'; '.join(notes)})" if notes else "")
+    description = f"{urdf_name} imported from {'xacro' if xacro else 'URDF'}" + (f" ({'; '.join(notes)})" if notes else "")
     command = _command(spelling, tip, chain, floating_flag, locks, name if name and name != c_identifier(urdf_name) else None,
-                       friction or not any(any(j.dynamics) for j in order), bool(repaired))
+                       friction or not any(any(j.dynamics) for j in order), bool(repaired),
+                       xacro_command(xacro_args, package_text))
     entry = {
         "description": description,
         "source": f"{origin_text}, imported by `{command}`",
