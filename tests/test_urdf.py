@@ -42,7 +42,7 @@ N_SAMPLES = 50
 
 # The shipped imports: models.yaml name -> import_urdf arguments.
 SHIPPED = {
-    "ur5": dict(path="example-robot-data:ur_description/urdf/ur5_robot.urdf", tip="tool0", lock=None),
+    "ur5": dict(path="example-robot-data:ur_description/urdf/ur5_robot.urdf", tip="tool0", lock=None, snap_angles=1e-4),
     "panda": dict(path="example-robot-data:panda_description/urdf/panda.urdf", tip="panda_hand_tcp",
                   lock="panda_finger_joint1,panda_finger_joint2", friction=False),
 }
@@ -303,7 +303,8 @@ def test_models_yaml_matches_a_fresh_import(pin, name):
     assert data[name] == fresh  # exact, float for float
     assert dump_entry(name, fresh) in default_models_path().read_text()  # comments and layout too
     # the same URDF given as a plain path imports identically
-    assert import_urdf(erd_path(args["path"]), args["tip"], args["lock"], friction=args.get("friction", True)) == fresh
+    assert import_urdf(erd_path(args["path"]), args["tip"], args["lock"], friction=args.get("friction", True),
+                       snap_angles=args.get("snap_angles")) == fresh
 
 
 @pytest.mark.parametrize("name", SHIPPED)
