@@ -337,9 +337,13 @@ def test_ur5_structure():
     assert all(j.type == "revolute" for j in robot.joints)
     frames = {f.name: f for f in robot.frames}
     assert set(frames) == {"tcp", "base_link", "base", "ee_link"}
-    # single URDF origins are copied, not recomputed: the truncated pi/2 of the UR files survives
-    assert frames["tcp"].link == "wrist_3_link" and frames["tcp"].origin.rpy == (-1.57079632679, 0.0, 0.0)
-    assert frames["base"].origin.rpy == (0.0, 0.0, -3.14159265359)
+    # imported with --snap-angles 1e-4: the UR files' truncated pi/2 (1.57079632679) and pi are made exact
+    assert frames["tcp"].link == "wrist_3_link" and frames["tcp"].origin.rpy == (-math.pi / 2, 0.0, 0.0)
+    assert frames["base"].origin.rpy == (0.0, 0.0, -math.pi)
+    # without it, single URDF origins are copied, not recomputed: the truncated values survive
+    as_written = {f["name"]: f for f in import_urdf(SHIPPED["ur5"]["path"], "tool0")["frames"]}
+    assert as_written["tcp"]["rpy"] == [-1.57079632679, 0.0, 0.0]
+    assert as_written["base"]["rpy"] == [0.0, 0.0, -3.14159265359]
     assert robot.link("world").mass == 4.0  # base_link merged into the root
 
 

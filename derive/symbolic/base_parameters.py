@@ -288,8 +288,8 @@ def near_dependencies(W: np.ndarray, names, count: int = 2) -> list[tuple[float,
 
 def dependencies_text(deps) -> str:
     """``near-dependencies (smallest singular values, unit columns, relative): 3.2e-06 (0.71 ZZR_a - 0.7 XX_b)``."""
-    parts = [f"{x:.2g} (" + _sum(((round(c, 2), n) for n, c in terms), lambda c: f"{c:g}", " ") + ")"
-             for x, terms in deps]
+    parts = [f"{x:.2g} (" + _sum(((round(c, 2), n) for n, c in terms[:5]), lambda c: f"{c:g}", " ")
+             + (" ..." if len(terms) > 5 else "") + ")" for x, terms in deps]
     return "near-dependencies (smallest singular values with unit columns, relative): " + "; ".join(parts)
 
 
