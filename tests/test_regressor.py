@@ -40,9 +40,6 @@ ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
 SHIPPED = sorted(robots())
 TOL = 1e-12
-TRUNCATED = {"ur5", "ur5_floating"}
-"""Robots with constants written short of pi/2 (1.57079632679): the symbolic side snaps them
-(derive.symbolic.spatial.SNAP), the reference and Pinocchio do not, so the two differ by ~1e-11 there."""
 PINOCCHIO_RANK = {"panda": 43, "ur5": 36, "planar_2r": 6, "rrprr": 27, "cartpole": 4, "panda_floating": 59, "ur5_floating": 52}
 STATES = 12
 
@@ -181,7 +178,7 @@ def test_values_are_pinocchios_dynamic_parameters(name):
 def test_regressor_times_pi_is_inverse_dynamics(name):
     """Y pi = ID (symbolic), Y_ref pi = rnea (reference), Y = Y_ref, Y_b pi_b = ID and Y = Y_b K."""
     d = derived(name)
-    tol_ref = 1e-10 if name in TRUNCATED else TOL
+    tol_ref = TOL  # ur5 writes exact pi/2 since its import with --snap-angles: no 1e-11 gap to the reference
     pi_b = d.base.values(d.pi)
     for q, qd, qdd in d.states(3):
         Y, Yb, tau = d(q, qd, qdd)

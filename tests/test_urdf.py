@@ -42,7 +42,7 @@ N_SAMPLES = 50
 
 # The shipped imports: models.yaml name -> import_urdf arguments.
 SHIPPED = {
-    "ur5": dict(path="example-robot-data:ur_description/urdf/ur5_robot.urdf", tip="tool0", lock=None),
+    "ur5": dict(path="example-robot-data:ur_description/urdf/ur5_robot.urdf", tip="tool0", lock=None, snap_angles=1e-4),
     "panda": dict(path="example-robot-data:panda_description/urdf/panda.urdf", tip="panda_hand_tcp",
                   lock="panda_finger_joint1,panda_finger_joint2", friction=False),
 }
@@ -303,7 +303,8 @@ def test_models_yaml_matches_a_fresh_import(pin, name):
     assert data[name] == fresh  # exact, float for float
     assert dump_entry(name, fresh) in default_models_path().read_text()  # comments and layout too
     # the same URDF given as a plain path imports identically
-    assert import_urdf(erd_path(args["path"]), args["tip"], args["lock"], friction=args.get("friction", True)) == fresh
+    assert import_urdf(erd_path(args["path"]), args["tip"], args["lock"], friction=args.get("friction", True),
+                       snap_angles=args.get("snap_angles")) == fresh
 
 
 @pytest.mark.parametrize("name", SHIPPED)
@@ -336,9 +337,13 @@ def test_ur5_structure():
     assert all(j.type == "revolute" for j in robot.joints)
     frames = {f.name: f for f in robot.frames}
     assert set(frames) == {"tcp", "base_link", "base", "ee_link"}
-    # single URDF origins are copied, not recomputed: the truncated pi/2 of the UR files survives
-    assert frames["tcp"].link == "wrist_3_link" and frames["tcp"].origin.rpy == (-1.57079632679, 0.0, 0.0)
-    assert frames["base"].origin.rpy == (0.0, 0.0, -3.14159265359)
+    # imported with --snap-angles 1e-4: the UR files' truncated pi/2 (1.57079632679) and pi are made exact
+    assert frames["tcp"].link == "wrist_3_link" and frames["tcp"].origin.rpy == (-math.pi / 2, 0.0, 0.0)
+    assert frames["base"].origin.rpy == (0.0, 0.0, -math.pi)
+    # without it, single URDF origins are copied, not recomputed: the truncated values survive
+    as_written = {f["name"]: f for f in import_urdf(SHIPPED["ur5"]["path"], "tool0")["frames"]}
+    assert as_written["tcp"]["rpy"] == [-1.57079632679, 0.0, 0.0]
+    assert as_written["base"]["rpy"] == [0.0, 0.0, -3.14159265359]
     assert robot.link("world").mass == 4.0  # base_link merged into the root
 
 

@@ -74,9 +74,13 @@ def add_parser(sub) -> None:
 
 
 def regressor_of(robot) -> tuple[Regressor, object]:
-    """The symbolic regressor of ``robot`` and its base parameters."""
+    """The symbolic regressor of ``robot`` and its base parameters (their near-dependencies, if any, as one
+    warning line on stderr)."""
     reg = Regressor(NewtonEuler(robot, make_symbols(robot)))
-    return reg, base_parameters(robot, regressor=reg)
+    bp = base_parameters(robot, regressor=reg)
+    if bp.near:
+        print(f"warning: robot '{robot.name}': {bp.near_text()}", file=sys.stderr)
+    return reg, bp
 
 
 def cmd_base_parameters(args) -> int:
@@ -181,7 +185,7 @@ def cmd_excite(args) -> int:
         Yb, tau_id = ca.substitute(Yb, s.p, p), ca.substitute(tau_id, s.p, p)
     ex = excite(robot, Yb, s.q, s.qd, s.qdd, tau_id, period=args.period, harmonics=args.harmonics,
                 samples=args.samples, seed=args.seed, max_iterations=args.iterations,
-                log=lambda m: print(m, file=sys.stderr, flush=True))
+                log=lambda m: print(m, file=sys.stderr, flush=True), names=bp.names)
     csv, png = ex.csv(), render_excitation(ex)  # both made before either is written
     if not out.is_dir():
         try:

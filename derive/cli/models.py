@@ -41,14 +41,15 @@ def warn_unmoved(name: str, entry: dict, shown: str, samples: int = 3) -> None:
 
 def cmd_import_urdf(args) -> int:
     """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--no-friction]
-    [--fix-inertia] [--name NAME] [--arg NAME=VALUE ...] [--package-path NAME=DIR ...] [--out models.yaml]``."""
+    [--fix-inertia] [--snap-angles TOL] [--name NAME] [--arg NAME=VALUE ...] [--package-path NAME=DIR ...] [--out models.yaml]``."""
     name, entry = import_urdf_named(args.file, getattr(args, "tip", None), lock=getattr(args, "lock", None),
                                     name=getattr(args, "name", None), chain=getattr(args, "chain", None),
                                     floating=bool(getattr(args, "floating", False)),
                                     friction=not getattr(args, "no_friction", False),
                                     fix_inertia=bool(getattr(args, "fix_inertia", False)),
                                     xacro_args=getattr(args, "xacro_arg", None),
-                                    package_paths=getattr(args, "package_path", None))
+                                    package_paths=getattr(args, "package_path", None),
+                                    snap_angles=getattr(args, "snap_angles", None))
     warn_unmoved(name, entry, resolve_urdf(args.file, name)[1])
     if args.out:
         append_entry(args.out, name, entry)
@@ -107,6 +108,10 @@ def add_parser(sub) -> None:
                         "massless link's inertia becomes zero; one that is not positive semi-definite or breaks the "
                         "triangle inequality becomes the nearest physical one (negative principal moments -> 0, the "
                         "two smaller raised equally until I1 + I2 >= I3)")
+    u.add_argument("--snap-angles", metavar="TOL", type=float,
+                   help="make every constant angle within TOL rad of a multiple of pi/2 exactly that multiple (e.g. "
+                        "1e-4 for 1.5708 and 3.1416); by default angles are kept as written and those within 1e-4 of one "
+                        "are listed in a warning")
     u.add_argument("--floating", action="store_true",
                    help="floating base: the URDF root link moves freely (base: floating, Pinocchio's JointModelFreeFlyer)")
     u.add_argument("--arg", dest="xacro_arg", action="append", metavar="NAME=VALUE",

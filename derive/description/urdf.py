@@ -40,10 +40,19 @@ no ``1_0``, no other digits than ASCII, no hex, inf or nan) and bounded like a m
 the axis, is rounding residue: read as 0 with a warning; a position limit beyond 1e12 is an
 exporter's "unbounded": dropped with a warning). Every error names the file. Numbers that come
 straight from the URDF are copied exactly; only composed or merged values are computed. Of those, only what is the rounding
-of an exact angle is snapped: an angle within a few ulps of a multiple of pi/2
-becomes that multiple, a vector component within a few ulps of the vector's
-length (e.g. 0.1 * cos(pi/2) = 6e-18) becomes 0. Nothing else moves, so the
-imported model reproduces the URDF to rounding (1e-15 relative).
+of an exact angle is snapped: a composed angle exact to rounding (within
+:data:`derive.description.angles.EXACT` = 1e-14 rad of a multiple of pi/2) becomes
+that multiple, a vector component within a few ulps of the vector's length (e.g.
+0.1 * cos(pi/2) = 6e-18) becomes 0. Nothing else moves, so the imported model
+reproduces the URDF as written to 1e-14 (relative).
+
+Right angles rounded by the file's author (1.5708, 3.1416, 1.57079632679: within
+NEAR = 1e-4 rad of k pi/2 but not exact, :mod:`derive.description.angles`) are kept as
+written, and one warning line lists them (the entry's joint origins and frames, where
+they land, and the links' inertial origins). ``snap_angles=TOL`` (``--snap-angles TOL``)
+makes every constant angle within TOL of k pi/2 exactly k pi/2: the URDF's joint and
+inertial origins before anything is composed, then the composed origins; the entry's
+``source`` command carries the option, so a re-import reproduces it.
 
 What exporters write that carries no information is read as absent, with a
 one-line warning on stderr: ``<limit>`` attributes that are all zero (or a zero
@@ -58,6 +67,7 @@ models file atomically (:func:`append_entry`).
 
 from __future__ import annotations
 
+import dataclasses
 import importlib.metadata
 import json
 import keyword
@@ -72,6 +82,7 @@ from typing import Any, Iterable, Mapping
 import numpy as np
 import yaml
 
+from derive.description.angles import EXACT, NEAR, quarter, snapped, spelled
 from derive.description.files import InputFileError, read_bytes, read_text
 from derive.description.inertia import inertia_problem, nearest_physical
 from derive.description.model import parse_models, parse_robot
@@ -86,7 +97,8 @@ from derive.filesystem import write_atomically
 
 ERD = "example-robot-data"
 ERD_PREFIX = ERD + ":"
-SNAP_ULPS = 4  # composed values within this many ulps of an exact value (0, k pi/2) are snapped to it
+SNAP_ULPS = 4  # composed vector components within this many ulps of the vector's length are snapped to 0
+MAX_SNAP = 0.1  # --snap-angles at most this (rad): beyond, real angles would be taken for right angles
 NOISE = 1e-12  # inertia noise floor, relative to the robot's largest inertia (see _clamp_inertia_noise)
 GRAVITY = [0.0, 0.0, -9.81]
 
@@ -186,19 +198,15 @@ def axis_angle(axis, angle: float) -> np.ndarray:
 
 
 _EPS = float(np.finfo(float).eps)
-_HALF_PI = math.pi / 2
 
 
 def _snap_angle(a: float) -> float:
-    """A computed angle within a few ulps of k pi/2 -> exactly k pi/2 (0.0 for k = 0); others unchanged.
+    """A computed angle exact to rounding (within EXACT = 1e-14 of k pi/2) -> exactly k pi/2 (0.0 for k = 0).
 
-    Only the rounding of an exact angle is removed: 1e-9 or even 1e-12 rad off a
-    multiple of pi/2 is a real angle (or the URDF's own spelling) and stays.
+    Only the rounding of an exact angle is removed (composing two exact right angles
+    leaves a few ulps): 1e-12 rad off a multiple of pi/2 is the URDF's own spelling and stays.
     """
-    a = float(a)
-    k = round(a / _HALF_PI)
-    exact = k * _HALF_PI if k else 0.0
-    return exact if abs(a - exact) <= SNAP_ULPS * _EPS * max(1.0, abs(exact)) else a
+    return snapped(a, EXACT)
 
 
 def _snap_vector(v) -> list[float]:
@@ -549,7 +557,8 @@ def _lock_spelling(j: _Joint) -> str:
 
 
 def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, lock: dict, name: str | None,
-             friction: bool = True, fix_inertia: bool = False, xacro: str = "") -> str:
+             friction: bool = True, fix_inertia: bool = False, xacro: str = "",
+             snap_angles: float | None = None) -> str:
     """The ``derive import-urdf`` command line that reproduces an import (``xacro``: its --arg and
     --package-path options)."""
     cmd = f"derive import-urdf {spelling}{xacro}"
@@ -567,6 +576,8 @@ def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, 
         cmd += " --no-friction"
     if fix_inertia:
         cmd += " --fix-inertia"
+    if snap_angles is not None:
+        cmd += f" --snap-angles {snap_angles!r}"
     return cmd
 
 
@@ -589,6 +600,12 @@ def _inertia_dict(m: np.ndarray) -> dict:
     m = np.where(np.abs(m) <= tiny, 0.0, m)
     return {"ixx": float(m[0, 0]), "ixy": float(m[0, 1]), "ixz": float(m[0, 2]),
             "iyy": float(m[1, 1]), "iyz": float(m[1, 2]), "izz": float(m[2, 2])}
+
+
+def _snap_origin(origin: Pose, tol: float) -> Pose:
+    """A URDF origin (as read: ``rpy`` exact, no matrix) with its angles within ``tol`` of k pi/2 made k pi/2."""
+    rpy = tuple(snapped(a, tol) for a in origin.rpy)
+    return origin if rpy == origin.rpy else Pose(origin.xyz, rpy)
 
 
 def _merge_mass(robot: str, body: str, parts: list[tuple[str, Pose, _Inertial]], noise: float = 0.0) -> dict:
@@ -668,7 +685,8 @@ def _clamp_inertia_noise(inertia: dict, mass: float, floor: float) -> dict:
 
 def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
                 chain: str | None = None, floating: bool = False, friction: bool = True,
-                fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None) -> dict:
+                fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None,
+                snap_angles: float | None = None) -> dict:
     """Read a URDF and return one models.yaml robot entry (a plain dict).
 
     ``path`` may be ``example-robot-data:<path under robots/>``. By default the
@@ -705,12 +723,18 @@ def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: 
     ``["NAME=VALUE", ...]``), ``package_paths`` the folders of the ROS packages its ``$(find NAME)`` and
     ``package://NAME`` name (``{"NAME": DIR}`` or ``["NAME=DIR", ...]``); the entry's ``source`` records them.
 
+    Constant angles are kept as written; those within 1e-4 rad of a multiple of pi/2
+    without being one to rounding are listed in one warning line. ``snap_angles``
+    (a tolerance in rad, at most 0.1) makes every constant angle within it of k pi/2
+    exactly k pi/2 (recorded in the entry's ``source`` command as ``--snap-angles``).
+
     Raises :class:`derive.description.model.ModelError` on any problem; it names
     the URDF and, for data defects, the way forward (a xacro expansion:
     :class:`derive.description.xacro_expand.XacroError`, naming the file).
     """
     return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating, friction=friction,
-                             fix_inertia=fix_inertia, xacro_args=xacro_args, package_paths=package_paths)[1]
+                             fix_inertia=fix_inertia, xacro_args=xacro_args, package_paths=package_paths,
+                             snap_angles=snap_angles)[1]
 
 
 def _fix_inertias(reader: "_Reader", links: dict[str, _Inertial], floor: float) -> list[str]:
@@ -761,7 +785,8 @@ def _flush_tiny(node: Any) -> Any:
 
 def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
                       chain: str | None = None, floating: bool = False, friction: bool = True,
-                      fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None) -> tuple[str, dict]:
+                      fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None,
+                      snap_angles: float | None = None) -> tuple[str, dict]:
     """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
@@ -778,6 +803,15 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
 
     def error(where: str, problem: str) -> ModelError:
         return ModelError(robot, where, problem, spelling)
+
+    if snap_angles is not None:
+        if isinstance(snap_angles, bool) or not isinstance(snap_angles, (int, float)) or not 0 < snap_angles <= MAX_SNAP:
+            raise error("snap_angles", f"must be a tolerance in rad, 0 < TOL <= {MAX_SNAP:g} (e.g. 1e-4), got "
+                        f"{shown(str(snap_angles))}")
+        snap_angles = float(snap_angles)
+        joints = [dataclasses.replace(j, origin=_snap_origin(j.origin, snap_angles)) for j in joints]
+        for inr in links.values():
+            inr.rpy = tuple(snapped(a, snap_angles) for a in inr.rpy)
 
     repaired: list[str] = []
     if fix_inertia:
@@ -1010,6 +1044,22 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         if body[n] != n and n != tip:
             frames.append({"name": n, "link": body[n], "xyz": list(pose[n].xyz), "rpy": list(pose[n].rpy)})
 
+    # ---- constant angles near k pi/2: snapped as asked (composed ones too), the others listed
+    placed_angles = [(f"joints[{j['name']}].origin.rpy", j["origin"]["rpy"]) for j in out_joints]
+    placed_angles += [(f"frames[{f['name']}].rpy", f["rpy"]) for f in frames]
+    if snap_angles is not None:
+        for _, rpy in placed_angles:
+            rpy[:] = [snapped(a, snap_angles) for a in rpy]
+    near = [(f"{where}[{i}]", a) for where, rpy in placed_angles for i, a in enumerate(rpy)]
+    near += [(f"links[{n}].inertial.origin.rpy[{i}]", a) for n, inr in links.items() if inr.mass != 0
+             for i, a in enumerate(inr.rpy)]
+    near = [(where, a) for where, a in near if quarter(a, NEAR) is not None and quarter(a, EXACT) is None]
+    if near:
+        _Reader(robot, spelling).warn(
+            "angles", f"{len(near)} constant angle{'s are' if len(near) > 1 else ' is'} within {NEAR:g} rad of a multiple of pi/2 "
+            f"without being one (kept as written; --snap-angles {NEAR:g} makes "
+            f"{'it' if len(near) == 1 else 'them'} exact): " + ", ".join(f"{w} = {spelled(a)}" for w, a in near))
+
     # ---- names -> C identifiers
     renamed: dict[str, str] = {}
 
@@ -1050,10 +1100,12 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         notes.append("repaired the inertia of " + ", ".join(repaired))
     if dropped:
         notes.append("dropped the massless moving " + ("branches " if len(dropped) > 1 else "branch ") + ", ".join(dropped))
+    if snap_angles is not None:
+        notes.append(f"constant angles within {snap_angles:g} rad of a multiple of pi/2 made exact")
     description = f"{urdf_name} imported from {'xacro' if xacro else 'URDF'}" + (f" ({'; '.join(notes)})" if notes else "")
     command = _command(spelling, tip, chain, floating_flag, locks, name if name and name != c_identifier(urdf_name) else None,
                        friction or not any(any(j.dynamics) for j in order), bool(repaired),
-                       xacro_command(xacro_args, package_text))
+                       xacro_command(xacro_args, package_text), snap_angles)
     entry = {
         "description": description,
         "source": f"{origin_text}, imported by `{command}`",

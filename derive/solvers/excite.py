@@ -26,6 +26,7 @@ import numpy as np
 
 from derive.errors import DeriveError
 from derive.filesystem import write_atomically
+from derive.symbolic.base_parameters import dependencies_text, near_dependencies
 
 
 @dataclass
@@ -46,6 +47,7 @@ class Excitation:
     iterations: int
     limits_ok: bool
     worst_limit: float  # max over samples of |value| / limit, per kind (<= 1 within limits)
+    dependencies: str = ""  # the smallest singular values of W_b and their base-parameter combinations
 
     def table(self) -> tuple[list[str], np.ndarray]:
         names = ["t"] + [f"{k}_{j}" for k in ("q", "qd", "qdd", "tau") for j in self.joints]
@@ -68,7 +70,8 @@ class Excitation:
         return (f"{self.robot}: excitation of period {self.period:g} s, {self.harmonics} harmonics, "
                 f"{len(self.t)} samples: cond(W_b) = {self.condition:.4g} (a random Fourier trajectory within the "
                 f"same limits: {self.random_condition:.4g}); {self.iterations} SLSQP iterations; within every limit: "
-                f"{'yes' if self.limits_ok else 'NO'} (worst use {self.worst_limit:.3f})")
+                f"{'yes' if self.limits_ok else 'NO'} (worst use {self.worst_limit:.3f})"
+                + (f"\n{self.dependencies}" if self.dependencies else ""))
 
 
 def fourier_basis(t: np.ndarray, period: float, harmonics: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -88,8 +91,12 @@ def fourier_basis(t: np.ndarray, period: float, harmonics: int) -> tuple[np.ndar
 
 def excite(robot, Yb: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, tau_id: ca.SX | None = None, period: float = 10.0,
            harmonics: int = 5, samples: int = 100, seed: int = 0, max_iterations: int = 200,
-           log=lambda s: None) -> Excitation:
-    """Optimise the Fourier coefficients (see the module docstring). ``Yb`` and ``tau_id`` are SX of q, qd, qdd."""
+           log=lambda s: None, names: tuple[str, ...] = ()) -> Excitation:
+    """Optimise the Fourier coefficients (see the module docstring). ``Yb`` and ``tau_id`` are SX of q, qd, qdd.
+
+    ``names``: the base parameters (Yb's columns); with them the result reports the near-dependencies of the
+    optimised W_b (its smallest singular values and their combinations).
+    """
     from scipy.optimize import minimize  # deferred: only excite needs it
 
     robot.require_fixed_base("derive excite")
@@ -182,8 +189,9 @@ def excite(robot, Yb: ca.SX, q: ca.SX, qd: ca.SX, qdd: ca.SX, tau_id: ca.SX | No
     within = bool(np.all(qs >= lo - 1e-9) and np.all(qs <= hi + 1e-9) and np.all(np.abs(qds) <= vmax + 1e-9)
                   and np.all(np.abs(qdds) <= amax + 1e-9) and np.all(np.abs(taus) <= emax + 1e-9))
     cond = math.exp(cond_and_grad(x)[0])
+    deps = dependencies_text(near_dependencies(np.array(fW(x)), names)) if names else ""
     return Excitation(robot.name, tuple(c.name for c in coords), period, harmonics, t, qs, qds, qdds, taus, cond,
-                      random_condition, int(res.nit), within, worst)
+                      random_condition, int(res.nit), within, worst, deps)
 
 
 def random_coefficients(rng, n, m, harmonics, period, lo, hi, vmax, amax, P, V, A) -> np.ndarray:

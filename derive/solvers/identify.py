@@ -49,7 +49,7 @@ import numpy as np
 
 from derive.description.robot import Robot
 from derive.errors import DeriveError
-from derive.symbolic.base_parameters import BaseParameters
+from derive.symbolic.base_parameters import BaseParameters, dependencies_text, near_dependencies
 from derive.symbolic.dynamics import NewtonEuler
 from derive.symbolic.regressor import Regressor
 from derive.symbolic.symbols import make_symbols
@@ -738,7 +738,7 @@ def _solve_stack(stack: RegressionStack, base: BaseParameters, pi0: np.ndarray, 
     s2 = float(np.sum(stack.residual_squares(pib, sigma))) / max(N * nv - r, 1)
     Rinv = np.linalg.inv(Rw[:r, :r])
     std = np.sqrt(np.maximum(s2 * np.sum(Rinv ** 2, axis=1), 0.0))  # diag(s2 (W^T W)^-1), (W^T W)^-1 = R^-1 R^-T
-    notes = []
+    notes = [dependencies_text(near_dependencies(Rw[:r, :r], base.names))]  # R has W's singular values, columns' norms
     if physical:
         Gw = np.sum(stack.G / (sigma ** 2)[:, None, None], axis=0)  # [W | tw]^T [W | tw] of the full regressor
         n = K.shape[1]

@@ -12,16 +12,30 @@ choice of r independent columns Y_1 gives
 pi_1 being the parameters of the chosen columns and pi_2 those of the others (beta = R_1^-1 R_2 of a
 QR factorisation of W with the chosen columns first).
 
-Which columns? The rank comes from a QR with column pivoting of W with its columns scaled to unit
-norm (Gautier 1990). Pivoting picks columns by size, which is arbitrary between equals and unstable
-between near-equals; here the base columns are instead the first independent columns in a fixed
-order of preference (bodies from the root out, each body's inertia before its first moment before
-its mass, then the actuators): an unpivoted QR of W in that order, a column being independent when
-its distance to the span of those before it is above the rank tolerance. That choice is structural
+The numerical rank, stated: RANK_TOL = 1e-4 relative to the regressor's scale. Columns of the same
+kind share units (masses, first moments, inertias, armatures, viscous, Coulomb: KINDS); each kind's
+columns are divided by the largest norm among them, so the largest column of every kind has norm 1,
+and a column is independent when its distance to the span of the columns before it exceeds RANK_TOL:
+its own effect, beyond what the others explain, is more than 1e-4 of the strongest effect of its kind.
+A 1e-5 rad tilt therefore adds no spurious base parameter: tilting the first joint of an arm 1e-5 rad
+off the vertical (the Kinova Gen3's URDF writes 1.5708 for pi/2, 3.7e-6 off) makes gravity act on that
+link's first moments about 1e-5 as strongly as on the others', which no measurement resolves. What the
+rule sets aside while clearly above rounding (NEAR_FLOOR = 1e-11 on the same scale) is reported as a
+near-dependency (:attr:`BaseParameters.near`): Y_1 [1 beta] P^T then reproduces Y to that relative size
+rather than to rounding (such a column that itself acts at most RANK_TOL of its kind's scale enters no
+base parameter, as an exactly zero one). Exact geometry leaves nothing there (the shipped robots' kept distances are
+above 1e-2, their set-aside ones below 1e-13), and their base parameters are those of the former
+rule (1e-8 on unit columns).
+
+Which columns? Gautier (1990) takes them from a QR with column pivoting. Pivoting picks columns by
+size, which is arbitrary between equals and unstable between near-equals; here the base columns are
+instead the first independent columns in a fixed order of preference (bodies from the root out, each body's inertia before its first moment before
+its mass, then the actuators): Gram-Schmidt in that order, a column being independent when its
+distance to the span of the independent ones before it is above the rank tolerance. That choice is structural
 (it depends on the model's geometry, not on the random states), and regroups each link's
 parameters into its parent's as Khalil and Bennis' rules do (e.g. ``ZZR_link1 = Izz_link1 +
-Iyy_link2 + ...``). The count must equal the pivoted rank, and the result is checked on a second
-seeded set of states (same rank, W_2 = W_1 beta to 1e-9): otherwise the model is refused.
+Iyy_link2 + ...``). The result is checked on a second seeded set of states (W_2 = W_1 beta to 1e-9,
+or to 10 times the largest near-dependency): otherwise the model is refused.
 
 A base parameter whose combination is its own column alone keeps the standard name; a regrouped one
 is named after its leading parameter in Khalil's style, ``ZZR_<link>``, ``MXR_<link>``, ``IAR_<joint>``.
@@ -47,13 +61,17 @@ from derive.symbolic.regressor import INERTIAL, Regressor
 from derive.symbolic.symbols import make_symbols
 
 SEED = 0
-RANK_TOL = 1e-8  # a unit column farther than this from the span of the others is independent
-GAP = 1e3  # the smallest kept distance must exceed the largest rejected one this many times
+RANK_TOL = 1e-4  # the stated rank tolerance, relative to the regressor's scale (see the module docstring)
+NEAR_FLOOR = 1e-11  # a column set aside above this (relative, as RANK_TOL) is a near-dependency: reported
+GAP = 1e3  # a distance within this factor of the rank tolerance is borderline (named in a refusal)
 SNAP = 1e-10  # |beta| (scaled to unit columns) below this is zero
 CLEAN = 3e-14  # coefficients: the shortest decimal within this of the computed one, in units of the unit
 # columns (beta / (|w_2| / |w_1|)): a few times the least-squares noise there (~2e-15 to 2e-14)
 PREFERENCE = ("Ixx", "Ixy", "Ixz", "Iyz", "Izz", "Iyy", "mx", "my", "mz", "m")
 """A body's parameters in the order the base columns are chosen: the first independent ones stay."""
+KINDS = {"m": "m", "mx": "mc", "my": "mc", "mz": "mc", "Ixx": "I", "Ixy": "I", "Iyy": "I", "Ixz": "I", "Iyz": "I",
+         "Izz": "I", "Ia": "Ia", "fv": "fv", "fc": "fc"}
+"""A parameter's kind: its units. Column norms are compared within a kind only."""
 KHALIL = {"m": "M", "mx": "MX", "my": "MY", "mz": "MZ", "Ixx": "XX", "Ixy": "XY", "Iyy": "YY", "Ixz": "XZ",
           "Iyz": "YZ", "Izz": "ZZ", "Ia": "IA", "fv": "FV", "fc": "FC"}
 LATEX = {"m": "m", "mx": "m c_x", "my": "m c_y", "mz": "m c_z", "Ixx": "I_{xx}", "Ixy": "I_{xy}", "Iyy": "I_{yy}",
@@ -129,6 +147,16 @@ class BaseParameters:
     K: np.ndarray  # (r, n_pi): pi_b = K pi; K[:, columns] = 1
     seed: int
     samples: int  # states stacked
+    near: tuple[tuple[str, float], ...] = ()  # near-dependencies: (parameter, relative size), largest first
+
+    def near_text(self, limit: int = 6) -> str:
+        """One line on the near-dependencies, or '' when there are none."""
+        if not self.near:
+            return ""
+        shown = ", ".join(f"{n} ({x:.1e})" for n, x in self.near[:limit]) + (" ..." if len(self.near) > limit else "")
+        return (f"near-dependencies (columns of Y set aside though above rounding, relative size; rank tolerance "
+                f"{RANK_TOL:g}): {shown}: nearly, not exactly, degenerate geometry (e.g. angles written 1.5708 for "
+                "pi/2: import with --snap-angles)")
 
     @property
     def rank(self) -> int:
@@ -187,8 +215,6 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     ``actuators=False`` leaves out the actuator parameters (the inertial ones only, as Pinocchio's
     ``computeJointTorqueRegressor`` has them).
     """
-    from scipy.linalg import qr
-
     reg = regressor or Regressor(NewtonEuler(robot, make_symbols(robot)))
     s = reg.sym
     p = reg.parameter_vector(params)
@@ -199,26 +225,26 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     count = max(10, math.ceil(5 * n / robot.nv))
     W = _stack(f, robot, p, count, seed)
     norms = np.linalg.norm(W, axis=0)
-    live = norms > 1e-13 * max(norms.max(), 1e-300)
+    kind = _kind_scale(norms, names)
+    live = norms > 1e-13 * kind  # exactly zero columns, to rounding
     scale = np.where(live, norms, 1.0)
-    Wn = W / scale
-    # the rank: a QR with column pivoting of the live unit columns
-    R = qr(Wn[:, live], mode="r", pivoting=True)[0]
-    d = np.abs(np.diag(R))
-    rank = int(np.sum(d > RANK_TOL * d[0])) if d.size else 0
+    Wn = W / scale  # unit columns: the combinations beta
+    Wk = W / kind  # the regressor at its scale: each kind's largest column has norm 1 (the rank)
+    threshold = RANK_TOL
     # the base columns: the first independent ones in the order of preference
     order = [j for j in preference(len(reg.bodies), n) if live[j]]
-    Rg = np.linalg.qr(Wn[:, order], mode="r")
-    dist = np.abs(np.diag(Rg))
-    threshold = RANK_TOL * (d[0] if d.size else 1.0)
+    dist = _distances(Wk[:, order], threshold)
     keep = dist > threshold
     columns = tuple(sorted(order[k] for k in np.flatnonzero(keep)))
-    if len(columns) != rank or (keep.any() and (~keep).any() and dist[keep].min() < GAP * dist[~keep].max()):
-        raise _degenerate(robot, params, names, "no clear numerical rank of the regressor (pivoted QR: "
-                          f"{rank}, chosen columns: {len(columns)})", _borderline(order, dist, threshold))
+    near = sorted(((names[order[k]], float(x)) for k, x in enumerate(dist) if not keep[k] and x > NEAR_FLOOR),
+                  key=lambda item: -item[1])
     dependent = [j for j in range(n) if j not in columns]
     B = np.linalg.lstsq(Wn[:, list(columns)], Wn[:, dependent], rcond=None)[0]
     B[np.abs(B) < SNAP] = 0.0
+    # a column that acts at most RANK_TOL of its kind's scale and is not exactly dependent (a near-dependency,
+    # e.g. gravity on the first link of an arm tilted 1e-5 rad) enters no base parameter, as if exactly zero
+    slight = {names[j] for j in dependent if norms[j] <= RANK_TOL * kind[j]} & {name for name, _ in near}
+    B[:, [names[j] in slight for j in dependent]] = 0.0
     unit = scale[dependent][None, :] / scale[list(columns)][:, None]  # beta per unit of B
     beta = B * unit
     K = np.zeros((len(columns), n))
@@ -226,19 +252,69 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     K[:, dependent] = [[clean(x, CLEAN * u) for x, u in zip(row, urow)] for row, urow in zip(beta, unit)]
     # check on other states: the same rank, and the dependent columns the same combinations
     W2 = _stack(f, robot, p, count, seed + 1)
-    s2 = np.linalg.svd(W2 / np.where(live, np.linalg.norm(W2, axis=0), 1.0), compute_uv=False)
-    rank2 = int(np.sum(s2 > RANK_TOL * s2[0])) if s2.size else 0
+    norms2 = np.linalg.norm(W2, axis=0)
+    Wk2 = W2 / _kind_scale(norms2, names)
+    dist2 = _distances(Wk2[:, order], threshold)
+    rank2 = int(np.sum(dist2 > threshold))
     err = np.abs(W2[:, list(columns)] @ K - W2).max() / max(np.abs(W2).max(), 1e-300)
-    if rank2 != rank or err > 1e-9:
-        Wn2 = W2 / np.where(live, np.linalg.norm(W2, axis=0), 1.0)
-        dist2 = np.abs(np.diag(np.linalg.qr(Wn2[:, order], mode="r")))
+    # exact geometry: the combinations hold to rounding; near-dependencies set aside: to their size
+    if err > max(1e-9, 10 * max((x for _, x in near), default=0.0)):
         column_err = np.abs(W2[:, list(columns)] @ K - W2).max(axis=0) / max(np.abs(W2).max(), 1e-300)
         involved = (_borderline(order, dist, threshold)
-                    + _borderline(order, dist2, RANK_TOL * (s2[0] if s2.size else 1.0)))
+                    + _borderline(order, dist2, threshold))
         involved += [(j, float(column_err[j])) for j in np.argsort(-column_err) if column_err[j] > 1e-9]
         raise _degenerate(robot, params, names, f"the base parameters found at one set of states do not hold at "
-                          f"another (rank {rank} vs {rank2}, residual {err:.1e})", involved)
-    return BaseParameters(robot.name, names, columns, _names(names, columns, K), K, seed, count)
+                          f"another (rank {len(columns)} vs {rank2}, residual {err:.1e})", involved)
+    return BaseParameters(robot.name, names, columns, _names(names, columns, K), K, seed, count, tuple(near))
+
+
+def near_dependencies(W: np.ndarray, names, count: int = 2) -> list[tuple[float, tuple[tuple[str, float], ...]]]:
+    """The ``count`` smallest singular values of W with its columns scaled to unit norm, over the largest,
+    each with its combination of ``names`` (W's columns): the right singular vector, entries of magnitude
+    0.1 or more, the largest positive. W v = s u: s / s_max near 0 means those columns are nearly dependent
+    (cond(W) with unit columns = s_max / s_min)."""
+    W = np.asarray(W, dtype=float)
+    if W.size == 0:
+        return []
+    norms = np.linalg.norm(W, axis=0)
+    _, s, Vt = np.linalg.svd(W / np.where(norms > 0, norms, 1.0), full_matrices=False)
+    out = []
+    for k in range(1, min(count, len(s)) + 1):
+        v = Vt[-k] * (1.0 if Vt[-k][np.argmax(np.abs(Vt[-k]))] > 0 else -1.0)
+        terms = tuple((names[i], float(v[i])) for i in np.argsort(-np.abs(v), kind="stable") if abs(v[i]) >= 0.1)
+        out.append((float(s[-k] / s[0]) if s[0] > 0 else 0.0, terms))
+    return out
+
+
+def dependencies_text(deps) -> str:
+    """``near-dependencies (smallest singular values, unit columns, relative): 3.2e-06 (0.71 ZZR_a - 0.7 XX_b)``."""
+    parts = [f"{x:.2g} (" + _sum(((round(c, 2), n) for n, c in terms[:5]), lambda c: f"{c:g}", " ")
+             + (" ..." if len(terms) > 5 else "") + ")" for x, terms in deps]
+    return "near-dependencies (smallest singular values with unit columns, relative): " + "; ".join(parts)
+
+
+def _distances(A: np.ndarray, threshold: float) -> np.ndarray:
+    """Per column of A, in order, its distance to the span of the columns before it that were farther than
+    ``threshold`` from theirs (Gram-Schmidt, orthogonalised twice). Only the kept columns span: a column set
+    aside as nearly dependent must not hide, through the sliver by which it is independent, a later column."""
+    basis = np.zeros((A.shape[0], 0))
+    out = np.zeros(A.shape[1])
+    for k in range(A.shape[1]):
+        r = A[:, k].copy()
+        for _ in range(2):
+            r -= basis @ (basis.T @ r)
+        out[k] = np.linalg.norm(r)
+        if out[k] > threshold:
+            basis = np.column_stack([basis, r / out[k]])
+    return out
+
+
+def _kind_scale(norms: np.ndarray, names: tuple[str, ...]) -> np.ndarray:
+    """Per column, the largest norm among the columns of its kind (KINDS: the same units); 1 for a kind that
+    never acts."""
+    kinds = [KINDS[n.partition("_")[0]] for n in names]
+    largest = {k: max(x for x, kk in zip(norms, kinds) if kk == k) for k in sorted(set(kinds))}
+    return np.array([largest[k] if largest[k] > 0 else 1.0 for k in kinds])
 
 
 def _borderline(order: list[int], dist: np.ndarray, threshold: float) -> list[tuple[int, float]]:

@@ -1,13 +1,14 @@
 """Rotations and homogeneous transforms in CasADi SX (symbolic) with exact constants.
 
-Constant angles within SNAP = 1e-11 of a multiple of pi/2 are taken as that multiple, so
-their cosine and sine are exactly 0 and +-1. URDFs write pi/2 as 1.5707963267948966 (cos =
-6e-17) or as 1.57079632679 (ur5: pi/2 - 4.9e-12); either way the intended rotation is exact,
-and keeping the residue would cost arithmetic in every generated function (ur5's mass matrix:
-359 -> 268 ops). The decision is taken on the angle, never on the value of its cosine: a
-real angle of 1e-5 rad keeps its cosine 0.99999999995 (snapping that to 1 moved some frames
-of g1 and romeo by 1e-9 relative against Pinocchio). Truncated constants inside the 1e-11
-window still move results by up to ~5e-12 relative (ur5, talos' 4.71238898038).
+Constant angles exact to rounding (within EXACT = 1e-14 rad of a multiple of pi/2,
+:mod:`derive.description.angles`) are taken as that multiple, so their cosine and sine are
+exactly 0 and +-1: the file's 1.5707963267948966 (cos = 6e-17) means pi/2, and keeping the
+residue would cost arithmetic in every generated function. That moves no result by more than
+1e-14 relative. An angle farther off is what the model says and is kept: ur5's URDF writes
+1.57079632679 (pi/2 - 4.9e-12), the Kinova Gen3's 1.5708 (pi/2 + 3.7e-6); making those exact is
+the import's decision (``derive import-urdf --snap-angles TOL``, recorded in the entry's
+``source``), never a silent one (a 1e-11 rule here once moved Sawyer's gravity by 6.7e-11 from
+its URDF). The decision is taken on the angle, never on the value of its cosine.
 """
 
 from __future__ import annotations
@@ -16,15 +17,16 @@ import math
 
 import casadi as ca
 
-SNAP = 1e-11
+from derive.description.angles import EXACT, quarter
+
 _QUARTERS = ((1.0, 0.0), (0.0, 1.0), (-1.0, 0.0), (0.0, -1.0))  # (cos, sin) of k pi/2, k mod 4
 
 
 def _cs(angle):
-    """(cos, sin) of an angle: exact for a numeric multiple of pi/2 (within SNAP), SX otherwise."""
+    """(cos, sin) of an angle: exact for a numeric multiple of pi/2 (within EXACT), SX otherwise."""
     if isinstance(angle, (int, float)):
-        k = round(angle / (math.pi / 2))
-        if abs(angle - k * (math.pi / 2)) <= SNAP:
+        k = quarter(angle, EXACT)
+        if k is not None:
             return _QUARTERS[k % 4]
         return math.cos(angle), math.sin(angle)
     return ca.cos(angle), ca.sin(angle)
