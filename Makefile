@@ -33,7 +33,7 @@ $(VENV)/.core: pyproject.toml constraints.txt
 	touch $@
 
 $(VENV)/.test: $(VENV)/.core
-	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda]'
+	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda,mjcf]'
 	touch $@
 
 venv: $(VENV)/.core
