@@ -25,6 +25,7 @@ import os
 import sys
 from pathlib import Path
 
+import casadi as ca
 import numpy as np
 import pytest
 
@@ -32,6 +33,7 @@ from derive.cli import main
 from derive.description.mjcf import import_mjcf, import_mjcf_named
 from derive.description.model import parse_robot
 from derive.reference import NumericRobot
+from derive.symbolic.model import SXModel
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "mjcf"
 SAMPLES = 5
@@ -133,16 +135,29 @@ def mujoco_dynamics(mujoco, m, qpos, qvel, qacc):
     return M, M - np.diag(m.dof_armature), rne + actuators, rne, d
 
 
+def symbolic(robot):
+    """CasADi functions of the derived model (what the generated code is printed from): M(q), the inverse
+    dynamics (q, qd, qdd) and the poses of ``robot.frame_names`` stacked (4 rows each)."""
+    sx = SXModel(robot)
+    s = sx.sym
+    return (ca.Function("M", [s.q], [sx.mass_matrix("newton-euler")]),
+            ca.Function("ID", [s.q, s.qd, s.qdd], [sx.inverse_dynamics("newton-euler")]),
+            ca.Function("FK", [s.q], [ca.vertcat(*[sx.fk(n) for n in robot.frame_names])]))
+
+
 def compare(mujoco, file: str, pin=None) -> dict[str, float]:
-    """Max errors of derive's reference (and Pinocchio, if given) against MuJoCo at seeded random states."""
+    """Max errors of derive's reference, its derived model (CasADi) and Pinocchio (if given) against MuJoCo
+    at seeded random states."""
     m = mujoco.MjModel.from_xml_path(str(FIXTURES / file))
     name, entry = import_mjcf_named(FIXTURES / file)
     robot = parse_robot(name, entry)
     ref = NumericRobot(robot)
+    sym_M, sym_id, sym_fk = symbolic(robot)
+    row = {n: 4 * i for i, n in enumerate(robot.frame_names)}
     pinr = pin.PinRobot(robot) if pin is not None else None
     convert = Map(mujoco, m, robot)
     rng = np.random.default_rng(0)
-    errors = {"M": 0.0, "tau": 0.0, "pose": 0.0, "pin M": 0.0, "pin tau": 0.0, "pin pose": 0.0}
+    errors = dict.fromkeys(["M", "tau", "pose", "sym M", "sym tau", "sym pose", "pin M", "pin tau", "pin pose"], 0.0)
     bodies = [b for b in range(1, m.nbody) if m.body(b).name in robot.frame_names]
     sites = [s for s in range(m.nsite) if m.site(s).name in robot.frame_names]
     for _ in range(SAMPLES):
@@ -158,6 +173,13 @@ def compare(mujoco, file: str, pin=None) -> dict[str, float]:
         for frame, xpos, xmat in placed:
             errors["pose"] = max(errors["pose"], np.abs(fk[frame][:3, 3] - xpos).max(),
                                  np.abs(fk[frame][:3, :3] - xmat.reshape(3, 3)).max())
+        errors["sym M"] = max(errors["sym M"], np.abs(np.array(sym_M(q)) - T.T @ M @ T).max())
+        errors["sym tau"] = max(errors["sym tau"], np.abs(np.array(sym_id(q, v, a)).ravel() - T.T @ tau).max())
+        poses = np.array(sym_fk(q))
+        for frame, xpos, xmat in placed:
+            pose = poses[row[frame]:row[frame] + 4]
+            errors["sym pose"] = max(errors["sym pose"], np.abs(pose[:3, 3] - xpos).max(),
+                                     np.abs(pose[:3, :3] - xmat.reshape(3, 3)).max())
         if pinr is not None:
             errors["pin M"] = max(errors["pin M"], np.abs(pinr.crba(q) - T.T @ M_rigid @ T).max())
             errors["pin tau"] = max(errors["pin tau"], np.abs(pinr.rnea(q, v, a) - T.T @ tau_rigid).max())
@@ -182,12 +204,13 @@ def pin():
 @pytest.mark.parametrize("file, frames", [("arm.xml", 11), ("walker.xml", 11)])
 def test_import_matches_mujoco_and_pinocchio(mujoco, pin, file, frames, capsys):
     """M, inverse dynamics (armature, damping and frictionloss included) and every body and site pose of
-    the imported model agree with MuJoCo's mj_fullM, mj_rne and xpos/xmat to 1e-10, and Pinocchio's crba,
-    rnea and frame placements with MuJoCo's rigid-body part to 1e-9, at seeded random states."""
+    the imported model, by the reference and by the derived CasADi model the generated code is printed
+    from, agree with MuJoCo's mj_fullM, mj_rne and xpos/xmat to 1e-10, and Pinocchio's crba, rnea and
+    frame placements with MuJoCo's rigid-body part to 1e-9, at seeded random states."""
     errors = compare(mujoco, file, pin)
     print(file, {k: f"{v:.1e}" if k != "frames" else v for k, v in errors.items()}, file=sys.stderr)
     assert errors["frames"] == frames  # every MuJoCo body but the world (and the dropped floor), every site
-    for key in ("M", "tau", "pose"):
+    for key in ("M", "tau", "pose", "sym M", "sym tau", "sym pose"):
         assert errors[key] <= TOL_MUJOCO, (file, key, errors)
     for key in ("pin M", "pin tau", "pin pose"):
         assert errors[key] <= TOL_PINOCCHIO, (file, key, errors)
