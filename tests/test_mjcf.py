@@ -4,7 +4,7 @@ Fixtures of the project's own (tests/fixtures/mjcf/): ``arm.xml`` (fixed base: a
 defaults and classes, degrees, every orientation spelling, a joint ref, anchors off the body origin,
 several joints in one body, a welded body with mass, sites, armature, damping, frictionloss, gears
 and a linear equality joint coupling) and ``walker.xml`` (floating: a free joint, a ball joint,
-three hinges in one body at an anchor, welded feet, sites).
+three hinges in one body at an anchor, welded feet, sites, a <frame>).
 
 Conventions converted here (derive.description.mjcf states them): derive's q is MuJoCo's qpos but
 for a free joint (derive [p, x y z w], MuJoCo [p, w x y z]), a ball (derive ZYX angles, MuJoCo a
@@ -311,3 +311,16 @@ def test_missing_mujoco_names_the_extra(monkeypatch, capsys):
     assert main(["import-mjcf", str(FIXTURES / "arm.xml")]) == 2
     assert capsys.readouterr().err == (f"derive: error: {FIXTURES / 'arm.xml'}: reading MJCF needs MuJoCo's "
                                        "compiler, the mujoco package: pip install 'derive-robotics[mjcf]'\n")
+
+
+@pytest.mark.parametrize("text, message", [(None, "cannot read MJCF (No such file or directory)"),
+                                           ("", "robot 'bad': line 1, column 1: malformed XML: no element found"),
+                                           ('<mujoco><worldbody><body><joint foo="1"/></body></worldbody></mujoco>',
+                                            "robot 'bad': MuJoCo's compiler refused it: XML Error: Schema violation: "
+                                            "unrecognized attribute: 'foo'; Element 'joint', line 1")])
+def test_unreadable_files_are_one_line(mujoco, tmp_path, capsys, text, message):
+    path = tmp_path / "bad.xml"
+    if text is not None:
+        path.write_text(text)
+    assert main(["import-mjcf", str(path)]) == 2
+    assert capsys.readouterr().err == f"derive: error: {path}: {message}\n"
