@@ -53,7 +53,7 @@ import numpy as np
 from derive.description.files import InputFileError, read_bytes
 from derive.description.model import parse_robot
 from derive.description.robot import ModelError, identifier
-from derive.description.urdf import Pose, c_identifier, rpy_matrix
+from derive.description.urdf import Pose, c_identifier
 from derive.errors import DeriveError
 
 EXTRA = "pip install 'derive-robotics[mjcf]'"
