@@ -33,7 +33,7 @@ $(VENV)/.core: pyproject.toml constraints.txt
 	touch $@
 
 $(VENV)/.test: $(VENV)/.core
-	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda,xacro]'
+	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda,xacro,mjcf]'
 	touch $@
 
 venv: $(VENV)/.core

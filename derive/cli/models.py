@@ -1,4 +1,4 @@
-"""Commands on models files: ``derive info`` and ``derive import-urdf``."""
+"""Commands on models files: ``derive info``, ``derive import-urdf`` and ``derive import-mjcf``."""
 
 from __future__ import annotations
 
@@ -7,6 +7,7 @@ import sys
 import numpy as np
 
 from derive.cli.common import path_arg, robots_of
+from derive.description.mjcf import GENERATOR as MJCF_GENERATOR, import_mjcf_named
 from derive.description.model import parse_robot
 from derive.description.xacro_expand import EXTRA as XACRO_EXTRA
 from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import_urdf_named, relock_command, resolve_urdf
@@ -56,6 +57,19 @@ def cmd_import_urdf(args) -> int:
         print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
     else:
         sys.stdout.write(dump_entry(name, entry))
+    return 0
+
+
+def cmd_import_mjcf(args) -> int:
+    """``derive import-mjcf FILE [--floating | --fixed] [--no-actuators] [--name NAME] [--out models.yaml]``."""
+    name, entry = import_mjcf_named(args.file, name=args.name, floating=args.floating,
+                                    actuators=not args.no_actuators)
+    warn_unmoved(name, entry, args.file)
+    if args.out:
+        append_entry(args.out, name, entry)
+        print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
+    else:
+        sys.stdout.write(dump_entry(name, entry, generator=MJCF_GENERATOR))
     return 0
 
 
@@ -124,6 +138,29 @@ def add_parser(sub) -> None:
                    help="append to this models file instead of printing (created if missing; written atomically: on "
                         "any failure the file is left as it was)")
     u.set_defaults(func=cmd_import_urdf)
+
+    # A command of its own rather than import-urdf guessing the format: the options differ (no --tip,
+    # --chain, --lock, --fix-inertia: MuJoCo's compiler has already checked the file), the reader needs
+    # the optional mujoco package, and import-urdf on a <mujoco> file names this command.
+    x = sub.add_parser("import-mjcf", help="turn an MJCF (MuJoCo) file into a models.yaml entry",
+                       description="Convert an MJCF file into a models.yaml robot entry (printed, or appended with "
+                                   "--out), read from the model MuJoCo's own compiler builds (defaults, classes, "
+                                   "includes and frames resolved): bodies, hinge/slide/ball/free joints, inertials, "
+                                   "named sites as frames, armature/damping/frictionloss and gears as actuators, "
+                                   "linear joint couplings as mimic joints. Needs the mujoco package "
+                                   "(pip install 'derive-robotics[mjcf]').")
+    x.add_argument("file", metavar="FILE", type=path_arg)
+    base = x.add_mutually_exclusive_group()
+    base.add_argument("--floating", dest="floating", action="store_const", const=True, default=None,
+                      help="floating base (default: as the file says, i.e. where its top-level body has a free joint)")
+    base.add_argument("--fixed", dest="floating", action="store_const", const=False,
+                      help="fixed base: a free body is welded to the world at its initial pose")
+    x.add_argument("--no-actuators", action="store_true",
+                   help="leave out armature, damping, frictionloss and actuator gears (ideal joints)")
+    x.add_argument("--name", help="robot name (default: the MJCF model name made a C identifier)")
+    x.add_argument("--out", metavar="MODELS", type=path_arg,
+                   help="append to this models file instead of printing (created if missing; written atomically)")
+    x.set_defaults(func=cmd_import_mjcf)
 
     i = sub.add_parser("info", help="summarise robots of models.yaml")
     i.add_argument("robot", nargs="*")

@@ -474,7 +474,8 @@ def _read(path: Path, robot: str | None, shown: str | None = None, xacro_args: M
         msg = str(exc).split(":")[0]
         raise ModelError(who, f"{path} line {line}, column {col + 1}{expanded}", f"malformed XML: {msg}") from None
     if root.tag != "robot":
-        raise ModelError(who, str(path), f"not a URDF: the root element is <{root.tag}>, not <robot>{expanded}")
+        hint = " (an MJCF file: derive import-mjcf FILE)" if root.tag == "mujoco" else ""
+        raise ModelError(who, str(path), f"not a URDF: the root element is <{root.tag}>, not <robot>{hint}{expanded}")
     urdf_name = root.get("name") or _stem(path)
     reader = _Reader(robot or c_identifier(urdf_name), shown or str(path))
     links: dict[str, _Inertial] = {}

@@ -1,0 +1,476 @@
+"""MJCF -> a models.yaml robot entry (``derive import-mjcf``), read from MuJoCo's compiled model.
+
+MuJoCo's own compiler (the optional ``mujoco`` package: ``pip install 'derive-robotics[mjcf]'``)
+reads the file, so defaults and classes, ``<include>``, ``<frame>``, ``compiler angle/eulerseq``,
+every orientation spelling (quat, euler, axisangle, xyaxes, zaxis) and ``inertiafromgeom`` mean
+exactly what they mean to MuJoCo; this module reads the compiled ``mjModel`` arrays. URDF is never
+read through MuJoCo (its URDF reader fuses the fixed base away): a ``<robot>`` file is refused.
+
+Conventions (what the entry is, against MuJoCo's qpos and qvel):
+
+- Every MuJoCo body is a derive link or frame with MuJoCo's body frame: a body with joints is the
+  link its last joint moves; a body without joints (welded to its parent) is merged into its
+  parent's link (mass by the parallel-axis theorem) and stays a named frame. With a fixed base the
+  root link is ``world``.
+- ``hinge`` -> revolute, ``slide`` -> prismatic: q = qpos (MuJoCo turns by qpos - ref, so the joint
+  origin holds the turn by -ref). Joints of one body apply in file order, each about its anchor
+  ``pos`` in the body frame: body = Trans(p) Rot(a, q) Trans(-p). A joint whose anchor is off the
+  body origin, and every joint but a body's last, moves a massless link ``<body>_<joint>`` whose
+  frame is the joint frame at the anchor; the body frame sits on it at Trans(-p).
+- ``ball`` -> spherical: derive's q are the ZYX Euler angles (z, y, x) of MuJoCo's quaternion,
+  R = Rz(z) Ry(y) Rx(x), and qd their rates: MuJoCo's qvel (the body-frame angular velocity) is
+  w = E qd with E = [[-sy, 0, 1], [cy sx, cx, 0], [cy cx, -sx, 0]] (gimbal lock at cos y = 0). A
+  ball's armature and damping act on w, not on Euler rates: dropped with a warning.
+- ``free`` (a top-level body only) -> ``base: floating``: q = [x, y, z, qx, qy, qz, qw] where MuJoCo
+  has qpos = [x, y, z, qw, qx, qy, qz]; v = [R^T v_world, w_body] where MuJoCo has qvel =
+  [v_world, w_body] (v_world the world-frame velocity of the body origin, R the body orientation).
+  ``floating=False`` welds a free body to the world at its initial pose; ``floating=True`` on a
+  file without a free joint floats its one top-level body (which must have no joints).
+- Inertials: ``body_mass``, ``body_ipos`` and the principal ``body_inertia`` turned from
+  ``body_iquat`` into the link frame (no ``inertia_rpy``).
+- Named sites become frames on their body's link (unnamed sites are left out).
+- ``dof_armature``, ``dof_damping`` and ``dof_frictionloss`` -> the joint's ``actuator``
+  ``{armature, viscous, coulomb}`` (MuJoCo applies frictionloss as a soft constraint, derive as
+  f_c sign(qd)); a joint actuator's ``gear`` -> ``gear_ratio`` (a record only: derive's tau stays
+  the joint torque, MuJoCo's motor ctrl = tau / gear). ``actuators=False`` leaves all of it out.
+- ``equality joint`` with polycoef (c0, c1, 0, 0, 0): joint1 becomes a mimic of joint2,
+  q1 - ref1 = c0 + c1 (q2 - ref2); a non-linear polynomial, a joint fixed to a constant,
+  ``connect``, ``weld`` (closed chains) and the other kinds are refused in one line.
+- Gravity is ``opt.gravity`` (0 where the gravity flag is disabled); joint stiffness and
+  gravity compensation have no derive counterpart and are dropped with a warning.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import xml.etree.ElementTree as ET
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from derive.description.files import InputFileError, read_bytes
+from derive.description.model import parse_robot
+from derive.description.robot import ModelError, identifier
+from derive.description.urdf import Pose, c_identifier
+from derive.errors import DeriveError
+
+EXTRA = "pip install 'derive-robotics[mjcf]'"
+GENERATOR = "derive import-mjcf"
+
+
+class MjcfError(DeriveError):
+    """An MJCF file that cannot be imported; one line naming the file (and the element)."""
+
+
+def load_mujoco(path: str | Path):
+    """The ``mujoco`` module, or a one-line error naming the extra that installs it."""
+    try:
+        import mujoco
+    except ImportError:
+        raise MjcfError(f"{path}: reading MJCF needs MuJoCo's compiler, the mujoco package: {EXTRA}") from None
+    return mujoco
+
+
+# --------------------------------------------------------------------------- transforms
+
+
+def quat_matrix(quat) -> np.ndarray:
+    """R of MuJoCo's unit quaternion (w, x, y, z)."""
+    w, x, y, z = (float(v) for v in quat)
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+                     [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+                     [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)]])
+
+
+def _h(rot: np.ndarray, pos) -> np.ndarray:
+    t = np.eye(4)
+    t[:3, :3], t[:3, 3] = rot, np.asarray(pos, dtype=float)
+    return t
+
+
+def _axis_rotation(axis, angle: float) -> np.ndarray:
+    k = np.asarray(axis, dtype=float)
+    kx = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + math.sin(angle) * kx + (1.0 - math.cos(angle)) * kx @ kx
+
+
+def _origin(t: np.ndarray) -> dict:
+    """{xyz, rpy} of a 4x4 pose (angles within a few ulps of k pi/2 snapped, as the URDF reader does)."""
+    pose = Pose.from_matrix(t[:3, :3], t[:3, 3])
+    return {"xyz": [float(v) for v in pose.xyz], "rpy": [float(v) for v in pose.rpy]}
+
+
+def _is_identity(t: np.ndarray) -> bool:
+    return bool(np.array_equal(t, np.eye(4)))
+
+
+def _clean(v: float) -> float:
+    """-0.0 -> 0.0 (YAML text stays tidy); other values unchanged."""
+    return 0.0 if v == 0 else float(v)
+
+
+# --------------------------------------------------------------------------- reading
+
+
+def _root_tag(path: Path, spelling: str, robot: str) -> tuple[str, str | None]:
+    """(root element tag, its ``model`` attribute) without reading the file through MuJoCo."""
+    try:
+        data = read_bytes(path, "MJCF")
+    except InputFileError as exc:
+        raise MjcfError(str(exc)) from None
+    try:
+        root = ET.fromstring(data)
+    except (RecursionError, MemoryError):
+        raise ModelError(robot, "", "XML nested too deeply", spelling) from None
+    except ET.ParseError as exc:
+        line, col = exc.position
+        raise ModelError(robot, f"line {line}, column {col + 1}", f"malformed XML: {str(exc).split(':')[0]}",
+                         spelling) from None
+    return root.tag, root.get("model")
+
+
+def _compile(mujoco, path: Path, spelling: str, robot: str):
+    try:
+        return mujoco.MjModel.from_xml_path(str(path))
+    except (ValueError, RuntimeError, OSError) as exc:  # MuJoCo's compiler: several lines, one kept per clause
+        text = "; ".join(line.strip() for line in str(exc).splitlines() if line.strip())
+        raise ModelError(robot, "", f"MuJoCo's compiler refused it: {text}", spelling) from None
+
+
+def import_mjcf(path: str | Path, name: str | None = None, floating: bool | None = None,
+                actuators: bool = True) -> dict:
+    """Read an MJCF file through MuJoCo's compiler and return one models.yaml robot entry (a plain dict).
+
+    ``floating`` None: as the file says (a free joint -> ``base: floating``); True / False to
+    choose (module docstring). ``actuators`` False leaves armature, damping, frictionloss and
+    gears out. ``name`` defaults to the MJCF ``model`` name made a C identifier. Raises a
+    one-line :class:`~derive.errors.DeriveError` naming the file and the element.
+    """
+    return import_mjcf_named(path, name, floating, actuators)[1]
+
+
+def import_mjcf_named(path: str | Path, name: str | None = None, floating: bool | None = None,
+                      actuators: bool = True) -> tuple[str, dict]:
+    """Like :func:`import_mjcf`, returning ``(robot name, entry)``."""
+    if name is not None:
+        identifier(name, "name", name)
+    spelling = str(path)
+    file = Path(path)
+    fallback = name or c_identifier(file.stem)
+    tag, model_name = _root_tag(file, spelling, fallback)
+    if tag != "mujoco":
+        hint = " (a URDF: derive import-urdf FILE)" if tag == "robot" else ""
+        raise ModelError(fallback, "", f"not an MJCF file: the root element is <{tag}>, not <mujoco>{hint}", spelling)
+    mujoco = load_mujoco(spelling)
+    default = c_identifier(model_name or file.stem)
+    robot = name or default
+    m = _compile(mujoco, file, spelling, robot)
+    return robot, _Importer(mujoco, m, robot, spelling, floating, actuators, default).entry()
+
+
+class _Importer:
+    def __init__(self, mujoco, m, robot: str, spelling: str, floating: bool | None, actuators: bool, default: str):
+        self.mj, self.m, self.robot, self.spelling, self.default_name = mujoco, m, robot, spelling, default
+        kinds = mujoco.mjtJoint
+        # plain ints: the arrays hold numpy integers, which pybind's enums do not compare with
+        self.FREE, self.BALL, self.SLIDE, self.HINGE = (int(k) for k in (kinds.mjJNT_FREE, kinds.mjJNT_BALL,
+                                                                          kinds.mjJNT_SLIDE, kinds.mjJNT_HINGE))
+        self.floating_arg, self.with_actuators = floating, actuators
+        self.notes: list[str] = []
+
+    def error(self, where: str, problem: str) -> ModelError:
+        return ModelError(self.robot, where, problem, self.spelling)
+
+    def warn(self, where: str, problem: str) -> None:
+        print(f"warning: {self.spelling}: {where}: {problem}", file=sys.stderr)
+
+    # ---- names (MuJoCo's, made C identifiers; unnamed ones numbered)
+    def body_name(self, b: int) -> str:
+        return "world" if b == 0 else c_identifier(self.m.body(b).name or f"body{b}")
+
+    def joint_name(self, j: int) -> str:
+        return c_identifier(self.m.joint(j).name or f"{self.body_name(int(self.m.jnt_bodyid[j]))}_joint{j}")
+
+    def body_where(self, b: int) -> str:
+        return f"<body name=\"{self.m.body(b).name}\">" if self.m.body(b).name else f"body {b}"
+
+    def joint_where(self, j: int) -> str:
+        return f"<joint name=\"{self.m.joint(j).name}\">" if self.m.joint(j).name else f"joint {j}"
+
+    def body_joints(self, b: int) -> list[int]:
+        start = int(self.m.body_jntadr[b])
+        return list(range(start, start + int(self.m.body_jntnum[b]))) if start >= 0 else []
+
+    # ---- the base
+    def choose_base(self) -> tuple[bool, int]:
+        """(floating?, the root body: 0 = the world for a fixed base)."""
+        m, mj = self.m, self.mj
+        free = [j for j in range(m.njnt) if int(m.jnt_type[j]) == self.FREE]
+        top = [b for b in range(1, m.nbody) if m.body_parentid[b] == 0]
+        if len(free) > 1:
+            raise self.error(self.joint_where(free[1]), f"a second free joint ({len(free)} in all): derive models "
+                             "one tree with at most one floating base")
+        floating = bool(free) if self.floating_arg is None else self.floating_arg
+        if not floating:
+            if free:
+                self.notes.append(f"the free body {self.body_name(int(m.jnt_bodyid[free[0]]))} welded to the world at "
+                                  "its initial pose")
+            return False, 0
+        if free:
+            root = int(m.jnt_bodyid[free[0]])
+            if len(self.body_joints(root)) > 1:
+                raise self.error(self.body_where(root), "a free joint together with other joints in one body")
+            dof = int(m.jnt_dofadr[free[0]])
+            if self.with_actuators and any(float(x) for x in np.concatenate(
+                    [m.dof_armature[dof:dof + 6], m.dof_damping[dof:dof + 6], m.dof_frictionloss[dof:dof + 6]])):
+                self.warn(self.joint_where(free[0]), "the free joint's armature, damping and frictionloss have no "
+                                                     "counterpart on derive's floating base: left out")
+        else:
+            if len(top) != 1:
+                raise self.error("worldbody", f"--floating needs one top-level body to float, the file has {len(top)}")
+            root = top[0]
+            if self.body_joints(root):
+                raise self.error(self.body_where(root), f"--floating: it is joined to the world by "
+                                 f"{self.joint_where(self.body_joints(root)[0])}; only a body without joints can float")
+        dropped = []
+        for b in top:
+            if b == root:
+                continue
+            subtree = [c for c in range(b, m.nbody) if self.under(c, b)]
+            moving = [j for c in subtree for j in self.body_joints(c)]
+            if moving:
+                raise self.error(self.joint_where(moving[0]), f"moves a body of another tree than the floating base "
+                                 f"'{self.body_name(root)}': derive models one tree")
+            dropped.append(self.body_name(b))
+        if dropped or m.body_mass[0] > 0:
+            self.notes.append("dropped what is fixed to the world" + (f" ({', '.join(dropped)})" if dropped else ""))
+        self.notes.append(f"floating base {self.body_name(root)}")
+        return True, root
+
+    def under(self, b: int, top: int) -> bool:
+        while b > 0:
+            if b == top:
+                return True
+            b = int(self.m.body_parentid[b])
+        return False
+
+    # ---- the entry
+    def entry(self) -> dict:
+        m, mj = self.m, self.mj
+        floating, root = self.choose_base()
+        for e in range(m.neq):
+            self.check_equality(e)
+        mimic = self.mimics()
+
+        link_of: dict[int, str] = {root: self.body_name(root)}
+        at: dict[int, np.ndarray] = {root: np.eye(4)}
+        links: list[str] = [self.body_name(root)]
+        joints: list[dict] = []
+        frames: list[dict] = []
+        parts: dict[str, list[tuple[np.ndarray, int]]] = {self.body_name(root): [(np.eye(4), root)]}
+
+        for b in range(1, m.nbody):
+            parent = int(m.body_parentid[b])
+            if b == root or parent not in link_of:
+                continue  # the floating root is placed; what hangs off the world is dropped with a floating base
+            pose = at[parent] @ _h(quat_matrix(m.body_quat[b]), m.body_pos[b])
+            body = self.body_name(b)
+            moving = [j for j in self.body_joints(b) if int(m.jnt_type[j]) != self.FREE]
+            link = link_of[parent]
+            for k, j in enumerate(moving):
+                joint, link, pose = self.joint(j, link, pose, body, last=k == len(moving) - 1, mimic=mimic.get(j))
+                joints.append(joint)
+                links.append(link)
+                parts[link] = []
+            link_of[b], at[b] = link, pose
+            parts[link].append((pose, b))
+            if link != body:
+                frames.append({"name": body, "link": link, **_origin(pose)})
+        for s in range(m.nsite):
+            b = int(m.site_bodyid[s])
+            if not m.site(s).name or b not in link_of:
+                continue
+            pose = at[b] @ _h(quat_matrix(m.site_quat[s]), m.site_pos[s])
+            frames.append({"name": c_identifier(m.site(s).name), "link": link_of[b], **_origin(pose)})
+        if floating and any(m.site_bodyid[s] == 0 and m.site(s).name for s in range(m.nsite)):
+            self.notes.append("the world's sites left out")
+
+        out_links = [{"name": n, **self.merged(n, parts[n])} for n in links]
+        self.check_names(out_links, joints, frames)
+        gravity = [0.0, 0.0, 0.0] if m.opt.disableflags & mj.mjtDisableBit.mjDSBL_GRAVITY else \
+            [_clean(g) for g in m.opt.gravity]
+        if any(m.body_gravcomp[1:]):
+            self.warn("body gravcomp", "gravity compensation is not modelled by derive: left out")
+        notes = "; ".join(self.notes)
+        command = f"{GENERATOR} {self.spelling}" + {None: "", True: " --floating", False: " --fixed"}[self.floating_arg] \
+            + ("" if self.with_actuators else " --no-actuators") + (f" --name {self.robot}" if self.robot != self.default_name else "")
+        entry = {
+            "description": f"{self.robot} imported from MJCF" + (f" ({notes})" if notes else ""),
+            "source": f"{Path(self.spelling).name}, imported by `{command}`",
+            **({"base": "floating"} if floating else {}),
+            "gravity": gravity,
+            "links": out_links,
+            "joints": joints,
+            "frames": frames,
+        }
+        try:
+            parse_robot(self.robot, entry)
+        except ModelError as exc:
+            raise ModelError(self.robot, exc.field, f"{exc.problem} (in the imported entry)", self.spelling) from None
+        return entry
+
+    def joint(self, j: int, parent: str, pose: np.ndarray, body: str, last: bool, mimic: dict | None
+              ) -> tuple[dict, str, np.ndarray]:
+        """(entry of MuJoCo joint j, the link it moves, the body frame's pose in that link).
+
+        ``pose``: the body frame (as moved by the body's earlier joints) in the link ``parent``.
+        """
+        m, mj = self.m, self.mj
+        kind = int(m.jnt_type[j])
+        axis = [_clean(v) for v in m.jnt_axis[j]]
+        ref = float(m.qpos0[m.jnt_qposadr[j]]) if kind in (self.HINGE, self.SLIDE) else 0.0
+        anchor = np.zeros(3) if kind == self.SLIDE else np.array(m.jnt_pos[j], dtype=float)
+        if kind == self.HINGE:
+            zero = _h(_axis_rotation(axis, -ref), np.zeros(3)) if ref else np.eye(4)
+        elif kind == self.SLIDE:
+            zero = _h(np.eye(3), -ref * np.array(axis)) if ref else np.eye(4)
+        else:
+            zero = np.eye(4)
+        origin = pose @ _h(np.eye(3), anchor) @ zero
+        rest = _h(np.eye(3), -anchor)  # the body frame in the joint's child frame
+        name = self.joint_name(j)
+        child = body if last and _is_identity(rest) else f"{body}_{name}"
+        jtype = {self.HINGE: "revolute", self.SLIDE: "prismatic",
+                 self.BALL: "spherical"}[kind]
+        entry: dict[str, Any] = {"name": name, "type": jtype, "parent": parent, "child": child,
+                                 "origin": _origin(origin)}
+        if jtype != "spherical":
+            entry["axis"] = axis
+            limits = {}
+            if m.jnt_limited[j]:
+                limits["lower"], limits["upper"] = (float(v) for v in m.jnt_range[j])
+            if m.jnt_actfrclimited[j]:
+                lo, hi = (float(v) for v in m.jnt_actfrcrange[j])
+                if lo == -hi and hi > 0:
+                    limits["effort"] = hi
+            if limits:
+                entry["limits"] = limits
+        elif m.jnt_limited[j]:
+            self.warn(self.joint_where(j), "a ball joint's cone limit has no counterpart in ZYX angles: left out")
+        if mimic is not None:
+            entry["mimic"] = mimic
+        if m.jnt_stiffness[j]:
+            self.warn(self.joint_where(j), f"stiffness {m.jnt_stiffness[j]:g} left out (derive has no joint springs)")
+        actuator = self.actuator(j, jtype)
+        if actuator:
+            entry["actuator"] = actuator
+        return entry, child, rest
+
+    def actuator(self, j: int, jtype: str) -> dict:
+        m, mj = self.m, self.mj
+        dof = int(m.jnt_dofadr[j])
+        values = {"armature": float(m.dof_armature[dof]), "viscous": float(m.dof_damping[dof]),
+                  "coulomb": float(m.dof_frictionloss[dof])}
+        gears = [float(m.actuator_gear[a][0]) for a in range(m.nu) if m.actuator_trnid[a][0] == j
+                 and int(m.actuator_trntype[a]) in (int(mj.mjtTrn.mjTRN_JOINT), int(mj.mjtTrn.mjTRN_JOINTINPARENT))]
+        if jtype == "spherical":
+            if any(float(x) for x in np.concatenate([m.dof_armature[dof:dof + 3], m.dof_damping[dof:dof + 3],
+                                                     m.dof_frictionloss[dof:dof + 3]])) and self.with_actuators:
+                self.warn(self.joint_where(j), "a ball joint's armature, damping and frictionloss act on its angular "
+                                               "velocity, not on derive's ZYX angle rates: left out")
+            return {}
+        if not self.with_actuators:
+            return {}
+        out = {k: v for k, v in values.items() if v}
+        if len(set(gears)) == 1 and gears[0] not in (0.0, 1.0):
+            out["gear_ratio"] = gears[0]
+        return out
+
+    # ---- equality constraints
+    def check_equality(self, e: int) -> None:
+        m, mj = self.m, self.mj
+        kind = int(m.eq_type[e])
+        label = m.equality(e).name
+        where = f"<equality name=\"{label}\">" if label else f"equality {e}"
+        spelled = {int(v): k.removeprefix("mjEQ_").lower() for k, v in mj.mjtEq.__members__.items()}.get(kind, str(kind))
+        if kind in (int(mj.mjtEq.mjEQ_CONNECT), int(mj.mjtEq.mjEQ_WELD)):
+            raise self.error(where, f"<{spelled}> closes a kinematic loop: closed chains are not supported yet "
+                             "(remove the constraint to import the open tree)")
+        if kind != int(mj.mjtEq.mjEQ_JOINT):
+            raise self.error(where, f"<{spelled}> equality constraints are not supported")
+        if not m.eq_active0[e]:
+            return
+        j1, j2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+        coef = [float(c) for c in m.eq_data[e][:5]]
+        if j2 < 0:
+            raise self.error(where, f"holds {self.joint_where(j1)} at a constant: remove the joint (or the constraint)")
+        if any(coef[2:]):
+            raise self.error(where, f"polycoef {' '.join(f'{c:g}' for c in coef)} is not linear: only q1 = c0 + c1 q2 "
+                                    "couplings (mimic joints) are supported")
+        for j in (j1, j2):
+            if int(m.jnt_type[j]) not in (self.HINGE, self.SLIDE):
+                raise self.error(where, f"couples {self.joint_where(j)}, which is no hinge or slide")
+        if coef[1] == 0:
+            raise self.error(where, f"polycoef c1 = 0 holds {self.joint_where(j1)} at a constant: remove the joint")
+
+    def mimics(self) -> dict[int, dict]:
+        """MuJoCo joint id -> models.yaml ``mimic`` for the active linear joint couplings."""
+        m, mj = self.m, self.mj
+        out: dict[int, dict] = {}
+        for e in range(m.neq):
+            if int(m.eq_type[e]) != int(mj.mjtEq.mjEQ_JOINT):
+                continue
+            if not m.eq_active0[e]:
+                label = m.equality(e).name
+                self.warn(f"<equality name=\"{label}\">" if label else f"equality {e}", "inactive at the start "
+                          "(active=\"false\"): left out")
+                continue
+            j1, j2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+            c0, c1 = (float(c) for c in m.eq_data[e][:2])
+            ref1, ref2 = float(m.qpos0[m.jnt_qposadr[j1]]), float(m.qpos0[m.jnt_qposadr[j2]])
+            # q1 - ref1 = c0 + c1 (q2 - ref2), and derive's q is MuJoCo's qpos
+            out[j1] = {"joint": self.joint_name(j2), "multiplier": c1, "offset": _clean(ref1 + c0 - c1 * ref2)}
+        return out
+
+    # ---- mass
+    def merged(self, link: str, parts: list[tuple[np.ndarray, int]]) -> dict:
+        """{mass, com, inertia} of the MuJoCo bodies in ``parts`` (pose of each body frame in the link frame)."""
+        m = self.m
+        kept = [(pose, b) for pose, b in parts if m.body_mass[b] > 0]
+        if not kept:
+            return {}
+        masses, coms, inertias = [], [], []
+        for pose, b in kept:
+            rot = pose[:3, :3] @ quat_matrix(m.body_iquat[b])
+            masses.append(float(m.body_mass[b]))
+            coms.append(pose[:3, :3] @ m.body_ipos[b] + pose[:3, 3])
+            inertias.append(rot @ np.diag(m.body_inertia[b]) @ rot.T)
+        total = math.fsum(masses)
+        com = sum(mass * c for mass, c in zip(masses, coms)) / total if len(kept) > 1 else coms[0]
+        inertia = np.zeros((3, 3))
+        for mass, c, inr in zip(masses, coms, inertias):
+            d = c - com
+            inertia += inr + mass * (float(d @ d) * np.eye(3) - np.outer(d, d))
+        inertia = (inertia + inertia.T) / 2
+        tiny = 4 * np.finfo(float).eps * float(np.abs(inertia).max())  # rounding residue of turning an exact zero
+        inertia = np.where(np.abs(inertia) <= tiny, 0.0, inertia)
+        return {"mass": total, "com": [_clean(v) for v in com],
+                "inertia": {"ixx": _clean(inertia[0, 0]), "iyy": _clean(inertia[1, 1]), "izz": _clean(inertia[2, 2]),
+                            "ixy": _clean(inertia[0, 1]), "ixz": _clean(inertia[0, 2]), "iyz": _clean(inertia[1, 2])}}
+
+    def check_names(self, links: list[dict], joints: list[dict], frames: list[dict]) -> None:
+        """Links and frames share one namespace in derive (fk_<name>), MuJoCo's bodies and sites do not."""
+        seen: dict[str, str] = {}
+        for kind, items in (("body", links), ("body or site", frames)):
+            for item in items:
+                if item["name"] in seen:
+                    raise self.error(f"{kind} '{item['name']}'", f"the name is also that of a {seen[item['name']]}: "
+                                     "derive names links and frames in one namespace; rename one in the MJCF")
+                seen[item["name"]] = "body" if kind == "body" else kind
+        named: set[str] = set()
+        for joint in joints:
+            if joint["name"] in named:
+                raise self.error(f"joint '{joint['name']}'", "two joints have this name (as a C identifier)")
+            named.add(joint["name"])
