@@ -24,8 +24,10 @@ import pytest
 from derive.cli import main
 from derive.description.export import export_mjcf, export_urdf, to_mjcf, to_urdf
 from derive.description.model import load_models, parse_models, parse_robot
+from derive.description.robot import ModelError
 from derive.description.urdf import import_urdf_named
 from derive.reference import NumericRobot
+from derive.resources import EXAMPLE_MODELS
 from derive.reference.rnea import quaternion_matrix
 
 HAND = """
@@ -95,7 +97,7 @@ MUJOCO_RTOL = 1e-10
 
 
 def all_robots():
-    return {**load_models(), **parse_models(HAND, source="test_export")}
+    return {**load_models(EXAMPLE_MODELS), **parse_models(HAND, source="test_export")}
 
 
 ROBOTS = all_robots()
@@ -268,7 +270,7 @@ def test_export_command_writes_both_files(tmp_path, capsys):
     robot = ROBOTS["gripper"]
     assert urdf.read_text() == to_urdf(robot) and mjcf.read_text() == to_mjcf(robot)
     err = capsys.readouterr().err.splitlines()
-    assert err[0].startswith("warning: robot 'gripper': URDF: URDF has no rotor inertia") and err[-2:] == [
+    assert err[0].startswith("note: robot 'gripper': URDF: URDF has no rotor inertia") and err[-2:] == [
         f"wrote {urdf}", f"wrote {mjcf}"]
 
 
@@ -284,5 +286,28 @@ def test_export_command_errors_are_one_line(tmp_path, capsys):
         "derive: error: robot 'nobody': robots: no such robot")
     assert error("export", "pendulum", "--urdf", str(tmp_path)) == (
         f"derive: error: {tmp_path}: cannot write URDF (is a folder); it is left as it was")
-    assert error("export", "pendulum", "--mjcf", "") .startswith("derive: error: export: argument --mjcf: empty path")
-    assert not list(tmp_path.iterdir())
+    assert error("export", "pendulum", "--urdf", str(tmp_path / "u.urdf"), "--mjcf", str(tmp_path)) == (
+        f"derive: error: {tmp_path}: cannot write MJCF (is a folder); it is left as it was")
+    assert error("export", "pendulum", "--mjcf", "").startswith("derive: error: export: argument --mjcf: empty path")
+    assert not list(tmp_path.iterdir())  # nothing written, the URDF of a refused pair neither
+
+
+def test_export_prints_with_a_dash(capsys):
+    assert main(["export", "rrprr", "--mjcf", "-"]) == 0
+    assert capsys.readouterr().out == to_mjcf(ROBOTS["rrprr"])
+
+
+def test_names_the_formats_cannot_take_are_one_line_errors():
+    clash = parse_models(HAND.replace("      - {name: d, mass: 0.4,", "      - {name: cam}\n      - {name: d, mass: 0.4,")
+                         .replace("    frames:\n      - {name: tip,", "      - {name: sleeve_rot, type: fixed, parent: ground, "
+                                  "child: cam}\n    frames:\n      - {name: tip,"), source="m.yaml")["twist"]
+    with pytest.raises(ModelError) as exc:
+        to_urdf(clash)
+    assert str(exc.value) == ("m.yaml: robot 'twist': joints (sleeve_rot): 'sleeve_rot' would name a joint of both "
+                              "'sleeve' and 'sleeve_rot' in the exported file: rename one")
+    world = parse_models(HAND.replace("{name: hull,", "{name: world,").replace("parent: hull", "parent: world").replace(
+        "link: hull", "link: world"), source="m.yaml")["flyer"]
+    with pytest.raises(ModelError) as exc:
+        to_mjcf(world)
+    assert str(exc.value) == ("m.yaml: robot 'flyer': links: MJCF calls its world body 'world': a link of that name "
+                              "must be the root of a fixed-base robot; rename it")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from pathlib import Path
 
 from derive.cli.common import path_arg
 from derive.description.export import export_mjcf, export_urdf
@@ -11,16 +12,31 @@ from derive.errors import DeriveError
 from derive.filesystem import write_atomically
 
 
+def check_output(path: str, what: str) -> None:
+    """Refuse, before anything is written, a path that cannot take a file: a folder, or below a non-folder."""
+    if path == "-":
+        return
+    if Path(path).is_dir():
+        raise DeriveError(f"{path}: cannot write {what} (is a folder); it is left as it was")
+    parent = Path(path).parent
+    if not parent.is_dir():
+        raise DeriveError(f"{path}: cannot write {what} ({parent} is not a folder)")
+
+
 def cmd_export(args) -> int:
-    """Both documents are built before either is written; each is written atomically ("-": stdout)."""
+    """Both documents are built and both paths checked before either is written; each is written
+    atomically ("-": printed)."""
     if args.urdf is None and args.mjcf is None:
         raise DeriveError(f"export {args.robot_name}: give --urdf FILE and/or --mjcf FILE")
     robot = load_robot(args.robot_name, args.models)
+    for path, what in ((args.urdf, "URDF"), (args.mjcf, "MJCF")):
+        if path is not None:
+            check_output(path, what)
     out = [(fmt, path, export(robot)) for fmt, path, export in (("URDF", args.urdf, export_urdf),
                                                                  ("MJCF", args.mjcf, export_mjcf)) if path is not None]
     for fmt, _, exported in out:
         for note in exported.notes:
-            print(f"warning: robot '{robot.name}': {fmt}: {note}", file=sys.stderr)
+            print(f"note: robot '{robot.name}': {fmt}: {note}", file=sys.stderr)
     for fmt, path, exported in out:
         if path == "-":
             sys.stdout.write(exported.text)

@@ -57,7 +57,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from derive.description import expr
-from derive.description.robot import FREE_FLYER, IDEAL, Actuator, Frame, Joint, Limits, Origin, Robot
+from derive.description.robot import FREE_FLYER, IDEAL, Actuator, Frame, Joint, Limits, ModelError, Origin, Robot
 
 URDF_GRAVITY = (0.0, 0.0, -9.81)
 """The gravity every URDF reader assumes (URDF has no element for it)."""
@@ -176,8 +176,13 @@ class _Model:
         self.link_names = {link.name for link in robot.links} | {f.name for f in robot.frames}
         self.joint_names = {j.name for j in robot.joints} | {c.name for c in robot.joint_coordinates}
         self.pieces = {j.name: self._pieces(j) for j in robot.joints if j.dof > 0}
-        for pieces in self.pieces.values():
-            self.joint_names.update(p.name for p in pieces)
+        seen: dict[str, str] = {}  # a multi-DOF joint's pieces are named after its coordinates: no other joint may be
+        for j in robot.joints:
+            for name in [p.name for p in self.pieces[j.name]] if j.dof else [j.name]:
+                if seen.setdefault(name, j.name) != j.name:
+                    raise ModelError(robot.name, f"joints ({j.name})", f"'{name}' would name a joint of both "
+                                     f"'{seen[name]}' and '{j.name}' in the exported file: rename one", robot.file or None)
+        self.joint_names.update(seen)
 
     def num(self, value: Any) -> float:
         return float(expr.evaluate(value, self.env))
@@ -369,6 +374,10 @@ def _principal(inertia: np.ndarray, rpy) -> tuple[tuple[float, float, float], tu
 def export_mjcf(robot: Robot) -> Exported:
     """The robot as an MJCF document (see the module docstring) and the notes on what differs in MuJoCo."""
     m = _Model(robot)
+    bodies = [lk.name for lk in robot.links if robot.floating or lk.name != robot.root]
+    if "world" in bodies:  # MuJoCo's world body has that name; a fixed root called world is that body
+        raise ModelError(robot.name, "links", "MJCF calls its world body 'world': a link of that name must be the "
+                                              "root of a fixed-base robot; rename it", robot.file or None)
     notes: list[str] = []
     ind = "  "
     masses = [m.num(lk.mass) for lk in robot.links]
@@ -442,7 +451,7 @@ def export_mjcf(robot: Robot) -> Exported:
         body.append(f'{ind * depth}<body name="{root.name}">')
         depth += 1
         if robot.floating:
-            body.append(f'{ind * depth}<freejoint name="{FREE_FLYER}"/>')
+            body.append(f'{ind * depth}<freejoint name="{m.unique(set(m.joint_names), FREE_FLYER)}"/>')
         body += inertial(root, depth)
     elif m.num(root.mass):
         body.append(f"{ind * depth}" + _comment(f"the root link 'world' is MuJoCo's world body: its mass "
