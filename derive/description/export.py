@@ -238,7 +238,7 @@ class _Model:
         return lines
 
 
-def _placeholders(m: _Model, pieces: Iterable[_Piece]) -> tuple[dict[str, dict[str, float]], list[str]]:
+def _placeholders(pieces: Iterable[_Piece]) -> tuple[dict[str, dict[str, float]], list[str]]:
     """piece -> URDF <limit> attributes; the pieces that got placeholders."""
     out, filled = {}, []
     for p in pieces:
@@ -300,7 +300,7 @@ def export_urdf(robot: Robot) -> Exported:
         link(lk.name, m.num(lk.mass), m.vec(lk.com), m.vec(lk.inertia_rpy), m.inertia(lk))
     rotor: list[str] = []
     pieces_all = [p for ps in m.pieces.values() for p in ps]
-    limits, filled = _placeholders(m, pieces_all)
+    limits, filled = _placeholders(pieces_all)
     for j in robot.joints:
         if j.dof == 0:
             joint(j.name, "fixed", j.parent, j.child, j.origin, [])
