@@ -20,7 +20,7 @@ import sys
 from derive.cli.signals import MESSAGES, EndOnSignals
 from derive.errors import DeriveError
 
-COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.inspect", "derive.cli.analysis",
+COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.export", "derive.cli.inspect", "derive.cli.analysis",
                               "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench"]
 """The command groups; imported when the parser is built."""
 
