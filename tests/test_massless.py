@@ -125,7 +125,11 @@ def test_generated_c_and_python_match_pinocchio_and_the_reference(generated, tmp
                     assert_close(got, want_ref, RTOL, f"{name} ({lang}) vs the reference")
         M = ref.crba(q)
         assert np.all(M[3:, :] == 0) and np.all(M[:, 3:] == 0)  # the wrist moves nothing: M is singular
-    assert not hasattr(py, "forward_dynamics")
+    assert py.LEFT_OUT == tuple(LEFT_OUT) and not hasattr(py, "ode_rhs")
+    with pytest.raises(AttributeError) as info:
+        py.forward_dynamics
+    assert str(info.value) == (f"robot 'irb140': forward_dynamics was not generated: {REASON} (forward dynamics, the "
+                               "ODE and its Jacobians do not exist)")
 
 
 def test_strict_refuses_as_before_even_from_the_cache(generated, capsys, tmp_path):

@@ -130,7 +130,9 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
     env = environment(backends)
     functions = [expression_function(s, progress) for s in specs] + [template_function(t) for t in templates]
     ctx = RobotContext(robot.name, model_hash, [c.name for c in robot.coordinates], robot.nq, robot.nv,
-                       [(p.name, p.default) for p in robot.parameters])
+                       [(p.name, p.default) for p in robot.parameters],
+                       tuple(n[len(robot.name) + 1:] for n in (left_out or {}).get("functions", ())),
+                       (left_out or {}).get("reason", ""))
     files: dict[str, str] = {}
     per_backend = {}
     for b in backends:
