@@ -133,7 +133,7 @@ def test_a_massless_last_link_is_refused_not_divided_by_zero(tmp_path, output, c
     text = arm().replace("      - {name: l2, mass: 0.5, com: [0.1, 0, 0], inertia: [0.01, 0.01, 0.01]}", "      - {name: l2}")
     (tmp_path / "m.yaml").write_text(text)
     before = files_of(output)
-    assert main(["--models", str(tmp_path / "m.yaml"), "generate", "--out", str(output)]) == 2
+    assert main(["--models", str(tmp_path / "m.yaml"), "generate", "--strict", "--out", str(output)]) == 2
     err = capsys.readouterr().err.splitlines()
     assert err == [f"derive: error: {tmp_path / 'm.yaml'}: robot 'arm': joints (q2): coordinate 'q2' moves no mass or inertia, so M(q) is "
                    "singular and forward dynamics do not exist; give the links it moves a mass (links[i].mass) or "

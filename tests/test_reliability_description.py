@@ -564,7 +564,7 @@ def test_a_massless_link_with_inertia_names_the_file_and_fix_inertia_zeroes_it(t
 
 
 def test_a_coordinate_that_moves_no_mass_names_the_file_and_the_lock_that_imports(tmp_path, capsys):
-    """A revolute joint spinning a point mass on its own axis: the import warns; generate refuses naming the
+    """A revolute joint spinning a point mass on its own axis: the import warns; generate --strict refuses naming the
     models file and the import command with --lock; that command imports a robot generate accepts."""
     point = link("spinner", inertia='ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"', com="0 0 0.05")
     parts = (*ARM, point, joint("spin", "l2", "spinner", axis="0 0 1", xyz="0 0.1 0"))
@@ -573,9 +573,10 @@ def test_a_coordinate_that_moves_no_mass_names_the_file_and_the_lock_that_import
     status, out, err = cli(capsys, "import-urdf", str(path), "--tip", "spinner", "--out", str(models))
     assert status == 0 and out == "" and err.splitlines()[0] == (
         f"warning: {path}: robot 'odd': joints (spin): coordinate 'spin' moves no mass or inertia: M(q) is singular, so "
-        "`derive generate` will refuse the robot (kinematics work); give the links it moves a mass in the URDF, or lock "
+        "`derive generate` leaves out forward dynamics and the ODE (--strict refuses the robot); give the links it moves "
+        "a mass in the URDF, or lock "
         f"it: derive import-urdf {path} --tip spinner --lock spin")
-    line = one_error(capsys, "--models", str(models), "generate", "--out", str(tmp_path / "gen"), quiet=False)
+    line = one_error(capsys, "--models", str(models), "generate", "--strict", "--out", str(tmp_path / "gen"), quiet=False)
     assert line == (f"derive: error: {models}: robot 'odd': joints (spin): coordinate 'spin' moves no mass or inertia, "
                     "so M(q) is singular and forward dynamics do not exist; give the links it moves a mass "
                     "(links[i].mass) or inertia about its axis, or import it with the joint locked: derive import-urdf "

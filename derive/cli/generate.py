@@ -42,7 +42,8 @@ def cmd_generate(args) -> int:
         raise DeriveError("generate: --prune removes every robot not in the models file; it cannot be "
                           "combined with --robot")
     generate(robots, out, only=args.robot or None, use_cache=not args.no_cache,
-             log=lambda s: print(s, flush=True), prune=args.prune, firmware=firmware_record_path(args.models))
+             log=lambda s: print(s, flush=True), prune=args.prune, firmware=firmware_record_path(args.models),
+             strict=args.strict)
     return 0
 
 
@@ -98,6 +99,9 @@ def add_parser(sub) -> None:
     g.add_argument("--prune", action="store_true",
                    help="remove (with --check: report) robots in the output folder that the models file does not name")
     g.add_argument("--no-cache", action="store_true", help="rederive every robot even if unchanged")
+    g.add_argument("--strict", action="store_true",
+                   help="refuse a robot whose M(q) is singular (a coordinate that moves no mass or inertia) instead of "
+                        "generating it without forward dynamics, the ODE and its Jacobians")
     g.set_defaults(func=cmd_generate)
 
     i = sub.add_parser("init", help="start a models.yaml from the shipped example robots",

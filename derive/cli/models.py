@@ -16,7 +16,8 @@ from derive.reference import NumericRobot
 
 def warn_unmoved(name: str, entry: dict, shown: str, samples: int = 3) -> None:
     """One warning line if an imported entry has a coordinate that moves no mass or inertia (M(q) singular
-    at every q: ``derive generate`` refuses it, kinematics still work, e.g. a massless path to a --tip),
+    at every q: ``derive generate`` leaves out forward dynamics and the ODE, or refuses it with --strict; e.g. a
+    massless path to a --tip),
     with the import command that locks its joint.
 
     The numeric reference's M(q) at ``samples`` seeded configurations, as
@@ -35,7 +36,8 @@ def warn_unmoved(name: str, entry: dict, shown: str, samples: int = 3) -> None:
         others = f" (and {len(still) - 1} more)" if len(still) > 1 else ""
         relock = relock_command(entry.get("source", ""), joints)
         print(f"warning: {shown}: robot '{name}': joints ({c.joint}): coordinate '{c.name}'{others} moves no mass or "
-              "inertia: M(q) is singular, so `derive generate` will refuse the robot (kinematics work); give the links "
+              "inertia: M(q) is singular, so `derive generate` leaves out forward dynamics and the ODE (--strict refuses "
+              "the robot); give the links "
               "it moves a mass in the URDF" + (f", or lock {'them' if len(joints) > 1 else 'it'}: {relock}" if relock else ""),
               file=sys.stderr)
 

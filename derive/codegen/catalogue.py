@@ -13,6 +13,7 @@ import casadi as ca
 import numpy as np
 
 from derive.description.robot import Robot
+from derive.errors import DeriveError
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
 from derive.symbolic.dynamics import graph_cost
@@ -20,6 +21,7 @@ from derive.symbolic.model import SXModel
 from derive.symbolic import derivatives
 from derive.symbolic.ode import AD_MODES, inverse_dynamics_jacobian, ode_jacobians
 from derive.symbolic.regressor import Regressor, body_links
+from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 
@@ -44,8 +46,12 @@ def parameter_input(model: SXModel) -> tuple[tuple, str]:
     return (("p", s.p),), f" p ({s.p.numel()}): parameters {', '.join(s.parameter_names)}."
 
 
-def function_specs(model: SXModel) -> list[FunctionSpec]:
-    """Every expression function generated for a robot, in a fixed order."""
+def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
+    """Every expression function generated for a robot, in a fixed order.
+
+    ``forward``: False for a robot whose M(q) is singular (a coordinate that moves no mass,
+    :func:`~derive.codegen.checks.check_mass_matrix`): the functions that need M^-1
+    (:data:`~derive.codegen.checks.NEEDS_INVERSE_MASS`) are left out, every other one is kept."""
     robot: Robot = model.robot
     s = model.sym
     n, nq = robot.nv, robot.nq
@@ -99,10 +105,11 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
         "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.", (("algorithm", "RNEA"),))
     specs.append(inverse_dynamics_derivatives_spec(model))
-    qdd_fd = model.forward_dynamics()
+    qdd_fd = model.forward_dynamics() if forward else None
     fd_how = (("algorithm", model.forward_dynamics_algorithm),)
-    add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
-        f"Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by {FD_DOC[model.forward_dynamics_algorithm]}.", fd_how)
+    if forward:
+        add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
+            f"Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by {FD_DOC[model.forward_dynamics_algorithm]}.", fd_how)
     frames = robot.wrench_frames
     if frames:
         k = len(frames)
@@ -112,9 +119,10 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
         jtw = wb.wrench_torques(w)
         add("inverse_dynamics_fext", None, [q, qd, qdd, ("w", w)], [("tau", ne.inverse_dynamics() - jtw)],
             f"Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; {wrench_doc}.")
-        add("forward_dynamics_fext", None, [q, qd, tau, ("w", w)],
-            [("qdd", model.forward_dynamics(extra_torque=jtw))],
-            f"Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); {wrench_doc}.", fd_how)
+        if forward:
+            add("forward_dynamics_fext", None, [q, qd, tau, ("w", w)],
+                [("qdd", model.forward_dynamics(extra_torque=jtw))],
+                f"Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); {wrench_doc}.", fd_how)
     com_doc = ("the moving bodies (the floating base included)" if robot.floating else
                "the moving bodies (the root link is the world and does not count, as in Pinocchio)")
     add("com", None, [q], [("c", wb.com)], f"Centre of mass of {com_doc}, world coordinates (3).")
@@ -123,6 +131,18 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
     add("centroidal_map", None, [q], [("A", wb.centroidal_map)],
         f"Centroidal momentum matrix A_G (6x{n}, row-major): A_G qd = [linear; angular] momentum about the centre "
         "of mass, world axes (Pinocchio's computeCentroidalMap).")
+    if forward:
+        ode_specs(model, qdd_fd, add, extra, fd_how)
+    regressor_specs(model, add)
+    bundle_specs(model, specs, add)
+    return specs
+
+
+def ode_specs(model: SXModel, qdd_fd: ca.SX, add, extra: tuple, fd_how: tuple) -> None:
+    """``ode_rhs`` and (below :data:`AD_COMPARE_MAX_NV`, see :func:`ode_by_template`) ``ode_jac_x``,
+    ``ode_jac_u`` of x' = f(x, u) = [dq/dt; forward_dynamics(q, qd, u)]."""
+    robot, s, ne = model.robot, model.sym, model.newton_euler
+    n, nq = robot.nv, robot.nq
     x, u = ca.SX.sym("x", nq + n), ca.SX.sym("u", n)
     f = ca.vertcat(model.configuration_rate, qdd_fd)
     sub_from, sub_to = ca.vertcat(s.q, s.qd, s.tau), ca.vertcat(x, u)
@@ -143,9 +163,6 @@ def function_specs(model: SXModel) -> list[FunctionSpec]:
             (("algorithm", f"-M^-1 dID/dx at qdd = FD, dID/dx by {DID_DX[mode]}"),))
         add("ode_jac_u", None, [("x", x), ("u", u)], [("B", in_xu(B))], ODE_JAC_DOC["ode_jac_u"].format(nx=nq + n, n=n),
             (("algorithm", "M^-1 by " + ("LDL^T" if ne.dof_parents is None else "LTDL along the tree")),))
-    regressor_specs(model, add)
-    bundle_specs(model, specs, add)
-    return specs
 
 
 AD_COMPARE_MAX_NV = 12
@@ -257,6 +274,9 @@ def bundle_specs(model: SXModel, specs: list[FunctionSpec], add) -> None:
             else:
                 prefix = next((p for p in frame_quantity if quantity.startswith(p + "_")
                                and quantity[len(p) + 1:] in model.kinematics.poses), None)
+                if prefix is None and quantity in NEEDS_INVERSE_MASS:
+                    raise DeriveError(f"robot '{robot.name}': bundle '{bundle.name}' holds {quantity}, which is not "
+                                      "generated: M(q) is singular (a coordinate moves no mass or inertia)")
                 if prefix is None:  # the description checked the names; a whole-robot function absent here
                     raise ValueError(f"bundle '{bundle.name}': no generated function '{quantity}' for robot '{robot.name}'")
                 ins, expression = frame_inputs[prefix], frame_quantity[prefix](quantity[len(prefix) + 1:])
@@ -303,8 +323,9 @@ def template_parameter(model: SXModel) -> tuple:
     return (("p", (np_, 1)),) if np_ else ()
 
 
-def template_functions(model: SXModel) -> list[TemplateFunction]:
-    """Functions built from templates on top of the expression functions, in a fixed order."""
+def template_functions(model: SXModel, forward: bool = True) -> list[TemplateFunction]:
+    """Functions built from templates on top of the expression functions, in a fixed order; without
+    ``forward`` (M(q) singular, see :func:`function_specs`) those that call the forward dynamics are left out."""
     robot = model.robot
     n = robot.nq + robot.nv
     extra = template_parameter(model)
@@ -317,7 +338,8 @@ def template_functions(model: SXModel) -> list[TemplateFunction]:
             if robot.floating else "."),
         "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n), ("quaternion", 3 if robot.floating else -1)))
     manipulability = [t for f in robot.frames if (t := manipulability_function(model, f.name))]
-    return ode_jacobian_templates(model) + [rk4] + ik_functions(model) + manipulability
+    dynamics = ode_jacobian_templates(model) + [rk4] if forward else []
+    return dynamics + ik_functions(model) + manipulability
 
 
 def ode_jacobian_templates(model: SXModel) -> list[TemplateFunction]:

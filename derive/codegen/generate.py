@@ -48,7 +48,7 @@ from typing import Callable, Iterable
 
 from derive.codegen.backends.c import translation_unit_hash
 from derive.codegen.catalogue import function_specs, template_functions
-from derive.codegen.checks import check_constants, check_mass_matrix
+from derive.codegen.checks import NEEDS_INVERSE_MASS, check_constants, check_mass_matrix, unmoved_reason
 from derive.codegen.render import render_robot
 from derive.errors import DeriveError
 from derive.description.files import InputFileError, read_text
@@ -275,12 +275,35 @@ def _record_firmware(out: Path, entries: dict[str, dict], record_path: Path, log
     write_atomically(out / "MANIFEST.json", json.dumps(manifest, indent=2, sort_keys=True) + "\n", "the manifest")
 
 
-def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, str]:
-    """Derive and render one robot; prints stage times."""
+def left_out_entry(robot: Robot, unmoved: list[str]) -> dict | None:
+    """manifest.json's ``left_out`` for a robot whose coordinates ``unmoved`` move no mass (None if none do):
+    the functions of :data:`~derive.codegen.checks.NEEDS_INVERSE_MASS` its set would hold, and why."""
+    if not unmoved:
+        return None
+    names = [q for q in NEEDS_INVERSE_MASS if q != "forward_dynamics_fext" or robot.wrench_frames]
+    return {"functions": [f"{robot.name}_{q}" for q in names], "coordinates": list(unmoved),
+            "reason": unmoved_reason(unmoved)}
+
+
+def left_out_warning(robot: Robot, reason: str) -> str:
+    """The one warning line of a robot generated without forward dynamics."""
+    where = f"{robot.file}: robot '{robot.name}'" if robot.file else f"robot '{robot.name}'"
+    return (f"derive: warning: {where}: {reason}: forward dynamics, the ODE and its Jacobians are not generated "
+            "(--strict refuses the robot)")
+
+
+def render(robot: Robot, mhash: str, log: Callable[[str], None], strict: bool = False,
+           warn: Callable[[str], None] | None = None) -> dict[str, str]:
+    """Derive and render one robot; prints stage times. A robot whose M(q) is singular because coordinates
+    move no mass is refused with ``strict``, else generated without the functions that need M^-1, with
+    one line to ``warn`` (default ``log``) and a ``left_out`` entry in its manifest.json."""
     t0 = time.perf_counter()
     model = SXModel(robot)
-    check_mass_matrix(model)
-    specs = function_specs(model)
+    unmoved = check_mass_matrix(model, strict=strict)
+    left_out = left_out_entry(robot, unmoved)
+    if left_out:
+        (warn or log)(left_out_warning(robot, left_out["reason"]))
+    specs = function_specs(model, forward=not unmoved)
     t1 = time.perf_counter()
     total_ops = [0]
 
@@ -288,8 +311,8 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, st
         check_constants(robot, spec, prog)
         total_ops[0] += prog.ops()["total"]
 
-    templates = template_functions(model)
-    files = render_robot(robot, specs, mhash[:16], progress=count, templates=templates)
+    templates = template_functions(model, forward=not unmoved)
+    files = render_robot(robot, specs, mhash[:16], progress=count, templates=templates, left_out=left_out)
     t2 = time.perf_counter()
     log(f"  {robot.name}: derive {t1 - t0:.2f} s, cse+print+render {t2 - t1:.2f} s "
         f"({len(specs) + len(templates)} functions, {total_ops[0]} ops in the {len(specs)} expression functions)")
@@ -297,9 +320,13 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None]) -> dict[str, st
 
 
 def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = None, use_cache: bool = True,
-             log: Callable[[str], None] = print, prune: bool = False, firmware: Path | None = None) -> dict:
+             log: Callable[[str], None] = print, prune: bool = False, firmware: Path | None = None,
+             strict: bool = False, warn: Callable[[str], None] | None = None) -> dict:
     """Write the robots of ``robots`` (all, or the names in ``only``) into ``out``; returns the new MANIFEST.
 
+    A robot with coordinates that move no mass or inertia (M(q) singular) is generated without forward
+    dynamics, the ODE and its Jacobians, with one warning line to ``warn`` (default: stderr) and the
+    functions left out named in its manifest.json (``left_out``); ``strict`` refuses it instead.
     Only those robots' folders are written or replaced: other robots already in ``out``
     (from another models file, say) and files derive does not manage stay as they are.
     With ``prune``, robots that ``out`` holds but ``robots`` does not are removed (and logged).
@@ -312,7 +339,8 @@ def generate(robots: dict[str, Robot], out: Path, only: Iterable[str] | None = N
     try:
         with output_lock(out, log):
             record = read_firmware_record(firmware or firmware_record_path())
-            return _generate(robots, out, shown, only, use_cache, log, prune, record["robots"])
+            return _generate(robots, out, shown, only, use_cache, log, prune, record["robots"], strict,
+                             warn or (lambda line: print(line, file=sys.stderr)))
     except OSError as exc:
         where = f" at {exc.filename}" if exc.filename and ".tmp-" not in os.fspath(exc.filename) else ""
         raise DeriveError(f"{shown}: cannot write the generated code ({exc.strerror or exc}{where}); "
@@ -428,7 +456,16 @@ def _mount_point(path: Path) -> bool:
     return any(len(fields) > 4 and unescape(fields[4]) == real for fields in map(str.split, lines))
 
 
-def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figures: dict) -> dict:
+def _left_out(robot_dir: Path) -> dict | None:
+    """The ``left_out`` entry of a generated robot's manifest.json, or None."""
+    try:
+        return json.loads((robot_dir / "manifest.json").read_bytes()).get("left_out")
+    except (OSError, ValueError, AttributeError):
+        return None
+
+
+def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figures: dict, strict: bool = False,
+              warn: Callable[[str], None] = print) -> dict:
     _recover(out, log)
     names = sorted(robots) if only is None else sorted(only)
     ghash = generator_hash()
@@ -463,8 +500,11 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figur
             robot = robots[name]
             mhash = model_hash(robot)
             prev = old_robots.get(name)
+            left_out = _left_out(out / name) if use_cache and prev else None
             if (use_cache and prev and prev.get("model_hash") == mhash and prev.get("generator_hash") == ghash
-                    and _intact(out, name, prev)):
+                    and _intact(out, name, prev) and not (strict and left_out)):  # strict: refused as it derives
+                if left_out:
+                    warn(left_out_warning(robot, left_out.get("reason", "M(q) is singular")))
                 _carry(out / name, tmp / name)
                 new_robots[name] = prev
                 text = with_firmware(robot_files(tmp / name), figures.get(name))
@@ -476,7 +516,7 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figur
                 log(f"[{k}/{len(names)}] {name}: unchanged, kept")
                 continue
             log(f"[{k}/{len(names)}] {name}: deriving")
-            files = {rel: text.encode() for rel, text in render(robot, mhash, log).items()}
+            files = {rel: text.encode() for rel, text in render(robot, mhash, log, strict, warn).items()}
             files["manifest.json"] = with_firmware(files, figures.get(name))
             (tmp / name).mkdir()
             for rel, data in files.items():

@@ -125,13 +125,19 @@ def actuator_table(robot: Robot) -> dict:
 
 
 def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,
-                 templates: list[TemplateFunction] = (), backends: list[Backend] | None = None) -> dict[str, str]:
-    """All files of one robot, as {path relative to generated/<robot>/: text}."""
+                 templates: list[TemplateFunction] = (), backends: list[Backend] | None = None,
+                 left_out: dict | None = None) -> dict[str, str]:
+    """All files of one robot, as {path relative to generated/<robot>/: text}.
+
+    ``left_out``: the functions of the robot's set that were not generated and why (plain data,
+    ``{"functions": [...], "coordinates": [...], "reason": "..."}``), recorded in manifest.json."""
     backends = registered_backends() if backends is None else backends
     env = environment(backends)
     functions = [expression_function(s, progress) for s in specs] + [template_function(t) for t in templates]
     ctx = RobotContext(robot.name, model_hash, [c.name for c in robot.coordinates], robot.nq, robot.nv,
-                       [(p.name, p.default) for p in robot.parameters])
+                       [(p.name, p.default) for p in robot.parameters],
+                       tuple(n[len(robot.name) + 1:] for n in (left_out or {}).get("functions", ())),
+                       (left_out or {}).get("reason", ""))
     files: dict[str, str] = {}
     continuous = [robot.coordinates[i].name for i in robot.continuous_indices]
     per_backend = {}
@@ -165,6 +171,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
             "calls": fn.common["calls"],
             **dict(fn.common["manifest"]),
         } for k, fn in enumerate(functions)],
+        **({"left_out": left_out} if left_out else {}),
     }
     files["manifest.json"] = env.get_template("manifest/manifest.json.jinja").render(
         manifest_json=json.dumps(manifest, indent=2))

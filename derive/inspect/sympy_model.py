@@ -18,6 +18,8 @@ import sympy as sp
 
 from derive.description.model import Robot, load_robot
 from derive.inspect.tosympy import to_sympy
+from derive.codegen.checks import check_mass_matrix, unmoved_reason
+from derive.errors import DeriveError
 from derive.symbolic.model import SXModel
 
 
@@ -106,7 +108,12 @@ class SymbolicModel:
         return self.inverse_dynamics - self.tau
 
     def forward_dynamics(self) -> sp.Matrix:
-        """qdd(q, qd, tau), LDL^T solve (unsimplified for nv > 2); always the recursive route, the leanest."""
+        """qdd(q, qd, tau), LDL^T solve (unsimplified for nv > 2); always the recursive route, the leanest.
+        A DeriveError where coordinates move no mass (M(q) singular: no forward dynamics)."""
+        unmoved = check_mass_matrix(self.sx, strict=False)
+        if unmoved:
+            where = f"{self.robot.file}: robot '{self.robot.name}'" if self.robot.file else f"robot '{self.robot.name}'"
+            raise DeriveError(f"{where}: no forward dynamics: {unmoved_reason(unmoved)}")
         return self._sympy(self.sx.forward_dynamics())
 
 

@@ -56,6 +56,7 @@ import numpy as np
 from derive.description import expr
 from derive.description.joints import motion_type
 from derive.description.robot import Origin, Robot
+from derive.errors import DeriveError
 
 COMPLEX_STEP = 1e-30
 
@@ -418,6 +419,15 @@ class NumericRobot:
             quat = rng.normal(size=4)
             q[3:7] = quat / np.linalg.norm(quat)
         return q
+
+    def unmoved_coordinates(self, samples: int = 3) -> list[str]:
+        """The coordinates (velocity names) that move no mass or inertia: M(q)_ii at most 1e-12 of the largest
+        diagonal entry at ``samples`` seeded configurations (np.random.default_rng(0)). M(q) is then singular
+        and forward dynamics do not exist; the kinematics and the inverse dynamics do."""
+        rng = np.random.default_rng(0)
+        diag = np.min([np.diag(self.crba(self.random_configuration(rng))) for _ in range(samples)], axis=0)
+        scale = max(float(np.max(np.abs(diag), initial=0.0)), 1e-300)
+        return [name for name, d in zip(self.robot.velocity_names, diag) if d <= 1e-12 * scale]
 
     def neutral(self) -> np.ndarray:
         """q = 0 for the joints; the identity quaternion (0, 0, 0, 1) for a floating base."""
@@ -917,3 +927,16 @@ class NumericRobot:
             p = poses[body][:3, :3] @ com + poses[body][:3, 3]
             energy = energy - mass * (self.gravity_vector @ p)
         return energy
+
+
+def require_forward_dynamics(robot: Robot | NumericRobot, what: str) -> None:
+    """A one-line DeriveError if ``robot`` has coordinates that move no mass or inertia
+    (:meth:`NumericRobot.unmoved_coordinates`): M(q) is singular at every q, so the forward dynamics and
+    the ODE that ``what`` needs do not exist (and `derive generate` left them out)."""
+    ref = robot if isinstance(robot, NumericRobot) else NumericRobot(robot)
+    names = ref.unmoved_coordinates()
+    if names:
+        who = f"coordinate {names[0]} moves" if len(names) == 1 else f"coordinates {', '.join(names)} move"
+        where = f"{ref.robot.file}: robot '{ref.robot.name}'" if ref.robot.file else f"robot '{ref.robot.name}'"
+        raise DeriveError(f"{where}: {what} needs forward dynamics, which do not exist: {who} no mass or inertia, so "
+                          "M(q) is singular; give the links they move a mass or inertia")

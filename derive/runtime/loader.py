@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 from derive.codegen.generate import default_output
-from derive.errors import DeriveError
+from derive.errors import DeriveError, NotGenerated
 from derive.runtime.build import Argument, Signature, library, read_generated, record, signatures
 
 _LOADED: dict[tuple[str, str], types.ModuleType] = {}
@@ -103,7 +103,28 @@ def _module(robot: str, manifest: dict, sigs: list[Signature], path: Path) -> ty
         fn = _bind(robot, s, pylib, clib, fast, default_p if params else None)
         fn.__module__ = mod.__name__
         setattr(mod, s.name, fn)
+    mod.LEFT_OUT = _left_out(robot, mod, manifest)
     return mod
+
+
+def _left_out(robot: str, mod: types.ModuleType, manifest: dict) -> tuple[str, ...]:
+    """The functions generation left out (manifest.json's ``left_out``), by short name; asking ``mod``
+    for one raises :class:`NotGenerated` naming why, not a bare AttributeError."""
+    entry = manifest.get("left_out")
+    if not isinstance(entry, dict):
+        return ()
+    prefix = f"{robot}_"
+    names = tuple(n[len(prefix):] for n in entry.get("functions", ()) if isinstance(n, str) and n.startswith(prefix))
+    reason = entry.get("reason", "see its manifest.json")
+
+    def __getattr__(name: str):
+        if name in names:
+            raise NotGenerated(f"robot '{robot}': {name} was not generated: {reason} "
+                               "(forward dynamics, the ODE and its Jacobians do not exist)")
+        raise AttributeError(f"module {mod.__name__!r} has no attribute {name!r}")
+
+    mod.__getattr__ = __getattr__
+    return names
 
 
 def _check_record(robot: str, manifest: dict, sigs: list[Signature], path: Path, lib: ctypes.CDLL) -> None:

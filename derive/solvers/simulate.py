@@ -42,6 +42,7 @@ from derive.description.robot import ModelError, Parameter, Robot
 from derive.errors import DeriveError
 from derive.filesystem import write_chunks_atomically
 from derive.reference import NumericRobot
+from derive.reference.rnea import require_forward_dynamics
 
 METHODS = ("rk4", "RK45", "DOP853", "LSODA", "Radau", "BDF")
 IMPLICIT = ("LSODA", "Radau", "BDF")
@@ -195,13 +196,15 @@ def with_parameters(robot: Robot, params: dict[str, float] | None) -> Robot:
 def numeric_reference(robot: Robot, q0, params: dict[str, float] | None = None) -> NumericRobot:
     """The numpy reference of ``robot`` with ``params`` (the energies of a run), once M(q0) is found invertible.
 
-    x' = f(x, u) solves M(q) qdd = ...: a singular mass matrix at q0 (a massless chain) is a
+    x' = f(x, u) solves M(q) qdd = ...: coordinates that move no mass (M singular at every q,
+    :func:`require_forward_dynamics`) or a singular mass matrix at q0 (a massless chain) is a
     DeriveError, as is a parameter set the reference rejects.
     """
     try:
         ref = NumericRobot(robot, params)
     except ValueError as exc:
         raise DeriveError(str(exc)) from None
+    require_forward_dynamics(ref, "simulate")
     M0 = ref.crba(np.asarray(q0, dtype=float))
     if not (np.all(np.isfinite(M0)) and np.linalg.eigvalsh(0.5 * (M0 + M0.T))[0] > 1e-12 * max(np.abs(M0).max(), 1e-300)):
         raise DeriveError(f"robot '{robot.name}': the mass matrix at q0 is singular (massless links?)"

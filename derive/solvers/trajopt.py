@@ -48,7 +48,7 @@ from derive.description.joints import wrap_angle
 from derive.description.model import Robot, load_robot
 from derive.errors import DeriveError
 from derive.filesystem import temporary_directory, write_atomically
-from derive.solvers.simulate import is_stale, load_generated
+from derive.solvers.simulate import is_stale, load_generated, require_forward_dynamics
 from derive.symbolic.model import SXModel
 
 METHODS = ("trapezoidal", "hermite-simpson", "rk4")
@@ -182,6 +182,7 @@ class TrajectoryOptimizer:
         """``log`` gets a line per stage; ``progress(iteration, max_iter)`` is called after every IPOPT iteration."""
         self.robot = load_robot(robot) if isinstance(robot, str) else robot
         self.robot.require_fixed_base("trajectory optimisation")
+        require_forward_dynamics(self.robot, "trajopt")
         self.log, self.progress = log, progress
         self.model = SXModel(self.robot)
         s = self.model.sym

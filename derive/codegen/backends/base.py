@@ -122,11 +122,14 @@ class RobotContext:
     nq: int
     nv: int
     parameters: list[tuple[str, float]]
+    left_out: tuple[str, ...] = ()  # short names of the usual functions not generated (M(q) singular), and why
+    left_out_reason: str = ""
 
     def data(self) -> dict:
         return {"robot": self.robot, "model_hash": self.model_hash, "joints": self.joints, "nq": self.nq,
                 "nv": self.nv, "np": len(self.parameters),
-                "parameters": [(n, float_literal(v)) for n, v in self.parameters]}
+                "parameters": [(n, float_literal(v)) for n, v in self.parameters],
+                "left_out": list(self.left_out), "left_out_reason": self.left_out_reason}
 
 
 class Backend:
