@@ -21,7 +21,6 @@ Without the mujoco package the MuJoCo tests are skipped, except in CI (CI=true),
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -39,17 +38,6 @@ FIXTURES = Path(__file__).resolve().parent / "fixtures" / "mjcf"
 SAMPLES = 5
 TOL_MUJOCO = 1e-10
 TOL_PINOCCHIO = 1e-9
-
-
-@pytest.fixture(scope="module")
-def mujoco():
-    try:
-        import mujoco
-    except ImportError:
-        if os.environ.get("CI"):
-            pytest.fail("mujoco not installed: the `mjcf` extra should be installed by `make test`")
-        pytest.skip("no mujoco: pip install 'derive-robotics[mjcf]'")
-    return mujoco
 
 
 # --------------------------------------------------------------------------- the conversions
