@@ -349,6 +349,26 @@ def test_mjcf_round_trip_keeps_the_effort_limit(mujoco, tmp_path):
     assert [c.limits.effort for c in back.joint_coordinates] == [150.0, 150.0, 150.0, 28.0, 28.0, 28.0]
 
 
+def test_mjcf_round_trip_keeps_a_one_sided_range(mujoco, tmp_path, capsys):
+    """A joint with a lower limit only: MJCF's range needs two ends, export writes +1e16 for the missing
+    one, and import-mjcf reads that back as no upper limit with one warning line (it refused the entry
+    before: a limit beyond 1e12 overflows in the dynamics)."""
+    robot = parse_models("""
+robots:
+  slider:
+    links:
+      - {name: base}
+      - {name: carriage, mass: 1.0, inertia: [0.01, 0.01, 0.01]}
+    joints:
+      - {name: s, type: prismatic, parent: base, child: carriage, axis: [1, 0, 0], limits: {lower: -0.5, effort: 40}}
+""", source="t.yaml")["slider"]
+    assert 'range="-0.5 1e+16"' in to_mjcf(robot)
+    back = mjcf_round_trip(robot, tmp_path)
+    assert back.joint_coordinates[0].limits == robot.joint_coordinates[0].limits
+    assert capsys.readouterr().err == (f"warning: {tmp_path / 'slider.xml'}: <joint name=\"s\">: upper 1e+16: beyond "
+                                       "1e+12, a placeholder for no limit: imported without it\n")
+
+
 @pytest.mark.parametrize("file, floating", [("arm.xml", None), ("walker.xml", None), ("walker.xml", False)])
 def test_imported_mjcf_exports_and_imports_back(mujoco, file, floating, tmp_path):
     """MJCF -> import-mjcf -> export -> MuJoCo and import-mjcf again: MuJoCo on the exported file agrees
