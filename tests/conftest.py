@@ -16,6 +16,8 @@ committed_library: the committed generated/<robot>/c built once per run into a s
 (strict C99, -Wall -Wextra -Werror -pedantic; double -O1, float -O0), double or float: tests/test_codegen.py and
 tests/test_regressor.py call the same build.
 
+mujoco: the mujoco module, skipped without it except under CI=true (tests/test_mjcf.py, tests/test_export.py).
+
 installed_venv: tests/test_installed.py's wheel and fresh venv (~35 s of pip), started in a thread
 when the session starts if that module has tests to run (by the first worker to start, under
 xdist), so that it runs on a CPU of its own while other modules run; the module's fixture waits
@@ -234,3 +236,16 @@ def installed_venv(request, tmp_path_factory):
             return base / "venv" / "bin" / "derive", base / "venv" / "bin" / "python"
 
         yield result
+
+
+@pytest.fixture(scope="session")
+def mujoco():
+    """The mujoco module (MuJoCo as a second oracle); skipped without it, except in CI (CI=true), where
+    the `mjcf` extra is installed and its absence fails."""
+    try:
+        import mujoco
+    except ImportError:
+        if os.environ.get("CI"):
+            pytest.fail("mujoco not installed: the `mjcf` extra should be installed by `make test`")
+        pytest.skip("no mujoco: pip install 'derive-robotics[mjcf]'")
+    return mujoco

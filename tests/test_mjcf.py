@@ -21,7 +21,6 @@ Without the mujoco package the MuJoCo tests are skipped, except in CI (CI=true),
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -39,17 +38,6 @@ FIXTURES = Path(__file__).resolve().parent / "fixtures" / "mjcf"
 SAMPLES = 5
 TOL_MUJOCO = 1e-10
 TOL_PINOCCHIO = 1e-9
-
-
-@pytest.fixture(scope="module")
-def mujoco():
-    try:
-        import mujoco
-    except ImportError:
-        if os.environ.get("CI"):
-            pytest.fail("mujoco not installed: the `mjcf` extra should be installed by `make test`")
-        pytest.skip("no mujoco: pip install 'derive-robotics[mjcf]'")
-    return mujoco
 
 
 # --------------------------------------------------------------------------- the conversions
@@ -145,9 +133,9 @@ def symbolic(robot):
             ca.Function("FK", [s.q], [ca.vertcat(*[sx.fk(n) for n in robot.frame_names])]))
 
 
-def compare(mujoco, file: str, pin=None) -> dict[str, float]:
+def compare(mujoco, file: str | Path, pin=None) -> dict[str, float]:
     """Max errors of derive's reference, its derived model (CasADi) and Pinocchio (if given) against MuJoCo
-    at seeded random states."""
+    at seeded random states (``file`` in the fixtures, or a path)."""
     m = mujoco.MjModel.from_xml_path(str(FIXTURES / file))
     name, entry = import_mjcf_named(FIXTURES / file)
     robot = parse_robot(name, entry)
@@ -253,6 +241,131 @@ def test_walker_floats_as_the_file_says_and_fixed_on_request(mujoco, capsys):
     torso = m.body("torso").id
     assert np.abs(pose[:3, 3] - d.xpos[torso]).max() <= 1e-15
     assert np.abs(pose[:3, :3] - d.xmat[torso].reshape(3, 3)).max() <= 1e-15
+
+
+def test_a_massless_body_with_inertia_counts(mujoco, tmp_path):
+    """MuJoCo keeps the rotational inertia of a body with mass 0 welded to a moving one (example-robot-data's
+    bolt has four such feet, written so by mj_saveLastXML); the import dropped it (M 2.9e-4 off on bolt)."""
+    path = tmp_path / "feet.xml"
+    path.write_text('<mujoco><compiler inertiafromgeom="false"/><worldbody><body name="leg"><joint name="j" axis="1 0 0"/>'
+                    '<inertial pos="0 0 -0.1" mass="0.1" diaginertia="1e-4 1e-4 1e-5"/><body name="foot" pos="0 0 -0.2">'
+                    '<inertial pos="0 0 0.01" quat="0.7 0 0 0.7" mass="0" diaginertia="8e-7 6e-7 5e-7"/></body></body>'
+                    '</worldbody></mujoco>')
+    errors = compare(mujoco, path)
+    assert errors["M"] <= TOL_MUJOCO and errors["tau"] <= TOL_MUJOCO, errors
+    leg = import_mjcf(path)["links"][1]
+    assert leg["mass"] == 0.1  # the foot's moments turned 90 degrees about z (its quat) and added
+    assert [leg["inertia"][k] for k in ("ixx", "iyy", "izz")] == pytest.approx([1e-4 + 6e-7, 1e-4 + 8e-7, 1e-5 + 5e-7],
+                                                                            rel=1e-15)
+
+
+# --------------------------------------------------------------------------- MJCF written by MuJoCo from URDFs
+
+# (URDF in example-robot-data, with a free joint): a fixed arm, an arm with a mimic finger, a floating quadruped
+ERD_MJCF = {"ur5": ("ur_description/urdf/ur5_robot.urdf", False),
+            "panda": ("panda_description/urdf/panda.urdf", False),
+            "solo12": ("solo_description/robots/solo12.urdf", True)}
+TOL_ROUNDED = 1e-5
+"""derive against Pinocchio on the original URDF: mj_saveLastXML writes 6 significant digits (MuJoCo
+4.0.0 has no option for more), so the imported numbers differ from the URDF's by up to 5e-7 relative;
+measured 2.7e-6 at most (solo12's M). A convention error is of order 1."""
+
+
+def mujoco_written(mujoco, urdf: Path, out: Path, free: bool) -> Path:
+    """The URDF, its visual and collision geometry stripped, compiled by MuJoCo with fusestatic="false"
+    (every link stays a body; MuJoCo fuses fixed joints away otherwise) and written out by
+    mj_saveLastXML; ``free``: a <freejoint> added to the root body of what MuJoCo wrote."""
+    import xml.etree.ElementTree as ET
+    root = ET.parse(urdf).getroot()
+    for parent in list(root.iter()):
+        for child in [c for c in parent if c.tag in ("visual", "collision")]:
+            parent.remove(child)
+    ET.SubElement(ET.SubElement(root, "mujoco"), "compiler", fusestatic="false", discardvisual="true")
+    model = mujoco.MjModel.from_xml_string(ET.tostring(root, encoding="unicode"))
+    mujoco.mj_saveLastXML(str(out), model)
+    if free:
+        tree = ET.parse(out)
+        tree.getroot().find("worldbody").find("body").insert(0, ET.Element("freejoint", name="root_joint"))
+        tree.write(out)
+    return out
+
+
+def pinocchio_errors(pin, model, robot, samples: int = 3) -> dict[str, float]:
+    """Largest relative differences of M and ID (rigid bodies) and of the body poses between derive's
+    reference of ``robot`` and Pinocchio's ``model`` (joints by name; its free flyer's q and v are derive's;
+    a mimic joint, an ordinary joint in ``model``, follows its leader: v_pin = G v)."""
+    ref = NumericRobot(robot)
+    data = model.createData()
+    qi = {c.name: i for i, c in enumerate(robot.coordinates)}
+    vi = {n: i for i, n in enumerate(robot.velocity_names)}
+    mimic = {j.name: j.mimic for j in robot.joints if j.mimic is not None}
+    rng = np.random.default_rng(3)
+    worst = {"M": 0.0, "ID": 0.0, "pose": 0.0}
+    for _ in range(samples):
+        q = ref.random_configuration(rng)
+        v, a = rng.normal(size=robot.nv), rng.normal(size=robot.nv)
+        pq, G = pin.neutral(model), np.zeros((model.nv, robot.nv))
+        for jid in range(1, model.njoints):
+            name, joint = model.names[jid], model.joints[jid]
+            if joint.nq == 7:  # the free flyer: derive's q = [p, qx qy qz qw], v = [v_body, w_body] are Pinocchio's
+                pq[joint.idx_q:joint.idx_q + 7], G[joint.idx_v:joint.idx_v + 6, :6] = q[:7], np.eye(6)
+                continue
+            leader, c1, c0 = (mimic[name].joint, mimic[name].multiplier, mimic[name].offset) if name in mimic else \
+                (name, 1.0, 0.0)
+            pq[joint.idx_q], G[joint.idx_v, vi[leader]] = c0 + c1 * q[qi[leader]], c1
+        M = pin.crba(model, data, pq)
+        M = np.triu(M) + np.triu(M, 1).T
+        rigid_M = ref.crba(q) - np.diag(ref.armature)
+        rigid_tau = ref.rnea(q, v, a) - ref.armature * a - ref.viscous * v - ref.friction(v) + ref.viscous * v
+        worst["M"] = max(worst["M"], np.abs(G.T @ (M - np.diag(model.armature)) @ G - rigid_M).max() / np.abs(rigid_M).max())
+        tau = G.T @ (pin.rnea(model, data, pq, G @ v, G @ a) - model.armature * (G @ a))
+        worst["ID"] = max(worst["ID"], np.abs(tau - rigid_tau).max() / np.abs(rigid_tau).max())
+        pin.framesForwardKinematics(model, data, pq)
+        fk = ref.fk(q)
+        for link in robot.frame_names:
+            if model.existFrame(link, pin.BODY):
+                placed = data.oMf[model.getFrameId(link, pin.BODY)]
+                worst["pose"] = max(worst["pose"], np.abs(placed.translation - fk[link][:3, 3]).max(),
+                                    np.abs(placed.rotation - fk[link][:3, :3]).max())
+    return worst
+
+
+@pytest.mark.parametrize("key", sorted(ERD_MJCF))
+def test_mjcf_written_by_mujoco_from_example_robot_data(mujoco, pin, tmp_path, key, capsys):
+    """example-robot-data URDF -> MuJoCo -> mj_saveLastXML -> import-mjcf imports whole (every link a
+    body or frame, panda's mimic finger a mimic joint, solo12 floating by its free joint) and matches
+    MuJoCo on the same MJCF to 1e-10 (M, ID with the URDF's damping, body poses; reference and the
+    derived CasADi model), Pinocchio on the same numbers to 1e-9 (its algorithms on the imported model, and
+    its own MJCF parser on the written file), and Pinocchio on the original URDF to TOL_ROUNDED (MuJoCo
+    writes 6 digits). --floating on the file without the free joint gives the same robot."""
+    import pinocchio
+    from derive.description.urdf import example_robot_data_dir
+
+    assert example_robot_data_dir() is not None, "example-robot-data is not installed"
+    urdf, free = ERD_MJCF[key]
+    path = mujoco_written(mujoco, example_robot_data_dir() / urdf, tmp_path / f"{key}.xml", free)
+    errors = compare(mujoco, path, pin)
+    robot = parse_robot(*import_mjcf_named(path))
+    original = pinocchio.buildModelFromUrdf(str(example_robot_data_dir() / urdf), *(
+        [pinocchio.JointModelFreeFlyer()] if free else []))
+    same_file = pinocchio_errors(pinocchio, pinocchio.buildModelFromMJCF(str(path)), robot)
+    rounded = pinocchio_errors(pinocchio, original, robot)
+    print(key, {k: f"{v:.1e}" for k, v in errors.items() if k != "frames"},
+          "pin MJCF", {k: f"{v:.1e}" for k, v in same_file.items()},
+          "pin URDF", {k: f"{v:.1e}" for k, v in rounded.items()}, file=sys.stderr)
+    assert robot.floating == free and errors["frames"] == len(robot.frame_names) - (not free)  # all but world
+    assert len(robot.frame_names) - (not free) == mujoco.MjModel.from_xml_path(str(path)).nbody - 1
+    for k in ("M", "tau", "pose", "sym M", "sym tau", "sym pose"):
+        assert errors[k] <= TOL_MUJOCO, (k, errors)
+    for k in ("pin M", "pin tau", "pin pose"):
+        assert errors[k] <= TOL_PINOCCHIO, (k, errors)
+    assert max(same_file.values()) <= TOL_PINOCCHIO, same_file
+    assert max(rounded.values()) <= TOL_ROUNDED, rounded
+    if free:
+        bare = mujoco_written(mujoco, example_robot_data_dir() / urdf, tmp_path / "bare.xml", False)
+        floated = import_mjcf(bare, floating=True)
+        entry = import_mjcf(path)
+        assert (floated["links"], floated["joints"], floated["frames"]) == (entry["links"], entry["joints"], entry["frames"])
 
 
 # --------------------------------------------------------------------------- the command and its refusals

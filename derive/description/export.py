@@ -34,7 +34,8 @@ MJCF (MuJoCo loads it; its mj_fullM and mj_rne match derive's M and ID):
 - a joint -> ``<joint>`` elements in the child body (hinge, slide; several in one body for a
   multi-DOF joint, applied in order as MuJoCo composes them, named after the coordinates; a helical
   joint is a hinge and a slide ``<joint>_slide`` coupled by an equality), ``range``, ``armature`` =
-  armature + gear_ratio^2 motor_inertia, ``damping`` = viscous, ``frictionloss`` = coulomb; one
+  armature + gear_ratio^2 motor_inertia, ``damping`` = viscous, ``frictionloss`` = coulomb,
+  ``actuatorfrcrange`` = +-effort (read back by ``derive import-mjcf`` as the effort limit); one
   ``<motor>`` per coordinate (gear 1: ctrl is derive's tau, ``ctrlrange`` = +-effort);
 - a mimic joint -> its own joint plus ``<equality><joint joint1 joint2 polycoef="offset
   multiplier 0 0 0">`` (MuJoCo enforces it as a constraint; M and ID over the full joints
@@ -428,6 +429,8 @@ def export_mjcf(robot: Robot) -> Exported:
                 lo = -UNBOUNDED if lim.lower is None else lim.lower
                 hi = UNBOUNDED if lim.upper is None else lim.upper
                 attrs += f' limited="true" range="{_num(lo)} {_num(hi)}"'
+            if lim.effort is not None:  # the joint's own torque limit, where import-mjcf reads it back
+                attrs += f' actuatorfrcrange="{_num(-lim.effort)} {_num(lim.effort)}"'
             arm, viscous, coulomb = m.armature(p.actuator), m.num(p.actuator.viscous), m.num(p.actuator.coulomb)
             for key, value in (("armature", arm), ("damping", viscous), ("frictionloss", coulomb)):
                 if value:

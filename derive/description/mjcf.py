@@ -26,8 +26,12 @@ Conventions (what the entry is, against MuJoCo's qpos and qvel):
   [v_world, w_body] (v_world the world-frame velocity of the body origin, R the body orientation).
   ``floating=False`` welds a free body to the world at its initial pose; ``floating=True`` on a
   file without a free joint floats its one top-level body (which must have no joints).
+- Limits: ``range`` -> lower, upper; a symmetric ``actuatorfrcrange`` -> effort; an end beyond
+  1e12 in magnitude (an exporter's "no limit", derive export's for a one-sided range) is left out
+  with a warning, as import-urdf does.
 - Inertials: ``body_mass``, ``body_ipos`` and the principal ``body_inertia`` turned from
-  ``body_iquat`` into the link frame (no ``inertia_rpy``).
+  ``body_iquat`` into the link frame (no ``inertia_rpy``); a massless body's rotational inertia
+  counts (MuJoCo's M holds it).
 - Named sites become frames on their body's link (unnamed sites are left out).
 - ``dof_armature``, ``dof_damping`` and ``dof_frictionloss`` -> the joint's ``actuator``
   ``{armature, viscous, coulomb}`` (MuJoCo applies frictionloss as a soft constraint, derive as
@@ -52,6 +56,7 @@ import numpy as np
 
 from derive.description.files import InputFileError, read_bytes
 from derive.description.model import parse_robot
+from derive.description.numbers import MAX_MAGNITUDE
 from derive.description.robot import ModelError, identifier
 from derive.description.urdf import Pose, c_identifier
 from derive.errors import DeriveError
@@ -355,6 +360,13 @@ class _Importer:
                 lo, hi = (float(v) for v in m.jnt_actfrcrange[j])
                 if lo == -hi and hi > 0:
                     limits["effort"] = hi
+            # a range has two ends: exporters (derive export's too) write a missing one as a huge number
+            huge = [k for k, v in limits.items() if abs(v) > MAX_MAGNITUDE]
+            if huge:
+                self.warn(self.joint_where(j), f"{', '.join(f'{k} {limits[k]:g}' for k in huge)}: beyond "
+                          f"{MAX_MAGNITUDE:g}, a placeholder for no limit: imported without it")
+                for k in huge:
+                    del limits[k]
             if limits:
                 entry["limits"] = limits
         elif m.jnt_limited[j]:
@@ -438,7 +450,8 @@ class _Importer:
     def merged(self, link: str, parts: list[tuple[np.ndarray, int]]) -> dict:
         """{mass, com, inertia} of the MuJoCo bodies in ``parts`` (pose of each body frame in the link frame)."""
         m = self.m
-        kept = [(pose, b) for pose, b in parts if m.body_mass[b] > 0]
+        # a massless body with rotational inertia counts (MuJoCo's M holds it: bolt's feet)
+        kept = [(pose, b) for pose, b in parts if m.body_mass[b] > 0 or np.any(m.body_inertia[b] > 0)]
         if not kept:
             return {}
         masses, coms, inertias = [], [], []
@@ -448,7 +461,8 @@ class _Importer:
             coms.append(pose[:3, :3] @ m.body_ipos[b] + pose[:3, 3])
             inertias.append(rot @ np.diag(m.body_inertia[b]) @ rot.T)
         total = math.fsum(masses)
-        com = sum(mass * c for mass, c in zip(masses, coms)) / total if len(kept) > 1 else coms[0]
+        # without mass the inertia is a pure moment, the same about every point: the first body's com
+        com = sum(mass * c for mass, c in zip(masses, coms)) / total if len(kept) > 1 and total > 0 else coms[0]
         inertia = np.zeros((3, 3))
         for mass, c, inr in zip(masses, coms, inertias):
             d = c - com
