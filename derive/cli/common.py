@@ -118,8 +118,8 @@ def check_number(value: float | None, option: str, least: float | None = None, m
 # quoted or not (--q0 "1, 2, 3"), each a number or an expression of pi ("pi/2", "-3*pi/4").
 
 NEGATIVE = re.compile(r"^-(\.?\d|pi\b)")
-"""What argparse must read as a value, not an option: "-1,2", "-1e-3", "-pi/2" (Python 3.11's own test,
-^-\d+$|^-\d*\.\d+$, takes only plain negative numbers; 3.13 widened it the same way)."""
+"""What argparse must read as a value, not an option: "-1,2", "-1e-3", "-pi/2" (Python 3.11's own test
+takes only plain negative numbers such as "-1" and "-0.5"; later versions widened it the same way)."""
 
 
 def number(text: str) -> float:

@@ -11,7 +11,7 @@ Energy E = T + U comes from the independent numpy reference
 (derive.reference), U = -sum m g . p_com (zero with every COM at the world
 origin). A constant torque does the work tau . (q - q0) and friction and damping
 dissipate W_d(t) = int_0^t qd . f(qd) dt >= 0 (the reference's smooth friction, the
-forward dynamics' own; trapezoidal rule over the samples), so
+forward dynamics' own; corrected trapezoidal rule over the samples, :func:`dissipated_work`), so
 E - tau . (q - q0) + W_d is conserved; its drift, relative to max(|E0|, max T), is
 the check on the integration (and on the generated dynamics). The dissipated work
 is reported apart: it is physics, not error.
@@ -291,12 +291,24 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
                 kinetic[k] = potential[k] = power[k] = math.nan
             if k % PROGRESS_STEPS == 0:
                 report("energies", k / len(t))
-        dissipated = np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])
+        dissipated = dissipated_work(t, power)
         traj = Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall,
                           robot.continuous_indices, qdd, dissipated, tuple(robot.velocity_names),
                           limit_crossings(robot, t, q))
         _check_finite(traj, dt)
     return traj
+
+
+def dissipated_work(t: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """W_d(t_k) = int_0^t_k P dt on equally spaced samples: the cumulative trapezoidal rule with its
+    Euler-Maclaurin end correction - h^2/12 (P'(t_k) - P'(0)) (P' by second-order differences), so the
+    quadrature's error is O(h^4), far below the integrator's drift (plain trapezoids left 2e-7 of it)."""
+    if len(t) < 3:
+        return np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])[:len(t)]
+    h = t[1] - t[0]
+    trapezoids = np.concatenate([[0.0], np.cumsum(0.5 * h * (power[1:] + power[:-1]))])
+    rate = np.gradient(power, h, edge_order=2)
+    return trapezoids - h * h / 12.0 * (rate - rate[0])
 
 
 def _check_finite(traj: Trajectory, dt: float) -> None:
@@ -404,7 +416,7 @@ def limit_crossings(robot: Robot, t: np.ndarray, q: np.ndarray) -> tuple[tuple[i
 def warnings(traj: Trajectory) -> list[str]:
     """One line per coordinate that crossed a joint limit, at its first crossing."""
     names = traj.names or traj.joints
-    return [f"warning: {traj.robot}: {names[i]} = {value:.4g} at t = {time_:.4g} s is beyond its limit {bound:+.4g} "
+    return [f"warning: {traj.robot}: {names[i]} = {value:.6g} at t = {time_:.4g} s is beyond its limit {bound:+.6g} "
             "(the model's limits are not enforced by the dynamics)" for i, time_, value, bound in traj.crossings]
 
 
