@@ -17,7 +17,7 @@ import os
 import signal
 import sys
 
-from derive import __version__
+import derive
 from derive.cli.common import NEGATIVE, HelpFormatter
 from derive.cli.signals import MESSAGES, EndOnSignals
 from derive.errors import DeriveError
@@ -49,7 +49,7 @@ def build_parser() -> argparse.ArgumentParser:
                             "manipulators. `derive COMMAND --help` explains a command.")
     models_help = "models file (default: $DERIVE_MODELS, else ./models.yaml, else the shipped example robots)"
     parser.add_argument("--models", help=models_help)
-    parser.add_argument("--version", action="version", version=f"derive {__version__}")
+    parser.add_argument("--version", action="version", version=f"derive {derive.__version__}")
     # --models is accepted after the subcommand too: every subparser inherits it
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--models", default=argparse.SUPPRESS, help=models_help)
