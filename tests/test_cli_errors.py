@@ -21,8 +21,8 @@ SHIPPED = str(EXAMPLE_MODELS)
 CASES = [
     # the command line itself (argparse): one line too
     ("unknown-command", ["nosuch"], "invalid choice: 'nosuch'"),
-    ("argparse-non-numeric", ["simulate", "pendulum", "--q0", "abc"], "invalid float value: 'abc'"),
-    ("argparse-wrong-count", ["ik", "pendulum", "--xyz", "0", "0"], "expected 3 arguments"),
+    ("argparse-non-numeric", ["simulate", "pendulum", "--q0", "abc"], "--q0: 'abc' is not a number"),
+    ("argparse-wrong-count", ["ik", "pendulum", "--xyz", "0", "0"], "--xyz needs 3 values (X Y Z), got 2"),
     ("argparse-missing", ["plan", "planar_2r", "--start", "0", "0"], "required: --goal"),
     # info / eom / generate: models files
     ("info-unknown-robot", ["info", "nosuch"], "robot 'nosuch'"),
@@ -52,7 +52,7 @@ CASES = [
     ("sing-negative-starts", ["singularities", "planar_2r", "--starts", "-1"], "--starts must be at least 1, got -1"),
     ("sing-zero-starts", ["singularities", "planar_2r", "--starts", "0"], "--starts must be at least 1, got 0"),
     ("sing-overflow-q", ["singularities", "planar_2r", "--q", "1e400", "0"], "theta1 = inf is not a finite number"),
-    ("sing-nan-q", ["singularities", "planar_2r", "--q", "nan", "0"], "expected 2 numbers"),
+    ("sing-nan-q", ["singularities", "planar_2r", "--q", "nan", "0"], "theta1 = nan is not a finite number"),
     ("sing-wrong-count", ["singularities", "planar_2r", "--q", "1", "2", "3"], "expected 2 values"),
     ("sing-unknown-frame", ["singularities", "planar_2r", "--frame", "nosuch"], "no frame 'nosuch'"),
     ("sing-unknown-task", ["singularities", "planar_2r", "--task", "bogus"], "task 'bogus'"),
@@ -70,7 +70,7 @@ CASES = [
      "margin must be a finite number >= 0"),
     ("plan-inf-obstacle", ["plan", "planar_2r", "--start", "0", "0", "--goal", "1", "1", "--obstacle", "circle:1e400,0,1"],
      "finite number"),
-    ("plan-inf-start", ["plan", "planar_2r", "--start", "inf", "0", "--goal", "1", "1"], "expected 2 numbers"),
+    ("plan-inf-start", ["plan", "planar_2r", "--start", "inf", "0", "--goal", "1", "1"], "theta1 = inf is not a finite number"),
     ("plan-outside-limits", ["plan", "planar_2r", "--start", "100", "0", "--goal", "1", "1"], "outside the joint box"),
     ("plan-unknown-frame", ["plan", "planar_2r", "--start", "0", "0", "--goal", "1", "1", "--frame", "nosuch"],
      "no frame 'nosuch'"),

@@ -242,7 +242,7 @@ def test_simulate_integrates_the_winding_angle_and_writes_it_wrapped(gen, tmp_pa
     assert traj.continuous == (0,) and traj.q[-1, 0] > 2 * math.pi     # the state winds past pi, then 2 pi
     assert traj.energy_drift < 1e-8                                      # the work needs the turns
     rows = list(csv.reader(write_csv(traj, tmp_path / "sim.csv").open()))
-    assert rows[0][:3] == ["t", "turn", "elbow"]
+    assert rows[0][:3] == ["t", "q_turn", "q_elbow"]
     turn = np.array([float(r[1]) for r in rows[1:]])
     elbow = np.array([float(r[2]) for r in rows[1:]])
     assert in_range(turn)

@@ -120,7 +120,7 @@ SIZES = [
      "10000 intervals (rk4) would need about", "GiB for the NLP", "use at most"),
     ("simulate-steps", ["simulate", "pendulum", "--q0", "0.1", "--t", "1e5"], "= 1e+08 steps, more than 1e+07"),
     ("simulate-memory", ["simulate", "rrprr", "--q0", *["0"] * 5, "--t", "7000"], "7000001 samples of 5 joints",
-     "would hold 1.1 GiB (more than the budget of 1 GiB)"),
+     "would hold 1.4 GiB (more than the budget of 1 GiB)"),
     ("latex-width", ["latex", "pendulum", "--width", "1e9"], "--width must be at most 10000"),
 ]
 
@@ -299,9 +299,9 @@ def test_simulate_writes_both_files_whole_and_reports_them(monkeypatch, work, ca
     assert sorted(p.name for p in out.iterdir()) == ["pendulum.csv", "pendulum.png"]  # no temporary left beside
     with (out / "pendulum.csv").open() as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == ["t", "phi", "dphi", "T", "U", "E"] and len(rows) == 502
+    assert rows[0] == ["t", "q_phi", "qd_phi", "qdd_phi", "tau_phi", "T", "U", "E"] and len(rows) == 502
     assert float(rows[1][1]) == 0.5 and float(rows[-1][0]) == pytest.approx(0.5)
-    energy = np.array([float(r[5]) for r in rows[1:]])
+    energy = np.array([float(r[7]) for r in rows[1:]])
     assert np.ptp(energy) < 1e-9 * abs(energy[0])  # RK4 conserves it
     assert (out / "pendulum.png").read_bytes().startswith(PNG_MAGIC)
 

@@ -457,7 +457,7 @@ def test_workspace_ends_at_once_while_sampling(scene):
 def test_simulate_ends_at_once_and_removes_its_scratch_generation(scene, sig, phase):
     """No ./generated: simulate generates the robot into a temporary folder (megabytes), then
     integrates; signalled in either phase, the folder goes (before, SIGTERM left 4.7 MB in /tmp)."""
-    argv = ["simulate", "planar_2r", "--q0", "0.1", "0.2", "--t", "1e4", "--out", str(scene.files / "sim")]
+    argv = ["simulate", "planar_2r", "--q0", "0.1", "0.2", "--t", "5e3", "--out", str(scene.files / "sim")]
     r = scene.signalled(argv, sig, phase, moment(sig + 30, 0.0, 0.3))
     assert "wrote" not in "\n".join(r.stdout)
 

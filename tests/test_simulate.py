@@ -76,7 +76,8 @@ def test_cli_writes_csv_and_png(tmp_path, capsys):
     assert "max relative drift" in text and "energy E - tau.(q - q0)" in text
     with (out / "planar_2r.csv").open() as fh:
         rows = list(csv.reader(fh))
-    assert rows[0] == ["t", "theta1", "theta2", "dtheta1", "dtheta2", "T", "U", "E"]
+    assert rows[0] == ["t", "q_theta1", "q_theta2", "qd_theta1", "qd_theta2", "qdd_theta1", "qdd_theta2",
+                       "tau_theta1", "tau_theta2", "T", "U", "E"]
     assert len(rows) == 1002 and float(rows[1][1]) == 1.0 and float(rows[-1][0]) == pytest.approx(1.0)
     assert matplotlib.image.imread(out / "planar_2r.png").shape[0] > 300
 

@@ -299,7 +299,7 @@ def guess_files(tmp_path_factory):
     (["--passive", "theta1,theta2"], "every joint is passive"),
     (["--from", "nan,0"], "--from theta1 = nan is not a finite number"),
     (["--to", "1,inf"], "--to theta2 = inf is not a finite number"),
-    (["--from", "0,x"], "--from must be comma-separated numbers"),
+    (["--from", "0,x"], "--from: 'x' is not a number"),
     (["--guess", "{d}/path.yaml"], "path.yaml: not a .npy array or a CSV of numbers"),
     (["--guess", "{d}/empty.csv"], "empty.csv: not a .npy array or a CSV of numbers"),
     (["--guess", "{d}/pickled.npy"], "pickled.npy: not a .npy array or a CSV of numbers"),

@@ -1,4 +1,4 @@
-"""Command line: ``derive <command>`` (also ``python -m derive``).
+"""Command line: derive <command> (also python -m derive).
 
 Each command group is one module of this package with ``add_parser(subparsers)``
 (argument parsing and printing only; the work is done by the domain packages).
@@ -17,6 +17,8 @@ import os
 import signal
 import sys
 
+import derive
+from derive.cli.common import NEGATIVE, HelpFormatter
 from derive.cli.signals import MESSAGES, EndOnSignals
 from derive.errors import DeriveError
 
@@ -32,19 +34,26 @@ class UsageError(DeriveError):
 class ArgumentParser(argparse.ArgumentParser):
     """argparse, but a bad command line is one line too (not usage + error): exit status 2."""
 
+    def __init__(self, *args, **kwargs):
+        kwargs.setdefault("formatter_class", HelpFormatter)
+        super().__init__(*args, **kwargs)
+        self._negative_number_matcher = NEGATIVE  # "-1,2" and "-pi/2" are values of a vector option
+
     def error(self, message: str):
         command = self.prog.partition(" ")[2]
         raise UsageError(f"{command + ': ' if command else ''}{message} (see `{self.prog} --help`)")
 
 
 def build_parser() -> argparse.ArgumentParser:
-    parser = ArgumentParser(prog="derive", description=__doc__.splitlines()[0])
+    parser = ArgumentParser(prog="derive", description="Symbolic derivation and code generation for robot "
+                            "manipulators. `derive COMMAND --help` explains a command.")
     models_help = "models file (default: $DERIVE_MODELS, else ./models.yaml, else the shipped example robots)"
     parser.add_argument("--models", help=models_help)
+    parser.add_argument("--version", action="version", version=f"derive {derive.__version__}")
     # --models is accepted after the subcommand too: every subparser inherits it
     common = argparse.ArgumentParser(add_help=False)
     common.add_argument("--models", default=argparse.SUPPRESS, help=models_help)
-    sub = parser.add_subparsers(dest="command", required=True)
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", title="commands")
     add_parser = sub.add_parser
     sub.add_parser = lambda *a, **k: add_parser(*a, parents=[common, *k.pop("parents", [])], **k)
     for module in COMMAND_MODULES:

@@ -14,9 +14,9 @@ import numpy as np
 from derive.analysis.grubler import mechanism_from_robot, parse_mechanism, read_yaml, report
 from derive.analysis.manipulability import MAX_POSES, Manipulability, default_poses
 from derive.analysis.planning import MAX_LENGTH, MAX_NODES, parse_obstacle, plan
-from derive.analysis.singularity import MAX_STARTS, TaskJacobian, analyse, eval_number, find_singularities, redundancy
+from derive.analysis.singularity import MAX_STARTS, TaskJacobian, analyse, find_singularities, redundancy
 from derive.analysis.workspace import MAX_SAMPLES, Arm, workspace
-from derive.cli.common import Progress, check_count, check_number, check_seed, integer, png_path
+from derive.cli.common import Progress, check_count, check_number, check_seed, integer, parse_vector, png_path, vector_help
 from derive.description.model import load_models, load_robot
 from derive.description.robot import Robot
 from derive.errors import DeriveError
@@ -30,20 +30,20 @@ def fmt(v) -> str:
     return "[" + ", ".join(f"{x:.6g}" for x in np.asarray(v).reshape(-1)) + "]"
 
 
-def parse_q(robot: Robot, text) -> np.ndarray:
-    """q from "0.1,pi/2" or from a list of such pieces (the CLI's space-separated values)."""
-    if not isinstance(text, str):
-        text = ",".join(text)
+def parse_q(robot: Robot, text, option: str = "--q") -> np.ndarray:
+    """q from "0.1,pi/2" or from a list of such pieces (the command line's words), read by
+    :func:`derive.cli.common.parse_vector` (the convention of every vector option)."""
     try:
-        q = np.array([float(eval_number(x)) for x in text.split(",")])
-    except ValueError:
-        raise DeriveError(f"robot '{robot.name}': q '{text}': expected {robot.nv} numbers separated by commas") from None
+        q = np.array(parse_vector(text, option))
+    except DeriveError as exc:
+        raise DeriveError(f"robot '{robot.name}': {exc}") from None
+    text = text if isinstance(text, str) else " ".join(text)
     if q.shape[0] != robot.nv:
-        raise DeriveError(f"robot '{robot.name}': q '{text}': expected {robot.nv} values "
+        raise DeriveError(f"robot '{robot.name}': {option} '{text}': expected {robot.nv} values "
                           f"({', '.join(c.name for c in robot.coordinates)}), got {q.shape[0]}")
     if not np.all(np.isfinite(q)):
         bad = robot.coordinates[int(np.argmin(np.isfinite(q)))].name
-        raise DeriveError(f"robot '{robot.name}': q '{text}': {bad} = {q[np.argmin(np.isfinite(q))]:g} is not a finite number")
+        raise DeriveError(f"robot '{robot.name}': {option} '{text}': {bad} = {q[np.argmin(np.isfinite(q))]:g} is not a finite number")
     return q
 
 
@@ -150,7 +150,7 @@ def manipulability_command(args) -> int:
 
 def plan_command(args) -> int:
     robot = load_robot(args.robot_name, args.models)
-    start, goal = parse_q(robot, args.start), parse_q(robot, args.goal)
+    start, goal = parse_q(robot, args.start, "--start"), parse_q(robot, args.goal, "--goal")
     obstacles = [parse_obstacle(o) for o in args.obstacle or []]
     if args.resolution is not None and args.resolution < 2:
         raise DeriveError(f"robot '{robot.name}': --resolution must be at least 2 grid points per joint, "
@@ -206,7 +206,7 @@ def add_parser(sub) -> None:
     p.add_argument("robot_name")
     p.add_argument("--frame", default="tcp")
     p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y,wz")
-    p.add_argument("--q", nargs="+", help="configuration: values separated by commas or spaces (pi allowed: 0 pi/2)")
+    p.add_argument("--q", nargs="+", help=vector_help("configuration"))
     p.add_argument("--starts", type=integer, default=24, help=f"random starts of the search (1 .. {MAX_STARTS}, default 24)")
     p.add_argument("--seed", type=integer, default=0, help="seed of the random starts (>= 0)")
     p.set_defaults(func=singularities_command)
@@ -217,8 +217,7 @@ def add_parser(sub) -> None:
     p.add_argument("robot_name")
     p.add_argument("--frame", default="tcp")
     p.add_argument("--task", default="position", help="position (default) | orientation | full | rows such as x,y")
-    p.add_argument("--q", action="append", nargs="+", help="configuration: values separated by commas or spaces "
-                   "(repeatable; pi allowed)")
+    p.add_argument("--q", action="append", nargs="+", help=vector_help("configuration, repeatable"))
     p.add_argument("--poses", type=integer, default=6,
                    help=f"without --q: this many poses across the joint box (1 .. {MAX_POSES}, default 6)")
     p.add_argument("--png", type=png_path, help="write the ellipses and the mu3 map to this .png file")
@@ -231,9 +230,8 @@ def add_parser(sub) -> None:
                                    "more than --check-step between checks). Exit status 1 when there is no path "
                                    "or it cannot be certified.")
     p.add_argument("robot_name")
-    p.add_argument("--start", required=True, nargs="+", help="start configuration: values separated by commas or "
-                   "spaces (pi allowed)")
-    p.add_argument("--goal", required=True, nargs="+", help="goal configuration")
+    p.add_argument("--start", required=True, nargs="+", help=vector_help("start configuration"))
+    p.add_argument("--goal", required=True, nargs="+", help=vector_help("goal configuration"))
     p.add_argument("--obstacle", action="append", help="circle:x,y,r | box:xmin,ymin,xmax,ymax (3-D forms too; repeatable)")
     p.add_argument("--frame", default="tcp", help="the chain to this frame is checked (default tcp)")
     p.add_argument("--resolution", type=integer, help=f"grid points per joint, >= 2, at most {MAX_NODES} nodes in all "

@@ -5,10 +5,12 @@ from __future__ import annotations
 import argparse
 import math
 import os
+import re
 import sys
 import time
 from pathlib import Path
 
+from derive.description import expr
 from derive.description.model import default_models_path, load_models
 from derive.description.robot import ModelError
 from derive.errors import DeriveError
@@ -108,6 +110,86 @@ def check_number(value: float | None, option: str, least: float | None = None, m
         raise DeriveError(f"{where}{option} must be a finite number{' ' + ' and '.join(bounds) if bounds else ''}"
                           f"{' ' + unit if unit else ''}, got {value:g}")
     return value
+
+
+# --------------------------------------------------------------------------- vectors
+# One convention for every vector option (ik --xyz, simulate --q0, trajopt --from, plan --start...):
+# the values may be given as separate words (--q0 1 2 3), comma-separated (--q0 1,2,3) or both,
+# quoted or not (--q0 "1, 2, 3"), each a number or an expression of pi ("pi/2", "-3*pi/4").
+
+NEGATIVE = re.compile(r"^-(\.?\d|pi\b)")
+"""What argparse must read as a value, not an option: "-1,2", "-1e-3", "-pi/2" (Python 3.11's own test
+takes only plain negative numbers such as "-1" and "-0.5"; later versions widened it the same way)."""
+
+
+def number(text: str) -> float:
+    """One value of a vector: a float ("1e-3", "nan" passes, for the command to name it) or an expression of pi."""
+    try:
+        return float(text)
+    except ValueError:
+        pass
+    try:
+        return float(expr.evaluate(text, {}))
+    except Exception:  # noqa: BLE001 (any parse error: not a number)
+        raise ValueError(text) from None
+
+
+def parse_vector(pieces: str | list[str], option: str, count: int | None = None, names: tuple[str, ...] = ()) -> list[float]:
+    """The numbers of ``pieces`` (words of the command line, each holding values separated by commas
+    and/or blanks); a DeriveError naming ``option`` for a value that is not a number or, ``count``
+    given, a wrong number of values (``names`` says which)."""
+    text = (pieces if isinstance(pieces, str) else " ".join(pieces)).strip()
+    parts = [part.strip() for part in text.split(",")]
+    if len(parts) > 1 and not all(parts):
+        raise DeriveError(f"{option}: an empty value in {text!r} (values separated by commas or blanks)")
+    words = [w for part in parts for w in part.split()]
+    values = []
+    for w in words:
+        try:
+            values.append(number(w))
+        except ValueError:
+            raise DeriveError(f"{option}: {w!r} is not a number (values separated by commas or blanks; "
+                              "pi allowed: pi/2)") from None
+    if count is not None and len(values) != count:
+        what = f" ({' '.join(names)})" if names else ""
+        raise DeriveError(f"{option} needs {count} values{what}, got {len(values)}")
+    if not values:
+        raise DeriveError(f"{option}: no values")
+    return values
+
+
+class Vector(argparse.Action):
+    """argparse action of a vector option: ``nargs="+"`` words parsed by :func:`parse_vector` into a
+    list of floats; ``count`` fixes the length (checked here), else the command checks it."""
+
+    def __init__(self, option_strings, dest, count: int | None = None, names: tuple[str, ...] = (), **kwargs):
+        kwargs.setdefault("nargs", "+")
+        if names and "metavar" not in kwargs:
+            kwargs["metavar"] = " ".join(names)
+        self.count, self.names = count, tuple(names)
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser, namespace, values, option_string=None):
+        try:
+            setattr(namespace, self.dest, parse_vector(values, option_string or self.dest, self.count, self.names))
+        except DeriveError as exc:
+            raise argparse.ArgumentError(None, str(exc)) from None
+
+
+class HelpFormatter(argparse.HelpFormatter):
+    """argparse's formatter, with a vector option shown as "--xyz X Y Z" or "--q0 Q0..." (not
+    "--q0 Q0 [Q0 ...]")."""
+
+    def _format_args(self, action, default_metavar):
+        if isinstance(action, Vector):
+            metavar = action.metavar or default_metavar
+            return metavar if action.count is not None else f"{metavar}..."
+        return super()._format_args(action, default_metavar)
+
+
+def vector_help(text: str) -> str:
+    """``text`` followed by the vector convention, for an option's help."""
+    return f"{text} (separated by blanks or commas; pi/2 allowed)"
 
 
 class Progress:

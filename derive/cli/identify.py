@@ -35,7 +35,7 @@ from derive.symbolic.symbols import make_symbols
 def add_parser(sub) -> None:
     i = sub.add_parser("identify", help="identify the base dynamic parameters from measured q, (qd, qdd,) tau",
                        description="Weighted least squares of the base parameters (Gautier's numerical QR) on a CSV "
-                                   "with columns t, q_<c>..., [qd_<c>..., qdd_<c>...,] tau_<c>... (trajopt's and "
+                                   "with columns t, q_<c>..., [qd_<c>..., qdd_<c>...,] tau_<c>... (simulate's, trajopt's and "
                                    "excite's CSV; missing qd and qdd are filtered and differentiated from q). Prints "
                                    "each base parameter with its standard deviation, the condition number and the "
                                    "torque residual per joint, and writes the robot with the identified values as a "

@@ -42,6 +42,12 @@ def warn_unmoved(name: str, entry: dict, shown: str, samples: int = 3) -> None:
               file=sys.stderr)
 
 
+def _write(args, name: str, entry: dict, generator: str = "derive import-urdf") -> str:
+    """Append (or with --replace, replace in place) ``entry`` in ``args.out``: the line that says which."""
+    done = append_entry(args.out, name, entry, replace=bool(getattr(args, "replace", False)), generator=generator)
+    return f"{done} robot '{name}' {'in' if done == 'replaced' else 'to'} {args.out}"
+
+
 def cmd_import_urdf(args) -> int:
     """``derive import-urdf FILE [--tip LINK | --chain LINK] [--lock J,...] [--floating] [--no-friction]
     [--fix-inertia] [--snap-angles TOL] [--name NAME] [--arg NAME=VALUE ...] [--package-path NAME=DIR ...] [--out models.yaml]``."""
@@ -55,8 +61,7 @@ def cmd_import_urdf(args) -> int:
                                     snap_angles=getattr(args, "snap_angles", None))
     warn_unmoved(name, entry, resolve_urdf(args.file, name)[1])
     if args.out:
-        append_entry(args.out, name, entry)
-        print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
+        print(_write(args, name, entry), file=sys.stderr)
     else:
         sys.stdout.write(dump_entry(name, entry))
     return 0
@@ -68,8 +73,7 @@ def cmd_import_mjcf(args) -> int:
                                     actuators=not args.no_actuators)
     warn_unmoved(name, entry, args.file)
     if args.out:
-        append_entry(args.out, name, entry)
-        print(f"appended robot '{name}' to {args.out}", file=sys.stderr)
+        print(_write(args, name, entry, MJCF_GENERATOR), file=sys.stderr)
     else:
         sys.stdout.write(dump_entry(name, entry, generator=MJCF_GENERATOR))
     return 0
@@ -100,6 +104,10 @@ def cmd_info(args) -> int:
             print(f"  source: {r.source}")
     return 0
 
+
+
+REPLACE_HELP = ("with --out: replace a robot of the same name in place (its lines and the generated comments above "
+                "them; the other robots and comments stay as they are) instead of refusing it")
 
 
 def add_parser(sub) -> None:
@@ -139,6 +147,7 @@ def add_parser(sub) -> None:
     u.add_argument("--out", metavar="MODELS", type=path_arg,
                    help="append to this models file instead of printing (created if missing; written atomically: on "
                         "any failure the file is left as it was)")
+    u.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     u.set_defaults(func=cmd_import_urdf)
 
     # A command of its own rather than import-urdf guessing the format: the options differ (no --tip,
@@ -162,6 +171,7 @@ def add_parser(sub) -> None:
     x.add_argument("--name", help="robot name (default: the MJCF model name made a C identifier)")
     x.add_argument("--out", metavar="MODELS", type=path_arg,
                    help="append to this models file instead of printing (created if missing; written atomically)")
+    x.add_argument("--replace", action="store_true", help=REPLACE_HELP)
     x.set_defaults(func=cmd_import_mjcf)
 
     i = sub.add_parser("info", help="summarise robots of models.yaml")

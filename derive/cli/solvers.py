@@ -6,7 +6,8 @@
     derive trajopt cartpole --swing-up      pole from down (theta = 0) to up (pi), cart back to 0
     derive trajopt panda --from Q0 --to Q1  rest to rest, full dynamics, the model's limits
 
-simulate writes <out>/<robot>.csv and <out>/<robot>.png (<out> defaults to ./simulate_out/<robot>/);
+simulate writes <out>/<robot>.csv (t, q_<joint>..., qd_..., qdd_..., tau_..., then T, U, E) and
+<out>/<robot>.png (<out> defaults to ./simulate_out/<robot>/);
 trajopt writes <out>/trajectory.csv (t, q_<joint>..., qd_..., qdd_..., tau_...) and
 <out>/trajectory.png (q, qd, tau over time), <out> defaulting to ./trajopt_out/<robot>/.
 """
@@ -21,7 +22,8 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
-from derive.cli.common import Progress, check_count, check_number, check_seed, integer, path_arg
+from derive.cli.common import (Progress, Vector, check_count, check_number, check_seed, integer, parse_vector,
+                               path_arg, vector_help)
 from derive.codegen.generate import default_output, generate
 from derive.description.files import read_bytes, read_text
 from derive.description.model import load_models, load_robot
@@ -33,7 +35,7 @@ from derive.plot.trajopt import trajopt_png
 from derive.solvers.ik import problem, solve_ik
 from derive.solvers.simulate import METHODS as SIMULATE_METHODS
 from derive.solvers.simulate import (check_times, check_vector, is_stale, numeric_reference, simulate, summary,
-                                     with_parameters, write_csv)
+                                     warnings, with_parameters, write_csv)
 from derive.solvers.trajopt import MAX_INTERVALS, MAX_SUBSTEPS
 from derive.solvers.trajopt import METHODS as TRAJOPT_METHODS
 from derive.solvers.trajopt import TrajectoryOptimizer, Waypoint
@@ -55,9 +57,9 @@ def add_parser(sub) -> None:
 def add_simulate(sub) -> None:
     p = sub.add_parser("simulate", help="integrate a robot's generated forward dynamics; CSV, plot, energy drift")
     p.add_argument("robot_name")
-    p.add_argument("--q0", type=float, nargs="+", required=True, help="initial joint positions (one per joint)")
-    p.add_argument("--qd0", type=float, nargs="+", help="initial joint velocities (default 0)")
-    p.add_argument("--tau", type=float, nargs="+", help="constant joint torques/forces (default 0)")
+    p.add_argument("--q0", action=Vector, required=True, help=vector_help("initial joint positions (one per joint)"))
+    p.add_argument("--qd0", action=Vector, help=vector_help("initial joint velocities (default 0)"))
+    p.add_argument("--tau", action=Vector, help=vector_help("constant joint torques/forces (default 0)"))
     p.add_argument("--t", type=float, default=10.0, help="duration in s (default 10)")
     p.add_argument("--dt", type=float, default=1e-3, help="RK4 step and sample interval in s (default 1e-3)")
     p.add_argument("--method", choices=SIMULATE_METHODS, default="rk4", help="integrator (default rk4)")
@@ -129,6 +131,8 @@ def cmd_simulate(args) -> int:
         traj = simulate(robot, args.q0, args.qd0, args.tau, t_end=args.t, dt=args.dt, method=args.method,
                         params=params, generated=generated, rtol=args.rtol, atol=args.atol,
                         progress=lambda stage, done: progress(done, 1.0, f"{stage}, t = {done * args.t:.4g} of {args.t:g} s"))
+    for line in warnings(traj):  # one line per joint, at its first crossing
+        print(line, file=sys.stderr)
     png = simulation_png(traj)  # drawn before anything is written
     text = summary(traj)
     csv_path = write_csv(traj, out / f"{robot.name}.csv")
@@ -151,14 +155,16 @@ def add_ik(sub) -> None:
                                    "--xyz alone is a position-only target; with --rpy (URDF roll-pitch-yaw, "
                                    "R = Rz(Y) Ry(P) Rx(R)) a full pose. Exit 0 if solved, 1 if not.")
     k.add_argument("robot_name", metavar="ROBOT")
-    k.add_argument("--xyz", nargs=3, type=float, required=True, metavar=("X", "Y", "Z"),
-                   help=f"position (m, within {MAX_MAGNITUDE:g})")
-    k.add_argument("--rpy", nargs=3, type=float, metavar=("R", "P", "Y"), help="orientation (rad)")
-    k.add_argument("--q0", nargs="+", type=float, help="start (default: mid-range)")
+    k.add_argument("--xyz", action=Vector, count=3, names=("X", "Y", "Z"), required=True,
+                   help=vector_help(f"position (m, within {MAX_MAGNITUDE:g})"))
+    k.add_argument("--rpy", action=Vector, count=3, names=("R", "P", "Y"),
+                   help=vector_help("orientation (rad)"))
+    k.add_argument("--q0", action=Vector, help=vector_help("start (default: mid-range)"))
     k.add_argument("--frame", default="tcp", help="frame to place (default: tcp)")
-    k.add_argument("--weights", nargs=6, type=float, metavar="W", help="row weights of [dp; dtheta]")
+    k.add_argument("--weights", action=Vector, count=6, metavar="W1..W6",
+                   help=vector_help("6 row weights of [dp; dtheta]"))
     k.add_argument("--method", choices=("auto", "lm", "opti"), default="auto")
-    k.add_argument("--rest", nargs="+", type=float, help="rest posture to stay near (redundant arms)")
+    k.add_argument("--rest", action=Vector, help=vector_help("rest posture to stay near (redundant arms)"))
     k.add_argument("--timeout", type=float, default=0.1, help="wall-time cap in s (default 0.1)")
     k.add_argument("--seed", type=integer, default=0, help="seed of the restarts (>= 0)")
     k.set_defaults(func=cmd_ik)
@@ -213,8 +219,9 @@ def add_trajopt(sub) -> None:
                        description=TRAJOPT_DESCRIPTION)
     t.add_argument("robot")
     t.add_argument("--swing-up", action="store_true", help=f"the swing-up example ({', '.join(SWING_UPS)})")
-    t.add_argument("--from", dest="start", help="start joint positions, one per coordinate of q, comma-separated (at rest)")
-    t.add_argument("--to", dest="goal", help="goal joint positions, comma-separated (at rest)")
+    t.add_argument("--from", dest="start", action=Vector, metavar="Q",
+                   help=vector_help("start joint positions, one per coordinate of q (at rest)"))
+    t.add_argument("--to", dest="goal", action=Vector, metavar="Q", help=vector_help("goal joint positions (at rest)"))
     t.add_argument("--method", choices=TRAJOPT_METHODS, help="transcription (default hermite-simpson)")
     t.add_argument("--intervals", type=integer, help=f"N, 2 .. {MAX_INTERVALS} (default 100 for swing-ups, 50 otherwise)")
     t.add_argument("--duration", type=float, help="final time T, or its first guess with --free-time")
@@ -222,7 +229,8 @@ def add_trajopt(sub) -> None:
     t.add_argument("--time-weight", type=float, help="w_T of the cost w_T T + integral |tau|^2 (needs --free-time)")
     t.add_argument("--accel-weight", type=float, help="w_A of the regulariser w_A integral |qdd|^2 "
                                                       "(default 1 for --from/--to, 0 for swing-ups)")
-    t.add_argument("--torque-limit", help="override the model's effort limits: one value or one per joint")
+    t.add_argument("--torque-limit", action=Vector, metavar="TAU",
+                   help=vector_help("override the model's effort limits: one value or one per joint"))
     t.add_argument("--passive", help="unactuated joints (or single coordinates of multi-DOF joints), comma-separated")
     t.add_argument("--waypoint", action="append", help="S:X,Y,Z[@FRAME]: FRAME (default tcp) at X,Y,Z at time S*T")
     t.add_argument("--guess", type=path_arg, help="initial path: .npy or .csv of joint positions (M x nq), e.g. a planner's")
@@ -233,11 +241,9 @@ def add_trajopt(sub) -> None:
 
 
 def parse_floats(text: str, what: str) -> list[float]:
-    """Comma- (or space-) separated numbers; a one-line DeriveError naming ``what`` otherwise."""
-    try:
-        return [float(x) for x in text.replace(",", " ").split()]
-    except ValueError:
-        raise DeriveError(f"trajopt: {what} must be comma-separated numbers, got {text!r}") from None
+    """Numbers separated by commas or blanks (:func:`derive.cli.common.parse_vector`); a one-line
+    DeriveError naming ``what`` otherwise."""
+    return parse_vector(text, f"trajopt: {what}")
 
 
 def parse_waypoint(text: str) -> Waypoint:
@@ -304,7 +310,7 @@ def cmd_trajopt(args) -> int:
     options = {k: v for k, v in {
         "method": args.method, "intervals": args.intervals, "duration": args.duration,
         "time_weight": args.time_weight, "accel_weight": args.accel_weight, "substeps": args.substeps,
-        "torque_limit": parse_floats(args.torque_limit, "--torque-limit") if args.torque_limit else None,
+        "torque_limit": args.torque_limit,
         "passive": tuple(x.strip() for x in args.passive.split(",") if x.strip()) if args.passive else None,
         "waypoints": tuple(parse_waypoint(w) for w in args.waypoint or ()) or None,
         "guess": read_path(args.guess, opt.joints) if args.guess else None}.items() if v is not None}
@@ -317,8 +323,7 @@ def cmd_trajopt(args) -> int:
     else:
         if not (args.start and args.goal):
             raise DeriveError(f"trajopt {args.robot}: give --from Q0 --to Q1 (or --swing-up)")
-        start, goal = parse_floats(args.start, "--from"), parse_floats(args.goal, "--to")
-        start, goal = opt.vector(start, "--from"), opt.vector(goal, "--to")
+        start, goal = opt.vector(args.start, "--from"), opt.vector(args.goal, "--to")
         if "duration" not in options:
             options["duration"] = point_to_point_duration(opt, start, goal)
         options.setdefault("accel_weight", 1.0)

@@ -2,9 +2,11 @@
 
 ``derive.compiled(robot)`` (:mod:`derive.runtime.loader`) builds a robot's generated C into a
 cached shared library (:mod:`derive.runtime.build`) and calls it through ctypes, one state or a
-whole batch per call.
+whole batch per call. ``derive.generated(robot)`` (:mod:`derive.runtime.python`) imports its
+generated Python instead (no compiler needed).
 """
 
 from derive.runtime.loader import compiled
+from derive.runtime.python import generated
 
-__all__ = ["compiled"]
+__all__ = ["compiled", "generated"]

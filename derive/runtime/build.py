@@ -45,6 +45,7 @@ import shlex
 import shutil
 import stat
 import subprocess
+import sys
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -605,7 +606,14 @@ def library(robot: str, source: Snapshot | str | Path, sigs: list[Signature]) ->
         if file_record(lib) == expected:  # built by the process we waited for
             return lib
         _remove_stale(root, digest if held else None)
+        # the first build of a big robot takes tens of seconds (panda: ~30 s on one core): say so, once;
+        # a cache hit (every later call) stays silent
+        files = sum(name.endswith(".c") for name, _ in snap.sources) + 1
+        print(f"derive: compiling {robot} ({files} C files, once; cached in {root}) ...", file=sys.stderr, flush=True)
+        start = time.perf_counter()
         _build(robot, snap, wrapper, cc, cflags, final, lib, expected, replace=bool(held))
+        print(f"derive: compiled {robot} in {time.perf_counter() - start:.1f} s (cached: later calls load it at once)",
+              file=sys.stderr, flush=True)
     return lib
 
 

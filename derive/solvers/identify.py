@@ -6,7 +6,7 @@ parameters pi_b = K pi (Gautier's numerical QR, :mod:`derive.symbolic.base_param
 identifiable: tau = Y_b pi_b with Y_b the base columns of Y.
 
 - Data: a CSV with a header, columns ``t, q_<coordinate>..., [qd_<coordinate>..., qdd_...,]
-  tau_<coordinate>...`` (trajopt's and excite's CSV; a UTF-8 byte-order mark, as Excel writes,
+  tau_<coordinate>...`` (simulate's, trajopt's and excite's CSV; a UTF-8 byte-order mark, as Excel writes,
   is accepted). Missing qd and qdd are obtained from q by a zero-phase low-pass filter (a
   4th-order Butterworth run forwards and backwards) and central differences; the report says so.
 - The CSV is streamed, never held: it is read in blocks of rows and each block's regressor is

@@ -9,9 +9,18 @@ generated ``ode_jac_x`` as their Jacobian.
 
 Energy E = T + U comes from the independent numpy reference
 (derive.reference), U = -sum m g . p_com (zero with every COM at the world
-origin). Without friction a constant torque does the work tau . (q - q0), so
-E - tau . (q - q0) is conserved; its drift, relative to max(|E0|, max T), is
-the check on the integration (and on the generated dynamics).
+origin). A constant torque does the work tau . (q - q0) and friction and damping
+dissipate W_d(t) = int_0^t qd . f(qd) dt >= 0 (the reference's smooth friction, the
+forward dynamics' own; corrected trapezoidal rule over the samples, :func:`dissipated_work`), so
+E - tau . (q - q0) + W_d is conserved; its drift, relative to max(|E0|, max T), is
+the check on the integration (and on the generated dynamics). The dissipated work
+is reported apart: it is physics, not error.
+
+The CSV has the columns every command shares (:func:`csv_header`):
+t, q_<c>..., qd_<c>..., qdd_<c>..., tau_<c>... (qdd from the generated ODE at each sample,
+tau the torque integrated with), then T, U, E; ``derive identify`` reads it as it is.
+Positions outside a joint's limits are reported once per joint (:attr:`Trajectory.crossings`):
+the model's limits are not enforced by the dynamics.
 
 A continuous joint's angle is integrated as it winds (the work tau . (q - q0) counts the turns)
 and drawn so; the CSV gives it wrapped to (-pi, pi] (:attr:`Trajectory.q_wrapped`).
@@ -52,8 +61,11 @@ IMPLICIT = ("LSODA", "Radau", "BDF")
 class Trajectory:
     """A simulated run: samples every dt from 0 to t_end.
 
-    t (N,), q and qd (N, nv), kinetic T, potential U and E = T + U (N,);
-    ``balance`` = E - tau . (q - q0), constant for exact dynamics without friction.
+    t (N,), q, qd and qdd (N, nv), kinetic T, potential U and E = T + U (N,), the work
+    ``dissipated`` by friction and damping up to each sample (N,);
+    ``balance`` = E - tau . (q - q0) + dissipated, constant for exact dynamics.
+    ``names`` are the coordinates (the CSV's column suffixes); ``crossings`` the first sample of
+    each coordinate outside its limits: (index, time, value, bound).
     ``q`` is the integration state: a continuous joint's angle as it winds up (the work
     tau . (q - q0) needs the turns); ``continuous`` indexes those angles, which
     :meth:`q_wrapped` (and so the CSV) gives in (-pi, pi].
@@ -70,6 +82,10 @@ class Trajectory:
     potential: np.ndarray
     wall_time: float
     continuous: tuple[int, ...] = ()
+    qdd: np.ndarray | None = None
+    dissipated: np.ndarray | None = None
+    names: tuple[str, ...] = ()
+    crossings: tuple[tuple[int, float, float, float], ...] = ()
 
     @property
     def q_wrapped(self) -> np.ndarray:
@@ -85,7 +101,8 @@ class Trajectory:
 
     @property
     def balance(self) -> np.ndarray:
-        return self.energy - (self.q - self.q[0]) @ self.tau
+        held = self.energy - (self.q - self.q[0]) @ self.tau
+        return held if self.dissipated is None else held + self.dissipated
 
     @property
     def energy_scale(self) -> float:
@@ -134,12 +151,12 @@ def check_vector(values, n: int, what: str, robot: str) -> np.ndarray:
 MAX_STEPS = 10_000_000
 """Most samples a run may produce (t / dt): at tens of microseconds per step, hours of work."""
 MEMORY_BUDGET = 2**30
-"""Bytes the samples of one run may take (t, q, qd, the energies and their temporaries: 8 (3 nv + 6) per sample)."""
+"""Bytes the samples of one run may take (t, q, qd, qdd, the energies, the dissipated power and their temporaries: 8 (4 nv + 7) per sample)."""
 
 
 def sample_bytes(nv: int) -> int:
     """Bytes a run holds per sample of an nv-joint robot (see MEMORY_BUDGET)."""
-    return 8 * (3 * nv + 6)
+    return 8 * (4 * nv + 7)
 
 
 def check_times(robot: str, t_end: float, dt: float, rtol: float = 1e-10, atol: float = 1e-12, nv: int = 1) -> int:
@@ -265,24 +282,42 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
             raise DeriveError(f"robot '{robot.name}': the state is no longer finite at t = {t[np.argmax(bad)]:g} s "
                               f"({method}, dt = {dt:g}); nothing written")
         q, qd = xs[:, :n], xs[:, n:]
-        kinetic, potential = np.empty(len(t)), np.empty(len(t))
+        qdd = np.asarray(mod.ode_rhs(xs, tau, *extra), dtype=float).reshape(len(t), 2 * n)[:, n:]  # one batch call
+        kinetic, potential, power = np.empty(len(t)), np.empty(len(t)), np.zeros(len(t))
+        rubs = any(np.any(f) for f in (*ref.body_viscous, *ref.body_coulomb))
         for k in range(len(t)):
             try:
                 kinetic[k], potential[k] = ref.kinetic_energy(q[k], qd[k]), ref.potential_energy(q[k])
+                if rubs:  # the power friction and damping take out of the motion
+                    power[k] = qd[k] @ ref.friction(qd[k], smooth=True)
             except (OverflowError, ValueError, ZeroDivisionError):
-                kinetic[k] = potential[k] = math.nan
+                kinetic[k] = potential[k] = power[k] = math.nan
             if k % PROGRESS_STEPS == 0:
                 report("energies", k / len(t))
+        dissipated = dissipated_work(t, power)
         traj = Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall,
-                          robot.continuous_indices)
+                          robot.continuous_indices, qdd, dissipated, tuple(robot.velocity_names),
+                          limit_crossings(robot, t, q))
         _check_finite(traj, dt)
     return traj
+
+
+def dissipated_work(t: np.ndarray, power: np.ndarray) -> np.ndarray:
+    """W_d(t_k) = int_0^t_k P dt on equally spaced samples: the cumulative trapezoidal rule with its
+    Euler-Maclaurin end correction - h^2/12 (P'(t_k) - P'(0)) (P' by second-order differences), so the
+    quadrature's error is O(h^4), far below the integrator's drift (plain trapezoids left 2e-7 of it)."""
+    if len(t) < 3:
+        return np.concatenate([[0.0], np.cumsum(0.5 * (power[1:] + power[:-1]) * np.diff(t))])[:len(t)]
+    h = t[1] - t[0]
+    trapezoids = np.concatenate([[0.0], np.cumsum(0.5 * h * (power[1:] + power[:-1]))])
+    rate = np.gradient(power, h, edge_order=2)
+    return trapezoids - h * h / 12.0 * (rate - rate[0])
 
 
 def _check_finite(traj: Trajectory, dt: float) -> None:
     """A DeriveError naming the first time where an energy, the balance or the drift is not a finite number."""
     for what, values in (("the kinetic energy", traj.kinetic), ("the potential energy", traj.potential),
-                         ("the energy E = T + U", traj.energy), ("the energy balance E - tau.(q - q0)", traj.balance)):
+                         ("the energy E = T + U", traj.energy), ("the energy balance E - tau.(q - q0) + W_d", traj.balance)):
         bad = ~np.isfinite(values)
         if bad.any():
             raise DeriveError(f"robot '{traj.robot}': {what} is no longer a finite number at t = {traj.t[np.argmax(bad)]:g} s "
@@ -331,13 +366,15 @@ CSV_CHUNK = 10_000
 
 
 def csv_header(traj: Trajectory) -> list[str]:
-    """Columns t, q..., dq..., T, U, E."""
-    return ["t", *traj.joints, *(f"d{j}" for j in traj.joints), "T", "U", "E"]
+    """Columns t, q_<c>..., qd_<c>..., qdd_<c>..., tau_<c>... (the schema of trajopt's, excite's and
+    identify's CSV, c the coordinates), then T, U, E."""
+    names = traj.names or traj.joints
+    return ["t", *(f"{k}_{c}" for k in ("q", "qd", "qdd", "tau") for c in names), "T", "U", "E"]
 
 
 def write_csv(traj: Trajectory, path: str | Path) -> Path:
-    """Columns t, q..., dq..., T, U, E (one row per sample; a continuous joint's angle wrapped to
-    (-pi, pi], :attr:`Trajectory.q_wrapped`), written atomically: the rows go, a chunk
+    """Columns :func:`csv_header` (one row per sample; a continuous joint's angle wrapped to
+    (-pi, pi], :attr:`Trajectory.q_wrapped`; tau the constant input), written atomically: the rows go, a chunk
     at a time, into a temporary file beside ``path`` that then replaces it (an old file stays as it
     was on any failure; the DeriveError names ``path``)."""
 
@@ -349,7 +386,9 @@ def write_csv(traj: Trajectory, path: str | Path) -> Path:
         yield buffer.getvalue()
         for k in range(0, len(traj.t), CSV_CHUNK):
             part = slice(k, k + CSV_CHUNK)
-            rows = np.column_stack([traj.t[part], q[part], traj.qd[part], traj.kinetic[part],
+            qdd = traj.qdd[part] if traj.qdd is not None else np.full_like(traj.qd[part], np.nan)
+            rows = np.column_stack([traj.t[part], q[part], traj.qd[part], qdd,
+                                    np.broadcast_to(traj.tau, traj.qd[part].shape), traj.kinetic[part],
                                     traj.potential[part], traj.energy[part]])
             buffer = io.StringIO()
             w = csv.writer(buffer)
@@ -360,11 +399,42 @@ def write_csv(traj: Trajectory, path: str | Path) -> Path:
     return write_chunks_atomically(Path(path), chunks(), "CSV", make_folder=True)
 
 
+def limit_crossings(robot: Robot, t: np.ndarray, q: np.ndarray) -> tuple[tuple[int, float, float, float], ...]:
+    """(coordinate index, time, value, bound) of the first sample at which each coordinate is outside
+    its position limits (none for a coordinate without limits)."""
+    found = []
+    for i, c in enumerate(robot.coordinates):
+        for bound, outside in ((c.limits.lower, lambda v, b: v < b), (c.limits.upper, lambda v, b: v > b)):
+            if bound is None or not math.isfinite(float(bound)):
+                continue
+            hit = outside(q[:, i], float(bound))
+            if hit.any():
+                k = int(np.argmax(hit))
+                found.append((i, float(t[k]), float(q[k, i]), float(bound), k))
+                break
+    found.sort(key=lambda x: (x[4], x[0]))
+    return tuple(x[:4] for x in found)
+
+
+def warnings(traj: Trajectory) -> list[str]:
+    """One line per coordinate that crossed a joint limit, at its first crossing."""
+    names = traj.names or traj.joints
+    return [f"warning: {traj.robot}: {names[i]} = {value:.6g} at t = {time_:.4g} s is beyond its limit {bound:+.6g} "
+            "(the model's limits are not enforced by the dynamics)" for i, time_, value, bound in traj.crossings]
+
+
 def summary(traj: Trajectory) -> str:
-    """Two lines: samples, method and wall time; the energy balance and its relative drift."""
+    """Samples, method and wall time; the energy balance and its relative drift; the work dissipated by
+    friction and damping (where there is any)."""
     e = traj.balance
     what = "E" if not traj.tau.any() else "E - tau.(q - q0)"
-    return (f"{traj.robot}: {len(traj.t) - 1} samples to t = {traj.t[-1]:g} s with {traj.method} in "
+    lost = traj.dissipated[-1] if traj.dissipated is not None else 0.0
+    if lost:
+        what += " + W_d"
+    text = (f"{traj.robot}: {len(traj.t) - 1} samples to t = {traj.t[-1]:g} s with {traj.method} in "
             f"{traj.wall_time:.2f} s\n"
             f"  energy {what}: initial {e[0]:.9g} J, final {e[-1]:.9g} J, "
             f"max relative drift {traj.energy_drift:.2e} (of max(|E0|, max T) = {traj.energy_scale:.4g} J)")
+    if lost:
+        text += f"\n  dissipated by friction and damping: W_d = {lost:.6g} J (not part of the drift)"
+    return text
