@@ -186,11 +186,11 @@ def test_failure_during_generation_leaves_previous_output(tmp_path, out_dir, mon
     calls = {"n": 0}
     real = gen.render
 
-    def flaky(robot, mhash, log):
+    def flaky(robot, mhash, log, *more):
         calls["n"] += 1
         if calls["n"] == 2:
             raise RuntimeError("disk full")
-        return real(robot, mhash, log)
+        return real(robot, mhash, log, *more)
 
     monkeypatch.setattr(gen, "render", flaky)
     from derive.description.model import load_models

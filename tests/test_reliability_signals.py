@@ -276,7 +276,7 @@ class Scene:
 
 def own_progress(line: str) -> bool:
     """A line a command writes on stderr on its way (progress, notes), not the signal's."""
-    return line.startswith(("note: ", "deriving ", "wrote ")) or (" %" in line and ": " in line)
+    return (line.startswith(("note: ", "deriving ", "wrote ", "derive: compiling ")) or (" %" in line and ": " in line))
 
 
 def moment(seed: int, low: float, high: float) -> float:
