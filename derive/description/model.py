@@ -331,14 +331,18 @@ class _Parser:
         return (self.limits(where, raw),) * dof
 
     def frame(self, where: str, raw: Any) -> Frame:
-        self.check_keys(where + ".", raw, {"name", "link", "xyz", "rpy"})
+        self.check_keys(where + ".", raw, {"name", "link", "xyz", "rpy", "aliases"})
         for key in ("name", "link"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
+        aliases = raw.get("aliases") or []
+        if not isinstance(aliases, list):
+            raise self.error(where + ".aliases", "expected a list of names")
         return Frame(
             name=identifier(self.name, where + ".name", raw["name"]),
             link=str(raw["link"]),
             origin=Origin(self.vec3(where + ".xyz", raw.get("xyz")), self.vec3(where + ".rpy", raw.get("rpy"))),
+            aliases=tuple(identifier(self.name, f"{where}.aliases[{k}]", a) for k, a in enumerate(aliases)),
         )
 
     # ---- robot ----
@@ -393,10 +397,15 @@ class _Parser:
         self.check_names(robot)
         self.check_values(robot)
         robot = self.resolve_mimics(robot)
-        known = robot.frame_names
+        known = robot.frame_names + tuple(robot.frame_aliases)
         for i, frame in enumerate(robot.wrench_frames):
             if frame not in known:
                 raise self.error(f"wrenches[{i}]", f"unknown frame '{shown(frame)}' (links and frames: {', '.join(known)})")
+        if robot.wrenches:  # an alias stands for its frame: the generated *_fext take the frame's name
+            wrenches = tuple(map(robot.frame_name, robot.wrenches))
+            if len(set(wrenches)) != len(wrenches):
+                raise self.error("wrenches", "a frame is listed twice (by its name and an alias)")
+            robot = dataclasses.replace(robot, wrenches=wrenches)
         for i, bundle in enumerate(robot.bundles or ()):
             for k, quantity in enumerate(bundle.quantities):
                 self.check_bundle_quantity(f"bundles[{i}].quantities[{k}]", quantity, known)
@@ -525,14 +534,14 @@ class _Parser:
     def check_names(self, robot: Robot) -> None:
         seen: dict[str, str] = {}
         groups = [("links", [x.name for x in robot.links]), ("joints", [x.name for x in robot.joints]),
-                  ("frames", [x.name for x in robot.frames])]
+                  ("frames", [x.name for x in robot.frames] + [a for x in robot.frames for a in x.aliases])]
         for group, names in groups:
             local: set[str] = set()
             for n in names:
                 if n in local:
                     raise self.error(group, f"duplicate name '{n}'")
                 local.add(n)
-        for group, names in (groups[0], groups[2]):  # links and frames share fk_<name>
+        for group, names in (groups[0], groups[2]):  # links, frames and aliases share fk_<name>
             for n in names:
                 if n in seen:
                     raise self.error(group, f"name '{n}' is used by both {seen[n]} and {group}")

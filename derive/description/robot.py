@@ -278,11 +278,16 @@ class Bundle:
 
 @dataclass(frozen=True)
 class Frame:
-    """A named frame rigidly attached to a link, e.g. the tool centre point."""
+    """A named frame rigidly attached to a link, e.g. the tool centre point.
+
+    ``aliases``: other names of the same frame (an imported URDF's own name of the link that became
+    ``tcp``), usable wherever a frame is asked for; the generated code keeps one set of functions
+    under ``name`` and spells the aliases as references to them."""
 
     name: str
     link: str
     origin: Origin = Origin()
+    aliases: tuple[str, ...] = ()
 
 
 FREE_FLYER = "root_joint"
@@ -463,10 +468,23 @@ class Robot:
         return next((j for j in self.joints if j.child == link_name), None)
 
     @property
+    def link_names(self) -> tuple[str, ...]:
+        """Every link in tree order: the root, then each joint's child."""
+        return (self.root,) + tuple(j.child for j in self.joints)
+
+    @property
     def frame_names(self) -> tuple[str, ...]:
-        """Every frame FK can place: links first (tree order), then named frames."""
-        ordered = [self.root] + [j.child for j in self.joints]
-        return tuple(ordered) + tuple(f.name for f in self.frames)
+        """Every frame FK can place: links first (tree order), then named frames (aliases not included)."""
+        return self.link_names + tuple(f.name for f in self.frames)
+
+    @property
+    def frame_aliases(self) -> dict[str, str]:
+        """{alias: frame name} of every named frame's aliases."""
+        return {a: f.name for f in self.frames for a in f.aliases}
+
+    def frame_name(self, name: str) -> str:
+        """The frame ``name`` stands for: itself, or the frame it is an alias of."""
+        return self.frame_aliases.get(name, name)
 
 
 def model_data(robot: Robot) -> dict:
@@ -482,6 +500,9 @@ def model_data(robot: Robot) -> dict:
     for key in ("wrenches", "coulomb_smoothing", "bundles"):
         if data[key] is None:
             del data[key]
+    for frame in data["frames"]:  # models without aliases keep the hash they had before aliases existed
+        if not frame["aliases"]:
+            del frame["aliases"]
     for joint in data["joints"]:
         for key in ("pitch", "axis2", "mimic", "actuator"):
             if joint[key] is None:

@@ -1,0 +1,141 @@
+"""Frames (issue 25, item 6): a URDF tip keeps its own name as an alias of ``tcp``, usable in the
+description, the symbolic model, the numeric reference, the CLI, the generated C, Python and JAX
+and derive.compiled; one set of generated functions, the alias spelled as references to it."""
+
+from __future__ import annotations
+
+import json
+import importlib.util
+
+import casadi as ca
+import numpy as np
+import pytest
+import yaml
+
+from derive.cli import main
+from derive.description.model import parse_models
+from derive.description.urdf import import_urdf
+from derive.reference import NumericRobot
+from derive.symbolic.model import SXModel
+
+# base -(shoulder)- upper -(elbow)- fore -(fixed)- tool_frame; upper is a moving link with no fixed child
+ARM_URDF = """\
+<robot name="arm">
+  <link name="base"/>
+  <link name="upper"><inertial><mass value="1.2"/><origin xyz="0.2 0 0"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.02"/></inertial></link>
+  <link name="fore"><inertial><mass value="0.7"/><origin xyz="0.15 0 0"/>
+    <inertia ixx="0.001" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <link name="tool_frame"/>
+  <joint name="shoulder" type="revolute"><parent link="base"/><child link="upper"/>
+    <axis xyz="0 1 0"/><limit lower="-2" upper="2" effort="40" velocity="3"/></joint>
+  <joint name="elbow" type="revolute"><parent link="upper"/><child link="fore"/><origin xyz="0.4 0 0"/>
+    <axis xyz="0 1 0"/><limit lower="-2.5" upper="2.5" effort="20" velocity="3"/></joint>
+  <joint name="tool_joint" type="fixed"><parent link="fore"/><child link="tool_frame"/>
+    <origin xyz="0.3 0 0.05" rpy="0 0.5 0"/></joint>
+</robot>
+"""
+Q = np.array([0.3, -0.7])
+
+
+@pytest.fixture(scope="module")
+def arm(tmp_path_factory):
+    """(models file, robot, generated folder) of the arm imported with --tip tool_frame."""
+    folder = tmp_path_factory.mktemp("frames")
+    urdf = folder / "arm.urdf"
+    urdf.write_text(ARM_URDF)
+    entry = import_urdf(urdf, "tool_frame")
+    models = folder / "models.yaml"
+    models.write_text(yaml.safe_dump({"robots": {"arm": entry}}, sort_keys=False))
+    robot = parse_models(models.read_text())["arm"]
+    out = folder / "generated"
+    assert main(["--models", str(models), "generate", "--out", str(out)]) == 0
+    return models, robot, out
+
+
+def load_module(path, name):
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_urdf_tip_keeps_its_name_as_an_alias_of_tcp(arm):
+    _, robot, _ = arm
+    (tcp,) = robot.frames
+    assert (tcp.name, tcp.link, tcp.aliases) == ("tcp", "fore", ("tool_frame",))
+    assert robot.frame_aliases == {"tool_frame": "tcp"} and robot.frame_name("tool_frame") == "tcp"
+    model = SXModel(robot)
+    for quantity in (model.fk, model.jacobian):
+        assert ca.SX(quantity("tool_frame") - quantity("tcp")).is_zero()  # the same expression, structurally
+    ref = NumericRobot(robot)
+    np.testing.assert_array_equal(ref.frame_pose(Q, "tool_frame"), ref.frame_pose(Q, "tcp"))
+    np.testing.assert_array_equal(ref.jacobian(Q, "tool_frame"), ref.jacobian(Q, "tcp"))
+
+
+def test_a_moving_tip_needs_no_alias(tmp_path):
+    urdf = tmp_path / "arm.urdf"
+    urdf.write_text(ARM_URDF)
+    (tcp,) = [f for f in import_urdf(urdf, "fore")["frames"] if f["name"] == "tcp"]
+    assert "aliases" not in tcp  # the link 'fore' is a frame of its own
+
+
+def test_alias_is_one_set_of_functions_under_both_names(arm):
+    _, robot, out = arm
+    manifest = json.loads((out / "arm" / "manifest.json").read_text())
+    assert manifest["aliases"] == {"tool_frame": "tcp"}
+    names = [f["name"] for f in manifest["functions"]]
+    assert not [n for n in names if "tool_frame" in n]  # no duplicated code
+    header = (out / "arm" / "c" / "arm.h").read_text()
+    tcp_functions = [n for n in names if n.endswith("_tcp")]
+    assert len(tcp_functions) == 7  # fk, jacobian, jdot_qd, frame_acceleration, fk_jacobian, ik, manipulability
+    for n in tcp_functions:
+        assert f"#define {n[:-3]}tool_frame {n}\n" in header
+    py = load_module(out / "arm" / "python" / "arm.py", "arm_frames_py")
+    assert py.fk_tool_frame is py.fk_tcp and py.ik_tool_frame is py.ik_tcp
+    T = py.fk_tool_frame(Q)
+    np.testing.assert_allclose(T, NumericRobot(robot).frame_pose(Q, "tool_frame"), rtol=0, atol=1e-15)
+    jax_text = (out / "arm" / "jax" / "arm.py").read_text()
+    assert "fk_tool_frame = fk_tcp\n" in jax_text and "ik_tool_frame" not in jax_text  # no IK in JAX
+
+
+def test_alias_in_compiled_c(arm):
+    from derive.runtime import compiled
+    _, robot, out = arm
+    mod = compiled("arm", out)
+    assert mod.fk_tool_frame is mod.fk_tcp and mod.jacobian_tool_frame is mod.jacobian_tcp
+    np.testing.assert_allclose(mod.fk_tool_frame(Q), NumericRobot(robot).frame_pose(Q, "tcp"), rtol=0, atol=1e-15)
+
+
+def test_alias_in_the_cli(arm, capsys):
+    models, robot, _ = arm
+    target = NumericRobot(robot).frame_pose(Q, "tcp")[:3, 3]
+    assert main(["--models", str(models), "ik", "arm", "--xyz", *map(str, target), "--frame", "tool_frame"]) == 0
+    assert "position target for frame 'tool_frame': solved" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("aliases, problem", [
+    ("[upper]", "frames: name 'upper' is used by both links and frames"),
+    ("[tcp]", "frames: duplicate name 'tcp'"),
+    ("[1tool]", "frames[0].aliases[0]: '1tool' is not a C identifier"),
+    ("tool", "frames[0].aliases: expected a list of names"),
+])
+def test_bad_alias_is_one_line(arm, aliases, problem):
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["frames"][0]["aliases"] = yaml.safe_load(aliases)
+    with pytest.raises(Exception) as info:
+        parse_models(yaml.safe_dump(data, sort_keys=False))
+    assert problem in str(info.value)
+
+
+def test_alias_in_wrenches_and_bundles_stands_for_its_frame(arm):
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["wrenches"] = ["tool_frame"]
+    data["robots"]["arm"]["bundles"] = [{"name": "tick", "quantities": ["fk_tool_frame", "jacobian_upper"]}]
+    robot = parse_models(yaml.safe_dump(data))["arm"]
+    assert robot.wrench_frames == ("tcp",)
+    data["robots"]["arm"]["wrenches"] = ["tool_frame", "tcp"]
+    with pytest.raises(Exception, match=r"wrenches: a frame is listed twice \(by its name and an alias\)"):
+        parse_models(yaml.safe_dump(data))
