@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import importlib.util
+from pathlib import Path
 
 import casadi as ca
 import numpy as np
@@ -36,6 +37,7 @@ ARM_URDF = """\
 </robot>
 """
 Q = np.array([0.3, -0.7])
+ROOT = Path(__file__).resolve().parent.parent
 
 
 @pytest.fixture(scope="module")
@@ -139,3 +141,117 @@ def test_alias_in_wrenches_and_bundles_stands_for_its_frame(arm):
     data["robots"]["arm"]["wrenches"] = ["tool_frame", "tcp"]
     with pytest.raises(Exception, match=r"wrenches: a frame is listed twice \(by its name and an alias\)"):
         parse_models(yaml.safe_dump(data))
+
+
+# ---- fk_all: every link's pose in one pass, in C, Python and JAX
+
+SHIPPED = ("pendulum", "planar_2r", "rrprr", "cartpole", "ur5", "panda")
+
+
+def random_qs(robot, n=4, seed=7):
+    rng = np.random.default_rng(seed)
+    lo, hi = (np.clip(np.array(b), -3, 3) for b in robot.joint_box())
+    return rng.uniform(lo, hi, size=(n, robot.nq))
+
+
+@pytest.mark.parametrize("name", SHIPPED)
+def test_fk_all_of_the_shipped_robots_matches_the_reference_and_pinocchio(name):
+    from derive.description.model import load_models
+    from derive.reference.pinocchio_model import PinRobot
+    robot = load_models()[name]
+    folder = ROOT / "generated" / name
+    (entry,) = [f for f in json.loads((folder / "manifest.json").read_text())["functions"] if f["quantity"] == "fk_all"]
+    links = robot.link_names
+    assert entry["name"] == f"{name}_fk_all" and entry["links"] == list(links)
+    assert entry["outputs"] == [{"name": "T", "shape": [4 * len(links), 4]}]
+    mod = load_module(folder / "python" / f"{name}.py", f"frames_{name}")
+    ref, pin = NumericRobot(robot), PinRobot(robot)
+    Q = random_qs(robot)
+    batch = mod.fk_all(Q).reshape(len(Q), len(links), 4, 4)
+    for q, poses in zip(Q, batch):
+        np.testing.assert_array_equal(poses, mod.fk_all(q).reshape(len(links), 4, 4))  # a batch: bit for bit
+        expected = ref.fk(q)
+        for link, T in zip(links, poses):
+            np.testing.assert_allclose(T, expected[link], rtol=0, atol=1e-12, err_msg=link)
+            np.testing.assert_allclose(T, pin.pose(q, link), rtol=0, atol=1e-12, err_msg=link)
+
+
+def test_fk_all_in_compiled_c_and_jax(arm):
+    from derive.runtime import compiled
+    _, robot, out = arm
+    ref = NumericRobot(robot)
+    Q = random_qs(robot)
+    c = compiled("arm", out).fk_all(Q).reshape(len(Q), 3, 4, 4)
+    for q, poses in zip(Q, c):
+        expected = ref.fk(q)
+        for link, T in zip(robot.link_names, poses):
+            np.testing.assert_allclose(T, expected[link], rtol=0, atol=1e-12, err_msg=link)
+    jax = load_module(out / "arm" / "jax" / "arm.py", "arm_frames_jax")
+    np.testing.assert_allclose(np.asarray(jax.fk_all(Q)).reshape(c.shape), c, rtol=0, atol=1e-13)
+    header = (out / "arm" / "c" / "arm_fk_all.h").read_text()
+    assert "void arm_fk_all(const DERIVE_REAL *q, DERIVE_REAL *T);" in header.replace("DERIVE_FN ", "")
+
+
+# ---- every link is a frame where asked: derive fk, and generate: {frames: [...]}
+
+
+def test_derive_fk_prints_any_link_frame_or_alias(arm, capsys):
+    models, robot, _ = arm
+    assert main(["--models", str(models), "fk", "arm", "--q", "0.3", "-0.7", "--frame", "upper,tool_frame",
+                 "--jacobian"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[0] == "arm: world_T_frame at q = [0.3, -0.7] and J (6x2, [linear; angular], LOCAL_WORLD_ALIGNED)"
+    assert lines[1] == "upper:" and lines[13] == "tool_frame (alias of tcp):" and lines[6] == lines[18] == "  J:"
+    ref = NumericRobot(robot)
+    for first, frame in ((2, "upper"), (14, "tcp")):
+        T = np.array([[float(x) for x in line.split()] for line in lines[first:first + 4]])
+        J = np.array([[float(x) for x in line.split()] for line in lines[first + 5:first + 11]])
+        np.testing.assert_allclose(T, ref.frame_pose(Q, frame), rtol=0, atol=1e-11)
+        np.testing.assert_allclose(J, ref.jacobian(Q, frame), rtol=0, atol=1e-11)
+    assert main(["--models", str(models), "fk", "arm", "--frame", "elbow"]) == 2
+    assert capsys.readouterr().err == ("derive: error: robot 'arm': no frame 'elbow' (links and frames: base, upper, "
+                                       "fore, tcp, tool_frame)\n")
+
+
+def test_generate_frames_gives_links_their_functions(arm, tmp_path):
+    models, robot, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["generate"] = {"frames": ["tool_frame", "upper"]}  # an alias stands for its frame
+    mine = tmp_path / "models.yaml"
+    mine.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = tmp_path / "generated"
+    assert main(["--models", str(mine), "generate", "--out", str(out)]) == 0
+    manifest = json.loads((out / "arm" / "manifest.json").read_text())
+    assert manifest["frames"] == ["tcp", "upper"]
+    framed = [f["name"][4:] for f in manifest["functions"] if f["frame"] is not None and f["quantity"] != "bundle"]
+    assert framed == ["fk_tcp", "jacobian_tcp", "jdot_qd_tcp", "frame_acceleration_tcp",
+                      "fk_upper", "jacobian_upper", "jdot_qd_upper", "frame_acceleration_upper", "fk_jacobian_tcp",
+                      "ik_tcp", "manipulability_tcp"]  # upper's origin never moves: no manipulability
+    mod = load_module(out / "arm" / "python" / "arm.py", "arm_frames_links")
+    ref = NumericRobot(robot)
+    np.testing.assert_allclose(mod.fk_upper(Q), ref.frame_pose(Q, "upper"), rtol=0, atol=1e-15)
+    np.testing.assert_allclose(mod.jacobian_upper(Q), ref.jacobian(Q, "upper"), rtol=0, atol=1e-15)
+    assert mod.fk_tool_frame is mod.fk_tcp
+
+
+@pytest.mark.parametrize("generate, problem", [
+    ({"frames": ["elbow"]}, "generate.frames[0]: unknown frame 'elbow' (links and frames: base, upper, fore, tcp, tool_frame)"),
+    ({"frames": ["tcp", "tool_frame"]}, "generate.frames[1]: 'tool_frame' is listed twice (by its name or an alias)"),
+    ({"frames": "tcp"}, "generate.frames: expected a list of link or frame names"),
+    ({"quantity": ["fk"]}, "generate.quantity"),
+])
+def test_bad_generate_is_one_line(arm, generate, problem):
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["generate"] = generate
+    with pytest.raises(Exception) as info:
+        parse_models(yaml.safe_dump(data, sort_keys=False))
+    assert problem in str(info.value)
+
+
+def test_a_frame_called_all_is_refused(arm):
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["frames"].append({"name": "all", "link": "upper"})
+    with pytest.raises(Exception, match="frames: the frame name 'all' is reserved: fk_all is the pose of every link"):
+        parse_models(yaml.safe_dump(data, sort_keys=False))

@@ -25,7 +25,7 @@ from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 
-QUANTITIES = ("fk", "jacobian", "fk_jacobian", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
+QUANTITIES = ("fk", "jacobian", "fk_jacobian", "fk_all", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
               "gravity", "inverse_dynamics", "inverse_dynamics_derivatives", "forward_dynamics", "inverse_dynamics_fext",
               "forward_dynamics_fext", "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor",
               "base_regressor", "bias", "bundle")
@@ -65,23 +65,28 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
         specs.append(FunctionSpec(robot.name, quantity, frame, tuple(inputs) + extra, tuple(outputs), doc + pdoc,
                                   tuple(manifest)))
 
-    for f in robot.frames:
-        add("fk", f.name, [q], [("T", model.fk(f.name))],
-            f"world_T_{f.name}: 4x4 homogeneous transform of frame '{f.name}' in the world (root) frame, row-major.")
-        add("jacobian", f.name, [q], [("J", model.jacobian(f.name))],
-            f"Geometric Jacobian of frame '{f.name}', 6x{n} row-major, rows [linear; angular], "
+    for f in robot.function_frames:  # the named frames, or models.yaml's generate: {frames: [...]} (links too)
+        add("fk", f, [q], [("T", model.fk(f))],
+            f"world_T_{f}: 4x4 homogeneous transform of frame '{f}' in the world (root) frame, row-major.")
+        add("jacobian", f, [q], [("J", model.jacobian(f))],
+            f"Geometric Jacobian of frame '{f}', 6x{n} row-major, rows [linear; angular], "
             "world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.")
-        add("jdot_qd", f.name, [q, qd], [("a", wb.jdot_qd(f.name))],
-            f"J'(q, qd) qd of frame '{f.name}' (6): its classical acceleration [linear; angular] at qdd = 0, "
+        add("jdot_qd", f, [q, qd], [("a", wb.jdot_qd(f))],
+            f"J'(q, qd) qd of frame '{f}' (6): its classical acceleration [linear; angular] at qdd = 0, "
             "world-aligned, without gravity: the bias of task-space control.")
-        add("frame_acceleration", f.name, [q, qd, qdd], [("a", wb.frame_acceleration(f.name))],
-            f"Classical acceleration of frame '{f.name}' (6): [d/dt of its origin's world velocity; angular "
+        add("frame_acceleration", f, [q, qd, qdd], [("a", wb.frame_acceleration(f))],
+            f"Classical acceleration of frame '{f}' (6): [d/dt of its origin's world velocity; angular "
             "acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's "
             "getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED).")
-    if "tcp" in {f.name for f in robot.frames}:
+    if "tcp" in robot.function_frames:
         add("fk_jacobian", "tcp", [q], [("T", model.fk("tcp")), ("J", model.jacobian("tcp"))],
             "world_T_tcp (4x4) and its geometric Jacobian (6x{n}, [linear; angular], LOCAL_WORLD_ALIGNED) "
             "in one pass, sharing the transforms: what IK and control loops need each step.".format(n=n))
+    links = robot.link_names
+    add("fk_all", None, [q], [("T", ca.vertcat(*(model.fk(link) for link in links)))],
+        f"world_T_<link> of all {len(links)} links in one pass, stacked ({4 * len(links)}x4, row-major): rows 4k..4k+3 "
+        f"are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: "
+        f"{', '.join(links)} (manifest.json's links).", (("links", list(links)),))
     add("mass_matrix", None, [q], [("M", ne.mass_matrix)],
         f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.",
         (("algorithm", "CRBA"),))
@@ -337,7 +342,7 @@ def template_functions(model: SXModel, forward: bool = True) -> list[TemplateFun
             "; then the base quaternion x_next[3:7] is divided by its norm (projected back onto the unit sphere)."
             if robot.floating else "."),
         "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n), ("quaternion", 3 if robot.floating else -1)))
-    manipulability = [t for f in robot.frames if (t := manipulability_function(model, f.name))]
+    manipulability = [t for f in robot.function_frames if (t := manipulability_function(model, f))]
     dynamics = ode_jacobian_templates(model) + [rk4] if forward else []
     return dynamics + ik_functions(model) + manipulability
 
@@ -381,7 +386,7 @@ def ik_functions(model: SXModel) -> list[TemplateFunction]:
     extra = template_parameter(model)
     out = []
     for frame in IK_FRAMES if not robot.floating else ():  # IK moves joints; a floating base has no limits to keep
-        if frame not in {f.name for f in robot.frames} or not model.kinematics.ancestors[frame]:
+        if frame not in robot.function_frames or not model.kinematics.ancestors[frame]:
             continue
         context = {"n": n, "frame": frame, "max_iterations": IK_MAX_ITERATIONS, "attempt": ATTEMPT,
                    "tol_position": TOL_POSITION, "tol_rotation": TOL_ROTATION, "lambda0": LAMBDA0,

@@ -170,7 +170,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         **({"continuous": continuous} if continuous else {}),
         "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
                     "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
-        "frames": [fr.name for fr in robot.frames],
+        "frames": list(robot.function_frames),
         **({"aliases": robot.frame_aliases} if robot.frame_aliases else {}),
         "parameters": [{"name": p.name, "default": p.default} for p in robot.parameters],
         "support": [entry for b in backends for entry in b.manifest_support(ctx, per_backend[b.name])],

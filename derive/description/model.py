@@ -349,7 +349,7 @@ class _Parser:
     def robot(self) -> Robot:
         spec = self.spec
         self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
-                                   "base", "wrenches", "coulomb_smoothing", "bundles"})
+                                   "base", "wrenches", "coulomb_smoothing", "bundles", "generate"})
         base = spec.get("base", "fixed")
         if base not in BASES:
             raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
@@ -406,6 +406,11 @@ class _Parser:
             if len(set(wrenches)) != len(wrenches):
                 raise self.error("wrenches", "a frame is listed twice (by its name and an alias)")
             robot = dataclasses.replace(robot, wrenches=wrenches)
+        if "generate" in spec:
+            robot = dataclasses.replace(robot, generate_frames=self.generate_frames(spec["generate"], robot))
+        if "all" in robot.function_frames:  # fk_<frame> would be fk_all, every link's pose
+            raise self.error("generate.frames" if robot.generate_frames else "frames", "the frame name 'all' is reserved: "
+                             "fk_all is the pose of every link; rename the frame or leave it out of generate.frames")
         for i, bundle in enumerate(robot.bundles or ()):
             for k, quantity in enumerate(bundle.quantities):
                 self.check_bundle_quantity(f"bundles[{i}].quantities[{k}]", quantity, known)
@@ -482,6 +487,26 @@ class _Parser:
         raise self.error(where, f"unknown quantity '{shown(quantity)}': one of {', '.join(BUNDLE_QUANTITIES)}, or "
                                 f"{', '.join(p + '_<frame>' for p in BUNDLE_FRAME_QUANTITIES)} for a link or frame "
                                 f"({', '.join(frames)})")
+
+    def generate_frames(self, raw: Any, robot: Robot) -> tuple[str, ...] | None:
+        """``generate: {frames: [...]}``: the links and named frames (an alias stands for its frame)
+        that get the per-frame functions, in the order given; None where ``frames`` is not given."""
+        self.check_keys("generate.", raw, {"frames"})
+        frames = raw.get("frames")
+        if frames is None:
+            return None
+        if not isinstance(frames, list):
+            raise self.error("generate.frames", "expected a list of link or frame names")
+        known = robot.frame_names + tuple(robot.frame_aliases)
+        out: list[str] = []
+        for i, name in enumerate(frames):
+            if name not in known:
+                raise self.error(f"generate.frames[{i}]", f"unknown frame '{shown(name)}' (links and frames: "
+                                 f"{', '.join(known)})")
+            if robot.frame_name(name) in out:
+                raise self.error(f"generate.frames[{i}]", f"'{name}' is listed twice (by its name or an alias)")
+            out.append(robot.frame_name(name))
+        return tuple(out)
 
     def wrenches(self, spec: Mapping) -> tuple[str, ...] | None:
         raw = spec.get("wrenches")

@@ -325,6 +325,7 @@ class Robot:
     wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
     coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
     bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
+    generate_frames: tuple[str, ...] | None = None  # frames given per-frame functions; None: the named frames
     file: str = field(default="", compare=False)  # the models file it was read from ("" if none): for messages only
 
     @property
@@ -478,6 +479,13 @@ class Robot:
         return self.link_names + tuple(f.name for f in self.frames)
 
     @property
+    def function_frames(self) -> tuple[str, ...]:
+        """The frames (named frames or links) that get the generated per-frame functions (``fk_<frame>``,
+        ``jacobian_<frame>``, ...): models.yaml's ``generate: {frames: [...]}``, by default every named
+        frame. Every link's pose is in ``fk_all`` whatever the choice."""
+        return tuple(f.name for f in self.frames) if self.generate_frames is None else self.generate_frames
+
+    @property
     def frame_aliases(self) -> dict[str, str]:
         """{alias: frame name} of every named frame's aliases."""
         return {a: f.name for f in self.frames for a in f.aliases}
@@ -497,7 +505,7 @@ def model_data(robot: Robot) -> dict:
     del data["file"]  # where the model was read from is no part of it
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    for key in ("wrenches", "coulomb_smoothing", "bundles"):
+    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames"):
         if data[key] is None:
             del data[key]
     for frame in data["frames"]:  # models without aliases keep the hash they had before aliases existed
