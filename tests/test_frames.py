@@ -238,7 +238,7 @@ def test_generate_frames_gives_links_their_functions(arm, tmp_path):
     ({"frames": ["elbow"]}, "generate.frames[0]: unknown frame 'elbow' (links and frames: base, upper, fore, tcp, tool_frame)"),
     ({"frames": ["tcp", "tool_frame"]}, "generate.frames[1]: 'tool_frame' is listed twice (by its name or an alias)"),
     ({"frames": "tcp"}, "generate.frames: expected a list of link or frame names"),
-    ({"quantity": ["fk"]}, "generate.quantity"),
+    ({"quantity": ["fk"]}, "generate.quantity"),  # a misspelt key
 ])
 def test_bad_generate_is_one_line(arm, generate, problem):
     models, _, _ = arm
@@ -255,3 +255,40 @@ def test_a_frame_called_all_is_refused(arm):
     data["robots"]["arm"]["frames"].append({"name": "all", "link": "upper"})
     with pytest.raises(Exception, match="frames: the frame name 'all' is reserved: fk_all is the pose of every link"):
         parse_models(yaml.safe_dump(data, sort_keys=False))
+
+
+# ---- generate: {quantities: [...]}: a selection per robot; without it, every function
+
+
+def test_generate_quantities_keeps_those_and_what_they_call(arm, tmp_path):
+    from derive.description.robot import FUNCTION_QUANTITIES
+    models, robot, full = arm
+    every = json.loads((full / "arm" / "manifest.json").read_text())["functions"]
+    assert {f["quantity"] for f in every} == set(FUNCTION_QUANTITIES)  # the list is the catalogue's
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["generate"] = {"frames": ["upper", "tcp"], "quantities": ["fk_all", "jacobian", "ik", "rk4_step"]}
+    mine = tmp_path / "models.yaml"
+    mine.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = tmp_path / "generated"
+    assert main(["--models", str(mine), "generate", "--out", str(out)]) == 0
+    names = [f["name"][4:] for f in json.loads((out / "arm" / "manifest.json").read_text())["functions"]]
+    assert names == ["jacobian_upper", "jacobian_tcp", "fk_jacobian_tcp", "fk_all", "ode_rhs", "rk4_step", "ik_tcp"]
+    assert sorted(p.name for p in (out / "arm" / "c").glob("arm_*.c")) == sorted(f"arm_{n}.c" for n in names)
+    mod = load_module(out / "arm" / "python" / "arm.py", "arm_frames_selected")
+    assert mod.jacobian_tool_frame is mod.jacobian_tcp and not hasattr(mod, "fk_tool_frame")
+    np.testing.assert_allclose(mod.jacobian_upper(Q), NumericRobot(robot).jacobian(Q, "upper"), rtol=0, atol=1e-15)
+    assert "#define arm_ik_tool_frame arm_ik_tcp\n" in (out / "arm" / "c" / "arm.h").read_text()
+
+
+@pytest.mark.parametrize("quantities, problem", [
+    (["fk", "mass"], "generate.quantities[1]: unknown quantity 'mass' (one of fk, jacobian, "),
+    (["fk", "fk"], "generate.quantities: a quantity is listed twice"),
+    ([], "generate.quantities: expected a non-empty list of quantities"),
+])
+def test_bad_generate_quantities_is_one_line(arm, quantities, problem):
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["generate"] = {"quantities": quantities}
+    with pytest.raises(Exception) as info:
+        parse_models(yaml.safe_dump(data, sort_keys=False))
+    assert problem in str(info.value)

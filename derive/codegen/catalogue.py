@@ -12,7 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from derive.description.robot import Robot
+from derive.description.robot import FUNCTION_QUANTITIES, Robot
 from derive.errors import DeriveError
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
@@ -25,10 +25,7 @@ from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 
-QUANTITIES = ("fk", "jacobian", "fk_jacobian", "fk_all", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
-              "gravity", "inverse_dynamics", "inverse_dynamics_derivatives", "forward_dynamics", "inverse_dynamics_fext",
-              "forward_dynamics_fext", "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor",
-              "base_regressor", "bias", "bundle")
+QUANTITIES = FUNCTION_QUANTITIES  # every quantity of a generated function
 
 IK_FRAMES = ("tcp",)      # the frames that have a generated fk_jacobian
 IK_MAX_ITERATIONS = 5000  # the generated solver's iteration cap
@@ -428,3 +425,16 @@ def manipulability_function(model: SXModel, frame: str) -> TemplateFunction | No
         context=(("k", k), ("nv", robot.nv), ("rows", rows),
                  ("jacobian_size", 6 * robot.nv), ("task_size", k * robot.nv)),  # work buffers (reals)
         support=("manipulability",), manifest=(("task_rows", rows),))
+
+
+def selected(robot: Robot, specs: list[FunctionSpec], templates: list[TemplateFunction]
+             ) -> tuple[list[FunctionSpec], list[TemplateFunction]]:
+    """The functions of models.yaml's ``generate: {quantities: [...]}`` (all without it), in the
+    catalogue's order: those of the quantities listed, plus the expression functions the kept
+    template functions call (ik_tcp keeps fk_jacobian_tcp, rk4_step ode_rhs)."""
+    wanted = robot.generate_quantities
+    if wanted is None:
+        return specs, templates
+    templates = [t for t in templates if t.quantity in wanted]
+    called = {short for t in templates for short in t.callees}
+    return [s for s in specs if s.quantity in wanted or s.short_name in called], templates

@@ -22,7 +22,7 @@ from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
 from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
-from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
+from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
                                       compose_mimics, identifier, import_command, shown)
 from derive.resources import EXAMPLE_MODELS
 
@@ -407,7 +407,8 @@ class _Parser:
                 raise self.error("wrenches", "a frame is listed twice (by its name and an alias)")
             robot = dataclasses.replace(robot, wrenches=wrenches)
         if "generate" in spec:
-            robot = dataclasses.replace(robot, generate_frames=self.generate_frames(spec["generate"], robot))
+            robot = dataclasses.replace(robot, generate_frames=self.generate_frames(spec["generate"], robot),
+                                        generate_quantities=self.generate_quantities(spec["generate"]))
         if "all" in robot.function_frames:  # fk_<frame> would be fk_all, every link's pose
             raise self.error("generate.frames" if robot.generate_frames else "frames", "the frame name 'all' is reserved: "
                              "fk_all is the pose of every link; rename the frame or leave it out of generate.frames")
@@ -491,7 +492,7 @@ class _Parser:
     def generate_frames(self, raw: Any, robot: Robot) -> tuple[str, ...] | None:
         """``generate: {frames: [...]}``: the links and named frames (an alias stands for its frame)
         that get the per-frame functions, in the order given; None where ``frames`` is not given."""
-        self.check_keys("generate.", raw, {"frames"})
+        self.check_keys("generate.", raw, {"frames", "quantities"})
         frames = raw.get("frames")
         if frames is None:
             return None
@@ -507,6 +508,22 @@ class _Parser:
                 raise self.error(f"generate.frames[{i}]", f"'{name}' is listed twice (by its name or an alias)")
             out.append(robot.frame_name(name))
         return tuple(out)
+
+    def generate_quantities(self, raw: Mapping) -> tuple[str, ...] | None:
+        """``generate: {quantities: [...]}``: the kinds of generated function kept (each of
+        :data:`FUNCTION_QUANTITIES`; what they call comes along); None where not given: all."""
+        quantities = raw.get("quantities")
+        if quantities is None:
+            return None
+        if not isinstance(quantities, list) or not quantities:
+            raise self.error("generate.quantities", "expected a non-empty list of quantities")
+        for i, q in enumerate(quantities):
+            if q not in FUNCTION_QUANTITIES:
+                raise self.error(f"generate.quantities[{i}]", f"unknown quantity '{shown(q)}' (one of "
+                                 f"{', '.join(FUNCTION_QUANTITIES)})")
+        if len(set(quantities)) != len(quantities):
+            raise self.error("generate.quantities", "a quantity is listed twice")
+        return tuple(quantities)
 
     def wrenches(self, spec: Mapping) -> tuple[str, ...] | None:
         raw = spec.get("wrenches")

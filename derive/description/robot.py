@@ -265,6 +265,13 @@ BUNDLE_QUANTITIES = ("mass_matrix", "bias", "gravity", "coriolis_matrix", "inver
 """What a control-tick bundle may hold: these generated functions' outputs, and per frame F
 those of :data:`BUNDLE_FRAME_QUANTITIES` (``fk_F``, ``jacobian_F``, ...)."""
 BUNDLE_FRAME_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration")
+FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_jacobian", "fk_all", "mass_matrix",
+                       "coriolis_matrix", "gravity", "bias", "inverse_dynamics", "inverse_dynamics_derivatives",
+                       "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext", "com", "com_jacobian",
+                       "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor", "base_regressor", "bundle",
+                       "rk4_step", "ik", "manipulability")
+"""The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
+``generate: {quantities: [...]}`` may choose from."""
 
 
 @dataclass(frozen=True)
@@ -326,6 +333,7 @@ class Robot:
     coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
     bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
     generate_frames: tuple[str, ...] | None = None  # frames given per-frame functions; None: the named frames
+    generate_quantities: tuple[str, ...] | None = None  # quantities generated (and what they call); None: all
     file: str = field(default="", compare=False)  # the models file it was read from ("" if none): for messages only
 
     @property
@@ -505,7 +513,7 @@ def model_data(robot: Robot) -> dict:
     del data["file"]  # where the model was read from is no part of it
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames"):
+    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities"):
         if data[key] is None:
             del data[key]
     for frame in data["frames"]:  # models without aliases keep the hash they had before aliases existed
