@@ -292,3 +292,31 @@ def test_bad_generate_quantities_is_one_line(arm, quantities, problem):
     with pytest.raises(Exception) as info:
         parse_models(yaml.safe_dump(data, sort_keys=False))
     assert problem in str(info.value)
+
+
+def test_double_pendulum_links_get_fk_and_jacobians_against_pinocchio(tmp_path, capsys):
+    """example-robot-data's double_pendulum has no fixed child, hence no named frame: fk_all places both
+    links, generate: {frames: [link1, link2]} gives them their functions; Pinocchio reads the URDF itself."""
+    import pinocchio as pin  # a hard requirement, as in tests/test_urdf.py
+    from derive.description.urdf import example_robot_data_dir
+    urdf = "example-robot-data:double_pendulum_description/urdf/double_pendulum.urdf"
+    entry = import_urdf(urdf)
+    assert entry["frames"] == []
+    entry["generate"] = {"frames": ["link1", "link2"], "quantities": ["fk", "jacobian", "fk_all"]}
+    models = tmp_path / "models.yaml"
+    models.write_text(yaml.safe_dump({"robots": {"double_pendulum": entry}}, sort_keys=False))
+    out = tmp_path / "generated"
+    assert main(["--models", str(models), "generate", "--out", str(out)]) == 0
+    mod = load_module(out / "double_pendulum" / "python" / "double_pendulum.py", "frames_double_pendulum")
+    model = pin.buildModelFromUrdf(str(example_robot_data_dir() / urdf.split(":", 1)[1]))
+    data = model.createData()
+    for q in random_qs(parse_models(models.read_text())["double_pendulum"]):
+        pin.framesForwardKinematics(model, data, q)
+        poses = mod.fk_all(q).reshape(3, 4, 4)
+        for k, link in enumerate(("base_link", "link1", "link2")):
+            fid = model.getFrameId(link, pin.BODY)
+            np.testing.assert_allclose(poses[k], data.oMf[fid].homogeneous, rtol=0, atol=1e-12, err_msg=link)
+            if link != "base_link":
+                np.testing.assert_allclose(getattr(mod, f"fk_{link}")(q), poses[k], rtol=0, atol=1e-15)
+                J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
+                np.testing.assert_allclose(getattr(mod, f"jacobian_{link}")(q), J, rtol=0, atol=1e-12, err_msg=link)
