@@ -320,3 +320,25 @@ def test_double_pendulum_links_get_fk_and_jacobians_against_pinocchio(tmp_path, 
                 np.testing.assert_allclose(getattr(mod, f"fk_{link}")(q), poses[k], rtol=0, atol=1e-15)
                 J = pin.computeFrameJacobian(model, data, q, fid, pin.LOCAL_WORLD_ALIGNED)
                 np.testing.assert_allclose(getattr(mod, f"jacobian_{link}")(q), J, rtol=0, atol=1e-12, err_msg=link)
+
+
+def test_a_selection_derives_only_what_it_keeps(arm, tmp_path, monkeypatch):
+    """The costly derivations (dID/dx, the regressor and base parameters, the bundles) are not even
+    started for a selection without them; templates bring what they call (catalogue.CALLS)."""
+    from derive.codegen import catalogue
+
+    def refuse(*args, **kwargs):
+        raise AssertionError("derived although not selected")
+    for name in ("inverse_dynamics_derivatives_spec", "regressor_specs", "bundle_specs"):
+        monkeypatch.setattr(catalogue, name, refuse)
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["generate"] = {"quantities": ["fk_all", "mass_matrix", "ik", "rk4_step", "manipulability",
+                                                        "ode_jac_u"]}
+    mine = tmp_path / "models.yaml"
+    mine.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = tmp_path / "generated"
+    assert main(["--models", str(mine), "generate", "--out", str(out)]) == 0
+    names = [f["name"][4:] for f in json.loads((out / "arm" / "manifest.json").read_text())["functions"]]
+    assert names == ["jacobian_tcp", "fk_jacobian_tcp", "fk_all", "mass_matrix", "ode_rhs", "ode_jac_u", "rk4_step",
+                     "ik_tcp", "manipulability_tcp"]  # jacobian_tcp: manipulability_tcp calls it

@@ -57,6 +57,7 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     q, qd, qdd, tau = ("q", s.q), ("qd", s.qd), ("qdd", s.qdd), ("tau", s.tau)
     ne = model.newton_euler
     specs: list[FunctionSpec] = []
+    need = wanted(robot)
 
     def add(quantity, frame, inputs, outputs, doc, manifest=()):
         specs.append(FunctionSpec(robot.name, quantity, frame, tuple(inputs) + extra, tuple(outputs), doc + pdoc,
@@ -106,14 +107,15 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
         "so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
         "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.", (("algorithm", "RNEA"),))
-    specs.append(inverse_dynamics_derivatives_spec(model))
-    qdd_fd = model.forward_dynamics() if forward else None
+    if need("inverse_dynamics_derivatives"):  # the costly ones are derived only where a selection keeps them
+        specs.append(inverse_dynamics_derivatives_spec(model))
+    qdd_fd = model.forward_dynamics() if forward and need("forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u") else None
     fd_how = (("algorithm", model.forward_dynamics_algorithm),)
-    if forward:
+    if qdd_fd is not None:
         add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
             f"Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by {FD_DOC[model.forward_dynamics_algorithm]}.", fd_how)
     frames = robot.wrench_frames
-    if frames:
+    if frames and need("inverse_dynamics_fext", "forward_dynamics_fext"):
         k = len(frames)
         w = ca.SX.sym("w", 6 * k)
         wrench_doc = (f"w ({6 * k}): the external wrenches [force; torque] acting at the origins of the frames "
@@ -121,7 +123,7 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
         jtw = wb.wrench_torques(w)
         add("inverse_dynamics_fext", None, [q, qd, qdd, ("w", w)], [("tau", ne.inverse_dynamics() - jtw)],
             f"Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; {wrench_doc}.")
-        if forward:
+        if forward and need("forward_dynamics_fext"):
             add("forward_dynamics_fext", None, [q, qd, tau, ("w", w)],
                 [("qdd", model.forward_dynamics(extra_torque=jtw))],
                 f"Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); {wrench_doc}.", fd_how)
@@ -133,10 +135,12 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     add("centroidal_map", None, [q], [("A", wb.centroidal_map)],
         f"Centroidal momentum matrix A_G (6x{n}, row-major): A_G qd = [linear; angular] momentum about the centre "
         "of mass, world axes (Pinocchio's computeCentroidalMap).")
-    if forward:
+    if forward and need("ode_rhs", "ode_jac_x", "ode_jac_u"):
         ode_specs(model, qdd_fd, add, extra, fd_how)
-    regressor_specs(model, add)
-    bundle_specs(model, specs, add)
+    if need("regressor", "base_regressor"):
+        regressor_specs(model, add)
+    if need("bundle"):
+        bundle_specs(model, specs, add)
     return specs
 
 
@@ -427,6 +431,22 @@ def manipulability_function(model: SXModel, frame: str) -> TemplateFunction | No
         support=("manipulability",), manifest=(("task_rows", rows),))
 
 
+CALLS = {"ik": ("fk_jacobian",), "rk4_step": ("ode_rhs",), "manipulability": ("jacobian",),
+         "ode_jac_x": ("forward_dynamics", "inverse_dynamics_derivatives", "mass_matrix"), "ode_jac_u": ("mass_matrix",)}
+"""The quantities a template function of each quantity may call: derived along with it under a
+selection (:func:`selected` then keeps exactly the functions called)."""
+
+
+def wanted(robot: Robot):
+    """``need(*quantities)``: whether any of them is to be derived: always without models.yaml's
+    ``generate: {quantities: [...]}``, else those listed and what their templates call (:data:`CALLS`)."""
+    chosen = robot.generate_quantities
+    if chosen is None:
+        return lambda *quantities: True
+    derived = set(chosen) | {c for q in chosen for c in CALLS.get(q, ())}
+    return lambda *quantities: any(q in derived for q in quantities)
+
+
 def selected(robot: Robot, specs: list[FunctionSpec], templates: list[TemplateFunction]
              ) -> tuple[list[FunctionSpec], list[TemplateFunction]]:
     """The functions of models.yaml's ``generate: {quantities: [...]}`` (all without it), in the
@@ -437,4 +457,7 @@ def selected(robot: Robot, specs: list[FunctionSpec], templates: list[TemplateFu
         return specs, templates
     templates = [t for t in templates if t.quantity in wanted]
     called = {short for t in templates for short in t.callees}
+    missing = called - {s.short_name for s in specs}
+    if missing:  # CALLS lacks an entry: a template would call a function that was not derived
+        raise DeriveError(f"robot '{robot.name}': internal: {', '.join(sorted(missing))} called but not derived (CALLS)")
     return [s for s in specs if s.quantity in wanted or s.short_name in called], templates
