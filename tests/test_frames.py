@@ -342,3 +342,16 @@ def test_a_selection_derives_only_what_it_keeps(arm, tmp_path, monkeypatch):
     names = [f["name"][4:] for f in json.loads((out / "arm" / "manifest.json").read_text())["functions"]]
     assert names == ["jacobian_tcp", "fk_jacobian_tcp", "fk_all", "mass_matrix", "ode_rhs", "ode_jac_u", "rk4_step",
                      "ik_tcp", "manipulability_tcp"]  # jacobian_tcp: manipulability_tcp calls it
+
+
+def test_info_shows_aliases_and_the_selection(arm, tmp_path, capsys):
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["generate"] = {"frames": ["tcp", "upper"], "quantities": ["fk"]}
+    mine = tmp_path / "models.yaml"
+    mine.write_text(yaml.safe_dump(data, sort_keys=False))
+    assert main(["--models", str(mine), "info", "arm"]) == 0
+    lines = capsys.readouterr().out.splitlines()
+    assert lines[1:4] == ["  frames: tcp (alias tool_frame)",
+                          "  per-frame functions for: tcp, upper (generate.frames; fk_all places every link)",
+                          "  generated quantities: fk (generate.quantities, and what they call)"]
