@@ -355,3 +355,24 @@ def test_info_shows_aliases_and_the_selection(arm, tmp_path, capsys):
     assert lines[1:4] == ["  frames: tcp (alias tool_frame)",
                           "  per-frame functions for: tcp, upper (generate.frames; fk_all places every link)",
                           "  generated quantities: fk (generate.quantities, and what they call)"]
+
+
+def test_fk_all_of_a_floating_base_places_the_base_too(arm, tmp_path):
+    models, _, _ = arm
+    data = yaml.safe_load(models.read_text())
+    data["robots"]["arm"]["base"] = "floating"
+    data["robots"]["arm"]["links"][0] = {**data["robots"]["arm"]["links"][1], "name": "base", "mass": 3.0}  # a body
+    data["robots"]["arm"]["generate"] = {"quantities": ["fk_all"]}
+    mine = tmp_path / "models.yaml"
+    mine.write_text(yaml.safe_dump(data, sort_keys=False))
+    out = tmp_path / "generated"
+    assert main(["--models", str(mine), "generate", "--out", str(out)]) == 0
+    robot = parse_models(mine.read_text())["arm"]
+    mod = load_module(out / "arm" / "python" / "arm.py", "arm_frames_floating")
+    rng = np.random.default_rng(3)
+    for _ in range(3):
+        quat = rng.normal(size=4)
+        q = np.concatenate([rng.normal(size=3), quat / np.linalg.norm(quat), rng.uniform(-2, 2, size=2)])
+        expected = NumericRobot(robot).fk(q)
+        for link, T in zip(robot.link_names, mod.fk_all(q).reshape(3, 4, 4)):
+            np.testing.assert_allclose(T, expected[link], rtol=0, atol=1e-12, err_msg=link)
