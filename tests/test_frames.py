@@ -376,3 +376,20 @@ def test_fk_all_of_a_floating_base_places_the_base_too(arm, tmp_path):
         expected = NumericRobot(robot).fk(q)
         for link, T in zip(robot.link_names, mod.fk_all(q).reshape(3, 4, 4)):
             np.testing.assert_allclose(T, expected[link], rtol=0, atol=1e-12, err_msg=link)
+
+
+def test_c_alias_compiles_and_calls_the_same_function(arm, tmp_path):
+    import shutil
+    import subprocess
+    cc = shutil.which("cc") or shutil.which("gcc")
+    _, robot, out = arm
+    c = out / "arm" / "c"
+    main_c = tmp_path / "main.c"
+    main_c.write_text('#include <stdio.h>\n#include "arm.h"\nint main(void) {\n'
+                      '    const double q[2] = {0.3, -0.7};\n    double T[16];\n    arm_fk_tool_frame(q, T);\n'
+                      '    for (int i = 0; i < 16; ++i) printf("%.17g\\n", T[i]);\n    return 0;\n}\n')
+    exe = tmp_path / "alias"
+    subprocess.run([cc, "-std=c99", "-Wall", "-Werror", f"-I{c}", str(main_c), str(c / "arm_fk_tcp.c"), "-lm", "-o",
+                    str(exe)], check=True)
+    T = np.array([float(x) for x in subprocess.run([str(exe)], capture_output=True, text=True, check=True).stdout.split()])
+    np.testing.assert_allclose(T.reshape(4, 4), NumericRobot(robot).frame_pose(Q, "tool_frame"), rtol=0, atol=1e-15)
