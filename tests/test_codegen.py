@@ -82,6 +82,9 @@ def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
         return [ref.frame_pose(q, fn["frame"]), ref.jacobian(q, fn["frame"])]
     if kind == "fk":
         return ref.frame_pose(q, fn["frame"])
+    if kind == "fk_all":  # every link's pose, stacked in the manifest's order of links
+        poses = ref.fk(q)
+        return np.vstack([poses[link] for link in fn["links"]])
     if kind == "jacobian":
         return ref.jacobian(q, fn["frame"])
     if kind == "manipulability":  # eq. 30 from the singular values of the task rows (mu3 = sqrt det J J^T)

@@ -65,7 +65,7 @@ def test_generates_all_but_forward_dynamics_with_one_warning_and_the_manifest_sa
                                     "coordinates": ["q4", "q5", "q6"], "reason": REASON}
     names = [fn["name"] for fn in manifest["functions"]]
     assert names == [f"irb140_{n}" for n in (
-        "fk_tcp", "jacobian_tcp", "jdot_qd_tcp", "frame_acceleration_tcp", "fk_jacobian_tcp", "mass_matrix",
+        "fk_tcp", "jacobian_tcp", "jdot_qd_tcp", "frame_acceleration_tcp", "fk_jacobian_tcp", "fk_all", "mass_matrix",
         "coriolis_matrix", "gravity", "bias", "inverse_dynamics", "inverse_dynamics_derivatives",
         "inverse_dynamics_fext", "com", "com_jacobian", "centroidal_map", "regressor", "base_regressor",
         "bundle_control", "bundle_computed_torque", "ik_tcp", "manipulability_tcp")]

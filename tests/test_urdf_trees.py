@@ -369,7 +369,8 @@ def test_synthetic_tree_against_pinocchio(pin, tmp_path):
 
     # a tip only adds the frame tcp; a tip on the massless head keeps the path to it
     entry = import_urdf(path, "r_tool")
-    assert entry["frames"][0] == {"name": "tcp", "link": "r_upper", "xyz": [0.0, -0.3, 0.0], "rpy": [0.0, 1.2, 0.0]}
+    assert entry["frames"][0] == {"name": "tcp", "link": "r_upper", "xyz": [0.0, -0.3, 0.0], "rpy": [0.0, 1.2, 0.0],
+                                  "aliases": ["r_tool"]}  # r_tool keeps its name
     assert [j["name"] for j in entry["joints"]] == TREE_JOINTS
     entry = import_urdf(path, "camera")
     assert [j["name"] for j in entry["joints"]] == ["head_pan_joint", "head_tilt_joint"] + TREE_JOINTS

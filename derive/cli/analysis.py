@@ -1,4 +1,4 @@
-"""Commands of the kinematic toolkit: dof, workspace, singularities, manipulability, plan.
+"""Commands of the kinematic toolkit: dof, fk, workspace, singularities, manipulability, plan.
 
 Each command reads its robot (or mechanism file), calls :mod:`derive.analysis` for the
 numbers and :mod:`derive.plot` for the figures (``--png``), and prints the results.
@@ -11,6 +11,7 @@ from typing import Mapping
 
 import numpy as np
 
+from derive.analysis.frames import frame_poses
 from derive.analysis.grubler import mechanism_from_robot, parse_mechanism, read_yaml, report
 from derive.analysis.manipulability import MAX_POSES, Manipulability, default_poses
 from derive.analysis.planning import MAX_LENGTH, MAX_NODES, parse_obstacle, plan
@@ -45,6 +46,41 @@ def parse_q(robot: Robot, text, option: str = "--q") -> np.ndarray:
         bad = robot.coordinates[int(np.argmin(np.isfinite(q)))].name
         raise DeriveError(f"robot '{robot.name}': {option} '{text}': {bad} = {q[np.argmin(np.isfinite(q))]:g} is not a finite number")
     return q
+
+
+# --------------------------------------------------------------------------- fk
+
+
+def fk_command(args) -> int:
+    """world_T_frame (and with --jacobian J) of the frames asked (default: every link and named frame)."""
+    robot = load_robot(args.robot_name, args.models)
+    if args.q is None:
+        q = np.zeros(robot.nq)
+        if robot.floating:
+            q[6] = 1.0  # the identity quaternion (x, y, z, w)
+    else:
+        try:
+            q = np.array(parse_vector(args.q, "--q"))
+        except DeriveError as exc:
+            raise DeriveError(f"robot '{robot.name}': {exc}") from None
+        if q.shape[0] != robot.nq or not np.all(np.isfinite(q)):
+            raise DeriveError(f"robot '{robot.name}': --q: expected {robot.nq} finite values "
+                              f"({', '.join(c.name for c in robot.coordinates)}), "
+                              f"got {' '.join(args.q)}")
+    frames = [f for text in args.frame or () for f in text.split(",") if f] or None
+    poses = frame_poses(robot, q, frames, jacobian=args.jacobian)
+    print(f"{robot.name}: world_T_frame at q = {fmt(q)}" + (" and J (6x" f"{robot.nv}, [linear; angular], "
+                                                            "LOCAL_WORLD_ALIGNED)" if args.jacobian else ""))
+    for name, (T, J) in poses.items():
+        alias = robot.frame_aliases.get(name)
+        print(f"{name}" + (f" (alias of {alias})" if alias else "") + ":")
+        for row in T:
+            print("  " + " ".join(f"{x + 0.0: .12g}" for x in row))  # + 0.0: no -0
+        if J is not None:
+            print("  J:")
+            for row in J:
+                print("  " + " ".join(f"{x + 0.0: .12g}" for x in row))  # + 0.0: no -0
+    return 0
 
 
 # --------------------------------------------------------------------------- dof
@@ -187,6 +223,17 @@ def add_parser(sub) -> None:
                                    "(see examples/grubler_example2.yaml).")
     p.add_argument("target", help="robot name in models.yaml, or a mechanism .yaml file")
     p.set_defaults(func=dof_command)
+
+    p = sub.add_parser("fk", help="world pose (and Jacobian) of any link, frame or alias at q",
+                       description="Print world_T_frame (4x4) of each frame asked, by default every link and named "
+                                   "frame, at q (default: zero, a floating base at the origin); with --jacobian also "
+                                   "the 6 x nv geometric Jacobian [linear; angular], LOCAL_WORLD_ALIGNED. No code is "
+                                   "generated: any link works, not only the frames with generated functions.")
+    p.add_argument("robot_name")
+    p.add_argument("--q", nargs="+", help=vector_help("configuration (nq values)"))
+    p.add_argument("--frame", action="append", help="link, frame or alias (repeatable, or comma-separated)")
+    p.add_argument("--jacobian", action="store_true", help="also print J")
+    p.set_defaults(func=fk_command)
 
     p = sub.add_parser("workspace", help="sample the configuration space through FK; plot both spaces",
                        description="Sample q in the joint box (grid or random), map through FK, print the "

@@ -60,7 +60,7 @@ def cmd_latex(args) -> int:
     if args.width < MIN_WIDTH:
         raise DeriveError(f"robot '{robot.name}': --width must be at least {MIN_WIDTH} characters, got {args.width}")
     check_count(args.width, "--width", MIN_WIDTH, MAX_WIDTH, "characters per line", f"robot '{robot.name}'")
-    frames = (robot.root,) + tuple(j.child for j in robot.joints) + tuple(f.name for f in robot.frames)
+    frames = robot.frame_names + tuple(robot.frame_aliases)
     for frame in args.fk + args.jacobian:
         if frame not in frames:
             raise DeriveError(f"robot '{robot.name}': no frame '{frame}' (known: {', '.join(frames)})")

@@ -95,7 +95,12 @@ def cmd_info(args) -> int:
         for j in r.moving_joints:
             if j.gimbal_lock:
                 print(f"  gimbal lock: {j.gimbal_lock}")
-        print(f"  frames: {', '.join(f.name for f in r.frames)}")
+        named = [f.name + (" (alias " + ", ".join(f.aliases) + ")" if f.aliases else "") for f in r.frames]
+        print(f"  frames: {', '.join(named)}")
+        if r.generate_frames is not None:
+            print(f"  per-frame functions for: {', '.join(r.generate_frames)} (generate.frames; fk_all places every link)")
+        if r.generate_quantities is not None:
+            print(f"  generated quantities: {', '.join(r.generate_quantities)} (generate.quantities, and what they call)")
         if r.wrench_frames:
             print(f"  wrench frames (the *_fext functions): {', '.join(r.wrench_frames)}")
         if r.parameters:

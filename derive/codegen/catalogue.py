@@ -12,7 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from derive.description.robot import Robot
+from derive.description.robot import FUNCTION_QUANTITIES, Robot
 from derive.errors import DeriveError
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
@@ -25,10 +25,7 @@ from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 
-QUANTITIES = ("fk", "jacobian", "fk_jacobian", "jdot_qd", "frame_acceleration", "mass_matrix", "coriolis_matrix",
-              "gravity", "inverse_dynamics", "inverse_dynamics_derivatives", "forward_dynamics", "inverse_dynamics_fext",
-              "forward_dynamics_fext", "com", "com_jacobian", "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor",
-              "base_regressor", "bias", "bundle")
+QUANTITIES = FUNCTION_QUANTITIES  # every quantity of a generated function
 
 IK_FRAMES = ("tcp",)      # the frames that have a generated fk_jacobian
 IK_MAX_ITERATIONS = 5000  # the generated solver's iteration cap
@@ -60,28 +57,34 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     q, qd, qdd, tau = ("q", s.q), ("qd", s.qd), ("qdd", s.qdd), ("tau", s.tau)
     ne = model.newton_euler
     specs: list[FunctionSpec] = []
+    need = wanted(robot)
 
     def add(quantity, frame, inputs, outputs, doc, manifest=()):
         specs.append(FunctionSpec(robot.name, quantity, frame, tuple(inputs) + extra, tuple(outputs), doc + pdoc,
                                   tuple(manifest)))
 
-    for f in robot.frames:
-        add("fk", f.name, [q], [("T", model.fk(f.name))],
-            f"world_T_{f.name}: 4x4 homogeneous transform of frame '{f.name}' in the world (root) frame, row-major.")
-        add("jacobian", f.name, [q], [("J", model.jacobian(f.name))],
-            f"Geometric Jacobian of frame '{f.name}', 6x{n} row-major, rows [linear; angular], "
+    for f in robot.function_frames:  # the named frames, or models.yaml's generate: {frames: [...]} (links too)
+        add("fk", f, [q], [("T", model.fk(f))],
+            f"world_T_{f}: 4x4 homogeneous transform of frame '{f}' in the world (root) frame, row-major.")
+        add("jacobian", f, [q], [("J", model.jacobian(f))],
+            f"Geometric Jacobian of frame '{f}', 6x{n} row-major, rows [linear; angular], "
             "world-aligned at the frame origin (LOCAL_WORLD_ALIGNED): [v; w] = J qd.")
-        add("jdot_qd", f.name, [q, qd], [("a", wb.jdot_qd(f.name))],
-            f"J'(q, qd) qd of frame '{f.name}' (6): its classical acceleration [linear; angular] at qdd = 0, "
+        add("jdot_qd", f, [q, qd], [("a", wb.jdot_qd(f))],
+            f"J'(q, qd) qd of frame '{f}' (6): its classical acceleration [linear; angular] at qdd = 0, "
             "world-aligned, without gravity: the bias of task-space control.")
-        add("frame_acceleration", f.name, [q, qd, qdd], [("a", wb.frame_acceleration(f.name))],
-            f"Classical acceleration of frame '{f.name}' (6): [d/dt of its origin's world velocity; angular "
+        add("frame_acceleration", f, [q, qd, qdd], [("a", wb.frame_acceleration(f))],
+            f"Classical acceleration of frame '{f}' (6): [d/dt of its origin's world velocity; angular "
             "acceleration], world-aligned, without gravity: J qdd + J' qd (Pinocchio's "
             "getFrameClassicalAcceleration, LOCAL_WORLD_ALIGNED).")
-    if "tcp" in {f.name for f in robot.frames}:
+    if "tcp" in robot.function_frames:
         add("fk_jacobian", "tcp", [q], [("T", model.fk("tcp")), ("J", model.jacobian("tcp"))],
             "world_T_tcp (4x4) and its geometric Jacobian (6x{n}, [linear; angular], LOCAL_WORLD_ALIGNED) "
             "in one pass, sharing the transforms: what IK and control loops need each step.".format(n=n))
+    links = robot.link_names
+    add("fk_all", None, [q], [("T", ca.vertcat(*(model.fk(link) for link in links)))],
+        f"world_T_<link> of all {len(links)} links in one pass, stacked ({4 * len(links)}x4, row-major): rows 4k..4k+3 "
+        f"are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: "
+        f"{', '.join(links)} (manifest.json's links).", (("links", list(links)),))
     add("mass_matrix", None, [q], [("M", ne.mass_matrix)],
         f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.",
         (("algorithm", "CRBA"),))
@@ -104,14 +107,15 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
         "so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
         "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.", (("algorithm", "RNEA"),))
-    specs.append(inverse_dynamics_derivatives_spec(model))
-    qdd_fd = model.forward_dynamics() if forward else None
+    if need("inverse_dynamics_derivatives"):  # the costly ones are derived only where a selection keeps them
+        specs.append(inverse_dynamics_derivatives_spec(model))
+    qdd_fd = model.forward_dynamics() if forward and need("forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u") else None
     fd_how = (("algorithm", model.forward_dynamics_algorithm),)
-    if forward:
+    if qdd_fd is not None:
         add("forward_dynamics", None, [q, qd, tau], [("qdd", qdd_fd)],
             f"Forward dynamics qdd = M(q)^-1 (tau - C(q, qd) qd - g(q)) by {FD_DOC[model.forward_dynamics_algorithm]}.", fd_how)
     frames = robot.wrench_frames
-    if frames:
+    if frames and need("inverse_dynamics_fext", "forward_dynamics_fext"):
         k = len(frames)
         w = ca.SX.sym("w", 6 * k)
         wrench_doc = (f"w ({6 * k}): the external wrenches [force; torque] acting at the origins of the frames "
@@ -119,7 +123,7 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
         jtw = wb.wrench_torques(w)
         add("inverse_dynamics_fext", None, [q, qd, qdd, ("w", w)], [("tau", ne.inverse_dynamics() - jtw)],
             f"Inverse dynamics with external wrenches tau = ID(q, qd, qdd) - sum_f J_f^T w_f; {wrench_doc}.")
-        if forward:
+        if forward and need("forward_dynamics_fext"):
             add("forward_dynamics_fext", None, [q, qd, tau, ("w", w)],
                 [("qdd", model.forward_dynamics(extra_torque=jtw))],
                 f"Forward dynamics with external wrenches qdd = M^-1 (tau + sum_f J_f^T w_f - C qd - g); {wrench_doc}.", fd_how)
@@ -131,10 +135,12 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     add("centroidal_map", None, [q], [("A", wb.centroidal_map)],
         f"Centroidal momentum matrix A_G (6x{n}, row-major): A_G qd = [linear; angular] momentum about the centre "
         "of mass, world axes (Pinocchio's computeCentroidalMap).")
-    if forward:
+    if forward and need("ode_rhs", "ode_jac_x", "ode_jac_u"):
         ode_specs(model, qdd_fd, add, extra, fd_how)
-    regressor_specs(model, add)
-    bundle_specs(model, specs, add)
+    if need("regressor", "base_regressor"):
+        regressor_specs(model, add)
+    if need("bundle"):
+        bundle_specs(model, specs, add)
     return specs
 
 
@@ -337,7 +343,7 @@ def template_functions(model: SXModel, forward: bool = True) -> list[TemplateFun
             "; then the base quaternion x_next[3:7] is divided by its norm (projected back onto the unit sphere)."
             if robot.floating else "."),
         "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n), ("quaternion", 3 if robot.floating else -1)))
-    manipulability = [t for f in robot.frames if (t := manipulability_function(model, f.name))]
+    manipulability = [t for f in robot.function_frames if (t := manipulability_function(model, f))]
     dynamics = ode_jacobian_templates(model) + [rk4] if forward else []
     return dynamics + ik_functions(model) + manipulability
 
@@ -381,7 +387,7 @@ def ik_functions(model: SXModel) -> list[TemplateFunction]:
     extra = template_parameter(model)
     out = []
     for frame in IK_FRAMES if not robot.floating else ():  # IK moves joints; a floating base has no limits to keep
-        if frame not in {f.name for f in robot.frames} or not model.kinematics.ancestors[frame]:
+        if frame not in robot.function_frames or not model.kinematics.ancestors[frame]:
             continue
         context = {"n": n, "frame": frame, "max_iterations": IK_MAX_ITERATIONS, "attempt": ATTEMPT,
                    "tol_position": TOL_POSITION, "tol_rotation": TOL_ROTATION, "lambda0": LAMBDA0,
@@ -423,3 +429,35 @@ def manipulability_function(model: SXModel, frame: str) -> TemplateFunction | No
         context=(("k", k), ("nv", robot.nv), ("rows", rows),
                  ("jacobian_size", 6 * robot.nv), ("task_size", k * robot.nv)),  # work buffers (reals)
         support=("manipulability",), manifest=(("task_rows", rows),))
+
+
+CALLS = {"ik": ("fk_jacobian",), "rk4_step": ("ode_rhs",), "manipulability": ("jacobian",),
+         "ode_jac_x": ("forward_dynamics", "inverse_dynamics_derivatives", "mass_matrix"), "ode_jac_u": ("mass_matrix",)}
+"""The quantities a template function of each quantity may call: derived along with it under a
+selection (:func:`selected` then keeps exactly the functions called)."""
+
+
+def wanted(robot: Robot):
+    """``need(*quantities)``: whether any of them is to be derived: always without models.yaml's
+    ``generate: {quantities: [...]}``, else those listed and what their templates call (:data:`CALLS`)."""
+    chosen = robot.generate_quantities
+    if chosen is None:
+        return lambda *quantities: True
+    derived = set(chosen) | {c for q in chosen for c in CALLS.get(q, ())}
+    return lambda *quantities: any(q in derived for q in quantities)
+
+
+def selected(robot: Robot, specs: list[FunctionSpec], templates: list[TemplateFunction]
+             ) -> tuple[list[FunctionSpec], list[TemplateFunction]]:
+    """The functions of models.yaml's ``generate: {quantities: [...]}`` (all without it), in the
+    catalogue's order: those of the quantities listed, plus the expression functions the kept
+    template functions call (ik_tcp keeps fk_jacobian_tcp, rk4_step ode_rhs)."""
+    wanted = robot.generate_quantities
+    if wanted is None:
+        return specs, templates
+    templates = [t for t in templates if t.quantity in wanted]
+    called = {short for t in templates for short in t.callees}
+    missing = called - {s.short_name for s in specs}
+    if missing:  # CALLS lacks an entry: a template would call a function that was not derived
+        raise DeriveError(f"robot '{robot.name}': internal: {', '.join(sorted(missing))} called but not derived (CALLS)")
+    return [s for s in specs if s.quantity in wanted or s.short_name in called], templates

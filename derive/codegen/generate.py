@@ -47,7 +47,7 @@ from typing import Callable, Iterable
 
 
 from derive.codegen.backends.c import translation_unit_hash
-from derive.codegen.catalogue import function_specs, template_functions
+from derive.codegen.catalogue import function_specs, selected, template_functions
 from derive.codegen.checks import NEEDS_INVERSE_MASS, check_constants, check_mass_matrix, unmoved_reason
 from derive.codegen.render import render_robot
 from derive.errors import DeriveError
@@ -312,6 +312,7 @@ def render(robot: Robot, mhash: str, log: Callable[[str], None], strict: bool = 
         total_ops[0] += prog.ops()["total"]
 
     templates = template_functions(model, forward=not unmoved)
+    specs, templates = selected(robot, specs, templates)
     files = render_robot(robot, specs, mhash[:16], progress=count, templates=templates, left_out=left_out)
     t2 = time.perf_counter()
     log(f"  {robot.name}: derive {t1 - t0:.2f} s, cse+print+render {t2 - t1:.2f} s "

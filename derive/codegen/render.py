@@ -124,6 +124,15 @@ def actuator_table(robot: Robot) -> dict:
     return table
 
 
+def function_aliases(robot: Robot, functions: list[tuple[str, str | None]]) -> tuple[tuple[str, str], ...]:
+    """(alias, function) short names, e.g. ``("fk_tool_frame", "fk_tcp")``: per generated function
+    ``<quantity>_<frame>`` of a named frame with aliases, one per alias. One set of functions, the
+    other names spelled as references to it (a C #define, a Python name bound to the same function)."""
+    named = {f.name: f.aliases for f in robot.frames if f.aliases}
+    return tuple((f"{quantity}_{alias}", f"{quantity}_{frame}") for quantity, frame in functions
+                 if quantity != "bundle" and frame in named for alias in named[frame])
+
+
 def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progress=None,
                  templates: list[TemplateFunction] = (), backends: list[Backend] | None = None,
                  left_out: dict | None = None) -> dict[str, str]:
@@ -134,10 +143,11 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
     backends = registered_backends() if backends is None else backends
     env = environment(backends)
     functions = [expression_function(s, progress) for s in specs] + [template_function(t) for t in templates]
+    aliases = function_aliases(robot, [(fn.common["quantity"], fn.common["frame"]) for fn in functions])
     ctx = RobotContext(robot.name, model_hash, [c.name for c in robot.coordinates], robot.nq, robot.nv,
                        [(p.name, p.default) for p in robot.parameters],
                        tuple(n[len(robot.name) + 1:] for n in (left_out or {}).get("functions", ())),
-                       (left_out or {}).get("reason", ""))
+                       (left_out or {}).get("reason", ""), aliases)
     files: dict[str, str] = {}
     continuous = [robot.coordinates[i].name for i in robot.continuous_indices]
     per_backend = {}
@@ -160,7 +170,8 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         **({"continuous": continuous} if continuous else {}),
         "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
                     "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
-        "frames": [fr.name for fr in robot.frames],
+        "frames": list(robot.function_frames),
+        **({"aliases": robot.frame_aliases} if robot.frame_aliases else {}),
         "parameters": [{"name": p.name, "default": p.default} for p in robot.parameters],
         "support": [entry for b in backends for entry in b.manifest_support(ctx, per_backend[b.name])],
         "functions": [{

@@ -22,7 +22,7 @@ from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
 from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
-from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
+from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
                                       compose_mimics, identifier, import_command, shown)
 from derive.resources import EXAMPLE_MODELS
 
@@ -331,21 +331,25 @@ class _Parser:
         return (self.limits(where, raw),) * dof
 
     def frame(self, where: str, raw: Any) -> Frame:
-        self.check_keys(where + ".", raw, {"name", "link", "xyz", "rpy"})
+        self.check_keys(where + ".", raw, {"name", "link", "xyz", "rpy", "aliases"})
         for key in ("name", "link"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
+        aliases = raw.get("aliases") or []
+        if not isinstance(aliases, list):
+            raise self.error(where + ".aliases", "expected a list of names")
         return Frame(
             name=identifier(self.name, where + ".name", raw["name"]),
             link=str(raw["link"]),
             origin=Origin(self.vec3(where + ".xyz", raw.get("xyz")), self.vec3(where + ".rpy", raw.get("rpy"))),
+            aliases=tuple(identifier(self.name, f"{where}.aliases[{k}]", a) for k, a in enumerate(aliases)),
         )
 
     # ---- robot ----
     def robot(self) -> Robot:
         spec = self.spec
         self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
-                                   "base", "wrenches", "coulomb_smoothing", "bundles"})
+                                   "base", "wrenches", "coulomb_smoothing", "bundles", "generate"})
         base = spec.get("base", "fixed")
         if base not in BASES:
             raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
@@ -393,10 +397,21 @@ class _Parser:
         self.check_names(robot)
         self.check_values(robot)
         robot = self.resolve_mimics(robot)
-        known = robot.frame_names
+        known = robot.frame_names + tuple(robot.frame_aliases)
         for i, frame in enumerate(robot.wrench_frames):
             if frame not in known:
                 raise self.error(f"wrenches[{i}]", f"unknown frame '{shown(frame)}' (links and frames: {', '.join(known)})")
+        if robot.wrenches:  # an alias stands for its frame: the generated *_fext take the frame's name
+            wrenches = tuple(map(robot.frame_name, robot.wrenches))
+            if len(set(wrenches)) != len(wrenches):
+                raise self.error("wrenches", "a frame is listed twice (by its name and an alias)")
+            robot = dataclasses.replace(robot, wrenches=wrenches)
+        if "generate" in spec:
+            robot = dataclasses.replace(robot, generate_frames=self.generate_frames(spec["generate"], robot),
+                                        generate_quantities=self.generate_quantities(spec["generate"]))
+        if "all" in robot.function_frames:  # fk_<frame> would be fk_all, every link's pose
+            raise self.error("generate.frames" if robot.generate_frames else "frames", "the frame name 'all' is reserved: "
+                             "fk_all is the pose of every link; rename the frame or leave it out of generate.frames")
         for i, bundle in enumerate(robot.bundles or ()):
             for k, quantity in enumerate(bundle.quantities):
                 self.check_bundle_quantity(f"bundles[{i}].quantities[{k}]", quantity, known)
@@ -474,6 +489,42 @@ class _Parser:
                                 f"{', '.join(p + '_<frame>' for p in BUNDLE_FRAME_QUANTITIES)} for a link or frame "
                                 f"({', '.join(frames)})")
 
+    def generate_frames(self, raw: Any, robot: Robot) -> tuple[str, ...] | None:
+        """``generate: {frames: [...]}``: the links and named frames (an alias stands for its frame)
+        that get the per-frame functions, in the order given; None where ``frames`` is not given."""
+        self.check_keys("generate.", raw, {"frames", "quantities"})
+        frames = raw.get("frames")
+        if frames is None:
+            return None
+        if not isinstance(frames, list):
+            raise self.error("generate.frames", "expected a list of link or frame names")
+        known = robot.frame_names + tuple(robot.frame_aliases)
+        out: list[str] = []
+        for i, name in enumerate(frames):
+            if name not in known:
+                raise self.error(f"generate.frames[{i}]", f"unknown frame '{shown(name)}' (links and frames: "
+                                 f"{', '.join(known)})")
+            if robot.frame_name(name) in out:
+                raise self.error(f"generate.frames[{i}]", f"'{name}' is listed twice (by its name or an alias)")
+            out.append(robot.frame_name(name))
+        return tuple(out)
+
+    def generate_quantities(self, raw: Mapping) -> tuple[str, ...] | None:
+        """``generate: {quantities: [...]}``: the kinds of generated function kept (each of
+        :data:`FUNCTION_QUANTITIES`; what they call comes along); None where not given: all."""
+        quantities = raw.get("quantities")
+        if quantities is None:
+            return None
+        if not isinstance(quantities, list) or not quantities:
+            raise self.error("generate.quantities", "expected a non-empty list of quantities")
+        for i, q in enumerate(quantities):
+            if q not in FUNCTION_QUANTITIES:
+                raise self.error(f"generate.quantities[{i}]", f"unknown quantity '{shown(q)}' (one of "
+                                 f"{', '.join(FUNCTION_QUANTITIES)})")
+        if len(set(quantities)) != len(quantities):
+            raise self.error("generate.quantities", "a quantity is listed twice")
+        return tuple(quantities)
+
     def wrenches(self, spec: Mapping) -> tuple[str, ...] | None:
         raw = spec.get("wrenches")
         if raw is None:
@@ -525,14 +576,14 @@ class _Parser:
     def check_names(self, robot: Robot) -> None:
         seen: dict[str, str] = {}
         groups = [("links", [x.name for x in robot.links]), ("joints", [x.name for x in robot.joints]),
-                  ("frames", [x.name for x in robot.frames])]
+                  ("frames", [x.name for x in robot.frames] + [a for x in robot.frames for a in x.aliases])]
         for group, names in groups:
             local: set[str] = set()
             for n in names:
                 if n in local:
                     raise self.error(group, f"duplicate name '{n}'")
                 local.add(n)
-        for group, names in (groups[0], groups[2]):  # links and frames share fk_<name>
+        for group, names in (groups[0], groups[2]):  # links, frames and aliases share fk_<name>
             for n in names:
                 if n in seen:
                     raise self.error(group, f"name '{n}' is used by both {seen[n]} and {group}")

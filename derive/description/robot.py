@@ -265,6 +265,13 @@ BUNDLE_QUANTITIES = ("mass_matrix", "bias", "gravity", "coriolis_matrix", "inver
 """What a control-tick bundle may hold: these generated functions' outputs, and per frame F
 those of :data:`BUNDLE_FRAME_QUANTITIES` (``fk_F``, ``jacobian_F``, ...)."""
 BUNDLE_FRAME_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration")
+FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_jacobian", "fk_all", "mass_matrix",
+                       "coriolis_matrix", "gravity", "bias", "inverse_dynamics", "inverse_dynamics_derivatives",
+                       "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext", "com", "com_jacobian",
+                       "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor", "base_regressor", "bundle",
+                       "rk4_step", "ik", "manipulability")
+"""The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
+``generate: {quantities: [...]}`` may choose from."""
 
 
 @dataclass(frozen=True)
@@ -278,11 +285,16 @@ class Bundle:
 
 @dataclass(frozen=True)
 class Frame:
-    """A named frame rigidly attached to a link, e.g. the tool centre point."""
+    """A named frame rigidly attached to a link, e.g. the tool centre point.
+
+    ``aliases``: other names of the same frame (an imported URDF's own name of the link that became
+    ``tcp``), usable wherever a frame is asked for; the generated code keeps one set of functions
+    under ``name`` and spells the aliases as references to them."""
 
     name: str
     link: str
     origin: Origin = Origin()
+    aliases: tuple[str, ...] = ()
 
 
 FREE_FLYER = "root_joint"
@@ -320,6 +332,8 @@ class Robot:
     wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
     coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
     bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
+    generate_frames: tuple[str, ...] | None = None  # frames given per-frame functions; None: the named frames
+    generate_quantities: tuple[str, ...] | None = None  # quantities generated (and what they call); None: all
     file: str = field(default="", compare=False)  # the models file it was read from ("" if none): for messages only
 
     @property
@@ -463,10 +477,30 @@ class Robot:
         return next((j for j in self.joints if j.child == link_name), None)
 
     @property
+    def link_names(self) -> tuple[str, ...]:
+        """Every link in tree order: the root, then each joint's child."""
+        return (self.root,) + tuple(j.child for j in self.joints)
+
+    @property
     def frame_names(self) -> tuple[str, ...]:
-        """Every frame FK can place: links first (tree order), then named frames."""
-        ordered = [self.root] + [j.child for j in self.joints]
-        return tuple(ordered) + tuple(f.name for f in self.frames)
+        """Every frame FK can place: links first (tree order), then named frames (aliases not included)."""
+        return self.link_names + tuple(f.name for f in self.frames)
+
+    @property
+    def function_frames(self) -> tuple[str, ...]:
+        """The frames (named frames or links) that get the generated per-frame functions (``fk_<frame>``,
+        ``jacobian_<frame>``, ...): models.yaml's ``generate: {frames: [...]}``, by default every named
+        frame. Every link's pose is in ``fk_all`` whatever the choice."""
+        return tuple(f.name for f in self.frames) if self.generate_frames is None else self.generate_frames
+
+    @property
+    def frame_aliases(self) -> dict[str, str]:
+        """{alias: frame name} of every named frame's aliases."""
+        return {a: f.name for f in self.frames for a in f.aliases}
+
+    def frame_name(self, name: str) -> str:
+        """The frame ``name`` stands for: itself, or the frame it is an alias of."""
+        return self.frame_aliases.get(name, name)
 
 
 def model_data(robot: Robot) -> dict:
@@ -479,9 +513,12 @@ def model_data(robot: Robot) -> dict:
     del data["file"]  # where the model was read from is no part of it
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    for key in ("wrenches", "coulomb_smoothing", "bundles"):
+    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities"):
         if data[key] is None:
             del data[key]
+    for frame in data["frames"]:  # models without aliases keep the hash they had before aliases existed
+        if not frame["aliases"]:
+            del frame["aliases"]
     for joint in data["joints"]:
         for key in ("pitch", "axis2", "mimic", "actuator"):
             if joint[key] is None:

@@ -14,7 +14,9 @@ Only :mod:`xml.etree` and numpy. The result is a plain dict ready for YAML that
   carries no mass at all is dropped (a massless body at a leaf would make the mass
   matrix singular) and named in the entry's description;
 - ``tip`` names the link that becomes the frame ``tcp`` (none without it); the
-  path to it is kept even where it carries no mass;
+  path to it is kept even where it carries no mass. A tip fused onto its moving
+  body by fixed joints keeps its own name as an alias of ``tcp`` (``aliases:``):
+  ``tool_frame`` and ``tcp`` then name the same frame everywhere;
 - ``chain`` imports the root-to-``chain`` path only (``tcp`` at that link):
   moving branches off it are dropped if they carry no mass and refused otherwise
   (lock them);
@@ -1039,8 +1041,9 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
             link["inertia"] = _clamp_inertia_noise(link["inertia"], link["mass"], NOISE * largest)
 
     frames = []
-    if tip is not None:
-        frames.append({"name": "tcp", "link": body[tip], "xyz": list(pose[tip].xyz), "rpy": list(pose[tip].rpy)})
+    if tip is not None:  # a tip fused onto its moving body keeps its own name as an alias of tcp (a moving link keeps it anyway)
+        frames.append({"name": "tcp", "link": body[tip], "xyz": list(pose[tip].xyz), "rpy": list(pose[tip].rpy),
+                       **({"aliases": [tip]} if body[tip] != tip and tip != "tcp" else {})})
     for n in body:
         if body[n] != n and n != tip:
             frames.append({"name": n, "link": body[n], "xyz": list(pose[n].xyz), "rpy": list(pose[n].rpy)})
@@ -1075,6 +1078,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
     for i, f in enumerate(frames):
         f["name"] = "tcp" if tip is not None and i == 0 else ident("frames", f["name"])
         f["link"] = c_identifier(f["link"])
+        if "aliases" in f:
+            f["aliases"] = [ident("frames", a) for a in f["aliases"]]
     if tip is not None and "tcp" in renamed:
         raise error(key, f"the URDF already has a link called '{renamed['tcp']}'; it would clash with the frame 'tcp'")
     renamed_joints: dict[str, str] = {}

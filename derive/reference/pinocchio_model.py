@@ -164,7 +164,7 @@ class PinRobot:
         assert len(set(self.frame_ids.values())) == len(self.frame_ids)
 
     def frame_id(self, name: str) -> int:
-        return self.frame_ids[name]
+        return self.frame_ids[self.robot.frame_name(name)]  # an alias: the frame it names
 
     def _kinematics(self, q, v=None, a=None) -> None:
         if v is None:

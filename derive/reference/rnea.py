@@ -386,7 +386,7 @@ class NumericRobot:
 
     def _frame(self, name: str) -> tuple[int, np.ndarray]:
         try:
-            return self.frames[name]
+            return self.frames[self.robot.frame_name(name)]  # an alias: the frame it names
         except KeyError:
             raise ValueError(f"robot '{self.robot.name}' has no frame '{name}' (frames: {', '.join(self.frames)})") from None
 

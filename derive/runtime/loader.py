@@ -103,8 +103,21 @@ def _module(robot: str, manifest: dict, sigs: list[Signature], path: Path) -> ty
         fn = _bind(robot, s, pylib, clib, fast, default_p if params else None)
         fn.__module__ = mod.__name__
         setattr(mod, s.name, fn)
+    _aliases(mod, manifest)
     mod.LEFT_OUT = _left_out(robot, mod, manifest)
     return mod
+
+
+def _aliases(mod: types.ModuleType, manifest: dict) -> None:
+    """Every function of a frame with other names (manifest.json's ``aliases``, {alias: frame}) also
+    under those names, as the generated Python module and the C header spell them."""
+    aliases = manifest.get("aliases")
+    if not isinstance(aliases, dict):
+        return
+    for name in mod.FUNCTIONS:
+        for alias, frame in aliases.items():
+            if isinstance(frame, str) and name.endswith("_" + frame) and not name.startswith("bundle_"):
+                setattr(mod, name[: -len(frame)] + alias, getattr(mod, name))
 
 
 def _left_out(robot: str, mod: types.ModuleType, manifest: dict) -> tuple[str, ...]:

@@ -161,6 +161,8 @@ class Kinematics:
             p_o = ca.vertcat(*(sym.value(v) for v in f.origin.xyz))
             poses[f.name] = Pose(link.R @ R_o, link.p + link.R @ p_o)
             ancestors[f.name] = ancestors[f.link]
+        for alias, name in robot.frame_aliases.items():  # the same pose under another name (the URDF's own)
+            poses[alias], ancestors[alias] = poses[name], ancestors[name]
         self.poses = poses
         self.ancestors = ancestors
         self.index = index

@@ -124,12 +124,14 @@ class RobotContext:
     parameters: list[tuple[str, float]]
     left_out: tuple[str, ...] = ()  # short names of the usual functions not generated (M(q) singular), and why
     left_out_reason: str = ""
+    aliases: tuple[tuple[str, str], ...] = ()  # (alias, function) short names: a frame's other name, same function
 
     def data(self) -> dict:
         return {"robot": self.robot, "model_hash": self.model_hash, "joints": self.joints, "nq": self.nq,
                 "nv": self.nv, "np": len(self.parameters),
                 "parameters": [(n, float_literal(v)) for n, v in self.parameters],
-                "left_out": list(self.left_out), "left_out_reason": self.left_out_reason}
+                "left_out": list(self.left_out), "left_out_reason": self.left_out_reason,
+                "aliases": list(self.aliases)}
 
 
 class Backend:

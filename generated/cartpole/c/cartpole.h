@@ -15,6 +15,7 @@
 #include "cartpole_jdot_qd_tcp.h"
 #include "cartpole_frame_acceleration_tcp.h"
 #include "cartpole_fk_jacobian_tcp.h"
+#include "cartpole_fk_all.h"
 #include "cartpole_mass_matrix.h"
 #include "cartpole_coriolis_matrix.h"
 #include "cartpole_gravity.h"

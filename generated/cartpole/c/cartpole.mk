@@ -30,6 +30,7 @@ CARTPOLE_DERIVE_SRC := $(addprefix $(CARTPOLE_DERIVE_DIR)/,\
   cartpole_com.c \
   cartpole_com_jacobian.c \
   cartpole_coriolis_matrix.c \
+  cartpole_fk_all.c \
   cartpole_fk_jacobian_tcp.c \
   cartpole_fk_tcp.c \
   cartpole_forward_dynamics.c \

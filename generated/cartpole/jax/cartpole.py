@@ -183,6 +183,22 @@ def fk_jacobian_tcp(q):
     return T, J
 
 
+def fk_all(q):
+    """world_T_<link> of all 3 links in one pass, stacked (12x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: rail, cart, pole (manifest.json's links).
+
+    in  q [2]
+    out T [12x4]
+    3 ops: 0 mul, 1 add, 0 div, 2 trig
+    """
+    q = _input(q, 2, "q")
+    batch = _batch(q)
+    t0 = jnp.cos(q[..., 1])
+    t1 = jnp.sin(q[..., 1])
+    t2 = -t1
+    T = _assemble([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, q[..., 0], 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t0, 0.0, t1, q[..., 0], 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (12, 4))
+    return T
+
+
 def mass_matrix(q):
     """Joint-space mass matrix M(q) (2x2, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
 

@@ -586,6 +586,60 @@ def _fk_jacobian_tcp_chunk(x, t, s, y):
     copyto(J_1, T_11)
 
 
+def fk_all(q):
+    """world_T_<link> of all 3 links in one pass, stacked (12x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: rail, cart, pole (manifest.json's links).
+
+    in  q [2]
+    out T [12x4]
+    3 ops: 0 mul, 1 add, 0 div, 2 trig
+    """
+    q = _array(q, 2, "fk_all", "q")
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_all_chunk, (q,), 0, ((12, 4),), fixed=_fk_all_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[1])
+    t1 = sin(q[1])
+    t2 = -t1
+    _T = (1.0, 0.0, 0.0, 0.0,
+          0.0, 1.0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          1.0, 0.0, 0.0, q[0],
+          0.0, 1.0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t0, 0.0, t1, q[0],
+          0.0, 1.0, 0.0, 0.0,
+          t2, 0.0, t0, 0.0,
+          0.0, 0.0, 0.0, 1.0)
+    return np.array(_T).reshape(12, 4)
+
+
+_fk_all_fixed = (
+    {0: 1.0, 1: 0.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0,
+     12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0, 16: 1.0, 17: 0.0, 18: 0.0, 20: 0.0, 21: 1.0, 22: 0.0, 23: 0.0,
+     24: 0.0, 25: 0.0, 26: 1.0, 27: 0.0, 28: 0.0, 29: 0.0, 30: 0.0, 31: 1.0, 33: 0.0, 36: 0.0, 37: 1.0,
+     38: 0.0, 39: 0.0, 41: 0.0, 43: 0.0, 44: 0.0, 45: 0.0, 46: 0.0, 47: 1.0},
+)
+"""fk_all's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_all_chunk(x, t, s, y):
+    """fk_all on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, negative, sin = np.copyto, np.cos, np.negative, np.sin
+    q_0, q_1 = x
+    T_19, T_32, T_34, T_35, T_40, T_42 = y
+    cos(q_1, T_32)
+    sin(q_1, T_34)
+    negative(T_34, T_40)
+    copyto(T_19, q_0)
+    copyto(T_35, q_0)
+    copyto(T_42, T_32)
+
+
 def mass_matrix(q):
     """Joint-space mass matrix M(q) (2x2, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
 

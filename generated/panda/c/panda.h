@@ -31,6 +31,7 @@
 #include "panda_jdot_qd_panda_rightfinger.h"
 #include "panda_frame_acceleration_panda_rightfinger.h"
 #include "panda_fk_jacobian_tcp.h"
+#include "panda_fk_all.h"
 #include "panda_mass_matrix.h"
 #include "panda_coriolis_matrix.h"
 #include "panda_gravity.h"

@@ -30,6 +30,7 @@ PANDA_DERIVE_SRC := $(addprefix $(PANDA_DERIVE_DIR)/,\
   panda_com.c \
   panda_com_jacobian.c \
   panda_coriolis_matrix.c \
+  panda_fk_all.c \
   panda_fk_jacobian_tcp.c \
   panda_fk_panda_hand.c \
   panda_fk_panda_leftfinger.c \

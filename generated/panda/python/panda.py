@@ -12367,6 +12367,394 @@ def _fk_jacobian_tcp_chunk(x, t, s, y):
     copyto(J_41, T_10)
 
 
+def fk_all(q):
+    """world_T_<link> of all 8 links in one pass, stacked (32x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: panda_link0, panda_link1, panda_link2, panda_link3, panda_link4, panda_link5, panda_link6, panda_link7 (manifest.json's links).
+
+    in  q [7]
+    out T [32x4]
+    151 ops: 77 mul, 60 add, 0 div, 14 trig
+    """
+    q = _array(q, 7, "fk_all", "q")
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_all_chunk, (q,), 10, ((32, 4),), fixed=_fk_all_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[0])
+    t1 = sin(q[0])
+    t2 = cos(q[1])
+    t3 = t0 * t2
+    t4 = t1 * t2
+    t5 = sin(q[1])
+    t6 = -t5
+    t7 = cos(q[2])
+    t8 = t3 * t7
+    t9 = sin(q[2])
+    t10 = t1 * t9
+    t8 = t8 - t10
+    t10 = t4 * t7
+    t11 = t0 * t9
+    t10 = t10 + t11
+    t11 = t5 * t7
+    t12 = -t11
+    t13 = cos(q[3])
+    t14 = t8 * t13
+    t15 = t0 * t5
+    t16 = sin(q[3])
+    t17 = t15 * t16
+    t14 = t14 + t17
+    t17 = t10 * t13
+    t18 = t1 * t5
+    t19 = t18 * t16
+    t17 = t17 + t19
+    t19 = t2 * t16
+    t20 = t11 * t13
+    t19 = t19 - t20
+    t20 = cos(q[4])
+    t21 = t14 * t20
+    t22 = t3 * t9
+    t23 = t1 * t7
+    t22 = t22 + t23
+    t23 = sin(q[4])
+    t24 = t22 * t23
+    t21 = t21 - t24
+    t24 = t17 * t20
+    t7 = t0 * t7
+    t25 = t4 * t9
+    t7 = t7 - t25
+    t25 = t7 * t23
+    t24 = t24 + t25
+    t25 = t19 * t20
+    t5 = t5 * t9
+    t9 = t5 * t23
+    t9 = t25 + t9
+    t25 = cos(q[5])
+    t26 = t21 * t25
+    t27 = t15 * t13
+    t28 = t8 * t16
+    t27 = t27 - t28
+    t28 = sin(q[5])
+    t29 = t27 * t28
+    t26 = t26 + t29
+    t29 = t24 * t25
+    t30 = t18 * t13
+    t31 = t10 * t16
+    t30 = t30 - t31
+    t31 = t30 * t28
+    t29 = t29 + t31
+    t31 = t9 * t25
+    t16 = t11 * t16
+    t13 = t2 * t13
+    t13 = t16 + t13
+    t16 = t13 * t28
+    t16 = t31 + t16
+    t31 = cos(q[6])
+    t32 = t26 * t31
+    t33 = t14 * t23
+    t34 = t22 * t20
+    t33 = t33 + t34
+    t34 = sin(q[6])
+    t35 = t33 * t34
+    t32 = t32 + t35
+    t35 = t29 * t31
+    t36 = t7 * t20
+    t37 = t17 * t23
+    t36 = t36 - t37
+    t37 = t36 * t34
+    t35 = t35 - t37
+    t37 = t16 * t31
+    t20 = t5 * t20
+    t23 = t19 * t23
+    t20 = t20 - t23
+    t23 = t20 * t34
+    t23 = t37 - t23
+    t37 = -t1
+    t38 = -t15
+    t39 = -t18
+    t40 = -t2
+    t41 = -t22
+    t42 = -t33
+    t43 = t27 * t25
+    t44 = t21 * t28
+    t43 = t43 - t44
+    t44 = t30 * t25
+    t45 = t24 * t28
+    t44 = t44 - t45
+    t25 = t13 * t25
+    t28 = t9 * t28
+    t25 = t25 - t28
+    t28 = t33 * t31
+    t45 = t26 * t34
+    t28 = t28 - t45
+    t45 = t29 * t34
+    t46 = t36 * t31
+    t45 = t45 + t46
+    t45 = -t45
+    t34 = t16 * t34
+    t31 = t20 * t31
+    t31 = t34 + t31
+    t31 = -t31
+    t34 = -t7
+    t46 = -t5
+    t47 = -t36
+    t48 = -t20
+    t49 = -t43
+    t50 = -t44
+    t51 = -t25
+    t52 = (-0.316) * t15
+    t53 = -t52
+    t54 = (-0.316) * t18
+    t55 = -t54
+    t56 = (-0.316) * t2
+    t56 = 0.333 - t56
+    t57 = 0.0825 * t8
+    t52 = t57 - t52
+    t57 = 0.0825 * t10
+    t54 = t57 - t54
+    t11 = 0.0825 * t11
+    t11 = t56 - t11
+    t57 = (-0.0825) * t14
+    t58 = 0.384 * t27
+    t57 = t57 + t58
+    t57 = t52 + t57
+    t58 = (-0.0825) * t17
+    t59 = 0.384 * t30
+    t58 = t58 + t59
+    t58 = t54 + t58
+    t59 = (-0.0825) * t19
+    t60 = 0.384 * t13
+    t59 = t59 + t60
+    t59 = t11 + t59
+    t60 = 0.088 * t26
+    t60 = t57 + t60
+    t61 = 0.088 * t29
+    t61 = t58 + t61
+    t62 = 0.088 * t16
+    t62 = t59 + t62
+    _T = (1.0, 0.0, 0.0, 0.0,
+          0.0, 1.0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t0, t37, 0.0, 0.0,
+          t1, t0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.333,
+          0.0, 0.0, 0.0, 1.0,
+          t3, t38, t37, 0.0,
+          t4, t39, t0, 0.0,
+          t6, t40, 0.0, 0.333,
+          0.0, 0.0, 0.0, 1.0,
+          t8, t41, t15, t53,
+          t10, t7, t18, t55,
+          t12, t5, t2, t56,
+          0.0, 0.0, 0.0, 1.0,
+          t14, t27, t22, t52,
+          t17, t30, t34, t54,
+          t19, t13, t46, t11,
+          0.0, 0.0, 0.0, 1.0,
+          t21, t42, t27, t57,
+          t24, t36, t30, t58,
+          t9, t20, t13, t59,
+          0.0, 0.0, 0.0, 1.0,
+          t26, t43, t33, t57,
+          t29, t44, t47, t58,
+          t16, t25, t48, t59,
+          0.0, 0.0, 0.0, 1.0,
+          t32, t28, t49, t60,
+          t35, t45, t50, t61,
+          t23, t31, t51, t62,
+          0.0, 0.0, 0.0, 1.0)
+    return np.array(_T).reshape(32, 4)
+
+
+_fk_all_constants = _constants(
+    -0.316, 0.333, 0.0825, -0.0825, 0.384, 0.088)
+
+
+_fk_all_fixed = (
+    {0: 1.0, 1: 0.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0,
+     12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0, 18: 0.0, 19: 0.0, 22: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 1.0,
+     27: 0.333, 28: 0.0, 29: 0.0, 30: 0.0, 31: 1.0, 35: 0.0, 39: 0.0, 42: 0.0, 43: 0.333, 44: 0.0,
+     45: 0.0, 46: 0.0, 47: 1.0, 60: 0.0, 61: 0.0, 62: 0.0, 63: 1.0, 76: 0.0, 77: 0.0, 78: 0.0, 79: 1.0,
+     92: 0.0, 93: 0.0, 94: 0.0, 95: 1.0, 108: 0.0, 109: 0.0, 110: 0.0, 111: 1.0, 124: 0.0, 125: 0.0,
+     126: 0.0, 127: 1.0},
+)
+"""fk_all's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_all_chunk(x, t, s, y):
+    """fk_all on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, q_5, q_6 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9 = t
+    (T_16, T_17, T_20, T_21, T_32, T_33, T_34, T_36, T_37, T_38, T_40, T_41, T_48, T_49, T_50, T_51, T_52,
+     T_53, T_54, T_55, T_56, T_57, T_58, T_59, T_64, T_65, T_66, T_67, T_68, T_69, T_70, T_71, T_72, T_73,
+     T_74, T_75, T_80, T_81, T_82, T_83, T_84, T_85, T_86, T_87, T_88, T_89, T_90, T_91, T_96, T_97, T_98,
+     T_99, T_100, T_101, T_102, T_103, T_104, T_105, T_106, T_107, T_112, T_113, T_114, T_115, T_116,
+     T_117, T_118, T_119, T_120, T_121, T_122, T_123) = y
+    k0, k1, k2, k3, k4, k5 = _fk_all_constants
+    cos(q_0, T_16)
+    sin(q_0, T_20)
+    cos(q_1, T_58)
+    multiply(T_16, T_58, T_32)
+    multiply(T_20, T_58, T_36)
+    sin(q_1, t0)
+    negative(t0, T_40)
+    cos(q_2, t1)
+    multiply(T_32, t1, t2)
+    sin(q_2, t3)
+    multiply(T_20, t3, t4)
+    subtract(t2, t4, T_48)
+    multiply(T_36, t1, t2)
+    multiply(T_16, t3, t4)
+    add(t2, t4, T_52)
+    multiply(t0, t1, t2)
+    negative(t2, T_56)
+    cos(q_3, t4)
+    multiply(T_48, t4, t5)
+    multiply(T_16, t0, T_50)
+    sin(q_3, t6)
+    multiply(T_50, t6, t7)
+    add(t5, t7, T_64)
+    multiply(T_52, t4, t5)
+    multiply(T_20, t0, T_54)
+    multiply(T_54, t6, t7)
+    add(t5, t7, T_68)
+    multiply(T_58, t6, t5)
+    multiply(t2, t4, t7)
+    subtract(t5, t7, T_72)
+    cos(q_4, t5)
+    multiply(T_64, t5, t7)
+    multiply(T_32, t3, t8)
+    multiply(T_20, t1, t9)
+    add(t8, t9, T_66)
+    sin(q_4, t8)
+    multiply(T_66, t8, t9)
+    subtract(t7, t9, T_80)
+    multiply(T_68, t5, t7)
+    multiply(T_16, t1, t1)
+    multiply(T_36, t3, t9)
+    subtract(t1, t9, T_53)
+    multiply(T_53, t8, t1)
+    add(t7, t1, T_84)
+    multiply(T_72, t5, t1)
+    multiply(t0, t3, T_57)
+    multiply(T_57, t8, t0)
+    add(t1, t0, T_88)
+    cos(q_5, t0)
+    multiply(T_80, t0, t1)
+    multiply(T_50, t4, t3)
+    multiply(T_48, t6, t7)
+    subtract(t3, t7, T_65)
+    sin(q_5, t3)
+    multiply(T_65, t3, t7)
+    add(t1, t7, T_96)
+    multiply(T_84, t0, t1)
+    multiply(T_54, t4, t7)
+    multiply(T_52, t6, t9)
+    subtract(t7, t9, T_69)
+    multiply(T_69, t3, t7)
+    add(t1, t7, T_100)
+    multiply(T_88, t0, t1)
+    multiply(t2, t6, t6)
+    multiply(T_58, t4, t4)
+    add(t6, t4, T_73)
+    multiply(T_73, t3, t4)
+    add(t1, t4, T_104)
+    cos(q_6, t1)
+    multiply(T_96, t1, t4)
+    multiply(T_64, t8, t6)
+    multiply(T_66, t5, t7)
+    add(t6, t7, T_98)
+    sin(q_6, t6)
+    multiply(T_98, t6, t7)
+    add(t4, t7, T_112)
+    multiply(T_100, t1, t4)
+    multiply(T_53, t5, t7)
+    multiply(T_68, t8, t9)
+    subtract(t7, t9, T_85)
+    multiply(T_85, t6, t7)
+    subtract(t4, t7, T_116)
+    multiply(T_104, t1, t4)
+    multiply(T_57, t5, t5)
+    multiply(T_72, t8, t8)
+    subtract(t5, t8, T_89)
+    multiply(T_89, t6, t5)
+    subtract(t4, t5, T_120)
+    negative(T_20, T_17)
+    negative(T_50, T_33)
+    negative(T_54, T_37)
+    negative(T_58, T_41)
+    negative(T_66, T_49)
+    negative(T_98, T_81)
+    multiply(T_65, t0, t4)
+    multiply(T_80, t3, t5)
+    subtract(t4, t5, T_97)
+    multiply(T_69, t0, t4)
+    multiply(T_84, t3, t5)
+    subtract(t4, t5, T_101)
+    multiply(T_73, t0, t0)
+    multiply(T_88, t3, t3)
+    subtract(t0, t3, T_105)
+    multiply(T_98, t1, t0)
+    multiply(T_96, t6, t3)
+    subtract(t0, t3, T_113)
+    multiply(T_100, t6, t0)
+    multiply(T_85, t1, t3)
+    add(t0, t3, t0)
+    negative(t0, T_117)
+    multiply(T_104, t6, t6)
+    multiply(T_89, t1, t1)
+    add(t6, t1, t6)
+    negative(t6, T_121)
+    negative(T_53, T_70)
+    negative(T_57, T_74)
+    negative(T_85, T_102)
+    negative(T_89, T_106)
+    negative(T_97, T_114)
+    negative(T_101, T_118)
+    negative(T_105, T_122)
+    multiply(k0, T_50, t0)
+    negative(t0, T_51)
+    multiply(k0, T_54, t1)
+    negative(t1, T_55)
+    multiply(k0, T_58, t3)
+    subtract(k1, t3, T_59)
+    multiply(k2, T_48, t3)
+    subtract(t3, t0, T_67)
+    multiply(k2, T_52, t0)
+    subtract(t0, t1, T_71)
+    multiply(k2, t2, t2)
+    subtract(T_59, t2, T_75)
+    multiply(k3, T_64, t0)
+    multiply(k4, T_65, t1)
+    add(t0, t1, t0)
+    add(T_67, t0, T_83)
+    multiply(k3, T_68, t0)
+    multiply(k4, T_69, t1)
+    add(t0, t1, t0)
+    add(T_71, t0, T_87)
+    multiply(k3, T_72, t0)
+    multiply(k4, T_73, t1)
+    add(t0, t1, t0)
+    add(T_75, t0, T_91)
+    multiply(k5, T_96, t0)
+    add(T_83, t0, T_115)
+    multiply(k5, T_100, t0)
+    add(T_87, t0, T_119)
+    multiply(k5, T_104, t0)
+    add(T_91, t0, T_123)
+    copyto(T_21, T_16)
+    copyto(T_34, T_17)
+    copyto(T_38, T_16)
+    copyto(T_82, T_65)
+    copyto(T_86, T_69)
+    copyto(T_90, T_73)
+    copyto(T_99, T_83)
+    copyto(T_103, T_87)
+    copyto(T_107, T_91)
+
+
 def mass_matrix(q):
     """Joint-space mass matrix M(q) (7x7, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
 

@@ -21,6 +21,7 @@
 #include "pendulum_jdot_qd_tcp.h"
 #include "pendulum_frame_acceleration_tcp.h"
 #include "pendulum_fk_jacobian_tcp.h"
+#include "pendulum_fk_all.h"
 #include "pendulum_mass_matrix.h"
 #include "pendulum_coriolis_matrix.h"
 #include "pendulum_gravity.h"

@@ -30,6 +30,7 @@ PENDULUM_DERIVE_SRC := $(addprefix $(PENDULUM_DERIVE_DIR)/,\
   pendulum_com.c \
   pendulum_com_jacobian.c \
   pendulum_coriolis_matrix.c \
+  pendulum_fk_all.c \
   pendulum_fk_jacobian_tcp.c \
   pendulum_fk_tcp.c \
   pendulum_forward_dynamics.c \

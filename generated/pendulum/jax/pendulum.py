@@ -174,6 +174,28 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     return T, J
 
 
+def fk_all(q, p=DEFAULT_P):
+    """world_T_<link> of all 3 links in one pass, stacked (12x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: world, rod, sphere (manifest.json's links). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out T [12x4]
+    7 ops: 2 mul, 3 add, 0 div, 2 trig
+    """
+    q = _input(q, 1, "q")
+    p = _input(p, 6, "p")
+    batch = _batch(q, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = jnp.sin(q[..., 0])
+    t2 = -t1
+    t3 = t1 * p[..., 4]
+    t4 = -t3
+    t5 = t0 * p[..., 4]
+    t6 = -t5
+    T = _assemble([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t0, 0.0, t1, 0.0, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, 0.0, 0.0, 0.0, 0.0, 1.0, t0, 0.0, t1, t4, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t6, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (12, 4))
+    return T
+
+
 def mass_matrix(q, p=DEFAULT_P):
     """Joint-space mass matrix M(q) (1x1, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (6): parameters m_r, m_s, I_r, I_s, l, g.
 

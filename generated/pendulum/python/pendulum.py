@@ -574,6 +574,74 @@ def _fk_jacobian_tcp_chunk(x, t, s, y):
     copyto(J_0, T_11)
 
 
+def fk_all(q, p=DEFAULT_P):
+    """world_T_<link> of all 3 links in one pass, stacked (12x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: world, rod, sphere (manifest.json's links). p (6): parameters m_r, m_s, I_r, I_s, l, g.
+
+    in  q [1]
+    in  p [6]
+    out T [12x4]
+    7 ops: 2 mul, 3 add, 0 div, 2 trig
+    """
+    q = _array(q, 1, "fk_all", "q")
+    p = _array(p, 6, "fk_all", "p")
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_all_chunk, (q, p), 1, ((12, 4),), fixed=_fk_all_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[0])
+    t1 = sin(q[0])
+    t2 = -t1
+    t3 = t1 * p[4]
+    t3 = -t3
+    t4 = t0 * p[4]
+    t4 = -t4
+    _T = (1.0, 0.0, 0.0, 0.0,
+          0.0, 1.0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t0, 0.0, t1, 0.0,
+          0.0, 1.0, 0.0, 0.0,
+          t2, 0.0, t0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t0, 0.0, t1, t3,
+          0.0, 1.0, 0.0, 0.0,
+          t2, 0.0, t0, t4,
+          0.0, 0.0, 0.0, 1.0)
+    return np.array(_T).reshape(12, 4)
+
+
+_fk_all_fixed = (
+    {0: 1.0, 1: 0.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0,
+     12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0, 17: 0.0, 19: 0.0, 20: 0.0, 21: 1.0, 22: 0.0, 23: 0.0, 25: 0.0,
+     27: 0.0, 28: 0.0, 29: 0.0, 30: 0.0, 31: 1.0, 33: 0.0, 36: 0.0, 37: 1.0, 38: 0.0, 39: 0.0, 41: 0.0,
+     44: 0.0, 45: 0.0, 46: 0.0, 47: 1.0},
+)
+"""fk_all's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_all_chunk(x, t, s, y):
+    """fk_all on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    copyto, cos, multiply, negative, sin = np.copyto, np.cos, np.multiply, np.negative, np.sin
+    q_0, p_0, p_1, p_2, p_3, p_4, p_5 = x
+    t0, = t
+    T_16, T_18, T_24, T_26, T_32, T_34, T_35, T_40, T_42, T_43 = y
+    cos(q_0, T_16)
+    sin(q_0, T_18)
+    negative(T_18, T_24)
+    multiply(T_18, p_4, t0)
+    negative(t0, T_35)
+    multiply(T_16, p_4, t0)
+    negative(t0, T_43)
+    copyto(T_26, T_16)
+    copyto(T_32, T_16)
+    copyto(T_34, T_18)
+    copyto(T_40, T_24)
+    copyto(T_42, T_16)
+
+
 def mass_matrix(q, p=DEFAULT_P):
     """Joint-space mass matrix M(q) (1x1, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (6): parameters m_r, m_s, I_r, I_s, l, g.
 

@@ -20,6 +20,7 @@
 #include "planar_2r_jdot_qd_tcp.h"
 #include "planar_2r_frame_acceleration_tcp.h"
 #include "planar_2r_fk_jacobian_tcp.h"
+#include "planar_2r_fk_all.h"
 #include "planar_2r_mass_matrix.h"
 #include "planar_2r_coriolis_matrix.h"
 #include "planar_2r_gravity.h"

@@ -30,6 +30,7 @@ PLANAR_2R_DERIVE_SRC := $(addprefix $(PLANAR_2R_DERIVE_DIR)/,\
   planar_2r_com.c \
   planar_2r_com_jacobian.c \
   planar_2r_coriolis_matrix.c \
+  planar_2r_fk_all.c \
   planar_2r_fk_jacobian_tcp.c \
   planar_2r_fk_tcp.c \
   planar_2r_forward_dynamics.c \

@@ -268,6 +268,39 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     return T, J
 
 
+def fk_all(q, p=DEFAULT_P):
+    """world_T_<link> of all 5 links in one pass, stacked (20x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: base, link1_dh, link1, link2_dh, link2 (manifest.json's links). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out T [20x4]
+    18 ops: 8 mul, 6 add, 0 div, 4 trig
+    """
+    q = _input(q, 2, "q")
+    p = _input(p, 5, "p")
+    batch = _batch(q, p)
+    t0 = jnp.cos(q[..., 0])
+    t1 = jnp.sin(q[..., 0])
+    t2 = jnp.cos(q[..., 1])
+    t3 = t0 * t2
+    t4 = jnp.sin(q[..., 1])
+    t5 = t1 * t4
+    t6 = t3 - t5
+    t7 = t1 * t2
+    t8 = t0 * t4
+    t9 = t7 + t8
+    t10 = -t1
+    t11 = -t9
+    t12 = t0 * p[..., 0]
+    t13 = t1 * p[..., 0]
+    t14 = t6 * p[..., 1]
+    t15 = t12 + t14
+    t16 = t9 * p[..., 1]
+    t17 = t13 + t16
+    T = _assemble([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t0, t10, 0.0, 0.0, t1, t0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t0, t10, 0.0, t12, t1, t0, 0.0, t13, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t6, t11, 0.0, t12, t9, t6, 0.0, t13, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t6, t11, 0.0, t15, t9, t6, 0.0, t17, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (20, 4))
+    return T
+
+
 def mass_matrix(q, p=DEFAULT_P):
     """Joint-space mass matrix M(q) (2x2, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (5): parameters L1, L2, m1, m2, g.
 

@@ -751,6 +751,114 @@ def _fk_jacobian_tcp_chunk(x, t, s, y):
     copyto(J_2, T_3)
 
 
+def fk_all(q, p=DEFAULT_P):
+    """world_T_<link> of all 5 links in one pass, stacked (20x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: base, link1_dh, link1, link2_dh, link2 (manifest.json's links). p (5): parameters L1, L2, m1, m2, g.
+
+    in  q [2]
+    in  p [5]
+    out T [20x4]
+    18 ops: 8 mul, 6 add, 0 div, 4 trig
+    """
+    q = _array(q, 2, "fk_all", "q")
+    p = _array(p, 5, "fk_all", "p")
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_all_chunk, (q, p), 4, ((20, 4),), fixed=_fk_all_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[0])
+    t1 = sin(q[0])
+    t2 = cos(q[1])
+    t3 = t0 * t2
+    t4 = sin(q[1])
+    t5 = t1 * t4
+    t3 = t3 - t5
+    t2 = t1 * t2
+    t4 = t0 * t4
+    t2 = t2 + t4
+    t4 = -t1
+    t5 = -t2
+    t6 = t0 * p[0]
+    t7 = t1 * p[0]
+    t8 = t3 * p[1]
+    t8 = t6 + t8
+    t9 = t2 * p[1]
+    t9 = t7 + t9
+    _T = (1.0, 0.0, 0.0, 0.0,
+          0.0, 1.0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t0, t4, 0.0, 0.0,
+          t1, t0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t0, t4, 0.0, t6,
+          t1, t0, 0.0, t7,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t3, t5, 0.0, t6,
+          t2, t3, 0.0, t7,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t3, t5, 0.0, t8,
+          t2, t3, 0.0, t9,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0)
+    return np.array(_T).reshape(20, 4)
+
+
+_fk_all_fixed = (
+    {0: 1.0, 1: 0.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0,
+     12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0, 18: 0.0, 19: 0.0, 22: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 1.0,
+     27: 0.0, 28: 0.0, 29: 0.0, 30: 0.0, 31: 1.0, 34: 0.0, 38: 0.0, 40: 0.0, 41: 0.0, 42: 1.0, 43: 0.0,
+     44: 0.0, 45: 0.0, 46: 0.0, 47: 1.0, 50: 0.0, 54: 0.0, 56: 0.0, 57: 0.0, 58: 1.0, 59: 0.0, 60: 0.0,
+     61: 0.0, 62: 0.0, 63: 1.0, 66: 0.0, 70: 0.0, 72: 0.0, 73: 0.0, 74: 1.0, 75: 0.0, 76: 0.0, 77: 0.0,
+     78: 0.0, 79: 1.0},
+)
+"""fk_all's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_all_chunk(x, t, s, y):
+    """fk_all on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, p_0, p_1, p_2, p_3, p_4 = x
+    t0, t1, t2, t3 = t
+    (T_16, T_17, T_20, T_21, T_32, T_33, T_35, T_36, T_37, T_39, T_48, T_49, T_51, T_52, T_53, T_55, T_64,
+     T_65, T_67, T_68, T_69, T_71) = y
+    cos(q_0, T_16)
+    sin(q_0, T_20)
+    cos(q_1, t0)
+    multiply(T_16, t0, t1)
+    sin(q_1, t2)
+    multiply(T_20, t2, t3)
+    subtract(t1, t3, T_48)
+    multiply(T_20, t0, t0)
+    multiply(T_16, t2, t2)
+    add(t0, t2, T_52)
+    negative(T_20, T_17)
+    negative(T_52, T_49)
+    multiply(T_16, p_0, T_35)
+    multiply(T_20, p_0, T_39)
+    multiply(T_48, p_1, t0)
+    add(T_35, t0, T_67)
+    multiply(T_52, p_1, t0)
+    add(T_39, t0, T_71)
+    copyto(T_21, T_16)
+    copyto(T_32, T_16)
+    copyto(T_33, T_17)
+    copyto(T_36, T_20)
+    copyto(T_37, T_16)
+    copyto(T_51, T_35)
+    copyto(T_53, T_48)
+    copyto(T_55, T_39)
+    copyto(T_64, T_48)
+    copyto(T_65, T_49)
+    copyto(T_68, T_52)
+    copyto(T_69, T_48)
+
+
 def mass_matrix(q, p=DEFAULT_P):
     """Joint-space mass matrix M(q) (2x2, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (5): parameters L1, L2, m1, m2, g.
 

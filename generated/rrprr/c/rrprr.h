@@ -18,6 +18,7 @@
 #include "rrprr_jdot_qd_tcp.h"
 #include "rrprr_frame_acceleration_tcp.h"
 #include "rrprr_fk_jacobian_tcp.h"
+#include "rrprr_fk_all.h"
 #include "rrprr_mass_matrix.h"
 #include "rrprr_coriolis_matrix.h"
 #include "rrprr_gravity.h"

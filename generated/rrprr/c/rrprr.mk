@@ -30,6 +30,7 @@ RRPRR_DERIVE_SRC := $(addprefix $(RRPRR_DERIVE_DIR)/,\
   rrprr_com.c \
   rrprr_com_jacobian.c \
   rrprr_coriolis_matrix.c \
+  rrprr_fk_all.c \
   rrprr_fk_jacobian_tcp.c \
   rrprr_fk_tcp.c \
   rrprr_forward_dynamics.c \

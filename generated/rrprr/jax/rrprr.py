@@ -696,6 +696,81 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     return T, J
 
 
+def fk_all(q, p=DEFAULT_P):
+    """world_T_<link> of all 6 links in one pass, stacked (24x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: s, link1, link2, link3, link4, b (manifest.json's links). p (3): parameters L1, L2, L_tcp.
+
+    in  q [5]
+    in  p [3]
+    out T [24x4]
+    60 ops: 33 mul, 19 add, 0 div, 8 trig
+    """
+    q = _input(q, 5, "q")
+    p = _input(p, 3, "p")
+    batch = _batch(q, p)
+    t0 = jnp.cos(q[..., 2])
+    t1 = jnp.sin(q[..., 0])
+    t2 = jnp.sin(q[..., 2])
+    t3 = t1 * t2
+    t4 = jnp.cos(q[..., 0])
+    t5 = t4 * t2
+    t6 = -t5
+    t7 = jnp.cos(q[..., 4])
+    t8 = t0 * t7
+    t9 = jnp.cos(q[..., 3])
+    t10 = t2 * t9
+    t11 = jnp.sin(q[..., 4])
+    t12 = t10 * t11
+    t13 = t8 - t12
+    t14 = t3 * t7
+    t15 = jnp.sin(q[..., 3])
+    t16 = t4 * t15
+    t17 = t1 * t0
+    t18 = t17 * t9
+    t19 = t16 + t18
+    t20 = t19 * t11
+    t21 = t14 + t20
+    t22 = t5 * t7
+    t23 = t4 * t0
+    t24 = t23 * t9
+    t25 = t1 * t15
+    t26 = t24 - t25
+    t27 = t26 * t11
+    t28 = t22 + t27
+    t29 = -t28
+    t30 = t2 * t15
+    t31 = t4 * t9
+    t32 = t17 * t15
+    t33 = t31 - t32
+    t34 = t1 * t9
+    t35 = t23 * t15
+    t36 = t34 + t35
+    t37 = -t1
+    t38 = -t17
+    t39 = -t19
+    t40 = t0 * t11
+    t41 = t10 * t7
+    t42 = t40 + t41
+    t43 = t3 * t11
+    t44 = t19 * t7
+    t45 = t43 - t44
+    t46 = t26 * t7
+    t47 = t5 * t11
+    t48 = t46 - t47
+    t49 = t4 * p[..., 0]
+    t50 = t4 * q[..., 1]
+    t51 = t49 + t50
+    t52 = t1 * p[..., 0]
+    t53 = t1 * q[..., 1]
+    t54 = t52 + t53
+    t55 = t30 * p[..., 1]
+    t56 = t33 * p[..., 1]
+    t57 = t51 + t56
+    t58 = t36 * p[..., 1]
+    t59 = t54 + t58
+    T = _assemble([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, t4, t37, 0.0, 0.0, t1, t4, 0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 0.0, 0.0, 0.0, 0.0, t4, t37, t51, 0.0, t1, t4, t54, 0.0, 0.0, 0.0, 1.0, t0, 0.0, t2, 0.0, t3, t4, t38, t51, t6, t1, t23, t54, 0.0, 0.0, 0.0, 1.0, t0, t30, t10, 0.0, t3, t33, t39, t51, t6, t36, t26, t54, 0.0, 0.0, 0.0, 1.0, t13, t30, t42, t55, t21, t33, t45, t57, t29, t36, t48, t59, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (24, 4))
+    return T
+
+
 def mass_matrix(q, p=DEFAULT_P):
     """Joint-space mass matrix M(q) (5x5, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (3): parameters L1, L2, L_tcp.
 

@@ -1605,6 +1605,207 @@ def _fk_jacobian_tcp_chunk(x, t, s, y):
     copyto(J_29, T_9)
 
 
+def fk_all(q, p=DEFAULT_P):
+    """world_T_<link> of all 6 links in one pass, stacked (24x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: s, link1, link2, link3, link4, b (manifest.json's links). p (3): parameters L1, L2, L_tcp.
+
+    in  q [5]
+    in  p [3]
+    out T [24x4]
+    60 ops: 33 mul, 19 add, 0 div, 8 trig
+    """
+    q = _array(q, 5, "fk_all", "q")
+    p = _array(p, 3, "fk_all", "p")
+    if q.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_all_chunk, (q, p), 10, ((24, 4),), fixed=_fk_all_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    p = p.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[2])
+    t1 = sin(q[0])
+    t2 = sin(q[2])
+    t3 = t1 * t2
+    t4 = cos(q[0])
+    t5 = t4 * t2
+    t6 = -t5
+    t7 = cos(q[4])
+    t8 = t0 * t7
+    t9 = cos(q[3])
+    t10 = t2 * t9
+    t11 = sin(q[4])
+    t12 = t10 * t11
+    t8 = t8 - t12
+    t12 = t3 * t7
+    t13 = sin(q[3])
+    t14 = t4 * t13
+    t15 = t1 * t0
+    t16 = t15 * t9
+    t14 = t14 + t16
+    t16 = t14 * t11
+    t12 = t12 + t16
+    t16 = t5 * t7
+    t17 = t4 * t0
+    t18 = t17 * t9
+    t19 = t1 * t13
+    t18 = t18 - t19
+    t19 = t18 * t11
+    t16 = t16 + t19
+    t16 = -t16
+    t19 = t2 * t13
+    t20 = t4 * t9
+    t21 = t15 * t13
+    t20 = t20 - t21
+    t9 = t1 * t9
+    t13 = t17 * t13
+    t9 = t9 + t13
+    t13 = -t1
+    t15 = -t15
+    t21 = -t14
+    t22 = t0 * t11
+    t23 = t10 * t7
+    t22 = t22 + t23
+    t23 = t3 * t11
+    t14 = t14 * t7
+    t14 = t23 - t14
+    t7 = t18 * t7
+    t5 = t5 * t11
+    t5 = t7 - t5
+    t7 = t4 * p[0]
+    t11 = t4 * q[1]
+    t7 = t7 + t11
+    t11 = t1 * p[0]
+    t23 = t1 * q[1]
+    t11 = t11 + t23
+    t23 = t19 * p[1]
+    t24 = t20 * p[1]
+    t24 = t7 + t24
+    t25 = t9 * p[1]
+    t25 = t11 + t25
+    _T = (1.0, 0.0, 0.0, 0.0,
+          0.0, 1.0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          1.0, 0.0, 0.0, 0.0,
+          0.0, t4, t13, 0.0,
+          0.0, t1, t4, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          1.0, 0.0, 0.0, 0.0,
+          0.0, t4, t13, t7,
+          0.0, t1, t4, t11,
+          0.0, 0.0, 0.0, 1.0,
+          t0, 0.0, t2, 0.0,
+          t3, t4, t15, t7,
+          t6, t1, t17, t11,
+          0.0, 0.0, 0.0, 1.0,
+          t0, t19, t10, 0.0,
+          t3, t20, t21, t7,
+          t6, t9, t18, t11,
+          0.0, 0.0, 0.0, 1.0,
+          t8, t19, t22, t23,
+          t12, t20, t14, t24,
+          t16, t9, t5, t25,
+          0.0, 0.0, 0.0, 1.0)
+    return np.array(_T).reshape(24, 4)
+
+
+_fk_all_fixed = (
+    {0: 1.0, 1: 0.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0,
+     12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0, 16: 1.0, 17: 0.0, 18: 0.0, 19: 0.0, 20: 0.0, 23: 0.0, 24: 0.0,
+     27: 0.0, 28: 0.0, 29: 0.0, 30: 0.0, 31: 1.0, 32: 1.0, 33: 0.0, 34: 0.0, 35: 0.0, 36: 0.0, 40: 0.0,
+     44: 0.0, 45: 0.0, 46: 0.0, 47: 1.0, 49: 0.0, 51: 0.0, 60: 0.0, 61: 0.0, 62: 0.0, 63: 1.0, 67: 0.0,
+     76: 0.0, 77: 0.0, 78: 0.0, 79: 1.0, 92: 0.0, 93: 0.0, 94: 0.0, 95: 1.0},
+)
+"""fk_all's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_all_chunk(x, t, s, y):
+    """fk_all on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, p_0, p_1, p_2 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9 = t
+    (T_21, T_22, T_25, T_26, T_37, T_38, T_39, T_41, T_42, T_43, T_48, T_50, T_52, T_53, T_54, T_55, T_56,
+     T_57, T_58, T_59, T_64, T_65, T_66, T_68, T_69, T_70, T_71, T_72, T_73, T_74, T_75, T_80, T_81, T_82,
+     T_83, T_84, T_85, T_86, T_87, T_88, T_89, T_90, T_91) = y
+    cos(q_2, T_48)
+    sin(q_0, T_25)
+    sin(q_2, T_50)
+    multiply(T_25, T_50, T_52)
+    cos(q_0, T_21)
+    multiply(T_21, T_50, t0)
+    negative(t0, T_56)
+    cos(q_4, t1)
+    multiply(T_48, t1, t2)
+    cos(q_3, t3)
+    multiply(T_50, t3, T_66)
+    sin(q_4, t4)
+    multiply(T_66, t4, t5)
+    subtract(t2, t5, T_80)
+    multiply(T_52, t1, t2)
+    sin(q_3, t5)
+    multiply(T_21, t5, t6)
+    multiply(T_25, T_48, t7)
+    multiply(t7, t3, t8)
+    add(t6, t8, t6)
+    multiply(t6, t4, t8)
+    add(t2, t8, T_84)
+    multiply(t0, t1, t2)
+    multiply(T_21, T_48, T_58)
+    multiply(T_58, t3, t8)
+    multiply(T_25, t5, t9)
+    subtract(t8, t9, T_74)
+    multiply(T_74, t4, t8)
+    add(t2, t8, t2)
+    negative(t2, T_88)
+    multiply(T_50, t5, T_65)
+    multiply(T_21, t3, t2)
+    multiply(t7, t5, t8)
+    subtract(t2, t8, T_69)
+    multiply(T_25, t3, t3)
+    multiply(T_58, t5, t5)
+    add(t3, t5, T_73)
+    negative(T_25, T_22)
+    negative(t7, T_54)
+    negative(t6, T_70)
+    multiply(T_48, t4, t2)
+    multiply(T_66, t1, t3)
+    add(t2, t3, T_82)
+    multiply(T_52, t4, t2)
+    multiply(t6, t1, t6)
+    subtract(t2, t6, T_86)
+    multiply(T_74, t1, t1)
+    multiply(t0, t4, t0)
+    subtract(t1, t0, T_90)
+    multiply(T_21, p_0, t0)
+    multiply(T_21, q_1, t1)
+    add(t0, t1, T_39)
+    multiply(T_25, p_0, t0)
+    multiply(T_25, q_1, t1)
+    add(t0, t1, T_43)
+    multiply(T_65, p_1, T_83)
+    multiply(T_69, p_1, t0)
+    add(T_39, t0, T_87)
+    multiply(T_73, p_1, t0)
+    add(T_43, t0, T_91)
+    copyto(T_26, T_21)
+    copyto(T_37, T_21)
+    copyto(T_38, T_22)
+    copyto(T_41, T_25)
+    copyto(T_42, T_21)
+    copyto(T_53, T_21)
+    copyto(T_55, T_39)
+    copyto(T_57, T_25)
+    copyto(T_59, T_43)
+    copyto(T_64, T_48)
+    copyto(T_68, T_52)
+    copyto(T_71, T_39)
+    copyto(T_72, T_56)
+    copyto(T_75, T_43)
+    copyto(T_81, T_65)
+    copyto(T_85, T_69)
+    copyto(T_89, T_73)
+
+
 def mass_matrix(q, p=DEFAULT_P):
     """Joint-space mass matrix M(q) (5x5, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm. p (3): parameters L1, L2, L_tcp.
 

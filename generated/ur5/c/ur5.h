@@ -27,6 +27,7 @@
 #include "ur5_jdot_qd_ee_link.h"
 #include "ur5_frame_acceleration_ee_link.h"
 #include "ur5_fk_jacobian_tcp.h"
+#include "ur5_fk_all.h"
 #include "ur5_mass_matrix.h"
 #include "ur5_coriolis_matrix.h"
 #include "ur5_gravity.h"

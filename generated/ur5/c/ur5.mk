@@ -30,6 +30,7 @@ UR5_DERIVE_SRC := $(addprefix $(UR5_DERIVE_DIR)/,\
   ur5_com.c \
   ur5_com_jacobian.c \
   ur5_coriolis_matrix.c \
+  ur5_fk_all.c \
   ur5_fk_base.c \
   ur5_fk_base_link.c \
   ur5_fk_ee_link.c \

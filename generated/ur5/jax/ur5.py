@@ -2215,6 +2215,144 @@ def fk_jacobian_tcp(q):
     return T, J
 
 
+def fk_all(q):
+    """world_T_<link> of all 7 links in one pass, stacked (28x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: world, shoulder_link, upper_arm_link, forearm_link, wrist_1_link, wrist_2_link, wrist_3_link (manifest.json's links).
+
+    in  q [6]
+    out T [28x4]
+    125 ops: 65 mul, 48 add, 0 div, 12 trig
+    """
+    q = _input(q, 6, "q")
+    batch = _batch(q)
+    t0 = jnp.cos(q[..., 0])
+    t1 = jnp.sin(q[..., 0])
+    t2 = jnp.sin(q[..., 1])
+    t3 = t0 * t2
+    t4 = -t3
+    t5 = t1 * t2
+    t6 = -t5
+    t7 = jnp.cos(q[..., 1])
+    t8 = -t7
+    t9 = jnp.cos(q[..., 2])
+    t10 = t3 * t9
+    t11 = t0 * t7
+    t12 = jnp.sin(q[..., 2])
+    t13 = t11 * t12
+    t14 = t10 + t13
+    t15 = -t14
+    t16 = t5 * t9
+    t17 = t1 * t7
+    t18 = t17 * t12
+    t19 = t16 + t18
+    t20 = -t19
+    t21 = t2 * t12
+    t22 = t7 * t9
+    t23 = t21 - t22
+    t24 = jnp.sin(q[..., 3])
+    t25 = t14 * t24
+    t26 = t11 * t9
+    t27 = t3 * t12
+    t28 = t26 - t27
+    t29 = jnp.cos(q[..., 3])
+    t30 = t28 * t29
+    t31 = t25 - t30
+    t32 = t19 * t24
+    t33 = t17 * t9
+    t34 = t5 * t12
+    t35 = t33 - t34
+    t36 = t35 * t29
+    t37 = t32 - t36
+    t38 = t7 * t12
+    t39 = t2 * t9
+    t40 = t38 + t39
+    t41 = t40 * t29
+    t42 = t23 * t24
+    t43 = t41 - t42
+    t44 = jnp.cos(q[..., 4])
+    t45 = t31 * t44
+    t46 = jnp.sin(q[..., 4])
+    t47 = t1 * t46
+    t48 = t45 - t47
+    t49 = t37 * t44
+    t50 = t0 * t46
+    t51 = t49 + t50
+    t52 = t43 * t44
+    t53 = jnp.cos(q[..., 5])
+    t54 = t48 * t53
+    t55 = t28 * t24
+    t56 = t14 * t29
+    t57 = t55 + t56
+    t58 = jnp.sin(q[..., 5])
+    t59 = t57 * t58
+    t60 = t54 + t59
+    t61 = t51 * t53
+    t62 = t35 * t24
+    t63 = t19 * t29
+    t64 = t62 + t63
+    t65 = t64 * t58
+    t66 = t61 + t65
+    t67 = t52 * t53
+    t68 = t40 * t24
+    t69 = t23 * t29
+    t70 = t68 + t69
+    t71 = t70 * t58
+    t72 = t67 - t71
+    t73 = -t1
+    t74 = t31 * t46
+    t75 = t1 * t44
+    t76 = t74 + t75
+    t77 = -t76
+    t78 = t0 * t44
+    t79 = t37 * t46
+    t80 = t78 - t79
+    t81 = t43 * t46
+    t82 = -t81
+    t83 = -t2
+    t84 = -t40
+    t85 = -t57
+    t86 = -t64
+    t87 = t48 * t58
+    t88 = t57 * t53
+    t89 = t87 - t88
+    t90 = t51 * t58
+    t91 = t64 * t53
+    t92 = t90 - t91
+    t93 = t52 * t58
+    t94 = t70 * t53
+    t95 = t93 + t94
+    t96 = 0.13585 * t1
+    t97 = -t96
+    t98 = 0.13585 * t0
+    t99 = 0.425 * t11
+    t100 = (-0.1197) * t1
+    t101 = t99 - t100
+    t102 = t101 - t96
+    t103 = (-0.1197) * t0
+    t104 = 0.425 * t17
+    t105 = t103 + t104
+    t106 = t98 + t105
+    t107 = 0.425 * t2
+    t108 = 0.089159 - t107
+    t109 = 0.39225 * t28
+    t110 = t102 + t109
+    t111 = 0.39225 * t35
+    t112 = t106 + t111
+    t113 = 0.39225 * t40
+    t114 = t108 - t113
+    t115 = 0.093 * t1
+    t116 = t110 - t115
+    t117 = 0.093 * t0
+    t118 = t112 + t117
+    t119 = 0.09465 * t57
+    t120 = t116 - t119
+    t121 = 0.09465 * t64
+    t122 = t118 - t121
+    t123 = 0.09465 * t70
+    t124 = t114 + t123
+    T = _assemble([1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, t0, t73, 0.0, 0.0, t1, t0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.089159, 0.0, 0.0, 0.0, 1.0, t4, t73, t11, t97, t6, t0, t17, t98, t8, 0.0, t83, 0.089159, 0.0, 0.0, 0.0, 1.0, t15, t73, t28, t102, t20, t0, t35, t106, t23, 0.0, t84, t108, 0.0, 0.0, 0.0, 1.0, t31, t73, t85, t110, t37, t0, t86, t112, t43, 0.0, t70, t114, 0.0, 0.0, 0.0, 1.0, t48, t77, t85, t116, t51, t80, t86, t118, t52, t82, t70, t114, 0.0, 0.0, 0.0, 1.0, t60, t77, t89, t120, t66, t80, t92, t122, t72, t82, t95, t124, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (28, 4))
+    return T
+
+
 def mass_matrix(q):
     """Joint-space mass matrix M(q) (6x6, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
 

@@ -4764,6 +4764,341 @@ def _fk_jacobian_tcp_chunk(x, t, s, y):
     copyto(J_35, T_10)
 
 
+def fk_all(q):
+    """world_T_<link> of all 7 links in one pass, stacked (28x4, row-major): rows 4k..4k+3 are link k's 4x4 homogeneous transform (as fk_<link> would give it), links in tree order: world, shoulder_link, upper_arm_link, forearm_link, wrist_1_link, wrist_2_link, wrist_3_link (manifest.json's links).
+
+    in  q [6]
+    out T [28x4]
+    125 ops: 65 mul, 48 add, 0 div, 12 trig
+    """
+    q = _array(q, 6, "fk_all", "q")
+    if q.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_fk_all_chunk, (q,), 12, ((28, 4),), fixed=_fk_all_fixed)
+    # one state: Python floats
+    q = q.tolist()
+    cos, sin = math.cos, math.sin
+    t0 = cos(q[0])
+    t1 = sin(q[0])
+    t2 = sin(q[1])
+    t3 = t0 * t2
+    t4 = -t3
+    t5 = t1 * t2
+    t6 = -t5
+    t7 = cos(q[1])
+    t8 = -t7
+    t9 = cos(q[2])
+    t10 = t3 * t9
+    t11 = t0 * t7
+    t12 = sin(q[2])
+    t13 = t11 * t12
+    t10 = t10 + t13
+    t13 = -t10
+    t14 = t5 * t9
+    t15 = t1 * t7
+    t16 = t15 * t12
+    t14 = t14 + t16
+    t16 = -t14
+    t17 = t2 * t12
+    t18 = t7 * t9
+    t17 = t17 - t18
+    t18 = sin(q[3])
+    t19 = t10 * t18
+    t20 = t11 * t9
+    t3 = t3 * t12
+    t3 = t20 - t3
+    t20 = cos(q[3])
+    t21 = t3 * t20
+    t19 = t19 - t21
+    t21 = t14 * t18
+    t22 = t15 * t9
+    t5 = t5 * t12
+    t5 = t22 - t5
+    t22 = t5 * t20
+    t21 = t21 - t22
+    t7 = t7 * t12
+    t9 = t2 * t9
+    t7 = t7 + t9
+    t9 = t7 * t20
+    t12 = t17 * t18
+    t9 = t9 - t12
+    t12 = cos(q[4])
+    t22 = t19 * t12
+    t23 = sin(q[4])
+    t24 = t1 * t23
+    t22 = t22 - t24
+    t24 = t21 * t12
+    t25 = t0 * t23
+    t24 = t24 + t25
+    t25 = t9 * t12
+    t26 = cos(q[5])
+    t27 = t22 * t26
+    t28 = t3 * t18
+    t10 = t10 * t20
+    t10 = t28 + t10
+    t28 = sin(q[5])
+    t29 = t10 * t28
+    t27 = t27 + t29
+    t29 = t24 * t26
+    t30 = t5 * t18
+    t14 = t14 * t20
+    t14 = t30 + t14
+    t30 = t14 * t28
+    t29 = t29 + t30
+    t30 = t25 * t26
+    t18 = t7 * t18
+    t20 = t17 * t20
+    t18 = t18 + t20
+    t20 = t18 * t28
+    t20 = t30 - t20
+    t30 = -t1
+    t31 = t19 * t23
+    t32 = t1 * t12
+    t31 = t31 + t32
+    t31 = -t31
+    t12 = t0 * t12
+    t32 = t21 * t23
+    t12 = t12 - t32
+    t23 = t9 * t23
+    t23 = -t23
+    t32 = -t2
+    t33 = -t7
+    t34 = -t10
+    t35 = -t14
+    t36 = t22 * t28
+    t37 = t10 * t26
+    t36 = t36 - t37
+    t37 = t24 * t28
+    t38 = t14 * t26
+    t37 = t37 - t38
+    t28 = t25 * t28
+    t26 = t18 * t26
+    t26 = t28 + t26
+    t28 = 0.13585 * t1
+    t38 = -t28
+    t39 = 0.13585 * t0
+    t40 = 0.425 * t11
+    t41 = (-0.1197) * t1
+    t40 = t40 - t41
+    t28 = t40 - t28
+    t40 = (-0.1197) * t0
+    t41 = 0.425 * t15
+    t40 = t40 + t41
+    t40 = t39 + t40
+    t2 = 0.425 * t2
+    t2 = 0.089159 - t2
+    t41 = 0.39225 * t3
+    t41 = t28 + t41
+    t42 = 0.39225 * t5
+    t42 = t40 + t42
+    t7 = 0.39225 * t7
+    t7 = t2 - t7
+    t43 = 0.093 * t1
+    t43 = t41 - t43
+    t44 = 0.093 * t0
+    t44 = t42 + t44
+    t10 = 0.09465 * t10
+    t10 = t43 - t10
+    t14 = 0.09465 * t14
+    t14 = t44 - t14
+    t45 = 0.09465 * t18
+    t45 = t7 + t45
+    _T = (1.0, 0.0, 0.0, 0.0,
+          0.0, 1.0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.0,
+          0.0, 0.0, 0.0, 1.0,
+          t0, t30, 0.0, 0.0,
+          t1, t0, 0.0, 0.0,
+          0.0, 0.0, 1.0, 0.089159,
+          0.0, 0.0, 0.0, 1.0,
+          t4, t30, t11, t38,
+          t6, t0, t15, t39,
+          t8, 0.0, t32, 0.089159,
+          0.0, 0.0, 0.0, 1.0,
+          t13, t30, t3, t28,
+          t16, t0, t5, t40,
+          t17, 0.0, t33, t2,
+          0.0, 0.0, 0.0, 1.0,
+          t19, t30, t34, t41,
+          t21, t0, t35, t42,
+          t9, 0.0, t18, t7,
+          0.0, 0.0, 0.0, 1.0,
+          t22, t31, t34, t43,
+          t24, t12, t35, t44,
+          t25, t23, t18, t7,
+          0.0, 0.0, 0.0, 1.0,
+          t27, t31, t36, t10,
+          t29, t12, t37, t14,
+          t20, t23, t26, t45,
+          0.0, 0.0, 0.0, 1.0)
+    return np.array(_T).reshape(28, 4)
+
+
+_fk_all_constants = _constants(
+    0.13585, 0.425, -0.1197, 0.089159, 0.39225, 0.093, 0.09465)
+
+
+_fk_all_fixed = (
+    {0: 1.0, 1: 0.0, 2: 0.0, 3: 0.0, 4: 0.0, 5: 1.0, 6: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 1.0, 11: 0.0,
+     12: 0.0, 13: 0.0, 14: 0.0, 15: 1.0, 18: 0.0, 19: 0.0, 22: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 1.0,
+     27: 0.089159, 28: 0.0, 29: 0.0, 30: 0.0, 31: 1.0, 41: 0.0, 43: 0.089159, 44: 0.0, 45: 0.0, 46: 0.0,
+     47: 1.0, 57: 0.0, 60: 0.0, 61: 0.0, 62: 0.0, 63: 1.0, 73: 0.0, 76: 0.0, 77: 0.0, 78: 0.0, 79: 1.0,
+     92: 0.0, 93: 0.0, 94: 0.0, 95: 1.0, 108: 0.0, 109: 0.0, 110: 0.0, 111: 1.0},
+)
+"""fk_all's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _fk_all_chunk(x, t, s, y):
+    """fk_all on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, multiply, negative, sin, subtract = np.add, np.copyto, np.cos, np.multiply, np.negative, np.sin, np.subtract
+    q_0, q_1, q_2, q_3, q_4, q_5 = x
+    t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11 = t
+    (T_16, T_17, T_20, T_21, T_32, T_33, T_34, T_35, T_36, T_37, T_38, T_39, T_40, T_42, T_48, T_49, T_50,
+     T_51, T_52, T_53, T_54, T_55, T_56, T_58, T_59, T_64, T_65, T_66, T_67, T_68, T_69, T_70, T_71, T_72,
+     T_74, T_75, T_80, T_81, T_82, T_83, T_84, T_85, T_86, T_87, T_88, T_89, T_90, T_91, T_96, T_97, T_98,
+     T_99, T_100, T_101, T_102, T_103, T_104, T_105, T_106, T_107) = y
+    k0, k1, k2, k3, k4, k5, k6 = _fk_all_constants
+    cos(q_0, T_16)
+    sin(q_0, T_20)
+    sin(q_1, t0)
+    multiply(T_16, t0, t1)
+    negative(t1, T_32)
+    multiply(T_20, t0, t2)
+    negative(t2, T_36)
+    cos(q_1, t3)
+    negative(t3, T_40)
+    cos(q_2, t4)
+    multiply(t1, t4, t5)
+    multiply(T_16, t3, T_34)
+    sin(q_2, t6)
+    multiply(T_34, t6, t7)
+    add(t5, t7, t5)
+    negative(t5, T_48)
+    multiply(t2, t4, t7)
+    multiply(T_20, t3, T_38)
+    multiply(T_38, t6, t8)
+    add(t7, t8, t7)
+    negative(t7, T_52)
+    multiply(t0, t6, t8)
+    multiply(t3, t4, t9)
+    subtract(t8, t9, T_56)
+    sin(q_3, t8)
+    multiply(t5, t8, t9)
+    multiply(T_34, t4, t10)
+    multiply(t1, t6, t1)
+    subtract(t10, t1, T_50)
+    cos(q_3, t1)
+    multiply(T_50, t1, t10)
+    subtract(t9, t10, T_64)
+    multiply(t7, t8, t9)
+    multiply(T_38, t4, t10)
+    multiply(t2, t6, t2)
+    subtract(t10, t2, T_54)
+    multiply(T_54, t1, t2)
+    subtract(t9, t2, T_68)
+    multiply(t3, t6, t3)
+    multiply(t0, t4, t4)
+    add(t3, t4, t3)
+    multiply(t3, t1, t2)
+    multiply(T_56, t8, t4)
+    subtract(t2, t4, T_72)
+    cos(q_4, t2)
+    multiply(T_64, t2, t4)
+    sin(q_4, t6)
+    multiply(T_20, t6, t9)
+    subtract(t4, t9, T_80)
+    multiply(T_68, t2, t4)
+    multiply(T_16, t6, t9)
+    add(t4, t9, T_84)
+    multiply(T_72, t2, T_88)
+    cos(q_5, t4)
+    multiply(T_80, t4, t9)
+    multiply(T_50, t8, t10)
+    multiply(t5, t1, t5)
+    add(t10, t5, t10)
+    sin(q_5, t5)
+    multiply(t10, t5, t11)
+    add(t9, t11, T_96)
+    multiply(T_84, t4, t9)
+    multiply(T_54, t8, t11)
+    multiply(t7, t1, t7)
+    add(t11, t7, t11)
+    multiply(t11, t5, t7)
+    add(t9, t7, T_100)
+    multiply(T_88, t4, t7)
+    multiply(t3, t8, t8)
+    multiply(T_56, t1, t1)
+    add(t8, t1, T_74)
+    multiply(T_74, t5, t1)
+    subtract(t7, t1, T_104)
+    negative(T_20, T_17)
+    multiply(T_64, t6, t1)
+    multiply(T_20, t2, t7)
+    add(t1, t7, t1)
+    negative(t1, T_81)
+    multiply(T_16, t2, t2)
+    multiply(T_68, t6, t1)
+    subtract(t2, t1, T_85)
+    multiply(T_72, t6, t6)
+    negative(t6, T_89)
+    negative(t0, T_42)
+    negative(t3, T_58)
+    negative(t10, T_66)
+    negative(t11, T_70)
+    multiply(T_80, t5, t1)
+    multiply(t10, t4, t2)
+    subtract(t1, t2, T_98)
+    multiply(T_84, t5, t1)
+    multiply(t11, t4, t2)
+    subtract(t1, t2, T_102)
+    multiply(T_88, t5, t5)
+    multiply(T_74, t4, t4)
+    add(t5, t4, T_106)
+    multiply(k0, T_20, t1)
+    negative(t1, T_35)
+    multiply(k0, T_16, T_39)
+    multiply(k1, T_34, t2)
+    multiply(k2, T_20, t4)
+    subtract(t2, t4, t2)
+    subtract(t2, t1, T_51)
+    multiply(k2, T_16, t1)
+    multiply(k1, T_38, t2)
+    add(t1, t2, t1)
+    add(T_39, t1, T_55)
+    multiply(k1, t0, t0)
+    subtract(k3, t0, T_59)
+    multiply(k4, T_50, t0)
+    add(T_51, t0, T_67)
+    multiply(k4, T_54, t0)
+    add(T_55, t0, T_71)
+    multiply(k4, t3, t3)
+    subtract(T_59, t3, T_75)
+    multiply(k5, T_20, t0)
+    subtract(T_67, t0, T_83)
+    multiply(k5, T_16, t0)
+    add(T_71, t0, T_87)
+    multiply(k6, t10, t10)
+    subtract(T_83, t10, T_99)
+    multiply(k6, t11, t11)
+    subtract(T_87, t11, T_103)
+    multiply(k6, T_74, t0)
+    add(T_75, t0, T_107)
+    copyto(T_21, T_16)
+    copyto(T_33, T_17)
+    copyto(T_37, T_16)
+    copyto(T_49, T_17)
+    copyto(T_53, T_16)
+    copyto(T_65, T_17)
+    copyto(T_69, T_16)
+    copyto(T_82, T_66)
+    copyto(T_86, T_70)
+    copyto(T_90, T_74)
+    copyto(T_91, T_75)
+    copyto(T_97, T_81)
+    copyto(T_101, T_85)
+    copyto(T_105, T_89)
+
+
 def mass_matrix(q):
     """Joint-space mass matrix M(q) (6x6, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.
 

@@ -74,7 +74,8 @@ class JaxBackend(Backend):
     def render(self, env: jinja2.Environment, robot: RobotContext, functions: list[dict]) -> dict[str, str]:
         text = env.get_template(self.template("module.py.jinja")).render(
             robot.data(), functions=functions, support=self.sections(functions),
-            missing=[f["short_name"] for f in functions if not f["jax_provided"]])
+            missing=[f["short_name"] for f in functions if not f["jax_provided"]],
+            jax_aliases=[(a, n) for a, n in robot.aliases if n in {f["short_name"] for f in functions if f["jax_provided"]}])
         return {f"jax/{robot.robot}.py": text}
 
     def manifest_entry(self, robot: RobotContext, f: dict) -> dict | None:
