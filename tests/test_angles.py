@@ -92,7 +92,7 @@ def test_arm_as_written_keeps_the_numbers_and_lists_the_rounded_angles(capsys):
     written = file_rpy(ARM.read_text())
     assert {j["name"]: j["origin"]["rpy"] for j in entry["joints"]} == {j: written[j] for j in JOINTS}  # exact copies
     assert entry["frames"] == [{"name": "tcp", "link": "flange", "xyz": [0.0, 0.0, -0.058],
-                                "rpy": written["tool_mount"]}]  # 3.14159265358979: pi to 3.2e-15, kept as written
+                                "rpy": written["tool_mount"], "aliases": ["tool"]}]  # 3.14159265358979: pi to 3.2e-15, kept as written
     assert "--snap-angles" not in entry["source"]
     symbolic_matches_file(parse_robot(name, entry), 1e-14)
 
