@@ -27,6 +27,9 @@ if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
     os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
 
 jax = pytest.importorskip("jax", reason="the jax extra is not installed (pip install derive-robotics[jax])")
+# float64, as a user of the modules turns it on (importing one changes no JAX setting:
+# test_import_changes_no_jax_setting, in a fresh process)
+jax.config.update("jax_enable_x64", True)
 
 from derive.codegen.generate import generate  # noqa: E402
 from derive.description.model import load_models, parse_models  # noqa: E402
@@ -126,7 +129,7 @@ def test_manifest_names_the_jax_functions(robot, generated):
         assert fn["jax"] == {"module": f"jax/{robot}.py", "function": fn["python"]["function"],
                              "returns": fn["python"]["returns"]}, fn["name"]
         assert callable(getattr(jx, fn["jax"]["function"]))
-    assert "jax_enable_x64" in jx.__doc__ and jax.config.jax_enable_x64
+    assert "jax_enable_x64" in jx.__doc__ and "changes no JAX setting" in jx.__doc__
     support = [s for s in manifest["support"] if s["file"] == f"jax/{robot}.py"]
     has_manipulability = any(fn["quantity"] == "manipulability" for fn in manifest["functions"])
     assert support == ([{"file": f"jax/{robot}.py", "source": "templates/jax/support/manipulability.py"}]
@@ -276,6 +279,31 @@ def test_functions_check_their_inputs(generated):
         jx.mass_matrix([0.0, 1.0], [1.0])
     assert jx.mass_matrix([0.1, 0.2]).shape == (2, 2)
     assert jx.rk4_step([0.1, 0.2, 0.0, 0.0], [0.0, 0.0], 0.01).shape == (4,)  # a scalar dt counts as [dt]
+
+
+def test_import_changes_no_jax_setting(generated):
+    """In a fresh process: importing a module leaves jax_enable_x64 off, the functions then compute
+    in float32; inside `with jax.enable_x64(True)` around the jit call they compute in float64 and
+    equal the numpy module to 1e-12."""
+    code = ("import importlib.util, jax, numpy as np, sys\n"
+            "def load(path, name):\n"
+            "    spec = importlib.util.spec_from_file_location(name, path)\n"
+            "    m = importlib.util.module_from_spec(spec); spec.loader.exec_module(m); return m\n"
+            f"jx = load({str(generated / 'planar_2r' / 'jax' / 'planar_2r.py')!r}, 'jx')\n"
+            f"py = load({str(generated / 'planar_2r' / 'python' / 'planar_2r.py')!r}, 'py')\n"
+            "assert jax.config.jax_enable_x64 is False\n"
+            "q = np.array([[0.3, -0.7], [1.1, 0.2]])\n"
+            "assert jax.jit(jx.mass_matrix)(q).dtype == np.float32\n"
+            "with jax.enable_x64(True):\n"
+            "    got = np.asarray(jax.jit(jx.mass_matrix)(q))\n"
+            "assert got.dtype == np.float64 and jax.config.jax_enable_x64 is False\n"
+            "want = np.stack([py.mass_matrix(s) for s in q])\n"
+            "assert np.max(np.abs(got - want)) <= 1e-12 * np.max(np.abs(want)), (got, want)\n"
+            "print('ok')\n")
+    env = {k: v for k, v in os.environ.items() if k != "JAX_ENABLE_X64"}
+    out = subprocess.run([sys.executable, "-c", code], check=True, cwd=ROOT, timeout=300, env=env,
+                         capture_output=True, text=True)
+    assert out.stdout.strip() == "ok"
 
 
 def test_generation_does_not_import_jax(tmp_path):

@@ -131,6 +131,8 @@ def _load_jax(folder: Path):
     """The JAX module, or None where the jax extra is not installed (CI installs it)."""
     if importlib.util.find_spec("jax") is None:
         return None
+    import jax
+    jax.config.update("jax_enable_x64", True)  # the module computes in JAX's default float type
     spec = importlib.util.spec_from_file_location("large_chain_jax", Path(folder / "jax" / f"chain{N}.py"))
     jx = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(jx)

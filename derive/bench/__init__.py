@@ -23,7 +23,7 @@ from derive.resources import CHECKOUT
 
 ROOT = CHECKOUT
 BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.bench.trajopt", "derive.bench.simulate",
-                            "derive.bench.python", "derive.bench.zoo", "derive.bench.identification",
+                            "derive.bench.python", "derive.bench.jax_speed", "derive.bench.zoo", "derive.bench.identification",
                             "derive.bench.bundles", "derive.bench.firmware", "derive.bench.large",
                             "derive.bench.pinocchio_cpp"]
 """The modules contributing benchmarks, in the order they run and appear in the results."""

@@ -102,6 +102,7 @@ def _jax_module(generated: Path):
         jax = importlib.import_module("jax")
     except ImportError:
         return None, None
+    jax.config.update("jax_enable_x64", True)  # the module computes in JAX's default float type
     path = generated / ROBOT / "jax" / f"{ROBOT}.py"
     spec = importlib.util.spec_from_file_location(f"derive_bench_{ROBOT}_jax", path)
     mod = importlib.util.module_from_spec(spec)

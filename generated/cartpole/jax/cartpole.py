@@ -2,9 +2,12 @@
 
 Do not edit: change models.yaml or derive, then run `make derive`.
 Pure jax.numpy: jax.jit, jax.vmap and jax.grad apply to every function, which runs wherever
-JAX does (CPU, GPU). Importing this module turns on float64 for the whole process
-(jax.config.update("jax_enable_x64", True)): the functions compute in float64, as the numpy
-module python/cartpole.py does, and agree with it to rounding.
+JAX does (CPU, GPU). Importing this module changes no JAX setting. The functions compute in JAX's
+default float type: float32 unless float64 is on, which the numpy module python/cartpole.py uses
+and this one then agrees with to rounding; turn it on before the first JAX computation
+(jax.config.update("jax_enable_x64", True), or JAX_ENABLE_X64=1 in the environment), or for a
+region with `with jax.enable_x64(True):` around the jit-compiled call, not inside the function
+(a jit call converts its float64 arguments to float32 on entry where float64 is off).
 Inputs take any leading batch shape: an input of n elements is an array (..., n), the batch
 shapes broadcast, and an output of shape s is returned as (..., *s); one state (1-D inputs)
 returns the shapes of the numpy module. Names and argument order are the numpy module's.
@@ -13,11 +16,8 @@ status code, not one traceable graph: use python/cartpole.py or the C code).
 Joints (q order): s, theta.
 """
 
-import jax
 import jax.numpy as jnp
 import numpy as np
-
-jax.config.update("jax_enable_x64", True)
 
 ROBOT = "cartpole"
 NQ = 2
@@ -28,8 +28,8 @@ DEFAULT_P = np.array([])
 
 
 def _input(value, n, name):
-    """value as a float64 array (..., n); a scalar counts as one element."""
-    v = jnp.asarray(value, dtype=jnp.float64)
+    """value as an array (..., n) of JAX's default float type; a scalar counts as one element."""
+    v = jnp.asarray(value, dtype=float)
     if v.ndim == 0 and n == 1:
         v = v[None]
     if v.ndim == 0 or v.shape[-1] != n:
@@ -42,17 +42,19 @@ def _batch(*arrays):
     return jnp.broadcast_shapes(*(a.shape[:-1] for a in arrays))
 
 
-def _assemble(entries, batch):
-    """entries (arrays of the batch shape or broadcastable to it, floats) as one array (*batch, len(entries)).
+def _keep(t, one):
+    """t, computed once: one is a runtime 1.0 (x * 0.0 + 1.0 of an input, not a constant XLA could
+    fold), t / one == t exactly, and XLA does not copy a divide into each of its users as it does
+    cheap ops (add, sub, mul, and on the CPU sin, cos), which would recompute t's tree per use."""
+    return t / one
 
-    Written entry by entry (.at[..., k].set; constant zeros are skipped) rather than with jnp.stack:
-    XLA:CPU fuses all of a stack's operands into one concatenate kernel that recomputes shared
-    subexpressions (jaxlib 0.10, panda: inverse_dynamics 130 us per state instead of 1 us)."""
-    out = jnp.zeros(batch + (len(entries),), dtype=jnp.float64)
-    for k, e in enumerate(entries):
-        if not (isinstance(e, float) and e == 0.0):
-            out = out.at[..., k].set(e)
-    return out
+
+def _stack(entries, batch):
+    """entries (arrays broadcastable to the batch shape, floats) as one array (*batch, len(entries)):
+    stacked along a new first axis (each entry a contiguous row), then that axis moved last."""
+    dtype = jnp.result_type(float)
+    return jnp.moveaxis(jnp.stack([jnp.broadcast_to(jnp.asarray(e, dtype), batch) for e in entries]), 0, -1)
+
 
 
 # ---- templates/jax/support/manipulability.py: the same in every generated module ----
@@ -83,12 +85,14 @@ def fk_tcp(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = jnp.cos(q[..., 1])
-    t1 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = _keep(jnp.sin(q_[1]), one)
     t2 = -t1
-    t3 = q[..., 0] - t1
+    t3 = q_[0] - t1
     t4 = -t0
-    T = _assemble([t0, 0.0, t1, t3, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t4, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    T = _stack([t0, 0.0, t1, t3, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t4, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
     return T
 
 
@@ -101,13 +105,15 @@ def jacobian_tcp(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[1])
     t1 = -t0
-    t2 = jnp.sin(q[..., 1])
-    t3 = q[..., 0] - t2
-    t4 = t3 - q[..., 0]
+    t2 = jnp.sin(q_[1])
+    t3 = q_[0] - t2
+    t4 = t3 - q_[0]
     t5 = -t4
-    J = _assemble([1.0, t1, 0.0, 0.0, 0.0, t5, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    J = _stack([1.0, t1, 0.0, 0.0, 0.0, t5, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
     return J
 
 
@@ -122,12 +128,15 @@ def jdot_qd_tcp(q, qd):
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     batch = _batch(q, qd)
-    t0 = jnp.sin(q[..., 1])
-    t1 = qd[..., 1] * qd[..., 1]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.sin(q_[1])
+    t1 = qd_[1] * qd_[1]
     t2 = t0 * t1
-    t3 = jnp.cos(q[..., 1])
+    t3 = jnp.cos(q_[1])
     t4 = t3 * t1
-    a = _assemble([t2, 0.0, t4, 0.0, 0.0, 0.0], batch)
+    a = _stack([t2, 0.0, t4, 0.0, 0.0, 0.0], batch)
     return a
 
 
@@ -144,20 +153,24 @@ def frame_acceleration_tcp(q, qd, qdd):
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     batch = _batch(q, qd, qdd)
-    t0 = jnp.cos(q[..., 1])
-    t1 = t0 * qdd[..., 0]
-    t2 = t1 - qdd[..., 1]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = t0 * qdd_[0]
+    t2 = t1 - qdd_[1]
     t3 = t0 * t2
-    t4 = jnp.sin(q[..., 1])
-    t5 = t4 * qdd[..., 0]
-    t6 = qd[..., 1] * qd[..., 1]
+    t4 = _keep(jnp.sin(q_[1]), one)
+    t5 = t4 * qdd_[0]
+    t6 = qd_[1] * qd_[1]
     t7 = t5 + t6
     t8 = t4 * t7
     t9 = t3 + t8
     t10 = t0 * t7
     t11 = t4 * t2
     t12 = t10 - t11
-    a = _assemble([t9, 0.0, t12, 0.0, qdd[..., 1], 0.0], batch)
+    a = _stack([t9, 0.0, t12, 0.0, qdd_[1], 0.0], batch)
     return a
 
 
@@ -171,15 +184,17 @@ def fk_jacobian_tcp(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = jnp.cos(q[..., 1])
-    t1 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = _keep(jnp.sin(q_[1]), one)
     t2 = -t1
-    t3 = q[..., 0] - t1
+    t3 = q_[0] - t1
     t4 = -t0
-    t5 = t3 - q[..., 0]
+    t5 = t3 - q_[0]
     t6 = -t5
-    T = _assemble([t0, 0.0, t1, t3, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t4, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    J = _assemble([1.0, t4, 0.0, 0.0, 0.0, t6, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    T = _stack([t0, 0.0, t1, t3, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t4, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    J = _stack([1.0, t4, 0.0, 0.0, 0.0, t6, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
     return T, J
 
 
@@ -208,9 +223,11 @@ def mass_matrix(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = jnp.cos(q[..., 1])
-    t1 = (-0.05) * t0
-    M = _assemble([1.1, t1, t1, 0.03333333333333333], batch).reshape(batch + (2, 2))
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[1])
+    t1 = _keep((-0.05) * t0, one)
+    M = _stack([1.1, t1, t1, 0.03333333333333333], batch).reshape(batch + (2, 2))
     return M
 
 
@@ -225,11 +242,14 @@ def coriolis_matrix(q, qd):
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     batch = _batch(q, qd)
-    t0 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.sin(q_[1])
     t1 = (-0.05) * t0
-    t2 = t1 * qd[..., 1]
+    t2 = t1 * qd_[1]
     t3 = -t2
-    C = _assemble([0.0, t3, 0.0, 0.0], batch).reshape(batch + (2, 2))
+    C = _stack([0.0, t3, 0.0, 0.0], batch).reshape(batch + (2, 2))
     return C
 
 
@@ -242,8 +262,10 @@ def gravity(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = jnp.sin(q[..., 1])
-    t1 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(q_[1]), one)
+    t1 = _keep(jnp.cos(q_[1]), one)
     t2 = 0.9810000000000001 * t1
     t3 = t0 * t2
     t4 = 0.9810000000000001 * t0
@@ -251,7 +273,7 @@ def gravity(q):
     t6 = t3 - t5
     t7 = (-0.49050000000000005) * t0
     t8 = -t7
-    g = _assemble([t6, t8], batch)
+    g = _stack([t6, t8], batch)
     return g
 
 
@@ -266,11 +288,14 @@ def bias(q, qd):
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     batch = _batch(q, qd)
-    t0 = jnp.sin(q[..., 1])
-    t1 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(q_[1]), one)
+    t1 = _keep(jnp.cos(q_[1]), one)
     t2 = 0.9810000000000001 * t1
-    t3 = (-0.05) * qd[..., 1]
-    t4 = qd[..., 1] * t3
+    t3 = (-0.05) * qd_[1]
+    t4 = qd_[1] * t3
     t5 = t2 - t4
     t6 = t0 * t5
     t7 = 0.9810000000000001 * t0
@@ -278,7 +303,7 @@ def bias(q, qd):
     t9 = t6 - t8
     t10 = (-0.49050000000000005) * t0
     t11 = -t10
-    h = _assemble([t9, t11], batch)
+    h = _stack([t9, t11], batch)
     return h
 
 
@@ -295,29 +320,33 @@ def inverse_dynamics(q, qd, qdd):
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     batch = _batch(q, qd, qdd)
-    t0 = jnp.cos(q[..., 1])
-    t1 = t0 * qdd[..., 0]
-    t2 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = t0 * qdd_[0]
+    t2 = _keep(jnp.sin(q_[1]), one)
     t3 = 9.81 * t2
     t4 = t1 - t3
     t5 = 0.1 * t4
-    t6 = (-0.05) * qdd[..., 1]
+    t6 = (-0.05) * qdd_[1]
     t7 = t5 + t6
     t8 = t0 * t7
-    t9 = t2 * qdd[..., 0]
+    t9 = t2 * qdd_[0]
     t10 = 9.81 * t0
     t11 = t9 + t10
     t12 = 0.1 * t11
-    t13 = (-0.05) * qd[..., 1]
-    t14 = qd[..., 1] * t13
+    t13 = (-0.05) * qd_[1]
+    t14 = qd_[1] * t13
     t15 = t12 - t14
     t16 = t2 * t15
     t17 = t8 + t16
-    t18 = qdd[..., 0] + t17
-    t19 = 0.03333333333333333 * qdd[..., 1]
+    t18 = qdd_[0] + t17
+    t19 = 0.03333333333333333 * qdd_[1]
     t20 = (-0.05) * t4
     t21 = t19 + t20
-    tau = _assemble([t18, t21], batch)
+    tau = _stack([t18, t21], batch)
     return tau
 
 
@@ -334,23 +363,27 @@ def inverse_dynamics_derivatives(q, qd, qdd):
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     batch = _batch(q, qd, qdd)
-    t0 = jnp.sin(q[..., 1])
-    t1 = t0 * qdd[..., 0]
-    t2 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(q_[1]), one)
+    t1 = t0 * qdd_[0]
+    t2 = _keep(jnp.cos(q_[1]), one)
     t3 = 9.81 * t2
     t4 = t1 + t3
     t5 = 0.1 * t4
-    t6 = (-0.05) * qd[..., 1]
-    t7 = qd[..., 1] * t6
+    t6 = (-0.05) * qd_[1]
+    t7 = qd_[1] * t6
     t8 = t5 - t7
     t9 = t8 * t2
-    t10 = qdd[..., 0] * t2
+    t10 = qdd_[0] * t2
     t11 = 9.81 * t0
     t12 = t10 - t11
     t13 = 0.1 * t12
     t14 = t0 * t13
     t15 = t9 + t14
-    t16 = (-0.05) * qdd[..., 1]
+    t16 = (-0.05) * qdd_[1]
     t17 = t13 + t16
     t18 = t17 * t0
     t19 = t2 * t5
@@ -358,10 +391,10 @@ def inverse_dynamics_derivatives(q, qd, qdd):
     t21 = t15 - t20
     t22 = (-0.05) * t4
     t23 = -t22
-    t24 = (-0.1) * qd[..., 1]
+    t24 = (-0.1) * qd_[1]
     t25 = t0 * t24
     t26 = -t25
-    dtau = _assemble([0.0, t21, 0.0, t26, 0.0, t23, 0.0, 0.0], batch).reshape(batch + (2, 4))
+    dtau = _stack([0.0, t21, 0.0, t26, 0.0, t23, 0.0, 0.0], batch).reshape(batch + (2, 4))
     return dtau
 
 
@@ -378,21 +411,25 @@ def forward_dynamics(q, qd, tau):
     qd = _input(qd, 2, "qd")
     tau = _input(tau, 2, "tau")
     batch = _batch(q, qd, tau)
-    t0 = jnp.sin(q[..., 1])
-    t1 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    tau_ = jnp.moveaxis(tau, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(q_[1]), one)
+    t1 = _keep(jnp.cos(q_[1]), one)
     t2 = 0.9810000000000001 * t1
-    t3 = (-0.05) * qd[..., 1]
-    t4 = qd[..., 1] * t3
+    t3 = (-0.05) * qd_[1]
+    t4 = qd_[1] * t3
     t5 = t2 - t4
     t6 = t0 * t5
     t7 = 0.9810000000000001 * t0
     t8 = t1 * t7
     t9 = t6 - t8
-    t10 = tau[..., 0] - t9
+    t10 = tau_[0] - t9
     t11 = t10 / 1.1
     t12 = (-0.045454545454545456) * t1
     t13 = (-0.49050000000000005) * t0
-    t14 = tau[..., 1] + t13
+    t14 = tau_[1] + t13
     t15 = t12 * t10
     t16 = t14 - t15
     t17 = t12 * t12
@@ -401,7 +438,7 @@ def forward_dynamics(q, qd, tau):
     t20 = t16 / t19
     t21 = t12 * t20
     t22 = t11 - t21
-    qdd = _assemble([t22, t20], batch)
+    qdd = _stack([t22, t20], batch)
     return qdd
 
 
@@ -420,37 +457,42 @@ def inverse_dynamics_fext(q, qd, qdd, w):
     qdd = _input(qdd, 2, "qdd")
     w = _input(w, 6, "w")
     batch = _batch(q, qd, qdd, w)
-    t0 = jnp.cos(q[..., 1])
-    t1 = t0 * qdd[..., 0]
-    t2 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    w_ = jnp.moveaxis(w, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = t0 * qdd_[0]
+    t2 = _keep(jnp.sin(q_[1]), one)
     t3 = 9.81 * t2
     t4 = t1 - t3
     t5 = 0.1 * t4
-    t6 = (-0.05) * qdd[..., 1]
+    t6 = (-0.05) * qdd_[1]
     t7 = t5 + t6
     t8 = t0 * t7
-    t9 = t2 * qdd[..., 0]
+    t9 = t2 * qdd_[0]
     t10 = 9.81 * t0
     t11 = t9 + t10
     t12 = 0.1 * t11
-    t13 = (-0.05) * qd[..., 1]
-    t14 = qd[..., 1] * t13
+    t13 = (-0.05) * qd_[1]
+    t14 = qd_[1] * t13
     t15 = t12 - t14
     t16 = t2 * t15
     t17 = t8 + t16
-    t18 = qdd[..., 0] + t17
-    t19 = t18 - w[..., 0]
-    t20 = 0.03333333333333333 * qdd[..., 1]
+    t18 = qdd_[0] + t17
+    t19 = t18 - w_[0]
+    t20 = 0.03333333333333333 * qdd_[1]
     t21 = (-0.05) * t4
     t22 = t20 + t21
-    t23 = t0 * w[..., 0]
-    t24 = q[..., 0] - t2
-    t25 = t24 - q[..., 0]
-    t26 = t25 * w[..., 2]
+    t23 = t0 * w_[0]
+    t24 = q_[0] - t2
+    t25 = t24 - q_[0]
+    t26 = t25 * w_[2]
     t27 = t23 + t26
-    t28 = w[..., 4] - t27
+    t28 = w_[4] - t27
     t29 = t22 - t28
-    tau = _assemble([t19, t29], batch)
+    tau = _stack([t19, t29], batch)
     return tau
 
 
@@ -469,12 +511,17 @@ def forward_dynamics_fext(q, qd, tau, w):
     tau = _input(tau, 2, "tau")
     w = _input(w, 6, "w")
     batch = _batch(q, qd, tau, w)
-    t0 = tau[..., 0] + w[..., 0]
-    t1 = jnp.sin(q[..., 1])
-    t2 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    tau_ = jnp.moveaxis(tau, -1, 0)
+    w_ = jnp.moveaxis(w, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = tau_[0] + w_[0]
+    t1 = _keep(jnp.sin(q_[1]), one)
+    t2 = _keep(jnp.cos(q_[1]), one)
     t3 = 0.9810000000000001 * t2
-    t4 = (-0.05) * qd[..., 1]
-    t5 = qd[..., 1] * t4
+    t4 = (-0.05) * qd_[1]
+    t5 = qd_[1] * t4
     t6 = t3 - t5
     t7 = t1 * t6
     t8 = 0.9810000000000001 * t1
@@ -483,13 +530,13 @@ def forward_dynamics_fext(q, qd, tau, w):
     t11 = t0 - t10
     t12 = t11 / 1.1
     t13 = (-0.045454545454545456) * t2
-    t14 = t2 * w[..., 0]
-    t15 = q[..., 0] - t1
-    t16 = t15 - q[..., 0]
-    t17 = t16 * w[..., 2]
+    t14 = t2 * w_[0]
+    t15 = q_[0] - t1
+    t16 = t15 - q_[0]
+    t17 = t16 * w_[2]
     t18 = t14 + t17
-    t19 = w[..., 4] - t18
-    t20 = tau[..., 1] + t19
+    t19 = w_[4] - t18
+    t20 = tau_[1] + t19
     t21 = (-0.49050000000000005) * t1
     t22 = t20 + t21
     t23 = t13 * t11
@@ -500,7 +547,7 @@ def forward_dynamics_fext(q, qd, tau, w):
     t28 = t24 / t27
     t29 = t13 * t28
     t30 = t12 - t29
-    qdd = _assemble([t30, t28], batch)
+    qdd = _stack([t30, t28], batch)
     return qdd
 
 
@@ -513,16 +560,18 @@ def com(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = 0.1 * q[..., 0]
-    t1 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = 0.1 * q_[0]
+    t1 = jnp.sin(q_[1])
     t2 = (-0.05) * t1
     t3 = t0 + t2
-    t4 = q[..., 0] + t3
+    t4 = q_[0] + t3
     t5 = t4 / 1.1
-    t6 = jnp.cos(q[..., 1])
+    t6 = jnp.cos(q_[1])
     t7 = (-0.05) * t6
     t8 = t7 / 1.1
-    c = _assemble([t5, 0.0, t8], batch)
+    c = _stack([t5, 0.0, t8], batch)
     return c
 
 
@@ -535,14 +584,16 @@ def com_jacobian(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[1])
     t1 = (-0.05) * t0
     t2 = t1 / 1.1
-    t3 = jnp.sin(q[..., 1])
+    t3 = jnp.sin(q_[1])
     t4 = (-0.05) * t3
     t5 = t4 / 1.1
     t6 = -t5
-    J = _assemble([1.0, t2, 0.0, 0.0, 0.0, t6], batch).reshape(batch + (3, 2))
+    J = _stack([1.0, t2, 0.0, 0.0, 0.0, t6], batch).reshape(batch + (3, 2))
     return J
 
 
@@ -555,25 +606,27 @@ def centroidal_map(q):
     """
     q = _input(q, 2, "q")
     batch = _batch(q)
-    t0 = jnp.cos(q[..., 1])
-    t1 = (-0.05) * t0
+    q_ = jnp.moveaxis(q, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[1])
+    t1 = _keep((-0.05) * t0, one)
     t2 = t1 / 1.1
     t3 = 0.1 * t2
     t4 = t1 - t3
     t5 = t4 - t2
-    t6 = jnp.sin(q[..., 1])
-    t7 = (-0.05) * t6
+    t6 = jnp.sin(q_[1])
+    t7 = _keep((-0.05) * t6, one)
     t8 = -t7
-    t9 = 0.1 * q[..., 0]
+    t9 = 0.1 * q_[0]
     t10 = t9 + t7
-    t11 = q[..., 0] + t10
+    t11 = q_[0] + t10
     t12 = t11 / 1.1
-    t13 = q[..., 0] - t12
+    t13 = q_[0] - t12
     t14 = t13 * t7
     t15 = t2 * t1
     t16 = t14 - t15
     t17 = 0.03333333333333333 + t16
-    A = _assemble([1.1, t1, 0.0, 0.0, 0.0, t8, 0.0, 0.0, t5, t17, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    A = _stack([1.1, t1, 0.0, 0.0, 0.0, t8, 0.0, 0.0, t5, t17, 0.0, 0.0], batch).reshape(batch + (6, 2))
     return A
 
 
@@ -588,21 +641,24 @@ def ode_rhs(x, u):
     x = _input(x, 4, "x")
     u = _input(u, 2, "u")
     batch = _batch(x, u)
-    t0 = jnp.sin(x[..., 1])
-    t1 = jnp.cos(x[..., 1])
+    x_ = jnp.moveaxis(x, -1, 0)
+    u_ = jnp.moveaxis(u, -1, 0)
+    one = x_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(x_[1]), one)
+    t1 = _keep(jnp.cos(x_[1]), one)
     t2 = 0.9810000000000001 * t1
-    t3 = (-0.05) * x[..., 3]
-    t4 = x[..., 3] * t3
+    t3 = (-0.05) * x_[3]
+    t4 = x_[3] * t3
     t5 = t2 - t4
     t6 = t0 * t5
     t7 = 0.9810000000000001 * t0
     t8 = t1 * t7
     t9 = t6 - t8
-    t10 = u[..., 0] - t9
+    t10 = u_[0] - t9
     t11 = t10 / 1.1
     t12 = (-0.045454545454545456) * t1
     t13 = (-0.49050000000000005) * t0
-    t14 = u[..., 1] + t13
+    t14 = u_[1] + t13
     t15 = t12 * t10
     t16 = t14 - t15
     t17 = t12 * t12
@@ -611,7 +667,7 @@ def ode_rhs(x, u):
     t20 = t16 / t19
     t21 = t12 * t20
     t22 = t11 - t21
-    xdot = _assemble([x[..., 2], x[..., 3], t22, t20], batch)
+    xdot = _stack([x_[2], x_[3], t22, t20], batch)
     return xdot
 
 
@@ -626,21 +682,24 @@ def ode_jac_x(x, u):
     x = _input(x, 4, "x")
     u = _input(u, 2, "u")
     batch = _batch(x, u)
-    t0 = jnp.sin(x[..., 1])
-    t1 = jnp.cos(x[..., 1])
+    x_ = jnp.moveaxis(x, -1, 0)
+    u_ = jnp.moveaxis(u, -1, 0)
+    one = x_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(x_[1]), one)
+    t1 = _keep(jnp.cos(x_[1]), one)
     t2 = 0.9810000000000001 * t1
-    t3 = (-0.05) * x[..., 3]
-    t4 = x[..., 3] * t3
+    t3 = (-0.05) * x_[3]
+    t4 = x_[3] * t3
     t5 = t2 - t4
     t6 = t0 * t5
     t7 = 0.9810000000000001 * t0
     t8 = t1 * t7
     t9 = t6 - t8
-    t10 = u[..., 0] - t9
+    t10 = u_[0] - t9
     t11 = t10 / 1.1
     t12 = (-0.045454545454545456) * t1
     t13 = (-0.49050000000000005) * t0
-    t14 = u[..., 1] + t13
+    t14 = u_[1] + t13
     t15 = t12 * t10
     t16 = t14 - t15
     t17 = t12 * t12
@@ -666,7 +725,7 @@ def ode_jac_x(x, u):
     t37 = t36 * t0
     t38 = t1 * t26
     t39 = t37 + t38
-    t40 = t34 - t39
+    t40 = _keep(t34 - t39, one)
     t41 = t40 / 1.1
     t42 = (-0.05) * t25
     t43 = t12 * t40
@@ -675,7 +734,7 @@ def ode_jac_x(x, u):
     t46 = t12 * t45
     t47 = t41 + t46
     t48 = -t47
-    t49 = (-0.1) * x[..., 3]
+    t49 = (-0.1) * x_[3]
     t50 = t0 * t49
     t51 = t50 / 1.1
     t52 = t12 * t50
@@ -683,7 +742,7 @@ def ode_jac_x(x, u):
     t54 = t12 * t53
     t55 = t51 + t54
     t56 = -t53
-    A = _assemble([0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, t48, 0.0, t55, 0.0, t45, 0.0, t56], batch).reshape(batch + (4, 4))
+    A = _stack([0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0, 0.0, t48, 0.0, t55, 0.0, t45, 0.0, t56], batch).reshape(batch + (4, 4))
     return A
 
 
@@ -698,8 +757,11 @@ def ode_jac_u(x, u):
     x = _input(x, 4, "x")
     u = _input(u, 2, "u")
     batch = _batch(x, u)
-    t0 = jnp.cos(x[..., 1])
-    t1 = (-0.045454545454545456) * t0
+    x_ = jnp.moveaxis(x, -1, 0)
+    u_ = jnp.moveaxis(u, -1, 0)
+    one = x_[0] * 0.0 + 1.0
+    t0 = jnp.cos(x_[1])
+    t1 = _keep((-0.045454545454545456) * t0, one)
     t2 = t1 * t1
     t3 = 1.1 * t2
     t4 = 0.03333333333333333 - t3
@@ -708,7 +770,7 @@ def ode_jac_u(x, u):
     t7 = 0.9090909090909091 + t6
     t8 = -t5
     t9 = 1.0 / t4
-    B = _assemble([0.0, 0.0, 0.0, 0.0, t7, t8, t8, t9], batch).reshape(batch + (4, 2))
+    B = _stack([0.0, 0.0, 0.0, 0.0, t7, t8, t8, t9], batch).reshape(batch + (4, 2))
     return B
 
 
@@ -725,29 +787,33 @@ def regressor(q, qd, qdd):
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     batch = _batch(q, qd, qdd)
-    t0 = jnp.cos(q[..., 1])
-    t1 = t0 * qdd[..., 0]
-    t2 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = t0 * qdd_[0]
+    t2 = _keep(jnp.sin(q_[1]), one)
     t3 = 9.81 * t2
     t4 = t1 - t3
     t5 = t0 * t4
-    t6 = t2 * qdd[..., 0]
+    t6 = t2 * qdd_[0]
     t7 = 9.81 * t0
     t8 = t6 + t7
     t9 = t2 * t8
     t10 = t5 + t9
-    t11 = qd[..., 1] * qd[..., 1]
+    t11 = qd_[1] * qd_[1]
     t12 = t0 * t11
-    t13 = t2 * qdd[..., 1]
+    t13 = t2 * qdd_[1]
     t14 = t12 + t13
     t15 = -t14
     t16 = -t8
-    t17 = t0 * qdd[..., 1]
+    t17 = t0 * qdd_[1]
     t18 = t2 * t11
     t19 = t17 - t18
-    t20 = jnp.sign(qd[..., 0])
-    t21 = jnp.sign(qd[..., 1])
-    Y = _assemble([qdd[..., 0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t10, t15, 0.0, t19, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[..., 0], qd[..., 0], t20, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t16, 0.0, t4, 0.0, 0.0, qdd[..., 1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd[..., 1], qd[..., 1], t21], batch).reshape(batch + (2, 26))
+    t20 = jnp.sign(qd_[0])
+    t21 = jnp.sign(qd_[1])
+    Y = _stack([qdd_[0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t10, t15, 0.0, t19, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd_[0], qd_[0], t20, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t16, 0.0, t4, 0.0, 0.0, qdd_[1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, qdd_[1], qd_[1], t21], batch).reshape(batch + (2, 26))
     return Y
 
 
@@ -764,26 +830,30 @@ def base_regressor(q, qd, qdd):
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     batch = _batch(q, qd, qdd)
-    t0 = jnp.cos(q[..., 1])
-    t1 = qd[..., 1] * qd[..., 1]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = qd_[1] * qd_[1]
     t2 = t0 * t1
-    t3 = jnp.sin(q[..., 1])
-    t4 = t3 * qdd[..., 1]
+    t3 = _keep(jnp.sin(q_[1]), one)
+    t4 = t3 * qdd_[1]
     t5 = t2 + t4
     t6 = -t5
-    t7 = t3 * qdd[..., 0]
+    t7 = t3 * qdd_[0]
     t8 = 9.81 * t0
     t9 = t7 + t8
     t10 = -t9
-    t11 = t0 * qdd[..., 1]
+    t11 = t0 * qdd_[1]
     t12 = t3 * t1
     t13 = t11 - t12
-    t14 = t0 * qdd[..., 0]
+    t14 = t0 * qdd_[0]
     t15 = 9.81 * t3
     t16 = t14 - t15
-    t17 = jnp.sign(qd[..., 0])
-    t18 = jnp.sign(qd[..., 1])
-    Y_b = _assemble([qdd[..., 0], t6, t13, 0.0, qd[..., 0], t17, 0.0, 0.0, 0.0, t10, t16, qdd[..., 1], 0.0, 0.0, qd[..., 1], t18], batch).reshape(batch + (2, 8))
+    t17 = jnp.sign(qd_[0])
+    t18 = jnp.sign(qd_[1])
+    Y_b = _stack([qdd_[0], t6, t13, 0.0, qd_[0], t17, 0.0, 0.0, 0.0, t10, t16, qdd_[1], 0.0, 0.0, qd_[1], t18], batch).reshape(batch + (2, 8))
     return Y_b
 
 
@@ -802,12 +872,15 @@ def bundle_control(q, qd):
     q = _input(q, 2, "q")
     qd = _input(qd, 2, "qd")
     batch = _batch(q, qd)
-    t0 = jnp.cos(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
     t1 = (-0.05) * t0
-    t2 = jnp.sin(q[..., 1])
+    t2 = _keep(jnp.sin(q_[1]), one)
     t3 = 0.9810000000000001 * t0
-    t4 = (-0.05) * qd[..., 1]
-    t5 = qd[..., 1] * t4
+    t4 = (-0.05) * qd_[1]
+    t5 = qd_[1] * t4
     t6 = t3 - t5
     t7 = t2 * t6
     t8 = 0.9810000000000001 * t2
@@ -816,18 +889,18 @@ def bundle_control(q, qd):
     t11 = (-0.49050000000000005) * t2
     t12 = -t11
     t13 = -t2
-    t14 = q[..., 0] - t2
+    t14 = q_[0] - t2
     t15 = -t0
-    t16 = t14 - q[..., 0]
+    t16 = t14 - q_[0]
     t17 = -t16
-    t18 = qd[..., 1] * qd[..., 1]
+    t18 = qd_[1] * qd_[1]
     t19 = t2 * t18
     t20 = t0 * t18
-    mass_matrix = _assemble([1.1, t1, t1, 0.03333333333333333], batch).reshape(batch + (2, 2))
-    bias = _assemble([t10, t12], batch)
-    fk_tcp = _assemble([t0, 0.0, t2, t14, 0.0, 1.0, 0.0, 0.0, t13, 0.0, t0, t15, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    jacobian_tcp = _assemble([1.0, t15, 0.0, 0.0, 0.0, t17, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
-    jdot_qd_tcp = _assemble([t19, 0.0, t20, 0.0, 0.0, 0.0], batch)
+    mass_matrix = _stack([1.1, t1, t1, 0.03333333333333333], batch).reshape(batch + (2, 2))
+    bias = _stack([t10, t12], batch)
+    fk_tcp = _stack([t0, 0.0, t2, t14, 0.0, 1.0, 0.0, 0.0, t13, 0.0, t0, t15, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _stack([1.0, t15, 0.0, 0.0, 0.0, t17, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    jdot_qd_tcp = _stack([t19, 0.0, t20, 0.0, 0.0, 0.0], batch)
     return mass_matrix, bias, fk_tcp, jacobian_tcp, jdot_qd_tcp
 
 
@@ -847,46 +920,50 @@ def bundle_computed_torque(q, qd, qdd):
     qd = _input(qd, 2, "qd")
     qdd = _input(qdd, 2, "qdd")
     batch = _batch(q, qd, qdd)
-    t0 = jnp.cos(q[..., 1])
-    t1 = t0 * qdd[..., 0]
-    t2 = jnp.sin(q[..., 1])
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[1]), one)
+    t1 = t0 * qdd_[0]
+    t2 = _keep(jnp.sin(q_[1]), one)
     t3 = 9.81 * t2
     t4 = t1 - t3
     t5 = 0.1 * t4
-    t6 = (-0.05) * qdd[..., 1]
+    t6 = (-0.05) * qdd_[1]
     t7 = t5 + t6
     t8 = t0 * t7
-    t9 = t2 * qdd[..., 0]
+    t9 = t2 * qdd_[0]
     t10 = 9.81 * t0
     t11 = t9 + t10
     t12 = 0.1 * t11
-    t13 = (-0.05) * qd[..., 1]
-    t14 = qd[..., 1] * t13
+    t13 = (-0.05) * qd_[1]
+    t14 = qd_[1] * t13
     t15 = t12 - t14
     t16 = t2 * t15
     t17 = t8 + t16
-    t18 = qdd[..., 0] + t17
-    t19 = 0.03333333333333333 * qdd[..., 1]
+    t18 = qdd_[0] + t17
+    t19 = 0.03333333333333333 * qdd_[1]
     t20 = (-0.05) * t4
     t21 = t19 + t20
     t22 = -t2
-    t23 = q[..., 0] - t2
+    t23 = q_[0] - t2
     t24 = -t0
-    t25 = t23 - q[..., 0]
+    t25 = t23 - q_[0]
     t26 = -t25
-    t27 = t1 - qdd[..., 1]
+    t27 = t1 - qdd_[1]
     t28 = t0 * t27
-    t29 = qd[..., 1] * qd[..., 1]
+    t29 = qd_[1] * qd_[1]
     t30 = t9 + t29
     t31 = t2 * t30
     t32 = t28 + t31
     t33 = t0 * t30
     t34 = t2 * t27
     t35 = t33 - t34
-    inverse_dynamics = _assemble([t18, t21], batch)
-    fk_tcp = _assemble([t0, 0.0, t2, t23, 0.0, 1.0, 0.0, 0.0, t22, 0.0, t0, t24, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    jacobian_tcp = _assemble([1.0, t24, 0.0, 0.0, 0.0, t26, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
-    frame_acceleration_tcp = _assemble([t32, 0.0, t35, 0.0, qdd[..., 1], 0.0], batch)
+    inverse_dynamics = _stack([t18, t21], batch)
+    fk_tcp = _stack([t0, 0.0, t2, t23, 0.0, 1.0, 0.0, 0.0, t22, 0.0, t0, t24, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _stack([1.0, t24, 0.0, 0.0, 0.0, t26, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0], batch).reshape(batch + (6, 2))
+    frame_acceleration_tcp = _stack([t32, 0.0, t35, 0.0, qdd_[1], 0.0], batch)
     return inverse_dynamics, fk_tcp, jacobian_tcp, frame_acceleration_tcp
 
 

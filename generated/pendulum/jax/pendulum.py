@@ -2,9 +2,12 @@
 
 Do not edit: change models.yaml or derive, then run `make derive`.
 Pure jax.numpy: jax.jit, jax.vmap and jax.grad apply to every function, which runs wherever
-JAX does (CPU, GPU). Importing this module turns on float64 for the whole process
-(jax.config.update("jax_enable_x64", True)): the functions compute in float64, as the numpy
-module python/pendulum.py does, and agree with it to rounding.
+JAX does (CPU, GPU). Importing this module changes no JAX setting. The functions compute in JAX's
+default float type: float32 unless float64 is on, which the numpy module python/pendulum.py uses
+and this one then agrees with to rounding; turn it on before the first JAX computation
+(jax.config.update("jax_enable_x64", True), or JAX_ENABLE_X64=1 in the environment), or for a
+region with `with jax.enable_x64(True):` around the jit-compiled call, not inside the function
+(a jit call converts its float64 arguments to float32 on entry where float64 is off).
 Inputs take any leading batch shape: an input of n elements is an array (..., n), the batch
 shapes broadcast, and an output of shape s is returned as (..., *s); one state (1-D inputs)
 returns the shapes of the numpy module. Names and argument order are the numpy module's.
@@ -13,11 +16,8 @@ status code, not one traceable graph: use python/pendulum.py or the C code).
 Joints (q order): phi.
 """
 
-import jax
 import jax.numpy as jnp
 import numpy as np
-
-jax.config.update("jax_enable_x64", True)
 
 ROBOT = "pendulum"
 NQ = 1
@@ -28,8 +28,8 @@ DEFAULT_P = np.array([1.0, 2.0, 0.0833333333333333, 0.002, 1.0, 9.81])
 
 
 def _input(value, n, name):
-    """value as a float64 array (..., n); a scalar counts as one element."""
-    v = jnp.asarray(value, dtype=jnp.float64)
+    """value as an array (..., n) of JAX's default float type; a scalar counts as one element."""
+    v = jnp.asarray(value, dtype=float)
     if v.ndim == 0 and n == 1:
         v = v[None]
     if v.ndim == 0 or v.shape[-1] != n:
@@ -42,17 +42,19 @@ def _batch(*arrays):
     return jnp.broadcast_shapes(*(a.shape[:-1] for a in arrays))
 
 
-def _assemble(entries, batch):
-    """entries (arrays of the batch shape or broadcastable to it, floats) as one array (*batch, len(entries)).
+def _keep(t, one):
+    """t, computed once: one is a runtime 1.0 (x * 0.0 + 1.0 of an input, not a constant XLA could
+    fold), t / one == t exactly, and XLA does not copy a divide into each of its users as it does
+    cheap ops (add, sub, mul, and on the CPU sin, cos), which would recompute t's tree per use."""
+    return t / one
 
-    Written entry by entry (.at[..., k].set; constant zeros are skipped) rather than with jnp.stack:
-    XLA:CPU fuses all of a stack's operands into one concatenate kernel that recomputes shared
-    subexpressions (jaxlib 0.10, panda: inverse_dynamics 130 us per state instead of 1 us)."""
-    out = jnp.zeros(batch + (len(entries),), dtype=jnp.float64)
-    for k, e in enumerate(entries):
-        if not (isinstance(e, float) and e == 0.0):
-            out = out.at[..., k].set(e)
-    return out
+
+def _stack(entries, batch):
+    """entries (arrays broadcastable to the batch shape, floats) as one array (*batch, len(entries)):
+    stacked along a new first axis (each entry a contiguous row), then that axis moved last."""
+    dtype = jnp.result_type(float)
+    return jnp.moveaxis(jnp.stack([jnp.broadcast_to(jnp.asarray(e, dtype), batch) for e in entries]), 0, -1)
+
 
 
 def fk_tcp(q, p=DEFAULT_P):
@@ -66,14 +68,17 @@ def fk_tcp(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = jnp.sin(q[..., 0])
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[0]), one)
+    t1 = _keep(jnp.sin(q_[0]), one)
     t2 = -t1
-    t3 = t1 * p[..., 4]
+    t3 = t1 * p_[4]
     t4 = -t3
-    t5 = t0 * p[..., 4]
+    t5 = t0 * p_[4]
     t6 = -t5
-    T = _assemble([t0, 0.0, t1, t4, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t6, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    T = _stack([t0, 0.0, t1, t4, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t6, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
     return T
 
 
@@ -88,12 +93,15 @@ def jacobian_tcp(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = t0 * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[0])
+    t1 = t0 * p_[4]
     t2 = -t1
-    t3 = jnp.sin(q[..., 0])
-    t4 = t3 * p[..., 4]
-    J = _assemble([t2, 0.0, t4, 0.0, 1.0, 0.0], batch)
+    t3 = jnp.sin(q_[0])
+    t4 = t3 * p_[4]
+    J = _stack([t2, 0.0, t4, 0.0, 1.0, 0.0], batch)
     return J
 
 
@@ -110,13 +118,17 @@ def jdot_qd_tcp(q, qd, p=DEFAULT_P):
     qd = _input(qd, 1, "qd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, p)
-    t0 = jnp.sin(q[..., 0])
-    t1 = qd[..., 0] * p[..., 4]
-    t2 = qd[..., 0] * t1
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.sin(q_[0])
+    t1 = qd_[0] * p_[4]
+    t2 = qd_[0] * t1
     t3 = t0 * t2
-    t4 = jnp.cos(q[..., 0])
+    t4 = jnp.cos(q_[0])
     t5 = t4 * t2
-    a = _assemble([t3, 0.0, t5, 0.0, 0.0, 0.0], batch)
+    a = _stack([t3, 0.0, t5, 0.0, 0.0, 0.0], batch)
     return a
 
 
@@ -135,18 +147,23 @@ def frame_acceleration_tcp(q, qd, qdd, p=DEFAULT_P):
     qdd = _input(qdd, 1, "qdd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, p)
-    t0 = jnp.sin(q[..., 0])
-    t1 = qd[..., 0] * p[..., 4]
-    t2 = qd[..., 0] * t1
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(q_[0]), one)
+    t1 = qd_[0] * p_[4]
+    t2 = qd_[0] * t1
     t3 = t0 * t2
-    t4 = jnp.cos(q[..., 0])
-    t5 = qdd[..., 0] * p[..., 4]
+    t4 = _keep(jnp.cos(q_[0]), one)
+    t5 = qdd_[0] * p_[4]
     t6 = t4 * t5
     t7 = t3 - t6
     t8 = t0 * t5
     t9 = t4 * t2
     t10 = t8 + t9
-    a = _assemble([t7, 0.0, t10, 0.0, qdd[..., 0], 0.0], batch)
+    a = _stack([t7, 0.0, t10, 0.0, qdd_[0], 0.0], batch)
     return a
 
 
@@ -162,15 +179,18 @@ def fk_jacobian_tcp(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = jnp.sin(q[..., 0])
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.cos(q_[0]), one)
+    t1 = _keep(jnp.sin(q_[0]), one)
     t2 = -t1
-    t3 = t1 * p[..., 4]
+    t3 = t1 * p_[4]
     t4 = -t3
-    t5 = t0 * p[..., 4]
+    t5 = t0 * p_[4]
     t6 = -t5
-    T = _assemble([t0, 0.0, t1, t4, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t6, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    J = _assemble([t6, 0.0, t3, 0.0, 1.0, 0.0], batch)
+    T = _stack([t0, 0.0, t1, t4, 0.0, 1.0, 0.0, 0.0, t2, 0.0, t0, t6, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    J = _stack([t6, 0.0, t3, 0.0, 1.0, 0.0], batch)
     return T, J
 
 
@@ -207,15 +227,18 @@ def mass_matrix(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = p[..., 4] / 2.0
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
     t1 = t0 * t0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 2] + t2
-    t4 = p[..., 4] * p[..., 4]
-    t5 = p[..., 1] * t4
-    t6 = p[..., 3] + t5
+    t2 = p_[0] * t1
+    t3 = p_[2] + t2
+    t4 = p_[4] * p_[4]
+    t5 = p_[1] * t4
+    t6 = p_[3] + t5
     t7 = t3 + t6
-    M = _assemble([t7], batch)
+    M = _stack([t7], batch)
     return M
 
 
@@ -232,7 +255,11 @@ def coriolis_matrix(q, qd, p=DEFAULT_P):
     qd = _input(qd, 1, "qd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, p)
-    C = _assemble([0.0], batch)
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    C = _stack([0.0], batch)
     return C
 
 
@@ -247,14 +274,17 @@ def gravity(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = p[..., 4] / 2.0
-    t1 = p[..., 0] * t0
-    t2 = p[..., 1] * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
+    t1 = p_[0] * t0
+    t2 = p_[1] * p_[4]
     t3 = t1 + t2
-    t4 = jnp.sin(q[..., 0])
-    t5 = t4 * p[..., 5]
+    t4 = jnp.sin(q_[0])
+    t5 = t4 * p_[5]
     t6 = t3 * t5
-    g = _assemble([t6], batch)
+    g = _stack([t6], batch)
     return g
 
 
@@ -271,14 +301,18 @@ def bias(q, qd, p=DEFAULT_P):
     qd = _input(qd, 1, "qd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, p)
-    t0 = p[..., 4] / 2.0
-    t1 = p[..., 0] * t0
-    t2 = p[..., 1] * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
+    t1 = p_[0] * t0
+    t2 = p_[1] * p_[4]
     t3 = t1 + t2
-    t4 = jnp.sin(q[..., 0])
-    t5 = t4 * p[..., 5]
+    t4 = jnp.sin(q_[0])
+    t5 = t4 * p_[5]
     t6 = t3 * t5
-    h = _assemble([t6], batch)
+    h = _stack([t6], batch)
     return h
 
 
@@ -297,23 +331,28 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     qdd = _input(qdd, 1, "qdd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, p)
-    t0 = p[..., 4] / 2.0
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
     t1 = t0 * t0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 2] + t2
-    t4 = p[..., 4] * p[..., 4]
-    t5 = p[..., 1] * t4
-    t6 = p[..., 3] + t5
+    t2 = p_[0] * t1
+    t3 = p_[2] + t2
+    t4 = p_[4] * p_[4]
+    t5 = p_[1] * t4
+    t6 = p_[3] + t5
     t7 = t3 + t6
-    t8 = t7 * qdd[..., 0]
-    t9 = p[..., 0] * t0
-    t10 = p[..., 1] * p[..., 4]
+    t8 = t7 * qdd_[0]
+    t9 = p_[0] * t0
+    t10 = p_[1] * p_[4]
     t11 = t9 + t10
-    t12 = jnp.sin(q[..., 0])
-    t13 = t12 * p[..., 5]
+    t12 = jnp.sin(q_[0])
+    t13 = t12 * p_[5]
     t14 = t11 * t13
     t15 = t8 + t14
-    tau = _assemble([t15], batch)
+    tau = _stack([t15], batch)
     return tau
 
 
@@ -332,14 +371,19 @@ def inverse_dynamics_derivatives(q, qd, qdd, p=DEFAULT_P):
     qdd = _input(qdd, 1, "qdd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = p[..., 4] / 2.0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 1] * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[0])
+    t1 = p_[4] / 2.0
+    t2 = p_[0] * t1
+    t3 = p_[1] * p_[4]
     t4 = t2 + t3
-    t5 = p[..., 5] * t4
+    t5 = p_[5] * t4
     t6 = t0 * t5
-    dtau = _assemble([t6, 0.0], batch).reshape(batch + (1, 2))
+    dtau = _stack([t6, 0.0], batch).reshape(batch + (1, 2))
     return dtau
 
 
@@ -358,23 +402,28 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     tau = _input(tau, 1, "tau")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, tau, p)
-    t0 = p[..., 4] / 2.0
-    t1 = p[..., 0] * t0
-    t2 = p[..., 1] * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    tau_ = jnp.moveaxis(tau, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
+    t1 = p_[0] * t0
+    t2 = p_[1] * p_[4]
     t3 = t1 + t2
-    t4 = jnp.sin(q[..., 0])
-    t5 = t4 * p[..., 5]
+    t4 = jnp.sin(q_[0])
+    t5 = t4 * p_[5]
     t6 = t3 * t5
-    t7 = tau[..., 0] - t6
+    t7 = tau_[0] - t6
     t8 = t0 * t0
-    t9 = p[..., 0] * t8
-    t10 = p[..., 2] + t9
-    t11 = p[..., 4] * p[..., 4]
-    t12 = p[..., 1] * t11
-    t13 = p[..., 3] + t12
+    t9 = p_[0] * t8
+    t10 = p_[2] + t9
+    t11 = p_[4] * p_[4]
+    t12 = p_[1] * t11
+    t13 = p_[3] + t12
     t14 = t10 + t13
     t15 = t7 / t14
-    qdd = _assemble([t15], batch)
+    qdd = _stack([t15], batch)
     return qdd
 
 
@@ -395,31 +444,37 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     w = _input(w, 6, "w")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, w, p)
-    t0 = p[..., 4] / 2.0
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    w_ = jnp.moveaxis(w, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
     t1 = t0 * t0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 2] + t2
-    t4 = p[..., 4] * p[..., 4]
-    t5 = p[..., 1] * t4
-    t6 = p[..., 3] + t5
+    t2 = p_[0] * t1
+    t3 = p_[2] + t2
+    t4 = p_[4] * p_[4]
+    t5 = p_[1] * t4
+    t6 = p_[3] + t5
     t7 = t3 + t6
-    t8 = t7 * qdd[..., 0]
-    t9 = p[..., 0] * t0
-    t10 = p[..., 1] * p[..., 4]
+    t8 = t7 * qdd_[0]
+    t9 = p_[0] * t0
+    t10 = p_[1] * p_[4]
     t11 = t9 + t10
-    t12 = jnp.sin(q[..., 0])
-    t13 = t12 * p[..., 5]
+    t12 = _keep(jnp.sin(q_[0]), one)
+    t13 = t12 * p_[5]
     t14 = t11 * t13
     t15 = t8 + t14
-    t16 = t12 * p[..., 4]
-    t17 = t16 * w[..., 2]
-    t18 = jnp.cos(q[..., 0])
-    t19 = t18 * p[..., 4]
-    t20 = t19 * w[..., 0]
+    t16 = t12 * p_[4]
+    t17 = t16 * w_[2]
+    t18 = jnp.cos(q_[0])
+    t19 = t18 * p_[4]
+    t20 = t19 * w_[0]
     t21 = t17 - t20
-    t22 = t21 + w[..., 4]
+    t22 = t21 + w_[4]
     t23 = t15 - t22
-    tau = _assemble([t23], batch)
+    tau = _stack([t23], batch)
     return tau
 
 
@@ -440,31 +495,37 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     w = _input(w, 6, "w")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, tau, w, p)
-    t0 = jnp.sin(q[..., 0])
-    t1 = t0 * p[..., 4]
-    t2 = t1 * w[..., 2]
-    t3 = jnp.cos(q[..., 0])
-    t4 = t3 * p[..., 4]
-    t5 = t4 * w[..., 0]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    tau_ = jnp.moveaxis(tau, -1, 0)
+    w_ = jnp.moveaxis(w, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = _keep(jnp.sin(q_[0]), one)
+    t1 = t0 * p_[4]
+    t2 = t1 * w_[2]
+    t3 = jnp.cos(q_[0])
+    t4 = t3 * p_[4]
+    t5 = t4 * w_[0]
     t6 = t2 - t5
-    t7 = t6 + w[..., 4]
-    t8 = tau[..., 0] + t7
-    t9 = p[..., 4] / 2.0
-    t10 = p[..., 0] * t9
-    t11 = p[..., 1] * p[..., 4]
+    t7 = t6 + w_[4]
+    t8 = tau_[0] + t7
+    t9 = p_[4] / 2.0
+    t10 = p_[0] * t9
+    t11 = p_[1] * p_[4]
     t12 = t10 + t11
-    t13 = t0 * p[..., 5]
+    t13 = t0 * p_[5]
     t14 = t12 * t13
     t15 = t8 - t14
     t16 = t9 * t9
-    t17 = p[..., 0] * t16
-    t18 = p[..., 2] + t17
-    t19 = p[..., 4] * p[..., 4]
-    t20 = p[..., 1] * t19
-    t21 = p[..., 3] + t20
+    t17 = p_[0] * t16
+    t18 = p_[2] + t17
+    t19 = p_[4] * p_[4]
+    t20 = p_[1] * t19
+    t21 = p_[3] + t20
     t22 = t18 + t21
     t23 = t15 / t22
-    qdd = _assemble([t23], batch)
+    qdd = _stack([t23], batch)
     return qdd
 
 
@@ -479,20 +540,23 @@ def com(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = jnp.sin(q[..., 0])
-    t1 = p[..., 4] / 2.0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 1] * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.sin(q_[0])
+    t1 = p_[4] / 2.0
+    t2 = p_[0] * t1
+    t3 = p_[1] * p_[4]
     t4 = t2 + t3
     t5 = t0 * t4
-    t6 = p[..., 0] + p[..., 1]
+    t6 = p_[0] + p_[1]
     t7 = t5 / t6
     t8 = -t7
-    t9 = jnp.cos(q[..., 0])
+    t9 = jnp.cos(q_[0])
     t10 = t9 * t4
     t11 = t10 / t6
     t12 = -t11
-    c = _assemble([t8, 0.0, t12], batch)
+    c = _stack([t8, 0.0, t12], batch)
     return c
 
 
@@ -507,19 +571,22 @@ def com_jacobian(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = p[..., 4] / 2.0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 1] * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[0])
+    t1 = p_[4] / 2.0
+    t2 = p_[0] * t1
+    t3 = p_[1] * p_[4]
     t4 = t2 + t3
     t5 = t0 * t4
-    t6 = p[..., 0] + p[..., 1]
+    t6 = p_[0] + p_[1]
     t7 = t5 / t6
     t8 = -t7
-    t9 = jnp.sin(q[..., 0])
+    t9 = jnp.sin(q_[0])
     t10 = t9 * t4
     t11 = t10 / t6
-    J = _assemble([t8, 0.0, t11], batch)
+    J = _stack([t8, 0.0, t11], batch)
     return J
 
 
@@ -534,30 +601,33 @@ def centroidal_map(q, p=DEFAULT_P):
     q = _input(q, 1, "q")
     p = _input(p, 6, "p")
     batch = _batch(q, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = p[..., 4] / 2.0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 1] * p[..., 4]
+    q_ = jnp.moveaxis(q, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[0])
+    t1 = p_[4] / 2.0
+    t2 = p_[0] * t1
+    t3 = p_[1] * p_[4]
     t4 = t2 + t3
-    t5 = t0 * t4
+    t5 = _keep(t0 * t4, one)
     t6 = -t5
-    t7 = jnp.sin(q[..., 0])
-    t8 = t7 * t4
+    t7 = jnp.sin(q_[0])
+    t8 = _keep(t7 * t4, one)
     t9 = t1 * t1
-    t10 = p[..., 0] * t9
-    t11 = p[..., 2] + t10
-    t12 = p[..., 4] * p[..., 4]
-    t13 = p[..., 1] * t12
-    t14 = p[..., 3] + t13
+    t10 = p_[0] * t9
+    t11 = p_[2] + t10
+    t12 = p_[4] * p_[4]
+    t13 = p_[1] * t12
+    t14 = p_[3] + t13
     t15 = t11 + t14
-    t16 = p[..., 0] + p[..., 1]
+    t16 = p_[0] + p_[1]
     t17 = t5 / t16
     t18 = t17 * t5
     t19 = t8 / t16
     t20 = t19 * t8
     t21 = t18 + t20
     t22 = t15 - t21
-    A = _assemble([t6, 0.0, t8, 0.0, t22, 0.0], batch)
+    A = _stack([t6, 0.0, t8, 0.0, t22, 0.0], batch)
     return A
 
 
@@ -574,23 +644,27 @@ def ode_rhs(x, u, p=DEFAULT_P):
     u = _input(u, 1, "u")
     p = _input(p, 6, "p")
     batch = _batch(x, u, p)
-    t0 = p[..., 4] / 2.0
-    t1 = p[..., 0] * t0
-    t2 = p[..., 1] * p[..., 4]
+    x_ = jnp.moveaxis(x, -1, 0)
+    u_ = jnp.moveaxis(u, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = x_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
+    t1 = p_[0] * t0
+    t2 = p_[1] * p_[4]
     t3 = t1 + t2
-    t4 = jnp.sin(x[..., 0])
-    t5 = t4 * p[..., 5]
+    t4 = jnp.sin(x_[0])
+    t5 = t4 * p_[5]
     t6 = t3 * t5
-    t7 = u[..., 0] - t6
+    t7 = u_[0] - t6
     t8 = t0 * t0
-    t9 = p[..., 0] * t8
-    t10 = p[..., 2] + t9
-    t11 = p[..., 4] * p[..., 4]
-    t12 = p[..., 1] * t11
-    t13 = p[..., 3] + t12
+    t9 = p_[0] * t8
+    t10 = p_[2] + t9
+    t11 = p_[4] * p_[4]
+    t12 = p_[1] * t11
+    t13 = p_[3] + t12
     t14 = t10 + t13
     t15 = t7 / t14
-    xdot = _assemble([x[..., 1], t15], batch)
+    xdot = _stack([x_[1], t15], batch)
     return xdot
 
 
@@ -607,23 +681,27 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     u = _input(u, 1, "u")
     p = _input(p, 6, "p")
     batch = _batch(x, u, p)
-    t0 = jnp.cos(x[..., 0])
-    t1 = p[..., 4] / 2.0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 1] * p[..., 4]
+    x_ = jnp.moveaxis(x, -1, 0)
+    u_ = jnp.moveaxis(u, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = x_[0] * 0.0 + 1.0
+    t0 = jnp.cos(x_[0])
+    t1 = p_[4] / 2.0
+    t2 = p_[0] * t1
+    t3 = p_[1] * p_[4]
     t4 = t2 + t3
-    t5 = p[..., 5] * t4
+    t5 = p_[5] * t4
     t6 = t0 * t5
     t7 = t1 * t1
-    t8 = p[..., 0] * t7
-    t9 = p[..., 2] + t8
-    t10 = p[..., 4] * p[..., 4]
-    t11 = p[..., 1] * t10
-    t12 = p[..., 3] + t11
+    t8 = p_[0] * t7
+    t9 = p_[2] + t8
+    t10 = p_[4] * p_[4]
+    t11 = p_[1] * t10
+    t12 = p_[3] + t11
     t13 = t9 + t12
     t14 = t6 / t13
     t15 = -t14
-    A = _assemble([0.0, 1.0, t15, 0.0], batch).reshape(batch + (2, 2))
+    A = _stack([0.0, 1.0, t15, 0.0], batch).reshape(batch + (2, 2))
     return A
 
 
@@ -640,16 +718,20 @@ def ode_jac_u(x, u, p=DEFAULT_P):
     u = _input(u, 1, "u")
     p = _input(p, 6, "p")
     batch = _batch(x, u, p)
-    t0 = p[..., 4] / 2.0
+    x_ = jnp.moveaxis(x, -1, 0)
+    u_ = jnp.moveaxis(u, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = x_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
     t1 = t0 * t0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 2] + t2
-    t4 = p[..., 4] * p[..., 4]
-    t5 = p[..., 1] * t4
-    t6 = p[..., 3] + t5
+    t2 = p_[0] * t1
+    t3 = p_[2] + t2
+    t4 = p_[4] * p_[4]
+    t5 = p_[1] * t4
+    t6 = p_[3] + t5
     t7 = t3 + t6
     t8 = 1.0 / t7
-    B = _assemble([0.0, t8], batch)
+    B = _stack([0.0, t8], batch)
     return B
 
 
@@ -668,14 +750,19 @@ def regressor(q, qd, qdd, p=DEFAULT_P):
     qdd = _input(qdd, 1, "qdd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = t0 * p[..., 5]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[0])
+    t1 = t0 * p_[5]
     t2 = -t1
-    t3 = jnp.sin(q[..., 0])
-    t4 = t3 * p[..., 5]
+    t3 = jnp.sin(q_[0])
+    t4 = t3 * p_[5]
     t5 = -t4
-    t6 = jnp.sign(qd[..., 0])
-    Y = _assemble([0.0, t2, 0.0, t5, 0.0, 0.0, qdd[..., 0], 0.0, 0.0, 0.0, qdd[..., 0], qd[..., 0], t6], batch).reshape(batch + (1, 13))
+    t6 = jnp.sign(qd_[0])
+    Y = _stack([0.0, t2, 0.0, t5, 0.0, 0.0, qdd_[0], 0.0, 0.0, 0.0, qdd_[0], qd_[0], t6], batch).reshape(batch + (1, 13))
     return Y
 
 
@@ -694,14 +781,19 @@ def base_regressor(q, qd, qdd, p=DEFAULT_P):
     qdd = _input(qdd, 1, "qdd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, p)
-    t0 = jnp.cos(q[..., 0])
-    t1 = t0 * p[..., 5]
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = jnp.cos(q_[0])
+    t1 = t0 * p_[5]
     t2 = -t1
-    t3 = jnp.sin(q[..., 0])
-    t4 = t3 * p[..., 5]
+    t3 = jnp.sin(q_[0])
+    t4 = t3 * p_[5]
     t5 = -t4
-    t6 = jnp.sign(qd[..., 0])
-    Y_b = _assemble([t2, t5, qdd[..., 0], qd[..., 0], t6], batch).reshape(batch + (1, 5))
+    t6 = jnp.sign(qd_[0])
+    Y_b = _stack([t2, t5, qdd_[0], qd_[0], t6], batch).reshape(batch + (1, 5))
     return Y_b
 
 
@@ -722,35 +814,39 @@ def bundle_control(q, qd, p=DEFAULT_P):
     qd = _input(qd, 1, "qd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, p)
-    t0 = p[..., 4] / 2.0
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
     t1 = t0 * t0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 2] + t2
-    t4 = p[..., 4] * p[..., 4]
-    t5 = p[..., 1] * t4
-    t6 = p[..., 3] + t5
+    t2 = p_[0] * t1
+    t3 = p_[2] + t2
+    t4 = p_[4] * p_[4]
+    t5 = p_[1] * t4
+    t6 = p_[3] + t5
     t7 = t3 + t6
-    t8 = p[..., 0] * t0
-    t9 = p[..., 1] * p[..., 4]
+    t8 = p_[0] * t0
+    t9 = p_[1] * p_[4]
     t10 = t8 + t9
-    t11 = jnp.sin(q[..., 0])
-    t12 = t11 * p[..., 5]
+    t11 = _keep(jnp.sin(q_[0]), one)
+    t12 = t11 * p_[5]
     t13 = t10 * t12
-    t14 = jnp.cos(q[..., 0])
+    t14 = _keep(jnp.cos(q_[0]), one)
     t15 = -t11
-    t16 = t11 * p[..., 4]
+    t16 = t11 * p_[4]
     t17 = -t16
-    t18 = t14 * p[..., 4]
+    t18 = t14 * p_[4]
     t19 = -t18
-    t20 = qd[..., 0] * p[..., 4]
-    t21 = qd[..., 0] * t20
+    t20 = qd_[0] * p_[4]
+    t21 = qd_[0] * t20
     t22 = t11 * t21
     t23 = t14 * t21
-    mass_matrix = _assemble([t7], batch)
-    bias = _assemble([t13], batch)
-    fk_tcp = _assemble([t14, 0.0, t11, t17, 0.0, 1.0, 0.0, 0.0, t15, 0.0, t14, t19, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    jacobian_tcp = _assemble([t19, 0.0, t16, 0.0, 1.0, 0.0], batch)
-    jdot_qd_tcp = _assemble([t22, 0.0, t23, 0.0, 0.0, 0.0], batch)
+    mass_matrix = _stack([t7], batch)
+    bias = _stack([t13], batch)
+    fk_tcp = _stack([t14, 0.0, t11, t17, 0.0, 1.0, 0.0, 0.0, t15, 0.0, t14, t19, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _stack([t19, 0.0, t16, 0.0, 1.0, 0.0], batch)
+    jdot_qd_tcp = _stack([t22, 0.0, t23, 0.0, 0.0, 0.0], batch)
     return mass_matrix, bias, fk_tcp, jacobian_tcp, jdot_qd_tcp
 
 
@@ -772,41 +868,46 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     qdd = _input(qdd, 1, "qdd")
     p = _input(p, 6, "p")
     batch = _batch(q, qd, qdd, p)
-    t0 = p[..., 4] / 2.0
+    q_ = jnp.moveaxis(q, -1, 0)
+    qd_ = jnp.moveaxis(qd, -1, 0)
+    qdd_ = jnp.moveaxis(qdd, -1, 0)
+    p_ = jnp.moveaxis(p, -1, 0)
+    one = q_[0] * 0.0 + 1.0
+    t0 = p_[4] / 2.0
     t1 = t0 * t0
-    t2 = p[..., 0] * t1
-    t3 = p[..., 2] + t2
-    t4 = p[..., 4] * p[..., 4]
-    t5 = p[..., 1] * t4
-    t6 = p[..., 3] + t5
+    t2 = p_[0] * t1
+    t3 = p_[2] + t2
+    t4 = p_[4] * p_[4]
+    t5 = p_[1] * t4
+    t6 = p_[3] + t5
     t7 = t3 + t6
-    t8 = t7 * qdd[..., 0]
-    t9 = p[..., 0] * t0
-    t10 = p[..., 1] * p[..., 4]
+    t8 = t7 * qdd_[0]
+    t9 = p_[0] * t0
+    t10 = p_[1] * p_[4]
     t11 = t9 + t10
-    t12 = jnp.sin(q[..., 0])
-    t13 = t12 * p[..., 5]
+    t12 = _keep(jnp.sin(q_[0]), one)
+    t13 = t12 * p_[5]
     t14 = t11 * t13
     t15 = t8 + t14
-    t16 = jnp.cos(q[..., 0])
+    t16 = _keep(jnp.cos(q_[0]), one)
     t17 = -t12
-    t18 = t12 * p[..., 4]
+    t18 = t12 * p_[4]
     t19 = -t18
-    t20 = t16 * p[..., 4]
+    t20 = t16 * p_[4]
     t21 = -t20
-    t22 = qd[..., 0] * p[..., 4]
-    t23 = qd[..., 0] * t22
+    t22 = qd_[0] * p_[4]
+    t23 = qd_[0] * t22
     t24 = t12 * t23
-    t25 = qdd[..., 0] * p[..., 4]
+    t25 = qdd_[0] * p_[4]
     t26 = t16 * t25
     t27 = t24 - t26
     t28 = t12 * t25
     t29 = t16 * t23
     t30 = t28 + t29
-    inverse_dynamics = _assemble([t15], batch)
-    fk_tcp = _assemble([t16, 0.0, t12, t19, 0.0, 1.0, 0.0, 0.0, t17, 0.0, t16, t21, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
-    jacobian_tcp = _assemble([t21, 0.0, t18, 0.0, 1.0, 0.0], batch)
-    frame_acceleration_tcp = _assemble([t27, 0.0, t30, 0.0, qdd[..., 0], 0.0], batch)
+    inverse_dynamics = _stack([t15], batch)
+    fk_tcp = _stack([t16, 0.0, t12, t19, 0.0, 1.0, 0.0, 0.0, t17, 0.0, t16, t21, 0.0, 0.0, 0.0, 1.0], batch).reshape(batch + (4, 4))
+    jacobian_tcp = _stack([t21, 0.0, t18, 0.0, 1.0, 0.0], batch)
+    frame_acceleration_tcp = _stack([t27, 0.0, t30, 0.0, qdd_[0], 0.0], batch)
     return inverse_dynamics, fk_tcp, jacobian_tcp, frame_acceleration_tcp
 
 

@@ -4,10 +4,13 @@ The functions are those of the Python backend, with the same short names and arg
 (``p=DEFAULT_P`` last where the robot has parameters), written on arrays of any leading batch
 shape: an input of n elements is an array (..., n), an output of shape s comes back as
 (..., *s), the batch shapes of the inputs broadcast, and one 1-D state returns exactly the shapes
-of the numpy module. Every body is straight-line jnp code (element access ``q[..., i]``, jnp
-ufuncs, the outputs assembled entry by entry with ``.at[..., k].set``), so ``jax.jit``,
-``jax.vmap`` and ``jax.grad`` apply to them. The module turns on float64 (``jax_enable_x64``)
-when imported.
+of the numpy module. Every body is straight-line jnp code on rows (element ``q_[i]`` of the input
+moved to the batch-last layout, jnp ufuncs, one ``jnp.stack`` per output; shared temporaries whose
+inlined tree is large marked computed-once, see :mod:`.printer`), so ``jax.jit``, ``jax.vmap`` and
+``jax.grad`` apply to them. Importing the module changes no JAX setting: the functions compute in
+JAX's default float type, float64 where the user has turned on ``jax_enable_x64`` (a jit call
+converts float64 arguments to float32 on entry otherwise, so a float64 scope inside the
+function could not keep the caller's precision).
 
 Template-bodied functions are provided where ``templates/jax/<template>.py.jinja`` exists
 (``rk4_step``, ``manipulability_<frame>``, the ODE Jacobians of large robots). IK is not: its Levenberg-Marquardt is a data-dependent
