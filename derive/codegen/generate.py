@@ -485,6 +485,7 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figur
         raise DeriveError(f"{shown}: cannot write the generated code: no temporary folder can be made in {where} "
                           f"({exc.strerror or exc}); the output folder is left as it was") from None
     register(tmp, True)
+    made = None
     try:
         made = os.stat(tmp)
         umask = os.umask(0)
@@ -545,13 +546,28 @@ def _generate(robots, out: Path, shown: Path, only, use_cache, log, prune, figur
         return manifest
     except FileNotFoundError as exc:
         inside = [os.fspath(f) for f in (exc.filename, exc.filename2) if f is not None]
-        if os.path.lexists(tmp) and not any(f == str(tmp) or f.startswith(f"{tmp}/") for f in inside):
+        # derive removes nothing in its own temporary folder while it runs: a path in it that is
+        # missing was removed by another process (rm -rf empties the folder before removing it, so
+        # the folder itself may still be there)
+        if not any(tmp.name in f for f in inside) and _whole(tmp, made):
             raise
         raise DeriveError(f"{shown}: the temporary folder of this run ({tmp}) was removed by another process "
                           "during the run; nothing was written, the output folder is left as it was") from None
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
         forget(tmp)
+
+
+def _whole(tmp: Path, made: os.stat_result | None) -> bool:
+    """Whether the run's temporary folder is still the one it made (``made``: its stat then, None
+    where it was gone before that), not removed, not made anew."""
+    if made is None:
+        return False
+    try:
+        now = os.stat(tmp)
+    except FileNotFoundError:
+        return False
+    return (now.st_dev, now.st_ino) == (made.st_dev, made.st_ino)
 
 
 def _moved_inside(tmp: Path, out: Path, names: list[str]) -> Path:
