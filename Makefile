@@ -4,6 +4,9 @@ PYTHON ?= python3
 VENV   := .venv
 PY     := $(VENV)/bin/python
 PIP    := $(PY) -m pip --disable-pip-version-check -q
+# pytest caches its assertion-rewritten test modules as .pyc files: with PYTHONDONTWRITEBYTECODE set
+# in the caller's environment every worker rewrites every test module again (~6 s of CPU each).
+unexport PYTHONDONTWRITEBYTECODE
 # `make test` runs pytest in TEST_WORKERS processes (pytest-xdist): one per CPU, at most 4 (each
 # holds up to ~2 GB); `make test TEST_WORKERS=0` runs the suite in one process.
 TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$((n < 4 ? n : 4)))

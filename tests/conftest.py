@@ -66,8 +66,10 @@ HEAVY = ("test_cuda.py", "test_compiled.py", "test_batch.py", "test_jax.py", "te
          "test_urdf_trees.py", "test_simulate.py", "test_whole_robots.py", "test_bad_input_corpus.py",
          "test_trajopt.py", "test_regressor.py", "test_ode.py")
 # Modules whose tests are spread one by one over the workers: long, and nothing but the session
-# fixtures (shared by all workers) is costly to set up for them.
-SPREAD = frozenset({"test_jax.py", "test_codegen.py", "test_batch.py"})
+# fixtures (shared by all workers) is costly to set up for them. Not test_jax.py: each process
+# pays for loading the modules and for JAX's per-operation compiles (spread, it took 277 s of CPU
+# where one worker takes 181 s).
+SPREAD = frozenset({"test_codegen.py", "test_batch.py"})
 
 
 def pytest_collection_modifyitems(items: list) -> None:

@@ -56,8 +56,9 @@ def read_text(path: str | Path, what: str = "file") -> str:
         raise InputFileError(f"{path}: {what} is not UTF-8 text (byte {exc.start})") from None
 
 
-class StrictLoader(yaml.SafeLoader):
-    """yaml.SafeLoader that refuses duplicate keys (the last one would silently win)."""
+class StrictLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):
+    """yaml.SafeLoader that refuses duplicate keys (the last one would silently win); on libyaml's
+    parser where PyYAML has it (5x faster: a 1,000-link models.yaml), the same constructor either way."""
 
 
 def _mapping(loader: StrictLoader, node: yaml.MappingNode, deep: bool = False):
