@@ -311,3 +311,10 @@ def test_info_states_the_chart(capsys):
     out = capsys.readouterr().out
     assert ("closed chain: 1 loop(s), 2 closure rows, rank 2; independent y = (motor1, motor2) chosen by pivoting on "
             "K at the reference configuration") in out
+
+
+def test_generate_refuses_loops_until_closed_chain_code_exists(tmp_path, capsys):
+    assert main(["generate", "--models", str(MODELS), "--out", str(tmp_path / "out")]) == 2
+    assert "derive: error: robot 'fourbar' has loops: generated code for closed chains is not available yet" in \
+        capsys.readouterr().err
+    assert not (tmp_path / "out").exists()
