@@ -43,6 +43,7 @@ SPACES = {"planar": 3, "spatial": 6}
 class MechanismJoint:
     type: str
     links: tuple[str, ...]
+    freedoms: int | None = None  # a loop closure's f (its kind names no joint type: a distance rod's 5)
 
     @property
     def count(self) -> int:
@@ -51,7 +52,7 @@ class MechanismJoint:
 
     @property
     def dof(self) -> int:
-        return JOINT_DOF[self.type]
+        return JOINT_DOF[self.type] if self.freedoms is None else self.freedoms
 
 
 @dataclass(frozen=True)
@@ -174,12 +175,47 @@ def load_mechanism(path: str | Path) -> Mechanism:
     return parse_mechanism(read_yaml(path), str(path))
 
 
+LOOP_JOINTS = {"point": ("spherical", None), "hinge": ("revolute", None), "weld": ("fixed", None),
+               "distance": ("distance rod", 5), "planar": ("revolute", None)}
+"""Loop kind -> the joint it stands for in Grübler's count (type, f): a distance rod (two ball joints and
+a rod, without the rod's idle spin) removes one freedom; a planar loop with rotation is a weld."""
+
+
 def mechanism_from_robot(robot) -> Mechanism:
-    """A models.yaml robot as a spatial mechanism: its links, one two-link joint per joint."""
+    """A models.yaml robot as a mechanism: its links, one two-link joint per joint, and one per loop closure
+    (joining the links that carry the loop's two frames). Planar (m = 3) when every loop is planar, else
+    spatial (m = 6)."""
     robot.require_fixed_base("the Gruebler count")
     links = (robot.root,) + tuple(x.name for x in robot.links if x.name != robot.root)
-    return Mechanism(robot.name, "spatial", links, tuple(MechanismJoint(j.type, (j.parent, j.child)) for j in robot.joints),
-                     robot.description)
+    joints = [MechanismJoint(j.type, (j.parent, j.child)) for j in robot.joints]
+    link_of = {f.name: f.link for f in robot.frames} | {a: f.link for f in robot.frames for a in f.aliases}
+    for lp in robot.loops:
+        jtype, freedoms = LOOP_JOINTS[lp.kind]
+        if lp.kind == "planar" and lp.rotation:
+            jtype = "fixed"
+        joints.append(MechanismJoint(jtype, (link_of.get(lp.a, lp.a), link_of.get(lp.b, lp.b)), freedoms))
+    planar = bool(robot.loops) and all(lp.kind == "planar" for lp in robot.loops)
+    return Mechanism(robot.name, "planar" if planar else "spatial", links, tuple(joints), robot.description)
+
+
+def closed_report(robot, mech: Mechanism) -> str:
+    """Mobility from the rank of the constraint Jacobian K at the reference configuration, next to Grübler."""
+    rows = sum(lp.rows for lp in robot.loops)
+    r = len(robot.loop_rows)
+    mobility = robot.nq - r
+    lines = [f"  loops: {'; '.join(lp.summary for lp in robot.loops)}",
+             f"mobility = nq - rank K = {robot.nq} - {r} = {mobility} (K: {rows} x {robot.nq} at the reference "
+             "configuration)"]
+    if mobility == mech.dof:
+        lines.append(f"  agrees with Grübler's count ({mech.dof})")
+    else:
+        lines.append(f"  differs from Grübler's count ({mech.dof}) by {mobility - mech.dof}: "
+                     + (f"{rows - r} of the {rows} closure rows are redundant (an over-constrained mechanism, e.g. a "
+                        "planar linkage closed by spatial loops)" if mobility > mech.dof else
+                        "the loops remove more freedoms than Grübler counts"))
+    lines.append(f"  independent y = ({', '.join(robot.independent)}), dependent z = ({', '.join(robot.dependent)})"
+                 + (" (chosen by pivoting on K)" if robot.independent_chosen else ""))
+    return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------- report
@@ -199,7 +235,7 @@ def report(mech: Mechanism, nv: int | None = None) -> str:
     lines.append(f"DOF = m (N - 1 - J) + sum f_i = {mech.m} ({mech.n_links} - 1 - {mech.n_joints}) + {mech.freedoms} = {mech.dof}")
     if mech.loops:
         lines.append(f"  {mech.loops} independent closed loop(s); the count assumes independent loop constraints")
-    if nv is not None:  # a tree has N - 1 = J: the formula reduces to the sum of the freedoms
+    if nv is not None and not mech.loops:  # a tree has N - 1 = J: the formula reduces to the sum of the freedoms
         lines.append(f"  tree (no loops): DOF = sum of joint freedoms = {mech.freedoms}; the model's nv = {nv}")
     if mech.dof <= 0:
         lines.append("  DOF <= 0: a structure (statically " + ("determinate" if mech.dof == 0 else "indeterminate") + "), "

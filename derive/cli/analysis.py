@@ -12,7 +12,7 @@ from typing import Mapping
 import numpy as np
 
 from derive.analysis.frames import frame_poses
-from derive.analysis.grubler import mechanism_from_robot, parse_mechanism, read_yaml, report
+from derive.analysis.grubler import closed_report, mechanism_from_robot, parse_mechanism, read_yaml, report
 from derive.analysis.manipulability import MAX_POSES, Manipulability, default_poses
 from derive.analysis.planning import MAX_LENGTH, MAX_NODES, parse_obstacle, plan
 from derive.analysis.singularity import MAX_STARTS, TaskJacobian, analyse, find_singularities, redundancy
@@ -95,13 +95,20 @@ def dof_command(args) -> int:
         data = read_yaml(path)
         if isinstance(data, Mapping) and "robots" in data:  # a models file: every robot in it
             for robot in load_models(path).values():
-                print(report(mechanism_from_robot(robot), robot.nv))
+                print(robot_dof(robot))
             return 0
         print(report(parse_mechanism(data, str(path))))
         return 0
     robot = load_robot(target, args.models)
-    print(report(mechanism_from_robot(robot), robot.nv))
+    print(robot_dof(robot))
     return 0
+
+
+def robot_dof(robot) -> str:
+    """Grübler's count of a robot; with loops also the mobility from the rank of K."""
+    mech = mechanism_from_robot(robot)
+    text = report(mech, robot.nv)
+    return text + "\n" + closed_report(robot, mech) if robot.loops else text
 
 
 # --------------------------------------------------------------------------- workspace

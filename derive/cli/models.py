@@ -7,6 +7,7 @@ import sys
 import numpy as np
 
 from derive.cli.common import path_arg, robots_of
+from derive.description.closure import closure_note
 from derive.description.mjcf import GENERATOR as MJCF_GENERATOR, import_mjcf_named
 from derive.description.model import parse_robot
 from derive.description.xacro_expand import EXTRA as XACRO_EXTRA
@@ -92,6 +93,10 @@ def cmd_info(args) -> int:
                             f"{own[j.name].armature}) acts on {j.mimic.joint} through the mimic map") if j.name in own else ""
                 print(f"  mimic: {j.name} = {j.mimic.multiplier:g} {j.mimic.joint} + {j.mimic.offset:g} (no entry in q)"
                       + friction)
+        if r.loops:
+            print(f"  closed chain: {closure_note(r)}")
+            for i, lp in enumerate(r.loops):
+                print(f"  loops[{i}]: {lp.summary}")
         for j in r.moving_joints:
             if j.gimbal_lock:
                 print(f"  gimbal lock: {j.gimbal_lock}")

@@ -16,13 +16,16 @@ import os
 from pathlib import Path
 from typing import Any, Iterable, Mapping
 
+import numpy as np
+
 from derive.description import expr
+from derive.description.closure import CHART_TOL, CLOSED_TOL, Closure, close
 from derive.description.dh import dh_to_tree
 from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
 from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
-from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
+from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, LOOP_KINDS, Loop, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
                                       compose_mimics, identifier, import_command, shown)
 from derive.resources import EXAMPLE_MODELS
 
@@ -349,7 +352,8 @@ class _Parser:
     def robot(self) -> Robot:
         spec = self.spec
         self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
-                                   "base", "wrenches", "coulomb_smoothing", "bundles", "generate"})
+                                   "base", "wrenches", "coulomb_smoothing", "bundles", "generate", "loops", "independent",
+                                   "reference"})
         base = spec.get("base", "fixed")
         if base not in BASES:
             raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
@@ -412,6 +416,8 @@ class _Parser:
         if "all" in robot.function_frames:  # fk_<frame> would be fk_all, every link's pose
             raise self.error("generate.frames" if robot.generate_frames else "frames", "the frame name 'all' is reserved: "
                              "fk_all is the pose of every link; rename the frame or leave it out of generate.frames")
+        if "loops" in spec or "independent" in spec or "reference" in spec:
+            robot = self.loops(spec, robot)
         for i, bundle in enumerate(robot.bundles or ()):
             for k, quantity in enumerate(bundle.quantities):
                 self.check_bundle_quantity(f"bundles[{i}].quantities[{k}]", quantity, known)
@@ -419,6 +425,116 @@ class _Parser:
                     raise self.error(f"bundles[{i}].quantities[{k}]", f"'{quantity}' needs frames taking external "
                                      "wrenches: list them in wrenches: (by default the frame tcp, where there is one)")
         return robot
+
+    # ---- loop closures ----
+    def loop(self, where: str, raw: Any, known: tuple[str, ...]) -> Loop:
+        self.check_keys(where + ".", raw, {"frames", "kind", "axis", "normal", "length", "rotation"})
+        for key in ("frames", "kind"):
+            if key not in raw:
+                raise self.error(f"{where}.{key}", "missing")
+        frames = raw["frames"]
+        if not isinstance(frames, list) or len(frames) != 2:
+            raise self.error(f"{where}.frames", f"expected two link or frame names [a, b], got {shown(frames)!r}")
+        for k, name in enumerate(frames):
+            if name not in known:
+                raise self.error(f"{where}.frames", f"unknown frame '{shown(name)}' (links and frames: {', '.join(known)})")
+        if frames[0] == frames[1]:
+            raise self.error(f"{where}.frames", f"'{frames[0]}' twice: a loop joins two different frames")
+        kind = raw["kind"]
+        if kind not in LOOP_KINDS:
+            raise self.error(f"{where}.kind", f"unknown loop kind '{shown(kind)}' (known: {', '.join(LOOP_KINDS)})")
+        own = {"hinge": "axis", "planar": "normal", "distance": "length"}
+        for key in ("axis", "normal", "length"):
+            if key in raw and own.get(kind) != key:
+                raise self.error(f"{where}.{key}", f"a {kind} loop has no '{key}'" + (
+                    f" (a {kind} loop takes '{own[kind]}')" if kind in own else ""))
+        if kind in own and own[kind] not in raw:
+            raise self.error(f"{where}.{own[kind]}", f"missing: a {kind} loop needs '{own[kind]}'")
+        if "rotation" in raw and (kind != "planar" or not isinstance(raw["rotation"], bool)):
+            raise self.error(f"{where}.rotation", "only a planar loop takes 'rotation', true or false")
+        axis = self.unit_vector(f"{where}.{own[kind]}", raw[own[kind]]) if kind in ("hinge", "planar") else None
+        length = None
+        if kind == "distance":
+            length = self.value(f"{where}.length", raw["length"])
+            value = float(expr.evaluate(length, self.params))
+            if not value > 0:
+                raise self.error(f"{where}.length", f"must be > 0 (m), got {value:g}")
+        return Loop(frames[0], frames[1], kind, axis, length, bool(raw.get("rotation", False)))
+
+    def loops(self, spec: Mapping, robot: Robot) -> Robot:
+        """``loops:``, ``independent:`` and ``reference:``: the closures, checked numerically at the reference
+        configuration (:func:`derive.description.closure.close`): they must close there, none may be redundant,
+        and the independent coordinates must be a chart (K_z invertible)."""
+        raw = spec.get("loops")
+        if not isinstance(raw, list) or not raw:
+            raise self.error("loops", "expected a non-empty list of {frames: [a, b], kind: ...}"
+                             + ("" if "loops" in spec else " (independent and reference need loops)"))
+        if robot.floating:
+            raise self.error("loops", "closed chains need a fixed base here; this robot has a floating base")
+        known = robot.frame_names + tuple(robot.frame_aliases)
+        loops = tuple(self.loop(f"loops[{i}]", item, known) for i, item in enumerate(raw))
+        names = [c.name for c in robot.coordinates]
+        independent = None
+        if spec.get("independent") is not None:
+            ind = spec["independent"]
+            if not isinstance(ind, list) or not ind:
+                raise self.error("independent", "expected a non-empty list of coordinate names")
+            for k, name in enumerate(ind):
+                if name not in names:
+                    raise self.error(f"independent[{k}]", f"unknown coordinate '{shown(name)}' (coordinates: "
+                                     f"{', '.join(names)})")
+            if len(set(ind)) != len(ind):
+                raise self.error("independent", "a coordinate is listed twice")
+            independent = tuple(ind)
+        reference: dict[str, float] = {}
+        if spec.get("reference") is not None:
+            ref = spec["reference"]
+            if not isinstance(ref, Mapping):
+                raise self.error("reference", "expected a mapping {coordinate: value}")
+            for name, value in ref.items():
+                if name not in names:
+                    raise self.error(f"reference.{shown(name)}", f"unknown coordinate (coordinates: {', '.join(names)})")
+                reference[name] = self.number(f"reference.{name}", value)
+        robot = dataclasses.replace(robot, loops=loops)
+        closed = close(robot, independent, reference)
+        n = len(names)
+        mobility = n - closed.rank
+        if mobility == 0:
+            raise self.error("loops", f"the loops leave no degree of freedom: rank K = {closed.rank} = nq at the "
+                             "reference configuration (a structure)")
+        if independent is not None and len(independent) != mobility:
+            raise self.error("independent", f"{len(independent)} coordinate(s) given, but the loops leave nq - rank K "
+                             f"= {n} - {closed.rank} = {mobility} degree(s) of freedom")
+        if closed.chart_sigma <= CHART_TOL:
+            ys = ", ".join(closed.independent)
+            raise self.error("independent", f"({ys}) is not a valid chart at the reference configuration: K_z is "
+                             f"singular there (smallest singular value / largest = {closed.chart_sigma:.3g}); choose "
+                             "other independent coordinates or another reference")
+        if closed.residual > CLOSED_TOL:
+            cl_rows = 0
+            worst, where = -1.0, 0
+            from_q = closed.q
+            phi = Closure(robot).phi(np.array(from_q))
+            for i, lp in enumerate(loops):
+                value = float(np.max(np.abs(phi[cl_rows:cl_rows + lp.rows])))
+                if value > worst:
+                    worst, where = value, i
+                cl_rows += lp.rows
+            raise self.error(f"loops[{where}].frames", f"'{loops[where].a}' and '{loops[where].b}' do not close at the "
+                             f"reference configuration: residual max |phi| = {worst:.3g} after Newton's method from "
+                             "reference: (unlisted coordinates 0); check the lengths, or give reference values nearer "
+                             "a closed configuration")
+        if closed.flipped:
+            i = closed.flipped[0]
+            raise self.error(f"loops[{i}].frames", f"'{loops[i].a}' and '{loops[i].b}' close turned half a turn against "
+                             "each other at the reference configuration; give reference values nearer the intended one")
+        if closed.redundant is not None:
+            i = closed.redundant
+            raise self.error(f"loops[{i}]", f"redundant: it constrains nothing the other loops do not (rank K = "
+                             f"{closed.rank} with or without it)")
+        return dataclasses.replace(robot, independent=closed.independent, independent_chosen=closed.chosen,
+                                   reference=tuple(reference.items()), loop_rows=closed.rows,
+                                   reference_q=closed.q)
 
     def resolve_mimics(self, robot: Robot) -> Robot:
         """``robot`` with every mimic of a mimic composed into one mimic of its chain's root

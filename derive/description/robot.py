@@ -297,6 +297,75 @@ class Frame:
     aliases: tuple[str, ...] = ()
 
 
+LOOP_KINDS = {"point": 3, "hinge": 5, "weld": 6, "planar": 2, "distance": 1}
+"""Closure kind -> rows of its residual phi (a planar loop with ``rotation`` has 3)."""
+
+
+def loop_basis(n) -> tuple[tuple[float, float, float], tuple[float, float, float]]:
+    """(u, v): with the unit vector n a right-handed orthonormal frame (u, v, n), u x v = n.
+
+    u is the coordinate axis e least aligned with n (the first of the smallest |n_i|) with its n
+    part removed, normalised; v = n x u. The symbolic side and the reference both take u, v from here,
+    so their residuals are the same functions of q.
+    """
+    n = [float(x) for x in n]
+    i = min(range(3), key=lambda k: (abs(n[k]), k))
+    e = [1.0 if k == i else 0.0 for k in range(3)]
+    u = [e[k] - n[i] * n[k] for k in range(3)]
+    norm = math.sqrt(sum(x * x for x in u))
+    u = [x / norm for x in u]
+    v = [n[1] * u[2] - n[2] * u[1], n[2] * u[0] - n[0] * u[2], n[0] * u[1] - n[1] * u[0]]
+    return tuple(u), tuple(v)
+
+
+@dataclass(frozen=True)
+class Loop:
+    """A loop closure: frames ``a`` and ``b`` (links or named frames) must coincide as ``kind`` says.
+
+    With (R_a, p_a), (R_b, p_b) the frames' world poses, d = p_a - p_b, and (u, v) = loop_basis(axis)
+    for the axis n given in frame a's axes, the residual phi (zero when closed) is
+
+    - point (3, a ball joint): d;
+    - hinge (5, a revolute joint about n): [d; (R_a u).(R_b n); (R_a v).(R_b n)];
+    - weld (6, rigid): [d; (R_a e_y).(R_b e_z); (R_a e_z).(R_b e_x); (R_a e_x).(R_b e_y)];
+    - planar (2, a revolute joint of a mechanism moving in the plane normal to n): [(R_a u).d; (R_a v).d],
+      with ``rotation`` (3, rigid in the plane) also (R_a u).(R_b v);
+    - distance (1, a rod of ``length`` L with ball joints at both ends): (d.d - L^2) / (2 L).
+
+    The orientation rows vanish also for some flipped frames (R_b n = -R_a n); validation requires
+    the unflipped closure at the reference configuration.
+    """
+
+    a: str
+    b: str
+    kind: str
+    axis: tuple | None = None  # hinge axis or planar normal, unit, in frame a's axes
+    length: Value | None = None  # distance only
+    rotation: bool = False  # planar only: the relative turn about n is closed too
+
+    @property
+    def rows(self) -> int:
+        """Entries of the loop's residual."""
+        return LOOP_KINDS[self.kind] + (1 if self.rotation else 0)
+
+    @property
+    def basis(self) -> tuple[tuple, tuple]:
+        """(u, v) of :func:`loop_basis` for the hinge axis or the planar normal."""
+        return loop_basis(self.axis)
+
+    @property
+    def summary(self) -> str:
+        """E.g. ``coupler_tip = rocker_tip (planar, normal [0, 0, 1], 2 rows)``."""
+        extra = ""
+        if self.kind == "hinge":
+            extra = f", axis [{', '.join(f'{float(x):g}' for x in self.axis)}]"
+        elif self.kind == "planar":
+            extra = f", normal [{', '.join(f'{float(x):g}' for x in self.axis)}]" + (", with rotation" if self.rotation else "")
+        elif self.kind == "distance":
+            extra = f", length {self.length}"
+        return f"{self.a} = {self.b} ({self.kind}{extra}, {self.rows} rows)"
+
+
 FREE_FLYER = "root_joint"
 """Name of the free-flyer joint a floating base adds above the root link (Pinocchio's name)."""
 BASE_POSITION = ("base_x", "base_y", "base_z", "base_qx", "base_qy", "base_qz", "base_qw")
@@ -334,7 +403,23 @@ class Robot:
     bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
     generate_frames: tuple[str, ...] | None = None  # frames given per-frame functions; None: the named frames
     generate_quantities: tuple[str, ...] | None = None  # quantities generated (and what they call); None: all
+    loops: tuple[Loop, ...] = ()  # loop closures of the tree (a closed chain); () for a tree
+    independent: tuple[str, ...] | None = None  # with loops: the independent coordinates y, in q's order
+    independent_chosen: bool = False  # with loops: y was chosen by pivoting on K (models.yaml gave none)
+    reference: tuple[tuple[str, float], ...] = ()  # with loops: models.yaml's starting values of coordinates
+    loop_rows: tuple[int, ...] | None = None  # with loops: the rows of the stacked phi kept (independent rows)
+    reference_q: tuple[float, ...] | None = field(default=None, compare=False)  # the closed reference q (solved)
     file: str = field(default="", compare=False)  # the models file it was read from ("" if none): for messages only
+
+    @property
+    def closed(self) -> bool:
+        """The robot has loop closures: a closed chain in the tree's coordinates q = (y, z)."""
+        return bool(self.loops)
+
+    @property
+    def dependent(self) -> tuple[str, ...]:
+        """With loops: the dependent coordinates z (q's entries not in y), in q's order."""
+        return tuple(c.name for c in self.coordinates if c.name not in (self.independent or ()))
 
     @property
     def mimic_actuators(self) -> tuple[tuple[Joint, Actuator], ...]:
@@ -511,6 +596,10 @@ def model_data(robot: Robot) -> dict:
     """
     data = asdict(robot)
     del data["file"]  # where the model was read from is no part of it
+    del data["reference_q"]  # solved from the model by Newton: its last bits may differ between machines
+    if not data["loops"]:  # trees keep the hash they had before loops existed
+        for key in ("loops", "independent", "independent_chosen", "reference", "loop_rows"):
+            del data[key]
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
     for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities"):
