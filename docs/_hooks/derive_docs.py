@@ -23,15 +23,15 @@ import json
 import logging
 import os
 import re
-import resource
 import subprocess
 import sys
 import tempfile
-import time
+from concurrent.futures import Future, ThreadPoolExecutor
 from pathlib import Path
 
 from mkdocs.exceptions import PluginError
 from mkdocs.structure.files import File
+from mkdocs.utils.meta import get_data
 
 ROOT = Path(__file__).resolve().parents[2]
 PAGE_SECONDS = 60.0
@@ -246,6 +246,7 @@ def on_config(config):
 def on_files(files, config):
     for path, text in generated_pages().items():
         files.append(File.generated(config, path, content=text))
+    _start_executing(files)
     return files
 
 
@@ -265,12 +266,6 @@ def run_blocks(markdown: str, name: str, required: bool = False) -> tuple[str, l
     is shown (markers removed, outputs inserted) and the time per block. Raises PluginError on a
     failing block, an unmarked block on a ``required`` page, or a page over :data:`PAGE_SECONDS`."""
     times: list[tuple[str, float]] = []
-
-    def cpu() -> float:
-        usage = resource.getrusage(resource.RUSAGE_CHILDREN)
-        return usage.ru_utime + usage.ru_stime
-
-    start = cpu()
     with tempfile.TemporaryDirectory(prefix="derive-docs-") as tmp:
         workdir = Path(tmp)
         (workdir / "home").mkdir()
@@ -288,13 +283,14 @@ def run_blocks(markdown: str, name: str, required: bool = False) -> tuple[str, l
                 return f"{indent}```{lang}\n{body}{indent}```"
             code = "\n".join(line[len(indent):] for line in body.splitlines())
             command = (["bash", "-euo", "pipefail", "-c", code] if lang in SHELLS else [sys.executable, "-c", code])
-            t0 = cpu()
-            try:
-                done = subprocess.run(command, cwd=workdir, env=env, capture_output=True, text=True,
-                                      timeout=BLOCK_SECONDS, stdin=subprocess.DEVNULL)
+            usage = workdir / "cpu-seconds"
+            try:  # through _TIMED, which reports the CPU time of the block's processes (pages run in parallel)
+                done = subprocess.run([sys.executable, "-c", _TIMED, str(usage), *command], cwd=workdir, env=env,
+                                      capture_output=True, text=True, timeout=BLOCK_SECONDS, stdin=subprocess.DEVNULL)
             except subprocess.TimeoutExpired:
                 raise PluginError(f"{name}: a {lang} block ran past {BLOCK_SECONDS:.0f} s:\n{code}") from None
-            seconds = cpu() - t0
+            seconds = float(usage.read_text()) if usage.exists() else 0.0
+            usage.unlink(missing_ok=True)
             times.append((code.splitlines()[0] if code.strip() else "", seconds))
             if done.returncode != 0:
                 raise PluginError(f"{name}: a {lang} block failed (exit {done.returncode}):\n{code}\n--- output:\n"
@@ -306,18 +302,43 @@ def run_blocks(markdown: str, name: str, required: bool = False) -> tuple[str, l
             return shown
 
         markdown = FENCE.sub(replace, markdown)
-    total = cpu() - start
+    total = sum(t for _, t in times)
     if total > PAGE_SECONDS:
         raise PluginError(f"{name}: its executed blocks took {total:.1f} s of CPU time, more than the "
                           f"{PAGE_SECONDS:.0f} s a tutorial may take")
     return markdown, times
 
 
+_TIMED = """import resource, subprocess, sys
+code = subprocess.call(sys.argv[2:])
+usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+open(sys.argv[1], "w").write(repr(usage.ru_utime + usage.ru_stime))
+sys.exit(code)
+"""
+"""Runs a command and writes the CPU time (user + system) of it and its descendants to a file."""
+
+_RUNS: dict[str, Future] = {}
+
+
+def _start_executing(files) -> None:
+    """Executes the blocks of every page that has some, pages in parallel (each in its own folder)."""
+    _RUNS.clear()
+    pool = ThreadPoolExecutor(max_workers=max(1, min(4, os.cpu_count() or 1)))
+    for file in files.documentation_pages():
+        if file.generated_by:
+            continue
+        markdown, meta = get_data(file.content_string)
+        if re.search(r"^[ ]*```[A-Za-z0-9_+-]+[^\n`]*\brun\b", markdown, re.M) or meta.get("execute"):
+            _RUNS[file.src_uri] = pool.submit(run_blocks, markdown, file.src_uri, bool(meta.get("execute")))
+    pool.shutdown(wait=False)
+
+
 def on_page_markdown(markdown, page, config, files):
     required = bool(page.meta.get("execute"))
     if "```" not in markdown:
         return markdown
-    markdown, times = run_blocks(markdown, page.file.src_uri, required)
+    run = _RUNS.pop(page.file.src_uri, None)
+    markdown, times = run.result() if run is not None else run_blocks(markdown, page.file.src_uri, required)
     if times:
         log.info("%s: %d block(s) executed in %.1f s of CPU time", page.file.src_uri, len(times),
                  sum(t for _, t in times))
