@@ -11,7 +11,7 @@ unexport PYTHONDONTWRITEBYTECODE
 # holds up to ~2 GB); `make test TEST_WORKERS=0` runs the suite in one process.
 TEST_WORKERS ?= $(shell n=$$(nproc 2>/dev/null || echo 1); echo $$((n < 4 ? n : 4)))
 
-.PHONY: derive test check bench firmware-check clean venv venv-test
+.PHONY: derive test check bench firmware-check docs clean venv venv-test
 
 derive: $(VENV)/.core
 	$(PY) -m derive generate --prune
@@ -29,6 +29,11 @@ bench: $(VENV)/.test
 firmware-check: $(VENV)/.core
 	$(PY) -m derive firmware-check --record
 
+# The documentation site into site/ (MkDocs, mkdocs.yml), warnings as errors. The schema, CLI and
+# generated-function pages are rendered from derive itself, and every snippet marked `run` is executed.
+docs: $(VENV)/.docs
+	NO_MKDOCS_2_WARNING=1 $(PY) -m mkdocs build --strict --site-dir site
+
 $(VENV)/.core: pyproject.toml constraints.txt
 	test -x $(PY) || $(PYTHON) -m venv $(VENV)
 	-$(PIP) uninstall -y derive 2>/dev/null  # the distribution's name before it became derive-robotics
@@ -36,11 +41,15 @@ $(VENV)/.core: pyproject.toml constraints.txt
 	touch $@
 
 $(VENV)/.test: $(VENV)/.core
-	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda,xacro,mjcf]'
+	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda,xacro,mjcf,docs]'
+	touch $@
+
+$(VENV)/.docs: $(VENV)/.core
+	$(PIP) install -c constraints.txt -e '.[docs]'
 	touch $@
 
 venv: $(VENV)/.core
 venv-test: $(VENV)/.test
 
 clean:
-	rm -rf $(VENV) build dist *.egg-info
+	rm -rf $(VENV) build dist site *.egg-info

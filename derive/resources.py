@@ -21,6 +21,9 @@ def data_path(name: str) -> Path:
 TEMPLATES = data_path("templates")
 """jinja2 templates and verbatim support files, one folder per language (``c/``, ``python/``, ...)."""
 
+EXAMPLES = data_path("examples")
+"""The example models, mechanisms and programs (``examples/`` of the checkout), shipped in the wheel."""
+
 EXAMPLE_MODELS = data_path("models.yaml")
 """The shipped robots (pendulum, planar_2r, rrprr, cartpole, ur5, panda): ``derive init`` copies them."""
 

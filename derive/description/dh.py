@@ -17,15 +17,15 @@ from __future__ import annotations
 
 from typing import Any
 
+from derive.description.schema import keys
 from derive.description.robot import Joint, Limits, Link, Origin, identifier
 
-ROW_KEYS = {"joint", "type", "a", "alpha", "d", "theta", "link", "mass", "com", "inertia", "inertia_rpy", "limits"}
 Z = (0.0, 0.0, 1.0)
 
 
 def dh_to_tree(p: Any, raw: Any) -> tuple[list[Link], list[Joint]]:
     """Convert a ``dh:`` block (parsed by the model parser ``p``) to links and joints."""
-    p.check_keys("dh.", raw, {"convention", "base", "rows"})
+    p.check_keys("dh.", raw, keys("dh"))
     convention = raw.get("convention")
     if convention not in ("standard", "modified"):
         raise p.error("dh.convention", f"must be 'standard' or 'modified', got {convention!r}")
@@ -38,7 +38,7 @@ def dh_to_tree(p: Any, raw: Any) -> tuple[list[Link], list[Joint]]:
     parent = base
     for i, row in enumerate(rows):
         where = f"dh.rows[{i}]"
-        p.check_keys(where + ".", row, ROW_KEYS)
+        p.check_keys(where + ".", row, keys("dh_row"))
         for key in ("joint", "type", "link"):
             if key not in row:
                 raise p.error(f"{where}.{key}", "missing")

@@ -27,6 +27,7 @@ from derive.description.joints import JOINT_TYPES
 from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
 from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, LOOP_KINDS, Loop, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
                                       compose_mimics, identifier, import_command, shown)
+from derive.description.schema import keys
 from derive.resources import EXAMPLE_MODELS
 
 
@@ -67,7 +68,7 @@ def parse_models(text: str, source: str | None = None) -> dict[str, Robot]:
     if not isinstance(data, Mapping) or not isinstance(data.get("robots"), Mapping):
         raise ModelError(None, "robots", "the file must hold a mapping 'robots: {name: {...}}'", source)
     try:
-        _check_keys(None, "", data, {"robots"})
+        _check_keys(None, "", data, keys("file"))
     except ModelError as exc:
         raise exc.in_file(source) from None
     if not data["robots"]:
@@ -124,7 +125,7 @@ class _Parser:
     # ---- values ----
     def value(self, where: str, raw: Any) -> Value:
         if isinstance(raw, Mapping):
-            self.check_keys(where + ".", raw, {"param", "default"})
+            self.check_keys(where + ".", raw, keys("parameter"))
             if "param" not in raw or "default" not in raw:
                 raise self.error(where, "a parameter needs both 'param' and 'default'")
             pname = identifier(self.name, where + ".param", raw["param"])
@@ -177,14 +178,14 @@ class _Parser:
     def origin(self, where: str, raw: Any) -> Origin:
         if raw is None:
             return Origin()
-        self.check_keys(where + ".", raw, {"xyz", "rpy"})
+        self.check_keys(where + ".", raw, keys("origin"))
         return Origin(self.vec3(where + ".xyz", raw.get("xyz")), self.vec3(where + ".rpy", raw.get("rpy")))
 
     def inertia(self, where: str, raw: Any) -> tuple:
         if raw is None:
             return Link.__dataclass_fields__["inertia"].default
         if isinstance(raw, Mapping):
-            self.check_keys(where + ".", raw, {"ixx", "iyy", "izz", "ixy", "ixz", "iyz"})
+            self.check_keys(where + ".", raw, keys("inertia"))
             v = {k: self.value(f"{where}.{k}", raw.get(k, 0.0)) for k in ("ixx", "iyy", "izz", "ixy", "ixz", "iyz")}
             return ((v["ixx"], v["ixy"], v["ixz"]), (v["ixy"], v["iyy"], v["iyz"]), (v["ixz"], v["iyz"], v["izz"]))
         if isinstance(raw, (list, tuple)) and len(raw) == 3 and all(isinstance(r, (list, tuple)) and len(r) == 3 for r in raw):
@@ -202,7 +203,7 @@ class _Parser:
     def limits(self, where: str, raw: Any) -> Limits:
         if raw is None:
             return Limits()
-        self.check_keys(where + ".", raw, {"lower", "upper", "velocity", "effort"})
+        self.check_keys(where + ".", raw, keys("limits"))
         vals = {k: (None if raw.get(k) is None else self.number(f"{where}.{k}", raw[k])) for k in ("lower", "upper", "velocity", "effort")}
         if vals["lower"] is not None and vals["upper"] is not None and vals["lower"] > vals["upper"]:
             raise self.error(where, f"lower ({vals['lower']}) is above upper ({vals['upper']})")
@@ -212,7 +213,7 @@ class _Parser:
         return Limits(**vals)
 
     def link(self, where: str, raw: Any) -> Link:
-        self.check_keys(where + ".", raw, {"name", "mass", "com", "inertia", "inertia_rpy"})
+        self.check_keys(where + ".", raw, keys("link"))
         if "name" not in raw:
             raise self.error(where + ".name", "missing")
         return Link(
@@ -238,8 +239,7 @@ class _Parser:
         return unit
 
     def joint(self, where: str, raw: Any) -> Joint:
-        self.check_keys(where + ".", raw, {"name", "type", "parent", "child", "origin", "axis", "axis2", "pitch", "limits",
-                                           "mimic", "actuator"})
+        self.check_keys(where + ".", raw, keys("joint"))
         for key in ("name", "type", "parent", "child"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
@@ -283,7 +283,7 @@ class _Parser:
     def actuator(self, where: str, raw: Any) -> Actuator:
         if not isinstance(raw, Mapping):
             raise self.error(where, "expected a mapping {armature, gear_ratio, motor_inertia, viscous, coulomb}")
-        self.check_keys(where + ".", raw, {"armature", "gear_ratio", "motor_inertia", "viscous", "coulomb"})
+        self.check_keys(where + ".", raw, keys("actuator"))
         return Actuator(**{k: self.value(f"{where}.{k}", v) for k, v in raw.items()})
 
     def joint_actuator(self, where: str, raw: Any, dof: int, mimic: bool) -> Actuator | tuple[Actuator, ...]:
@@ -307,7 +307,7 @@ class _Parser:
             raise self.error(where, f"only a 1-DOF joint can mimic another (this one is {jtype})")
         if not isinstance(raw, Mapping):
             raise self.error(where, "expected a mapping {joint: NAME, multiplier: A, offset: B}")
-        self.check_keys(where + ".", raw, {"joint", "multiplier", "offset"})
+        self.check_keys(where + ".", raw, keys("mimic"))
         if "joint" not in raw:
             raise self.error(f"{where}.joint", "missing")
         return Mimic(identifier(self.name, f"{where}.joint", raw["joint"]),
@@ -334,7 +334,7 @@ class _Parser:
         return (self.limits(where, raw),) * dof
 
     def frame(self, where: str, raw: Any) -> Frame:
-        self.check_keys(where + ".", raw, {"name", "link", "xyz", "rpy", "aliases"})
+        self.check_keys(where + ".", raw, keys("frame"))
         for key in ("name", "link"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
@@ -351,9 +351,7 @@ class _Parser:
     # ---- robot ----
     def robot(self) -> Robot:
         spec = self.spec
-        self.check_keys("", spec, {"description", "source", "parameters", "gravity", "links", "joints", "dh", "frames",
-                                   "base", "wrenches", "coulomb_smoothing", "bundles", "generate", "loops", "independent",
-                                   "reference"})
+        self.check_keys("", spec, keys("robot"))
         base = spec.get("base", "fixed")
         if base not in BASES:
             raise self.error("base", f"expected one of {', '.join(BASES)}, got {shown(base)!r}")
@@ -428,7 +426,7 @@ class _Parser:
 
     # ---- loop closures ----
     def loop(self, where: str, raw: Any, known: tuple[str, ...]) -> Loop:
-        self.check_keys(where + ".", raw, {"frames", "kind", "axis", "normal", "length", "rotation"})
+        self.check_keys(where + ".", raw, keys("loop"))
         for key in ("frames", "kind"):
             if key not in raw:
                 raise self.error(f"{where}.{key}", "missing")
@@ -580,7 +578,7 @@ class _Parser:
             where = f"bundles[{i}]"
             if not isinstance(item, Mapping):
                 raise self.error(where, "expected a mapping with name and quantities")
-            self.check_keys(where + ".", item, {"name", "quantities"})
+            self.check_keys(where + ".", item, keys("bundle"))
             for key in ("name", "quantities"):
                 if key not in item:
                     raise self.error(f"{where}.{key}", "missing")
@@ -608,7 +606,7 @@ class _Parser:
     def generate_frames(self, raw: Any, robot: Robot) -> tuple[str, ...] | None:
         """``generate: {frames: [...]}``: the links and named frames (an alias stands for its frame)
         that get the per-frame functions, in the order given; None where ``frames`` is not given."""
-        self.check_keys("generate.", raw, {"frames", "quantities"})
+        self.check_keys("generate.", raw, keys("generate"))
         frames = raw.get("frames")
         if frames is None:
             return None

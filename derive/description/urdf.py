@@ -1229,7 +1229,7 @@ def append_entry(models_path: str | Path, name: str, entry: Mapping, replace: bo
     """
     path = Path(models_path)
     if not path.exists() and not path.is_symlink():  # a new models file
-        new_text = "# derive robot models (see README.md, 'Writing a model')\nrobots:\n" + dump_entry(name, entry, generator=generator)
+        new_text = "# derive robot models (fields: the documentation's models.yaml reference, docs/reference/schema.md)\nrobots:\n" + dump_entry(name, entry, generator=generator)
         parse_models(new_text, source=str(path))
         write_atomically(path, new_text, "models file")
         return "appended"
