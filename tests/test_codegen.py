@@ -282,6 +282,21 @@ def test_check_names_stale_files(tmp_path):
     assert any("planar_2r.py (missing)" in p for p in problems)
 
 
+def test_python_byte_code_cache_is_not_a_stale_file(tmp_path):
+    """Importing a generated module writes python/__pycache__/*.pyc beside it: Python's cache, not a file
+    the check names, and the robot still counts as intact (not derived again)."""
+    import py_compile
+
+    out = tmp_path / "generated"
+    shutil.copytree(GENERATED, out)
+    module = out / "pendulum" / "python" / "pendulum.py"
+    py_compile.compile(str(module), cfile=str(module.parent / "__pycache__" / "pendulum.cpython-311.pyc"))
+    assert check(robots(), out) == []
+    logs = []
+    generate({"pendulum": robots()["pendulum"]}, out, log=logs.append)
+    assert not any("deriving" in line for line in logs), logs
+
+
 def test_unchanged_robots_are_not_rederived(tmp_path):
     out = tmp_path / "generated"
     shutil.copytree(GENERATED, out)

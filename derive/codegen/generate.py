@@ -157,13 +157,17 @@ def _regular(path: Path) -> bool:
 
 
 def _entries(robot_dir: Path) -> set[str]:
-    """Paths under ``robot_dir`` of everything but folders (links and special files included), links not followed."""
+    """Paths under ``robot_dir`` of everything but folders (links and special files included), links not
+    followed; not what Python's byte-code cache holds (``__pycache__``, written where a generated module is
+    imported, rebuilt by Python from the sources: no part of the generated code nor the user's)."""
     found = set()
     for root, dirs, names in os.walk(robot_dir):
         base = Path(root)
         for d in list(dirs):
             if (base / d).is_symlink():
                 names.append(d)
+                dirs.remove(d)
+            elif d == "__pycache__":
                 dirs.remove(d)
         found |= {(base / n).relative_to(robot_dir).as_posix() for n in names}
     return found
