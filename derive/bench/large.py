@@ -3,13 +3,23 @@
 ``large``: generic chains (random placements, axes cycling z, y, x) of growing size: wall time to
 derive and render the whole set, the operations of the largest functions, and the time and peak
 memory (per process) of compiling every generated C file with ``cc -O2`` (two at a time).
+
+``big``: robots as people have them (iCub, the Unitree H1-2 with hands, a Kinova Gen3 with a 2F-85
+and a wrist camera), fixed and floating, with the default selection of big robots
+(:attr:`derive.description.robot.Robot.function_frames`, ``function_quantities``): functions,
+files and sizes, ``derive generate`` time of that robot alone, and the first (compiling) and a
+cached import of its generated Python module in a fresh process. URDFs that no package ships are
+read from the paths in :data:`BIG_URDF_VARIABLES` (never committed); without them the row says so.
 """
 
 from __future__ import annotations
 
+import contextlib
+import io
 import json
 import os
 import subprocess
+import sys
 import tempfile
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -19,7 +29,8 @@ import numpy as np
 
 from derive.codegen.backends.c import printer as c_printer
 from derive.codegen.generate import generate
-from derive.description.model import parse_models
+from derive.description.model import parse_models, parse_robot
+from derive.description.urdf import import_urdf_named
 
 SIZES = (6, 12, 20, 40)
 QUICK_SIZES = (6, 12)
@@ -60,7 +71,8 @@ def bench_large(args) -> str:
     have_time = Path("/usr/bin/time").is_file()
     with tempfile.TemporaryDirectory() as tmp:
         for n in QUICK_SIZES if args.quick else SIZES:
-            robot = parse_models(generic_chain(n))[f"chain{n}"]
+            # the whole set and the tcp alone, at every size: a chain above BIG_NV would get the lean default
+            robot = parse_models(generic_chain(n) + "    generate: {frames: [tcp], quantities: all}\n")[f"chain{n}"]
             start = time.perf_counter()
             generate({robot.name: robot}, Path(tmp), use_cache=False, log=lambda s: None)
             gen = time.perf_counter() - start
@@ -94,5 +106,90 @@ def bench_large(args) -> str:
     return "\n".join(rows)
 
 
+BIG_URDF_VARIABLES = {"h1_2": "DERIVE_BENCH_H1_2_URDF", "gen3_2f85": "DERIVE_BENCH_GEN3_2F85_URDF"}
+"""Environment variables naming the URDFs of ``big`` that no installed package ships: the H1-2 with
+hands (unitree_ros robots/h1_2_description/h1_2.urdf) and the Gen3 with a 2F-85 and a wrist camera
+(ros2_kortex kortex_description/robots/gen3_2f85.urdf); meshes are not needed."""
+BIG_ROBOTS = (
+    # (label, URDF or variable, --tip, bases, also the named frames' full set for comparison)
+    ("iCub", "example-robot-data:icub_description/robots/icub.urdf", None, ("fixed", "floating"), False),
+    ("Unitree H1-2 with hands", "h1_2", None, ("fixed", "floating"), False),
+    ("Kinova Gen3 + 2F-85 + camera", "gen3_2f85", "gen3_end_effector_link", ("fixed",), True),
+)
+IMPORT_SCRIPT = ("import sys, time, numpy; sys.path.insert(0, sys.argv[1]); t = time.perf_counter(); "
+                 "__import__(sys.argv[2]); print(time.perf_counter() - t)")
+
+
+def import_seconds(folder: Path, module: str, cache: Path | None) -> float:
+    """Seconds to import the generated module ``module`` from ``folder`` in a fresh interpreter
+    (numpy already imported): with ``cache`` None, compiling its source (no bytecode written or read,
+    a first import); else with bytecode under ``cache`` (PYTHONPYCACHEPREFIX)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONDONTWRITEBYTECODE", "PYTHONPYCACHEPREFIX")}
+    env.update({"PYTHONDONTWRITEBYTECODE": "1"} if cache is None else {"PYTHONPYCACHEPREFIX": str(cache)})
+    out = subprocess.run([sys.executable, "-c", IMPORT_SCRIPT, str(folder), module], capture_output=True, text=True,
+                         check=True, env=env)
+    return float(out.stdout.strip().splitlines()[-1])
+
+
+def _megabytes(paths) -> float:
+    return sum(p.stat().st_size for p in paths if p.is_file()) / 1e6
+
+
+def bench_big(args) -> str:
+    runs = 1 if args.quick else 2
+    rows = ["## Big robots with the default selection (iCub, Unitree H1-2, Gen3 + 2F-85)", "",
+            "| robot | base | nv | named frames | frames with functions | functions | files (C) | C MB | Python MB "
+            "| JAX MB | generate s | first import s | cached import s |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    with tempfile.TemporaryDirectory() as tmp:
+        for label, source, tip, bases, compare in BIG_ROBOTS:
+            variable = BIG_URDF_VARIABLES.get(source)
+            path = os.environ.get(variable, "") if variable else source
+            if variable and not (path and Path(path).is_file()):
+                rows.append(f"| {label} | {', '.join(bases)} | | | | | | | | | not measured: URDF not present "
+                            f"(set {variable}) | | |")
+                continue
+            for base in bases:
+                with contextlib.redirect_stderr(io.StringIO()):  # the URDFs' rounded-angle warnings
+                    name, entry = import_urdf_named(path, tip, floating=base == "floating")
+                selections = [("default", entry)]
+                if compare:
+                    selections.append(("every named frame", {**entry, "generate": {
+                        "frames": [f["name"] for f in entry["frames"]], "quantities": "all"}}))
+                for how, spec in selections:
+                    robot = parse_robot(name, spec)
+                    out = Path(tmp) / f"{name}_{base}_{len(rows)}"
+                    best = float("inf")
+                    for _ in range(runs):
+                        start = time.perf_counter()
+                        generate({name: robot}, out, use_cache=False, log=lambda s: None)
+                        best = min(best, time.perf_counter() - start)
+                    folder = out / name
+                    manifest = json.loads((folder / "manifest.json").read_text())
+                    files = [p for p in folder.rglob("*") if p.is_file()]
+                    c_files = [p for p in (folder / "c").rglob("*") if p.is_file()]
+                    first = min(import_seconds(folder / "python", name, None) for _ in range(runs))
+                    cache = Path(tmp) / f"pycache_{len(rows)}"
+                    import_seconds(folder / "python", name, cache)  # writes the bytecode
+                    cached = min(import_seconds(folder / "python", name, cache) for _ in range(runs))
+                    rows.append(f"| {label}{'' if how == 'default' else f' ({how}, as before)'} | {base} | {robot.nv} "
+                                f"| {len(robot.frames)} | {len(robot.function_frames)} | {len(manifest['functions'])} "
+                                f"| {len(files)} ({len(c_files)}) | {_megabytes(c_files):.1f} "
+                                f"| {_megabytes((folder / 'python').rglob('*.py')):.1f} "
+                                f"| {_megabytes((folder / 'jax').rglob('*.py')):.1f} | {best:.1f} | {first:.1f} "
+                                f"| {cached:.2f} |")
+    rows += ["", "Each robot imported whole (`derive import-urdf FILE [--floating]`; the Gen3 with `--tip "
+             "gen3_end_effector_link`) and generated with the default selection of big robots: per-frame functions "
+             "for the tcp, the wrench frames and the leaves of the tree only; above 30 velocities also without the "
+             "Coriolis matrix, dID/dx, the ODE, its Jacobians and RK4, and the regressors (docs/large-robots.md). "
+             "generate s: `derive generate` of that robot alone (C, Python and JAX), no cache. first import: a fresh "
+             "interpreter importing the generated Python module with no bytecode (it compiles the source, as a "
+             "first import does); cached import: the same with the bytecode Python wrote on a previous import. "
+             f"Best of {runs} run{'s' * (runs > 1)} each, on a shared 2-core machine. The H1-2 and Gen3 URDFs come "
+             "from the vendors' public repositories (unitree_ros, ros2_kortex) and are not part of derive: "
+             f"set {' and '.join(BIG_URDF_VARIABLES.values())} to their paths."]
+    return "\n".join(rows)
+
+
 def benchmarks() -> dict:
-    return {"large": bench_large}
+    return {"large": bench_large, "big": bench_big}

@@ -173,7 +173,8 @@ def measure(urdf: str, floating: bool, max_nv: int = WHOLE_SET_MAX_NV) -> Row:
         with contextlib.redirect_stderr(io.StringIO()):  # the importer's warnings about placeholder limits
             name, entry = import_urdf_named(urdf if Path(urdf).is_absolute() else "example-robot-data:" + urdf,
                                             floating=floating)
-        robot = parse_robot(name, entry)
+        # every named frame, as the rows measured before big robots had a default selection (docs/large-robots.md)
+        robot = parse_robot(name, {**entry, "generate": {"frames": [f["name"] for f in entry["frames"]]}})
     except ModelError as exc:
         row.refused = str(exc)
         return row

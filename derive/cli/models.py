@@ -10,6 +10,7 @@ from derive.cli.common import path_arg, robots_of
 from derive.description.closure import closure_note
 from derive.description.mjcf import GENERATOR as MJCF_GENERATOR, import_mjcf_named
 from derive.description.model import parse_robot
+from derive.description.robot import FUNCTION_QUANTITIES
 from derive.description.xacro_expand import EXTRA as XACRO_EXTRA
 from derive.description.urdf import ERD_PREFIX, append_entry, dump_entry, import_urdf_named, relock_command, resolve_urdf
 from derive.reference import NumericRobot
@@ -43,6 +44,24 @@ def warn_unmoved(name: str, entry: dict, shown: str, samples: int = 3) -> None:
               file=sys.stderr)
 
 
+def note_big(name: str, entry: dict, shown: str) -> None:
+    """One line if an imported robot is big (:attr:`~derive.description.robot.Robot.big`): which frames
+    ``derive generate`` gives per-frame functions by default, what it leaves out, and how to ask for more."""
+    robot = parse_robot(name, entry)
+    if not robot.big:
+        return
+    size = f"{len(robot.frames)} named frames, {len(robot.link_names)} links, nv = {robot.nv}"
+    frames = robot.default_frames
+    lean = robot.function_quantities
+    left = [q for q in FUNCTION_QUANTITIES if q not in lean] if lean is not None else []
+    print(f"note: {shown}: robot '{name}' is big ({size}): by default `derive generate` gives the per-frame functions "
+          f"(fk_<frame>, jacobian_<frame>, ...) to {len(frames)} frames (the tcp, wrench frames and leaves: "
+          f"{', '.join(frames)}; fk_all "
+          "places every link)" + (f" and leaves out {', '.join(left)}" if left else "") + "; for more, add to its entry "
+          "generate: {frames: all" + (", quantities: all" if left else "") + "} (or lists of frames and quantities)",
+          file=sys.stderr)
+
+
 def _write(args, name: str, entry: dict, generator: str = "derive import-urdf") -> str:
     """Append (or with --replace, replace in place) ``entry`` in ``args.out``: the line that says which."""
     done = append_entry(args.out, name, entry, replace=bool(getattr(args, "replace", False)), generator=generator)
@@ -61,6 +80,7 @@ def cmd_import_urdf(args) -> int:
                                     package_paths=getattr(args, "package_path", None),
                                     snap_angles=getattr(args, "snap_angles", None))
     warn_unmoved(name, entry, resolve_urdf(args.file, name)[1])
+    note_big(name, entry, resolve_urdf(args.file, name)[1])
     if args.out:
         print(_write(args, name, entry), file=sys.stderr)
     else:
@@ -73,6 +93,7 @@ def cmd_import_mjcf(args) -> int:
     name, entry = import_mjcf_named(args.file, name=args.name, floating=args.floating,
                                     actuators=not args.no_actuators)
     warn_unmoved(name, entry, args.file)
+    note_big(name, entry, args.file)
     if args.out:
         print(_write(args, name, entry, MJCF_GENERATOR), file=sys.stderr)
     else:
@@ -102,10 +123,12 @@ def cmd_info(args) -> int:
                 print(f"  gimbal lock: {j.gimbal_lock}")
         named = [f.name + (" (alias " + ", ".join(f.aliases) + ")" if f.aliases else "") for f in r.frames]
         print(f"  frames: {', '.join(named)}")
-        if r.generate_frames is not None:
-            print(f"  per-frame functions for: {', '.join(r.generate_frames)} (generate.frames; fk_all places every link)")
-        if r.generate_quantities is not None:
-            print(f"  generated quantities: {', '.join(r.generate_quantities)} (generate.quantities, and what they call)")
+        selection = r.selection
+        if "frames" in selection:
+            print(f"  per-frame functions for: {', '.join(r.function_frames)} ({selection['frames']}; "
+                  "fk_all places every link)")
+        if "quantities" in selection:
+            print(f"  generated quantities: {', '.join(r.function_quantities)} ({selection['quantities']})")
         if r.wrench_frames:
             print(f"  wrench frames (the *_fext functions): {', '.join(r.wrench_frames)}")
         if r.parameters:

@@ -88,14 +88,14 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     add("mass_matrix", None, [q], [("M", ne.mass_matrix)],
         f"Joint-space mass matrix M(q) ({n}x{n}, row-major) of M qdd + C qd + g = tau; composite-rigid-body algorithm.",
         (("algorithm", "CRBA"),))
-    if not robot.floating:
+    if need("coriolis_matrix") and not robot.floating:
         C = ne.coriolis_matrix
         how = ("from the Christoffel symbols of M" if ne.coriolis_algorithm == "Christoffel symbols of M" else
                f"of the Christoffel symbols of M, as {ne.coriolis_algorithm}")
         add("coriolis_matrix", None, [q, qd], [("C", C)],
             f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) {how}; Mdot - 2C is skew-symmetric.",
             (("algorithm", ne.coriolis_algorithm),))
-    else:  # the Christoffel symbols need qd = dq/dt; the spatial factorisation does not
+    elif need("coriolis_matrix"):  # the Christoffel symbols need qd = dq/dt; the spatial factorisation does not
         add("coriolis_matrix", None, [q, qd], [("C", wb.coriolis_matrix)],
             f"Coriolis matrix C(q, qd) ({n}x{n}, row-major) by the spatial factorisation sum_i J_i^T (I_i Jdot_i + "
             "B_i J_i) (Pinocchio's computeCoriolisMatrix): C qd = the velocity terms of ID, Mdot - 2C skew-symmetric.",
@@ -438,9 +438,10 @@ selection (:func:`selected` then keeps exactly the functions called)."""
 
 
 def wanted(robot: Robot):
-    """``need(*quantities)``: whether any of them is to be derived: always without models.yaml's
-    ``generate: {quantities: [...]}``, else those listed and what their templates call (:data:`CALLS`)."""
-    chosen = robot.generate_quantities
+    """``need(*quantities)``: whether any of them is to be derived: always where
+    :attr:`~derive.description.robot.Robot.function_quantities` is None (no ``generate: {quantities:
+    [...]}``, at most BIG_NV velocities), else those chosen and what their templates call (:data:`CALLS`)."""
+    chosen = robot.function_quantities
     if chosen is None:
         return lambda *quantities: True
     derived = set(chosen) | {c for q in chosen for c in CALLS.get(q, ())}
@@ -451,8 +452,9 @@ def selected(robot: Robot, specs: list[FunctionSpec], templates: list[TemplateFu
              ) -> tuple[list[FunctionSpec], list[TemplateFunction]]:
     """The functions of models.yaml's ``generate: {quantities: [...]}`` (all without it), in the
     catalogue's order: those of the quantities listed, plus the expression functions the kept
-    template functions call (ik_tcp keeps fk_jacobian_tcp, rk4_step ode_rhs)."""
-    wanted = robot.generate_quantities
+    template functions call (ik_tcp keeps fk_jacobian_tcp, rk4_step ode_rhs); a big robot's lean
+    default likewise (:attr:`~derive.description.robot.Robot.function_quantities`)."""
+    wanted = robot.function_quantities
     if wanted is None:
         return specs, templates
     templates = [t for t in templates if t.quantity in wanted]

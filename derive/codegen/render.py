@@ -171,6 +171,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
         "joints": [{"name": j.name, "type": j.type, "lower": j.limits.lower, "upper": j.limits.upper,
                     "velocity": j.limits.velocity, "effort": j.limits.effort} for j in robot.coordinates],
         "frames": list(robot.function_frames),
+        **({"selection": robot.selection} if robot.selection else {}),
         **({"aliases": robot.frame_aliases} if robot.frame_aliases else {}),
         "parameters": [{"name": p.name, "default": p.default} for p in robot.parameters],
         "support": [entry for b in backends for entry in b.manifest_support(ctx, per_backend[b.name])],

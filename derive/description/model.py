@@ -605,13 +605,16 @@ class _Parser:
 
     def generate_frames(self, raw: Any, robot: Robot) -> tuple[str, ...] | None:
         """``generate: {frames: [...]}``: the links and named frames (an alias stands for its frame)
-        that get the per-frame functions, in the order given; None where ``frames`` is not given."""
+        that get the per-frame functions, in the order given; ``frames: all``: every link and named frame
+        (:attr:`Robot.frame_names`); None where ``frames`` is not given."""
         self.check_keys("generate.", raw, keys("generate"))
         frames = raw.get("frames")
         if frames is None:
             return None
+        if frames == "all":
+            return robot.frame_names
         if not isinstance(frames, list):
-            raise self.error("generate.frames", "expected a list of link or frame names")
+            raise self.error("generate.frames", "expected a list of link or frame names, or all")
         known = robot.frame_names + tuple(robot.frame_aliases)
         out: list[str] = []
         for i, name in enumerate(frames):
@@ -625,12 +628,15 @@ class _Parser:
 
     def generate_quantities(self, raw: Mapping) -> tuple[str, ...] | None:
         """``generate: {quantities: [...]}``: the kinds of generated function kept (each of
-        :data:`FUNCTION_QUANTITIES`; what they call comes along); None where not given: all."""
+        :data:`FUNCTION_QUANTITIES`; what they call comes along); ``quantities: all``: every one, also for a
+        robot of more than :data:`~derive.description.robot.BIG_NV` velocities; None where not given."""
         quantities = raw.get("quantities")
         if quantities is None:
             return None
+        if quantities == "all":
+            return FUNCTION_QUANTITIES
         if not isinstance(quantities, list) or not quantities:
-            raise self.error("generate.quantities", "expected a non-empty list of quantities")
+            raise self.error("generate.quantities", "expected a non-empty list of quantities, or all")
         for i, q in enumerate(quantities):
             if q not in FUNCTION_QUANTITIES:
                 raise self.error(f"generate.quantities[{i}]", f"unknown quantity '{shown(q)}' (one of "

@@ -273,6 +273,21 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
 
+BIG_FRAMES = 8
+"""A robot with more named frames than this is big (the committed arms have at most 5; a Gen3 with a
+2F-85 and a wrist camera has 17, iCub 23, ANYmal C 65): without models.yaml's ``generate: {frames: ...}``
+its per-frame functions go to :attr:`Robot.default_frames` only, not to every named frame."""
+BIG_NV = 30
+"""A robot with more velocities than this is big as well, and without ``generate: {quantities: ...}``
+it also leaves out :data:`LEAN_LEFT_OUT`: with a floating base or mimic joints (no analytic derivatives,
+no ABA) those are unrolled in O(nv^3) or worse and made 80 % of the Unitree H1-2's 1.4 million
+operations and 76 MB of Python (344 s to generate, 20 s to import)."""
+LEAN_LEFT_OUT = ("coriolis_matrix", "inverse_dynamics_derivatives", "ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step",
+                 "regressor", "base_regressor")
+"""What a robot of more than :data:`BIG_NV` velocities leaves out by default: C (the bias h = C qd + g
+stays), dID/dx, the ODE, its Jacobians and RK4 (forward dynamics stays: qdd = FD(q, qd, tau)) and the
+identification regressors. ``generate: {quantities: all}`` brings them back."""
+
 
 @dataclass(frozen=True)
 class Bundle:
@@ -572,11 +587,61 @@ class Robot:
         return self.link_names + tuple(f.name for f in self.frames)
 
     @property
+    def leaves(self) -> tuple[str, ...]:
+        """The leaves of the kinematic tree: links that are no joint's parent (feet, hands, finger
+        tips, a head), in tree order."""
+        parents = {j.parent for j in self.joints}
+        return tuple(link for link in self.link_names if link not in parents)
+
+    @property
+    def big(self) -> bool:
+        """More than :data:`BIG_FRAMES` named frames or more than :data:`BIG_NV` velocities."""
+        return len(self.frames) > BIG_FRAMES or self.nv > BIG_NV
+
+    @property
+    def default_frames(self) -> tuple[str, ...]:
+        """A big robot's frames with per-frame functions when models.yaml chooses none: the ``tcp``,
+        the wrench (contact) frames, then the leaves of the tree, each once."""
+        tcp = ("tcp",) if any(f.name == "tcp" for f in self.frames) else ()
+        return tuple(dict.fromkeys(tcp + self.wrench_frames + self.leaves))
+
+    @property
     def function_frames(self) -> tuple[str, ...]:
         """The frames (named frames or links) that get the generated per-frame functions (``fk_<frame>``,
-        ``jacobian_<frame>``, ...): models.yaml's ``generate: {frames: [...]}``, by default every named
-        frame. Every link's pose is in ``fk_all`` whatever the choice."""
-        return tuple(f.name for f in self.frames) if self.generate_frames is None else self.generate_frames
+        ``jacobian_<frame>``, ...): models.yaml's ``generate: {frames: [...]}``; without it every named
+        frame, or for a :attr:`big` robot :attr:`default_frames`. Every link's pose is in ``fk_all``
+        whatever the choice."""
+        if self.generate_frames is not None:
+            return self.generate_frames
+        return self.default_frames if self.big else tuple(f.name for f in self.frames)
+
+    @property
+    def function_quantities(self) -> tuple[str, ...] | None:
+        """The quantities generated (None: all): models.yaml's ``generate: {quantities: [...]}``; without
+        it all, or above :data:`BIG_NV` velocities all but :data:`LEAN_LEFT_OUT`."""
+        if self.generate_quantities is not None or self.nv <= BIG_NV:
+            return self.generate_quantities
+        return tuple(q for q in FUNCTION_QUANTITIES if q not in LEAN_LEFT_OUT)
+
+    @property
+    def selection(self) -> dict[str, str]:
+        """Why these frames and quantities, in words, where a default for big robots or models.yaml's
+        ``generate:`` chose them ({} for a small robot without ``generate:``, which gets every named frame
+        and every quantity): what manifest.json's ``selection``, ``derive info`` and the importer say."""
+        out = {}
+        why = f"more than {BIG_FRAMES} named frames ({len(self.frames)})" if len(self.frames) > BIG_FRAMES else \
+            f"more than {BIG_NV} velocities ({self.nv})"
+        if self.generate_frames is not None:
+            out["frames"] = "generate.frames"
+        elif self.big:
+            out["frames"] = (f"default for a big robot ({why}): the tcp, the wrench frames and the leaves of the tree "
+                             "(links with no child); generate: {frames: all} gives every link and named frame")
+        if self.generate_quantities is not None:
+            out["quantities"] = "generate.quantities, and what they call"
+        elif self.nv > BIG_NV:
+            out["quantities"] = (f"default for more than {BIG_NV} velocities ({self.nv}): all but "
+                                 f"{', '.join(LEAN_LEFT_OUT)}; generate: {{quantities: all}} gives them")
+        return out
 
     @property
     def frame_aliases(self) -> dict[str, str]:

@@ -123,8 +123,10 @@ _SECTIONS = (
                 "rotation": "planar: true also closes the rotation within the plane (default false)",
             }),
     Section("generate", "robots.<name>.generate", "Optional; without it every function is generated.", {
-        "frames": "links and frames that get the per-frame functions (default: the named frames)",
-        "quantities": "only these kinds of function (and the functions they call)",
+        "frames": "links and frames that get the per-frame functions, or `all` (default: the named frames; "
+                  "a big robot, more than 8 named frames or nv above 30: the tcp, the wrench frames and the leaves)",
+        "quantities": "only these kinds of function (and the functions they call), or `all` (default: all; above "
+                      "nv 30 the O(nv^3) ones are left out: see the large-robots guide)",
     }),
     Section("parameter", "any numeric field, as a mapping", "An inline parameter: declares the symbol and its "
             "default where it is used.", {

@@ -959,15 +959,15 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         if j.mimic is None or not moves(j):
             continue
         if j.name not in composed:  # it mimics itself
-            target, chain = j, (j.name,)
-        else:
-            leader, chain = composed[j.name]
+            target, through = j, (j.name,)
+        else:  # not `chain`: that is the --chain argument, still needed for the notes and the command
+            leader, through = composed[j.name]
             target = by_name.get(leader.joint)
         problem = ("an unknown joint" if target is None else "itself" if target is j else
                    "a fixed joint" if target.type == "fixed" else "a locked joint" if target.name in locks else
                    "a joint of a dropped massless branch" if target.name not in kept else None)
         if problem:
-            stuck.append((j, "".join(f", which mimics '{x}'" for x in chain[1:]), problem))
+            stuck.append((j, "".join(f", which mimics '{x}'" for x in through[1:]), problem))
     if stuck:
         j, via, problem = stuck[0]
         others = f" (and {len(stuck) - 1} more mimic joint{'s' * (len(stuck) > 2)} alike)" if len(stuck) > 1 else ""
