@@ -236,3 +236,31 @@ def test_the_first_compiled_build_says_so_and_a_cache_hit_is_silent(tmp_path, mo
     assert len(err) == 2
     derive.compiled("pendulum", GENERATED)
     assert capfd.readouterr().err == ""
+
+
+def test_a_command_line_builds_the_parser_of_its_command_alone():
+    """COMMANDS names each command's module (the full parser's commands, no more); a command line that
+    names one imports only that module, so a bad models file is refused before CasADi or sympy load."""
+    import subprocess
+    import sys
+
+    from derive.cli import COMMANDS
+
+    full = build_parser()
+    sub = next(a for a in full._actions if isinstance(a, argparse._SubParsersAction))
+    assert sorted(sub.choices) == sorted(COMMANDS)
+    for command, module in COMMANDS.items():
+        alone = build_parser([command])
+        only = next(a for a in alone._actions if isinstance(a, argparse._SubParsersAction))
+        assert command in only.choices and set(only.choices) <= {c for c, m in COMMANDS.items() if m == module}
+    assert not next(a for a in build_parser(["--version"])._actions
+                    if isinstance(a, argparse._SubParsersAction)).choices
+    # the same parse either way: the arguments of one command line, full or alone
+    argv = ["--models", "m.yaml", "ik", "ur5", "--xyz", "0,0,1", "--rpy", "-pi/2", "0", "pi"]
+    assert vars(full.parse_args(argv)) == vars(build_parser(argv).parse_args(argv))
+    code = ("import sys; from derive.cli import main; status = main(sys.argv[1:]); "
+            "print(status, sorted(m for m in ('casadi', 'sympy', 'matplotlib', 'jinja2') if m in sys.modules))")
+    bad = ROOT / "tests" / "data" / "no_such_models.yaml"
+    out = subprocess.run([sys.executable, "-c", code, "--models", str(bad), "generate"], capture_output=True, text=True)
+    assert out.stdout.split("\n")[0] == "2 []", out
+    assert out.stderr.startswith("derive: error: ") and len(out.stderr.splitlines()) == 1

@@ -24,7 +24,34 @@ from derive.errors import DeriveError
 
 COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.export", "derive.cli.inspect", "derive.cli.analysis",
                               "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench"]
-"""The command groups; imported when the parser is built."""
+"""The command groups, in the order ``derive --help`` lists their commands."""
+
+COMMANDS: dict[str, str] = {
+    "generate": "derive.cli.generate", "init": "derive.cli.generate",
+    "import-urdf": "derive.cli.models", "import-mjcf": "derive.cli.models", "info": "derive.cli.models",
+    "export": "derive.cli.export",
+    "eom": "derive.cli.inspect", "latex": "derive.cli.inspect",
+    "dof": "derive.cli.analysis", "fk": "derive.cli.analysis", "workspace": "derive.cli.analysis",
+    "singularities": "derive.cli.analysis", "manipulability": "derive.cli.analysis", "plan": "derive.cli.analysis",
+    "simulate": "derive.cli.solvers", "ik": "derive.cli.solvers", "trajopt": "derive.cli.solvers",
+    "identify": "derive.cli.identify", "base-parameters": "derive.cli.identify", "excite": "derive.cli.identify",
+    "firmware-check": "derive.cli.firmware", "bench": "derive.cli.bench",
+}
+"""Command -> the module that adds it (tests/test_conventions.py checks it against the full parser). A
+command line that names one builds the parser of that command alone: the others' modules import
+CasADi, sympy and matplotlib, about a second of CPU before the first line of work (or of error)."""
+
+
+def _command_of(argv: list[str]) -> str | None:
+    """The command ``argv`` names (its first word that is neither an option nor --models' value);
+    None where it names none ("--version" alone, "--help", nothing)."""
+    words = iter(argv)
+    for word in words:
+        if word == "--models":
+            next(words, None)
+        elif not word.startswith("-"):
+            return word
+    return None
 
 
 class UsageError(DeriveError):
@@ -44,7 +71,9 @@ class ArgumentParser(argparse.ArgumentParser):
         raise UsageError(f"{command + ': ' if command else ''}{message} (see `{self.prog} --help`)")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(argv: list[str] | None = None) -> argparse.ArgumentParser:
+    """The command line's parser: every command's, or where ``argv`` names a known command (or asks only
+    for --version), just what parsing it needs."""
     parser = ArgumentParser(prog="derive", description="Symbolic derivation and code generation for robot "
                             "manipulators. `derive COMMAND --help` explains a command.")
     models_help = "models file (default: $DERIVE_MODELS, else ./models.yaml, else the shipped example robots)"
@@ -56,7 +85,14 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND", title="commands")
     add_parser = sub.add_parser
     sub.add_parser = lambda *a, **k: add_parser(*a, parents=[common, *k.pop("parents", [])], **k)
-    for module in COMMAND_MODULES:
+    command = None if argv is None else _command_of(argv)
+    if command in COMMANDS:
+        modules = [COMMANDS[command]]
+    elif argv is not None and command is None and "--version" in argv and not {"-h", "--help"} & set(argv):
+        modules = []
+    else:
+        modules = COMMAND_MODULES
+    for module in modules:
         importlib.import_module(module).add_parser(sub)
     return parser
 
@@ -82,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     SIGTERM / SIGHUP."""
     ending = EndOnSignals()
     try:
-        args = build_parser().parse_args(argv)
+        argv = sys.argv[1:] if argv is None else list(argv)
+        args = build_parser(argv).parse_args(argv)
         return args.func(args)
     except DeriveError as exc:
         print(f"derive: error: {exc}", file=sys.stderr)

@@ -7,7 +7,6 @@ import sys
 from pathlib import Path
 
 from derive.cli.common import path_arg, robots_of
-from derive.codegen.generate import check, default_output, firmware_record_path, generate
 from derive.description.model import MODELS_FILE, load_models, local_models_path
 from derive.errors import DeriveError
 from derive.filesystem import write_atomically
@@ -26,6 +25,8 @@ def _models_named(args) -> None:
 def cmd_generate(args) -> int:
     _models_named(args)
     robots = robots_of(args)
+    # here, not at the top: a models file with a mistake is refused before CasADi and jinja2 load
+    from derive.codegen.generate import check, default_output, firmware_record_path, generate
     closed = [name for name, r in robots.items() if r.loops and (not args.robot or name in args.robot)]
     if closed:  # the tree's functions would ignore the loops: refuse rather than write a wrong model
         raise DeriveError(f"robot '{closed[0]}' has loops: generated code for closed chains is not available yet "
