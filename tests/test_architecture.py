@@ -2,7 +2,7 @@
 
 The flow is description -> symbolic -> codegen -> files, with the numeric reference beside
 symbolic (it shares only the description), and inspect, analysis, solvers on top, then
-figures (plot), benchmarks (bench) and the command line (cli). A module may import its own
+figures (plot), benchmarks (bench), the viewer (view) and the command line (cli). A module may import its own
 package and the packages listed for it below, nothing else of derive.
 """
 
@@ -29,8 +29,9 @@ ALLOWED = {
     "runtime": BASE | {"description", "codegen"},
     "plot": BASE | {"description", "symbolic", "inspect", "analysis", "solvers"},
     "bench": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers", "runtime"},
+    "view": BASE | {"description", "codegen", "reference", "solvers", "runtime"},
     "cli": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers", "plot", "bench",
-                   "runtime"},
+                   "runtime", "view"},
     "__init__": BASE | {"description", "symbolic", "inspect", "runtime"},
     "__main__": {"cli"},
 }

@@ -23,7 +23,8 @@ from derive.cli.signals import MESSAGES, EndOnSignals
 from derive.errors import DeriveError
 
 COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.export", "derive.cli.inspect", "derive.cli.analysis",
-                              "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench"]
+                              "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench",
+                              "derive.cli.view"]
 """The command groups; imported when the parser is built."""
 
 
