@@ -274,3 +274,31 @@ def test_ik_gizmo_moves_the_robot_to_the_generated_ik_answer(viser):
         np.testing.assert_allclose(view.skeleton.points, place(geo, kin.poses(view.q)).segments, atol=1e-6)
     finally:
         server.stop()
+
+
+def test_live_player_plays_a_simulated_csv_in_real_time(viser, tmp_path):
+    from derive.view.scene import read_trajectory
+    from derive.view.server import LiveView
+
+    robot = derive.load_robot("planar_2r")
+    t = np.linspace(0.0, 2.0, 201)
+    q = np.column_stack([-1.2 + 0.3 * np.sin(np.pi * t), 0.3 * np.cos(np.pi * t)])
+    header = "t," + ",".join(f"{k}_{c}" for k in ("q", "qd", "qdd", "tau") for c in robot.velocity_names)
+    np.savetxt(tmp_path / "run.csv", np.column_stack([t, q, np.zeros((201, 6))]), delimiter=",", header=header,
+               comments="", fmt="%.12g")
+    trajectory = read_trajectory(robot, tmp_path / "run.csv")
+    kin = Kinematics(robot)
+    server = viser.ViserServer(host="127.0.0.1", port=free_port(), verbose=False)
+    try:
+        view = LiveView(server, robot, kin, geometry(robot, kin), initial_q(robot), trajectory)
+        start = time.monotonic()
+        view.play.value = True
+        time.sleep(0.5)
+        view.play.value = False
+        elapsed = time.monotonic() - start
+        time.sleep(0.1)  # the player notices within a tick
+        k = view.sample.value
+        assert 0 < t[k] <= elapsed + 0.01  # real time: the sample of the wall clock, never ahead of it
+        assert view.q.tolist() == trajectory.q[k].tolist()
+    finally:
+        server.stop()

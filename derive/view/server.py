@@ -130,6 +130,7 @@ class LiveView:
             play = gui.add_checkbox("play", initial_value=False)
             slider = gui.add_slider("sample", min=0, max=len(t) - 1, step=1, initial_value=0)
             clock = gui.add_markdown(f"t = {t[0]:.3f} s of {t[0]:.3f} .. {t[-1]:.3f} s")
+        self.play, self.sample = play, slider
 
         def at(k: int) -> None:
             clock.content = f"t = {t[k]:.3f} s of {t[0]:.3f} .. {t[-1]:.3f} s"
