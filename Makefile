@@ -41,7 +41,7 @@ $(VENV)/.core: pyproject.toml constraints.txt
 	touch $@
 
 $(VENV)/.test: $(VENV)/.core
-	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda,xacro,mjcf,docs]'
+	$(PIP) install -c constraints.txt -e '.[test,pinocchio,jax,cuda,xacro,mjcf,docs,viewer]'
 	touch $@
 
 $(VENV)/.docs: $(VENV)/.core

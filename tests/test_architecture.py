@@ -2,7 +2,7 @@
 
 The flow is description -> symbolic -> codegen -> files, with the numeric reference beside
 symbolic (it shares only the description), and inspect, analysis, solvers on top, then
-figures (plot), benchmarks (bench) and the command line (cli). A module may import its own
+figures (plot), benchmarks (bench), the viewer (view) and the command line (cli). A module may import its own
 package and the packages listed for it below, nothing else of derive.
 """
 
@@ -29,12 +29,21 @@ ALLOWED = {
     "runtime": BASE | {"description", "codegen"},
     "plot": BASE | {"description", "symbolic", "inspect", "analysis", "solvers"},
     "bench": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers", "runtime"},
+    "view": BASE | {"description", "codegen", "reference", "solvers", "runtime"},
     "cli": BASE | {"description", "symbolic", "codegen", "reference", "inspect", "analysis", "solvers", "plot", "bench",
-                   "runtime"},
+                   "runtime", "view"},
     "__init__": BASE | {"description", "symbolic", "inspect", "runtime"},
     "__main__": {"cli"},
 }
 DEFERRED_OK = {"matplotlib", "scipy"}  # heavy optional dependencies, imported where used on purpose
+# derive modules imported inside a function on purpose, by the module importing them: the package's
+# names for type checkers only (derive/__init__.py loads them on first use), and generate's code
+# generation after the models file is read (a bad file is refused before CasADi loads)
+DEFERRED_DERIVE = {
+    "derive.__init__": {"derive.description.model", "derive.description.robot", "derive.inspect.sympy_model",
+                        "derive.runtime", "derive.symbolic.model"},
+    "derive.cli.generate": {"derive.codegen.generate"},
+}
 GENERATION = ("description", "symbolic", "codegen", "errors", "resources", "filesystem")
 
 
@@ -94,7 +103,8 @@ def test_no_private_or_hidden_imports(module):
         if target.startswith("derive"):
             assert not [n for n in names if n.startswith("_")], f"{module} imports private {names} from {target}"
         if not top and target.split(".")[0] not in DEFERRED_OK:
-            assert not target.startswith("derive"), f"{module}: import of {target} inside a function"
+            assert not target.startswith("derive") or target in DEFERRED_DERIVE.get(module, ()), \
+                f"{module}: import of {target} inside a function"
 
 
 def test_no_import_cycles():

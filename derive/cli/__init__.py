@@ -23,7 +23,8 @@ from derive.cli.signals import MESSAGES, EndOnSignals
 from derive.errors import DeriveError
 
 COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.export", "derive.cli.inspect", "derive.cli.analysis",
-                              "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench"]
+                              "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench",
+                              "derive.cli.view"]
 """The command groups, in the order ``derive --help`` lists their commands."""
 
 COMMANDS: dict[str, str] = {
@@ -35,7 +36,7 @@ COMMANDS: dict[str, str] = {
     "singularities": "derive.cli.analysis", "manipulability": "derive.cli.analysis", "plan": "derive.cli.analysis",
     "simulate": "derive.cli.solvers", "ik": "derive.cli.solvers", "trajopt": "derive.cli.solvers",
     "identify": "derive.cli.identify", "base-parameters": "derive.cli.identify", "excite": "derive.cli.identify",
-    "firmware-check": "derive.cli.firmware", "bench": "derive.cli.bench",
+    "firmware-check": "derive.cli.firmware", "bench": "derive.cli.bench", "view": "derive.cli.view",
 }
 """Command -> the module that adds it (tests/test_conventions.py checks it against the full parser). A
 command line that names one builds the parser of that command alone: the others' modules import
