@@ -34,12 +34,14 @@ The compiler is ``$CC`` (else cc, gcc or clang, the first found); the flags are
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import errno
 import fcntl
 import hashlib
 import json
 import mmap
 import os
+import platform
 import re
 import shlex
 import shutil
@@ -91,6 +93,8 @@ class Signature:
     outputs: tuple[Argument, ...]  # the arrays written, shaped as the generated Python returns them
     status: bool                   # the C function returns an int status (IK), returned last
     doc: str
+    lanes: bool = False            # it and what it calls compile in lane mode (manifest.json c.lanes)
+    calls: tuple[str, ...] = ()    # the C names of the generated functions it calls
 
 
 @dataclass(frozen=True)
@@ -247,14 +251,135 @@ def _signatures(manifest: dict, robot: str) -> list[Signature]:
                         + [f"in  {a.name} {list(a.shape)}" + (" (or None)" if a.nullable else "") for a in inputs]
                         + [f"out {a.name} {list(a.shape)}" for a in outputs]
                         + (["out status (int: 0 solved, 1 not converged, 2 bad input)"] if status else []))
-        out.append(Signature(name, f["name"], tuple(inputs), tuple(outputs), status, doc))
+        calls = tuple(c for c in f.get("calls") or () if isinstance(c, str))
+        out.append(Signature(name, f["name"], tuple(inputs), tuple(outputs), status, doc, c.get("lanes") is True, calls))
+    lane_wise = {s.cname for s in out if s.lanes}
+    out = [dataclasses.replace(s, lanes=s.lanes and all(c in lane_wise for c in s.calls)) for s in out]
     names = [s.cname for s in out]
     for s in out:
-        for suffix in ("_batch", "_obj", "_rt_record"):
+        for suffix in ("_batch", "_obj", "_rt_record", "_lanes", "_lanes_batch"):
             if s.cname + suffix in names:
                 raise DeriveError(f"robot '{robot}': the generated function {s.cname}{suffix} clashes with the "
                                   f"compiled wrapper of {s.cname}")
     return out
+
+
+# ---- lane mode: the batch loops evaluate LANES states per call ----
+
+@dataclass(frozen=True)
+class Lanes:
+    """How the batch loops use the lane mode of the generated C (derive_lanes.h)."""
+    count: int                # states per call of a lane function; 0: none, every state by the scalar function
+    isa: str                  # "avx512f", "avx2", "sse2", "neon", or "" (none)
+    flags: tuple[str, ...]    # the compiler flags of the lane translation units (only those)
+
+
+LANE_MODES = {"avx512f": Lanes(8, "avx512f", ("-mavx512f",)), "avx2": Lanes(4, "avx2", ("-mavx2",)),
+              "sse2": Lanes(2, "sse2", ()), "neon": Lanes(2, "neon", ()), "off": Lanes(0, "", ())}
+"""The lane modes by name (``DERIVE_LANES=<name>`` chooses one). avx512f and avx2 call glibc's
+libmvec for sin, cos and the other elementary functions (within a few ulp of <math.h>); sse2 and
+neon call <math.h> once per lane, so their results are the scalar function's bit for bit."""
+
+
+def _cpu_flags() -> set[str]:
+    """The CPU's feature flags from /proc/cpuinfo (Linux), or an empty set."""
+    try:
+        with open("/proc/cpuinfo", encoding="ascii", errors="replace") as f:
+            for line in f:
+                if line.startswith("flags"):
+                    return set(line.partition(":")[2].split())
+    except OSError:
+        pass
+    return set()
+
+
+def host_lanes() -> Lanes:
+    """The lane mode for this machine: ``$DERIVE_LANES`` (auto, off, avx512f, avx2, sse2 or neon),
+    else the widest the CPU has: AVX-512F 8 doubles, AVX2 4, any other x86-64 (SSE2) or
+    AArch64 (NEON) 2; off elsewhere."""
+    choice = os.environ.get("DERIVE_LANES", "").strip().lower()
+    if choice in ("", "auto"):
+        machine = platform.machine().lower()
+        if machine in ("x86_64", "amd64"):
+            cpu = _cpu_flags()
+            return LANE_MODES["avx512f" if "avx512f" in cpu else "avx2" if "avx2" in cpu else "sse2"]
+        if machine in ("aarch64", "arm64"):
+            return LANE_MODES["neon"]
+        return LANE_MODES["off"]
+    if choice in ("0", "no", "none", "scalar"):
+        choice = "off"
+    if choice not in LANE_MODES:
+        raise DeriveError(f"DERIVE_LANES={choice}: not a lane mode (auto, off, {', '.join(m for m in LANE_MODES if m != 'off')})")
+    return LANE_MODES[choice]
+
+
+STACK_VECTORS = 512
+"""Most vectors (inputs and outputs of one lane call) that a lane batch keeps on the stack (16 KiB
+of AVX2 vectors: the Panda's ode_jac_x needs 217); more (a large robot's regressor) on the heap."""
+
+
+def lane_source(robot: str, s: Signature, lanes: Lanes) -> str:
+    """The translation unit of ``s``'s lane variant: its generated .c compiled with DERIVE_REAL a
+    vector of ``lanes.count`` reals, renamed ``<fn>_lanes`` (its callees too), and
+    ``<fn>_lanes_batch``: n states in blocks of count, each input element gathered into a vector
+    (lane k: state i + k; the last block's missing lanes repeat the last state), one call, the
+    outputs scattered back. So a state's results do not depend on where in a batch it is, or
+    whether it is alone (n = 1: the one-state path). Returns n, or 0 without memory for the vectors
+    (the caller then loops over the scalar function)."""
+    ins = [f"const double *a_{a.name}, long s_{a.name}" for a in s.inputs]
+    outs = [f"double *r_{a.name}" for a in s.outputs]
+    total = sum(a.length for a in s.inputs + s.outputs)
+    count = lanes.count
+    on_stack = total <= STACK_VECTORS
+    lines = [f"/* Built by derive.runtime for robot '{robot}': {s.cname} in lane mode ({lanes.isa}, {count} states a call). */",
+             "#include <stdint.h>",
+             "#include <stdlib.h>",
+             f"#define DERIVE_LANES {count}",
+             '#include "derive_lanes.h"',
+             *[f"#define {c} {c}_lanes" for c in (s.cname, *s.calls)],
+             f'#include "{s.cname}.c"',
+             "",
+             f"long {s.cname}_lanes_batch(long n, {', '.join(ins + outs)})",
+             "{",
+             "    long i, at[DERIVE_LANES];",
+             "    int j, k;"]
+    if on_stack:
+        lines += [f"    DERIVE_REAL v[{total}];"]
+    else:
+        lines += [f"    /* {total} vectors, aligned: on the heap (they would not fit the stack) */",
+                  f"    unsigned char *raw = malloc({total} * sizeof(DERIVE_REAL) + sizeof(DERIVE_REAL));",
+                  "    DERIVE_REAL *v;",
+                  "    if (!raw)",
+                  "        return 0;",
+                  "    v = (DERIVE_REAL *)(raw + sizeof(DERIVE_REAL) - (uintptr_t)raw % sizeof(DERIVE_REAL));"]
+    lines += [f"    for (i = 0; i < n; i += {count}) {{",
+              f"        for (k = 0; k < {count}; ++k)",
+              "            at[k] = i + k < n ? i + k : n - 1;"]
+    at = 0
+    offsets = {}
+    for a in s.inputs + s.outputs:
+        offsets[a.name] = at
+        at += a.length
+    for a in s.inputs:
+        lines += [f"        for (j = 0; j < {a.length}; ++j)",
+                  f"            for (k = 0; k < {count}; ++k)",
+                  f"                v[{offsets[a.name]} + j][k] = a_{a.name}[at[k] * s_{a.name} + j];"]
+    lines.append(f"        {s.cname}_lanes({', '.join(f'v + {offsets[a.name]}' for a in s.inputs + s.outputs)});")
+    for a in s.outputs:
+        lines += [f"        for (k = 0; k < {count} && i + k < n; ++k)",
+                  f"            for (j = 0; j < {a.length}; ++j)",
+                  f"                r_{a.name}[(i + k) * {a.length} + j] = v[{offsets[a.name]} + j][k];"]
+    lines += ["    }", *([] if on_stack else ["    free(raw);"]), "    return n;", "}"]
+    return "\n".join(lines) + "\n"
+
+
+def lane_sources(robot: str, sigs: list[Signature], lanes: Lanes, snapshot: Snapshot | None = None) -> dict[str, str]:
+    """{file name: text} of the lane translation units, one per lane-wise function (none when
+    ``lanes.count`` is 0, or the snapshot has no derive_lanes.h: code generated before it)."""
+    if not lanes.count or (snapshot is not None and "derive_lanes.h" not in dict(snapshot.sources)):
+        return {}
+    return {f"{s.cname}_lanes.c": lane_source(robot, s, lanes) for s in sigs
+            if s.lanes and not s.status and not any(a.nullable for a in s.inputs)}
 
 
 # ---- the library's own record, and the wrapper ----
@@ -301,9 +426,13 @@ def _bytes_array(data: bytes) -> list[str]:
     return ["    " + ", ".join(str(b) for b in data[k:k + 24]) + "," for k in range(0, len(data), 24)]
 
 
-def wrapper_source(robot: str, sigs: list[Signature], manifest: dict | None = None, rec: str | None = None) -> str:
+def wrapper_source(robot: str, sigs: list[Signature], manifest: dict | None = None, rec: str | None = None,
+                   lanes: int = 0, lane_wise: frozenset[str] | set[str] = frozenset()) -> str:
     """The C file compiled with the robot's generated code: the batch loops, the one-state fast
-    paths and the record ``rec`` (default: :func:`record` of ``manifest``, without a sources hash)."""
+    paths and the record ``rec`` (default: :func:`record` of ``manifest``, without a sources hash).
+    The batch loops of the functions in ``lane_wise`` (C names) first call their lane variant
+    (:func:`lane_source`, ``lanes`` states a call) and loop over the tail it leaves;
+    ``<robot>_rt_lanes()`` returns ``lanes``."""
     manifest = manifest or {}
     rec = rec if rec is not None else record(robot, manifest, sigs, None)
     prefix = robot.upper()
@@ -383,6 +512,12 @@ def wrapper_source(robot: str, sigs: list[Signature], manifest: dict | None = No
         "{",
         "    return derive_rt_out(o);",
         "}",
+        "",
+        "/* States per call of the lane variants the batch loops use (0: none). */",
+        f"int {robot}_rt_lanes(void)",
+        "{",
+        f"    return {lanes if lane_wise else 0};",
+        "}",
     ]
     for s in sigs:
         # C names: a_ (input), s_ (its stride), r_ (output); o_ / ro_ (an input's / output's Python object), d_ (its data)
@@ -391,8 +526,14 @@ def wrapper_source(robot: str, sigs: list[Signature], manifest: dict | None = No
         args = [(f"a_{a.name} ? a_{a.name} + i * s_{a.name} : NULL" if a.nullable else f"a_{a.name} + i * s_{a.name}")
                 for a in s.inputs] + [f"r_{a.name} + i * {a.length}" for a in s.outputs]
         call = f"{s.cname}({', '.join(args)})"
-        lines += ["", f"void {s.cname}_batch(long n, {', '.join(ins + outs)})", "{", "    long i;",
-                  "    for (i = 0; i < n; ++i)", f"        {'status[i] = ' if s.status else ''}{call};", "}"]
+        start = "    long i = 0;"
+        if s.cname in lane_wise:
+            names = [f"a_{a.name}, s_{a.name}" for a in s.inputs] + [f"r_{a.name}" for a in s.outputs]
+            decl = [f"const double *a_{a.name}, long s_{a.name}" for a in s.inputs] + [f"double *r_{a.name}" for a in s.outputs]
+            lines += ["", f"long {s.cname}_lanes_batch(long n, {', '.join(decl)});"]
+            start = f"    long i = {s.cname}_lanes_batch(n, {', '.join(names)});"
+        lines += ["", f"void {s.cname}_batch(long n, {', '.join(ins + outs)})", "{", start,
+                  "    for (; i < n; ++i)", f"        {'status[i] = ' if s.status else ''}{call};", "}"]
         fail = "-1" if s.status else "0"
         params = [f"const void *o_{a.name}" for a in s.inputs] + [f"void *ro_{a.name}" for a in s.outputs]
         body = []
@@ -405,6 +546,9 @@ def wrapper_source(robot: str, sigs: list[Signature], manifest: dict | None = No
             else:
                 body += [f"    const DERIVE_REAL *d_{a.name} = {get};", f"    if (!d_{a.name})", f"        return {fail};"]
         call = f"{s.cname}({', '.join([f'd_{a.name}' for a in s.inputs] + [f'derive_rt_out(ro_{a.name})' for a in s.outputs])})"
+        if s.cname in lane_wise:  # the lane variant, as in a batch: one state's results wherever it is
+            lanes_call = f"{s.cname}_lanes_batch(1, {', '.join([f'd_{a.name}, 0' for a in s.inputs] + [f'derive_rt_out(ro_{a.name})' for a in s.outputs])})"
+            body += [f"    if ({lanes_call})", "        return 1;"]
         body += [f"    return {call};"] if s.status else [f"    {call};", "    return 1;"]
         lines += ["", f"int {s.cname}_obj({', '.join(params)})", "{", *body, "}"]
     return "\n".join(lines) + "\n"
@@ -464,11 +608,16 @@ def cache_root() -> Path:
     return root / "derive" / "compiled"
 
 
-def content_hash(robot: str, snapshot: Snapshot, wrapper: str, cc: list[str], cflags: list[str]) -> str:
+def content_hash(robot: str, snapshot: Snapshot, wrapper: str, cc: list[str], cflags: list[str],
+                 lanes: Lanes = LANE_MODES["off"], units: dict[str, str] | None = None) -> str:
     h = hashlib.sha256()
     h.update(json.dumps({"robot": robot, "compiler": compiler_identity(cc), "flags": cflags, "link": ["-shared", "-lm"]}).encode())
     h.update(b"\0sources\0" + snapshot.sources_hash.encode())
     h.update(b"\0wrapper\0" + wrapper.encode())
+    if units:
+        h.update(b"\0lanes\0" + json.dumps([lanes.count, lanes.isa, list(lanes.flags)]).encode())
+        for name, text in sorted(units.items()):
+            h.update(f"\0{name}\0".encode() + text.encode())
     return h.hexdigest()
 
 
@@ -590,10 +739,13 @@ def library(robot: str, source: Snapshot | str | Path, sigs: list[Signature]) ->
     snap = source if isinstance(source, Snapshot) else read_generated(robot, Path(source).parent)
     cc = compiler(robot)
     cflags = flags(robot)
+    lanes = host_lanes()
+    units = lane_sources(robot, sigs, lanes, snap)
     expected = record(robot, snap.manifest, sigs, snap.sources_hash)
-    wrapper = wrapper_source(robot, sigs, snap.manifest, expected)
+    lane_wise = {name[:-len("_lanes.c")] for name in units}
+    wrapper = wrapper_source(robot, sigs, snap.manifest, expected, lanes.count, lane_wise)
     root = cache_root()
-    digest = content_hash(robot, snap, wrapper, cc, cflags)
+    digest = content_hash(robot, snap, wrapper, cc, cflags, lanes, units)
     final = root / digest
     lib = final / f"lib{robot}.so"
     if file_record(lib) == expected:
@@ -611,14 +763,14 @@ def library(robot: str, source: Snapshot | str | Path, sigs: list[Signature]) ->
         files = sum(name.endswith(".c") for name, _ in snap.sources) + 1
         print(f"derive: compiling {robot} ({files} C files, once; cached in {root}) ...", file=sys.stderr, flush=True)
         start = time.perf_counter()
-        _build(robot, snap, wrapper, cc, cflags, final, lib, expected, replace=bool(held))
+        _build(robot, snap, wrapper, cc, cflags, final, lib, expected, replace=bool(held), lanes=lanes, units=units)
         print(f"derive: compiled {robot} in {time.perf_counter() - start:.1f} s (cached: later calls load it at once)",
               file=sys.stderr, flush=True)
     return lib
 
 
 def _build(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: list[str], final: Path, lib: Path,
-           expected: str, replace: bool) -> None:
+           expected: str, replace: bool, lanes: Lanes = LANE_MODES["off"], units: dict[str, str] | None = None) -> None:
     """Compile ``snap``'s sources (a copy of their bytes) with the wrapper in a temporary folder
     beside ``final`` and rename it into place (``replace``: over a present ``final`` whose library
     is not the expected one; only under the digest's lock)."""
@@ -640,8 +792,13 @@ def _build(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: list
         src = tmp / f"{robot}_runtime.c"
         src.write_text(wrapper)
         sources = [copy / name for name, _ in snap.sources if name.endswith(".c")] + [src]
+        jobs = [cc + cflags + [f"-I{copy}", "-c", str(s)] for s in sources]
+        for name, text in sorted((units or {}).items()):  # the lane variants: only these get the ISA's flags
+            (tmp / name).write_text(text)
+            sources.append(tmp / name)
+            jobs.append(cc + cflags + list(lanes.flags) + [f"-I{copy}", "-c", str(tmp / name)])
         objects = [tmp / f"{k:03d}_{s.stem}.o" for k, s in enumerate(sources)]
-        jobs = [cc + cflags + [f"-I{copy}", "-c", str(s), "-o", str(o)] for s, o in zip(sources, objects)]
+        jobs = [job + ["-o", str(o)] for job, o in zip(jobs, objects)]
         pool = ThreadPoolExecutor(max_workers=max(1, min(len(jobs), os.cpu_count() or 1)))
         try:
             for future in [pool.submit(_run, job, robot, copy, cdir) for job in jobs]:

@@ -99,6 +99,7 @@ def _module(robot: str, manifest: dict, sigs: list[Signature], path: Path) -> ty
     mod.LIBRARY = path
     mod.FAST_PATH = fast
     mod.FUNCTIONS = tuple(s.name for s in sigs)
+    mod.LANES, mod.LANE_FUNCTIONS = _lanes(robot, clib, sigs)
     for s in sigs:
         fn = _bind(robot, s, pylib, clib, fast, default_p if params else None)
         fn.__module__ = mod.__name__
@@ -161,6 +162,19 @@ def _check_record(robot: str, manifest: dict, sigs: list[Signature], path: Path,
                 f"{k} {_brief(have.get(k))} in the library, {_brief(want.get(k))} in the manifest" for k in keys)
         raise DeriveError(f"robot '{robot}': {path} {what} (it changed after it was checked? "
                           "call derive.compiled again)")
+
+
+def _lanes(robot: str, lib: ctypes.CDLL, sigs: list[Signature]) -> tuple[int, tuple[str, ...]]:
+    """States per call of the lane variants the batch loops use (0: none) and the functions that
+    have one (those the manifest marks lane-wise, when the library was built with lanes)."""
+    get = getattr(lib, f"{robot}_rt_lanes", None)
+    if get is None:
+        return 0, ()
+    get.argtypes = []
+    get.restype = ctypes.c_int
+    count = int(get())
+    names = tuple(s.name for s in sigs if count and hasattr(lib, f"{s.cname}_lanes_batch"))
+    return count, names
 
 
 def _brief(value) -> str:

@@ -27,6 +27,16 @@ SUPPORT = {"ik": ("derive_linalg.h", "derive_ik.h"), "manipulability": ("derive_
            "ltdl": ("derive_ltdl.h",)}
 """Fixed algorithms -> the header-only support files (templates/c/support/) that implement them."""
 
+LANES_HEADER = "derive_lanes.h"
+"""The lane mode's header (templates/c/support/), written for every robot: with -DDERIVE_LANES=4 it
+makes DERIVE_REAL a vector of 4 doubles, so the same .c files evaluate 4 states per call. No
+generated file includes it (the firmware's translation units and their hashes stay as they were)."""
+
+LANE_TEMPLATES = ("rk4_step", "ode_jac_x", "ode_jac_u")
+"""Template functions that run lane-wise: their loops count array indices and nothing branches on
+a real (rk4_step's stages, the LTDL factor and solve). ik and manipulability test reals (convergence,
+the singular values) and stay scalar-only."""
+
 HEADER_NOTES = {
     "manipulability": (
         "-ffast-math / -Ofast / -ffinite-math-only: the compiler may then assume that no value is",
@@ -78,8 +88,9 @@ class CBackend(Backend):
                    **self._contract([(n, x.shape) for n, x in spec.inputs], [(n, e.shape) for n, e in spec.outputs]),
                    "unused": [n for i, n in enumerate(in_names) if i not in used], "header_notes": []}
         if len(prog.body) + len(prog.results) <= c_printer.SPLIT_ABOVE:
-            return {**context, "parts": None, "body": printer.body(prog), "work": printer.declarations(),
-                    "stores": printer.stores(prog, out_names)}
+            body, stores = printer.body(prog), printer.stores(prog, out_names)
+            return {**context, "parts": None, "body": body, "work": printer.declarations(), "stores": stores,
+                    "lanes": lane_wise(body + stores)}
         fills, prog = zero_fills(prog, [math.prod(e.shape) for _, e in spec.outputs])
         parts = printer.split(prog, out_names)
         for k, part in enumerate(parts):
@@ -87,6 +98,7 @@ class CBackend(Backend):
             part["unused"] = ([n for i, n in enumerate(in_names) if i not in part["reads"]]
                               + [n for n in out_names if n not in part["writes"]] + ([] if part["uses_slots"] else ["W"]))
         return {**context, "parts": parts, "slots": max(1, printer.slots), "part_size": printer.part_size,
+                "lanes": lane_wise([line for part in parts for line in part["body"] + part["stores"]]),
                 "fills": [(out_names[oi], size) for oi, size in fills], "computing": printer.computing,
                 "part_args": self._signature(spec) + ["DERIVE_REAL *W"], "call_args": in_names + out_names + ["W"]}
 
@@ -104,12 +116,13 @@ class CBackend(Backend):
                 "h_template": self.template(header) if self.has_template(header) else self.template("function.h.jinja"),
                 "call_headers": [f"{t.robot}_{short}.h" for short in t.callees],
                 "support_headers": [h for algorithm in t.support for h in SUPPORT[algorithm]],
-                "p_arg": ", p" if "p" in in_names else "", "has_p": "p" in in_names}
+                "p_arg": ", p" if "p" in in_names else "", "has_p": "p" in in_names,
+                "lanes": t.template in LANE_TEMPLATES}
 
     def render(self, env: jinja2.Environment, robot: RobotContext, functions: list[dict]) -> dict[str, str]:
         base = {**robot.data(), "prefix": robot.robot.upper()}
         files = {"c/derive_real.h": env.get_template(self.template("derive_real.h.jinja")).render(functions=MATH_FUNCTIONS)}
-        for name in self.support_files(functions):
+        for name in self.support_files(functions) + [LANES_HEADER]:
             files[f"c/{name}"] = env.get_template(self.template("support.jinja")).render(
                 source=self.support_source(name), text=self.support_text(name))
         for f in functions:
@@ -154,9 +167,11 @@ class CBackend(Backend):
         ``reads`` (the inputs) and ``writes`` (the outputs), each array in signature order with its
         length in DERIVE_REALs, row-major (``nullable``: the caller may pass NULL); ``form``: "whole"
         (one straight-line function), "split" (``parts`` static functions, ``zero_filled``: the outputs
-        whose zero entries one loop writes) or "template" (calls and loops around other functions)."""
+        whose zero entries one loop writes) or "template" (calls and loops around other functions);
+        ``lanes``: whether it compiles in lane mode (derive_lanes.h: DERIVE_REAL a vector, one state
+        per lane), false for the functions that branch on a real (ik, manipulability)."""
         entry = {"header": f"c/{f['header']}", "source": f"c/{f['source']}", "returns": f["c_returns"],
-                 "reads": f["c_reads"], "writes": f["c_writes"]}
+                 "reads": f["c_reads"], "writes": f["c_writes"], "lanes": f["lanes"]}
         if "parts" not in f:
             return {**entry, "form": "template"}
         if not f["parts"]:
@@ -173,7 +188,14 @@ class CBackend(Backend):
                 {"build": "example", "target": f"{robot.robot}_derive_example"}]
         build = [{"file": f"c/{path.format(robot=robot.robot)}", "source": f"templates/{self.name}/{template}", **use}
                  for (path, template), use in zip(BUILD_FILES, uses)] if self.complete(functions) else []
-        return [{"file": f"c/{name}", "source": self.support_source(name)} for name in self.support_files(functions)] + build
+        support = self.support_files(functions) + [LANES_HEADER]
+        return [{"file": f"c/{name}", "source": self.support_source(name)} for name in support] + build
+
+
+def lane_wise(lines: list[tuple[str, str]]) -> bool:
+    """Whether printed (lhs, rhs) lines compile with DERIVE_REAL a vector: all but a literal too small
+    for a float, which the printer casts, ``((DERIVE_REAL)1e-40)`` (a scalar cannot be cast to a vector)."""
+    return not any("((DERIVE_REAL)" in rhs for _, rhs in lines)
 
 
 ZERO_FILL_MIN = 256
