@@ -341,7 +341,7 @@ def lane_source(robot: str, s: Signature, lanes: Lanes) -> str:
              "",
              f"long {s.cname}_lanes_batch(long n, {', '.join(ins + outs)})",
              "{",
-             "    long i, at[DERIVE_LANES];",
+             "    long i;",
              "    int j, k;"]
     if on_stack:
         lines += [f"    DERIVE_REAL v[{total}];"]
@@ -352,24 +352,34 @@ def lane_source(robot: str, s: Signature, lanes: Lanes) -> str:
                   "    if (!raw)",
                   "        return 0;",
                   "    v = (DERIVE_REAL *)(raw + sizeof(DERIVE_REAL) - (uintptr_t)raw % sizeof(DERIVE_REAL));"]
+    # the states of the block (the last block's missing lanes repeat the last state); each input
+    # vector built from its lanes in registers: lane stores into a vector in memory and then one
+    # vector load would stall the store forwarding
     lines += [f"    for (i = 0; i < n; i += {count}) {{",
-              f"        for (k = 0; k < {count}; ++k)",
-              "            at[k] = i + k < n ? i + k : n - 1;"]
+              *[f"        const long at{k} = i + {k} < n ? i + {k} : n - 1;" if k else "        const long at0 = i;"
+                for k in range(count)]]
     at = 0
     offsets = {}
     for a in s.inputs + s.outputs:
         offsets[a.name] = at
         at += a.length
     for a in s.inputs:
+        lanes_of = ", ".join(f"a_{a.name}[at{k} * s_{a.name} + j]" for k in range(count))
         lines += [f"        for (j = 0; j < {a.length}; ++j)",
-                  f"            for (k = 0; k < {count}; ++k)",
-                  f"                v[{offsets[a.name]} + j][k] = a_{a.name}[at[k] * s_{a.name} + j];"]
+                  f"            v[{offsets[a.name]} + j] = (DERIVE_REAL){{{lanes_of}}};"]
     lines.append(f"        {s.cname}_lanes({', '.join(f'v + {offsets[a.name]}' for a in s.inputs + s.outputs)});")
+    lines.append(f"        if (i + {count} <= n) {{  /* a whole block: each output vector read once */")
     for a in s.outputs:
-        lines += [f"        for (k = 0; k < {count} && i + k < n; ++k)",
-                  f"            for (j = 0; j < {a.length}; ++j)",
-                  f"                r_{a.name}[(i + k) * {a.length} + j] = v[{offsets[a.name]} + j][k];"]
-    lines += ["    }", *([] if on_stack else ["    free(raw);"]), "    return n;", "}"]
+        lines += [f"            for (j = 0; j < {a.length}; ++j) {{",
+                  f"                const DERIVE_REAL t = v[{offsets[a.name]} + j];",
+                  *[f"                r_{a.name}[(i + {k}) * {a.length} + j] = t[{k}];" for k in range(count)],
+                  "            }"]
+    lines.append("        } else {")
+    for a in s.outputs:
+        lines += [f"            for (k = 0; i + k < n; ++k)",
+                  f"                for (j = 0; j < {a.length}; ++j)",
+                  f"                    r_{a.name}[(i + k) * {a.length} + j] = v[{offsets[a.name]} + j][k];"]
+    lines += ["        }", "    }", *([] if on_stack else ["    free(raw);"]), "    return n;", "}"]
     return "\n".join(lines) + "\n"
 
 

@@ -1,0 +1,148 @@
+"""Lane mode: the generated C with DERIVE_REAL a vector (derive_lanes.h), as derive.compiled runs it.
+
+A copy of planar_2r cut down to seven functions (lane-wise dynamics, the regressor's sign, rk4_step
+calling ode_rhs, and ik_tcp, which branches and stays scalar) is built three times at -O0 (values,
+not speed): with the host's lanes, with DERIVE_LANES=off (the scalar fallback), and on x86-64 with
+sse2 lanes (the per-lane <math.h> path). Seeded batches of 11 states (two blocks of 4 and a tail of
+3) agree with the scalar build to 1e-13 of each output's largest entry (libmvec), and bit for bit
+where the lanes call <math.h>.
+"""
+
+from __future__ import annotations
+
+import json
+import platform
+import re
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from derive.errors import DeriveError
+from derive.runtime import build, loader
+
+ROOT = Path(__file__).resolve().parent.parent
+GENERATED = ROOT / "generated"
+KEEP = ("inverse_dynamics", "forward_dynamics", "regressor", "ode_rhs", "rk4_step", "fk_jacobian_tcp", "ik_tcp")
+X86 = platform.machine().lower() in ("x86_64", "amd64")
+
+
+@pytest.fixture(scope="module")
+def small(tmp_path_factory) -> Path:
+    """generated/ holding planar_2r with only the functions of KEEP (its manifest, sources, umbrella header)."""
+    out = tmp_path_factory.mktemp("gen")
+    src, dst = GENERATED / "planar_2r", out / "planar_2r"
+    (dst / "c").mkdir(parents=True)
+    manifest = json.loads((src / "manifest.json").read_text())
+    names = {f"planar_2r_{k}" for k in KEEP}
+    manifest["functions"] = [f for f in manifest["functions"] if f["name"] in names]
+    (dst / "manifest.json").write_text(json.dumps(manifest))
+    for path in (src / "c").iterdir():
+        m = re.fullmatch(r"(planar_2r_\w+)\.[ch]", path.name)
+        if path.suffix in (".c", ".h") and (m is None or m[1] in names):
+            shutil.copy(path, dst / "c" / path.name)
+    umbrella = dst / "c" / "planar_2r.h"
+    lines = umbrella.read_text().splitlines(keepends=True)
+    umbrella.write_text("".join(ln for ln in lines if not (ln.startswith('#include "planar_2r_')
+                                                          and ln.split('"')[1][:-2] not in names)))
+    return out
+
+
+@pytest.fixture(scope="module")
+def mods(small, tmp_path_factory):
+    """{mode: derive.compiled module} built into one fresh cache at -O0."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv("XDG_CACHE_HOME", str(tmp_path_factory.mktemp("xdg")))
+        mp.setenv("CFLAGS", "-O0")
+        mp.delenv("CC", raising=False)
+        out = {}
+        for mode in ("auto", "off") + (("sse2",) if X86 else ()):
+            mp.setenv("DERIVE_LANES", mode)
+            out[mode] = loader.compiled("planar_2r", small)
+        mp.delenv("DERIVE_LANES")
+        out["host"] = build.host_lanes()
+        yield out
+
+
+def values(result) -> list[np.ndarray]:
+    return list(result) if isinstance(result, tuple) else [result]
+
+
+def batch(name: str, n: int, seed: int):
+    rng = np.random.default_rng(seed)
+    sig = next(s for s in build.signatures(json.loads((GENERATED / "planar_2r" / "manifest.json").read_text()))
+               if s.name == name)
+    args = [rng.uniform(-2, 2, (n,) + a.shape) for a in sig.inputs]
+    return args
+
+
+LANE_WISE = ("inverse_dynamics", "forward_dynamics", "regressor", "ode_rhs", "rk4_step", "fk_jacobian_tcp")
+
+
+def test_host_lanes_are_chosen_and_ik_stays_scalar(mods):
+    host = mods["host"]
+    auto, off = mods["auto"], mods["off"]
+    if X86 or platform.machine().lower() in ("aarch64", "arm64"):
+        assert host.count in (2, 4, 8)
+    assert auto.LANES == host.count
+    assert sorted(auto.LANE_FUNCTIONS) == (sorted(LANE_WISE) if host.count else [])
+    assert off.LANES == 0 and off.LANE_FUNCTIONS == ()  # the scalar fallback: every state by the scalar C
+
+
+@pytest.mark.parametrize("name", LANE_WISE)
+def test_lanes_equal_scalar_to_1e13(mods, name):
+    """11 states: two blocks of 4 lanes and a tail of 3 (padded with the last state); each state's
+    results also equal its results alone (the one-state path runs the lanes too)."""
+    args = batch(name, 11, seed=len(name))
+    lanes, scalar = values(getattr(mods["auto"], name)(*args)), values(getattr(mods["off"], name)(*args))
+    for got, want in zip(lanes, scalar):
+        flat_l, flat_s = got.reshape(11, -1), want.reshape(11, -1)
+        scale = np.max(np.abs(flat_s), axis=1)
+        assert np.all(scale > 0) and np.all(np.max(np.abs(flat_l - flat_s), axis=1) <= 1e-13 * scale)
+    for k in (0, 5, 8, 10):  # a first lane, a middle one, the tail's first and last
+        for got, alone in zip(lanes, values(getattr(mods["auto"], name)(*[a[k] for a in args]))):
+            np.testing.assert_array_equal(alone, got[k])
+
+
+@pytest.mark.skipif(not X86, reason="sse2 lanes are x86-64's")
+@pytest.mark.parametrize("name", LANE_WISE)
+def test_per_lane_maths_is_bit_for_bit_scalar(mods, name):
+    """Without libmvec (sse2: 2 lanes, <math.h> per lane) the lanes compute exactly what the scalar C does."""
+    assert mods["sse2"].LANES == 2
+    args = batch(name, 5, seed=7)
+    for got, want in zip(values(getattr(mods["sse2"], name)(*args)), values(getattr(mods["off"], name)(*args))):
+        np.testing.assert_array_equal(got, want)
+
+
+def test_ik_is_unchanged_by_lanes(mods):
+    T = mods["off"].fk_jacobian_tcp(np.array([0.3, -0.4]))[0]
+    for mode in ("auto", "off"):
+        q, *_, status = mods[mode].ik_tcp(T, np.array([0.2, -0.2]))
+        assert status == 0 and np.allclose(mods[mode].fk_jacobian_tcp(q)[0], T, atol=1e-9)
+
+
+def test_bad_lane_mode_is_one_line(small, monkeypatch):
+    monkeypatch.setenv("DERIVE_LANES", "avx9")
+    with pytest.raises(DeriveError, match=r"^DERIVE_LANES=avx9: not a lane mode \(auto, off, avx512f, avx2, sse2, neon\)$"):
+        loader.compiled("planar_2r", small)
+
+
+def test_code_without_the_lane_header_builds_without_lanes(small):
+    snap = build.read_generated("planar_2r", small / "planar_2r")
+    sigs = build.signatures(snap.manifest)
+    assert set(build.lane_sources("planar_2r", sigs, build.LANE_MODES["avx2"], snap)) == {
+        f"planar_2r_{n}_lanes.c" for n in LANE_WISE}
+    old = build.Snapshot(snap.robot, snap.folder, snap.manifest,
+                         tuple(s for s in snap.sources if s[0] != "derive_lanes.h"), snap.sources_hash)
+    assert build.lane_sources("planar_2r", sigs, build.LANE_MODES["avx2"], old) == {}
+
+
+def test_manifest_says_which_functions_are_lane_wise():
+    """Every function of every committed robot: "lanes" false exactly for ik and manipulability."""
+    robots = sorted(json.loads((GENERATED / "MANIFEST.json").read_text())["robots"])
+    for robot in robots:
+        manifest = json.loads((GENERATED / robot / "manifest.json").read_text())
+        assert {"file": "c/derive_lanes.h", "source": "templates/c/support/derive_lanes.h"} in manifest["support"]
+        for f in manifest["functions"]:
+            assert f["c"]["lanes"] is (f["quantity"] not in ("ik", "manipulability")), f["name"]
