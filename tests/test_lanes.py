@@ -146,3 +146,16 @@ def test_manifest_says_which_functions_are_lane_wise():
         assert {"file": "c/derive_lanes.h", "source": "templates/c/support/derive_lanes.h"} in manifest["support"]
         for f in manifest["functions"]:
             assert f["c"]["lanes"] is (f["quantity"] not in ("ik", "manipulability")), f["name"]
+
+
+def test_a_lane_mode_the_cpu_lacks_is_one_line(monkeypatch):
+    """Forcing AVX-512F (or AVX2) lanes on a CPU without them would end the process at the first
+    batch (SIGILL): refused in one line instead."""
+    cpu = build._cpu_flags()
+    for isa in ("avx512f", "avx2"):
+        monkeypatch.setenv("DERIVE_LANES", isa)
+        if X86 and cpu and isa not in cpu:
+            with pytest.raises(DeriveError, match=rf"^DERIVE_LANES={isa}: this CPU has no {isa} "):
+                build.host_lanes()
+        elif X86 and cpu:
+            assert build.host_lanes() == build.LANE_MODES[isa]

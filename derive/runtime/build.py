@@ -13,11 +13,19 @@
   (:func:`record`: robot, nq, nv, model hash, each function's input and output lengths, the hash of
   the sources), as const data behind ``<robot>_rt_record()``, and an ``#error`` unless the
   sources' ``<ROBOT>_NQ`` and ``<ROBOT>_NV`` are the manifest's.
+- :func:`lane_sources` writes, for the host's lane mode (:func:`host_lanes`: AVX-512F 8 doubles,
+  AVX2 4, SSE2 or NEON 2, ``$DERIVE_LANES`` to choose, ``off`` for none), one more translation unit
+  per function the manifest marks lane-wise (``c.lanes``): its generated .c compiled a second time
+  with derive_lanes.h (DERIVE_REAL a vector, one state per lane; only these units get the ISA's
+  flag) and ``<robot>_<fn>_lanes_batch``, which gathers blocks of states into lane vectors, calls
+  it and scatters the results, all in C. The batch loop and the one-state path of such a function
+  both go through it, so a state's results do not depend on the batch around it.
 - :func:`library` returns ``$XDG_CACHE_HOME/derive/compiled/<hash>/lib<robot>.so`` (default
   ~/.cache/derive/compiled/), the hash being the sha256 of the snapshot's source bytes, the
-  wrapper, the compiler (its path and ``--version``) and the flags. The library is compiled from a
-  copy of exactly the bytes hashed (written into the build folder, compiled there), so a
-  ``derive generate`` during the build cannot put other code under this hash. A present library
+  wrapper, the compiler (its path and ``--version``), the flags and the lane units with their
+  flags. The library is compiled from a copy of exactly the bytes hashed (written into the build
+  folder, compiled there), so a ``derive generate`` during the build cannot put other code under
+  this hash. A present library
   is used only if the record in its file is the expected one (else it is rebuilt and replaced).
 
 Builds of one hash take turns: the builder holds an advisory lock (``flock``) on
@@ -310,6 +318,10 @@ def host_lanes() -> Lanes:
         choice = "off"
     if choice not in LANE_MODES:
         raise DeriveError(f"DERIVE_LANES={choice}: not a lane mode (auto, off, {', '.join(m for m in LANE_MODES if m != 'off')})")
+    cpu = _cpu_flags() if choice in ("avx512f", "avx2") else set()
+    if cpu and choice not in cpu:  # its instructions would end the process (SIGILL) at the first batch
+        raise DeriveError(f"DERIVE_LANES={choice}: this CPU has no {choice} (its flags in /proc/cpuinfo); "
+                          "use auto or off")
     return LANE_MODES[choice]
 
 
@@ -557,7 +569,8 @@ def wrapper_source(robot: str, sigs: list[Signature], manifest: dict | None = No
                 body += [f"    const DERIVE_REAL *d_{a.name} = {get};", f"    if (!d_{a.name})", f"        return {fail};"]
         call = f"{s.cname}({', '.join([f'd_{a.name}' for a in s.inputs] + [f'derive_rt_out(ro_{a.name})' for a in s.outputs])})"
         if s.cname in lane_wise:  # the lane variant, as in a batch: one state's results wherever it is
-            lanes_call = f"{s.cname}_lanes_batch(1, {', '.join([f'd_{a.name}, 0' for a in s.inputs] + [f'derive_rt_out(ro_{a.name})' for a in s.outputs])})"
+            pointers = [f"d_{a.name}, 0" for a in s.inputs] + [f"derive_rt_out(ro_{a.name})" for a in s.outputs]
+            lanes_call = f"{s.cname}_lanes_batch(1, {', '.join(pointers)})"
             body += [f"    if ({lanes_call})", "        return 1;"]
         body += [f"    return {call};"] if s.status else [f"    {call};", "    return 1;"]
         lines += ["", f"int {s.cname}_obj({', '.join(params)})", "{", *body, "}"]
