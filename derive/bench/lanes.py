@@ -112,7 +112,8 @@ def _widths() -> list[tuple[str, int, bool, list[str]]]:
 
 
 def _program(widths) -> tuple[str, list[tuple[str, list[str], str]]]:
-    """The C program timing the scalar and every lane width, and its lane objects: (source, flags, rename)."""
+    """The C program timing the scalar function and every lane width, interleaved in each repeat,
+    and its lane objects: (source, flags, rename)."""
     vtype = {(4, False): "v4d", (8, True): "v8f", (8, False): "v8d", (16, True): "v16f"}
     decls, objects = [], []
     inputs = {"q": ("q", 7), "qd": ("qd", 7), "qdd": ("qdd", 7), "x": ("x", 14)}
@@ -120,40 +121,38 @@ def _program(widths) -> tuple[str, list[tuple[str, list[str], str]]]:
     for name, args, m in FUNCTIONS:
         fn = f"{ROBOT}_{name}"
         call = ", ".join(f"{inputs[a][0]} + {inputs[a][1]}*i" for a in args)
-        body += ["    {", "        double best = 1e9;",
-                 f"        for (r = 0; r < repeats; r++) {{ t0 = now(); for (i = 0; i < n; i++) {fn}({call}, out + {m}*i);",
-                 "            t0 = now() - t0; if (t0 < best) best = t0; sink += out[3]; }",
-                 f'        printf("scalar {name} %.3f\\n", best / n * 1e9);']
+        setup, timed, report = [], [], []
         for w, (label, lanes, single, flags) in enumerate(widths):
             vt = vtype[(lanes, single)]
-            scalar = "float" if single else "double"
             lane_fn = f"{fn}_w{w}"
             objects.append((f"{fn}.c", flags + [f"-DDERIVE_LANES={lanes}"] + (["-DDERIVE_FLOAT"] if single else []),
                             f"-D{fn}={lane_fn}"))
             decls.append(f"void {lane_fn}({', '.join([f'const {vt} *'] * len(args) + [f'{vt} *'])});")
-            packs, vargs = [], []
+            vargs = []
             for a in args:
                 src, length = inputs[a]
-                packs.append(f"        {vt} *v_{a} = lanes_alloc(sizeof({vt}) * (n / {lanes}) * {length});")
-                packs.append(f"        PACK({scalar}, {lanes}, {src}, {length}, v_{a});")
-                vargs.append(f"v_{a} + {length}*b")
-            body += ["        {", "            long b;", *["    " + p for p in packs],
-                     f"            {vt} *v_out = lanes_alloc(sizeof({vt}) * (n / {lanes}) * {m});",
-                     "            best = 1e9;",
-                     f"            for (r = 0; r < repeats; r++) {{ t0 = now(); for (b = 0; b < n / {lanes}; b++) "
-                     f"{lane_fn}({', '.join(vargs)}, v_out + {m}*b);",
-                     "                t0 = now() - t0; if (t0 < best) best = t0; sink += v_out[0][0]; }",
-                     f'            printf("lanes{w} {name} %.3f\\n", best / (n / {lanes} * {lanes}) * 1e9);']
+                setup += [f"        {vt} *v{w}_{a} = lanes_alloc(sizeof({vt}) * (n / {lanes}) * {length});",
+                          f"        PACK({'float' if single else 'double'}, {lanes}, {src}, {length}, v{w}_{a});"]
+                vargs.append(f"v{w}_{a} + {length}*b")
+            setup += [f"        {vt} *v{w}_out = lanes_alloc(sizeof({vt}) * (n / {lanes}) * {m});",
+                      f"        double best{w} = 1e9;"]
+            timed += [f"            t0 = now(); for (b = 0; b < n / {lanes}; b++) {lane_fn}({', '.join(vargs)}, v{w}_out + {m}*b);",
+                      f"            t0 = now() - t0; if (t0 < best{w}) best{w} = t0; sink += v{w}_out[0][0];"]
+            report.append(f'        printf("lanes{w} {name} %.3f\\n", best{w} / (n / {lanes} * {lanes}) * 1e9);')
             if not single:  # the largest difference from the scalar results, over the output's largest entry
-                body += [f"            UNPACK({lanes}, v_out, {m}, lout);",
-                         "            { double worst = 0; long s; int j;",
-                         f"              for (s = 0; s < n / {lanes} * {lanes}; s++) {{ double big = 0, d = 0;",
-                         f"                  for (j = 0; j < {m}; j++) {{ big = fmax(big, fabs(out[{m}*s+j])); "
-                         f"d = fmax(d, fabs(out[{m}*s+j] - lout[{m}*s+j])); }}",
-                         "                  if (big > 0 && d / big > worst) worst = d / big; }",
-                         f'              printf("error{w} {name} %.3g\\n", worst); }}']
-            body += ["        }"]
-        body += ["    }"]
+                report += [f"        UNPACK({lanes}, v{w}_out, {m}, lout);",
+                           "        { double worst = 0; long s; int j;",
+                           f"          for (s = 0; s < n / {lanes} * {lanes}; s++) {{ double big = 0, d = 0;",
+                           f"              for (j = 0; j < {m}; j++) {{ big = fmax(big, fabs(out[{m}*s+j])); "
+                           f"d = fmax(d, fabs(out[{m}*s+j] - lout[{m}*s+j])); }}",
+                           "              if (big > 0 && d / big > worst) worst = d / big; }",
+                           f'          printf("error{w} {name} %.3g\\n", worst); }}']
+        body += ["    {", "        double best = 1e9;", "        long b;", *setup,
+                 "        for (r = 0; r < repeats; r++) {  /* interleaved: a burst of load hits all alike */",
+                 f"            t0 = now(); for (i = 0; i < n; i++) {fn}({call}, out + {m}*i);",
+                 "            t0 = now() - t0; if (t0 < best) best = t0; sink += out[3];",
+                 *timed, "        }",
+                 f'        printf("scalar {name} %.3f\\n", best / n * 1e9);', *report, "    }"]
     return PROGRAM % {"robot": ROBOT, "declarations": "\n".join(decls), "body": "\n".join(body)}, objects
 
 
@@ -213,7 +212,7 @@ def _best(fn, repeats: int) -> float:
 def bench_lanes(args) -> str:
     generated = CHECKOUT / "generated"
     n = 4096 if args.quick else 16384
-    repeats = 3 if args.quick else 7
+    repeats = 3 if args.quick else 11
     widths = _widths()
     if not widths:
         raise DeriveError("bench lanes: measures AVX2 or AVX-512F lanes, which this CPU has not")
@@ -244,11 +243,12 @@ def bench_lanes(args) -> str:
                                for w in range(len(widths)))
         errors = ", ".join(f"{figures[(f'error{w}', name)]:.1e}" for w, (_, _, single, _) in enumerate(widths) if not single)
         rows.append(f"| {name} | {ns:.1f} | {lane_cols} | {1e9 * times['before'] / n:.1f} | {1e9 * times['after'] / n:.1f} | "
-                    f"**{1e9 * times['after'] / n / ns:.2f}x** | {1e9 * times['numpy'] / n:.1f} | {errors} |")
+                    f"**{1e9 * times['after'] / n / ns:.2f}x** | {times['after'] / times['before']:.2f}x | "
+                    f"{1e9 * times['numpy'] / n:.1f} | {errors} |")
     cpu = build._cpu_flags()
     has = ", ".join(f for f in ("avx2", "fma", "avx512f") if f in cpu)
     header = ("| function | scalar C ns/call | " + " | ".join(f"lane C ns/state, {label}" for label, _, _, _ in widths)
-              + " | derive.compiled batch ns/state, before (no lanes) | after (lanes) | after / scalar C | "
+              + " | derive.compiled batch ns/state, before (no lanes) | after (lanes) | after / scalar C | after / before | "
               "NumPy batch ns/state | lane vs scalar (max diff / max entry) |")
     return "\n".join([
         "## SIMD lanes (Panda)", "",
