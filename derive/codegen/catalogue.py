@@ -200,8 +200,8 @@ def closed_chain_specs(model: SXModel, specs: list[FunctionSpec], need) -> None:
         f"that give ydd with the loops closed; {at}.")
     add("forward_dynamics_y", [y, yd, tau], [("ydd", red.forward_dynamics)],
         f"Constrained forward dynamics ydd = M_y^-1 (tau_y - h_y) ({ny}), LDL^T of M_y; {at}.")
-    add("constraint_forces", [y, yd, tau], [("lambda", red.constraint_forces)],
-        f"Loop forces lambda ({nz}, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the "
+    add("constraint_forces", [y, yd, tau], [("lam", red.constraint_forces)],
+        f"Loop forces lam = lambda ({nz}, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the "
         f"forward dynamics' qdd (the tree's KKT multiplier); {at}.")
     if not need("ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step"):
         return

@@ -4,7 +4,7 @@
  */
 #include "example2_constraint_forces.h"
 
-DERIVE_FN void example2_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda)
+DERIVE_FN void example2_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam)
 {
     /* 1700 ops: 721 mul, 894 add, 59 div, 15 trig, 11 other */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11;
@@ -1719,8 +1719,8 @@ DERIVE_FN void example2_constraint_forces(const DERIVE_REAL *y, const DERIVE_REA
     w132 = w67 * w80;
     w43 = w92 - w132;
     w4 = w43 / w54;
-    lambda[0] = w28;
-    lambda[1] = w85;
-    lambda[2] = w4;
-    lambda[3] = w80;
+    lam[0] = w28;
+    lam[1] = w85;
+    lam[2] = w4;
+    lam[3] = w80;
 }

@@ -12,16 +12,16 @@ extern "C" {
 #endif
 
 /*
- * example2_constraint_forces: Loop forces lambda (4, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (1): parameters g.
+ * example2_constraint_forces: Loop forces lam = lambda (4, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (1): parameters g.
  *
  * in  y [3]
  * in  yd [3]
  * in  tau_y [3]
  * in  p [1]
- * out lambda [4]
+ * out lam [4]
  * Arrays are row-major. 1700 ops: 721 mul, 894 add, 59 div, 15 trig, 11 other
  */
-DERIVE_FN void example2_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda);
+DERIVE_FN void example2_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam);
 
 #ifdef __cplusplus
 }

@@ -7530,13 +7530,13 @@ def forward_dynamics_y(y, yd, tau_y, p=DEFAULT_P):
 
 
 def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
-    """Loop forces lambda (4, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (1): parameters g.
+    """Loop forces lam = lambda (4, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (1): parameters g.
 
     in  y [3]
     in  yd [3]
     in  tau_y [3]
     in  p [1]
-    out lambda [4]
+    out lam [4]
     1700 ops: 721 mul, 894 add, 59 div, 15 trig, 11 other
     """
     y = _input(y, 3, "y")
@@ -9249,8 +9249,8 @@ def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
     t1697 = t215 * t1696
     t1698 = t1686 - t1697
     t1699 = t1698 / t191
-    lambda = _stack([t1677, t1674, t1699, t1696], batch)
-    return lambda
+    lam = _stack([t1677, t1674, t1699, t1696], batch)
+    return lam
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

@@ -15268,13 +15268,13 @@ def _forward_dynamics_y_chunk(x, t, s, y):
 
 
 def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
-    """Loop forces lambda (4, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (1): parameters g.
+    """Loop forces lam = lambda (4, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (1): parameters g.
 
     in  y [3]
     in  yd [3]
     in  tau_y [3]
     in  p [1]
-    out lambda [4]
+    out lam [4]
     1700 ops: 721 mul, 894 add, 59 div, 15 trig, 11 other
     """
     y = _array(y, 3, "constraint_forces", "y")
@@ -16989,8 +16989,8 @@ def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
     t4 = t67 * t0
     t3 = t3 - t4
     t3 = t3 / t54
-    _lambda = (t1, t2, t3, t0)
-    return np.array(_lambda)
+    _lam = (t1, t2, t3, t0)
+    return np.array(_lam)
 
 
 _constraint_forces_constants = _constants(
@@ -17015,7 +17015,7 @@ def _constraint_forces_chunk(x, t, s, y):
      t102, t103, t104, t105, t106, t107, t108, t109, t110, t111, t112, t113, t114, t115, t116, t117, t118,
      t119, t120, t121, t122, t123, t124, t125, t126, t127, t128, t129, t130, t131, t132, t133, t134, t135,
      t136, t137, t138, t139, t140) = t
-    lambda_0, lambda_1, lambda_2, lambda_3 = y
+    lam_0, lam_1, lam_2, lam_3 = y
     (k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14, k15, k16, k17, k18, k19, k20, k21,
      k22, k23, k24, k25, k26, k27, k28, k29, k30, k31, k32, k33, k34, k35, k36, k37, k38, k39) = _constraint_forces_constants
     sin(y_0, t0)
@@ -18692,32 +18692,32 @@ def _constraint_forces_chunk(x, t, s, y):
     divide(t10, t4, t10)
     multiply(t10, t2, t10)
     add(t76, t10, t76)
-    divide(t76, t4, lambda_1)
-    multiply(t7, lambda_1, t7)
+    divide(t76, t4, lam_1)
+    multiply(t7, lam_1, t7)
     subtract(t0, t7, t0)
-    divide(t0, t77, lambda_0)
+    divide(t0, t77, lam_0)
     multiply(t66, t16, t66)
     multiply(t59, t124, t59)
     add(t66, t59, t66)
     multiply(t56, t1, t56)
     add(t66, t56, t66)
-    multiply(t3, lambda_1, t3)
+    multiply(t3, lam_1, t3)
     subtract(t66, t3, t66)
-    multiply(t57, lambda_0, t57)
+    multiply(t57, lam_0, t57)
     subtract(t66, t57, t66)
     multiply(t72, t16, t72)
     multiply(t71, t124, t71)
     subtract(t72, t71, t72)
     multiply(t74, t1, t74)
     add(t72, t74, t72)
-    multiply(t6, lambda_1, t6)
+    multiply(t6, lam_1, t6)
     subtract(t72, t6, t72)
-    multiply(t75, lambda_0, t75)
+    multiply(t75, lam_0, t75)
     subtract(t72, t75, t72)
-    divide(t72, t73, lambda_3)
-    multiply(t67, lambda_3, t67)
+    divide(t72, t73, lam_3)
+    multiply(t67, lam_3, t67)
     subtract(t66, t67, t66)
-    divide(t66, t54, lambda_2)
+    divide(t66, t54, lam_2)
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

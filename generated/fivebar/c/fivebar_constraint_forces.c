@@ -4,7 +4,7 @@
  */
 #include "fivebar_constraint_forces.h"
 
-DERIVE_FN void fivebar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda)
+DERIVE_FN void fivebar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam)
 {
     /* 426 ops: 207 mul, 193 add, 14 div, 10 trig, 2 other */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11;
@@ -438,6 +438,6 @@ DERIVE_FN void fivebar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL
     w46 = w48 * w17;
     w49 = w50 * w3;
     w5 = w46 - w49;
-    lambda[0] = w30;
-    lambda[1] = w5;
+    lam[0] = w30;
+    lam[1] = w5;
 }

@@ -12,16 +12,16 @@ extern "C" {
 #endif
 
 /*
- * fivebar_constraint_forces: Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
+ * fivebar_constraint_forces: Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
  *
  * in  y [2]
  * in  yd [2]
  * in  tau_y [2]
  * in  p [4]
- * out lambda [2]
+ * out lam [2]
  * Arrays are row-major. 426 ops: 207 mul, 193 add, 14 div, 10 trig, 2 other
  */
-DERIVE_FN void fivebar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda);
+DERIVE_FN void fivebar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam);
 
 #ifdef __cplusplus
 }

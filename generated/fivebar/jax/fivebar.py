@@ -2684,13 +2684,13 @@ def forward_dynamics_y(y, yd, tau_y, p=DEFAULT_P):
 
 
 def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
-    """Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
+    """Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
 
     in  y [2]
     in  yd [2]
     in  tau_y [2]
     in  p [4]
-    out lambda [2]
+    out lam [2]
     426 ops: 207 mul, 193 add, 14 div, 10 trig, 2 other
     """
     y = _input(y, 2, "y")
@@ -3129,8 +3129,8 @@ def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
     t423 = t161 * t407
     t424 = t188 * t420
     t425 = t423 - t424
-    lambda = _stack([t422, t425], batch)
-    return lambda
+    lam = _stack([t422, t425], batch)
+    return lam
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

@@ -5466,13 +5466,13 @@ def _forward_dynamics_y_chunk(x, t, s, y):
 
 
 def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
-    """Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
+    """Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
 
     in  y [2]
     in  yd [2]
     in  tau_y [2]
     in  p [4]
-    out lambda [2]
+    out lam [2]
     426 ops: 207 mul, 193 add, 14 div, 10 trig, 2 other
     """
     y = _array(y, 2, "constraint_forces", "y")
@@ -5913,8 +5913,8 @@ def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
     t0 = t48 * t0
     t1 = t27 * t1
     t0 = t0 - t1
-    _lambda = (t2, t0)
-    return np.array(_lambda)
+    _lam = (t2, t0)
+    return np.array(_lam)
 
 
 _constraint_forces_constants = _constants(
@@ -5931,7 +5931,7 @@ def _constraint_forces_chunk(x, t, s, y):
      t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
      t42, t43, t44, t45, t46, t47, t48, t49) = t
     s0, s1, s2, s3, s4, s5 = s
-    lambda_0, lambda_1 = y
+    lam_0, lam_1 = y
     k0, k1, k2, k3, k4, k5, k6, k7, k8, k9 = _constraint_forces_constants
     cos(y_0, t0)
     multiply(t0, p_2, t1)
@@ -6355,10 +6355,10 @@ def _constraint_forces_chunk(x, t, s, y):
     multiply(s1, t4, t4)
     add(t41, t4, t41)
     multiply(t32, t41, t32)
-    add(t35, t32, lambda_0)
+    add(t35, t32, lam_0)
     multiply(t44, t43, t44)
     multiply(t27, t41, t27)
-    subtract(t44, t27, lambda_1)
+    subtract(t44, t27, lam_1)
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

@@ -4,7 +4,7 @@
  */
 #include "fourbar_constraint_forces.h"
 
-DERIVE_FN void fourbar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda)
+DERIVE_FN void fourbar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam)
 {
     /* 297 ops: 142 mul, 131 add, 14 div, 8 trig, 2 other */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11;
@@ -308,6 +308,6 @@ DERIVE_FN void fourbar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL
     w26 = w20 * w10;
     w25 = w27 * w21;
     w9 = w26 - w25;
-    lambda[0] = w7;
-    lambda[1] = w9;
+    lam[0] = w7;
+    lam[1] = w9;
 }

@@ -12,16 +12,16 @@ extern "C" {
 #endif
 
 /*
- * fourbar_constraint_forces: Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (5): parameters a, b, c, d, g.
+ * fourbar_constraint_forces: Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (5): parameters a, b, c, d, g.
  *
  * in  y [1]
  * in  yd [1]
  * in  tau_y [1]
  * in  p [5]
- * out lambda [2]
+ * out lam [2]
  * Arrays are row-major. 297 ops: 142 mul, 131 add, 14 div, 8 trig, 2 other
  */
-DERIVE_FN void fourbar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda);
+DERIVE_FN void fourbar_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam);
 
 #ifdef __cplusplus
 }

@@ -2067,13 +2067,13 @@ def forward_dynamics_y(y, yd, tau_y, p=DEFAULT_P):
 
 
 def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
-    """Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (5): parameters a, b, c, d, g.
+    """Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (5): parameters a, b, c, d, g.
 
     in  y [1]
     in  yd [1]
     in  tau_y [1]
     in  p [5]
-    out lambda [2]
+    out lam [2]
     297 ops: 142 mul, 131 add, 14 div, 8 trig, 2 other
     """
     y = _input(y, 1, "y")
@@ -2383,8 +2383,8 @@ def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
     t294 = t137 * t286
     t295 = t150 * t291
     t296 = t294 - t295
-    lambda = _stack([t293, t296], batch)
-    return lambda
+    lam = _stack([t293, t296], batch)
+    return lam
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

@@ -4,7 +4,7 @@
  */
 #include "slider_crank_constraint_forces.h"
 
-DERIVE_FN void slider_crank_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda)
+DERIVE_FN void slider_crank_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam)
 {
     /* 236 ops: 115 mul, 106 add, 9 div, 5 trig, 1 other */
     DERIVE_REAL w0, w1, w2, w3, w4, w5, w6, w7, w8, w9, w10, w11;
@@ -247,6 +247,6 @@ DERIVE_FN void slider_crank_constraint_forces(const DERIVE_REAL *y, const DERIVE
     w35 = w34 * w11;
     w5 = w1 * w29;
     w32 = w35 - w5;
-    lambda[0] = w19;
-    lambda[1] = w32;
+    lam[0] = w19;
+    lam[1] = w32;
 }

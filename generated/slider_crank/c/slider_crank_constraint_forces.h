@@ -12,16 +12,16 @@ extern "C" {
 #endif
 
 /*
- * slider_crank_constraint_forces: Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
+ * slider_crank_constraint_forces: Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
  *
  * in  y [1]
  * in  yd [1]
  * in  tau_y [1]
  * in  p [3]
- * out lambda [2]
+ * out lam [2]
  * Arrays are row-major. 236 ops: 115 mul, 106 add, 9 div, 5 trig, 1 other
  */
-DERIVE_FN void slider_crank_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lambda);
+DERIVE_FN void slider_crank_constraint_forces(const DERIVE_REAL *y, const DERIVE_REAL *yd, const DERIVE_REAL *tau_y, const DERIVE_REAL *p, DERIVE_REAL *lam);
 
 #ifdef __cplusplus
 }

@@ -1683,13 +1683,13 @@ def forward_dynamics_y(y, yd, tau_y, p=DEFAULT_P):
 
 
 def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
-    """Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
+    """Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
 
     in  y [1]
     in  yd [1]
     in  tau_y [1]
     in  p [3]
-    out lambda [2]
+    out lam [2]
     236 ops: 115 mul, 106 add, 9 div, 5 trig, 1 other
     """
     y = _input(y, 1, "y")
@@ -1938,8 +1938,8 @@ def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
     t233 = t94 * t226
     t234 = t105 * t230
     t235 = t233 - t234
-    lambda = _stack([t232, t235], batch)
-    return lambda
+    lam = _stack([t232, t235], batch)
+    return lam
 
 
 def ode_rhs(x, u, p=DEFAULT_P):

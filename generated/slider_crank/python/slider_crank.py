@@ -3439,13 +3439,13 @@ def _forward_dynamics_y_chunk(x, t, s, y):
 
 
 def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
-    """Loop forces lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
+    """Loop forces lam = lambda (2, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the forward dynamics' qdd (the tree's KKT multiplier); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
 
     in  y [1]
     in  yd [1]
     in  tau_y [1]
     in  p [3]
-    out lambda [2]
+    out lam [2]
     236 ops: 115 mul, 106 add, 9 div, 5 trig, 1 other
     """
     y = _array(y, 1, "constraint_forces", "y")
@@ -3696,8 +3696,8 @@ def constraint_forces(y, yd, tau_y, p=DEFAULT_P):
     t0 = t34 * t0
     t1 = t5 * t1
     t0 = t0 - t1
-    _lambda = (t2, t0)
-    return np.array(_lambda)
+    _lam = (t2, t0)
+    return np.array(_lam)
 
 
 _constraint_forces_constants = _constants(
@@ -3712,7 +3712,7 @@ def _constraint_forces_chunk(x, t, s, y):
     (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
      t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33) = t
     s0, s1, s2, s3, s4 = s
-    lambda_0, lambda_1 = y
+    lam_0, lam_1 = y
     k0, k1, k2, k3, k4, k5, k6, k7 = _constraint_forces_constants
     cos(y_0, t0)
     multiply(t0, p_1, t1)
@@ -3946,10 +3946,10 @@ def _constraint_forces_chunk(x, t, s, y):
     add(t32, t4, t32)
     multiply(k7, t32, t32)
     multiply(t21, t32, t21)
-    add(t22, t21, lambda_0)
+    add(t22, t21, lam_0)
     multiply(t31, t30, t31)
     multiply(t17, t32, t17)
-    subtract(t31, t17, lambda_1)
+    subtract(t31, t17, lam_1)
 
 
 def ode_rhs(x, u, p=DEFAULT_P):
