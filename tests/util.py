@@ -124,3 +124,10 @@ def closed_inputs(robot: Robot, rng: np.random.Generator, shape: tuple = ()) -> 
     tau = 5 * rng.normal(size=shape + (ny,))
     return {"y": y, "yd": yd, "ydd": rng.normal(size=shape + (ny,)), "tau_y": tau, "u": tau,
             "x": np.concatenate([y, yd], axis=-1)}
+
+
+def tree_robots() -> list[str]:
+    """The models.yaml robots without loops, sorted: those whose generated set holds the tree's forward
+    dynamics, ODE, regressors, IK and bundles (a closed chain's functions in y: tests/test_codegen.py,
+    test_closed_chain_code.py, test_closed_chains.py)."""
+    return sorted(n for n, r in robots().items() if not r.closed)
