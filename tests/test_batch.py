@@ -20,7 +20,7 @@ import pytest
 from derive.codegen.backends.python import BACKEND
 from derive.codegen.render import render_robot
 from derive.codegen.spec import FunctionSpec
-from util import params, robots
+from util import closed_inputs, params, robots
 
 ROBOTS = sorted(robots())
 BATCHES = [(7,), (3, 4), (10000,)]
@@ -51,9 +51,12 @@ def random_inputs(robot: str, module, fn: dict, shape: tuple, rng: np.random.Gen
     lo, hi = r.joint_box()
     names = [i["name"] for i in fn["inputs"]]
     a = {"p": params(r) * rng.uniform(0.9, 1.1, shape + (len(r.parameters),))} if "p" in names else {}
+    closed = closed_inputs(r, rng, shape) if r.closed else {}  # y near the reference configuration
     for item in fn["inputs"]:
         name, n = item["name"], item["shape"][0]
-        if name in ("q", "q0"):
+        if name in ("y", "x") and closed and fn.get("coordinates") == "y":
+            a[name] = closed[name]
+        elif name in ("q", "q0"):
             a[name] = rng.uniform(lo, hi, shape + (n,))
         elif name == "p":
             continue
@@ -186,14 +189,19 @@ def test_one_p_broadcasts_against_a_batch(robot, generated):
         ):
             for g, w in zip(outputs(got, fn), want):
                 assert_bits(g, w, name)
-    q, qd, tau = rng.uniform(lo, hi, (3, 4, r.nq)), rng.normal(size=(4, r.nv)), rng.normal(size=(r.nv,))
-    got = module.forward_dynamics(q, qd, tau, P[:4])
-    assert got.shape == (3, 4, r.nv)
+    nq, nv, fd = r.nq, r.nv, "forward_dynamics"
+    q = rng.uniform(lo, hi, (3, 4, nq))
+    if r.closed:  # the closed chain's forward dynamics and ODE, in y near the reference configuration
+        nq = nv = len(r.independent)
+        fd, q = "forward_dynamics_y", closed_inputs(r, rng, (3, 4))["y"]
+    qd, tau = rng.normal(size=(4, nv)), rng.normal(size=(nv,))
+    got = getattr(module, fd)(q, qd, tau, P[:4])
+    assert got.shape == (3, 4, nv)
     for i, j in np.ndindex(3, 4):
-        assert_bits(got[i, j], module.forward_dynamics(q[i, j], qd[j], tau, P[j]), "forward_dynamics broadcast")
-    x = np.concatenate([q, np.broadcast_to(qd, (3, 4, r.nv))], axis=-1)
+        assert_bits(got[i, j], getattr(module, fd)(q[i, j], qd[j], tau, P[j]), "forward_dynamics broadcast")
+    x = np.concatenate([q, np.broadcast_to(qd, (3, 4, nv))], axis=-1)
     step = module.rk4_step(x, tau, 0.01, p1)  # one dt (a number) for the batch
-    assert step.shape == (3, 4, r.nq + r.nv)
+    assert step.shape == (3, 4, nq + nv)
     for i, j in np.ndindex(3, 4):
         assert_bits(step[i, j], module.rk4_step(x[i, j], tau, [0.01], p1), "rk4_step with one dt")
 

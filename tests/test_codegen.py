@@ -19,13 +19,18 @@ import pytest
 
 from derive.codegen.generate import check, generate
 from derive.reference import NumericRobot
+from derive.reference.closure import ClosedChainReference
 from derive.codegen.catalogue import function_specs
-from util import assert_close, compile_objects, params, random_q, robots, states, sx_model
+from util import assert_close, closed_inputs, compile_objects, params, random_q, robots, states, sx_model
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 ROBOTS = sorted(robots())
+N_STATES = 50
+CLOSED_STATES = 10
+"""States per closed chain: its reference solves the closure by Newton and ode_jac_x by 4 ODE calls per
+column; 10 states cost a pendulum's 50."""
 
 
 def load_python(robot: str):
@@ -51,7 +56,67 @@ class CFunctions:
         return [o.astype(float) for o in outs]
 
 
+CLOSED = {"closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y", "forward_dynamics_y",
+          "constraint_forces"}
+"""The quantities of a closed chain in y; its ode_rhs, ode_jac_x, ode_jac_u and rk4_step are in x = [y; yd]."""
+
+
+def closed_reference(ref: ClosedChainReference, fn: dict, a: dict):
+    """A closed chain's function in y from the numpy reference (Newton closure from the reference
+    configuration, K from the frame Jacobians, Kdot qd by complex step, Featherstone's RNEA and CRBA)."""
+    kind = fn["quantity"]
+    ny = len(ref.y)
+
+    def f(x, u):  # the ODE x' = [yd; ydd]
+        q, _ = ref.closure(x[:ny])
+        return np.concatenate([x[ny:], ref.forward_dynamics(q, x[ny:], u)])
+
+    if kind in ("ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step"):
+        x, u = a["x"], a["u"]
+        if kind == "ode_rhs":
+            return f(x, u)
+        if kind == "ode_jac_u":
+            return np.vstack([np.zeros((ny, ny)), np.linalg.inv(ref.mass_matrix(ref.closure(x[:ny])[0]))])
+        if kind == "ode_jac_x":  # central differences, Richardson-extrapolated (error O(h^4) ~ 1e-12)
+            return richardson(lambda v: f(v, u), x)
+        h = a["dt"][0]
+        k1 = f(x, u)
+        k2 = f(x + h / 2 * k1, u)
+        k3 = f(x + h / 2 * k2, u)
+        k4 = f(x + h * k3, u)
+        return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    q, residual = ref.closure(a["y"])
+    yd, ydd, tau = a["yd"], a["ydd"], a["tau_y"]
+    if kind == "closure":  # the residual is compared with 1e-12, not with the reference's own rounding
+        return [q, np.array([1.0]), np.array([residual])]
+    if kind == "velocity_map":
+        return ref.projection(q)
+    if kind == "mass_matrix_y":
+        return ref.mass_matrix(q)
+    if kind == "bias_y":
+        return ref.bias(q, yd)
+    if kind == "inverse_dynamics_y":
+        return ref.inverse_dynamics(q, yd, ydd)
+    if kind == "forward_dynamics_y":
+        return ref.forward_dynamics(q, yd, tau)
+    if kind == "constraint_forces":  # the tree's KKT multiplier at tau = S^T tau_y
+        return ref.kkt_forward_dynamics(q, ref.projection(q) @ yd, ref.actuation(tau))[1]
+    raise AssertionError(kind)
+
+
+def richardson(g, x: np.ndarray, h: float = 1e-3) -> np.ndarray:
+    """dg/dx by central differences at h and h/2, Richardson-extrapolated: (4 D(h/2) - D(h)) / 3."""
+    eye = np.eye(len(x))
+
+    def d(step):
+        return np.array([(g(x + step * eye[k]) - g(x - step * eye[k])) / (2 * step) for k in range(len(x))]).T
+
+    return (4 * d(h / 2) - d(h)) / 3
+
+
 def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
+    if fn.get("coordinates") == "y":
+        return closed_reference(a["closed"], fn, a)
     q, qd, qdd, tau = a["q"], a["qd"], a["qdd"], a["tau"]
     nq, nv = len(q), len(qd)
     kind = fn["quantity"]
@@ -148,11 +213,15 @@ def test_generated_c_python_casadi_match_reference(robot, committed_library):
     ref = NumericRobot(r)
     p = params(r)
     rng = np.random.default_rng(1)
-    for q, qd, qdd in states(r):
+    closed = ClosedChainReference(r) if r.closed else None
+    for q, qd, qdd in states(r, n=CLOSED_STATES if r.closed else N_STATES):
         tau = rng.normal(size=r.nv) * 5
         a = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "x": np.concatenate([q, qd]), "u": tau, "p": p,
              "dt": np.array([0.01]), "w": rng.normal(size=6 * len(r.wrench_frames)) * 5,
              "wrench_frames": manifest["wrench_frames"]}
+        if closed:  # the functions in y near the reference configuration; the tree's at the closed q
+            a |= closed_inputs(r, rng) | {"closed": closed}
+            a["q"] = closed.closure(a["y"])[0]
         for fn in manifest["functions"]:
             if fn["quantity"] == "ik":
                 continue   # a solver, not a formula: tests/test_ik.py
@@ -171,6 +240,10 @@ def test_generated_c_python_casadi_match_reference(robot, committed_library):
             got_float = outputs(c_float(fn, a))
             for k, o in enumerate(fn["outputs"]):
                 what = f"{fn['name']} output {o['name']} at q = {q}"
+                if fn["quantity"] == "closure" and o["name"] == "residual":  # max |phi|: rounding, not a value
+                    assert got_c[k][0] <= 1e-12 and got_py[k][0] <= 1e-12 and got_ca[k][0] <= 1e-12, what
+                    assert got_float[k][0] <= 1e-5, what
+                    continue
                 assert_close(got_c[k], expected[k], what="C " + what)
                 assert_close(got_py[k], got_c[k], rtol=1e-12, what="Python vs C " + what)
                 if got_ca is not None:
@@ -191,6 +264,8 @@ def test_python_returns_what_the_manifest_declares(robot):
     a = {"q": q, "qd": rng.normal(size=r.nv), "qdd": rng.normal(size=r.nv), "tau": rng.normal(size=r.nv),
          "x": np.concatenate([q, rng.normal(size=r.nv)]), "u": rng.normal(size=r.nv), "p": params(r),
          "dt": np.array([0.01]), "q0": None}
+    if r.closed:
+        a |= closed_inputs(r, rng)
     assert manifest["functions"]
     for fn in manifest["functions"]:
         a["w"] = rng.normal(size=6 * len(r.wrench_frames)) if fn["quantity"].endswith("_fext") else None
@@ -239,6 +314,9 @@ def test_generated_c_runs_clean_under_sanitizers(tmp_path):
                 size = max(1, int(np.prod(item["shape"])))
                 decls.append(f"DERIVE_REAL a{k}[{size}];")
                 decls.append(f"for (i = 0; i < {size}; ++i) a{k}[i] = (DERIVE_REAL)(0.1 + 0.01 * i);")
+                if item["name"] in ("y", "x") and k < len(fn["inputs"]) and "closed_chain" in manifest:
+                    # a closed chain's y at its reference configuration: an assembly exists there
+                    decls += [f"a{k}[{i}] = (DERIVE_REAL){v!r};" for i, v in enumerate(manifest["closed_chain"]["reference_y"])]
                 args.append(f"a{k}")
             out = len(fn["inputs"])
             size = int(np.prod(fn["outputs"][0]["shape"]))
@@ -264,7 +342,9 @@ def test_regeneration_is_byte_identical(fresh_generated):
     regeneration (conftest.py), which tests/test_batch.py, test_ik.py, test_jax.py, test_trajopt.py use."""
     out = fresh_generated
     fresh = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
-    committed = {p.relative_to(GENERATED).as_posix(): p.read_bytes() for p in GENERATED.rglob("*") if p.is_file()}
+    # not Python's byte-code cache, which importing a generated module writes beside it
+    committed = {p.relative_to(GENERATED).as_posix(): p.read_bytes() for p in GENERATED.rglob("*")
+                 if p.is_file() and "__pycache__" not in p.parts}
     assert sorted(fresh) == sorted(committed)
     differing = [k for k in fresh if fresh[k] != committed[k]]
     assert not differing, f"regeneration differs from generated/: {differing[:10]}"

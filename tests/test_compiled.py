@@ -85,6 +85,10 @@ def state_inputs(sig, py, fn_name: str, shape: tuple, rng) -> list:
             out.append(rng.uniform(1e-3, 1e-2, full))
         elif a.name == "w":
             out.append(rng.uniform(0.5, 1.5, full))
+        elif a.name in ("y", "x") and "closed_chain" in manifest(py.ROBOT):  # y near the reference configuration
+            ref = np.array(manifest(py.ROBOT)["closed_chain"]["reference_y"])
+            y = ref + rng.uniform(-0.1, 0.1, shape + ref.shape)
+            out.append(y if a.name == "y" else np.concatenate([y, rng.uniform(-1.0, 1.0, y.shape)], axis=-1))
         elif a.name == "T":
             fk = getattr(py, "fk_" + fn_name.removeprefix("ik_"))
             joints = manifest(py.ROBOT)["joints"]  # q within the limits (and [-1, 1]): a reachable target

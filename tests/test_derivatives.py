@@ -20,7 +20,7 @@ from derive.symbolic.model import SXModel
 from derive.symbolic.ode import inverse_dynamics_jacobian
 from pin_model import PinRobot
 from test_codegen import load_python
-from util import assert_close, params, robots, states
+from util import assert_close, params, robots, states, tree_robots
 
 TREE = """
 robots:
@@ -109,7 +109,7 @@ def test_long_chain_takes_the_analytic_forms_and_they_are_right():
         assert np.abs(got - want).max() <= 1e-10 * np.abs(want).max()
 
 
-@pytest.mark.parametrize("name", [n for n, r in robots().items() if not r.floating])
+@pytest.mark.parametrize("name", [n for n in tree_robots() if not robots()[n].floating])
 def test_generated_inverse_dynamics_derivatives_match_pinocchio(name):
     """The generated inverse_dynamics_derivatives (C's arithmetic, in Python) of every shipped fixed-base
     robot against Pinocchio's computeRNEADerivatives, at seeded states."""

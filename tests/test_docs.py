@@ -40,8 +40,8 @@ ARM = {"robots": {"arm": {
 }}}
 DH = {"robots": {"dh_arm": {"dh": {"convention": "standard", "rows": [
     {"joint": "q1", "type": "revolute", "a": 0.5, "link": "link1", "mass": 1.0, "inertia": [0.1, 0.1, 0.1]}]}}}}
-# a closed chain: the four-bar of examples/closed_chains.yaml
-LOOP = {"robots": {"fourbar": yaml.safe_load((ROOT / "examples" / "closed_chains.yaml").read_text())["robots"]["fourbar"]}}
+# a closed chain: the shipped four-bar
+LOOP = {"robots": {"fourbar": yaml.safe_load((ROOT / "models.yaml").read_text())["robots"]["fourbar"]}}
 
 # where each section's mapping sits in the models above
 PLACES = {

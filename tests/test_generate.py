@@ -44,8 +44,9 @@ robots:
 
 
 def digests(folder: Path) -> dict[str, str]:
+    """sha256 of every file, but Python's byte-code cache (importing a generated module writes it)."""
     return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
-            for p in sorted(folder.rglob("*")) if p.is_file()}
+            for p in sorted(folder.rglob("*")) if p.is_file() and "__pycache__" not in p.parts}
 
 
 def load_module(path: Path, name: str):

@@ -9,7 +9,7 @@ import pytest
 from derive.cli import main
 from derive.errors import DeriveError
 from derive.analysis.grubler import grubler, load_mechanism, mechanism_from_robot, parse_mechanism
-from util import robots
+from util import robots, tree_robots
 
 EXAMPLE2 = Path(__file__).resolve().parent.parent / "examples" / "grubler_example2.yaml"
 
@@ -45,7 +45,7 @@ def test_formula_on_classic_mechanisms():
     assert grubler(6, 2, [3]) == 3
 
 
-@pytest.mark.parametrize("name", sorted(robots()))
+@pytest.mark.parametrize("name", tree_robots())  # a closed chain: DOF = len(y), test_closed_chains.py
 def test_robots_dof_equals_nv(name):
     """A tree has N - 1 = J, so the formula with m = 6 is the sum of joint freedoms."""
     robot = robots()[name]

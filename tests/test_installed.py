@@ -10,6 +10,7 @@ generated Python imports and matches the numeric reference.
 from __future__ import annotations
 
 import hashlib
+import re
 import importlib.util
 import os
 import shutil
@@ -98,3 +99,23 @@ def test_own_robot_from_any_folder(installed, tmp_path):
     assert "panda" in run(installed, empty, "info").stdout
     assert "no models.yaml in" in run(installed, empty, "generate", status=2).stderr
     assert sorted(os.listdir(empty)) == []
+
+
+def test_the_getting_started_page_runs_verbatim_from_the_wheel(installed):
+    """docs/getting-started/own-robot.md, every block in order (the site's own runner), with the wheel's
+    `derive` and python: a models file from scratch, generate, C that compiles and runs, the generated
+    Python; the torques the C and the Python print equal the numeric reference's g(q)."""
+    spec = importlib.util.spec_from_file_location("derive_docs_hooks", ROOT / "docs" / "_hooks" / "derive_docs.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    page = (ROOT / "docs" / "getting-started" / "own-robot.md").read_text()
+    shown, times = hooks.run_blocks(page, "own-robot.md", required=True, python=str(installed[1]))
+    assert len(times) == len(re.findall(r"^```[a-z]+ run", page, re.M)) == 9
+    models = page.split("cat > models.yaml <<'YAML'\n", 1)[1].split("YAML\n", 1)[0]
+    robot = parse_models(models)["my_arm"]
+    q = np.array([0.5, 0.3])
+    want = NumericRobot(robot).rnea(q, np.zeros(2), np.zeros(2))
+    c_line = next(line for line in shown.splitlines() if line.startswith("tau = ") and "[" not in line)
+    py_line = next(line for line in shown.splitlines() if line.startswith("tau = ["))
+    np.testing.assert_allclose([float(x) for x in c_line.split()[2:]], want, rtol=0, atol=1e-6)  # printed %.6f
+    np.testing.assert_allclose([float(x) for x in py_line[7:].strip("[]").split()], want, rtol=0, atol=1e-6)

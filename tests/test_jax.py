@@ -34,17 +34,19 @@ jax.config.update("jax_enable_x64", True)
 from derive.codegen.generate import generate  # noqa: E402
 from derive.description.model import load_models, parse_models  # noqa: E402
 
-from util import assert_close  # noqa: E402
+from util import assert_close, closed_inputs  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = load_models()
 ROBOTS = sorted(MODELS)
 RTOL = 1e-12  # the issue's target: the same arithmetic, so agreement to rounding
-N_STATES = 2  # one state at a time: the shapes and values of unbatched calls; values at more states: the batches
+# one state at a time: the shapes and values of unbatched calls (two states of the small robots, one of
+# the others: each unbatched call of panda's functions costs what a batch does); values at more states: the batches
+N_STATES_SMALL, N_STATES = 2, 1
 BATCH = 16
 # jit compiles each function once per shape: every function of the small robots; of the others
 # (ode_jac_x, rk4_step of panda: 20-50 s on a small CPU) these
-JIT_ALWAYS = ("fk_jacobian", "mass_matrix", "inverse_dynamics", "forward_dynamics")
+JIT_ALWAYS = ("fk_jacobian", "mass_matrix", "inverse_dynamics", "forward_dynamics", "closure", "forward_dynamics_y")
 SMALL = ("cartpole", "pendulum", "planar_2r")
 
 
@@ -83,6 +85,8 @@ def inputs(robot: str, rng: np.random.Generator, batch: tuple[int, ...] = (), mo
     a = {"q": q, "qd": qd, "qdd": rng.normal(size=batch + (r.nv,)), "tau": 5 * rng.normal(size=batch + (r.nv,)),
          "u": 5 * rng.normal(size=batch + (r.nv,)), "x": np.concatenate([q, qd], axis=-1),
          "dt": np.full(batch + (1,), 0.01), "w": 5 * rng.normal(size=batch + (6 * len(r.wrench_frames),))}
+    if r.closed:  # the closed chain's functions in y (and x = [y; yd], u = tau_y) near the reference
+        a |= closed_inputs(r, rng, batch)
     return a
 
 
@@ -99,10 +103,12 @@ def check(got, want, fn: dict, what: str, rtol: float = RTOL) -> None:
     manipulability entry by entry (mu2 = mu1^2 dwarfs mu3)."""
     got, want = values(got), values(want)
     assert len(got) == len(want), what
-    for g, w in zip(got, want):
+    for k, (g, w) in enumerate(zip(got, want)):
         g, w = np.asarray(g), np.asarray(w)
         assert g.dtype == np.float64, f"{what}: dtype {g.dtype}"
-        if fn["quantity"] == "manipulability":
+        if fn["quantity"] == "closure" and k == 2:  # the residual max |phi|: rounding (~1e-16), not a value
+            assert g.max() <= 1e-12 and w.max() <= 1e-12, f"{what}: residual {g.max():.3g}, numpy {w.max():.3g}"
+        elif fn["quantity"] == "manipulability":
             for k in range(w.shape[-1]):
                 assert_close(g[..., k], w[..., k], rtol=rtol, what=f"{what} mu{k + 1}")
         else:
@@ -143,7 +149,7 @@ def test_one_state_matches_numpy(robot, generated):
     """One 1-D state: the numpy module's shapes (the manifest's "returns") and values to 1e-12."""
     jx, py, manifest = modules(generated, robot)
     rng = np.random.default_rng(11)
-    for _ in range(N_STATES):
+    for _ in range(N_STATES_SMALL if robot in SMALL else N_STATES):
         a = inputs(robot, rng)
         for fn in provided(manifest):
             args = call_args(fn, a)
@@ -213,22 +219,27 @@ def test_grad_of_inverse_dynamics_matches_the_ode_jacobian(robot, generated):
     r = MODELS[robot]
     nq, nv = r.nq, r.nv
     rng = np.random.default_rng(14)
+    # a closed chain: the same identity in y, ID_y(y, yd, FD_y(y, yd, tau_y)) = tau_y, with M_y and its ODE
+    suffix = "_y" if r.closed else ""
+    if r.closed:
+        nq = nv = len(r.independent)
+    inverse_dynamics = getattr(jx, "inverse_dynamics" + suffix)
 
     def s(q, qd, w, qdd):
-        return jax.numpy.dot(w, jx.inverse_dynamics(q, qd, qdd))
+        return jax.numpy.dot(w, inverse_dynamics(q, qd, qdd))
 
     grad_s = jax.grad(s, argnums=(0, 1))
     jit_grad_s = jax.jit(grad_s)  # w and qdd arguments, not constants of a closure: one compile for both states
     for k in range(2):
         a = inputs(robot, rng)
-        q, qd, tau = a["q"], a["qd"], a["tau"]
-        qdd = py.forward_dynamics(q, qd, tau)
+        q, qd, tau = (a["y"], a["yd"], a["tau_y"]) if r.closed else (a["q"], a["qd"], a["tau"])
+        qdd = getattr(py, "forward_dynamics" + suffix)(q, qd, tau)
         w = rng.normal(size=nv)
 
         jgq, jgqd = jit_grad_s(q, qd, w, qdd)
         # grad without jit (an op-by-op trace, slow on the larger robots) at the first state
         gq, gqd = grad_s(q, qd, w, qdd) if k == 0 else (jgq, jgqd)
-        M = np.reshape(py.mass_matrix(q), (nv, nv))  # (1,) for a 1 x 1 M
+        M = np.reshape(getattr(py, "mass_matrix" + suffix)(q), (nv, nv))  # (1,) for a 1 x 1 M
         A = py.ode_jac_x(np.concatenate([q, qd]), tau)[nq:, :]  # d FD / d [q, qd]
         want_q, want_qd = -(M @ A[:, :nq]).T @ w, -(M @ A[:, nq:]).T @ w
         assert_close(gq, want_q, rtol=1e-9, what=f"{robot} grad_q")
@@ -236,7 +247,8 @@ def test_grad_of_inverse_dynamics_matches_the_ode_jacobian(robot, generated):
         assert_close(jgq, gq, rtol=1e-12, what=f"{robot} jit grad_q")
         assert_close(jgqd, gqd, rtol=1e-12, what=f"{robot} jit grad_qd")
         h = 1e-6
-        fd = np.array([(w @ py.inverse_dynamics(q + h * e, qd, qdd) - w @ py.inverse_dynamics(q - h * e, qd, qdd))
+        id_py = getattr(py, "inverse_dynamics" + suffix)
+        fd = np.array([(w @ id_py(q + h * e, qd, qdd) - w @ id_py(q - h * e, qd, qdd))
                        / (2 * h) for e in np.eye(nq)])
         assert_close(gq, fd, rtol=1e-6, what=f"{robot} grad_q vs central difference")
 

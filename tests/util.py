@@ -106,3 +106,28 @@ def build_library(argv: list[str], sources, lib: Path) -> Path:
     objects = compile_objects(argv, sources, folder)
     subprocess.run([*argv, "-shared", "-o", str(lib), *map(str, objects), "-lm"], check=True, capture_output=True, text=True)
     return lib
+
+
+Y_SPREAD = 0.1
+"""A closed chain's y is drawn within +-Y_SPREAD (rad or m) of its reference configuration's: every
+shipped mechanism assembles there, on the reference's branch (tests/test_closed_chains.py)."""
+
+
+def closed_inputs(robot: Robot, rng: np.random.Generator, shape: tuple = ()) -> dict[str, np.ndarray]:
+    """Seeded arguments of a closed chain's functions in y, of shape (*shape, n): y near the reference
+    configuration, yd, ydd normal, tau_y and u 5 x normal, x = [y; yd]."""
+    names = [c.name for c in robot.coordinates]
+    y_ref = np.array([robot.reference_q[names.index(c)] for c in robot.independent])
+    ny = len(y_ref)
+    y = y_ref + rng.uniform(-Y_SPREAD, Y_SPREAD, shape + (ny,))
+    yd = rng.normal(size=shape + (ny,))
+    tau = 5 * rng.normal(size=shape + (ny,))
+    return {"y": y, "yd": yd, "ydd": rng.normal(size=shape + (ny,)), "tau_y": tau, "u": tau,
+            "x": np.concatenate([y, yd], axis=-1)}
+
+
+def tree_robots() -> list[str]:
+    """The models.yaml robots without loops, sorted: those whose generated set holds the tree's forward
+    dynamics, ODE, regressors, IK and bundles (a closed chain's functions in y: tests/test_codegen.py,
+    test_closed_chain_code.py, test_closed_chains.py)."""
+    return sorted(n for n, r in robots().items() if not r.closed)

@@ -7,8 +7,9 @@ memory (per process) of compiling every generated C file with ``cc -O2`` (two at
 ``big``: robots as people have them (iCub, the Unitree H1-2 with hands, a Kinova Gen3 with a 2F-85
 and a wrist camera), fixed and floating, with the default selection of big robots
 (:attr:`derive.description.robot.Robot.function_frames`, ``function_quantities``): functions,
-files and sizes, ``derive generate`` time of that robot alone, and the first (compiling) and a
-cached import of its generated Python module in a fresh process. URDFs that no package ships are
+files and sizes, ``derive generate`` time of that robot alone, the first (compiling) and a cached
+import of its generated Python module in a fresh process, and the first call of its forward dynamics
+(compiling the part file that defines it lazily, see :data:`derive.codegen.backends.python.EAGER_OPS`). URDFs that no package ships are
 read from the paths in :data:`BIG_URDF_VARIABLES` (never committed); without them the row says so.
 """
 
@@ -28,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from derive.codegen.backends.c import printer as c_printer
+from derive.codegen.backends.python import EAGER_OPS, WHOLE_OPS
 from derive.codegen.generate import generate
 from derive.description.model import parse_models, parse_robot
 from derive.description.urdf import import_urdf_named
@@ -117,18 +119,26 @@ BIG_ROBOTS = (
     ("Kinova Gen3 + 2F-85 + camera", "gen3_2f85", "gen3_end_effector_link", ("fixed",), True),
 )
 IMPORT_SCRIPT = ("import sys, time, numpy; sys.path.insert(0, sys.argv[1]); t = time.perf_counter(); "
-                 "__import__(sys.argv[2]); print(time.perf_counter() - t)")
+                 "m = __import__(sys.argv[2]); print(time.perf_counter() - t)\n"
+                 "if len(sys.argv) > 3:\n"
+                 "    f, args = getattr(m, sys.argv[3]), [numpy.full(int(n), 0.5) for n in sys.argv[4:]]\n"
+                 "    t = time.perf_counter(); f(*args); print(time.perf_counter() - t)")
+"""Import the module (and call a function once on inputs of 0.5: a unit quaternion for a floating base);
+print the seconds of each."""
 
 
-def import_seconds(folder: Path, module: str, cache: Path | None) -> float:
+def import_seconds(folder: Path, module: str, cache: Path | None, call: tuple[str, list[int]] | None = None):
     """Seconds to import the generated module ``module`` from ``folder`` in a fresh interpreter
     (numpy already imported): with ``cache`` None, compiling its source (no bytecode written or read,
-    a first import); else with bytecode under ``cache`` (PYTHONPYCACHEPREFIX)."""
+    a first import); else with bytecode under ``cache`` (PYTHONPYCACHEPREFIX). With ``call`` (a
+    function and its inputs' sizes), (import seconds, seconds of that function's first call)."""
     env = {k: v for k, v in os.environ.items() if k not in ("PYTHONDONTWRITEBYTECODE", "PYTHONPYCACHEPREFIX")}
     env.update({"PYTHONDONTWRITEBYTECODE": "1"} if cache is None else {"PYTHONPYCACHEPREFIX": str(cache)})
-    out = subprocess.run([sys.executable, "-c", IMPORT_SCRIPT, str(folder), module], capture_output=True, text=True,
-                         check=True, env=env)
-    return float(out.stdout.strip().splitlines()[-1])
+    extra = [call[0], *map(str, call[1])] if call else []
+    out = subprocess.run([sys.executable, "-c", IMPORT_SCRIPT, str(folder), module, *extra], capture_output=True,
+                         text=True, check=True, env=env)
+    seconds = [float(line) for line in out.stdout.strip().splitlines()[-2 if call else -1:]]
+    return tuple(seconds) if call else seconds[0]
 
 
 def _megabytes(paths) -> float:
@@ -137,17 +147,18 @@ def _megabytes(paths) -> float:
 
 def bench_big(args) -> str:
     runs = 1 if args.quick else 2
+    imports = 1 if args.quick else 3
     rows = ["## Big robots with the default selection (iCub, Unitree H1-2, Gen3 + 2F-85)", "",
             "| robot | base | nv | named frames | frames with functions | functions | files (C) | C MB | Python MB "
-            "| JAX MB | generate s | first import s | cached import s |",
-            "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+            "(imported) | JAX MB | generate s | first import s | cached import s | first FD call s |",
+            "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     with tempfile.TemporaryDirectory() as tmp:
         for label, source, tip, bases, compare in BIG_ROBOTS:
             variable = BIG_URDF_VARIABLES.get(source)
             path = os.environ.get(variable, "") if variable else source
             if variable and not (path and Path(path).is_file()):
                 rows.append(f"| {label} | {', '.join(bases)} | | | | | | | | | not measured: URDF not present "
-                            f"(set {variable}) | | |")
+                            f"(set {variable}) | | | |")
                 continue
             for base in bases:
                 with contextlib.redirect_stderr(io.StringIO()):  # the URDFs' rounded-angle warnings
@@ -168,24 +179,34 @@ def bench_big(args) -> str:
                     manifest = json.loads((folder / "manifest.json").read_text())
                     files = [p for p in folder.rglob("*") if p.is_file()]
                     c_files = [p for p in (folder / "c").rglob("*") if p.is_file()]
-                    first = min(import_seconds(folder / "python", name, None) for _ in range(runs))
+                    first = min(import_seconds(folder / "python", name, None) for _ in range(imports))
                     cache = Path(tmp) / f"pycache_{len(rows)}"
                     import_seconds(folder / "python", name, cache)  # writes the bytecode
-                    cached = min(import_seconds(folder / "python", name, cache) for _ in range(runs))
+                    cached = min(import_seconds(folder / "python", name, cache) for _ in range(imports))
+                    fd = next(f for f in manifest["functions"] if f["quantity"] == "forward_dynamics")
+                    sizes = [i["shape"][0] for i in fd["inputs"] if i["name"] != "p"]
+                    call = min(import_seconds(folder / "python", name, None, ("forward_dynamics", sizes))[1]
+                               for _ in range(runs))
+                    python = list((folder / "python").rglob("*.py"))
                     rows.append(f"| {label}{'' if how == 'default' else f' ({how}, as before)'} | {base} | {robot.nv} "
                                 f"| {len(robot.frames)} | {len(robot.function_frames)} | {len(manifest['functions'])} "
                                 f"| {len(files)} ({len(c_files)}) | {_megabytes(c_files):.1f} "
-                                f"| {_megabytes((folder / 'python').rglob('*.py')):.1f} "
+                                f"| {_megabytes(python):.1f} ({_megabytes([folder / 'python' / f'{name}.py']):.1f}) "
                                 f"| {_megabytes((folder / 'jax').rglob('*.py')):.1f} | {best:.1f} | {first:.1f} "
-                                f"| {cached:.2f} |")
+                                f"| {cached:.2f} | {call:.2f} |")
     rows += ["", "Each robot imported whole (`derive import-urdf FILE [--floating]`; the Gen3 with `--tip "
              "gen3_end_effector_link`) and generated with the default selection of big robots: per-frame functions "
              "for the tcp, the wrench frames and the leaves of the tree only; above 30 velocities also without the "
              "Coriolis matrix, dID/dx, the ODE, its Jacobians and RK4, and the regressors (docs/large-robots.md). "
              "generate s: `derive generate` of that robot alone (C, Python and JAX), no cache. first import: a fresh "
              "interpreter importing the generated Python module with no bytecode (it compiles the source, as a "
-             "first import does); cached import: the same with the bytecode Python wrote on a previous import. "
-             f"Best of {runs} run{'s' * (runs > 1)} each, on a shared 2-core machine. The H1-2 and Gen3 URDFs come "
+             "first import does); cached import: the same with the bytecode Python wrote on a previous import; "
+             f"both best of {imports}. Python MB: the module and the part files of its largest functions, which it "
+             "compiles on their first call (imported: the module alone, what an import compiles: at most "
+             f"{EAGER_OPS:,} operations in a module of more than {WHOLE_OPS:,}, docs/large-robots.md); "
+             "first FD call: forward_dynamics called once in a "
+             "fresh interpreter after a first import, compiling its part if it has one. Generation best of "
+             f"{runs} run{'s' * (runs > 1)}, on a shared 2-core machine. The H1-2 and Gen3 URDFs come "
              "from the vendors' public repositories (unitree_ros, ros2_kortex) and are not part of derive: "
              f"set {' and '.join(BIG_URDF_VARIABLES.values())} to their paths."]
     return "\n".join(rows)

@@ -27,11 +27,6 @@ def cmd_generate(args) -> int:
     robots = robots_of(args)
     # here, not at the top: a models file with a mistake is refused before CasADi and jinja2 load
     from derive.codegen.generate import check, default_output, firmware_record_path, generate
-    closed = [name for name, r in robots.items() if r.loops and (not args.robot or name in args.robot)]
-    if closed:  # the tree's functions would ignore the loops: refuse rather than write a wrong model
-        raise DeriveError(f"robot '{closed[0]}' has loops: generated code for closed chains is not available yet "
-                          "(docs/closed-chains.md: use derive.symbolic.closure.ClosedChainModel); generate the other "
-                          "robots by name")
     out = Path(args.out) if args.out else default_output()
     if args.check:
         problems = check({k: v for k, v in robots.items() if not args.robot or k in args.robot}, out,

@@ -21,6 +21,7 @@ from derive.symbolic.model import SXModel
 from derive.symbolic import derivatives
 from derive.symbolic.ode import AD_MODES, inverse_dynamics_jacobian, ode_jacobians
 from derive.symbolic.regressor import Regressor, body_links
+from derive.symbolic.closure import ASSEMBLED_TOL, NEWTON_STEPS, ClosedChainModel
 from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
@@ -60,6 +61,9 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     need = wanted(robot)
 
     def add(quantity, frame, inputs, outputs, doc, manifest=()):
+        if robot.closed:  # the spanning tree's functions, in q: the loops are not imposed
+            doc += " Of the spanning tree, in its coordinates q (the loops are not imposed)."
+            manifest = tuple(manifest) + (("coordinates", "q"),)
         specs.append(FunctionSpec(robot.name, quantity, frame, tuple(inputs) + extra, tuple(outputs), doc + pdoc,
                                   tuple(manifest)))
 
@@ -107,6 +111,12 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
         "so that tau = M(q) qdd + h: what computed-torque and task-space control need besides M.")
     add("inverse_dynamics", None, [q, qd, qdd], [("tau", ne.inverse_dynamics())],
         "Inverse dynamics tau = M(q) qdd + C(q, qd) qd + g(q), recursive Newton-Euler.", (("algorithm", "RNEA"),))
+    if robot.closed:  # the tree functions above in q, then the closed chain's in y; none that ignores the loops
+        add("com", None, [q], [("c", wb.com)], "Centre of mass of the moving bodies, world coordinates (3).")
+        add("com_jacobian", None, [q], [("J", wb.com_jacobian)],
+            f"Jacobian of the centre of mass (3x{n}, row-major): its world velocity is J qd.")
+        closed_chain_specs(model, specs, need)
+        return specs
     if need("inverse_dynamics_derivatives"):  # the costly ones are derived only where a selection keeps them
         specs.append(inverse_dynamics_derivatives_spec(model))
     qdd_fd = model.forward_dynamics() if forward and need("forward_dynamics", "ode_rhs", "ode_jac_x", "ode_jac_u") else None
@@ -142,6 +152,70 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     if need("bundle"):
         bundle_specs(model, specs, add)
     return specs
+
+
+CLOSED_LEFT_OUT = ("inverse_dynamics_derivatives", "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext",
+                   "centroidal_map", "regressor", "base_regressor", "bundle", "ik", "manipulability")
+"""The tree functions a robot with loops does not get: the tree's forward dynamics (and its ODE and
+derivatives) ignore the loops; regressors, IK, manipulability and the control bundles of the tree would
+mislead without them (closed-chain versions are future work). Its ode_rhs, ode_jac_x, ode_jac_u and
+rk4_step are the closed chain's, in x = (y, yd)."""
+
+
+def closed_chain_specs(model: SXModel, specs: list[FunctionSpec], need) -> None:
+    """The functions of a closed chain in its independent coordinates y (:meth:`~derive.symbolic.closure.
+    ClosedChainModel.in_y`): closure, velocity_map (G), mass_matrix_y, bias_y, inverse_dynamics_y,
+    forward_dynamics_y, constraint_forces and the ODE in x = (y, yd) with its Jacobians."""
+    robot = model.robot
+    extra, pdoc = parameter_input(model)
+    ccm = ClosedChainModel(robot, model)
+    red = ccm.in_y()
+    ny, nq, nz = ccm.ny, ccm.nq, len(ccm.z)
+    y, yd, ydd, tau = ("y", red.y), ("yd", ccm.yd), ("ydd", ccm.ydd), ("tau_y", ccm.tau_y)
+    ys = ", ".join(robot.independent)
+    method = (("coordinates", "y"), ("closure", red.method))
+
+    def add(quantity, inputs, outputs, doc, manifest=()):
+        if need(quantity):
+            specs.append(FunctionSpec(robot.name, quantity, None, tuple(inputs) + extra, tuple(outputs), doc + pdoc,
+                                      method + tuple(manifest)))
+
+    closure_in = [y] if red.z0 is None else [y, ("z0", red.z0)]
+    how = (f"{red.method} (exact up to rounding)" if red.z0 is None else
+           f"{red.method}, from z0 (the last z, or the reference configuration's)")
+    add("closure", closure_in, [("q", red.q), ("status", red.status), ("residual", red.residual)],
+        f"Loop closure z = gamma(y): the tree configuration q ({nq}) of y = ({ys}) by {how}; status 1 where "
+        f"max |phi(q)| <= {ASSEMBLED_TOL:g} (float builds too), else 0 (no assembly: q is NaN or off the loops); residual = max |phi(q)|.")
+    at = ("q = gamma(y) by the closed form inside" if red.z0 is None else
+          f"q = gamma(y) inside by {NEWTON_STEPS} Newton steps from the reference configuration (call closure "
+          "for the status)")
+    add("velocity_map", [y], [("G", red.projection)],
+        f"Velocity map G(y) ({nq}x{ny}, row-major): qd = G yd, G = [I; -K_z^-1 K_y] in q's order; {at}.")
+    add("mass_matrix_y", [y], [("M_y", red.mass_matrix)],
+        f"Reduced mass matrix M_y = G^T M G ({ny}x{ny}, row-major) of M_y ydd + h_y = tau_y; {at}.")
+    add("bias_y", [y, yd], [("h_y", red.bias)],
+        f"Reduced bias h_y = G^T (C qd + g + M Gdot yd) ({ny}), qd = G yd; {at}.")
+    add("inverse_dynamics_y", [y, yd, ydd], [("tau_y", red.inverse_dynamics)],
+        f"Constrained inverse dynamics tau_y = G^T rnea(q, G yd, G ydd + Gdot yd) ({ny}): the torques on y "
+        f"that give ydd with the loops closed; {at}.")
+    add("forward_dynamics_y", [y, yd, tau], [("ydd", red.forward_dynamics)],
+        f"Constrained forward dynamics ydd = M_y^-1 (tau_y - h_y) ({ny}), LDL^T of M_y; {at}.")
+    add("constraint_forces", [y, yd, tau], [("lam", red.constraint_forces)],
+        f"Loop forces lam = lambda ({nz}, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the "
+        f"forward dynamics' qdd (the tree's KKT multiplier); {at}.")
+    if not need("ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step"):
+        return
+    x, u = ca.SX.sym("x", 2 * ny), ca.SX.sym("u", ny)
+    f = ca.vertcat(ccm.yd, red.forward_dynamics)
+    sub_from, sub_to = ca.vertcat(red.y, ccm.yd, ccm.tau_y), ca.vertcat(x, u)
+    f = ca.substitute(f, sub_from, sub_to)
+    doc = (f"First-order ODE x' = f(x, u) of the closed chain, x = [y; yd] ({2 * ny}), u = tau_y ({ny}): "
+           f"f = [yd; forward_dynamics_y]; {at}")
+    add("ode_rhs", [("x", x), ("u", u)], [("xdot", f)], doc + ".")
+    add("ode_jac_x", [("x", x), ("u", u)], [("A", ca.jacobian(f, x))],
+        ODE_JAC_DOC["ode_jac_x"].format(nx=2 * ny) + " Closed chain, x = [y; yd].", (("algorithm", "forward AD"),))
+    add("ode_jac_u", [("x", x), ("u", u)], [("B", ca.jacobian(f, u))],
+        ODE_JAC_DOC["ode_jac_u"].format(nx=2 * ny, n=ny) + " Closed chain, x = [y; yd].", (("algorithm", "forward AD"),))
 
 
 def ode_specs(model: SXModel, qdd_fd: ca.SX, add, extra: tuple, fd_how: tuple) -> None:
@@ -343,6 +417,16 @@ def template_functions(model: SXModel, forward: bool = True) -> list[TemplateFun
             "; then the base quaternion x_next[3:7] is divided by its norm (projected back onto the unit sphere)."
             if robot.floating else "."),
         "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", n), ("quaternion", 3 if robot.floating else -1)))
+    if robot.closed:  # the closed chain's RK4 in x = (y, yd): the closure inside ode_rhs, nothing drifts
+        ny = len(robot.independent)
+        return [TemplateFunction(
+            robot.name, "rk4_step", None, (("x", (2 * ny, 1)), ("u", (ny, 1)), ("dt", (1, 1))) + extra,
+            (("x_next", (2 * ny, 1)),),
+            "One classical Runge-Kutta step of the closed chain's x' = f(x, u), x = [y; yd], u = tau_y held "
+            "constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs (q = gamma(y) inside "
+            "each: the loops stay closed, nothing drifts).",
+            "rk4_step", calls=(("ode", "ode_rhs"),), context=(("n", 2 * ny), ("quaternion", -1)),
+            manifest=(("coordinates", "y"),))] if forward else []
     manipulability = [t for f in robot.function_frames if (t := manipulability_function(model, f))]
     dynamics = ode_jacobian_templates(model) + [rk4] if forward else []
     return dynamics + ik_functions(model) + manipulability

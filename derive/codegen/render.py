@@ -17,6 +17,7 @@ import jinja2
 
 from derive.codegen.backends import backends as registered_backends
 from derive.codegen.backends.base import Backend, Function, RobotContext, ops_comment, shape_text
+from derive.codegen.catalogue import CLOSED_LEFT_OUT
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
 from derive.description.robot import Robot
@@ -124,6 +125,41 @@ def actuator_table(robot: Robot) -> dict:
     return table
 
 
+def closed_chain_entry(robot: Robot, functions: list[Function]) -> dict:
+    """manifest.json's ``loops`` (each loop's two frames with their generated fk_<frame>, kind, axis or
+    length, and the coordinates of its cycle) and ``closed_chain`` (y, z, the closure, what is left out)."""
+    generated = {fn.common["name"] for fn in functions}
+    closure = next((dict(fn.common["manifest"]).get("closure") for fn in functions
+                    if fn.common["quantity"] == "closure"), None)
+
+    def fk(frame: str) -> str | None:
+        name = f"{robot.name}_fk_{frame}"
+        return name if name in generated else None
+
+    loops = []
+    for lp in robot.loops:
+        entry = {"frames": [{"name": lp.a, "fk": fk(lp.a)}, {"name": lp.b, "fk": fk(lp.b)}], "kind": lp.kind,
+                 "rows": lp.rows}
+        if lp.kind in ("hinge", "planar"):
+            entry["normal" if lp.kind == "planar" else "axis"] = [float(x) for x in lp.axis]
+        if lp.kind == "planar":
+            entry["rotation"] = lp.rotation
+        if lp.kind == "distance":
+            entry["length"] = lp.length if isinstance(lp.length, str) else float(lp.length)
+        loops.append(entry)
+    return {"loops": loops, "closed_chain": {
+        "independent": list(robot.independent), "dependent": list(robot.dependent),
+        "reference_y": [float(robot.reference_q[[c.name for c in robot.coordinates].index(c)]) for c in robot.independent],
+        "independent_chosen": "by pivoting on K" if robot.independent_chosen else "models.yaml's independent",
+        "kept_rows": list(robot.loop_rows), "closure": closure,
+        "coordinates": "functions marked coordinates 'q' are the spanning tree's, in q = (y, z) (the loops not "
+                       "imposed); those marked 'y' are the closed chain's, in y with q = gamma(y) inside",
+        "left_out": sorted(CLOSED_LEFT_OUT),
+        "left_out_reason": "the tree's forward dynamics, ODE and their derivatives ignore the loops; the tree's "
+                           "regressors, IK, manipulability, centroidal map, external wrenches and control bundles "
+                           "are not generated for a closed chain (its own versions are not available yet)"}}
+
+
 def function_aliases(robot: Robot, functions: list[tuple[str, str | None]]) -> tuple[tuple[str, str], ...]:
     """(alias, function) short names, e.g. ``("fk_tool_frame", "fk_tcp")``: per generated function
     ``<quantity>_<frame>`` of a named frame with aliases, one per alias. One set of functions, the
@@ -184,6 +220,7 @@ def render_robot(robot: Robot, specs: list[FunctionSpec], model_hash: str, progr
             **dict(fn.common["manifest"]),
         } for k, fn in enumerate(functions)],
         **({"left_out": left_out} if left_out else {}),
+        **(closed_chain_entry(robot, functions) if robot.closed else {}),
     }
     files["manifest.json"] = env.get_template("manifest/manifest.json.jinja").render(
         manifest_json=json.dumps(manifest, indent=2))

@@ -269,7 +269,8 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "coriolis_matrix", "gravity", "bias", "inverse_dynamics", "inverse_dynamics_derivatives",
                        "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext", "com", "com_jacobian",
                        "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor", "base_regressor", "bundle",
-                       "rk4_step", "ik", "manipulability")
+                       "rk4_step", "ik", "manipulability", "closure", "velocity_map", "mass_matrix_y", "bias_y",
+                       "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
 

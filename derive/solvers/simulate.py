@@ -250,6 +250,9 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
     A state, an energy or a drift that is no longer finite (a torque of 1e300, a run that
     diverges) is a DeriveError naming the time: every number of a returned Trajectory is finite.
     """
+    if robot.closed:  # its generated ODE is in x = (y, yd), not the tree's (q, qd)
+        raise DeriveError(f"robot '{robot.name}' has loops: derive simulate integrates a tree in q; step the closed "
+                          "chain's generated rk4_step in x = [y; yd] instead (docs/closed-chains.md)")
     robot.require_fixed_base("derive simulate")
     if method not in METHODS:
         raise DeriveError(f"simulate: unknown method {method!r} (known: {', '.join(METHODS)})")

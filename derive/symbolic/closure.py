@@ -19,11 +19,13 @@ Parameters p come last, as in every generated function.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import cached_property
 
 import casadi as ca
 
 from derive.description.robot import Robot
+from derive.symbolic.closed_form import closed_form_closure
 from derive.symbolic.model import SXModel
 from derive.symbolic.ode import ldlt_solve
 
@@ -32,6 +34,10 @@ NEWTON_STEPS = 8
 start (the last step's z, at control rates) to rounding in 3 to 4; 8 leaves margin."""
 CLOSED_TOL = 1e-12
 """status = 1 where max |phi| <= this after the Newton steps."""
+ASSEMBLED_TOL = 1e-6
+"""The generated closure's status: 1 where max |phi| <= this. Looser than CLOSED_TOL so that a float
+build (rounding ~1e-7 of the lengths) reports an assembled mechanism as one; the residual itself is
+returned (~1e-16 in double) for a caller that wants more."""
 
 
 class ClosedChainModel:
@@ -207,3 +213,62 @@ class ClosedChainModel:
             "constraint_forces_id": ca.Function("constraint_forces_id", [q, yd, ydd, p], [self.constraint_forces(ydd)],
                                                 ["q", "yd", "ydd", "p"], ["lambda"]),
         }
+
+    # ---- the model in y: q = gamma(y) put in ----
+    def in_y(self, closed_form: bool = True) -> "ReducedChain":
+        """The reduced model as expressions of y (not of q): q = gamma(y) by the closed form of
+        :func:`~derive.symbolic.closed_form.closed_form_closure` where one exists (and ``closed_form``),
+        else by :data:`NEWTON_STEPS` Newton steps from the reference configuration's z (rounded to 1e-3:
+        the solved reference's last bits may differ between machines, the generated code must not)."""
+        s = self.sym
+        y = ca.SX.sym("y", self.ny)
+        found = closed_form_closure(self.model, y) if closed_form else None
+        if found is not None:
+            gamma, method = found
+            q_out, z0 = gamma, None
+        else:
+            z0 = ca.SX.sym("z0", len(self.z))
+            start = ca.DM([round(float(self.robot.reference_q[i]), 3) for i in self.z])
+            q_out = ca.SX.zeros(self.nq, 1)
+            q_out[self.y], q_out[self.z] = y, z0
+            step = self.newton_step()
+            for _ in range(NEWTON_STEPS):
+                q_out = step(q_out, s.p)
+            gamma = ca.substitute(q_out, z0, start)
+            method = f"Newton: {NEWTON_STEPS} steps on the kept rows"
+        phi = ca.substitute(self.phi, s.q, q_out)
+        residual = ca.mmax(ca.fabs(phi))
+        # 1 where residual <= ASSEMBLED_TOL, else 0 (a NaN residual too: fmin(NaN, 1) = 1); no comparison op needed
+        status = 0.5 * (1 + ca.sign(ASSEMBLED_TOL - ca.fmin(residual, 1)))
+
+        def put(e: ca.SX) -> ca.SX:
+            return ca.substitute(e, s.q, gamma)
+
+        fd = put(self.forward_dynamics)
+        return ReducedChain(y=y, z0=z0, q=q_out, status=status, residual=residual, gamma=gamma, method=method,
+                            projection=put(self.projection), gdot_yd=put(self.gdot_yd),
+                            mass_matrix=put(self.mass_matrix), bias=put(self.bias),
+                            inverse_dynamics=put(self.inverse_dynamics), forward_dynamics=fd,
+                            constraint_forces=put(self.constraint_forces(self.forward_dynamics)))
+
+
+@dataclass(frozen=True)
+class ReducedChain:
+    """The reduced model of :meth:`ClosedChainModel.in_y`: expressions of y, the rates' symbols
+    (``ClosedChainModel.yd``, ``ydd``, ``tau_y``) and p. ``q``, ``status``, ``residual``: the closure's
+    outputs (of y, and of z0 for the Newton solve); ``gamma``: q = gamma(y) put into the others."""
+
+    y: ca.SX
+    z0: ca.SX | None  # the Newton solve's starting z (None for a closed form)
+    q: ca.SX
+    status: ca.SX
+    residual: ca.SX
+    gamma: ca.SX
+    method: str
+    projection: ca.SX
+    gdot_yd: ca.SX
+    mass_matrix: ca.SX
+    bias: ca.SX
+    inverse_dynamics: ca.SX
+    forward_dynamics: ca.SX
+    constraint_forces: ca.SX

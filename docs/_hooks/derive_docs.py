@@ -252,24 +252,29 @@ def on_files(files, config):
 
 # --------------------------------------------------------------------------- executed snippets
 
-def _environment(workdir: Path) -> dict[str, str]:
-    env = {k: v for k, v in os.environ.items() if not k.startswith("DERIVE_")}
-    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
+def _environment(workdir: Path, python: str) -> dict[str, str]:
+    env = {k: v for k, v in os.environ.items() if not k.startswith("DERIVE_") and k != "PYTHONPATH"}
+    env["PATH"] = os.pathsep.join([str(Path(python).parent), env.get("PATH", "")])
     env["MPLBACKEND"] = "Agg"
     env["PYTHONDONTWRITEBYTECODE"] = "1"
     env["HOME"] = str(workdir / "home")  # derive.compiled's cache and anything else stays in the folder
     return env
 
 
-def run_blocks(markdown: str, name: str, required: bool = False) -> tuple[str, list[tuple[str, float]]]:
-    """Execute the page's ``run`` blocks in order in one temporary folder; return the Markdown as it
-    is shown (markers removed, outputs inserted) and the time per block. Raises PluginError on a
-    failing block, an unmarked block on a ``required`` page, or a page over :data:`PAGE_SECONDS`."""
+def run_blocks(markdown: str, name: str, required: bool = False,
+               python: str | None = None) -> tuple[str, list[tuple[str, float]]]:
+    """Execute the page's ``run`` blocks in order in one temporary folder, with ``python`` (default:
+    the one building the site) for Python blocks and its folder's ``derive`` first on PATH (so
+    tests/test_installed.py runs the Getting started page on the installed wheel); return the
+    Markdown as it is shown (markers removed, outputs inserted) and the time per block. Raises
+    PluginError on a failing block, an unmarked block on a ``required`` page, or a page over
+    :data:`PAGE_SECONDS`."""
+    python = python or sys.executable
     times: list[tuple[str, float]] = []
     with tempfile.TemporaryDirectory(prefix="derive-docs-") as tmp:
         workdir = Path(tmp)
         (workdir / "home").mkdir()
-        env = _environment(workdir)
+        env = _environment(workdir, python)
 
         def replace(match: re.Match) -> str:
             lang, opts = match["lang"], match["opts"].split()
@@ -282,7 +287,7 @@ def run_blocks(markdown: str, name: str, required: bool = False) -> tuple[str, l
                                       f"every block):\n{body}")
                 return f"{indent}```{lang}\n{body}{indent}```"
             code = "\n".join(line[len(indent):] for line in body.splitlines())
-            command = (["bash", "-euo", "pipefail", "-c", code] if lang in SHELLS else [sys.executable, "-c", code])
+            command = (["bash", "-euo", "pipefail", "-c", code] if lang in SHELLS else [python, "-c", code])
             usage = workdir / "cpu-seconds"
             try:  # through _TIMED, which reports the CPU time of the block's processes (pages run in parallel)
                 done = subprocess.run([sys.executable, "-c", _TIMED, str(usage), *command], cwd=workdir, env=env,

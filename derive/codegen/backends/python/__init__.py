@@ -20,6 +20,15 @@ gives bit for bit the per-state results, and one state those of the C code:
 Template functions: ``rk4_step``, ``manipulability_<frame>`` and the ODE Jacobians of large robots are batched as well; ``ik_<frame>``
 (:data:`LOOPS`), iterative per state, solves a batch one state after the other.
 
+A module of more than :data:`WHOLE_OPS` operations defines at most :data:`EAGER_OPS` of them when it
+is imported: its largest functions, one after the other until the rest fits, are defined lazily.
+The definition of each (both bodies) is the file ``python/<robot>_parts/<name>.py``, and the module
+holds a stand-in of the same name, signature and docstring whose first call compiles that file into
+the module's namespace (the module's ``_part``). Compiling the source is what a first import costs
+(about 0.5 s per MB; the floating Unitree H1-2's 12 MB took 6.5 s), so a big robot's module imports
+in a fraction of that, and each big function pays its own compilation on its first call. The
+committed robots are written whole: their modules have no parts.
+
 Every function first checks its inputs (the module's ``_array``, and ``_matrix`` for IK's T): numbers
 only (bool, int, float; None, complex or text is a TypeError) of the right last axis (a ValueError),
 each error naming the function and the argument; IK's q0 and w may be None. The check converts an
@@ -49,6 +58,16 @@ python-speed bench are one chunk."""
 CHUNK_FLOATS = 4_000_000
 """Most floats per buffer of a chunk's rows (``_FLOATS``, 30.5 MB): glibc's malloc keeps reusing blocks
 under 32 MB from call to call, and maps a larger one anew each time (page faults on every call)."""
+
+WHOLE_OPS = 45_000
+"""Most operations (after CSE, summed over the expression functions) of a module written whole, every
+function defined when it is imported (:class:`PythonBackend`'s ``whole_ops``; see
+:func:`lazy_functions`): about a second of compiling on a first import. The Panda's module is
+40 225 (2.2 MB), the UR5's 18 335."""
+
+EAGER_OPS = 20_000
+"""Most operations a larger module defines when it is imported (``eager_ops``): about half a second
+of compiling. The floating H1-2 with hands totals 216 455 operations (12 MB of Python)."""
 
 ENTRIES_PER_LINE = 8
 """Entries per line of a vector output's tuple (a matrix has one line per row)."""
@@ -131,8 +150,32 @@ def _chunk_context(name: str, prog, inputs: list[tuple[str, int]], outputs: list
             if any(chunk.fixed) else None}
 
 
+def lazy_functions(functions: list[dict], whole: int, eager: int) -> set[str]:
+    """The short names of the functions a module defines lazily: none when its expression functions
+    total at most ``whole`` operations; else those, most operations first (then by name), until the
+    others total at most ``eager``. Template functions (ops None) cost little to compile and stay."""
+    sized = sorted((-f["ops"]["total"], f["short_name"]) for f in functions if f["ops"])  # largest first
+    rest = -sum(minus for minus, _ in sized)
+    lazy: set[str] = set()
+    if rest <= whole:
+        return lazy
+    for minus, name in sized:
+        if rest <= eager:
+            break
+        lazy.add(name)
+        rest += minus
+    return lazy
+
+
+def _part_path(robot: RobotContext, f: dict) -> str:
+    """The file defining a lazy function: ``python/<robot>_parts/<name>.py``."""
+    return f"python/{robot.robot}_parts/{f['short_name']}.py"
+
+
 class PythonBackend(Backend):
     name = "python"
+    whole_ops: int = WHOLE_OPS
+    eager_ops: int = EAGER_OPS
 
     def function_context(self, fn: Function) -> dict:
         spec, prog = fn.spec, fn.program
@@ -148,6 +191,7 @@ class PythonBackend(Backend):
                             "dims_text": f"({r},)" if c == 1 else f"({r}, {c})"})
         inputs = [(n, x.shape[0]) for n, x in spec.inputs if x.shape[0] > 0]
         return {**fn.common, "py_args": _args(spec), "py_template": None, "py_loops": False,
+                "py_names": [n for n, _ in spec.inputs],
                 "py_inputs": inputs, "py_body": body, "py_outputs": outputs, "py_functions": called,
                 "py_scalar": [SCALAR[k] for k in called],
                 "py_chunk": _chunk_context(spec.short_name, prog, [(n, x.shape[0]) for n, x in spec.inputs],
@@ -169,6 +213,10 @@ class PythonBackend(Backend):
         return [{"source": self.support_source(name), "text": self.support_text(name)} for name in names]
 
     def render(self, env: jinja2.Environment, robot: RobotContext, functions: list[dict]) -> dict[str, str]:
+        lazy = lazy_functions(functions, self.whole_ops, self.eager_ops)
+        for f in functions:  # read again by manifest_entry
+            f["py_lazy"] = f["short_name"] in lazy
+        lazy = [f["short_name"] for f in functions if f["py_lazy"]]
         used = sorted({k for f in functions for k in f.get("py_functions", ()) if k in BATCH_DEFINITIONS})
         text = env.get_template(self.template("module.py.jinja")).render(
             robot.data(), functions=functions, support=self.sections(functions),
@@ -176,12 +224,17 @@ class PythonBackend(Backend):
             elementwise=any(BATCH_DEFINITIONS[k].startswith("_batch") for k in used),
             matrices=any(f.get("py_matrix") for f in functions),
             chunk_size=CHUNK, chunk_floats=f"{CHUNK_FLOATS:_}",
-            batch_definitions=[BATCH_DEFINITIONS[k] for k in used])
-        return {f"python/{robot.robot}.py": text}
+            batch_definitions=[BATCH_DEFINITIONS[k] for k in used],
+            lazy=lazy, eager_ops=f"{self.eager_ops:,}".replace(",", " "))
+        part = env.get_template(self.template("part.py.jinja"))
+        return {f"python/{robot.robot}.py": text, **{
+            _part_path(robot, f): part.render(robot.data(), f=f) for f in functions if f["py_lazy"]}}
 
     def manifest_entry(self, robot: RobotContext, f: dict) -> dict:
-        """The module, the function and what it returns (see :func:`_returns`)."""
-        return {"module": f"python/{robot.robot}.py", "function": f["short_name"], "returns": f["py_returns"]}
+        """The module, the function and what it returns (see :func:`_returns`); for a function defined
+        lazily (as :meth:`render` marked it), also ``part``: the file that defines it."""
+        return {"module": f"python/{robot.robot}.py", "function": f["short_name"], "returns": f["py_returns"],
+                **({"part": _part_path(robot, f)} if f.get("py_lazy") else {})}
 
     def manifest_support(self, robot: RobotContext, functions: list[dict]) -> list[dict]:
         return [{"file": f"python/{robot.robot}.py", "source": s["source"]} for s in self.sections(functions)]

@@ -1,0 +1,94 @@
+"""The generated code of the closed chains (docs/closed-chains.md) as a user calls it: the closure's
+residual in C and Python, FD(ID) in generated code, and 1 s of the generated rk4_step in y keeping the
+loops closed (the numpy reference's phi of the generated closure's q). Values against the numpy
+reference at seeded states: tests/test_codegen.py (every generated function)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from derive.reference.closure import ClosedChainReference
+from test_codegen import CFunctions, load_python
+from util import closed_inputs, robots
+
+import ctypes
+
+GENERATED = Path(__file__).resolve().parent.parent / "generated"
+CLOSED = ("fourbar", "slider_crank", "fivebar", "example2")
+CLOSURE = {"fourbar": "closed form: circle-circle", "slider_crank": "closed form: circle-line",
+           "fivebar": "closed form: circle-circle", "example2": "closed form: circle-circle, circle-line"}
+
+
+def manifest(name: str) -> dict:
+    return json.loads((GENERATED / name / "manifest.json").read_text())
+
+
+def function(m: dict, quantity: str) -> dict:
+    return next(f for f in m["functions"] if f["quantity"] == quantity)
+
+
+@pytest.mark.parametrize("name", CLOSED)
+def test_manifest_states_loops_coordinates_and_closure(name):
+    m, r = manifest(name), robots()[name]
+    assert m["closed_chain"]["closure"] == CLOSURE[name]
+    assert m["closed_chain"]["independent"] == list(r.independent)
+    assert m["closed_chain"]["dependent"] == list(r.dependent)
+    assert [[f["name"] for f in lp["frames"]] for lp in m["loops"]] == [[lp.a, lp.b] for lp in r.loops]
+    for lp in m["loops"]:
+        assert lp["kind"] == "planar" and lp["normal"] == [0.0, 0.0, 1.0]
+        assert all(f["fk"] == f"{name}_fk_{f['name']}" for f in lp["frames"])
+    quantities = {f["quantity"]: f["coordinates"] for f in m["functions"]}
+    for q in ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y", "forward_dynamics_y",
+              "constraint_forces", "ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step"):
+        assert quantities[q] == "y", q
+    for q in ("fk", "jacobian", "mass_matrix", "inverse_dynamics", "gravity"):
+        assert quantities[q] == "q", q
+    assert not set(quantities) & set(m["closed_chain"]["left_out"])  # no tree forward dynamics, IK, ...
+
+
+@pytest.mark.parametrize("name", CLOSED)
+def test_generated_closure_and_fd_of_id(name, committed_library):
+    """C and Python: residual max |phi| <= 1e-12 with status 1 (and the reference's phi of q <= 1e-12);
+    forward_dynamics_y(inverse_dynamics_y(ydd)) = ydd to 1e-10."""
+    m, r = manifest(name), robots()[name]
+    c = CFunctions(committed_library(name), m, ctypes.c_double)
+    py = load_python(name)
+    ref = ClosedChainReference(r)
+    rng = np.random.default_rng(5)
+    p = np.array([x.default for x in r.parameters])
+    for _ in range(5):
+        a = closed_inputs(r, rng) | {"p": p}
+        q_c, status_c, res_c = (v.ravel() for v in c(function(m, "closure"), a))
+        q_py, status_py, res_py = py.closure(a["y"])
+        assert status_c[0] == 1.0 and status_py[0] == 1.0
+        assert res_c[0] <= 1e-12 and res_py[0] <= 1e-12
+        assert np.abs(ref.phi(q_c)).max() <= 1e-12 and np.abs(ref.phi(q_py)).max() <= 1e-12
+        tau = c(function(m, "inverse_dynamics_y"), a)[0].ravel()
+        ydd = c(function(m, "forward_dynamics_y"), a | {"tau_y": tau})[0].ravel()
+        assert np.abs(ydd - a["ydd"]).max() <= 1e-10
+        assert np.abs(py.forward_dynamics_y(a["y"], a["yd"], py.inverse_dynamics_y(a["y"], a["yd"], a["ydd"]))
+                      - a["ydd"]).max() <= 1e-10
+
+
+@pytest.mark.parametrize("name", ["fourbar", "example2"])
+def test_generated_rk4_for_one_second_keeps_the_loops_closed(name):
+    """1 s of rk4_step at 1 ms from rest at the reference configuration, unforced: every step's q from the
+    generated closure closes the loops to 1e-10 (numpy reference phi); y moves (it swings)."""
+    m, r = manifest(name), robots()[name]
+    py = load_python(name)
+    ref = ClosedChainReference(r)
+    y0 = np.array(m["closed_chain"]["reference_y"])
+    ny = len(y0)
+    x = np.concatenate([y0, np.zeros(ny)])
+    worst = 0.0
+    for _ in range(1000):
+        x = py.rk4_step(x, np.zeros(ny), [0.001])
+        q, status, _ = py.closure(x[:ny])
+        assert status[0] == 1.0
+        worst = max(worst, float(np.abs(ref.phi(q)).max()))
+    assert worst <= 1e-10
+    assert np.abs(x[:ny] - y0).max() > 1e-3
