@@ -18,9 +18,9 @@ from util import closed_inputs, robots
 import ctypes
 
 GENERATED = Path(__file__).resolve().parent.parent / "generated"
-CLOSED = ("fourbar", "slider_crank", "fivebar", "example2")
+CLOSED = ("fourbar", "slider_crank", "fivebar", "example2", "delta")
 CLOSURE = {"fourbar": "closed form: circle-circle", "slider_crank": "closed form: circle-line",
-           "fivebar": "closed form: circle-circle", "example2": "closed form: circle-circle, circle-line"}
+           "fivebar": "closed form: circle-circle", "example2": "closed form: circle-circle, circle-line", "delta": "closed form: sphere intersection"}
 
 
 def manifest(name: str) -> dict:
@@ -39,7 +39,10 @@ def test_manifest_states_loops_coordinates_and_closure(name):
     assert m["closed_chain"]["dependent"] == list(r.dependent)
     assert [[f["name"] for f in lp["frames"]] for lp in m["loops"]] == [[lp.a, lp.b] for lp in r.loops]
     for lp in m["loops"]:
-        assert lp["kind"] == "planar" and lp["normal"] == [0.0, 0.0, 1.0]
+        if name == "delta":
+            assert lp["kind"] == "distance" and lp["length"] == "Lr", lp
+        else:
+            assert lp["kind"] == "planar" and lp["normal"] == [0.0, 0.0, 1.0]
         assert all(f["fk"] == f"{name}_fk_{f['name']}" for f in lp["frames"])
     quantities = {f["quantity"]: f["coordinates"] for f in m["functions"]}
     for q in ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y", "forward_dynamics_y",
