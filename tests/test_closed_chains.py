@@ -21,9 +21,9 @@ from derive.reference.pinocchio_model import PinRobot
 from derive.symbolic.closure import ClosedChainModel
 
 MODELS = Path(__file__).resolve().parent.parent / "models.yaml"
-SHIPPED = ("fourbar", "slider_crank", "fivebar", "example2", "delta")
+SHIPPED = ("fourbar", "slider_crank", "fivebar", "example2", "delta", "parallel_ankle")
 PLANAR = ("fourbar", "slider_crank", "fivebar", "example2")
-DOF = {"fourbar": 1, "slider_crank": 1, "fivebar": 2, "example2": 3, "delta": 3}
+DOF = {"fourbar": 1, "slider_crank": 1, "fivebar": 2, "example2": 3, "delta": 3, "parallel_ankle": 2}
 
 
 @lru_cache(maxsize=None)
@@ -144,12 +144,13 @@ def test_forward_dynamics_matches_pinocchio_constraint_dynamics(name):
         np.testing.assert_allclose(G @ ydd + ref.gdot_yd(q, qd), qdd_pin, rtol=0, atol=1e-8)
 
 
-def test_delta_forward_dynamics_matches_pinocchio_kkt():
-    """Pinocchio has no 1-D distance constraint (RigidConstraintModel is 3D/6D), so the Delta's rods go
+@pytest.mark.parametrize("name", ["delta", "parallel_ankle"])
+def test_rod_loops_forward_dynamics_matches_pinocchio_kkt(name):
+    """Pinocchio has no 1-D distance constraint (RigidConstraintModel is 3D/6D), so the rods go
     to its KKT forwardDynamics(q, v, tau, J, gamma) with the rows built from Pinocchio's own kinematics:
     phi = (d.d - L^2)/(2L), d = p_a - p_b, K = d^T (J_a - J_b)/L, Kdot qd = (ddot.ddot + d.(a_a - a_b))/L
     (frame origins' classical accelerations at qdd = 0). Same qdd to 1e-8."""
-    robot, ref, f = built("delta")
+    robot, ref, f = built(name)
     p = [x.default for x in robot.parameters]
     pr = PinRobot(robot)
     model, data = pr.model, pr.model.createData()
@@ -239,7 +240,7 @@ def test_dof_reports_the_rank_of_k_next_to_grubler(capsys):
     for name in SHIPPED:
         robot = shipped()[name]
         n = robot.nq
-        block = out.split(f"{name}: {'spatial' if name == 'delta' else 'planar'}", 1)[1]
+        block = out.split(f"{name}: {'planar' if name in PLANAR else 'spatial'}", 1)[1]
         assert f"mobility = nq - rank K = {n} - {n - DOF[name]} = {DOF[name]}" in block
         assert f"agrees with Grübler's count ({DOF[name]})" in block
         assert DOF[name] == len(robot.independent)
