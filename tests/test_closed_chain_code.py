@@ -18,9 +18,11 @@ from util import closed_inputs, robots
 import ctypes
 
 GENERATED = Path(__file__).resolve().parent.parent / "generated"
-CLOSED = ("fourbar", "slider_crank", "fivebar", "example2")
+CLOSED = ("fourbar", "slider_crank", "fivebar", "example2", "delta", "parallel_ankle")
 CLOSURE = {"fourbar": "closed form: circle-circle", "slider_crank": "closed form: circle-line",
-           "fivebar": "closed form: circle-circle", "example2": "closed form: circle-circle, circle-line"}
+           "fivebar": "closed form: circle-circle", "example2": "closed form: circle-circle, circle-line", "delta": "closed form: sphere intersection",
+           "parallel_ankle": "Newton: 8 steps on the kept rows"}
+LENGTH = {"delta": "Lr", "parallel_ankle": 0.22}
 
 
 def manifest(name: str) -> dict:
@@ -39,7 +41,10 @@ def test_manifest_states_loops_coordinates_and_closure(name):
     assert m["closed_chain"]["dependent"] == list(r.dependent)
     assert [[f["name"] for f in lp["frames"]] for lp in m["loops"]] == [[lp.a, lp.b] for lp in r.loops]
     for lp in m["loops"]:
-        assert lp["kind"] == "planar" and lp["normal"] == [0.0, 0.0, 1.0]
+        if name in LENGTH:
+            assert lp["kind"] == "distance" and lp["length"] == LENGTH[name], lp
+        else:
+            assert lp["kind"] == "planar" and lp["normal"] == [0.0, 0.0, 1.0]
         assert all(f["fk"] == f"{name}_fk_{f['name']}" for f in lp["frames"])
     quantities = {f["quantity"]: f["coordinates"] for f in m["functions"]}
     for q in ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y", "forward_dynamics_y",
@@ -63,7 +68,7 @@ def test_generated_closure_and_fd_of_id(name, committed_library):
     for _ in range(5):
         a = closed_inputs(r, rng) | {"p": p}
         q_c, status_c, res_c = (v.ravel() for v in c(function(m, "closure"), a))
-        q_py, status_py, res_py = py.closure(a["y"])
+        q_py, status_py, res_py = py.closure(a["y"], a["z0"]) if name == "parallel_ankle" else py.closure(a["y"])
         assert status_c[0] == 1.0 and status_py[0] == 1.0
         assert res_c[0] <= 1e-12 and res_py[0] <= 1e-12
         assert np.abs(ref.phi(q_c)).max() <= 1e-12 and np.abs(ref.phi(q_py)).max() <= 1e-12

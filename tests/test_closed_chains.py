@@ -21,8 +21,9 @@ from derive.reference.pinocchio_model import PinRobot
 from derive.symbolic.closure import ClosedChainModel
 
 MODELS = Path(__file__).resolve().parent.parent / "models.yaml"
-SHIPPED = ("fourbar", "slider_crank", "fivebar", "example2")
-DOF = {"fourbar": 1, "slider_crank": 1, "fivebar": 2, "example2": 3}
+SHIPPED = ("fourbar", "slider_crank", "fivebar", "example2", "delta", "parallel_ankle")
+PLANAR = ("fourbar", "slider_crank", "fivebar", "example2")
+DOF = {"fourbar": 1, "slider_crank": 1, "fivebar": 2, "example2": 3, "delta": 3, "parallel_ankle": 2}
 
 
 @lru_cache(maxsize=None)
@@ -115,7 +116,7 @@ def test_reduced_model_matches_numpy_reference_and_kkt(name):
         np.testing.assert_allclose(num(f["constraint_forces_id"](q, yd, ydd, p)), lam_kkt, rtol=0, atol=1e-10)
 
 
-@pytest.mark.parametrize("name", SHIPPED)
+@pytest.mark.parametrize("name", PLANAR)
 def test_forward_dynamics_matches_pinocchio_constraint_dynamics(name):
     """Pinocchio's proximal constraintDynamics on the same tree with a CONTACT_3D RigidConstraintModel per
     loop (the planar loops' normal row is redundant there: an over-constrained system the proximal solver
@@ -140,6 +141,41 @@ def test_forward_dynamics_matches_pinocchio_constraint_dynamics(name):
         ydd = num(f["forward_dynamics"](q, yd, tau, p))
         prox = pin.ProximalSettings(1e-14, 1e-12, 100)
         qdd_pin = pin.constraintDynamics(model, data, q, qd, ref.actuation(tau), models, datas, prox)
+        np.testing.assert_allclose(G @ ydd + ref.gdot_yd(q, qd), qdd_pin, rtol=0, atol=1e-8)
+
+
+@pytest.mark.parametrize("name", ["delta", "parallel_ankle"])
+def test_rod_loops_forward_dynamics_matches_pinocchio_kkt(name):
+    """Pinocchio has no 1-D distance constraint (RigidConstraintModel is 3D/6D), so the rods go
+    to its KKT forwardDynamics(q, v, tau, J, gamma) with the rows built from Pinocchio's own kinematics:
+    phi = (d.d - L^2)/(2L), d = p_a - p_b, K = d^T (J_a - J_b)/L, Kdot qd = (ddot.ddot + d.(a_a - a_b))/L
+    (frame origins' classical accelerations at qdd = 0). Same qdd to 1e-8."""
+    robot, ref, f = built(name)
+    p = [x.default for x in robot.parameters]
+    pr = PinRobot(robot)
+    model, data = pr.model, pr.model.createData()
+    world = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+    lengths = ref.lengths
+    for seed in range(3):
+        q, yd, _, tau = state(ref, seed)
+        G = ref.projection(q)
+        qd = G @ yd
+        pin.forwardKinematics(model, data, q, qd, np.zeros_like(q))
+        pin.updateFramePlacements(model, data)
+        pin.computeJointJacobians(model, data, q)
+        K, gamma = [], []
+        for lp, L in zip(robot.loops, lengths):
+            ia, ib = pr.frame_id(lp.a), pr.frame_id(lp.b)
+            d = data.oMf[ia].translation - data.oMf[ib].translation
+            ja = pin.getFrameJacobian(model, data, ia, world)[:3]
+            jb = pin.getFrameJacobian(model, data, ib, world)[:3]
+            dd = pin.getFrameVelocity(model, data, ia, world).linear - pin.getFrameVelocity(model, data, ib, world).linear
+            acc = (pin.getFrameClassicalAcceleration(model, data, ia, world).linear
+                   - pin.getFrameClassicalAcceleration(model, data, ib, world).linear)
+            K.append(d @ (ja - jb) / L)
+            gamma.append((dd @ dd + d @ acc) / L)
+        ydd = num(f["forward_dynamics"](q, yd, tau, p))
+        qdd_pin = pin.forwardDynamics(model, data, q, qd, ref.actuation(tau), np.array(K), np.array(gamma))
         np.testing.assert_allclose(G @ ydd + ref.gdot_yd(q, qd), qdd_pin, rtol=0, atol=1e-8)
 
 
@@ -204,7 +240,7 @@ def test_dof_reports_the_rank_of_k_next_to_grubler(capsys):
     for name in SHIPPED:
         robot = shipped()[name]
         n = robot.nq
-        block = out.split(f"{name}: planar", 1)[1]
+        block = out.split(f"{name}: {'planar' if name in PLANAR else 'spatial'}", 1)[1]
         assert f"mobility = nq - rank K = {n} - {n - DOF[name]} = {DOF[name]}" in block
         assert f"agrees with Grübler's count ({DOF[name]})" in block
         assert DOF[name] == len(robot.independent)

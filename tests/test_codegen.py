@@ -77,7 +77,8 @@ def closed_reference(ref: ClosedChainReference, fn: dict, a: dict):
             return f(x, u)
         if kind == "ode_jac_u":
             return np.vstack([np.zeros((ny, ny)), np.linalg.inv(ref.mass_matrix(ref.closure(x[:ny])[0]))])
-        if kind == "ode_jac_x":  # central differences, Richardson-extrapolated (error O(h^4) ~ 1e-12)
+        if kind == "ode_jac_x":  # central differences, Richardson-extrapolated (error O(h^4): the Delta's
+            # A ~ 1e3 has a 1e-9 relative truncation error at h = 1e-3, 16 times less at h = 2.5e-4)
             return richardson(lambda v: f(v, u), x)
         h = a["dt"][0]
         k1 = f(x, u)
@@ -104,7 +105,7 @@ def closed_reference(ref: ClosedChainReference, fn: dict, a: dict):
     raise AssertionError(kind)
 
 
-def richardson(g, x: np.ndarray, h: float = 1e-3) -> np.ndarray:
+def richardson(g, x: np.ndarray, h: float = 2.5e-4) -> np.ndarray:
     """dg/dx by central differences at h and h/2, Richardson-extrapolated: (4 D(h/2) - D(h)) / 3."""
     eye = np.eye(len(x))
 

@@ -69,10 +69,17 @@ def test_coriolis_is_christoffel_and_mdot_minus_2c_is_skew(case):
     for q, qd, qdd in states(robot):
         out = _eval(f, q, qd, qdd, params(robot))
         C, Mdot = out[1], out[8]
-        assert_close(C, ref.coriolis_matrix(q, qd), what=f"{robot.name} C")
-        assert_close(out[5], C, what=f"{robot.name} C (CRBA route)")
         zero = np.zeros(robot.nv)
-        assert_close(C @ qd, ref.rnea(q, qd, zero) - ref.rnea(q, zero, zero), what=f"{robot.name} C qd")
+        C_ref, Cqd_ref = ref.coriolis_matrix(q, qd), ref.rnea(q, qd, zero) - ref.rnea(q, zero, zero)
+        # C's own size is |dM/dq| |qd| ~ |M| |qd|; where C is 0 identically (the Delta's tree: each arm on
+        # a fixed axis, the plate on three prismatic joints: M constant) both sides are rounding of that size
+        natural = np.abs(out[0]).max() * max(np.abs(qd).max(), 1.0)
+        if np.abs(C_ref).max() <= 1e-14 * natural and np.abs(Cqd_ref).max() <= 1e-14 * natural:
+            assert max(np.abs(C).max(), np.abs(out[5]).max()) <= 1e-14 * natural, f"{robot.name}: C is not 0"
+        else:
+            assert_close(C, C_ref, what=f"{robot.name} C")
+            assert_close(out[5], C, what=f"{robot.name} C (CRBA route)")
+            assert_close(C @ qd, Cqd_ref, what=f"{robot.name} C qd")
         N = Mdot - 2 * C
         # relative to the size of Mdot ~ |M| |qd| (N itself is 0 for one joint)
         scale = max(np.abs(Mdot).max(), 2 * np.abs(C).max(), np.abs(out[0]).max() * np.abs(qd).max())

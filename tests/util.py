@@ -115,15 +115,17 @@ shipped mechanism assembles there, on the reference's branch (tests/test_closed_
 
 def closed_inputs(robot: Robot, rng: np.random.Generator, shape: tuple = ()) -> dict[str, np.ndarray]:
     """Seeded arguments of a closed chain's functions in y, of shape (*shape, n): y near the reference
-    configuration, yd, ydd normal, tau_y and u 5 x normal, x = [y; yd]."""
+    configuration, yd, ydd normal, tau_y and u 5 x normal, x = [y; yd]; z0 (a Newton closure's start)
+    the reference configuration's z."""
     names = [c.name for c in robot.coordinates]
     y_ref = np.array([robot.reference_q[names.index(c)] for c in robot.independent])
+    z_ref = np.array([robot.reference_q[names.index(c)] for c in robot.dependent])
     ny = len(y_ref)
     y = y_ref + rng.uniform(-Y_SPREAD, Y_SPREAD, shape + (ny,))
     yd = rng.normal(size=shape + (ny,))
     tau = 5 * rng.normal(size=shape + (ny,))
     return {"y": y, "yd": yd, "ydd": rng.normal(size=shape + (ny,)), "tau_y": tau, "u": tau,
-            "x": np.concatenate([y, yd], axis=-1)}
+            "x": np.concatenate([y, yd], axis=-1), "z0": np.broadcast_to(z_ref, shape + z_ref.shape).copy()}
 
 
 def tree_robots() -> list[str]:

@@ -1,4 +1,5 @@
-"""Closed-form loop closures z = gamma(y) of planar dyads: circle-circle and circle-line intersections.
+"""Closed-form loop closures z = gamma(y): planar dyads (circle-circle, circle-line) and the Delta's
+sphere intersection.
 
 A planar loop (2 rows: the two frames' origins coincide in the plane normal to n) is a revolute joint
 C about n. Where the loop's cycle holds exactly two coordinates not yet known, the cycle is a dyad:
@@ -23,6 +24,18 @@ within (c_j - pi, c_j + pi] (continuous through the motion, no 2 pi jump at +-pi
 Loops are solved in turn, each as soon as its cycle has two unknowns left. A mechanism where that
 fails (a loop that is not planar, a joint off the plane, three unknowns in every remaining loop)
 has no closed form here: :func:`closed_form_closure` returns None and the Newton solve is used.
+
+Three `distance` loops (rods of lengths L_i with ball joints) whose one ends hang on the same body,
+carried by exactly the three unknown coordinates, all prismatic (the Delta's travelling plate on an
+x-y-z translation chain), while the other ends E_i hang on known coordinates only: the plate's
+translation P = A z (A the prismatic axes in world, constant: nothing turns them) puts end i at
+B_i + P, so P lies on the three spheres |P - c_i| = L_i, c_i = E_i - B_i (trilateration):
+      e_x = (c_2 - c_1)/|c_2 - c_1|,  i = e_x.(c_3 - c_1),  e_y = (c_3 - c_1 - i e_x)/|...|,
+      e_z = e_x x e_y,  j = e_y.(c_3 - c_1),  d = |c_2 - c_1|,
+      x = (L_1^2 - L_2^2 + d^2)/(2 d),  y = (L_1^2 - L_3^2 + i^2 + j^2 - 2 i x)/(2 j),
+      P = c_1 + x e_x + y e_y + sigma sqrt(L_1^2 - x^2 - y^2) e_z,   z = A^-1 P,
+with sigma the reference's branch (the Delta's plate below the base). The square root is the
+assembly condition; the chart is lost where the three rods lie in one plane (K_z singular).
 """
 
 from __future__ import annotations
@@ -59,6 +72,15 @@ def closed_form_closure(model: SXModel, y: ca.SX) -> tuple[ca.SX, str] | None:
         return _num(ca.Function("f", [s.q, y, s.p], [e]), q_ref, y_ref, p_def)
 
     known = {c: y[i] for i, c in enumerate(robot.independent)}  # coordinate -> expression in y, p
+    if all(lp.kind == "distance" for lp in robot.loops):
+        out = _sphere_closure(model, known, at_ref, q_ref)
+        if out is None:
+            return None
+        q = ca.vertcat(*[out[c] if c in out else known[c] for c in names])
+        got = _num(ca.Function("g", [y, s.p], [q]), y_ref, p_def).ravel()
+        if not np.all(np.abs(got - q_ref) <= AGREE_TOL):
+            return None
+        return q, "closed form: sphere intersection"
     rows, start, kinds = set(robot.loop_rows), 0, []
     loops = []
     for lp in robot.loops:
@@ -187,3 +209,58 @@ def _solve_loop(model: SXModel, entry, known: dict, at_ref, q_ref) -> tuple[str,
         w0r = ca.vertcat(cs * w0[0] - sn * w0[1], sn * w0[0] + cs * w0[1])
         solved[k] = centre + sgn * ca.atan2(w0r[0] * wt[1] - w0r[1] * wt[0], ca.dot(w0r, wt))
     return kind, solved
+
+
+def _sphere_closure(model: SXModel, known: dict, at_ref, q_ref) -> dict | None:
+    """Three distance loops closing a body carried by the three unknown prismatic coordinates:
+    {coordinate: expression} by trilateration (module docstring), or None."""
+    robot: Robot = model.robot
+    s, kin = model.sym, model.kinematics
+    names = list(s.joint_names)
+    unknown = [c for c in names if c not in known]
+    if len(robot.loops) != 3 or len(unknown) != 3:
+        return None
+    if any(kin.motions[k].kind != "prismatic" for k in unknown):
+        return None
+    ends = []  # (known end, moving end) per loop
+    for lp in robot.loops:
+        anc_a, anc_b = set(kin.ancestors[lp.a]), set(kin.ancestors[lp.b])
+        if anc_a <= set(known) and anc_b == set(unknown):
+            ends.append((lp.a, lp.b))
+        elif anc_b <= set(known) and anc_a == set(unknown):
+            ends.append((lp.b, lp.a))
+        else:
+            return None
+    zero = ca.vertcat(*[s.q[names.index(k)] for k in unknown])
+    pairs_a = ca.vertcat(*[s.q[names.index(k)] for k in known])
+    pairs_b = ca.vertcat(*[x for x in known.values()])
+
+    def sub(e: ca.SX) -> ca.SX:
+        """e with the known coordinates as expressions of y and the unknown ones at 0."""
+        e = ca.substitute([e], [pairs_a], [pairs_b])[0]
+        return ca.substitute([e], [zero], [ca.SX.zeros(3)])[0]
+
+    A = ca.horzcat(*[sub(kin.joint_axis[k]) for k in unknown])  # P = A z
+    if ca.depends_on(A, ca.vertcat(s.q, s.p, *known.values())):
+        return None  # axes turned by a coordinate or set by a parameter: not a pure translation here
+    A_num = at_ref(A).reshape(3, 3)
+    if abs(np.linalg.det(A_num)) < 1e-9:
+        return None
+    c = [sub(kin.pose(e).p) - sub(kin.pose(m).p) for e, m in ends]
+    L = [s.value(lp.length) for lp in robot.loops]
+    d21, d31 = c[1] - c[0], c[2] - c[0]
+    d = ca.norm_2(d21)
+    ex = d21 / d
+    i = ca.dot(ex, d31)
+    ey_raw = d31 - i * ex
+    ey = ey_raw / ca.norm_2(ey_raw)
+    ez = ca.cross(ex, ey)
+    j = ca.dot(ey, d31)
+    x = (L[0] ** 2 - L[1] ** 2 + d * d) / (2 * d)
+    yy = (L[0] ** 2 - L[2] ** 2 + i * i + j * j - 2 * i * x) / (2 * j)
+    h = ca.sqrt(L[0] ** 2 - x * x - yy * yy)
+    base = c[0] + x * ex + yy * ey
+    P_ref = A_num @ q_ref[[names.index(k) for k in unknown]]
+    sigma = 1.0 if float((P_ref - at_ref(base).ravel()) @ at_ref(ez).ravel()) >= 0 else -1.0
+    z = ca.DM(np.linalg.inv(A_num)) @ (base + sigma * h * ez)  # constant A: no symbolic solve
+    return {k: z[n] for n, k in enumerate(unknown)}
