@@ -273,6 +273,9 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
+CLOSED_CHAIN_QUANTITIES = ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y",
+                           "forward_dynamics_y", "constraint_forces")
+"""Those of :data:`FUNCTION_QUANTITIES` that only a robot with loops has (in its independent coordinates)."""
 
 BIG_FRAMES = 8
 """A robot with more named frames than this is big (the committed arms have at most 5; a Gen3 with a
