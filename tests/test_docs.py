@@ -135,3 +135,12 @@ def test_snippets_run_in_order_and_a_failing_one_fails_the_build():
         hooks.run_blocks("```bash\nls\n```\n", "tutorial.md", required=True)
     assert hooks.run_blocks("```bash norun\nrm -rf /nothing\n```\n", "t.md", required=True)[0] == \
         "```bash\nrm -rf /nothing\n```\n"
+
+
+def test_the_viewer_guide_embeds_the_pages_the_build_writes():
+    """Every `derive view --html` page the build writes (EMBEDDED_VIEWS) is shown by an iframe of the guide,
+    and every iframe of the docs shows one of them (a missing page would be a blank frame, not a warning)."""
+    shown = {m for page in (ROOT / "docs").rglob("*.md")
+             for m in re.findall(r'<iframe src="\.\./([^"]+)"', page.read_text())}
+    assert shown == {Path(p).name for p in hooks.EMBEDDED_VIEWS} and shown
+    assert all(p.startswith("guide/") for p in hooks.EMBEDDED_VIEWS)  # beside guide/viewer/, which ../ leaves

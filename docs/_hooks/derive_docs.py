@@ -243,8 +243,28 @@ def on_config(config):
     return config
 
 
+EMBEDDED_VIEWS = {"guide/panda_view.html": ["panda", "--q", "0", "-0.6", "0", "-2.2", "0", "1.6", "0.8"]}
+"""Pages of `derive view ROBOT ... --html` the site embeds (docs/guide/viewer.md), written at build time."""
+
+
+def viewer_exports() -> dict[str, str]:
+    """{site path: the self-contained HTML page `derive view` writes} for :data:`EMBEDDED_VIEWS`."""
+    out = {}
+    with tempfile.TemporaryDirectory(prefix="derive-docs-view-") as tmp:
+        for path, argv in EMBEDDED_VIEWS.items():
+            page = Path(tmp) / Path(path).name
+            done = subprocess.run([sys.executable, "-m", "derive", "view", *argv, "--html", str(page)], cwd=tmp,
+                                  env=_environment(Path(tmp), sys.executable), capture_output=True, text=True)
+            if done.returncode != 0:
+                raise PluginError(f"derive view {' '.join(argv)} --html: exit {done.returncode}: {done.stderr.strip()}")
+            out[path] = page.read_text()
+    return out
+
+
 def on_files(files, config):
     for path, text in generated_pages().items():
+        files.append(File.generated(config, path, content=text))
+    for path, text in viewer_exports().items():
         files.append(File.generated(config, path, content=text))
     _start_executing(files)
     return files
