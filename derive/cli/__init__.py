@@ -22,11 +22,6 @@ from derive.cli.common import NEGATIVE, HelpFormatter
 from derive.cli.signals import MESSAGES, EndOnSignals
 from derive.errors import DeriveError
 
-COMMAND_MODULES: list[str] = ["derive.cli.generate", "derive.cli.models", "derive.cli.export", "derive.cli.inspect", "derive.cli.analysis",
-                              "derive.cli.solvers", "derive.cli.identify", "derive.cli.firmware", "derive.cli.bench",
-                              "derive.cli.view"]
-"""The command groups, in the order ``derive --help`` lists their commands."""
-
 COMMANDS: dict[str, str] = {
     "generate": "derive.cli.generate", "init": "derive.cli.generate",
     "import-urdf": "derive.cli.models", "import-mjcf": "derive.cli.models", "info": "derive.cli.models",
@@ -41,6 +36,9 @@ COMMANDS: dict[str, str] = {
 """Command -> the module that adds it (tests/test_conventions.py checks it against the full parser). A
 command line that names one builds the parser of that command alone: the others' modules import
 CasADi, sympy and matplotlib, about a second of CPU before the first line of work (or of error)."""
+
+COMMAND_MODULES: list[str] = list(dict.fromkeys(COMMANDS.values()))
+"""The command groups, in the order ``derive --help`` lists their commands."""
 
 
 def _command_of(argv: list[str]) -> str | None:
