@@ -384,11 +384,7 @@ def test_command_prints_and_appends(mujoco, tmp_path, capsys):
     assert "--fixed --no-actuators --name w" in robot.source
 
 
-REFUSED = {
-    "connect": ('<equality><connect name="loop" body1="b" body2="world" anchor="0 0 0"/></equality>',
-                "<equality name=\"loop\">: <connect> closes a kinematic loop: closed chains are not supported yet"),
-    "weld": ('<equality><weld body1="b"/></equality>',
-             "equality 0: <weld> closes a kinematic loop"),
+REFUSED = {  # connect, weld and tendon equalities (closed chains): tests/test_closed_chain_mujoco.py
     "polycoef": ('<equality><joint joint1="j2" joint2="j1" polycoef="0 1 0.5 0 0"/></equality>',
                  "equality 0: polycoef 0 1 0.5 0 0 is not linear: only q1 = c0 + c1 q2 couplings"),
 }

@@ -89,9 +89,12 @@ def cmd_import_urdf(args) -> int:
 
 
 def cmd_import_mjcf(args) -> int:
-    """``derive import-mjcf FILE [--floating | --fixed] [--no-actuators] [--name NAME] [--out models.yaml]``."""
+    """``derive import-mjcf FILE [--floating | --fixed] [--no-actuators] [--independent J,...] [--keyframe NAME]
+    [--name NAME] [--out models.yaml]``."""
+    independent = [x.strip() for x in args.independent.split(",") if x.strip()] if args.independent else None
     name, entry = import_mjcf_named(args.file, name=args.name, floating=args.floating,
-                                    actuators=not args.no_actuators)
+                                    actuators=not args.no_actuators, independent=independent,
+                                    keyframe=args.keyframe)
     warn_unmoved(name, entry, args.file)
     note_big(name, entry, args.file)
     if args.out:
@@ -191,7 +194,8 @@ def add_parser(sub) -> None:
                                    "--out), read from the model MuJoCo's own compiler builds (defaults, classes, "
                                    "includes and frames resolved): bodies, hinge/slide/ball/free joints, inertials, "
                                    "named sites as frames, armature/damping/frictionloss and gears as actuators, "
-                                   "linear joint couplings as mimic joints. Needs the mujoco package "
+                                   "linear joint couplings as mimic joints, connect/weld equalities as closed-chain "
+                                   "loops (point/weld). Needs the mujoco package "
                                    "(pip install 'derive-robotics[mjcf]').")
     x.add_argument("file", metavar="FILE", type=path_arg)
     base = x.add_mutually_exclusive_group()
@@ -201,6 +205,12 @@ def add_parser(sub) -> None:
                       help="fixed base: a free body is welded to the world at its initial pose")
     x.add_argument("--no-actuators", action="store_true",
                    help="leave out armature, damping, frictionloss and actuator gears (ideal joints)")
+    x.add_argument("--independent", metavar="JOINT,...",
+                   help="a closed chain's independent coordinates y (e.g. the motors; default: chosen by pivoting on "
+                        "the constraint Jacobian at MuJoCo's qpos0, actuated joints kept independent where possible)")
+    x.add_argument("--keyframe", metavar="NAME",
+                   help="a closed chain's reference configuration: this keyframe's qpos (default: the keyframe named "
+                        "'reference' where there is one, as derive export writes it, else qpos0)")
     x.add_argument("--name", help="robot name (default: the MJCF model name made a C identifier)")
     x.add_argument("--out", metavar="MODELS", type=path_arg,
                    help="append to this models file instead of printing (created if missing; written atomically)")

@@ -22,7 +22,8 @@ URDF (what ``derive import-urdf`` reads back to the same M, g and ID):
 - a floating base -> a massless ``world`` link and a ``floating`` joint ``root_joint`` (identity
   origin) to the root link: URDF's own spelling of a free body, read back by import-urdf as
   ``base: floating`` and by Pinocchio as a free flyer;
-- what URDF has no place for (gravity other than 0 0 -9.81, rotor inertia) is a comment and a note.
+- what URDF has no place for (gravity other than 0 0 -9.81, rotor inertia, loop closures) is a
+  comment and a note.
   URDF requires ``<limit effort velocity>`` (and lower, upper on revolute and prismatic joints):
   where the model has none the file gets the placeholders import-urdf reads as "no limit"
   (0 for effort and velocity, +-1e16 for a position), and a note says so.
@@ -43,6 +44,17 @@ MJCF (MuJoCo loads it; its mj_fullM and mj_rne match derive's M and ID):
 - a frame -> a ``<site>``; a floating base -> a ``<freejoint name="root_joint">`` in the root body
   (MuJoCo's qpos quaternion is (w, x, y, z), its free qvel the linear velocity in the world frame
   and the angular one in the body frame; derive's are (x, y, z, w) and both in the body frame);
+- loops (a closed chain, docs/closed-chains.md) -> ``<equality>`` between sites (a loop frame that
+  is a link gets a site ``<link>_site`` at its origin): ``point`` -> ``<connect site1 site2>``,
+  ``weld`` -> ``<weld site1 site2>``; a ``planar`` loop -> ``<connect>`` (``<weld>`` with
+  ``rotation``), the same constraint while the mechanism moves in its plane (refused where the two
+  frames are apart along the normal, or turned, at the reference configuration); a ``distance``
+  loop of length L (a massless rod with ball joints) -> a two-site spatial ``<tendon>`` ``loop<i>``
+  from frame a to frame b and ``<equality><tendon polycoef="L - L0 0 0 0 0">`` (MuJoCo holds the
+  tendon's length minus L0, its length at qpos0, at polycoef[0]); a ``hinge`` loop is refused
+  (MuJoCo has no hinge equality). MuJoCo's soft rows keep their default solref/solimp. The closed
+  reference configuration is the ``<key name="reference">`` (derive import-mjcf closes the loops
+  there);
 - gravity -> ``<option gravity>``. MuJoCo refuses a moving body (one with a joint) whose mass or a
   principal moment is below mjMINVAL (1e-15); such a mass or moment (a thin rod's zero moment, a
   massless link between joints) is raised to 1e-12 of the robot's largest (at least 1e-14), and a
@@ -342,6 +354,9 @@ def export_urdf(robot: Robot) -> Exported:
                      f"{_vec(gravity)}: written as a comment only")
     if rotor:
         notes.append("URDF has no rotor inertia (armature): left out, in comments only, for " + ", ".join(rotor))
+    if robot.loops:
+        notes.append(f"URDF has no loop closures: the {len(robot.loops)} loop(s) are left out (the file is the "
+                     "spanning tree; derive export --mjcf writes them as MuJoCo equalities)")
     if filled:
         notes.append("URDF requires <limit effort velocity> (and lower, upper on revolute and prismatic joints): where "
                      f"the model gives none, the placeholders 0 and +-{UNBOUNDED:g} are written (read back as no limit) "
@@ -372,6 +387,78 @@ def _principal(inertia: np.ndarray, rpy) -> tuple[tuple[float, float, float], tu
     return tuple(float(v) for v in eig), matrix_quaternion(rpy_matrix(rpy) @ axes)
 
 
+@dataclass
+class _MjcfLoops:
+    """What a robot's loops add to its MJCF: sites per link, tendons, equality lines, notes."""
+
+    sites: dict[str, list[str]]  # link -> <site .../> (no indent)
+    tendons: list[str]
+    equalities: list[str]
+    notes: list[str]
+
+
+def _mjcf_loops(robot: Robot, m: "_Model") -> _MjcfLoops:
+    """The loops as MuJoCo equalities between sites (module docstring), checked at the reference configuration."""
+    from derive.description.closure import Poses, loop_residual
+
+    out = _MjcfLoops({}, [], [], [])
+    if not robot.loops:
+        return out
+    poses = Poses(robot)(np.array(robot.reference_q, dtype=float))
+    zero = Poses(robot)(np.zeros(robot.nq))
+    tendons: set[str] = set()
+    if any(lp.kind == "distance" for lp in robot.loops) and any(j.mimic and j.mimic.offset for j in robot.joints):
+        raise ModelError(robot.name, "loops", "a distance loop's tendon length is MuJoCo's at qpos0, where a mimic "
+                         "joint's offset is not applied: a robot with both cannot be written as MJCF", robot.file or None)
+    links = {lk.name for lk in robot.links}
+    bodies, joints = set(m.link_names), set(m.joint_names)
+    sites = {f.name for f in robot.frames}
+    link_site: dict[str, str] = {}
+
+    def site(frame: str) -> str:
+        frame = robot.frame_name(frame) if frame not in links else frame
+        if frame not in links:
+            return frame
+        if frame not in link_site:
+            link_site[frame] = m.unique(sites | bodies, f"{frame}_site")
+            sites.add(link_site[frame])
+            out.sites.setdefault(frame, []).append(f'<site name="{link_site[frame]}" pos="0 0 0"/>')
+        return link_site[frame]
+
+    def where(i: int) -> str:
+        return f"loops[{i}]"
+
+    for i, lp in enumerate(robot.loops):
+        (Ra, pa), (Rb, pb) = poses[lp.a], poses[lp.b]
+        if lp.kind == "hinge":
+            raise ModelError(robot.name, where(i), "MuJoCo has no hinge equality: a hinge loop cannot be written as MJCF "
+                             "(two point loops on the axis can)", robot.file or None)
+        if lp.kind == "distance":
+            length = m.num(lp.length)
+            tendon = m.unique(tendons, f"loop{i}")
+            # MuJoCo's tendon equality holds length - length0 = polycoef[0], length0 the length at qpos0 (q = 0)
+            length0 = float(np.linalg.norm(zero[lp.a][1] - zero[lp.b][1]))
+            out.tendons.append(f'<spatial name="{tendon}"><site site="{site(lp.a)}"/><site site="{site(lp.b)}"/></spatial>')
+            out.equalities.append(f'<tendon name="{tendon}" tendon1="{tendon}" polycoef="{_num(length - length0)} 0 0 0 0"/>')
+            out.notes.append(f"{where(i)} (distance {length!r} m) is the spatial tendon '{tendon}' from {lp.a} to {lp.b} "
+                             f"held at that length (<equality><tendon>: its length at q = 0, {length0!r} m, plus polycoef[0])")
+            continue
+        if lp.kind == "planar":
+            n = Ra @ np.asarray(lp.axis, dtype=float)
+            apart = abs(float(n @ (pa - pb)))
+            turned = float(np.linalg.norm(Ra - Rb)) if lp.rotation else 0.0
+            if apart > 1e-9 or turned > 1e-9:
+                raise ModelError(robot.name, where(i), f"a planar loop is a <{'weld' if lp.rotation else 'connect'}> "
+                                 f"in MJCF only where its frames coincide at the reference configuration: they are "
+                                 f"{apart:.3g} m apart along the normal" + (f" and turned ({turned:.3g})" if lp.rotation
+                                 else ""), robot.file or None)
+            out.notes.append(f"{where(i)} (planar) is a 3-D <{'weld' if lp.rotation else 'connect'}>: the same "
+                             "constraint while the mechanism moves in its plane")
+        tag = "weld" if lp.kind == "weld" or lp.rotation else "connect"
+        out.equalities.append(f'<{tag} name="loop{i}" site1="{site(lp.a)}" site2="{site(lp.b)}"/>')
+    return out
+
+
 def export_mjcf(robot: Robot) -> Exported:
     """The robot as an MJCF document (see the module docstring) and the notes on what differs in MuJoCo."""
     m = _Model(robot)
@@ -385,6 +472,9 @@ def export_mjcf(robot: Robot) -> Exported:
     moments = [float(np.abs(np.linalg.eigvalsh(m.inertia(lk))).max()) for lk in robot.links]
     floor_mass = max(FLOOR * max(masses, default=0.0), 10 * MJ_MINVAL)
     floor_moment = max(FLOOR * max(moments, default=0.0), 10 * MJ_MINVAL)
+    closed = _mjcf_loops(robot, m)
+    reference = dict(zip((c.name for c in robot.coordinates), robot.reference_q)) if robot.loops else {}
+    key_qpos: list[str] = []  # the reference configuration in MuJoCo's qpos order
     raised: list[str] = []
     equalities: list[str] = []
     motors: list[str] = []
@@ -415,6 +505,7 @@ def export_mjcf(robot: Robot) -> Exported:
             rpy = m.vec(f.origin.rpy)
             quat = f' quat="{_vec(rpy_quaternion(rpy))}"' if any(rpy) else ""
             out.append(f'{ind * depth}<site name="{f.name}" pos="{_vec(m.vec(f.origin.xyz))}"{quat}/>')
+        out += [f"{ind * depth}{x}" for x in closed.sites.get(link, [])]
         return out
 
     def joint_lines(j: Joint, depth: int) -> list[str]:
@@ -436,6 +527,9 @@ def export_mjcf(robot: Robot) -> Exported:
                 if value:
                     attrs += f' {key}="{_num(value)}"'
             out.append(f"{ind * depth}<joint {attrs}/>")
+            if reference:
+                leader, a, b = p.mimic or (p.name, 1.0, 0.0)
+                key_qpos.append(_num(a * reference[leader] + b))
             if lim.velocity is not None:
                 velocity.append(f"{p.name} {lim.velocity!r}")
             if p.mimic is not None:
@@ -491,6 +585,11 @@ def export_mjcf(robot: Robot) -> Exported:
     if equalities:
         notes.append("mimic joints are MuJoCo equality constraints (soft, solref/solimp defaults): "
                      + ", ".join(e.split('"')[1] for e in equalities))
+    if robot.loops:
+        notes += closed.notes
+        notes.append("the loops are MuJoCo equality constraints (soft, solref/solimp defaults); the keyframe "
+                     "'reference' is the closed reference configuration")
+        equalities += [f"{ind * 2}{e}" for e in closed.equalities]
     lines = [f'<mujoco model="{robot.name}">', *(f"{ind}{c}" for c in m.header("MJCF")),
              *(f"{ind}" + _comment("note: " + n) for n in notes),
              f'{ind}<compiler angle="radian" autolimits="true" inertiafromgeom="false"/>',
@@ -499,6 +598,10 @@ def export_mjcf(robot: Robot) -> Exported:
         lines += [f"{ind}<equality>", *equalities, f"{ind}</equality>"]
     if motors:
         lines += [f"{ind}<actuator>", *motors, f"{ind}</actuator>"]
+    if closed.tendons:
+        lines += [f"{ind}<tendon>", *(f"{ind * 2}{t}" for t in closed.tendons), f"{ind}</tendon>"]
+    if key_qpos:
+        lines += [f"{ind}<keyframe>", f'{ind * 2}<key name="reference" qpos="{" ".join(key_qpos)}"/>', f"{ind}</keyframe>"]
     lines.append("</mujoco>")
     return Exported("\n".join(lines) + "\n", tuple(notes))
 

@@ -38,8 +38,27 @@ Conventions (what the entry is, against MuJoCo's qpos and qvel):
   f_c sign(qd)); a joint actuator's ``gear`` -> ``gear_ratio`` (a record only: derive's tau stays
   the joint torque, MuJoCo's motor ctrl = tau / gear). ``actuators=False`` leaves all of it out.
 - ``equality joint`` with polycoef (c0, c1, 0, 0, 0): joint1 becomes a mimic of joint2,
-  q1 - ref1 = c0 + c1 (q2 - ref2); a non-linear polynomial, a joint fixed to a constant,
-  ``connect``, ``weld`` (closed chains) and the other kinds are refused in one line.
+  q1 - ref1 = c0 + c1 (q2 - ref2); a non-linear polynomial, a joint fixed to a constant and the
+  other kinds (flex, other tendon couplings) are refused in one line.
+- ``equality connect``, ``weld`` and a two-site ``tendon`` close kinematic loops
+  (docs/closed-chains.md); each becomes a ``loops:`` entry between two frames. A named site is the
+  loop's frame itself; otherwise new frames ``<name>_a`` (body1's link) and ``<name>_b`` (body2's),
+  ``<name>`` the equality's name or ``loop<k>``.
+  connect -> ``point``: with bodies, frame a at ``anchor`` in body1 and frame b at the point MuJoCo
+  computes in body2 at qpos0 (its ``eq_data[3:6]``); with sites, the two sites.
+  weld -> ``weld``: with bodies, frame a at (``relpose``, given or the one MuJoCo computes at qpos0)
+  in body1 and frame b at ``anchor`` in body2 (MuJoCo's p1 + R1 relpos = p2 + R2 anchor, R1 relquat =
+  R2); with sites, the two sites. torquescale 0 (no rotation held) is refused: write a connect.
+  tendon (a spatial tendon through exactly two sites, no tendon2, polycoef (c0, 0, 0, 0, 0)) ->
+  ``distance`` between the two sites, length = MuJoCo's tendon_length0 + c0 (a massless rod with
+  ball joints); other tendon couplings are refused.
+  ``solref``, ``solimp`` and ``torquescale`` weigh MuJoCo's soft rows; derive's closure is exact, so
+  they are not kept. An inactive one (``active="false"``) is left out with a warning.
+  ``reference:`` is the qpos of the keyframe ``keyframe=`` (``--keyframe``; by default the one named
+  ``reference`` where there is one, as derive export writes it), else MuJoCo's qpos0 (the hinge and
+  slide ``ref``): derive closes the loops there (``independent:`` from ``independent=``, else
+  derive's pivoting); loops that do not close there are one line. Closed chains need a fixed base
+  (``--fixed`` welds a free body).
 - Gravity is ``opt.gravity`` (0 where the gravity flag is disabled); joint stiffness and
   gravity compensation have no derive counterpart and are dropped with a warning.
 """
@@ -145,19 +164,23 @@ def _compile(mujoco, path: Path, spelling: str, robot: str):
 
 
 def import_mjcf(path: str | Path, name: str | None = None, floating: bool | None = None,
-                actuators: bool = True) -> dict:
+                actuators: bool = True, independent: list[str] | None = None, keyframe: str | None = None) -> dict:
     """Read an MJCF file through MuJoCo's compiler and return one models.yaml robot entry (a plain dict).
 
     ``floating`` None: as the file says (a free joint -> ``base: floating``); True / False to
     choose (module docstring). ``actuators`` False leaves armature, damping, frictionloss and
-    gears out. ``name`` defaults to the MJCF ``model`` name made a C identifier. Raises a
-    one-line :class:`~derive.errors.DeriveError` naming the file and the element.
+    gears out. ``name`` defaults to the MJCF ``model`` name made a C identifier. ``independent``: the
+    independent coordinates of a closed chain (``connect``/``weld`` equalities; default: derive's
+    pivoting); ``keyframe``: the keyframe whose qpos is its reference configuration (default: the one named
+    ``reference`` where there is one, else qpos0). Raises a one-line :class:`~derive.errors.DeriveError`
+    naming the file and the element.
     """
-    return import_mjcf_named(path, name, floating, actuators)[1]
+    return import_mjcf_named(path, name, floating, actuators, independent, keyframe)[1]
 
 
 def import_mjcf_named(path: str | Path, name: str | None = None, floating: bool | None = None,
-                      actuators: bool = True) -> tuple[str, dict]:
+                      actuators: bool = True, independent: list[str] | None = None,
+                      keyframe: str | None = None) -> tuple[str, dict]:
     """Like :func:`import_mjcf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
@@ -172,12 +195,16 @@ def import_mjcf_named(path: str | Path, name: str | None = None, floating: bool 
     default = c_identifier(model_name or file.stem)
     robot = name or default
     m = _compile(mujoco, file, spelling, robot)
-    return robot, _Importer(mujoco, m, robot, spelling, floating, actuators, default).entry()
+    return robot, _Importer(mujoco, m, robot, spelling, floating, actuators, default, independent,
+                              keyframe).entry()
 
 
 class _Importer:
-    def __init__(self, mujoco, m, robot: str, spelling: str, floating: bool | None, actuators: bool, default: str):
+    def __init__(self, mujoco, m, robot: str, spelling: str, floating: bool | None, actuators: bool, default: str,
+                 independent: list[str] | None = None, keyframe: str | None = None):
         self.mj, self.m, self.robot, self.spelling, self.default_name = mujoco, m, robot, spelling, default
+        self.independent = list(independent) if independent else None
+        self.keyframe = keyframe
         kinds = mujoco.mjtJoint
         # plain ints: the arrays hold numpy integers, which pybind's enums do not compare with
         self.FREE, self.BALL, self.SLIDE, self.HINGE = (int(k) for k in (kinds.mjJNT_FREE, kinds.mjJNT_BALL,
@@ -301,6 +328,11 @@ class _Importer:
             frames.append({"name": c_identifier(m.site(s).name), "link": link_of[b], **_origin(pose)})
         if floating and any(m.site_bodyid[s] == 0 and m.site(s).name for s in range(m.nsite)):
             self.notes.append("the world's sites left out")
+        loops = self.loops(link_of, at, frames, links)
+        if self.independent and not loops:
+            raise self.error("--independent", "only a closed chain (an equality connect or weld) has independent "
+                                              "coordinates; this file has none")
+        closed = self.closure_fields(loops, joints)
 
         out_links = [{"name": n, **self.merged(n, parts[n])} for n in links]
         self.check_names(out_links, joints, frames)
@@ -310,7 +342,9 @@ class _Importer:
             self.warn("body gravcomp", "gravity compensation is not modelled by derive: left out")
         notes = "; ".join(self.notes)
         command = f"{GENERATOR} {self.spelling}" + {None: "", True: " --floating", False: " --fixed"}[self.floating_arg] \
-            + ("" if self.with_actuators else " --no-actuators") + (f" --name {self.robot}" if self.robot != self.default_name else "")
+            + ("" if self.with_actuators else " --no-actuators") + (f" --name {self.robot}" if self.robot != self.default_name else "") \
+            + (f" --independent {','.join(self.independent)}" if self.independent else "") \
+            + (f" --keyframe {self.keyframe}" if self.keyframe is not None else "")
         entry = {
             "description": f"{self.robot} imported from MJCF" + (f" ({notes})" if notes else ""),
             "source": f"{Path(self.spelling).name}, imported by `{command}`",
@@ -319,6 +353,7 @@ class _Importer:
             "links": out_links,
             "joints": joints,
             "frames": frames,
+            **closed,
         }
         try:
             parse_robot(self.robot, entry)
@@ -400,6 +435,107 @@ class _Importer:
             out["gear_ratio"] = gears[0]
         return out
 
+    # ---- loop closures (equality connect and weld)
+    def loops(self, link_of: dict[int, str], at: dict[int, np.ndarray], frames: list[dict],
+              links: list[str]) -> list[dict]:
+        """models.yaml ``loops:`` of the active connect, weld and two-site tendon equalities; the frames they
+        need appended to ``frames`` (module docstring)."""
+        m, mj = self.m, self.mj
+        connect, weld, tendon = (int(k) for k in (mj.mjtEq.mjEQ_CONNECT, mj.mjtEq.mjEQ_WELD, mj.mjtEq.mjEQ_TENDON))
+        site = int(mj.mjtObj.mjOBJ_SITE)
+        taken = set(links) | {f["name"] for f in frames}
+        out: list[dict] = []
+        for e in range(m.neq):
+            kind = int(m.eq_type[e])
+            if kind not in (connect, weld, tendon):
+                continue
+            label = m.equality(e).name
+            where = f"<equality name=\"{label}\">" if label else f"equality {e}"
+            if not m.eq_active0[e]:
+                self.warn(where, "inactive at the start (active=\"false\"): left out")
+                continue
+            data = np.array(m.eq_data[e], dtype=float)
+            o1, o2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+            loop: dict[str, Any] = {"kind": {connect: "point", weld: "weld", tendon: "distance"}[kind]}
+            if kind == tendon:
+                ends = self.tendon_sites(where, o1, o2, data)
+                loop["length"] = float(m.tendon_length0[o1] + data[0])
+            elif int(m.eq_objtype[e]) == site:
+                ends = [o1, o2]
+            if kind == tendon or int(m.eq_objtype[e]) == site:
+                poses = [(int(m.site_bodyid[s]), _h(quat_matrix(m.site_quat[s]), m.site_pos[s]),
+                          c_identifier(m.site(s).name) if m.site(s).name else None) for s in ends]
+            elif kind == connect:
+                poses = [(o1, _h(np.eye(3), data[0:3]), None), (o2, _h(np.eye(3), data[3:6]), None)]
+            else:
+                quat = data[6:10]
+                poses = [(o1, _h(quat_matrix(quat / np.linalg.norm(quat)), data[3:6]), None),
+                         (o2, _h(np.eye(3), data[0:3]), None)]
+            if kind == weld and not data[10] > 0:
+                raise self.error(where, f"torquescale {data[10]:g} leaves the rotation free: write it as <connect>")
+            for b, _, _ in poses:
+                if b not in link_of:
+                    raise self.error(where, f"joins {self.body_where(b)}, which is not on the floating base's tree "
+                                            "(closed chains need a fixed base: --fixed)")
+            base = c_identifier(label) if label else f"loop{len(out)}"
+            names = []
+            for side, (b, pose, named) in zip("ab", poses):
+                if named is not None:  # a named site is a frame already
+                    names.append(named)
+                    continue
+                name = f"{base}_{side}"
+                while name in taken:
+                    name += "_"
+                taken.add(name)
+                names.append(name)
+                frames.append({"name": name, "link": link_of[b], **_origin(at[b] @ pose)})
+            out.append({"frames": names, **loop})
+        return out
+
+    def tendon_sites(self, where: str, t1: int, t2: int, data: np.ndarray) -> list[int]:
+        """The two sites of a tendon equality that is a distance loop: a spatial tendon through exactly two sites
+        held at a constant length (no tendon2, polycoef c1..c4 = 0); anything else is refused in one line."""
+        m, mj = self.m, self.mj
+        start, count = int(m.tendon_adr[t1]), int(m.tendon_num[t1])
+        wraps = [(int(m.wrap_type[w]), int(m.wrap_objid[w])) for w in range(start, start + count)]
+        if t2 >= 0 or any(data[1:5]) or len(wraps) != 2 or any(k != int(mj.mjtWrap.mjWRAP_SITE) for k, _ in wraps):
+            raise self.error(where, "<tendon> equality constraints are supported only as a distance loop: a spatial "
+                             "tendon through exactly two sites held at a constant length (no tendon2, polycoef "
+                             "c1 = c2 = c3 = c4 = 0)")
+        return [w for _, w in wraps]
+
+    def closure_fields(self, loops: list[dict], joints: list[dict]) -> dict:
+        """``loops:``, ``independent:`` and ``reference:``: the configuration of the keyframe ``self.keyframe``
+        (by default the one named ``reference``, where there is one: derive export writes it), else MuJoCo's
+        qpos0; a ball's quaternion as its ZYX angles. Mimic joints have no entry."""
+        if not loops:
+            return {}
+        m, mj = self.m, self.mj
+        names = [m.key(k).name for k in range(m.nkey)]
+        wanted = self.keyframe if self.keyframe is not None else ("reference" if "reference" in names else None)
+        if wanted is not None and wanted not in names:
+            raise self.error(f"<key name=\"{wanted}\">", "no keyframe of that name (keyframes: "
+                             f"{', '.join(n or '(unnamed)' for n in names) or 'none'})")
+        qpos = np.array(m.qpos0 if wanted is None else m.key(names.index(wanted)).qpos, dtype=float)
+        if wanted is not None:
+            self.notes.append(f"loops closed at the keyframe '{wanted}'")
+        mimics = {x["name"] for x in joints if "mimic" in x}
+        reference = {}
+        for j in range(m.njnt):
+            kind, a, name = int(m.jnt_type[j]), int(m.jnt_qposadr[j]), self.joint_name(j)
+            if kind in (self.HINGE, self.SLIDE) and name not in mimics:
+                values = {name: float(qpos[a])}
+            elif kind == self.BALL:
+                R = quat_matrix(qpos[a:a + 4] / np.linalg.norm(qpos[a:a + 4]))
+                values = {f"{name}_z": math.atan2(R[1, 0], R[0, 0]),
+                          f"{name}_y": math.asin(max(-1.0, min(1.0, -R[2, 0]))),
+                          f"{name}_x": math.atan2(R[2, 1], R[2, 2])}
+            else:
+                continue
+            reference.update({k: _clean(v) for k, v in values.items() if v})
+        return {"loops": loops, **({"independent": self.independent} if self.independent else {}),
+                **({"reference": reference} if reference else {})}
+
     # ---- equality constraints
     def check_equality(self, e: int) -> None:
         m, mj = self.m, self.mj
@@ -407,9 +543,8 @@ class _Importer:
         label = m.equality(e).name
         where = f"<equality name=\"{label}\">" if label else f"equality {e}"
         spelled = {int(v): k.removeprefix("mjEQ_").lower() for k, v in mj.mjtEq.__members__.items()}.get(kind, str(kind))
-        if kind in (int(mj.mjtEq.mjEQ_CONNECT), int(mj.mjtEq.mjEQ_WELD)):
-            raise self.error(where, f"<{spelled}> closes a kinematic loop: closed chains are not supported yet "
-                             "(remove the constraint to import the open tree)")
+        if kind in (int(mj.mjtEq.mjEQ_CONNECT), int(mj.mjtEq.mjEQ_WELD), int(mj.mjtEq.mjEQ_TENDON)):
+            return  # a loop closure: self.loops
         if kind != int(mj.mjtEq.mjEQ_JOINT):
             raise self.error(where, f"<{spelled}> equality constraints are not supported")
         if not m.eq_active0[e]:
