@@ -97,3 +97,43 @@ def test_generated_rk4_for_one_second_keeps_the_loops_closed(name):
         worst = max(worst, float(np.abs(ref.phi(q)).max()))
     assert worst <= 1e-10
     assert np.abs(x[:ny] - y0).max() > 1e-3
+
+
+def test_newton_closure_reports_its_status_and_residual(committed_library):
+    """The fixed-count Newton closure (8 steps on the kept rows; the only shipped mechanism without a closed
+    form is the parallel ankle). C and Python agree; from z0 near the solution (the reference's z, and 0.3 rad
+    off) status 1 and residual <= 1e-12; started far off (z0 = (2, 2) rad) the 8 steps do not converge:
+    status 0 and residual 0.0129; over a grid of starts status is 1 exactly where the residual is <= 1e-6
+    (ASSEMBLED_TOL) and the residual is the reference's max |phi(q)|. A start past the foot's other
+    assembly (pitch 3 rad) closes there: status 1 says the loops are closed, not on which branch."""
+    newton = [n for n in CLOSED if manifest(n)["closed_chain"]["closure"].startswith("Newton")]
+    assert newton == ["parallel_ankle"]
+    name = "parallel_ankle"
+    m, r = manifest(name), robots()[name]
+    c = CFunctions(committed_library(name), m, ctypes.c_double)
+    py = load_python(name)
+    ref = ClosedChainReference(r)
+    p = np.array([x.default for x in r.parameters])
+    y = np.array(m["closed_chain"]["reference_y"])
+    z_ref = ref.q_ref[ref.z]
+
+    def both(z0):
+        q_c, status_c, res_c = (v.ravel() for v in c(function(m, "closure"), {"y": y, "z0": np.asarray(z0), "p": p}))
+        q_py, status_py, res_py = (np.ravel(v) for v in py.closure(y, z0))
+        np.testing.assert_allclose(q_c, q_py, rtol=1e-12, atol=1e-12)
+        assert status_c[0] == status_py[0]
+        assert res_c[0] == pytest.approx(res_py[0], rel=1e-9, abs=1e-15)
+        assert res_py[0] == pytest.approx(np.abs(ref.phi(q_py)).max(), rel=1e-9, abs=1e-15)
+        return q_py, status_py[0], res_py[0]
+
+    for z0 in (z_ref, z_ref + 0.3, z_ref - 0.3):
+        q, status, residual = both(z0)
+        assert status == 1.0 and residual <= 1e-12
+        np.testing.assert_allclose(q[ref.z], ref.closure(y)[0][ref.z], rtol=0, atol=1e-12)
+    q, status, residual = both([2.0, 2.0])
+    assert status == 0.0 and residual == pytest.approx(0.0129, rel=0.01)
+    for z0 in np.array(np.meshgrid(np.linspace(-3, 3, 7), np.linspace(-3, 3, 7))).reshape(2, -1).T:
+        _, status, residual = both(z0)
+        assert status == float(residual <= 1e-6)
+    q, status, residual = both([3.0, 0.0])
+    assert status == 1.0 and residual <= 1e-12 and abs(q[ref.z][0] - ref.closure(y)[0][ref.z][0]) > 2

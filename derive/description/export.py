@@ -70,6 +70,7 @@ from typing import Any, Iterable
 import numpy as np
 
 from derive.description import expr
+from derive.description.closure import Poses
 from derive.description.robot import FREE_FLYER, IDEAL, Actuator, Frame, Joint, Limits, ModelError, Origin, Robot
 
 URDF_GRAVITY = (0.0, 0.0, -9.81)
@@ -399,8 +400,6 @@ class _MjcfLoops:
 
 def _mjcf_loops(robot: Robot, m: "_Model") -> _MjcfLoops:
     """The loops as MuJoCo equalities between sites (module docstring), checked at the reference configuration."""
-    from derive.description.closure import Poses, loop_residual
-
     out = _MjcfLoops({}, [], [], [])
     if not robot.loops:
         return out
