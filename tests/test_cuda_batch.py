@@ -12,6 +12,7 @@ nvcc time (2 shared cores, measured): planar_2r's 5 functions ~8 s CPU, Panda's 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import subprocess
@@ -28,37 +29,52 @@ from derive.runtime import build, cuda
 
 ROOT = Path(__file__).resolve().parent.parent
 SMALL = ("inverse_dynamics", "mass_matrix", "forward_dynamics", "ode_jac_x", "ik_tcp")
+INPUTS = {"inverse_dynamics": ("q", "qd", "qdd"), "mass_matrix": ("q",), "forward_dynamics": ("q", "qd", "tau"),
+          "ode_jac_x": ("x", "u"), "ode_rhs": ("x", "u"), "rk4_step": ("x", "u", "dt")}
+EMULATED = SMALL + ("ode_rhs", "rk4_step")  # rk4_step calls ode_rhs: in two units of one precision (chunks)
 PANDA = ("inverse_dynamics",)
 
 
 @pytest.fixture(scope="module")
 def cache(tmp_path_factory):
-    """A cache of this module's own, so the libraries are built here (not found built)."""
+    """A cache of this module's own, so the CUDA libraries are built here (not found built); the CPU
+    libraries the results are compared with come from the usual cache."""
     if cuda.find_nvcc() is None:
         if os.environ.get("CI"):
             pytest.fail("nvcc not found: the `cuda` extra (nvidia-cuda-nvcc) should be installed by `make test`")
         pytest.skip("no nvcc: install the CUDA toolkit or `pip install derive-robotics[cuda]`")
-    root = tmp_path_factory.mktemp("xdg")
+    return tmp_path_factory.mktemp("xdg")
+
+
+@contextlib.contextmanager
+def cached_in(root: Path):
     old = os.environ.get("XDG_CACHE_HOME")
     os.environ["XDG_CACHE_HOME"] = str(root)
-    yield root
-    if old is None:
-        os.environ.pop("XDG_CACHE_HOME")
-    else:
-        os.environ["XDG_CACHE_HOME"] = old
+    try:
+        yield
+    finally:
+        if old is None:
+            os.environ.pop("XDG_CACHE_HOME")
+        else:
+            os.environ["XDG_CACHE_HOME"] = old
+
+
+def cuda_compiled(root: Path, robot: str, functions):
+    with cached_in(root):
+        return derive.compiled(robot, device="cuda", functions=functions)
 
 
 @pytest.fixture(scope="module")
 def small(cache):
     builds = build.BUILDS
-    mod = derive.compiled("planar_2r", device="cuda", functions=SMALL)
+    mod = cuda_compiled(cache, "planar_2r", SMALL)
     assert build.BUILDS == builds + 1
     return mod
 
 
 @pytest.fixture(scope="module")
 def panda(cache):
-    return derive.compiled("panda", device="cuda", functions=PANDA)
+    return cuda_compiled(cache, "panda", PANDA)
 
 
 def defined_symbols(lib: Path) -> set[str]:
@@ -86,20 +102,21 @@ def test_the_library_exports_a_launcher_per_function_and_precision(which, reques
     assert [f[0] for f in rec["functions"]] == [f"{robot}_{n}" for n in mod.FUNCTIONS]
 
 
-def test_second_call_is_the_cached_library(small):
+def test_second_call_is_the_cached_library(small, cache):
     builds = build.BUILDS
-    again = derive.compiled("planar_2r", device="cuda", functions=list(reversed(SMALL)))
+    again = cuda_compiled(cache, "planar_2r", list(reversed(SMALL)))
     assert again is small and build.BUILDS == builds
 
 
 def test_kernel_source_gathers_and_scatters_by_two_strides(small):
     """The unit's kernel reads element j of state i at a[i*s + j*e] and IK's nullable inputs as NULL."""
-    text = (small.LIBRARY.parent / "planar_2r_cuda_f64.cu").read_text()
-    assert "#define DERIVE_FN __device__" in text and "DERIVE_FLOAT" not in text
+    units = sorted(small.LIBRARY.parent.glob("planar_2r_cuda_f64*.cu"))  # one per group of functions (CPUs)
+    text = "".join(u.read_text() for u in units)
+    assert units and "#define DERIVE_FN __device__" in text and "DERIVE_FLOAT" not in text
     assert "l_q[j] = a_q[i * s_q + j * e_q];" in text
     assert "r_tau[i * s_tau + j * e_tau] = l_tau[j];" in text
     assert "status[i * s_status] = planar_2r_ik_tcp(" in text and "a_w ? l_w : 0" in text
-    assert "#define DERIVE_FLOAT" in (small.LIBRARY.parent / "planar_2r_cuda_f32.cu").read_text()
+    assert all("#define DERIVE_FLOAT" in u.read_text() for u in small.LIBRARY.parent.glob("planar_2r_cuda_f32*.cu"))
 
 
 NO_DEVICE = r"""
@@ -129,7 +146,7 @@ def test_without_a_device_a_call_is_one_line_no_cuda_device(small, cache):
 
 def test_bad_requests_are_one_line(cache):
     with pytest.raises(DeriveError, match=r"^robot 'planar_2r': derive.compiled\(device='cuda'\): no function 'nope'"):
-        derive.compiled("planar_2r", device="cuda", functions=["nope"])
+        cuda_compiled(cache, "planar_2r", ["nope"])
     with pytest.raises(DeriveError, match=r"device='tpu' is not a device \(cpu or cuda\)"):
         derive.compiled("planar_2r", device="tpu")
     with pytest.raises(DeriveError, match="functions= chooses the CUDA kernels"):
@@ -139,7 +156,7 @@ def test_bad_requests_are_one_line(cache):
 def test_a_compile_error_is_one_line(cache, monkeypatch):
     monkeypatch.setenv("NVCCFLAGS", "-DDERIVE_REAL=no_such_type")
     with pytest.raises(DeriveError, match=r"^cannot compile robot 'planar_2r': .*error") as info:
-        derive.compiled("planar_2r", device="cuda", functions=["mass_matrix"])
+        cuda_compiled(cache, "planar_2r", ["mass_matrix"])
     assert "\n" not in str(info.value)
 
 
@@ -196,7 +213,8 @@ def compare_with_the_cpu(mod, cpu, n: int) -> None:
     for name in mod.FUNCTIONS:
         if name.startswith("ik_"):
             continue
-        args = (x, qdd) if name == "ode_jac_x" else (q,) if name == "mass_matrix" else (q, qd, qdd)
+        given = {"q": q, "qd": qd, "qdd": qdd, "tau": qdd, "x": x, "u": qdd, "dt": np.full((n, 1), 0.01)}
+        args = tuple(given[k] for k in INPUTS[name])
         want = getattr(cpu, name)(*args)
         fn = getattr(mod, name)
         close(fn(*args), want, 1e-12)                                   # host arrays: numpy out
@@ -319,11 +337,15 @@ def emulated(tmp_path_factory):
     robot = "planar_2r"
     snap = build.read_generated(robot, ROOT / "generated" / robot)
     sigs = build.signatures(snap.manifest)
-    chosen = cuda.select(robot, sigs, SMALL)
-    files = cuda.needed_sources(chosen, sigs, snap)
+    chosen = cuda.select(robot, sigs, EMULATED)
     rec = cuda.cuda_record(robot, snap.manifest, chosen, snap.sources_hash)
     (tmp / "fake_cuda.h").write_text(FAKE_CUDA)
-    units = [cuda.unit_source(robot, chosen, files, s, sigs) for s in ("f64", "f32")] + [cuda.host_source(robot, rec)]
+    groups = cuda.chunks(chosen, snap.manifest, 4)  # as on an 8-core machine
+    assert len(groups) == 4 and sorted(s.name for g in groups for s in g) == sorted(EMULATED)
+    assert next(g for g in groups if any(s.name == "rk4_step" for s in g)) != \
+        next(g for g in groups if any(s.name == "ode_rhs" for s in g))
+    units = [cuda.unit_source(robot, g, cuda.needed_sources(g, sigs, snap), s, sigs, f"{s}_{k}")
+             for s in ("f64", "f32") for k, g in enumerate(groups)] + [cuda.host_source(robot, rec)]
     paths = []
     for k, text in enumerate(units):
         text = text.replace("#include <cuda_runtime.h>", '#include "fake_cuda.h"')

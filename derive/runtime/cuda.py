@@ -180,6 +180,23 @@ def needed_sources(chosen: list[Signature], sigs: list[Signature], snap: Snapsho
     return [f"{s.cname}.c" for s in sigs if s.cname in need and f"{s.cname}.c" in present]
 
 
+def chunks(chosen: list[Signature], manifest: dict, count: int) -> list[list[Signature]]:
+    """``chosen`` in at most ``count`` groups of about equal arithmetic (manifest ops, largest first
+    to the lightest group), each in the manifest's order: one translation unit per group and
+    precision, so nvcc runs on every CPU (one unit of a big function takes it a minute)."""
+    ops = {f.get("name"): (f.get("ops") or {}).get("total", 0) for f in manifest.get("functions", [])
+           if isinstance(f, dict)}
+    count = max(1, min(count, len(chosen)))
+    groups: list[list[Signature]] = [[] for _ in range(count)]
+    load = [0] * count
+    for s in sorted(chosen, key=lambda s: -(ops.get(s.cname) or 0)):
+        k = load.index(min(load))
+        groups[k].append(s)
+        load[k] += (ops.get(s.cname) or 0) + 1
+    order = {s.cname: i for i, s in enumerate(chosen)}
+    return [sorted(g, key=lambda s: order[s.cname]) for g in groups if g]
+
+
 def cuda_record(robot: str, manifest: dict, chosen: list[Signature], sources_hash: str | None) -> str:
     """The library's record: :func:`derive.runtime.build.record` of the chosen functions, with the
     device and the precisions."""
@@ -194,15 +211,15 @@ def _bytes_array(data: bytes) -> list[str]:
 
 
 def unit_source(robot: str, chosen: list[Signature], files: list[str], suffix: str,
-                sigs: list[Signature] | None = None) -> str:
-    """The CUDA translation unit of one precision (``suffix`` f64 or f32): the generated sources as
-    device functions (every generated name, ``sigs``, renamed ``<name>_<suffix>``: nvcc gives each
-    a host stub, which would clash between the precisions), a kernel and a host launcher per
-    chosen function."""
+                sigs: list[Signature] | None = None, tag: str | None = None) -> str:
+    """A CUDA translation unit of one precision (``suffix`` f64 or f32): the generated sources
+    ``files`` as device functions (every generated name, ``sigs``, renamed ``<name>_<tag>``, tag
+    default ``suffix``: nvcc gives each a host stub, which would clash between the units that
+    include it), a kernel and a host launcher per chosen function."""
     lines = [f"/* Built by derive.runtime.cuda for robot '{robot}' ({suffix}) into the build folder (not part of generated/). */",
              *(["#define DERIVE_FLOAT"] if suffix == "f32" else []),
              "#define DERIVE_FN __device__",
-             *[f"#define {c} {c}_{suffix}" for c in sorted({s.cname for s in (sigs or chosen)})],
+             *[f"#define {c} {c}_{tag or suffix}" for c in sorted({s.cname for s in (sigs or chosen)})],
              "#include <cuda_runtime.h>",
              f'#include "{robot}.h"',
              *[f'#include "{name}"' for name in files],
@@ -332,9 +349,13 @@ def library(robot: str, snap: Snapshot, sigs: list[Signature], chosen: list[Sign
     """The CUDA library of the ``chosen`` functions (from the cache, else built), and its record."""
     argv, link = nvcc(robot)
     fl = flags(robot, argv)
-    files = needed_sources(chosen, sigs, snap)
     rec = cuda_record(robot, snap.manifest, chosen, snap.sources_hash)
-    units = {f"{robot}_cuda_{suffix}.cu": unit_source(robot, chosen, files, suffix, sigs) for suffix in PRECISIONS.values()}
+    groups = chunks(chosen, snap.manifest, max(1, (os.cpu_count() or 1) // len(PRECISIONS)))
+    units = {}
+    for suffix in PRECISIONS.values():
+        for k, group in enumerate(groups):
+            tag = suffix if len(groups) == 1 else f"{suffix}_{k}"
+            units[f"{robot}_cuda_{tag}.cu"] = unit_source(robot, group, needed_sources(group, sigs, snap), suffix, sigs, tag)
     units[f"{robot}_cuda_host.cu"] = host_source(robot, rec)
     h = hashlib.sha256()
     h.update(json.dumps({"robot": robot, "device": "cuda", "compiler": compiler_identity(argv), "flags": fl,
