@@ -401,3 +401,33 @@ def test_emulated_bad_calls_are_one_line_errors(emulated):
     with pytest.raises(ValueError, match="not one state stride and one element stride"):
         base = emulated.empty((3, 2, 2))
         emulated.mass_matrix(emulated.to_device(q), out=cuda_view(base, (3, 2, 2), (4, 1, 2)))
+
+
+class dlpack_on_gpu:
+    """A numpy array offered through DLPack as if on CUDA device 0 (JAX's way in), for the emulation."""
+
+    def __init__(self, a):
+        self.a = a
+
+    def __dlpack_device__(self):
+        return (2, 0)
+
+    def __dlpack__(self, stream=None):
+        assert stream == 1  # the legacy default stream, which the call runs on
+        return self.a.__dlpack__()
+
+
+def test_emulated_dlpack_inputs_and_outputs(emulated):
+    cpu = derive.compiled("planar_2r")
+    rng = np.random.default_rng(5)
+    q, qd, qdd = states(cpu, 11, rng)
+    want = cpu.inverse_dynamics(q, qd, qdd)
+    soa = [np.ascontiguousarray(a.T).T for a in (q, qd, qdd)]  # elements-major: strides (1, n) elements
+    res = emulated.inverse_dynamics(*[dlpack_on_gpu(a) for a in soa])
+    assert isinstance(res, emulated.DeviceArray)
+    close(res.get(), want, 1e-12)
+    out = np.zeros((2, 11)).T
+    emulated.inverse_dynamics(dlpack_on_gpu(q), dlpack_on_gpu(qd), dlpack_on_gpu(qdd), out=dlpack_on_gpu(out))
+    close(out, want, 1e-12)
+    with pytest.raises(TypeError, match="DLPack dtype .* is not float32 or float64"):
+        emulated.inverse_dynamics(dlpack_on_gpu(np.zeros((3, 2), np.int64)), q[:3], q[:3])
