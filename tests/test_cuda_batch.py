@@ -268,14 +268,14 @@ def test_bench_cuda_without_a_device_says_so_and_writes_nothing(monkeypatch, tmp
     out = tmp_path / "results.md"
     args = types.SimpleNamespace(names=["cuda"], out=str(out), quick=True)
     with pytest.raises(DeriveError) as info:
-        bench.run(args)
+        bench.run(args, bench_cuda.benchmarks())  # as `python -m derive.bench.cuda` and `derive bench cuda` run it
     assert str(info.value) == (f"bench cuda: no CUDA device on this machine (nvcc's device query finds none): "
                                f"nothing measured; {out} not written")
     assert not out.exists()
     # a run of all: the section is left out, and one measured earlier (on a GPU) kept
     out.write_text("# derive benchmark results\n\n## CUDA batch kernels (Panda): states per second\n\nearlier\n")
-    monkeypatch.setattr(bench, "registry", lambda: {"other": lambda a: "## Other\n\nnew\n", **bench_cuda.benchmarks()})
-    assert bench.run(types.SimpleNamespace(names=[], out=str(out), quick=True)) == 0
+    benches = {"other": lambda a: "## Other\n\nnew\n", **bench_cuda.benchmarks()}
+    assert bench.run(types.SimpleNamespace(names=[], out=str(out), quick=True), benches) == 0
     text = out.read_text()
     assert "## CUDA batch kernels (Panda): states per second\n\nearlier\n" in text and "## Other\n\nnew\n" in text
 
@@ -431,3 +431,18 @@ def test_emulated_dlpack_inputs_and_outputs(emulated):
     close(out, want, 1e-12)
     with pytest.raises(TypeError, match="DLPack dtype .* is not float32 or float64"):
         emulated.inverse_dynamics(dlpack_on_gpu(np.zeros((3, 2), np.int64)), q[:3], q[:3])
+
+
+# ---- what a GPU machine's image needs: numpy, PyYAML, nvcc (no CasADi, jinja2 or Pinocchio) ----
+
+def test_the_runtime_and_this_benchmark_import_no_casadi():
+    """derive.compiled (CPU and CUDA) and `python -m derive.bench.cuda` run where only numpy and
+    PyYAML are installed, as on a GPU machine's image; this module runs there with --noconftest."""
+    code = ("import sys, derive.runtime, derive.runtime.cuda_arrays, derive.bench.cuda\n"
+            "print(sorted(m for m in ('casadi', 'jinja2', 'sympy', 'pinocchio', 'jax') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT,
+                       env={**os.environ, "PYTHONPATH": str(ROOT)}, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", r.stdout + r.stderr[-2000:]
+    from derive.codegen.generate import default_output
+
+    assert build.default_generated() == default_output()

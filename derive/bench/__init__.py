@@ -41,16 +41,18 @@ def registry() -> dict:
     return out
 
 
-def run(args) -> int:
+def run(args, benches: dict | None = None) -> int:
     """Run the benchmarks ``args.names`` (default: all) and write their sections to ``args.out``.
 
     ``args.quick`` asks for smaller sample sizes. Rerunning some benchmarks into an existing
-    results file replaces their sections and keeps the others.
+    results file replaces their sections and keeps the others. ``benches`` (default: every
+    module's, :func:`registry`) is what may be run: one module's alone imports no other (a GPU
+    machine's image may lack what the others need: ``python -m derive.bench.cuda``).
     """
     if not (ROOT / "generated").is_dir() or not (ROOT / "models.yaml").is_file():
         raise DeriveError(f"bench: measures the project's own models.yaml and generated/, which {ROOT} does not "
                           "hold: run it in a source checkout (`make bench`)")
-    benches = registry()
+    benches = registry() if benches is None else benches
     names = args.names or list(benches)
     unknown = [n for n in names if n not in benches]
     if unknown:

@@ -12,17 +12,24 @@ largest entry of each state's output.
 
 Without a CUDA device (or without nvcc) this benchmark is not run: ``derive bench cuda`` says so
 in one line and writes nothing; ``derive bench`` (all) leaves its section out.
+
+``python -m derive.bench.cuda [--quick] [--out FILE]`` runs it alone, importing nothing of derive
+but the runtime (no CasADi, no other benchmark's dependencies: a GPU machine's image may have only
+numpy, PyYAML and nvcc).
 """
 
 from __future__ import annotations
 
+import argparse
 import ctypes
 import os
+import sys
 import time
 
 import numpy as np
 
-from derive.bench import Unavailable
+from derive.bench import Unavailable, run
+from derive.errors import DeriveError
 from derive.runtime import compiled
 from derive.runtime.cuda import NoDevice, device_architectures, find_nvcc
 
@@ -186,3 +193,20 @@ def _device_name(mod) -> str:
     arch = device_architectures(find_nvcc()[0]) if find_nvcc() else []
     return f"{mod.device_name()} ({mod.device_count()} device(s), compute capability {', '.join(arch) or '?'})"
 
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m derive.bench.cuda``: this benchmark alone into bench/results.md (or --out)."""
+    parser = argparse.ArgumentParser(prog="python -m derive.bench.cuda", description=__doc__.splitlines()[0])
+    parser.add_argument("--out", help="results file (default: bench/results.md)")
+    parser.add_argument("--quick", action="store_true", help="1e3 and 1e5 states only")
+    args = parser.parse_args(argv)
+    args.names = ["cuda"]
+    try:
+        return run(args, benchmarks())
+    except DeriveError as exc:
+        print(f"derive: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -117,6 +117,13 @@ class Snapshot:
 
 # ---- reading generated/<robot>/ ----
 
+def default_generated() -> Path:
+    """./generated, where ``derive generate`` writes by default (the folder of
+    derive.codegen.generate.default_output, which is not imported here: it loads CasADi and jinja2,
+    which running the generated code does not need; a GPU machine's image may have neither)."""
+    return Path.cwd() / "generated"
+
+
 def _read_sources(cdir: Path) -> tuple[tuple[str, bytes], ...]:
     try:
         names = sorted(n for n in os.listdir(cdir) if n.endswith((".c", ".h")))

@@ -41,9 +41,8 @@ from pathlib import Path
 
 import numpy as np
 
-from derive.codegen.generate import default_output
 from derive.errors import DeriveError
-from derive.runtime.build import Argument, Signature, read_generated, signatures
+from derive.runtime.build import Argument, Signature, default_generated, read_generated, signatures
 from derive.runtime.cuda import PRECISIONS, NoDevice, library, select
 
 _LOADED: dict[tuple[str, str], types.ModuleType] = {}
@@ -60,7 +59,7 @@ def compiled_cuda(robot: str, generated: str | Path | None = None, functions=Non
     built on first use (nvcc, once; cached) and loaded through ctypes."""
     if not isinstance(robot, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", robot):
         raise DeriveError(f"derive.compiled: {robot!r} is not a robot name (letters, digits and _, as in models.yaml)")
-    folder = Path(generated) if generated is not None else default_output()
+    folder = Path(generated) if generated is not None else default_generated()
     snap = read_generated(robot, folder / robot)
     sigs = signatures(snap.manifest)
     chosen = select(robot, sigs, functions)

@@ -56,9 +56,8 @@ from pathlib import Path
 
 import numpy as np
 
-from derive.codegen.generate import default_output
 from derive.errors import DeriveError, NotGenerated
-from derive.runtime.build import Argument, Signature, library, read_generated, record, signatures
+from derive.runtime.build import Argument, Signature, default_generated, library, read_generated, record, signatures
 from derive.runtime.cuda_arrays import compiled_cuda
 
 _LOADED: dict[tuple[str, str], types.ModuleType] = {}
@@ -86,7 +85,7 @@ def compiled(robot: str, generated: str | Path | None = None, device: str = "cpu
                           "holds every function")
     if not isinstance(robot, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", robot):
         raise DeriveError(f"derive.compiled: {robot!r} is not a robot name (letters, digits and _, as in models.yaml)")
-    folder = Path(generated) if generated is not None else default_output()
+    folder = Path(generated) if generated is not None else default_generated()
     snap = read_generated(robot, folder / robot)
     sigs = signatures(snap.manifest)
     path = library(robot, snap, sigs)
