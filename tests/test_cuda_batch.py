@@ -429,6 +429,10 @@ def test_emulated_dlpack_inputs_and_outputs(emulated):
     out = np.zeros((2, 11)).T
     emulated.inverse_dynamics(dlpack_on_gpu(q), dlpack_on_gpu(qd), dlpack_on_gpu(qdd), out=dlpack_on_gpu(out))
     close(out, want, 1e-12)
+    # an input written on another stream (its interface says which): waited for, then read
+    other = cuda_view(emulated.to_device(q), q.shape, (2, 1))
+    other.__cuda_array_interface__["stream"] = 12345
+    close(emulated.inverse_dynamics(other, qd, qdd).get(), want, 1e-12)
     with pytest.raises(TypeError, match="DLPack dtype .* is not float32 or float64"):
         emulated.inverse_dynamics(dlpack_on_gpu(np.zeros((3, 2), np.int64)), q[:3], q[:3])
 

@@ -176,6 +176,7 @@ class _View:
     dtype: np.dtype
     owner: object        # what keeps the memory alive (the array, a DLPack capsule, a DeviceArray)
     device: bool         # on the device already (False: a host array, copied)
+    stream: int | None = None  # the producer's stream to wait for (__cuda_array_interface__ v3), if any
 
 
 # ---- reading the caller's arrays ----
@@ -218,7 +219,8 @@ def _from_cai(x, where: str) -> _View:
         strides = tuple(int(s) // dtype.itemsize for s in cai["strides"])
     if cai.get("mask") is not None:
         raise ValueError(f"{where}: masked device arrays are not read")
-    return _View(int(cai["data"][0] or 0), shape, strides, dtype, x, True)
+    stream = cai.get("stream")
+    return _View(int(cai["data"][0] or 0), shape, strides, dtype, x, True, int(stream) if stream else None)
 
 
 def _from_dlpack(x, where: str, stream: int) -> _View:
@@ -464,6 +466,8 @@ def _call(robot: str, s: Signature, rt: _Runtime, launch: dict, values: list, ou
             v = _View(dev.ptr, host.shape, _c_strides(host.shape), dtype, dev, False)
         elif math.prod(v.shape):
             _check_pointer(rt, s, a.name, v, device)
+        if v.stream is not None and v.stream != (stream or 1):  # written on another stream: wait for it
+            rt.check(rt.synchronize(v.stream), f"{s.name}: {a.name}: cudaStreamSynchronize of its stream")
         batch, st, e = _layout(s, a, v.shape, v.strides)
         inputs.append(((v, st, e), batch))
     shapes = [b for _, b in inputs if b and math.prod(b) != 1]
