@@ -429,6 +429,10 @@ def test_emulated_dlpack_inputs_and_outputs(emulated):
     out = np.zeros((2, 11)).T
     emulated.inverse_dynamics(dlpack_on_gpu(q), dlpack_on_gpu(qd), dlpack_on_gpu(qdd), out=dlpack_on_gpu(out))
     close(out, want, 1e-12)
+    # host inputs into a device out=: written there, out returned as given
+    dev_out = emulated.empty((11, 2))
+    assert emulated.inverse_dynamics(q, qd, qdd, out=dev_out) is dev_out
+    close(dev_out.get(), want, 1e-12)
     # an input written on another stream (its interface says which): waited for, then read
     other = cuda_view(emulated.to_device(q), q.shape, (2, 1))
     other.__cuda_array_interface__["stream"] = 12345

@@ -484,7 +484,7 @@ def _call(robot: str, s: Signature, rt: _Runtime, launch: dict, values: list, ou
             continue
         v, st, e = entry
         argv += [v.ptr, st if (b and math.prod(b) != 1) else 0, e]
-    host = not on_device
+    host = not on_device and out is None  # host arrays in (and no out=): numpy arrays out
     like = on_device[0].owner if on_device else None
     if isinstance(like, tuple):  # a DLPack input: (array, capsule)
         like = like[0]
