@@ -113,9 +113,9 @@ def test_kernel_source_gathers_and_scatters_by_two_strides(small):
     units = sorted(small.LIBRARY.parent.glob("planar_2r_cuda_f64*.cu"))  # one per group of functions (CPUs)
     text = "".join(u.read_text() for u in units)
     assert units and "#define DERIVE_FN __device__" in text and "DERIVE_FLOAT" not in text
-    assert "l_q[j] = a_q[i * s_q + j * e_q];" in text
-    assert "r_tau[i * s_tau + j * e_tau] = l_tau[j];" in text
-    assert "status[i * s_status] = planar_2r_ik_tcp(" in text and "a_w ? l_w : 0" in text
+    assert "li_q[j] = a_q[i * s_q + j * e_q];" in text
+    assert "r_tau[i * rs_tau + j * re_tau] = lo_tau[j];" in text
+    assert "st_status[i * st_stride] = planar_2r_ik_tcp(" in text and "a_w ? li_w : 0" in text
     assert all("#define DERIVE_FLOAT" in u.read_text() for u in small.LIBRARY.parent.glob("planar_2r_cuda_f32*.cu"))
 
 

@@ -226,26 +226,28 @@ def unit_source(robot: str, chosen: list[Signature], files: list[str], suffix: s
              "",
              "typedef long long derive_cu_n;"]
     for s in chosen:
+        # C names: a_/s_/e_ an input's pointer, state stride and element stride, li_ its local copy;
+        # r_/rs_/re_ and lo_ an output's (an input and an output may share a name); st_ IK's status
         params = [f"const DERIVE_REAL *a_{a.name}, derive_cu_n s_{a.name}, derive_cu_n e_{a.name}" for a in s.inputs]
-        params += [f"DERIVE_REAL *r_{a.name}, derive_cu_n s_{a.name}, derive_cu_n e_{a.name}" for a in s.outputs]
+        params += [f"DERIVE_REAL *r_{a.name}, derive_cu_n rs_{a.name}, derive_cu_n re_{a.name}" for a in s.outputs]
         if s.status:
-            params += ["int *status, derive_cu_n s_status"]
+            params += ["int *st_status, derive_cu_n st_stride"]
         body = []
         for a in s.inputs:
             load = [f"            for (int j = 0; j < {a.length}; ++j)",
-                    f"                l_{a.name}[j] = a_{a.name}[i * s_{a.name} + j * e_{a.name}];"]
-            body += [f"        DERIVE_REAL l_{a.name}[{a.length}];"]
+                    f"                li_{a.name}[j] = a_{a.name}[i * s_{a.name} + j * e_{a.name}];"]
+            body += [f"        DERIVE_REAL li_{a.name}[{a.length}];"]
             body += ([f"        if (a_{a.name}) {{", *load, "        }"] if a.nullable else [ln[4:] for ln in load])
-        body += [f"        DERIVE_REAL l_{a.name}[{a.length}];" for a in s.outputs]
-        args = [f"a_{a.name} ? l_{a.name} : 0" if a.nullable else f"l_{a.name}" for a in s.inputs]
-        args += [f"l_{a.name}" for a in s.outputs]
+        body += [f"        DERIVE_REAL lo_{a.name}[{a.length}];" for a in s.outputs]
+        args = [f"a_{a.name} ? li_{a.name} : 0" if a.nullable else f"li_{a.name}" for a in s.inputs]
+        args += [f"lo_{a.name}" for a in s.outputs]
         call = f"{s.cname}({', '.join(args)})"
-        body += [f"        status[i * s_status] = {call};" if s.status else f"        {call};"]
+        body += [f"        st_status[i * st_stride] = {call};" if s.status else f"        {call};"]
         for a in s.outputs:
             body += [f"        for (int j = 0; j < {a.length}; ++j)",
-                     f"            r_{a.name}[i * s_{a.name} + j * e_{a.name}] = l_{a.name}[j];"]
+                     f"            r_{a.name}[i * rs_{a.name} + j * re_{a.name}] = lo_{a.name}[j];"]
         names = [f"a_{a.name}, s_{a.name}, e_{a.name}" for a in s.inputs] + \
-                [f"r_{a.name}, s_{a.name}, e_{a.name}" for a in s.outputs] + (["status, s_status"] if s.status else [])
+                [f"r_{a.name}, rs_{a.name}, re_{a.name}" for a in s.outputs] + (["st_status, st_stride"] if s.status else [])
         kernel = f"{s.cname}_kernel_{suffix}"
         lines += ["",
                   f"__global__ void {kernel}(derive_cu_n n, {', '.join(params)})",
