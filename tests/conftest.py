@@ -62,7 +62,7 @@ T = TypeVar("T")
 
 # The longest modules (pytest --durations), longest first: started first under xdist, so that the
 # run does not end waiting for one of them.
-HEAVY = ("test_cuda.py", "test_compiled.py", "test_batch.py", "test_jax.py", "test_codegen.py",
+HEAVY = ("test_cuda.py", "test_cuda_batch.py", "test_compiled.py", "test_batch.py", "test_jax.py", "test_codegen.py",
          "test_urdf_trees.py", "test_simulate.py", "test_whole_robots.py", "test_bad_input_corpus.py",
          "test_trajopt.py", "test_regressor.py", "test_ode.py")
 # Modules whose tests are spread one by one over the workers: long, and nothing but the session

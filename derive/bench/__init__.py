@@ -25,8 +25,13 @@ ROOT = CHECKOUT
 BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.bench.trajopt", "derive.bench.simulate",
                             "derive.bench.python", "derive.bench.jax_speed", "derive.bench.zoo", "derive.bench.identification",
                             "derive.bench.bundles", "derive.bench.firmware", "derive.bench.large",
-                            "derive.bench.pinocchio_cpp", "derive.bench.lanes"]
+                            "derive.bench.pinocchio_cpp", "derive.bench.lanes", "derive.bench.cuda"]
 """The modules contributing benchmarks, in the order they run and appear in the results."""
+
+
+class Unavailable(DeriveError):
+    """A benchmark this machine cannot run (no GPU, say): named alone, a one-line error and nothing
+    written; in a run of all, its section is left out (the results file keeps an earlier one)."""
 
 
 def registry() -> dict:
@@ -36,32 +41,44 @@ def registry() -> dict:
     return out
 
 
-def run(args) -> int:
+def run(args, benches: dict | None = None) -> int:
     """Run the benchmarks ``args.names`` (default: all) and write their sections to ``args.out``.
 
     ``args.quick`` asks for smaller sample sizes. Rerunning some benchmarks into an existing
-    results file replaces their sections and keeps the others.
+    results file replaces their sections and keeps the others. ``benches`` (default: every
+    module's, :func:`registry`) is what may be run: one module's alone imports no other (a GPU
+    machine's image may lack what the others need: ``python -m derive.bench.cuda``).
     """
     if not (ROOT / "generated").is_dir() or not (ROOT / "models.yaml").is_file():
         raise DeriveError(f"bench: measures the project's own models.yaml and generated/, which {ROOT} does not "
                           "hold: run it in a source checkout (`make bench`)")
-    benches = registry()
+    benches = registry() if benches is None else benches
     names = args.names or list(benches)
     unknown = [n for n in names if n not in benches]
     if unknown:
         raise DeriveError(f"bench: unknown benchmark {unknown[0]!r} (known: {', '.join(benches)})")
-    sections = []
+    sections, skipped = [], []
     for name in names:
-        print(f"[bench] {name} ...", flush=True)
-        start = time.perf_counter()
-        text = benches[name](args)
+        check = getattr(benches[name], "check", None)  # what the machine lacks, before any progress line
+        try:
+            if check is not None:
+                check()
+            print(f"[bench] {name} ...", flush=True)
+            start = time.perf_counter()
+            text = benches[name](args)
+        except Unavailable as exc:
+            if args.names:  # asked for by name: say so, write nothing
+                raise DeriveError(f"bench {exc}; {Path(args.out) if args.out else 'bench/results.md'} not written") from None
+            print(f"[bench] {name} not run here: {exc}", flush=True)
+            skipped.append(name)
+            continue
         sections.append(text.rstrip() + "\n")
         print(text, flush=True)
         print(f"[bench] {name} done in {time.perf_counter() - start:.1f} s", flush=True)
     out = Path(args.out) if args.out else ROOT / "bench" / "results.md"
     out.parent.mkdir(parents=True, exist_ok=True)
     header = "# derive benchmark results\n\nWritten by `make bench` (`derive bench`). Ratios are against references measured in the same run.\n\n"
-    if args.names and out.exists():  # keep other sections, replace the ones rerun
+    if (args.names or skipped) and out.exists():  # keep other sections (and those not run here), replace the ones rerun
         old = out.read_text()
         sections = _merge(old, sections)
     write_atomically(out, header + "\n".join(sections), "the benchmark results")

@@ -117,6 +117,13 @@ class Snapshot:
 
 # ---- reading generated/<robot>/ ----
 
+def default_generated() -> Path:
+    """./generated, where ``derive generate`` writes by default (the folder of
+    derive.codegen.generate.default_output, which is not imported here: it loads CasADi and jinja2,
+    which running the generated code does not need; a GPU machine's image may have neither)."""
+    return Path.cwd() / "generated"
+
+
 def _read_sources(cdir: Path) -> tuple[tuple[str, bytes], ...]:
     try:
         names = sorted(n for n in os.listdir(cdir) if n.endswith((".c", ".h")))
@@ -652,7 +659,7 @@ def _first_error(stderr: str) -> str:
     return (lines[0][:400] if lines else "no message")
 
 
-def _run(argv: list[str], robot: str, copy: Path | None = None, origin: Path | None = None) -> None:
+def run_compiler(argv: list[str], robot: str, copy: Path | None = None, origin: Path | None = None) -> None:
     """Run the compiler; a failure is one line, the copy's paths (``copy``) named as the originals'."""
     try:
         r = subprocess.run(argv, capture_output=True, text=True)
@@ -767,10 +774,26 @@ def library(robot: str, source: Snapshot | str | Path, sigs: list[Signature]) ->
     expected = record(robot, snap.manifest, sigs, snap.sources_hash)
     lane_wise = {name[:-len("_lanes.c")] for name in units}
     wrapper = wrapper_source(robot, sigs, snap.manifest, expected, lanes.count, lane_wise)
-    root = cache_root()
     digest = content_hash(robot, snap, wrapper, cc, cflags, lanes, units)
+    # the first build of a big robot takes tens of seconds (panda: ~30 s on one core): say so, once
+    files = sum(name.endswith(".c") for name, _ in snap.sources) + 1
+
+    def make(tmp: Path) -> Path:
+        return _compile(robot, snap, wrapper, cc, cflags, tmp, f"lib{robot}.so", lanes, units)
+
+    return cached_library(robot, digest, f"lib{robot}.so", expected, make, f"{files} C files")
+
+
+def cached_library(robot: str, digest: str, name: str, expected: str, make, what: str) -> Path:
+    """The library file ``name`` in the cache folder ``digest`` (:func:`cache_root`): the present
+    one when the record in its file (:func:`file_record`) is ``expected``, else built by
+    ``make(tmp)`` (which compiles into the temporary folder ``tmp`` and returns the library's path
+    there) under the digest's lock and renamed into place in one step (see the module's
+    docstring). ``what`` says what is compiled in the one progress line a build prints (a cache
+    hit prints nothing). Used by the CPU library and by :mod:`derive.runtime.cuda`."""
+    root = cache_root()
     final = root / digest
-    lib = final / f"lib{robot}.so"
+    lib = final / name
     if file_record(lib) == expected:
         return lib
     try:
@@ -781,25 +804,61 @@ def library(robot: str, source: Snapshot | str | Path, sigs: list[Signature]) ->
         if file_record(lib) == expected:  # built by the process we waited for
             return lib
         _remove_stale(root, digest if held else None)
-        # the first build of a big robot takes tens of seconds (panda: ~30 s on one core): say so, once;
-        # a cache hit (every later call) stays silent
-        files = sum(name.endswith(".c") for name, _ in snap.sources) + 1
-        print(f"derive: compiling {robot} ({files} C files, once; cached in {root}) ...", file=sys.stderr, flush=True)
+        print(f"derive: compiling {robot} ({what}, once; cached in {root}) ...", file=sys.stderr, flush=True)
         start = time.perf_counter()
-        _build(robot, snap, wrapper, cc, cflags, final, lib, expected, replace=bool(held), lanes=lanes, units=units)
+        _install(robot, final, lib, expected, bool(held), make)
         print(f"derive: compiled {robot} in {time.perf_counter() - start:.1f} s (cached: later calls load it at once)",
               file=sys.stderr, flush=True)
     return lib
 
 
-def _build(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: list[str], final: Path, lib: Path,
-           expected: str, replace: bool, lanes: Lanes = LANE_MODES["off"], units: dict[str, str] | None = None) -> None:
-    """Compile ``snap``'s sources (a copy of their bytes) with the wrapper in a temporary folder
-    beside ``final`` and rename it into place (``replace``: over a present ``final`` whose library
-    is not the expected one; only under the digest's lock)."""
+def _compile(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: list[str], tmp: Path, name: str,
+             lanes: Lanes = LANE_MODES["off"], units: dict[str, str] | None = None) -> Path:
+    """Compile ``snap``'s sources (a copy of their bytes) with the wrapper and the lane units in
+    ``tmp``; the library's path there."""
+    cdir = snap.folder / "c"
+    copy = tmp / "src"
+    copy.mkdir()
+    for fname, data in snap.sources:
+        (copy / fname).write_bytes(data)
+    src = tmp / f"{robot}_runtime.c"
+    src.write_text(wrapper)
+    sources = [copy / fname for fname, _ in snap.sources if fname.endswith(".c")] + [src]
+    jobs = [cc + cflags + [f"-I{copy}", "-c", str(s)] for s in sources]
+    for fname, text in sorted((units or {}).items()):  # the lane variants: only these get the ISA's flags
+        (tmp / fname).write_text(text)
+        sources.append(tmp / fname)
+        jobs.append(cc + cflags + list(lanes.flags) + [f"-I{copy}", "-c", str(tmp / fname)])
+    objects = [tmp / f"{k:03d}_{s.stem}.o" for k, s in enumerate(sources)]
+    jobs = [job + ["-o", str(o)] for job, o in zip(jobs, objects)]
+    run_parallel(jobs, robot, copy, cdir)
+    built = tmp / name
+    run_compiler(cc + cflags + ["-shared", "-o", str(built)] + [str(o) for o in objects] + ["-lm"], robot, copy, cdir)
+    for o in objects:
+        o.unlink()
+    shutil.rmtree(copy)
+    return built
+
+
+def run_parallel(jobs: list[list[str]], robot: str, copy: Path | None = None, origin: Path | None = None) -> None:
+    """Run the compiler commands ``jobs`` on as many threads as there are CPUs; the first failure
+    in their order is raised (one line, see :func:`run_compiler`)."""
+    if not jobs:
+        return
+    pool = ThreadPoolExecutor(max_workers=max(1, min(len(jobs), os.cpu_count() or 1)))
+    try:
+        for future in [pool.submit(run_compiler, job, robot, copy, origin) for job in jobs]:
+            future.result()  # the first failure, in source order
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _install(robot: str, final: Path, lib: Path, expected: str, replace: bool, make) -> None:
+    """Build with ``make`` in a temporary folder beside ``final`` and rename it into place
+    (``replace``: over a present ``final`` whose library is not the expected one; only under the
+    digest's lock)."""
     global BUILDS
     root = final.parent
-    cdir = snap.folder / "c"
     prefix = f".{final.name}.tmp-"
     try:
         tmp = Path(tempfile.mkdtemp(prefix=prefix, dir=root))
@@ -808,33 +867,12 @@ def _build(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: list
     register(tmp, True)
     aside = None
     try:
-        copy = tmp / "src"
-        copy.mkdir()
-        for name, data in snap.sources:
-            (copy / name).write_bytes(data)
-        src = tmp / f"{robot}_runtime.c"
-        src.write_text(wrapper)
-        sources = [copy / name for name, _ in snap.sources if name.endswith(".c")] + [src]
-        jobs = [cc + cflags + [f"-I{copy}", "-c", str(s)] for s in sources]
-        for name, text in sorted((units or {}).items()):  # the lane variants: only these get the ISA's flags
-            (tmp / name).write_text(text)
-            sources.append(tmp / name)
-            jobs.append(cc + cflags + list(lanes.flags) + [f"-I{copy}", "-c", str(tmp / name)])
-        objects = [tmp / f"{k:03d}_{s.stem}.o" for k, s in enumerate(sources)]
-        jobs = [job + ["-o", str(o)] for job, o in zip(jobs, objects)]
-        pool = ThreadPoolExecutor(max_workers=max(1, min(len(jobs), os.cpu_count() or 1)))
-        try:
-            for future in [pool.submit(_run, job, robot, copy, cdir) for job in jobs]:
-                future.result()  # the first failure, in source order
-        finally:
-            pool.shutdown(wait=True, cancel_futures=True)
-        built = tmp / lib.name
-        _run(cc + cflags + ["-shared", "-o", str(built)] + [str(o) for o in objects] + ["-lm"], robot, copy, cdir)
-        for o in objects:
-            o.unlink()
-        shutil.rmtree(copy)
+        built = make(tmp)
+        if built != tmp / lib.name:
+            os.rename(built, tmp / lib.name)
+            built = tmp / lib.name
         if file_record(built) != expected:
-            raise DeriveError(f"cannot compile robot '{robot}': the library built from {cdir} does not hold its "
+            raise DeriveError(f"cannot compile robot '{robot}': the library built does not hold its "
                               f"record (do CFLAGS strip its data?)")
         with open(built, "rb") as f:  # on disk before the rename makes it the cache's
             os.fsync(f.fileno())

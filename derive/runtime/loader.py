@@ -56,23 +56,36 @@ from pathlib import Path
 
 import numpy as np
 
-from derive.codegen.generate import default_output
 from derive.errors import DeriveError, NotGenerated
-from derive.runtime.build import Argument, Signature, library, read_generated, record, signatures
+from derive.runtime.build import Argument, Signature, default_generated, library, read_generated, record, signatures
+from derive.runtime.cuda_arrays import compiled_cuda
 
 _LOADED: dict[tuple[str, str], types.ModuleType] = {}
 
 
-def compiled(robot: str, generated: str | Path | None = None) -> types.ModuleType:
+def compiled(robot: str, generated: str | Path | None = None, device: str = "cpu",
+             functions=None) -> types.ModuleType:
     """The compiled functions of ``robot`` from ``<generated>/<robot>/`` (default ./generated).
 
     Builds the library on first use (seconds) and reuses it from the cache afterwards.
     Raises a one-line :class:`DeriveError` when the robot's generated code is missing, no C
     compiler is found or compiling fails.
+
+    ``device="cuda"``: the same C as CUDA batch kernels (nvcc; FP64 and FP32), called on device
+    arrays (:mod:`derive.runtime.cuda_arrays`); ``functions`` (Python names) chooses which are
+    compiled (default all; nvcc takes seconds per function). It builds without a GPU; its calls
+    then raise :class:`derive.runtime.cuda.NoDevice`.
     """
+    if device == "cuda":
+        return compiled_cuda(robot, generated, functions)
+    if device != "cpu":
+        raise DeriveError(f"derive.compiled: device={device!r} is not a device (cpu or cuda)")
+    if functions is not None:
+        raise DeriveError("derive.compiled: functions= chooses the CUDA kernels (device='cuda'); the CPU library "
+                          "holds every function")
     if not isinstance(robot, str) or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", robot):
         raise DeriveError(f"derive.compiled: {robot!r} is not a robot name (letters, digits and _, as in models.yaml)")
-    folder = Path(generated) if generated is not None else default_output()
+    folder = Path(generated) if generated is not None else default_generated()
     snap = read_generated(robot, folder / robot)
     sigs = signatures(snap.manifest)
     path = library(robot, snap, sigs)

@@ -13,8 +13,8 @@ import re
 import types
 from pathlib import Path
 
-from derive.codegen.generate import default_output
 from derive.errors import DeriveError
+from derive.runtime.build import default_generated
 from derive.resources import data_path
 
 _IMPORTED: dict[tuple[str, int], types.ModuleType] = {}  # (resolved path, mtime_ns) -> module
@@ -22,7 +22,7 @@ _IMPORTED: dict[tuple[str, int], types.ModuleType] = {}  # (resolved path, mtime
 
 def candidates(robot: str, folder: str | Path | None = None) -> list[Path]:
     """Where the module of ``robot`` is looked for, in order."""
-    folders = [Path(folder)] if folder is not None else [default_output(), data_path("generated")]
+    folders = [Path(folder)] if folder is not None else [default_generated(), data_path("generated")]
     return [f / robot / "python" / f"{robot}.py" for f in dict.fromkeys(folders)]
 
 
