@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -62,8 +64,24 @@ def note_big(name: str, entry: dict, shown: str) -> None:
           file=sys.stderr)
 
 
+def relative_meshes(entry: dict, models: str) -> dict:
+    """``entry`` with its absolute mesh files written relative to the folder of the models file ``models``
+    (what the viewer resolves them against): the models file and the meshes can move together."""
+    folder = Path(os.path.abspath(models)).parent
+    for link in entry.get("links", []):
+        for item in link.get("visual", []):
+            mesh = item.get("mesh")
+            if mesh and Path(mesh).is_absolute():
+                try:
+                    item["mesh"] = Path(os.path.relpath(mesh, folder)).as_posix()
+                except ValueError:  # another drive (Windows): stays absolute
+                    pass
+    return entry
+
+
 def _write(args, name: str, entry: dict, generator: str = "derive import-urdf") -> str:
     """Append (or with --replace, replace in place) ``entry`` in ``args.out``: the line that says which."""
+    entry = relative_meshes(entry, args.out)
     done = append_entry(args.out, name, entry, replace=bool(getattr(args, "replace", False)), generator=generator)
     return f"{done} robot '{name}' {'in' if done == 'replaced' else 'to'} {args.out}"
 
@@ -78,7 +96,8 @@ def cmd_import_urdf(args) -> int:
                                     fix_inertia=bool(getattr(args, "fix_inertia", False)),
                                     xacro_args=getattr(args, "xacro_arg", None),
                                     package_paths=getattr(args, "package_path", None),
-                                    snap_angles=getattr(args, "snap_angles", None))
+                                    snap_angles=getattr(args, "snap_angles", None),
+                                    visuals=not getattr(args, "no_visuals", False))
     warn_unmoved(name, entry, resolve_urdf(args.file, name)[1])
     note_big(name, entry, resolve_urdf(args.file, name)[1])
     if args.out:
@@ -91,7 +110,7 @@ def cmd_import_urdf(args) -> int:
 def cmd_import_mjcf(args) -> int:
     """``derive import-mjcf FILE [--floating | --fixed] [--no-actuators] [--name NAME] [--out models.yaml]``."""
     name, entry = import_mjcf_named(args.file, name=args.name, floating=args.floating,
-                                    actuators=not args.no_actuators)
+                                    actuators=not args.no_actuators, visuals=not args.no_visuals)
     warn_unmoved(name, entry, args.file)
     note_big(name, entry, args.file)
     if args.out:
@@ -171,6 +190,9 @@ def add_parser(sub) -> None:
                         "are listed in a warning")
     u.add_argument("--floating", action="store_true",
                    help="floating base: the URDF root link moves freely (base: floating, Pinocchio's JointModelFreeFlyer)")
+    u.add_argument("--no-visuals", action="store_true",
+                   help="leave out the links' <visual> meshes and shapes (by default each link keeps them as its "
+                        "visual: list, for derive view; mesh files resolved now, written relative to --out)")
     u.add_argument("--arg", dest="xacro_arg", action="append", metavar="NAME=VALUE",
                    help="a xacro argument (xacro's NAME:=VALUE); repeat for more")
     u.add_argument("--package-path", dest="package_path", action="append", metavar="NAME=DIR",
@@ -201,6 +223,9 @@ def add_parser(sub) -> None:
                       help="fixed base: a free body is welded to the world at its initial pose")
     x.add_argument("--no-actuators", action="store_true",
                    help="leave out armature, damping, frictionloss and actuator gears (ideal joints)")
+    x.add_argument("--no-visuals", action="store_true",
+                   help="leave out the visible geoms (by default each link keeps its meshes and shapes as its visual: "
+                        "list, for derive view)")
     x.add_argument("--name", help="robot name (default: the MJCF model name made a C identifier)")
     x.add_argument("--out", metavar="MODELS", type=path_arg,
                    help="append to this models file instead of printing (created if missing; written atomically)")
