@@ -244,6 +244,53 @@ def test_stl_binary_ascii_and_obj_read_alike(trimesh, tmp_path):
                                    np.sort(triangles.reshape(-1, 3), axis=0), atol=1e-7)  # float32 in binary STL
 
 
+DAE = """<?xml version="1.0" encoding="utf-8"?>
+<COLLADA xmlns="http://www.collada.org/2005/11/COLLADASchema" version="1.4.1">
+  <asset><unit name="millimeter" meter="0.001"/><up_axis>Z_UP</up_axis></asset>
+  <library_effects>
+    <effect id="green-fx"><profile_COMMON><technique sid="common"><lambert>
+      <diffuse><color>0 0.8 0 1</color></diffuse></lambert></technique></profile_COMMON></effect>
+  </library_effects>
+  <library_materials><material id="green" name="green"><instance_effect url="#green-fx"/></material></library_materials>
+  <library_geometries>
+    <geometry id="tri-mesh"><mesh>
+      <source id="tri-pos"><float_array id="tri-pos-array" count="9">0 0 0 100 0 0 0 200 0</float_array>
+        <technique_common><accessor source="#tri-pos-array" count="3" stride="3">
+          <param name="X" type="float"/><param name="Y" type="float"/><param name="Z" type="float"/></accessor></technique_common></source>
+      <vertices id="tri-vtx"><input semantic="POSITION" source="#tri-pos"/></vertices>
+      <triangles material="mat" count="1"><input semantic="VERTEX" source="#tri-vtx" offset="0"/><p>0 1 2</p></triangles>
+    </mesh></geometry>
+  </library_geometries>
+  <library_visual_scenes>
+    <visual_scene id="scene"><node id="n"><matrix>1 0 0 0.5 0 1 0 0 0 0 1 0 0 0 0 1</matrix>
+      <instance_geometry url="#tri-mesh"><bind_material><technique_common>
+        <instance_material symbol="mat" target="#green"/></technique_common></bind_material></instance_geometry></node></visual_scene>
+  </library_visual_scenes>
+  <scene><instance_visual_scene url="#scene"/></scene>
+</COLLADA>
+"""
+"""One triangle in millimetres, moved 0.5 mm along x by its node, in a green material."""
+
+
+def test_dae_reads_in_metres_with_its_colours(trimesh, tmp_path, monkeypatch):
+    try:
+        import collada  # noqa: F401
+    except ImportError:
+        if os.environ.get("CI"):
+            pytest.fail("pycollada not installed: the `viewer` extra should be installed by `make test`")
+        pytest.skip("no pycollada: pip install 'derive-robotics[viewer]'")
+    (tmp_path / "tri.dae").write_text(DAE)
+    (vertices, faces, colour), = read_mesh(tmp_path / "tri.dae")
+    np.testing.assert_allclose(vertices, [[0.0005, 0, 0], [0.1005, 0, 0], [0.0005, 0.2, 0]], rtol=1e-12, atol=1e-15)
+    assert faces.tolist() == [[0, 1, 2]] and colour == (0.0, 0.8, 0.0, 1.0)
+    monkeypatch.setitem(sys.modules, "collada", None)  # a DAE without pycollada: the extra named
+    robot = parse_models(MODEL.replace("VISUAL", f"{{mesh: {tmp_path / 'tri.dae'}}}"))["bot"]
+    lines = []
+    assert visual_parts(robot, robot.frame_names, lines.append) == []
+    assert lines == ["warning: derive view bot: reading mesh files needs the viewer extra (trimesh, pycollada): "
+                     "pip install 'derive-robotics[viewer]' (collada is missing); the meshes are left out"]
+
+
 def test_primitives_are_the_shapes_they_name():
     from derive.description.robot import Visual
 
@@ -267,11 +314,11 @@ def test_primitives_are_the_shapes_they_name():
                              "sphere": 4 / 3 * np.pi * 0.05 ** 3}[shape]
 
 
-def test_simplify_meets_the_budget():
+def dense_sphere(sub: int) -> tuple[np.ndarray, np.ndarray]:
+    """A unit sphere of shape_mesh's, every triangle split into sub^2 (vertices pushed onto the sphere)."""
     from derive.description.robot import Visual
 
     v, f = shape_mesh(Visual("sphere", size=(1.0,)))
-    sub = 6  # subdivide every triangle into sub^2 for a dense mesh
     verts, faces = [], []
     for a, b, c in v[f]:
         base = len(verts)
@@ -286,7 +333,11 @@ def test_simplify_meets_the_budget():
                 faces.append([base + grid[i, j], base + grid[i + 1, j], base + grid[i, j + 1]])
                 if j < sub - i - 1:
                     faces.append([base + grid[i + 1, j], base + grid[i + 1, j + 1], base + grid[i, j + 1]])
-    verts, faces = np.array(verts), np.array(faces)
+    return np.array(verts), np.array(faces)
+
+
+def test_simplify_meets_the_budget():
+    verts, faces = dense_sphere(6)
     assert len(faces) > 15000
     for limit in (4000, 500, 60):
         v2, f2 = simplify(verts, faces, limit)
@@ -302,7 +353,7 @@ def test_without_trimesh_the_meshes_go_with_one_warning(looks, monkeypatch):
     robot = load_robot("looks", looks)
     lines = []
     parts = visual_parts(robot, robot.frame_names, lines.append)
-    assert lines == ["warning: derive view looks: reading mesh files needs trimesh: pip install "
+    assert lines == ["warning: derive view looks: reading mesh files needs the viewer extra (trimesh, pycollada): pip install "
                      "'derive-robotics[viewer]'; the meshes are left out"]
     assert [p.name for p in parts] == ["base_0", "arm_1"]  # the box and the cylinder are drawn without it
 
@@ -361,6 +412,22 @@ def test_page_draws_the_meshes_where_they_are(looks, trimesh, tmp_path):
         assert b > 0.3 and r < 0.1 and g < 0.1, (x, y, image[y, x])
     for y, x in [(HEIGHT // 2, 2), (HEIGHT // 2, WIDTH - 3)]:
         assert image[y, x].min() > 0.8  # background at the sides
+
+
+def test_view_html_thins_a_big_mesh_and_says_so(trimesh, tmp_path, capsys):
+    verts, faces = dense_sphere(8)
+    assert len(faces) > 30_000
+    write_stl(tmp_path / "ball.stl", 0.1 * verts[faces])
+    (tmp_path / "models.yaml").write_text(MODEL.replace("VISUAL", "{mesh: ball.stl}"))
+    page = tmp_path / "bot.html"
+    assert main(["--models", str(tmp_path / "models.yaml"), "view", "bot", "--html", str(page)]) == 0
+    out = capsys.readouterr().out
+    assert out.startswith(f"wrote {page} (") and out.endswith(f" KiB, {len(faces)} mesh triangles thinned to at most 30000)\n")
+    import base64
+    (packed,) = page_json(page.read_text())["meshes"]
+    assert 15_000 < len(base64.b64decode(packed["f"])) // 6 <= 30_000
+    assert main(["--models", str(tmp_path / "models.yaml"), "view", "bot", "--no-meshes", "--html", str(page)]) == 0
+    assert page_json(page.read_text())["meshes"] == [] and "mesh" not in capsys.readouterr().out
 
 
 def test_page_thins_to_its_budget():

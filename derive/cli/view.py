@@ -4,6 +4,7 @@
     derive view panda --csv run.csv            ... plus playback of a trajectory CSV
     derive view panda --html panda.html        one self-contained page (no viser, no network)
     derive view panda --csv run.csv --html run.html   the page with play controls
+    derive --models arm.yaml view arm --no-meshes     the model alone, without its links' meshes
 """
 
 from __future__ import annotations

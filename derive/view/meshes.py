@@ -115,8 +115,8 @@ def mesh_path(mesh: str, robot: Robot) -> Path | None:
 
 
 def read_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray, tuple | None]]:
-    """The triangles of a mesh file as [(vertices, faces, rgba or None)], one item per colour (a DAE
-    scene's sub-meshes placed by its node transforms). Raises :class:`MeshLibraryMissing` without
+    """The triangles of a mesh file as [(vertices, faces, rgba or None)] in metres, one item per colour (a
+    DAE scene's sub-meshes placed by its node transforms, scaled by its ``<unit>``). Raises :class:`MeshLibraryMissing` without
     trimesh, ValueError (one line) for a file it cannot read."""
     try:
         import trimesh  # noqa: PLC0415 (the optional viewer extra)
@@ -128,6 +128,12 @@ def read_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray, tuple | None]]:
         raise MeshLibraryMissing(f"{EXTRA} ({exc.name or 'a reader'} is missing)") from None
     except Exception as exc:  # noqa: BLE001 (trimesh's readers raise anything on a bad file)
         raise ValueError(f"{type(exc).__name__}: {str(exc).splitlines()[0] if str(exc) else 'unreadable'}") from None
+    unit = 1.0  # a DAE's <unit meter=...> (0.001 for millimetres), which RViz applies too
+    if getattr(loaded, "units", None) not in (None, "m", "meters"):
+        try:
+            unit = float(trimesh.units.unit_conversion(loaded.units, "meters"))
+        except (ValueError, TypeError, KeyError):
+            raise ValueError(f"unknown length unit {loaded.units!r}") from None
     if isinstance(loaded, trimesh.Scene):
         items = []
         for node in loaded.graph.nodes_geometry:
@@ -142,7 +148,8 @@ def read_mesh(path: Path) -> list[tuple[np.ndarray, np.ndarray, tuple | None]]:
     by_colour: dict[tuple | None, list] = {}
     for vertices, geometry in items:
         if len(geometry.faces):
-            by_colour.setdefault(_colour(geometry), []).append((np.asarray(vertices, float), np.asarray(geometry.faces)))
+            by_colour.setdefault(_colour(geometry), []).append((unit * np.asarray(vertices, float),
+                                                                np.asarray(geometry.faces)))
     out = []
     for colour, pieces in by_colour.items():
         offsets = np.cumsum([0] + [len(v) for v, _ in pieces[:-1]])
@@ -209,7 +216,8 @@ def visual_parts(robot: Robot, frames: tuple[str, ...], warn: Callable[[str], No
                                   tuple(visual.color or colour or GREY), name + (f"_{i}" if len(pieces) > 1 else "")))
     who = f"derive view {robot.name}"
     if library is not None:
-        warn(f"warning: {who}: reading mesh files needs trimesh: {library}; the meshes are left out")
+        warn(f"warning: {who}: reading mesh files needs the viewer extra (trimesh, pycollada): {library}; the meshes "
+             "are left out")
     if missing:
         warn(f"warning: {who}: {len(missing)} mesh file{'s' * (len(missing) > 1)} not found, left out: {missing[0]}"
              + (f" and {len(missing) - 1} more" if len(missing) > 1 else "")
