@@ -171,6 +171,34 @@ def test_import_urdf_keeps_the_visuals_in_their_bodies(looks, tmp_path):
         "robots:\n  looks: " + __import__("json").dumps(import_urdf(urdf)))["looks"])
 
 
+def test_mesh_files_resolve_as_ros_does(tmp_path, monkeypatch):
+    """package://NAME/...: --package-path first, then a folder NAME at or beside an ancestor of the URDF's
+    folder, then ROS_PACKAGE_PATH; talos' package:///NAME/... too; relative paths from the URDF's folder."""
+    from derive.description.urdf import mesh_file
+
+    urdf_folder = tmp_path / "ws" / "src" / "arm_description" / "urdf"
+    urdf_folder.mkdir(parents=True)
+    for package in (tmp_path / "ws" / "src" / "arm_description", tmp_path / "ws" / "src" / "gripper",
+                    tmp_path / "elsewhere" / "arm_description", tmp_path / "ros" / "tools"):
+        (package / "meshes").mkdir(parents=True)
+        (package / "meshes" / "m.stl").write_bytes(b"")
+    (urdf_folder / "local.stl").write_bytes(b"")
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ros"))
+    missing = []
+    found = {name: mesh_file(name, urdf_folder, {"arm_description": tmp_path / "elsewhere" / "arm_description"} if k == 0
+                             else {}, missing.append)
+             for k, name in enumerate(["package://arm_description/meshes/m.stl", "package:///arm_description/meshes/m.stl",
+                                       "package://gripper/meshes/m.stl", "package://tools/meshes/m.stl", "local.stl",
+                                       f"file://{urdf_folder / 'local.stl'}", "package://nowhere/m.stl"])}
+    assert list(found.values()) == [
+        (tmp_path / "elsewhere" / "arm_description" / "meshes" / "m.stl").as_posix(),
+        (tmp_path / "ws" / "src" / "arm_description" / "meshes" / "m.stl").as_posix(),
+        (tmp_path / "ws" / "src" / "gripper" / "meshes" / "m.stl").as_posix(),
+        (tmp_path / "ros" / "tools" / "meshes" / "m.stl").as_posix(),
+        (urdf_folder / "local.stl").as_posix(), (urdf_folder / "local.stl").as_posix(), "package://nowhere/m.stl"]
+    assert missing == ["package://nowhere/m.stl: package 'nowhere' not found (--package-path nowhere=DIR)"]
+
+
 def test_import_urdf_keeps_a_missing_mesh_with_one_warning(tmp_path, capsys):
     urdf = tmp_path / "arm.urdf"
     urdf.write_text(LOOKS_URDF.replace("package://looks_description/meshes/slab.stl", "meshes/gone.stl")

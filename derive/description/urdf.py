@@ -518,7 +518,7 @@ def mesh_file(filename: str, folder: Path, packages: Mapping[str, Path] = {}, wa
     text = filename.strip()
     path: Path | None
     if text.startswith("package://"):
-        package, _, rest = text[len("package://"):].partition("/")
+        package, _, rest = text[len("package://"):].lstrip("/").partition("/")  # talos' package:///NAME/...
         found = _package_folder(package, folder, packages)
         path = found / rest if found is not None else None
         if path is None:
