@@ -489,6 +489,11 @@ def test_live_meshes_move_with_the_joints_and_toggle(looks, trimesh):
         view = LiveView(server, robot, kin, geo, initial_q(robot), parts=parts)
         assert sorted(view.mesh_frames) == [geo.frames.index("base"), geo.frames.index("arm")]
         assert len(view.meshes) == 3 and not view.boxes[0].visible and view.skeleton.visible
+        # the first camera looks at the centre of the frames from the page's direction, not from viser's far default
+        origins = kin.poses(initial_q(robot))[:, :3, 3]
+        np.testing.assert_allclose(server.initial_camera.look_at, 0.5 * (origins.min(axis=0) + origins.max(axis=0)),
+                                   atol=1e-6)
+        assert np.linalg.norm(np.asarray(server.initial_camera.position) - server.initial_camera.look_at) < 3 * geo.size
         view.sliders[0].value = 0.9
         view._slid(0)(None)
         arm = kin.poses(view.q)[geo.frames.index("arm")]

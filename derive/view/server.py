@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import threading
 import time
 from typing import Callable
@@ -22,6 +23,7 @@ import numpy as np
 from derive.description.robot import Robot
 from derive.errors import DeriveError
 from derive.view.meshes import Part
+from derive.view.page import AZIMUTH, ELEVATION, FOV
 from derive.view.scene import Geometry, Kinematics, Trajectory, place, upright
 
 EXTRA = "derive view needs the viewer extra: pip install 'derive-robotics[viewer]'"
@@ -53,6 +55,7 @@ class LiveView:
         scene, gui = server.scene, server.gui
         placed = place(geo, kin.poses(self.q))
         scene.set_up_direction(geo.up)  # against gravity: a planar arm in x-y stands upright
+        self._aim(placed.frames[:, :3, 3])
         scene.add_grid("/ground", width=4 * geo.size, height=4 * geo.size, cell_size=geo.size / 10,
                        wxyz=_wxyz(self.viser, upright(geo.up).T))  # the plane normal to up
         self.boxes = [scene.add_box(f"/inertia_boxes/{geo.frames[f]}", color=BOX, dimensions=tuple(np.maximum(e, 1e-4)),
@@ -111,6 +114,21 @@ class LiveView:
         if trajectory is not None:
             self._player(trajectory)
         self.show(self.q)
+
+    def _aim(self, origins: np.ndarray) -> None:
+        """The first camera as the page's (:mod:`derive.view.page`): at the centre of the frames, from the
+        front right and a little above, far enough for the robot to fill the view (viser's default stands
+        metres away, where a 1 m arm is a speck)."""
+        lo, hi = origins.min(axis=0), origins.max(axis=0)
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.5 * self.geo.size, 0.05)
+        target = 0.5 * (lo + hi)
+        ce = math.cos(ELEVATION)
+        away = upright(self.geo.up).T @ np.array([ce * math.cos(AZIMUTH), ce * math.sin(AZIMUTH), math.sin(ELEVATION)])
+        camera = self.server.initial_camera
+        camera.look_at = tuple(float(x) for x in target)
+        camera.position = tuple(float(x) for x in target + 1.4 * radius / math.sin(0.5 * FOV) * away)
+        camera.up = tuple(float(x) for x in self.geo.up)
+        camera.fov = FOV
 
     @staticmethod
     def _shown(handles: list, box) -> Callable:
