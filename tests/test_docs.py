@@ -30,7 +30,7 @@ ARM = {"robots": {"arm": {
     "parameters": {"L": 0.3},
     "links": [{"name": "base"},
               {"name": "l1", "mass": {"param": "m1", "default": 1.0}, "inertia": {"ixx": 0.1, "iyy": 0.1, "izz": 0.1}},
-              {"name": "l2", "mass": 0.5, "inertia": [0.01, 0.01, 0.01]}],
+              {"name": "l2", "mass": 0.5, "inertia": [0.01, 0.01, 0.01], "visual": [{"box": [0.1, 0.02, 0.02]}]}],
     "joints": [{"name": "j1", "type": "revolute", "parent": "base", "child": "l1", "axis": [0, 0, 1],
                 "origin": {"xyz": [0, 0, 0.1]}, "limits": {"lower": -1, "upper": 1}, "actuator": {"viscous": 0.1}},
                {"name": "j2", "type": "revolute", "parent": "l1", "child": "l2", "mimic": {"joint": "j1"}}],
@@ -51,7 +51,7 @@ PLACES = {
     "actuator": (ARM, ("robots", "arm", "joints", 0, "actuator")), "mimic": (ARM, ("robots", "arm", "joints", 1, "mimic")),
     "frame": (ARM, ("robots", "arm", "frames", 0)), "bundle": (ARM, ("robots", "arm", "bundles", 0)),
     "generate": (ARM, ("robots", "arm", "generate")), "parameter": (ARM, ("robots", "arm", "links", 1, "mass")),
-    "loop": (LOOP, ("robots", "fourbar", "loops", 0)),
+    "loop": (LOOP, ("robots", "fourbar", "loops", 0)), "visual": (ARM, ("robots", "arm", "links", 2, "visual", 0)),
     "dh": (DH, ("robots", "dh_arm", "dh")), "dh_row": (DH, ("robots", "dh_arm", "dh", "rows", 0)),
 }
 

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import os
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -62,8 +64,24 @@ def note_big(name: str, entry: dict, shown: str) -> None:
           file=sys.stderr)
 
 
+def relative_meshes(entry: dict, models: str) -> dict:
+    """``entry`` with its absolute mesh files written relative to the folder of the models file ``models``
+    (what the viewer resolves them against): the models file and the meshes can move together."""
+    folder = Path(os.path.abspath(models)).parent
+    for link in entry.get("links", []):
+        for item in link.get("visual", []):
+            mesh = item.get("mesh")
+            if mesh and Path(mesh).is_absolute():
+                try:
+                    item["mesh"] = Path(os.path.relpath(mesh, folder)).as_posix()
+                except ValueError:  # another drive (Windows): stays absolute
+                    pass
+    return entry
+
+
 def _write(args, name: str, entry: dict, generator: str = "derive import-urdf") -> str:
     """Append (or with --replace, replace in place) ``entry`` in ``args.out``: the line that says which."""
+    entry = relative_meshes(entry, args.out)
     done = append_entry(args.out, name, entry, replace=bool(getattr(args, "replace", False)), generator=generator)
     return f"{done} robot '{name}' {'in' if done == 'replaced' else 'to'} {args.out}"
 
@@ -78,7 +96,8 @@ def cmd_import_urdf(args) -> int:
                                     fix_inertia=bool(getattr(args, "fix_inertia", False)),
                                     xacro_args=getattr(args, "xacro_arg", None),
                                     package_paths=getattr(args, "package_path", None),
-                                    snap_angles=getattr(args, "snap_angles", None))
+                                    snap_angles=getattr(args, "snap_angles", None),
+                                    visuals=not getattr(args, "no_visuals", False))
     warn_unmoved(name, entry, resolve_urdf(args.file, name)[1])
     note_big(name, entry, resolve_urdf(args.file, name)[1])
     if args.out:
@@ -94,7 +113,7 @@ def cmd_import_mjcf(args) -> int:
     independent = [x.strip() for x in args.independent.split(",") if x.strip()] if args.independent else None
     name, entry = import_mjcf_named(args.file, name=args.name, floating=args.floating,
                                     actuators=not args.no_actuators, independent=independent,
-                                    keyframe=args.keyframe)
+                                    keyframe=args.keyframe, visuals=not args.no_visuals)
     warn_unmoved(name, entry, args.file)
     note_big(name, entry, args.file)
     if args.out:
@@ -174,6 +193,9 @@ def add_parser(sub) -> None:
                         "are listed in a warning")
     u.add_argument("--floating", action="store_true",
                    help="floating base: the URDF root link moves freely (base: floating, Pinocchio's JointModelFreeFlyer)")
+    u.add_argument("--no-visuals", action="store_true",
+                   help="leave out the links' <visual> meshes and shapes (by default each link keeps them as its "
+                        "visual: list, for derive view; mesh files resolved now, written relative to --out)")
     u.add_argument("--arg", dest="xacro_arg", action="append", metavar="NAME=VALUE",
                    help="a xacro argument (xacro's NAME:=VALUE); repeat for more")
     u.add_argument("--package-path", dest="package_path", action="append", metavar="NAME=DIR",
@@ -211,6 +233,9 @@ def add_parser(sub) -> None:
     x.add_argument("--keyframe", metavar="NAME",
                    help="a closed chain's reference configuration: this keyframe's qpos (default: the keyframe named "
                         "'reference' where there is one, as derive export writes it, else qpos0)")
+    x.add_argument("--no-visuals", action="store_true",
+                   help="leave out the visible geoms (by default each link keeps its meshes and shapes as its visual: "
+                        "list, for derive view)")
     x.add_argument("--name", help="robot name (default: the MJCF model name made a C identifier)")
     x.add_argument("--out", metavar="MODELS", type=path_arg,
                    help="append to this models file instead of printing (created if missing; written atomically)")

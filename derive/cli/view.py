@@ -4,6 +4,7 @@
     derive view panda --csv run.csv            ... plus playback of a trajectory CSV
     derive view panda --html panda.html        one self-contained page (no viser, no network)
     derive view panda --csv run.csv --html run.html   the page with play controls
+    derive --models arm.yaml view arm --no-meshes     the model alone, without its links' meshes
 """
 
 from __future__ import annotations
@@ -18,14 +19,17 @@ from derive.cli.common import Vector, path_arg, vector_help
 from derive.description.model import load_robot
 from derive.errors import DeriveError
 from derive.filesystem import write_atomically
-from derive.view.page import render_page
+from derive.view.meshes import visual_parts
+from derive.view.page import PAGE_TRIANGLES, render_page
 from derive.view.scene import Kinematics, frames_to_show, geometry, initial_q, read_trajectory
 from derive.view.server import import_viser, serve
 
 
 def add_parser(sub) -> None:
-    v = sub.add_parser("view", help="show a robot in the browser: skeleton, axes, frames, CoM, inertia boxes",
-                       description="Shows ROBOT from its model alone (no meshes): the skeleton between the joint "
+    v = sub.add_parser("view", help="show a robot in the browser: meshes, skeleton, axes, frames, CoM, inertia boxes",
+                       description="Shows ROBOT: its links' meshes and shapes where models.yaml has them (visual:, "
+                                   "as import-urdf and import-mjcf keep them; mesh files need the viewer extra), and "
+                                   "from the model alone the skeleton between the joint "
                                    "origins, joint axes, link and named frames, a CoM sphere (a steel ball of the "
                                    "link's mass) and the equivalent-inertia box of every link. Live (the viewer "
                                    "extra, viser): joint sliders within the limits, playback of a trajectory CSV "
@@ -41,6 +45,8 @@ def add_parser(sub) -> None:
     v.add_argument("--host", default="127.0.0.1", help="address the live viewer listens on (default 127.0.0.1)")
     v.add_argument("--port", type=int, default=8080, help="port of the live viewer (default 8080)")
     v.add_argument("--ik", metavar="FRAME", help="frame of the IK gizmo (default tcp, else the first with ik_<frame>)")
+    v.add_argument("--no-meshes", action="store_true",
+                   help="leave out the links' meshes and shapes (models.yaml visual:), drawing the model alone")
     v.set_defaults(func=cmd_view)
 
 
@@ -68,9 +74,10 @@ def cmd_view(args) -> int:
         have = ", ".join(kin.ik_frames) or "none: run `derive generate` for the generated IK"
         raise DeriveError(f"view {robot.name}: --ik {args.ik}: no generated ik_{args.ik} (frames with IK: {have})")
     geo = geometry(robot, kin)
+    parts = [] if args.no_meshes else visual_parts(robot, geo.frames, lambda line: print(line, file=sys.stderr))
     if args.html is None:
         serve(robot, kin, geo, q0, trajectory, args.host, args.port, args.ik,
-              lambda line: print(line, flush=True))
+              lambda line: print(line, flush=True), parts)
         return 0
     if trajectory is None:
         poses, times = kin.poses(q0)[None], None
@@ -80,7 +87,10 @@ def cmd_view(args) -> int:
         poses = np.array([kin.poses(trajectory.q[k]) for k in shown])
         times = trajectory.t[shown]
         note = f"{Path(args.csv).name}: {len(trajectory.t)} samples, {times[0]:g} .. {times[-1]:g} s"
-    text = render_page(geo, poses, times, note=f"{note}; poses from the {kin.source}")
+    text = render_page(geo, poses, times, note=f"{note}; poses from the {kin.source}", parts=parts)
     path = write_atomically(Path(args.html), text, "viewer page")
-    print(f"wrote {path} ({len(text.encode()) / 1024:.0f} KiB{'' if times is None else f', {len(times)} frames'})")
+    triangles = sum(len(p.faces) for p in parts)
+    meshes = "" if not parts else f", {triangles} mesh triangles" + (
+        f" thinned to at most {PAGE_TRIANGLES}" if triangles > PAGE_TRIANGLES else "")
+    print(f"wrote {path} ({len(text.encode()) / 1024:.0f} KiB{'' if times is None else f', {len(times)} frames'}{meshes})")
     return 0

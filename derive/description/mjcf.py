@@ -33,6 +33,14 @@ Conventions (what the entry is, against MuJoCo's qpos and qvel):
   ``body_iquat`` into the link frame (no ``inertia_rpy``); a massless body's rotational inertia
   counts (MuJoCo's M holds it).
 - Named sites become frames on their body's link (unnamed sites are left out).
+- The visible geoms (groups 0 to 2, MuJoCo's viewer's default; not fully transparent) become their
+  link's ``visual:`` list (``derive view`` only; ``visuals=False`` / ``--no-visuals`` leaves them
+  out): box, sphere, cylinder and capsule with their full sizes, an ellipsoid as a unit sphere
+  scaled by its radii, a mesh as its file (absolute; relative to the models file with ``--out``) and
+  ``scale``, placed as written: MuJoCo's compiler moves a mesh's vertices to its inertial frame
+  (``mesh_pos``, ``mesh_quat``) and the geom the other way, which the import undoes. Colour: the
+  geom's material's ``rgba``, else its own. Planes, height fields and meshes without a file are
+  left out.
 - ``dof_armature``, ``dof_damping`` and ``dof_frictionloss`` -> the joint's ``actuator``
   ``{armature, viscous, coulomb}`` (MuJoCo applies frictionloss as a soft constraint, derive as
   f_c sign(qd)); a joint actuator's ``gear`` -> ``gear_ratio`` (a record only: derive's tau stays
@@ -66,6 +74,7 @@ Conventions (what the entry is, against MuJoCo's qpos and qvel):
 from __future__ import annotations
 
 import math
+import os
 import sys
 import xml.etree.ElementTree as ET
 from pathlib import Path
@@ -164,7 +173,8 @@ def _compile(mujoco, path: Path, spelling: str, robot: str):
 
 
 def import_mjcf(path: str | Path, name: str | None = None, floating: bool | None = None,
-                actuators: bool = True, independent: list[str] | None = None, keyframe: str | None = None) -> dict:
+                actuators: bool = True, independent: list[str] | None = None, keyframe: str | None = None,
+                visuals: bool = True) -> dict:
     """Read an MJCF file through MuJoCo's compiler and return one models.yaml robot entry (a plain dict).
 
     ``floating`` None: as the file says (a free joint -> ``base: floating``); True / False to
@@ -172,15 +182,16 @@ def import_mjcf(path: str | Path, name: str | None = None, floating: bool | None
     gears out. ``name`` defaults to the MJCF ``model`` name made a C identifier. ``independent``: the
     independent coordinates of a closed chain (``connect``/``weld`` equalities; default: derive's
     pivoting); ``keyframe``: the keyframe whose qpos is its reference configuration (default: the one named
-    ``reference`` where there is one, else qpos0). Raises a one-line :class:`~derive.errors.DeriveError`
+    ``reference`` where there is one, else qpos0). ``visuals`` False leaves out the visible geoms (each
+    link's ``visual:`` list, module docstring). Raises a one-line :class:`~derive.errors.DeriveError`
     naming the file and the element.
     """
-    return import_mjcf_named(path, name, floating, actuators, independent, keyframe)[1]
+    return import_mjcf_named(path, name, floating, actuators, independent, keyframe, visuals)[1]
 
 
 def import_mjcf_named(path: str | Path, name: str | None = None, floating: bool | None = None,
                       actuators: bool = True, independent: list[str] | None = None,
-                      keyframe: str | None = None) -> tuple[str, dict]:
+                      keyframe: str | None = None, visuals: bool = True) -> tuple[str, dict]:
     """Like :func:`import_mjcf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
@@ -195,8 +206,9 @@ def import_mjcf_named(path: str | Path, name: str | None = None, floating: bool 
     default = c_identifier(model_name or file.stem)
     robot = name or default
     m = _compile(mujoco, file, spelling, robot)
-    return robot, _Importer(mujoco, m, robot, spelling, floating, actuators, default, independent,
-                              keyframe).entry()
+    importer = _Importer(mujoco, m, robot, spelling, floating, actuators, default, independent, keyframe)
+    importer.folder = file.absolute().parent if visuals else None
+    return robot, importer.entry()
 
 
 class _Importer:
@@ -211,6 +223,7 @@ class _Importer:
                                                                           kinds.mjJNT_SLIDE, kinds.mjJNT_HINGE))
         self.floating_arg, self.with_actuators = floating, actuators
         self.notes: list[str] = []
+        self.folder: Path | None = None  # the MJCF's folder, where its relative mesh files are; None: no visuals
 
     def error(self, where: str, problem: str) -> ModelError:
         return ModelError(self.robot, where, problem, self.spelling)
@@ -335,6 +348,11 @@ class _Importer:
         closed = self.closure_fields(loops, joints)
 
         out_links = [{"name": n, **self.merged(n, parts[n])} for n in links]
+        if self.folder is not None:
+            for link in out_links:
+                looks = [item for pose, b in parts[link["name"]] for item in self.visuals(pose, b)]
+                if looks:
+                    link["visual"] = looks
         self.check_names(out_links, joints, frames)
         gravity = [0.0, 0.0, 0.0] if m.opt.disableflags & mj.mjtDisableBit.mjDSBL_GRAVITY else \
             [_clean(g) for g in m.opt.gravity]
@@ -579,6 +597,54 @@ class _Importer:
             ref1, ref2 = float(m.qpos0[m.jnt_qposadr[j1]]), float(m.qpos0[m.jnt_qposadr[j2]])
             # q1 - ref1 = c0 + c1 (q2 - ref2), and derive's q is MuJoCo's qpos
             out[j1] = {"joint": self.joint_name(j2), "multiplier": c1, "offset": _clean(ref1 + c0 - c1 * ref2)}
+        return out
+
+    # ---- looks
+    def visuals(self, pose: np.ndarray, b: int) -> list[dict]:
+        """The visible geoms of body ``b`` as ``visual`` items in its link's frame (``pose``: the body's)."""
+        m, kinds = self.m, self.mj.mjtGeom
+        out = []
+        for g in range(m.ngeom):
+            if int(m.geom_bodyid[g]) != b or int(m.geom_group[g]) > 2:
+                continue
+            kind = int(m.geom_type[g])
+            rgba = m.mat_rgba[m.geom_matid[g]] if m.geom_matid[g] >= 0 else m.geom_rgba[g]
+            if rgba[3] <= 0:
+                continue
+            size = [float(v) for v in m.geom_size[g]]
+            place = _h(quat_matrix(m.geom_quat[g]), m.geom_pos[g])
+            item: dict = {}
+            if kind == int(kinds.mjGEOM_BOX):
+                item["box"] = [2 * v for v in size]
+            elif kind == int(kinds.mjGEOM_SPHERE):
+                item["sphere"] = size[0]
+            elif kind in (int(kinds.mjGEOM_CYLINDER), int(kinds.mjGEOM_CAPSULE)):
+                item["cylinder" if kind == int(kinds.mjGEOM_CYLINDER) else "capsule"] = [size[0], 2 * size[1]]
+            elif kind == int(kinds.mjGEOM_ELLIPSOID):
+                item.update(sphere=1.0, scale=size)
+            elif kind == int(kinds.mjGEOM_MESH):
+                mesh = int(m.geom_dataid[g])
+                at = int(m.mesh_pathadr[mesh])
+                file = m.paths[at:].split(b"\0", 1)[0].decode() if at >= 0 else ""
+                if not file:
+                    self.warn(f"geom {g}", "a mesh without a file (inline vertices): not kept for derive view")
+                    continue
+                path = Path(file) if Path(file).is_absolute() else self.folder / file
+                if not path.is_file():
+                    self.warn(f"geom {g}", f"mesh file {file}: not found ({path}): kept, derive view skips it")
+                item["mesh"] = Path(os.path.normpath(path)).as_posix()
+                # the compiler moved the vertices to the mesh's inertial frame and the geom the other way: undone
+                place = place @ np.linalg.inv(_h(quat_matrix(m.mesh_quat[mesh]), m.mesh_pos[mesh]))
+                scale = [float(v) for v in m.mesh_scale[mesh]]
+                if scale != [1.0, 1.0, 1.0]:
+                    item["scale"] = scale
+            else:
+                continue  # a plane, a height field, an SDF: no part of a robot's looks
+            origin = _origin(pose @ place)
+            item.update({k: v for k, v in origin.items() if any(v)})
+            item["color"] = [round(float(c), 6) for c in rgba]
+            out.append({k: item[k] for k in sorted(item, key=["mesh", "box", "cylinder", "sphere", "capsule", "xyz",
+                                                                "rpy", "scale", "color"].index)})
         return out
 
     # ---- mass

@@ -25,7 +25,7 @@ from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
 from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
-from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, LOOP_KINDS, Loop, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3,
+from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, LOOP_KINDS, Loop, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3, VISUAL_SHAPES, Visual,
                                       compose_mimics, identifier, import_command, shown)
 from derive.description.schema import keys
 from derive.resources import EXAMPLE_MODELS
@@ -222,7 +222,64 @@ class _Parser:
             com=self.vec3(where + ".com", raw.get("com")),
             inertia=self.inertia(where + ".inertia", raw.get("inertia")),
             inertia_rpy=self.vec3(where + ".inertia_rpy", raw.get("inertia_rpy")),
+            visual=self.visuals(where + ".visual", raw.get("visual")),
         )
+
+    def numbers(self, where: str, raw: Any, n: int | tuple[int, ...], positive: bool = False) -> tuple[float, ...]:
+        """A list of ``n`` plain numbers (``n`` a tuple: any of those counts); ``positive``: each > 0."""
+        counts = (n,) if isinstance(n, int) else n
+        if not isinstance(raw, (list, tuple)) or len(raw) not in counts:
+            want = " or ".join(str(c) for c in counts)
+            raise self.error(where, f"expected a list of {want} numbers, got {shown(repr(raw), 60)}")
+        out = tuple(self.number(f"{where}[{i}]", v) for i, v in enumerate(raw))
+        for i, v in enumerate(out):
+            if positive and not v > 0:
+                raise self.error(f"{where}[{i}]", f"must be positive, got {v:g}")
+        return out
+
+    def visuals(self, where: str, raw: Any) -> tuple[Visual, ...]:
+        """A link's ``visual`` list (see :class:`~derive.description.robot.Visual`); plain numbers only."""
+        if raw is None:
+            return ()
+        if not isinstance(raw, list):
+            raise self.error(where, "expected a list of visuals ({mesh: FILE} or {box: [x, y, z]}, ...)")
+        out = []
+        for k, item in enumerate(raw):
+            at = f"{where}[{k}]"
+            self.check_keys(at + ".", item, keys("visual"))
+            shapes = [s for s in VISUAL_SHAPES if s in item]
+            if len(shapes) != 1:
+                raise self.error(at, f"needs exactly one of {', '.join(VISUAL_SHAPES)}, got "
+                                     f"{', '.join(shapes) if shapes else 'none'}")
+            shape, value = shapes[0], item[shapes[0]]
+            mesh, size = "", ()
+            if shape == "mesh":
+                if not isinstance(value, str) or not value.strip():
+                    raise self.error(f"{at}.mesh", f"expected a file name, got {shown(repr(value), 60)}")
+                mesh = value
+            elif shape == "box":
+                size = self.numbers(f"{at}.box", value, 3, positive=True)
+            elif shape == "sphere":
+                size = (self.number(f"{at}.sphere", value),)
+                if not size[0] > 0:
+                    raise self.error(f"{at}.sphere", f"must be a positive radius, got {size[0]:g}")
+            else:
+                size = self.numbers(f"{at}.{shape}", value, 2, positive=True)
+            scale = self.numbers(f"{at}.scale", item["scale"], 3) if "scale" in item else (1.0, 1.0, 1.0)
+            for i, v in enumerate(scale):
+                if v == 0:
+                    raise self.error(f"{at}.scale[{i}]", "must not be 0")
+            color = None
+            if "color" in item:
+                color = self.numbers(f"{at}.color", item["color"], (3, 4))
+                for i, v in enumerate(color):
+                    if not 0 <= v <= 1:
+                        raise self.error(f"{at}.color[{i}]", f"must be from 0 to 1, got {v:g}")
+                color = color + (1.0,) * (4 - len(color))
+            xyz = self.numbers(f"{at}.xyz", item["xyz"], 3) if "xyz" in item else (0.0, 0.0, 0.0)
+            rpy = self.numbers(f"{at}.rpy", item["rpy"], 3) if "rpy" in item else (0.0, 0.0, 0.0)
+            out.append(Visual(shape, mesh, size, Origin(xyz, rpy), scale, color))
+        return tuple(out)
 
     def unit_vector(self, where: str, raw: Any) -> tuple:
         """A nonzero 3-vector of numbers, normalised (kept as written when already unit); robust for any

@@ -71,6 +71,29 @@ class Origin:
     rpy: Vec3 = (0.0, 0.0, 0.0)
 
 
+VISUAL_SHAPES = ("mesh", "box", "cylinder", "sphere", "capsule")
+"""What a link's ``visual`` draws: a mesh file or a primitive shape."""
+
+
+@dataclass(frozen=True)
+class Visual:
+    """One piece of a link's looks (URDF ``<visual>``, MJCF ``<geom>``), for ``derive view`` only.
+
+    ``shape`` one of :data:`VISUAL_SHAPES`; ``mesh`` the file as models.yaml spells it (relative to the
+    models file, absolute, or ``example-robot-data:<path under robots/>``); ``size`` box edges (x, y, z),
+    cylinder and capsule (radius, length along z), sphere (radius,); placed at ``origin`` in the link
+    frame, scaled by ``scale`` along its own axes, coloured ``color`` (r, g, b, a in 0..1; None: the
+    mesh's own, else grey). No part of the dynamics or of the generated code (not in the model hash).
+    """
+
+    shape: str
+    mesh: str = ""
+    size: tuple[float, ...] = ()
+    origin: Origin = Origin()
+    scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    color: tuple[float, float, float, float] | None = None
+
+
 @dataclass(frozen=True)
 class Link:
     name: str
@@ -78,6 +101,7 @@ class Link:
     com: Vec3 = (0.0, 0.0, 0.0)
     inertia: tuple = ((0.0, 0.0, 0.0), (0.0, 0.0, 0.0), (0.0, 0.0, 0.0))
     inertia_rpy: Vec3 = (0.0, 0.0, 0.0)
+    visual: tuple[Visual, ...] = field(default=(), compare=False)  # the looks: derive view only, not the dynamics
 
 
 @dataclass(frozen=True)
@@ -666,6 +690,8 @@ def model_data(robot: Robot) -> dict:
     data = asdict(robot)
     del data["file"]  # where the model was read from is no part of it
     del data["reference_q"]  # solved from the model by Newton: its last bits may differ between machines
+    for link in data["links"]:  # the looks move no generated number: a new mesh regenerates nothing
+        del link["visual"]
     if not data["loops"]:  # trees keep the hash they had before loops existed
         for key in ("loops", "independent", "independent_chosen", "reference", "loop_rows"):
             del data[key]

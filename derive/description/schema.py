@@ -58,7 +58,22 @@ _SECTIONS = (
         "inertia": "inertia about the COM: diagonal [ixx, iyy, izz], a symmetric 3x3 list, or "
                    "{ixx, ixy, ixz, iyy, iyz, izz}; positive semi-definite, triangle inequality",
         "inertia_rpy": "orientation [roll, pitch, yaw] of the inertial frame in the link frame (default 0)",
+        "visual": "list of the link's looks (see visual): meshes and shapes `derive view` draws; no part of the "
+                  "dynamics or the generated code",
     }),
+    Section("visual", "links[i].visual[k]", "One mesh or primitive shape fixed to the link, for `derive view` only "
+            "(import-urdf and import-mjcf write them). Exactly one of mesh, box, cylinder, sphere, capsule.", {
+                "mesh": "a mesh file (STL, OBJ or DAE; the `viewer` extra reads it): relative to the models file's "
+                        "folder, absolute, or example-robot-data:<path under robots/>",
+                "box": "edge lengths [x, y, z] (m), centred on the visual's origin",
+                "cylinder": "[radius, length] (m), along the visual's z, centred",
+                "sphere": "radius (m)",
+                "capsule": "[radius, length] (m): a cylinder of that length along z with hemispherical ends",
+                "xyz": "position of the visual's origin in the link frame (m; default 0)",
+                "rpy": "its orientation [roll, pitch, yaw] in the link frame (rad; default 0)",
+                "scale": "[sx, sy, sz] along the visual's axes (default [1, 1, 1]; a mesh in mm: 0.001)",
+                "color": "[r, g, b] or [r, g, b, a], each 0..1 (default: the mesh's own colour, else grey)",
+            }),
     Section("joint", "robots.<name>.joints[i]", "Joins a parent link to a child link.", {
         "name": "C identifier; a 1-DOF joint's coordinate (q's entry) takes this name",
         "type": "revolute, continuous, prismatic, helical, cylindrical, universal, spherical or fixed",

@@ -74,6 +74,7 @@ import importlib.metadata
 import json
 import keyword
 import math
+import os
 import re
 import sys
 import xml.etree.ElementTree as ET
@@ -441,6 +442,106 @@ class _Reader:
     def warn(self, where: str, problem: str) -> None:
         print(_printable(f"warning: {self.path}: {where}: {problem}"), file=sys.stderr)
 
+    def visuals(self, name: str, el: ET.Element, folder: Path, packages: Mapping[str, Path],
+                materials: Mapping[str, tuple], missing) -> list[dict]:
+        """The ``<visual>`` elements of link ``name`` (in the link frame): {shape: value, origin: Pose,
+        scale, color}, a mesh's file resolved (:func:`mesh_file`). Shapes URDF does not know are skipped
+        with a warning; nothing here stops an import."""
+        out = []
+        for k, vis in enumerate(el.findall("visual")):
+            where = f"links[{name}].visual[{k}]"
+            geometry = vis.find("geometry")
+            shape = next(iter(geometry), None) if geometry is not None else None
+            if shape is None or shape.tag not in ("mesh", "box", "cylinder", "sphere", "capsule"):
+                self.warn(where, f"no mesh, box, cylinder, sphere or capsule in its <geometry>"
+                                 f"{f' (<{shape.tag}>)' if shape is not None else ''}: not shown by derive view")
+                continue
+            item: dict = {}
+            if shape.tag == "mesh":
+                filename = shape.get("filename") or ""
+                if not filename:
+                    self.warn(where + ".mesh", "no filename: not shown by derive view")
+                    continue
+                item["mesh"] = mesh_file(filename, folder, packages, missing)
+            elif shape.tag == "box":
+                item["box"] = list(self.floats(where + ".box", shape, "size", 3, (0.0, 0.0, 0.0)))
+            elif shape.tag == "sphere":
+                item["sphere"] = self.number(where + ".sphere", shape, "radius", 0.0)
+            else:
+                item[shape.tag] = [self.number(f"{where}.{shape.tag}", shape, key, 0.0) for key in ("radius", "length")]
+            sizes = item.get("box") or item.get("cylinder") or item.get("capsule") or [item.get("sphere", 1.0)]
+            if not all(v > 0 for v in sizes):
+                self.warn(where, f"<{shape.tag}> of size {' '.join(f'{v:g}' for v in sizes)}: not shown by derive view")
+                continue
+            item["origin"] = self.origin(where + ".origin", vis.find("origin"))
+            scale = self.floats(where + ".mesh.scale", shape, "scale", 3, (1.0, 1.0, 1.0)) if shape.tag == "mesh" \
+                else (1.0, 1.0, 1.0)
+            if any(v == 0 for v in scale):
+                self.warn(where + ".mesh.scale", "a zero scale: not shown by derive view")
+                continue
+            if scale != (1.0, 1.0, 1.0):
+                item["scale"] = list(scale)
+            material = vis.find("material")
+            if material is not None:
+                color = material.find("color")
+                rgba = self.floats(where + ".material.color", color, "rgba", 4, ()) if color is not None else \
+                    materials.get(material.get("name") or "", ())
+                if rgba and all(0 <= v <= 1 for v in rgba):
+                    item["color"] = list(rgba)
+            out.append(item)
+        return out
+
+
+def _package_folder(package: str, folder: Path, packages: Mapping[str, Path]) -> Path | None:
+    """Where ROS package ``package`` lies: ``--package-path``, else a folder of that name at or beside
+    an ancestor of the URDF's folder (a ROS workspace's layout), else ROS_PACKAGE_PATH or share/ under
+    AMENT_PREFIX_PATH."""
+    if package in packages:
+        return Path(packages[package])
+    for up in [folder, *folder.parents]:
+        if up.name == package:
+            return up
+        if (up / package).is_dir():
+            return up / package
+    for var, below in (("ROS_PACKAGE_PATH", ""), ("AMENT_PREFIX_PATH", "share")):
+        for root in filter(None, os.environ.get(var, "").split(os.pathsep)):
+            if (Path(root) / below / package).is_dir():
+                return Path(root) / below / package
+    return None
+
+
+def mesh_file(filename: str, folder: Path, packages: Mapping[str, Path] = {}, warn=None) -> str:
+    """A URDF mesh ``filename`` as models.yaml keeps it: ``package://NAME/...`` resolved (:func:`_package_folder`),
+    ``file://`` and paths relative to the URDF's ``folder`` made absolute; a file of the installed
+    example-robot-data spelled ``example-robot-data:<path under robots/>``. A file that is not there is
+    kept as written and ``warn`` (if given) is called with the problem: the viewer skips it."""
+    text = filename.strip()
+    path: Path | None
+    if text.startswith("package://"):
+        package, _, rest = text[len("package://"):].lstrip("/").partition("/")  # talos' package:///NAME/...
+        found = _package_folder(package, folder, packages)
+        path = found / rest if found is not None else None
+        if path is None:
+            if warn:
+                warn(f"{text}: package '{package}' not found (--package-path {package}=DIR)")
+            return text
+    elif text.startswith("file://"):
+        path = Path(text[len("file://"):])
+    else:
+        path = folder / text
+    path = Path(os.path.normpath(path.absolute()))
+    if not path.is_file():
+        if warn:
+            warn(f"{text}: no such file ({path})")
+        return text if text.startswith("package://") else path.as_posix()
+    erd = example_robot_data_dir()
+    if erd is not None:
+        try:
+            return ERD_PREFIX + path.resolve().relative_to(erd.resolve()).as_posix()
+        except (ValueError, OSError):
+            pass
+    return path.as_posix()
+
 
 def _stem(path: Path) -> str:
     """The file name without ``.xacro`` and ``.urdf`` (``arm.urdf.xacro`` -> ``arm``)."""
@@ -452,9 +553,11 @@ def _stem(path: Path) -> str:
 
 
 def _read(path: Path, robot: str | None, shown: str | None = None, xacro_args: Mapping[str, str] | None = None,
-          packages: Mapping[str, Path] | None = None) -> tuple[str, dict[str, _Inertial], list[_Joint], bool]:
+          packages: Mapping[str, Path] | None = None, visuals: dict[str, list[dict]] | None = None
+          ) -> tuple[str, dict[str, _Inertial], list[_Joint], bool]:
     """(URDF robot name, links in file order, joints in file order, whether the file was xacro); warnings
-    name the file as ``shown``. A xacro file is expanded first (:mod:`derive.description.xacro_expand`)."""
+    name the file as ``shown``. A xacro file is expanded first (:mod:`derive.description.xacro_expand`).
+    ``visuals``, if given, receives each link's ``<visual>`` elements (:meth:`_Reader.visuals`)."""
     who = robot or c_identifier(_stem(path))
     try:
         text = read_bytes(path, "URDF")
@@ -488,6 +591,21 @@ def _read(path: Path, robot: str | None, shown: str | None = None, xacro_args: M
         if name in links:
             raise reader.error(f"links[{name}]", "duplicate link name")
         links[name] = reader.inertial(name, el.find("inertial"))
+    if visuals is not None:
+        materials = {}
+        for mat in root.findall("material"):
+            color = mat.find("color")
+            if mat.get("name") and color is not None:
+                materials[mat.get("name")] = reader.floats(f"materials[{mat.get('name')}].color", color, "rgba", 4, ())
+        missing: list[str] = []
+        for el in root.findall("link"):
+            found = reader.visuals(el.get("name"), el, path.parent, packages or {}, materials, missing.append)
+            if found:
+                visuals[el.get("name")] = found
+        if missing:
+            reader.warn("visual", f"{len(missing)} mesh file{'s' * (len(missing) > 1)} not found, kept as written "
+                                  f"(derive view skips {'them' if len(missing) > 1 else 'it'}): {missing[0]}"
+                                  + (f"; and {len(missing) - 1} more" if len(missing) > 1 else ""))
     joints = [reader.joint(el) for el in root.findall("joint")]
     return urdf_name, links, joints, xacro
 
@@ -561,7 +679,7 @@ def _lock_spelling(j: _Joint) -> str:
 
 def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, lock: dict, name: str | None,
              friction: bool = True, fix_inertia: bool = False, xacro: str = "",
-             snap_angles: float | None = None) -> str:
+             snap_angles: float | None = None, visuals: bool = True) -> str:
     """The ``derive import-urdf`` command line that reproduces an import (``xacro``: its --arg and
     --package-path options)."""
     cmd = f"derive import-urdf {spelling}{xacro}"
@@ -581,6 +699,8 @@ def _command(spelling: str, tip: str | None, chain: str | None, floating: bool, 
         cmd += " --fix-inertia"
     if snap_angles is not None:
         cmd += f" --snap-angles {snap_angles!r}"
+    if not visuals:
+        cmd += " --no-visuals"
     return cmd
 
 
@@ -595,6 +715,17 @@ def relock_command(source: str, joints: Iterable[str]) -> str | None:
     if match:
         return command[:match.end()] + "," + ",".join(joints) + command[match.end():]
     return command + " --lock " + ",".join(joints)
+
+
+def _visual_entry(origin: Pose, item: Mapping) -> dict:
+    """A models.yaml ``visual`` item: the shape, then only what differs from the defaults."""
+    out = {k: v for k, v in item.items() if k in ("mesh", "box", "cylinder", "sphere", "capsule")}
+    if any(origin.xyz):
+        out["xyz"] = list(origin.xyz)
+    if any(origin.rpy):
+        out["rpy"] = list(origin.rpy)
+    out.update({k: item[k] for k in ("scale", "color") if k in item})
+    return out
 
 
 def _inertia_dict(m: np.ndarray) -> dict:
@@ -689,7 +820,7 @@ def _clamp_inertia_noise(inertia: dict, mass: float, floor: float) -> dict:
 def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
                 chain: str | None = None, floating: bool = False, friction: bool = True,
                 fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None,
-                snap_angles: float | None = None) -> dict:
+                snap_angles: float | None = None, visuals: bool = True) -> dict:
     """Read a URDF and return one models.yaml robot entry (a plain dict).
 
     ``path`` may be ``example-robot-data:<path under robots/>``. By default the
@@ -731,13 +862,20 @@ def import_urdf(path: str | Path, tip: str | None = None, lock: Any = (), name: 
     (a tolerance in rad, at most 0.1) makes every constant angle within it of k pi/2
     exactly k pi/2 (recorded in the entry's ``source`` command as ``--snap-angles``).
 
+    ``visuals`` (default True) keeps each link's ``<visual>`` elements as its ``visual:`` list (meshes
+    and shapes for ``derive view``; no part of the dynamics): a link merged through fixed joints
+    brings its visuals along, placed in its body's frame; a mesh file is resolved now
+    (:func:`mesh_file`: ``package://`` through ``package_paths`` or the URDF's ancestors) and kept
+    absolute (``derive import-urdf --out`` writes it relative to the models file). False (``--no-visuals``)
+    leaves them out.
+
     Raises :class:`derive.description.model.ModelError` on any problem; it names
     the URDF and, for data defects, the way forward (a xacro expansion:
     :class:`derive.description.xacro_expand.XacroError`, naming the file).
     """
     return import_urdf_named(path, tip, lock, name, chain=chain, floating=floating, friction=friction,
                              fix_inertia=fix_inertia, xacro_args=xacro_args, package_paths=package_paths,
-                             snap_angles=snap_angles)[1]
+                             snap_angles=snap_angles, visuals=visuals)[1]
 
 
 def _fix_inertias(reader: "_Reader", links: dict[str, _Inertial], floor: float) -> list[str]:
@@ -789,7 +927,7 @@ def _flush_tiny(node: Any) -> Any:
 def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), name: str | None = None,
                       chain: str | None = None, floating: bool = False, friction: bool = True,
                       fix_inertia: bool = False, xacro_args: Any = None, package_paths: Any = None,
-                      snap_angles: float | None = None) -> tuple[str, dict]:
+                      snap_angles: float | None = None, visuals: bool = True) -> tuple[str, dict]:
     """Like :func:`import_urdf`, returning ``(robot name, entry)``."""
     if name is not None:
         identifier(name, "name", name)
@@ -800,7 +938,8 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
         packages = package_folders(package_text)
     except XacroError as exc:
         raise XacroError(f"{spelling}: {exc}") from None
-    urdf_name, links, joints, xacro = _read(file, name, spelling, xacro_args, packages)
+    looks: dict[str, list[dict]] | None = {} if visuals else None
+    urdf_name, links, joints, xacro = _read(file, name, spelling, xacro_args, packages, looks)
     robot = name or c_identifier(urdf_name)
     floating_flag = bool(floating)
 
@@ -1039,6 +1178,11 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
     for link in out_links:
         if "inertia" in link:
             link["inertia"] = _clamp_inertia_noise(link["inertia"], link["mass"], NOISE * largest)
+    for link in out_links:  # the looks of every URDF link merged into it, in its frame
+        placed_visuals = [_visual_entry(pose[n] * item["origin"], item) for n in body if body[n] == link["name"]
+                          for item in (looks or {}).get(n, ())]
+        if placed_visuals:
+            link["visual"] = placed_visuals
 
     frames = []
     if tip is not None:  # a tip fused onto its moving body keeps its own name as an alias of tcp (a moving link keeps it anyway)
@@ -1111,7 +1255,7 @@ def import_urdf_named(path: str | Path, tip: str | None = None, lock: Any = (), 
     description = f"{urdf_name} imported from {'xacro' if xacro else 'URDF'}" + (f" ({'; '.join(notes)})" if notes else "")
     command = _command(spelling, tip, chain, floating_flag, locks, name if name and name != c_identifier(urdf_name) else None,
                        friction or not any(any(j.dynamics) for j in order), bool(repaired),
-                       xacro_command(xacro_args, package_text), snap_angles)
+                       xacro_command(xacro_args, package_text), snap_angles, visuals)
     entry = {
         "description": description,
         "source": f"{origin_text}, imported by `{command}`",

@@ -3,7 +3,9 @@
 Joint sliders within the limits move the robot (poses from the generated ``fk_all`` or the numpy
 reference); a trajectory CSV adds play, pause and a time slider; where the robot's generated Python
 has ``ik_<frame>``, a transform gizmo at that frame is the IK target, solved by the generated IK from
-the current q at each move (status and residual shown). viser is the ``viewer`` extra, imported here
+the current q at each move (status and residual shown). The links' meshes (:mod:`derive.view.meshes`)
+hang under one scene node per link, which :meth:`LiveView.show` moves with the rest; check boxes
+show and hide each layer (meshes, skeleton and axes, frames, CoM spheres, inertia boxes). viser is the ``viewer`` extra, imported here
 only: the rest of derive, and ``derive view --html``, run without it.
 """
 
@@ -11,6 +13,7 @@ from __future__ import annotations
 
 import contextlib
 import io
+import math
 import threading
 import time
 from typing import Callable
@@ -19,6 +22,8 @@ import numpy as np
 
 from derive.description.robot import Robot
 from derive.errors import DeriveError
+from derive.view.meshes import Part
+from derive.view.page import AZIMUTH, ELEVATION, FOV
 from derive.view.scene import Geometry, Kinematics, Trajectory, place, upright
 
 EXTRA = "derive view needs the viewer extra: pip install 'derive-robotics[viewer]'"
@@ -42,7 +47,7 @@ class LiveView:
     """The viser scene and GUI of one robot; :meth:`show` moves it to a configuration q (nq)."""
 
     def __init__(self, server, robot: Robot, kin: Kinematics, geo: Geometry, q0: np.ndarray,
-                 trajectory: Trajectory | None = None, ik_frame: str | None = None):
+                 trajectory: Trajectory | None = None, ik_frame: str | None = None, parts: list[Part] | tuple = ()):
         self.viser = import_viser()
         self.server, self.robot, self.kin, self.geo = server, robot, kin, geo
         self.q = np.array(q0, dtype=float)
@@ -50,6 +55,7 @@ class LiveView:
         scene, gui = server.scene, server.gui
         placed = place(geo, kin.poses(self.q))
         scene.set_up_direction(geo.up)  # against gravity: a planar arm in x-y stands upright
+        self._aim(placed.frames[:, :3, 3])
         scene.add_grid("/ground", width=4 * geo.size, height=4 * geo.size, cell_size=geo.size / 10,
                        wxyz=_wxyz(self.viser, upright(geo.up).T))  # the plane normal to up
         self.boxes = [scene.add_box(f"/inertia_boxes/{geo.frames[f]}", color=BOX, dimensions=tuple(np.maximum(e, 1e-4)),
@@ -63,7 +69,30 @@ class LiveView:
                                                 thickness=5.0, thickness_units="screen")
         self.axes = scene.add_line_segments("/joint_axes", points=placed.axes.astype(np.float32), colors=AXIS,
                                             thickness=3.0, thickness_units="screen")
+        # the meshes: one node per link that has any, moved by show(); the parts hang under it, in its coordinates
+        self.mesh_frames = {f: scene.add_frame(f"/meshes/{geo.frames[f]}", show_axes=False)
+                            for f in sorted({p.frame for p in parts})}
+        self.meshes = [scene.add_mesh_simple(f"/meshes/{geo.frames[p.frame]}/{p.name}",
+                                             vertices=p.vertices.astype(np.float32), faces=p.faces.astype(np.uint32),
+                                             color=tuple(int(round(255 * c)) for c in p.color[:3]),
+                                             opacity=float(p.color[3]) if p.color[3] < 1 else None, side="double")
+                       for p in parts]
         self.status = gui.add_markdown(f"**{robot.name}**: poses from the {kin.source}")
+        self.layers = {}
+        plain = not parts  # with meshes, the model's own primitives start hidden
+        with gui.add_folder("layers"):
+            for key, label, handles, on in (
+                    ("meshes", "meshes", list(self.mesh_frames.values()), True),
+                    ("skeleton", "skeleton and joint axes", [self.skeleton, self.axes], True),
+                    ("frames", "frames", self.frames, plain), ("coms", "CoM spheres", self.coms, plain),
+                    ("boxes", "inertia boxes", self.boxes, plain)):
+                if key == "meshes" and not parts:
+                    continue
+                box = gui.add_checkbox(label, initial_value=on)
+                box.on_update(self._shown(handles, box))
+                for handle in handles:
+                    handle.visible = on
+                self.layers[key] = box
         lower, upper = robot.joint_box()
         first = 7 if robot.floating else 0
         self.sliders = {}
@@ -85,6 +114,28 @@ class LiveView:
         if trajectory is not None:
             self._player(trajectory)
         self.show(self.q)
+
+    def _aim(self, origins: np.ndarray) -> None:
+        """The first camera as the page's (:mod:`derive.view.page`): at the centre of the frames, from the
+        front right and a little above, far enough for the robot to fill the view (viser's default stands
+        metres away, where a 1 m arm is a speck)."""
+        lo, hi = origins.min(axis=0), origins.max(axis=0)
+        radius = max(0.5 * float(np.linalg.norm(hi - lo)), 0.5 * self.geo.size, 0.05)
+        target = 0.5 * (lo + hi)
+        ce = math.cos(ELEVATION)
+        away = upright(self.geo.up).T @ np.array([ce * math.cos(AZIMUTH), ce * math.sin(AZIMUTH), math.sin(ELEVATION)])
+        camera = self.server.initial_camera
+        camera.look_at = tuple(float(x) for x in target)
+        camera.position = tuple(float(x) for x in target + 1.4 * radius / math.sin(0.5 * FOV) * away)
+        camera.up = tuple(float(x) for x in self.geo.up)
+        camera.fov = FOV
+
+    @staticmethod
+    def _shown(handles: list, box) -> Callable:
+        def toggled(_event) -> None:
+            for handle in handles:
+                handle.visible = bool(box.value)
+        return toggled
 
     def _slid(self, k: int) -> Callable:
         def moved(_event) -> None:
@@ -108,6 +159,9 @@ class LiveView:
                 handle.position, handle.wxyz = c, _wxyz(self.viser, R)
             for handle, c in zip(self.coms, placed.coms):
                 handle.position = c
+            for f, handle in self.mesh_frames.items():
+                T = placed.frames[f]
+                handle.position, handle.wxyz = T[:3, 3], _wxyz(self.viser, T[:3, :3])
             for k, slider in self.sliders.items():
                 if slider.value != self.q[k]:
                     slider.value = float(self.q[k])
@@ -160,7 +214,8 @@ class LiveView:
 
 
 def serve(robot: Robot, kin: Kinematics, geo: Geometry, q0: np.ndarray, trajectory: Trajectory | None,
-          host: str, port: int, ik_frame: str | None, announce: Callable[[str], None]) -> None:
+          host: str, port: int, ik_frame: str | None, announce: Callable[[str], None],
+          parts: list[Part] | tuple = ()) -> None:
     """Serve the live viewer at http://host:port until the process ends (Ctrl-C)."""
     viser = import_viser()
     try:
@@ -169,7 +224,7 @@ def serve(robot: Robot, kin: Kinematics, geo: Geometry, q0: np.ndarray, trajecto
     except OSError as exc:
         raise DeriveError(f"view {robot.name}: cannot serve on {host}:{port} ({exc.strerror or exc}): "
                           "choose another --port") from None
-    LiveView(server, robot, kin, geo, q0, trajectory, ik_frame)
+    LiveView(server, robot, kin, geo, q0, trajectory, ik_frame, parts)
     announce(f"derive view {robot.name}: http://{host}:{server.get_port()} (Ctrl-C ends it)")
     while True:
         time.sleep(3600)
