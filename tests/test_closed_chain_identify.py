@@ -214,3 +214,32 @@ def test_regressor_is_linear_in_the_parameters_p():
         assert np.abs(np.array(f(y, yd, ydd, params(r))) @ cr.reg.values(true) - want).max() <= 1e-12 * max(
             1.0, np.abs(want).max())
 
+
+
+def test_simulate_a_closed_chain_writes_its_csv_in_y(tmp_path, capsys):
+    """`derive simulate` in y: the generated rk4_step, the tree's energy at the closed q and qd = G yd (drift of
+    the 1 s swing below 1e-10), the CSV's columns q_<c>, qd_<c>, qdd_<c>, tau_<c> for c in y, which identify's
+    reader takes; the Newton closure (the ankle) from the reference's z."""
+    from derive.solvers.identify import read_measurements
+    from derive.solvers.simulate import simulate
+
+    r = robots()["parallel_ankle"]
+    traj = simulate(r, [0.25, 0.05], t_end=1.0, dt=1e-3)
+    assert traj.energy_drift <= 1e-10 and traj.q.shape == (1001, 2)
+    ref = ClosedChainReference(r)
+    for k in (0, 500, 1000):  # the generated closure's q closes the loops; energy E = T + U of that q
+        q = closed_q("parallel_ankle", traj.q[k])
+        assert np.abs(ref.phi(q)).max() <= 1e-12
+        assert abs(ref.energy(q, ref.projection(q) @ traj.qd[k]) - traj.energy[k]) <= 1e-12
+    capsys.readouterr()
+    assert main(["simulate", "delta", "--q0", "1.45", "1.75", "1.6", "--t", "0.2", "--out", str(tmp_path)]) == 0
+    assert "max relative drift" in capsys.readouterr().out
+    csv = tmp_path / "delta.csv"
+    assert csv.read_text().splitlines()[0] == ",".join(
+        ["t"] + [f"{k}_motor{i}" for k in ("q", "qd", "qdd", "tau") for i in (1, 2, 3)] + ["T", "U", "E"])
+    m = read_measurements(csv, list(robots()["delta"].independent))
+    assert m.q.shape == (201, 3) and np.array_equal(m.q[0], [1.45, 1.75, 1.6])
+    py = load_python("delta")
+    assert np.abs(np.asarray(py.forward_dynamics_y(m.q, m.qd, m.tau)).reshape(m.qdd.shape) - m.qdd).max() <= 1e-12
+    assert main(["simulate", "delta", "--q0", "1.45", "1.75", "--out", str(tmp_path)]) == 2
+    assert "q0 needs 3 values" in capsys.readouterr().err
