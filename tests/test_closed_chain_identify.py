@@ -170,6 +170,14 @@ def test_identify_command_on_a_closed_chain(delta_data, tmp_path, capsys):
     cr, red, bp = closed_regressor(written)
     assert bp.names == derived("delta")[2].names
     assert np.abs(bp.K @ cr.reg.values() - pib_true).max() <= 1e-6 * np.abs(pib_true).max()
+    # --physical: each body's pseudo-inertia >= 0; the massless carriages (identified m = 0) written massless
+    physical = tmp_path / "delta_physical.yaml"
+    assert main(["identify", "delta", str(data), "--out", str(physical), "--physical"]) == 0
+    written = load_models(physical)["delta_identified"]
+    assert {link.name: float(link.mass) for link in written.links}["carriage_x"] == 0.0
+    cr, red, bp = closed_regressor(written)
+    # the fit is IPOPT's with the prior's pull and m >= 0 (observed 6.5e-5 relative)
+    assert np.abs(bp.K @ cr.reg.values() - pib_true).max() <= 1e-3 * np.abs(pib_true).max()
 
 
 def test_identify_names_a_sample_where_the_loops_do_not_close(tmp_path, capsys):

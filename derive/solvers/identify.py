@@ -875,7 +875,8 @@ def identified_entry(raw: dict, robot, names: list[str], pi: np.ndarray, source:
 
     Each body's 10 parameters (about the body origin, body frame) go to the body's link as mass, centre
     of mass and inertia about the centre of mass; links merged into it through fixed joints become
-    massless. Actuator parameters replace the joints' armature (gear ratio 1, no motor inertia),
+    massless, and so does a body whose identified mass is 0 (the Delta's carriages: the physically
+    consistent fit leaves them the 1e-9 inertia of its start, which no body without mass can have). Actuator parameters replace the joints' armature (gear ratio 1, no motor inertia),
     viscous and Coulomb friction. ``names`` are the regressor's parameter names (``m_<link>``, ...,
     ``Ia_<coordinate>``, ``fv_<coordinate>``, ``fc_<coordinate>``).
     """
@@ -907,7 +908,7 @@ def identified_entry(raw: dict, robot, names: list[str], pi: np.ndarray, source:
             fields = links[link]
             for key in ("mass", "com", "inertia", "inertia_rpy"):
                 fields.pop(key, None)
-            if link == body:
+            if link == body and m > 0:  # m = 0: a massless body (an inertia without mass is none; a fit's rest)
                 fields.update({"mass": m, "com": [float(x) for x in c],
                                "inertia": {"ixx": Ic[0, 0], "ixy": Ic[0, 1], "ixz": Ic[0, 2], "iyy": Ic[1, 1],
                                            "iyz": Ic[1, 2], "izz": Ic[2, 2]}})
