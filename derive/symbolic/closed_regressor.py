@@ -7,13 +7,14 @@ rnea(q, qd, qdd) = Y(q, qd, qdd) pi. The closed chain's constrained inverse dyna
     tau_y = G^T rnea(q, G yd, G ydd + Gdot yd) = Y_y(y, yd, ydd) pi,
     Y_y = G^T Y(q, G yd, G ydd + Gdot yd),   q = gamma(y)
 
-(ny x n_pi). The closure takes freedom away, so Y_y has fewer independent columns than the tree's Y:
-a body that only translates with the others, or whose motion is fixed by the loops, adds its mass
-to theirs. The base parameters of the closed chain are therefore found on Y_y itself: Gautier's
-numerical QR (:func:`derive.symbolic.base_parameters.base_parameters`, the same rank tolerance and
-choice of columns) on Y_y stacked at seeded closed states (:func:`closed_states`: y within
-+-:data:`SPREAD` of the reference configuration's, where every shipped mechanism assembles on the
-reference's branch; yd, ydd standard normal).
+(ny x n_pi). The closure takes freedom away, so Y_y can have fewer independent columns than the
+tree's Y: parameters that the tree tells apart can act together once the loops tie the motions (the
+four-bar's rocker's first moment along its length acts as the crank's, coupler's and rocker's other
+parameters do: 15 base parameters, its tree 16). The base parameters of the closed chain are therefore
+found on Y_y itself: Gautier's numerical QR (:func:`derive.symbolic.base_parameters.base_parameters`,
+the same choice of columns and names) on Y_y stacked at seeded closed states (:func:`closed_states`:
+y within +-:data:`SPREAD` of the reference configuration's where the loops close on a well-conditioned
+chart; yd, ydd standard normal), with the rank tolerance :data:`RANK_TOL`.
 """
 
 from __future__ import annotations
