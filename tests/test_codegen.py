@@ -57,7 +57,7 @@ class CFunctions:
 
 
 CLOSED = {"closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y", "forward_dynamics_y",
-          "constraint_forces"}
+          "constraint_forces", "regressor_y", "base_regressor_y"}
 """The quantities of a closed chain in y; its ode_rhs, ode_jac_x, ode_jac_u and rk4_step are in x = [y; yd]."""
 
 
@@ -100,6 +100,10 @@ def closed_reference(ref: ClosedChainReference, fn: dict, a: dict):
         return ref.inverse_dynamics(q, yd, ydd)
     if kind == "forward_dynamics_y":
         return ref.forward_dynamics(q, yd, tau)
+    if kind == "regressor_y":  # G^T Y of the reference's own Y (Featherstone's linear form)
+        return ref.regressor(q, yd, ydd)
+    if kind == "base_regressor_y":  # its base columns
+        return ref.regressor(q, yd, ydd)[:, [b["column"] for b in fn["base_parameters"]]]
     if kind == "constraint_forces":  # the tree's KKT multiplier at tau = S^T tau_y
         return ref.kkt_forward_dynamics(q, ref.projection(q) @ yd, ref.actuation(tau))[1]
     raise AssertionError(kind)

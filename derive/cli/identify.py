@@ -24,9 +24,10 @@ from derive.errors import DeriveError
 from derive.filesystem import write_atomically
 from derive.plot.excite import render_excitation
 from derive.solvers.excite import check_options, excite
-from derive.solvers.identify import (identified_entry, identify_file, open_measurements, regressor_along,
-                                     scan_measurements)
+from derive.solvers.identify import (closed_regressor_along, identified_entry, identify_file, open_measurements,
+                                     regressor_along, scan_measurements)
 from derive.symbolic.base_parameters import base_parameters
+from derive.symbolic.closed_regressor import closed_regressor
 from derive.symbolic.dynamics import NewtonEuler
 from derive.symbolic.regressor import Regressor
 from derive.symbolic.symbols import make_symbols
@@ -75,12 +76,23 @@ def add_parser(sub) -> None:
 
 def regressor_of(robot) -> tuple[Regressor, object]:
     """The symbolic regressor of ``robot`` and its base parameters (their near-dependencies, if any, as one
-    warning line on stderr)."""
-    reg = Regressor(NewtonEuler(robot, make_symbols(robot)))
-    bp = base_parameters(robot, regressor=reg)
+    warning line on stderr); a closed chain's are those of its Y_y (:mod:`derive.symbolic.closed_regressor`)."""
+    return identification_model(robot)[:2]
+
+
+def identification_model(robot) -> tuple[Regressor, object, object]:
+    """:func:`regressor_of` and the regressor along samples (:func:`~derive.solvers.identify.regressor_along`):
+    of (q, qd, qdd) for a tree, of (y, yd, ydd) for a closed chain."""
+    if robot.closed:
+        cr, red, bp = closed_regressor(robot)
+        reg, along = cr.reg, lambda: closed_regressor_along(cr, red, robot)
+    else:
+        reg = Regressor(NewtonEuler(robot, make_symbols(robot)))
+        bp = base_parameters(robot, regressor=reg)
+        along = lambda: regressor_along(reg, robot)  # noqa: E731
     if bp.near:
         print(f"warning: robot '{robot.name}': {bp.near_text()}", file=sys.stderr)
-    return reg, bp
+    return reg, bp, along
 
 
 def cmd_base_parameters(args) -> int:
@@ -91,6 +103,7 @@ def cmd_base_parameters(args) -> int:
         return 0
     values = bp.K @ np.asarray(reg.values(), dtype=float)
     print(f"{robot.name}: {len(bp.names)} base parameters of {len(reg.names)} standard ones"
+          + (f" (the closed chain's, in y = {', '.join(robot.independent)})" if robot.closed else "")
           + (f" (never identifiable: {', '.join(bp.unidentifiable)})" if bp.unidentifiable else ""))
     for equation, value in zip(bp.equations(), values):
         print(f"  {equation}    [{value:.6g}]")
@@ -135,14 +148,15 @@ def cmd_identify(args) -> int:
         raise DeriveError(f"identify: --out {out} is the models file {source_path} that holds {robot.name} (its "
                           "other robots would be lost): choose another --out")
     log = lambda m: print(m, file=sys.stderr, flush=True)  # noqa: E731
-    mf = open_measurements(args.data, list(robot.velocity_names))
+    coordinates = list(robot.independent if robot.closed else robot.velocity_names)  # a closed chain's data is in y
+    mf = open_measurements(args.data, coordinates)
     if mf.derives:
         scan_measurements(mf, log)
-    reg, bp = regressor_of(robot)
+    reg, bp, along = identification_model(robot)
     pi0 = np.asarray(reg.values(), dtype=float)
-    result = identify_file(regressor_along(reg, robot), bp, pi0, mf, physical=args.physical, bodies=len(reg.bodies),
-                           log=log)
-    print(result.report(list(robot.velocity_names)))
+    result = identify_file(along(), bp, pi0, mf, physical=args.physical, bodies=len(reg.bodies), log=log,
+                           closed=robot.closed)
+    print(result.report(coordinates))
     shown = " ".join(str(args.data).replace("`", "'").split())  # the entry's source and comments: one line each
     command = f"derive identify {robot.name} {shown}" + (" --physical" if args.physical else "")
     entry = identified_entry(raw, robot, list(reg.names), result.standard, f"{shown}, identified by `{command}`")
@@ -170,6 +184,10 @@ def cmd_excite(args) -> int:
     robot = load_robot(args.robot_name, args.models)
     check_options(robot.name, args.period, args.harmonics, args.samples, args.seed, args.iterations)
     robot.require_fixed_base("derive excite")
+    if robot.closed:
+        raise DeriveError(f"excite {robot.name}: robot '{robot.name}' has loops: excite plans a tree's joints within "
+                          "their limits, not a closed chain's y within its assembly (not supported yet); identify reads "
+                          "a closed chain's motion in y (docs/closed-chains.md, Identification)")
     out = Path(args.out) if args.out else Path("excite_out") / robot.name
     if out.exists() and not out.is_dir():
         raise DeriveError(f"excite {robot.name}: --out {out} is a file; it names the folder to write "

@@ -22,6 +22,7 @@ from derive.symbolic import derivatives
 from derive.symbolic.ode import AD_MODES, inverse_dynamics_jacobian, ode_jacobians
 from derive.symbolic.regressor import Regressor, body_links
 from derive.symbolic.closure import ASSEMBLED_TOL, NEWTON_STEPS, ClosedChainModel
+from derive.symbolic.closed_regressor import ClosedRegressor, closed_base_parameters
 from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
@@ -158,14 +159,16 @@ CLOSED_LEFT_OUT = ("inverse_dynamics_derivatives", "forward_dynamics", "inverse_
                    "centroidal_map", "regressor", "base_regressor", "bundle", "ik", "manipulability")
 """The tree functions a robot with loops does not get: the tree's forward dynamics (and its ODE and
 derivatives) ignore the loops; regressors, IK, manipulability and the control bundles of the tree would
-mislead without them (closed-chain versions are future work). Its ode_rhs, ode_jac_x, ode_jac_u and
-rk4_step are the closed chain's, in x = (y, yd)."""
+mislead without them (closed-chain versions of IK and the bundles are future work). Its ode_rhs, ode_jac_x,
+ode_jac_u and rk4_step are the closed chain's, in x = (y, yd); its regressor_y and base_regressor_y replace
+the tree's regressors."""
 
 
 def closed_chain_specs(model: SXModel, specs: list[FunctionSpec], need) -> None:
     """The functions of a closed chain in its independent coordinates y (:meth:`~derive.symbolic.closure.
     ClosedChainModel.in_y`): closure, velocity_map (G), mass_matrix_y, bias_y, inverse_dynamics_y,
-    forward_dynamics_y, constraint_forces and the ODE in x = (y, yd) with its Jacobians."""
+    forward_dynamics_y, constraint_forces, the ODE in x = (y, yd) with its Jacobians, then the regressors
+    regressor_y and base_regressor_y."""
     robot = model.robot
     extra, pdoc = parameter_input(model)
     ccm = ClosedChainModel(robot, model)
@@ -203,8 +206,15 @@ def closed_chain_specs(model: SXModel, specs: list[FunctionSpec], need) -> None:
     add("constraint_forces", [y, yd, tau], [("lam", red.constraint_forces)],
         f"Loop forces lam = lambda ({nz}, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the "
         f"forward dynamics' qdd (the tree's KKT multiplier); {at}.")
-    if not need("ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step"):
-        return
+    if need("ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step"):
+        closed_ode_specs(ccm, red, add, at)
+    if need("regressor_y", "base_regressor_y"):
+        closed_regressor_specs(model, ccm, red, add, at)
+
+
+def closed_ode_specs(ccm: ClosedChainModel, red, add, at: str) -> None:
+    """The closed chain's ``ode_rhs``, ``ode_jac_x`` and ``ode_jac_u`` in x = (y, yd), u = tau_y."""
+    ny = ccm.ny
     x, u = ca.SX.sym("x", 2 * ny), ca.SX.sym("u", ny)
     f = ca.vertcat(ccm.yd, red.forward_dynamics)
     sub_from, sub_to = ca.vertcat(red.y, ccm.yd, ccm.tau_y), ca.vertcat(x, u)
@@ -216,6 +226,31 @@ def closed_chain_specs(model: SXModel, specs: list[FunctionSpec], need) -> None:
         ODE_JAC_DOC["ode_jac_x"].format(nx=2 * ny) + " Closed chain, x = [y; yd].", (("algorithm", "forward AD"),))
     add("ode_jac_u", [("x", x), ("u", u)], [("B", ca.jacobian(f, u))],
         ODE_JAC_DOC["ode_jac_u"].format(nx=2 * ny, n=ny) + " Closed chain, x = [y; yd].", (("algorithm", "forward AD"),))
+
+
+def closed_regressor_specs(model: SXModel, ccm: ClosedChainModel, red, add, at: str) -> None:
+    """``regressor_y`` (Y_y = G^T Y(q, G yd, G ydd + Gdot yd), every standard parameter) and ``base_regressor_y``
+    (its base columns: the closed chain's own base parameters, :mod:`derive.symbolic.closed_regressor`)."""
+    robot, ny = model.robot, ccm.ny
+    cr = ClosedRegressor(ccm)
+    pi = cr.reg.values()
+    base = closed_base_parameters(cr, red)
+    Y = cr.in_y(red)
+    y, yd, ydd = ("y", red.y), ("yd", ccm.yd), ("ydd", ccm.ydd)
+    values = " (numbers at the parameters' defaults)" if model.sym.p.numel() else ""
+    add("regressor_y", [y, yd, ydd], [("Y_y", Y)],
+        f"Closed-chain regressor Y_y(y, yd, ydd) = G^T Y(q, G yd, G ydd + Gdot yd) ({ny}x{cr.reg.size}, row-major): "
+        f"inverse_dynamics_y = Y_y pi, pi the tree's standard parameters (per body ({', '.join(body_links(robot))}) "
+        "[m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the body origin, body axes; then per "
+        "coordinate [armature, viscous, coulomb]); pi's names and the model's values in manifest.json "
+        f"(regressor_parameters){values}; {at}.",
+        (("regressor_parameters", [{"name": k, "value": float(v)} for k, v in zip(cr.reg.names, pi)]),))
+    add("base_regressor_y", [y, yd, ydd], [("Y_b", Y[:, list(base.columns)])],
+        f"Closed-chain base regressor Y_b(y, yd, ydd) ({ny}x{base.rank}, row-major): the {base.rank} independent columns "
+        "of regressor_y (the closed chain's base parameters, fewer than or as many as the tree's), so that "
+        "inverse_dynamics_y = Y_b pi_b, pi_b = pi_1 + beta pi_2 (Gautier's QR on Y_y stacked at seeded closed "
+        f"states); names, values, columns and combinations in manifest.json (base_parameters){values}; {at}.",
+        (("rank", base.rank), ("base_parameters", base.manifest(pi))))
 
 
 def ode_specs(model: SXModel, qdd_fd: ca.SX, add, extra: tuple, fd_how: tuple) -> None:

@@ -294,11 +294,11 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext", "com", "com_jacobian",
                        "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor", "base_regressor", "bundle",
                        "rk4_step", "ik", "manipulability", "closure", "velocity_map", "mass_matrix_y", "bias_y",
-                       "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces")
+                       "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
 CLOSED_CHAIN_QUANTITIES = ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y",
-                           "forward_dynamics_y", "constraint_forces")
+                           "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y")
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with loops has (in its independent coordinates)."""
 
 BIG_FRAMES = 8

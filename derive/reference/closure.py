@@ -164,6 +164,13 @@ class ClosedChainReference:
         qd = G @ yd
         return G.T @ self.tree.rnea(q, qd, G @ ydd + self.gdot_yd(q, qd))
 
+    def regressor(self, q, yd, ydd) -> np.ndarray:
+        """Y_y = G^T Y(q, G yd, G ydd + Gdot yd) (ny x n_pi) of the tree's regressor (Featherstone's linear
+        form, :meth:`NumericRobot.regressor`): inverse_dynamics = Y_y @ the tree's dynamic parameters."""
+        G = self.projection(q)
+        qd = G @ yd
+        return G.T @ self.tree.regressor(q, qd, G @ ydd + self.gdot_yd(q, qd))
+
     def forward_dynamics(self, q, yd, tau_y) -> np.ndarray:
         """ydd = M_y^-1 (tau_y - h_y)."""
         return np.linalg.solve(self.mass_matrix(q), tau_y - self.bias(q, yd))

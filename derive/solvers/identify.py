@@ -50,6 +50,8 @@ import numpy as np
 from derive.description.robot import Robot
 from derive.errors import DeriveError
 from derive.symbolic.base_parameters import BaseParameters, dependencies_text, near_dependencies
+from derive.symbolic.closed_regressor import ClosedRegressor
+from derive.symbolic.closure import ReducedChain
 from derive.symbolic.dynamics import NewtonEuler
 from derive.symbolic.regressor import Regressor
 from derive.symbolic.symbols import make_symbols
@@ -552,7 +554,23 @@ def regressor_along(reg: Regressor, robot: Robot) -> Callable:
     if s.p.numel():
         Ysx = ca.substitute(Ysx, s.p, ca.DM([robot.parameter_defaults[n] for n in s.parameter_names]))
     f = ca.Function("Y", [s.q, s.qd, s.qdd], [ca.densify(Ysx)])
-    nv, n = robot.nv, Ysx.shape[1]
+    return function_along(f, robot.nv, Ysx.shape[1])
+
+
+def closed_regressor_along(regressor: ClosedRegressor, reduced: ReducedChain, robot: Robot) -> Callable:
+    """Y_y(y, yd, ydd) for (N, ny) arrays -> (N, ny, n): a closed chain's regressor in its independent
+    coordinates (:mod:`derive.symbolic.closed_regressor`) at the model's parameter values, mapped as
+    :func:`regressor_along`."""
+    f = regressor.function(reduced)
+    p = regressor.reg.parameter_vector()
+    y, yd, ydd = (ca.SX.sym(k, f.size1_in(i)) for i, k in enumerate(("y", "yd", "ydd")))
+    g = ca.Function("Y_y", [y, yd, ydd], [f(y, yd, ydd, p)])
+    return function_along(g, len(robot.independent), f.size2_out(0))
+
+
+def function_along(f: ca.Function, nv: int, n: int) -> Callable:
+    """(q, qd, qdd) for (N, nv) arrays -> (N, nv, n) of a casadi Function (q, qd, qdd) -> (nv x n), mapped
+    over the samples (see :func:`regressor_along`)."""
     chunk = 1 << max(4, (REGRESSOR_BYTES // 8 // (nv * n)).bit_length() - 1)  # a power of two
     maps: dict[int, tuple] = {}
 
@@ -660,29 +678,33 @@ class RegressionStack:
 
 
 def identify(Y: Callable, base: BaseParameters, pi0: np.ndarray, data: Measurements,
-             physical: bool = False, bodies: int = 0) -> Identification:
+             physical: bool = False, bodies: int = 0, closed: bool = False) -> Identification:
     """Weighted least squares of tau = Y_b pi_b on the base parameters pi_b = K pi (see the module docstring).
 
     ``Y(q, qd, qdd)`` is the full regressor, (N, nv, n) for (N, nv) samples (:func:`regressor_along`);
     ``base`` gives K (r x n), the base columns and names; ``pi0`` the model's standard parameters;
     ``bodies`` is the number of 10-parameter blocks at the front of pi (the rest are the actuators'
-    armature, viscous, Coulomb: kept >= 0 by ``physical``).
+    armature, viscous, Coulomb: kept >= 0 by ``physical``). A closed chain (``closed``): ``Y`` is its Y_y
+    (:func:`closed_regressor_along`), ``base`` its own base parameters and the samples are (y, yd, ydd, tau_y).
     """
-    return identify_samples(Y, base, pi0, [data], physical, bodies, derived=data.derived)
+    return identify_samples(Y, base, pi0, [data], physical, bodies, derived=data.derived, closed=closed)
 
 
 def identify_file(Y: Callable, base: BaseParameters, pi0: np.ndarray, mf: MeasurementFile, physical: bool = False,
-                  bodies: int = 0, log: Callable[[str], None] | None = None) -> Identification:
+                  bodies: int = 0, log: Callable[[str], None] | None = None, closed: bool = False) -> Identification:
     """:func:`identify` on the samples of a measurement CSV (:func:`open_measurements`), streamed."""
     check_sample_count(mf, base.rank, len(mf.tau))
     return identify_samples(Y, base, pi0, measurement_blocks(mf, log), physical, bodies,
-                            derived=mf.note() if mf.derives else "", source=str(mf.path), what=mf.what)
+                            derived=mf.note() if mf.derives else "", source=str(mf.path), what=mf.what, closed=closed)
 
 
 def identify_samples(Y: Callable, base: BaseParameters, pi0: np.ndarray, blocks: Iterable[Measurements],
                      physical: bool = False, bodies: int = 0, derived: str = "", source: str = "",
-                     what: str = "identify") -> Identification:
-    """:func:`identify` on samples that come in blocks (any number; memory does not grow with them)."""
+                     what: str = "identify", closed: bool = False) -> Identification:
+    """:func:`identify` on samples that come in blocks (any number; memory does not grow with them).
+    ``closed``: Y is a closed chain's Y_y, whose samples are (y, yd, ydd): a sample where it is not finite
+    does not assemble."""
+    where = f"{what}: {source}: " if source else f"{what}: "
     stack = None
     for data in blocks:
         nv = data.tau.shape[1]
@@ -691,9 +713,15 @@ def identify_samples(Y: Callable, base: BaseParameters, pi0: np.ndarray, blocks:
         step = max(1, REGRESSOR_BYTES // 8 // (nv * base.K.shape[1]))
         for k in range(0, len(data.t), step):
             s = slice(k, k + step)
-            stack.add(np.asarray(Y(data.q[s], data.qd[s], data.qdd[s]), dtype=float), data.tau[s],
-                      None if data.lines is None else data.lines[s])
-    where = f"{what}: {source}: " if source else f"{what}: "
+            Ys = np.asarray(Y(data.q[s], data.qd[s], data.qdd[s]), dtype=float)
+            bad = ~np.isfinite(Ys).all(axis=(1, 2)) & np.isfinite(data.q[s]).all(axis=1)
+            if closed and bad.any():  # finite coordinates, no assembly: name the sample
+                k = int(np.argmax(bad))
+                at = f"line {int(data.lines[s][k])}" if data.lines is not None else f"sample {stack.samples + k}"
+                raise DeriveError(f"{where}{at}: the loops do not close at y = "
+                                  f"{np.array2string(data.q[s][k], precision=6, separator=', ')} (no assembly of the "
+                                  "mechanism there): the data is not of this closed chain, or its columns are not y")
+            stack.add(Ys, data.tau[s], None if data.lines is None else data.lines[s])
     if stack is None or stack.samples == 0:
         raise DeriveError(f"{where}no samples")
     return _solve(stack, base, pi0, physical, bodies, derived, where)
@@ -847,7 +875,8 @@ def identified_entry(raw: dict, robot, names: list[str], pi: np.ndarray, source:
 
     Each body's 10 parameters (about the body origin, body frame) go to the body's link as mass, centre
     of mass and inertia about the centre of mass; links merged into it through fixed joints become
-    massless. Actuator parameters replace the joints' armature (gear ratio 1, no motor inertia),
+    massless, and so does a body whose identified mass is 0 (the Delta's carriages: the physically
+    consistent fit leaves them the 1e-9 inertia of its start, which no body without mass can have). Actuator parameters replace the joints' armature (gear ratio 1, no motor inertia),
     viscous and Coulomb friction. ``names`` are the regressor's parameter names (``m_<link>``, ...,
     ``Ia_<coordinate>``, ``fv_<coordinate>``, ``fc_<coordinate>``).
     """
@@ -879,7 +908,7 @@ def identified_entry(raw: dict, robot, names: list[str], pi: np.ndarray, source:
             fields = links[link]
             for key in ("mass", "com", "inertia", "inertia_rpy"):
                 fields.pop(key, None)
-            if link == body:
+            if link == body and m > 0:  # m = 0: a massless body (an inertia without mass is none; a fit's rest)
                 fields.update({"mass": m, "com": [float(x) for x in c],
                                "inertia": {"ixx": Ic[0, 0], "ixy": Ic[0, 1], "ixz": Ic[0, 2], "iyy": Ic[1, 1],
                                            "iyz": Ic[1, 2], "izz": Ic[2, 2]}})

@@ -34,6 +34,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import importlib.util
+import inspect
 import io
 import json
 import math
@@ -251,8 +252,7 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
     diverges) is a DeriveError naming the time: every number of a returned Trajectory is finite.
     """
     if robot.closed:  # its generated ODE is in x = (y, yd), not the tree's (q, qd)
-        raise DeriveError(f"robot '{robot.name}' has loops: derive simulate integrates a tree in q; step the closed "
-                          "chain's generated rk4_step in x = [y; yd] instead (docs/closed-chains.md)")
+        return simulate_closed(robot, q0, qd0, tau, t_end, dt, method, params, generated, rtol, atol, progress)
     robot.require_fixed_base("derive simulate")
     if method not in METHODS:
         raise DeriveError(f"simulate: unknown method {method!r} (known: {', '.join(METHODS)})")
@@ -301,6 +301,83 @@ def simulate(robot: Robot, q0, qd0=None, tau=None, t_end: float = 10.0, dt: floa
         traj = Trajectory(robot.name, tuple(mod.JOINTS), method, tau, t, q, qd, kinetic, potential, wall,
                           robot.continuous_indices, qdd, dissipated, tuple(robot.velocity_names),
                           limit_crossings(robot, t, q))
+        _check_finite(traj, dt)
+    return traj
+
+
+def simulate_closed(robot: Robot, y0, yd0=None, tau=None, t_end: float = 10.0, dt: float = 1e-3, method: str = "rk4",
+                    params: dict[str, float] | None = None, generated: str | Path | None = None,
+                    rtol: float = 1e-10, atol: float = 1e-12,
+                    progress: Callable[[str, float], None] | None = None) -> Trajectory:
+    """:func:`simulate` of a closed chain (a robot with loops) in its independent coordinates y: the generated
+    ODE in x = [y; yd] (``rk4_step``, or ``ode_rhs`` and ``ode_jac_x``), u = tau_y held constant; y0, yd0 and
+    tau have one value per coordinate of y. The energies are the tree's (numpy reference) at the closed
+    q = closure(y) and qd = velocity_map(y) yd; the Trajectory's q, qd, qdd are y, yd, ydd (the CSV's columns
+    q_<c>, ... for c in y: what ``derive identify`` reads)."""
+    if method not in METHODS:
+        raise DeriveError(f"simulate: unknown method {method!r} (known: {', '.join(METHODS)})")
+    ny = len(robot.independent)
+    steps = check_times(robot.name, t_end, dt, rtol, atol, ny)
+    mod = load_generated(robot.name, generated)
+    y0, yd0, tau = (check_vector(v, ny, w, robot.name) for v, w in ((y0, "q0"), (yd0, "qd0"), (tau, "tau")))
+    with_parameters(robot, params)
+    try:
+        ref = NumericRobot(robot, params)
+    except ValueError as exc:
+        raise DeriveError(str(exc)) from None
+    p = np.array([ref.params[par.name] for par in robot.parameters])
+    extra = (p,) if p.size else ()
+    names = [c.name for c in robot.coordinates]
+    z_ref = np.array([robot.reference_q[names.index(c)] for c in robot.dependent])
+    newton = "z0" in inspect.signature(mod.closure).parameters  # the Newton closure starts from z0
+
+    def closed(ys: np.ndarray) -> np.ndarray:  # q = gamma(y) of every sample (Newton: from the reference's z)
+        args = (ys, np.broadcast_to(z_ref, (len(ys), len(z_ref)))) if newton else (ys,)
+        return np.asarray(mod.closure(*args, *extra)[0], dtype=float).reshape(len(ys), -1)
+
+    with np.errstate(all="ignore"):
+        if not np.isfinite(closed(y0[None])).all():
+            raise DeriveError(f"robot '{robot.name}': the loops do not close at q0 = y = {y0.tolist()} (no assembly); "
+                              f"y is ({', '.join(robot.independent)})")
+    t = np.arange(steps + 1) * dt
+    x0 = np.concatenate([y0, yd0])
+    report = progress or (lambda stage, done: None)
+    start = time.perf_counter()
+    with np.errstate(all="ignore"):
+        try:
+            xs = _integrate(mod, method, x0, tau, t, dt, extra, rtol, atol, robot.name, report)
+        except DeriveError:
+            raise
+        except (ZeroDivisionError, OverflowError, FloatingPointError, ValueError) as exc:  # math.sqrt(-1): no assembly
+            raise DeriveError(f"robot '{robot.name}': the generated dynamics failed during the run ({method}, "
+                              f"dt = {dt:g}): {type(exc).__name__}: {exc} (the loops cannot close?); nothing written") from None
+        wall = time.perf_counter() - start
+        bad = ~np.all(np.isfinite(xs), axis=1)
+        if bad.any():
+            raise DeriveError(f"robot '{robot.name}': the state is no longer finite at t = {t[np.argmax(bad)]:g} s "
+                              f"({method}, dt = {dt:g}; the loops cannot close?); nothing written")
+        y, yd = xs[:, :ny], xs[:, ny:]
+        ydd = np.asarray(mod.ode_rhs(xs, tau, *extra), dtype=float).reshape(len(t), 2 * ny)[:, ny:]
+        q = closed(y)
+        G = np.asarray(mod.velocity_map(y, *extra), dtype=float).reshape(len(t), q.shape[1], ny)
+        qd = np.einsum("kij,kj->ki", G, yd)
+        kinetic, potential, power = np.empty(len(t)), np.empty(len(t)), np.zeros(len(t))
+        rubs = any(np.any(f) for f in (*ref.body_viscous, *ref.body_coulomb))
+        for k in range(len(t)):
+            try:
+                kinetic[k], potential[k] = ref.kinetic_energy(q[k], qd[k]), ref.potential_energy(q[k])
+                if rubs:  # the closed chain's friction: sign(qd), not smoothed (its inverse dynamics')
+                    power[k] = qd[k] @ ref.friction(qd[k])
+            except (OverflowError, ValueError, ZeroDivisionError):
+                kinetic[k] = potential[k] = power[k] = math.nan
+            if k % PROGRESS_STEPS == 0:
+                report("energies", k / len(t))
+        index = [names.index(c) for c in robot.independent]
+        crossings = tuple((index.index(i), time_, value, bound) for i, time_, value, bound in
+                          limit_crossings(robot, t, q) if i in index)
+        traj = Trajectory(robot.name, tuple(robot.independent), method, tau, t, y, yd, kinetic, potential, wall,
+                          tuple(index.index(i) for i in robot.continuous_indices if i in index), ydd,
+                          dissipated_work(t, power), tuple(robot.independent), crossings)
         _check_finite(traj, dt)
     return traj
 

@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable
 
 import casadi as ca
 import numpy as np
@@ -208,12 +209,16 @@ def _stack(f: ca.Function, robot: Robot, p: list[float], count: int, seed: int) 
 
 
 def base_parameters(robot: Robot, params: dict | None = None, regressor: Regressor | None = None,
-                    actuators: bool = True, seed: int = SEED) -> BaseParameters:
+                    actuators: bool = True, seed: int = SEED, stack: Callable[[int, int], np.ndarray] | None = None,
+                    rows: int | None = None, rank_tol: float = RANK_TOL) -> BaseParameters:
     """The base parameters of ``robot`` at its parameters' defaults (or ``params``).
 
     ``regressor``: an already derived :class:`Regressor` of the robot (else one is derived).
     ``actuators=False`` leaves out the actuator parameters (the inertial ones only, as Pinocchio's
     ``computeJointTorqueRegressor`` has them).
+    ``stack(count, seed)``: another regressor (every column of pi) stacked at ``count`` seeded states of
+    ``rows`` rows each, instead of Y at :func:`states` (a closed chain's Y_y in y,
+    :mod:`derive.symbolic.closed_regressor`); ``rank_tol`` its rank tolerance (relative, as RANK_TOL).
     """
     reg = regressor or Regressor(NewtonEuler(robot, make_symbols(robot)))
     s = reg.sym
@@ -221,16 +226,18 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     names = reg.names
     n = len(names) if actuators else 10 * len(reg.bodies)
     names = names[:n]
-    f = ca.Function("Y", [s.q, s.qd, s.qdd, s.p], [reg.matrix[:, :n]])
-    count = max(10, math.ceil(5 * n / robot.nv))
-    W = _stack(f, robot, p, count, seed)
+    if stack is None:
+        f = ca.Function("Y", [s.q, s.qd, s.qdd, s.p], [reg.matrix[:, :n]])
+        stack = lambda count_, seed_: _stack(f, robot, p, count_, seed_)  # noqa: E731
+    count = max(10, math.ceil(5 * n / (rows or robot.nv)))
+    W = stack(count, seed)[:, :n]
     norms = np.linalg.norm(W, axis=0)
     kind = _kind_scale(norms, names)
     live = norms > 1e-13 * kind  # exactly zero columns, to rounding
     scale = np.where(live, norms, 1.0)
     Wn = W / scale  # unit columns: the combinations beta
     Wk = W / kind  # the regressor at its scale: each kind's largest column has norm 1 (the rank)
-    threshold = RANK_TOL
+    threshold = rank_tol
     # the base columns: the first independent ones in the order of preference
     order = [j for j in preference(len(reg.bodies), n) if live[j]]
     dist = _distances(Wk[:, order], threshold)
@@ -243,7 +250,7 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     B[np.abs(B) < SNAP] = 0.0
     # a column that acts at most RANK_TOL of its kind's scale and is not exactly dependent (a near-dependency,
     # e.g. gravity on the first link of an arm tilted 1e-5 rad) enters no base parameter, as if exactly zero
-    slight = {names[j] for j in dependent if norms[j] <= RANK_TOL * kind[j]} & {name for name, _ in near}
+    slight = {names[j] for j in dependent if norms[j] <= threshold * kind[j]} & {name for name, _ in near}
     B[:, [names[j] in slight for j in dependent]] = 0.0
     unit = scale[dependent][None, :] / scale[list(columns)][:, None]  # beta per unit of B
     beta = B * unit
@@ -251,7 +258,7 @@ def base_parameters(robot: Robot, params: dict | None = None, regressor: Regress
     K[np.arange(len(columns)), list(columns)] = 1.0
     K[:, dependent] = [[clean(x, CLEAN * u) for x, u in zip(row, urow)] for row, urow in zip(beta, unit)]
     # check on other states: the same rank, and the dependent columns the same combinations
-    W2 = _stack(f, robot, p, count, seed + 1)
+    W2 = stack(count, seed + 1)[:, :n]
     norms2 = np.linalg.norm(W2, axis=0)
     Wk2 = W2 / _kind_scale(norms2, names)
     dist2 = _distances(Wk2[:, order], threshold)

@@ -59,6 +59,8 @@
 #include "delta_ode_rhs.h"
 #include "delta_ode_jac_x.h"
 #include "delta_ode_jac_u.h"
+#include "delta_regressor_y.h"
+#include "delta_base_regressor_y.h"
 #include "delta_rk4_step.h"
 
 #endif /* DELTA_DERIVE_H */

@@ -14563,6 +14563,1982 @@ def _ode_jac_u_chunk(x, t, s, y):
     copyto(B_16, B_14)
 
 
+def regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain regressor Y_y(y, yd, ydd) = G^T Y(q, G yd, G ydd + Gdot yd) (3x78, row-major): inverse_dynamics_y = Y_y pi, pi the tree's standard parameters (per body (arm1, arm2, arm3, carriage_x, carriage_y, plate) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the body origin, body axes; then per coordinate [armature, viscous, coulomb]); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (7): parameters R, La, Lr, r, ma, mp, g.
+
+    in  y [3]
+    in  yd [3]
+    in  ydd [3]
+    in  p [7]
+    out Y_y [3x78]
+    458 ops: 213 mul, 180 add, 50 div, 6 trig, 9 other
+    """
+    y = _array(y, 3, "regressor_y", "y")
+    yd = _array(yd, 3, "regressor_y", "yd")
+    ydd = _array(ydd, 3, "regressor_y", "ydd")
+    p = _array(p, 7, "regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_y_chunk, (y, yd, ydd, p), 48, ((3, 78),), fixed=_regressor_y_fixed, pure=4)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    cos, sign, sin, sqrt = math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[6]
+    t1 = -t1
+    t2 = sin(y[0])
+    t3 = t2 * p[6]
+    t3 = -t3
+    t4 = cos(y[1])
+    t5 = t4 * p[6]
+    t5 = -t5
+    t6 = sin(y[1])
+    t7 = t6 * p[6]
+    t7 = -t7
+    t8 = cos(y[2])
+    t9 = t8 * p[6]
+    t9 = -t9
+    t10 = sin(y[2])
+    t11 = t10 * p[6]
+    t11 = -t11
+    t12 = t6 * p[1]
+    t13 = (-0.5000000000000002) * t4
+    t13 = t13 * p[1]
+    t14 = p[0] / 2.0
+    t15 = t13 - t14
+    t16 = p[3] / 2.0
+    t17 = t15 + t16
+    t0 = t0 * p[1]
+    t18 = p[0] + t0
+    t19 = t18 - p[3]
+    t17 = t17 - t19
+    t20 = t17 * t17
+    t21 = 0.8660254037844386 * p[0]
+    t22 = 0.8660254037844385 * t4
+    t22 = t22 * p[1]
+    t23 = t21 + t22
+    t24 = 0.8660254037844386 * p[3]
+    t25 = t23 - t24
+    t26 = t25 * t25
+    t20 = t20 + t26
+    t2 = t2 * p[1]
+    t26 = t2 - t12
+    t27 = t26 * t26
+    t20 = t20 + t27
+    t27 = sqrt(t20)
+    t28 = t27 + t27
+    t20 = t20 / t28
+    t26 = t26 / t27
+    t28 = t20 * t26
+    t28 = t28 - t2
+    t17 = t17 / t27
+    t29 = (-0.5000000000000002) * t8
+    t29 = t29 * p[1]
+    t14 = t29 - t14
+    t30 = t14 + t16
+    t30 = t30 - t19
+    t31 = t17 * t30
+    t25 = t25 / t27
+    t27 = (-0.8660254037844385) * t8
+    t27 = t27 * p[1]
+    t21 = t27 - t21
+    t32 = t21 + t24
+    t33 = t25 * t32
+    t31 = t31 + t33
+    t33 = t10 * p[1]
+    t34 = t2 - t33
+    t35 = t26 * t34
+    t31 = t31 + t35
+    t35 = t31 * t31
+    t36 = t31 * t17
+    t36 = t30 - t36
+    t37 = t36 * t36
+    t38 = t31 * t25
+    t38 = t32 - t38
+    t39 = t38 * t38
+    t37 = t37 + t39
+    t39 = t31 * t26
+    t39 = t34 - t39
+    t40 = t39 * t39
+    t37 = t37 + t40
+    t37 = sqrt(t37)
+    t36 = t36 / t37
+    t30 = t36 * t30
+    t38 = t38 / t37
+    t32 = t38 * t32
+    t30 = t30 + t32
+    t32 = t39 / t37
+    t34 = t32 * t34
+    t30 = t30 + t34
+    t34 = t30 * t30
+    t34 = t35 + t34
+    t31 = t31 + t31
+    t31 = t31 * t20
+    t31 = t34 - t31
+    t30 = t30 + t30
+    t30 = t31 / t30
+    t31 = t30 * t32
+    t28 = t28 + t31
+    t31 = p[2] * p[2]
+    t34 = t20 * t20
+    t31 = t31 - t34
+    t34 = t30 * t30
+    t31 = t31 - t34
+    t31 = sqrt(t31)
+    t34 = t17 * t38
+    t35 = t25 * t36
+    t34 = t34 - t35
+    t34 = t31 * t34
+    t28 = t28 - t34
+    t34 = t12 + t28
+    t35 = t34 / p[2]
+    t37 = t20 * t25
+    t39 = t30 * t38
+    t37 = t37 + t39
+    t39 = t26 * t36
+    t40 = t17 * t32
+    t39 = t39 - t40
+    t39 = t31 * t39
+    t37 = t37 - t39
+    t39 = t37 - t24
+    t21 = t21 - t39
+    t39 = t21 / p[2]
+    t40 = t35 * t39
+    t24 = t37 + t24
+    t23 = t23 - t24
+    t24 = t23 / p[2]
+    t41 = t33 + t28
+    t42 = t41 / p[2]
+    t43 = t24 * t42
+    t40 = t40 - t43
+    t28 = t2 + t28
+    t43 = t28 / p[2]
+    t17 = t20 * t17
+    t17 = t19 + t17
+    t19 = t30 * t36
+    t17 = t17 + t19
+    t19 = t25 * t32
+    t20 = t26 * t38
+    t19 = t19 - t20
+    t19 = t31 * t19
+    t17 = t17 - t19
+    t16 = t17 - t16
+    t15 = t15 - t16
+    t19 = t15 / p[2]
+    t20 = t19 * t39
+    t14 = t14 - t16
+    t16 = t14 / p[2]
+    t25 = t24 * t16
+    t20 = t20 - t25
+    t25 = t43 * t20
+    t17 = t17 + p[3]
+    t17 = t18 - t17
+    t18 = t17 / p[2]
+    t26 = t18 * t40
+    t30 = t37 / p[2]
+    t31 = t35 * t16
+    t32 = t19 * t42
+    t31 = t31 - t32
+    t32 = t30 * t31
+    t26 = t26 + t32
+    t25 = t25 - t26
+    t26 = t40 / t25
+    t28 = t28 + t28
+    t32 = t28 * t0
+    t17 = t17 + t17
+    t36 = t17 * t2
+    t32 = t32 - t36
+    t36 = p[2] + p[2]
+    t32 = t32 / t36
+    t37 = t26 * t32
+    t38 = t30 * t42
+    t40 = t43 * t39
+    t38 = t38 + t40
+    t38 = t38 / t25
+    t34 = t34 + t34
+    t4 = p[1] * t4
+    t40 = t34 * t4
+    t15 = t15 + t15
+    t44 = (-0.5000000000000002) * t6
+    t44 = p[1] * t44
+    t45 = t15 * t44
+    t23 = t23 + t23
+    t6 = 0.8660254037844385 * t6
+    t6 = p[1] * t6
+    t46 = t23 * t6
+    t45 = t45 + t46
+    t40 = t40 - t45
+    t40 = t40 / t36
+    t45 = t38 * t40
+    t46 = t45 * ydd[1]
+    t47 = t37 * ydd[0]
+    t46 = t46 - t47
+    t47 = t30 * t35
+    t48 = t43 * t24
+    t47 = t47 + t48
+    t47 = t47 / t25
+    t41 = t41 + t41
+    t8 = p[1] * t8
+    t48 = t41 * t8
+    t14 = t14 + t14
+    t49 = (-0.5000000000000002) * t10
+    t49 = p[1] * t49
+    t50 = t14 * t49
+    t21 = t21 + t21
+    t10 = (-0.8660254037844385) * t10
+    t10 = p[1] * t10
+    t51 = t21 * t10
+    t50 = t50 + t51
+    t48 = t48 - t50
+    t48 = t48 / t36
+    t50 = t47 * t48
+    t51 = t50 * ydd[2]
+    t46 = t46 - t51
+    t51 = t0 + t0
+    t51 = t0 * t51
+    t28 = t28 * t2
+    t28 = t51 - t28
+    t51 = -t2
+    t51 = t51 + t51
+    t51 = t2 * t51
+    t17 = t17 * t0
+    t17 = t51 + t17
+    t17 = t28 - t17
+    t17 = t17 / t36
+    t17 = yd[0] * t17
+    t28 = t45 * yd[1]
+    t51 = t37 * yd[0]
+    t28 = t28 - t51
+    t51 = t50 * yd[2]
+    t28 = t28 - t51
+    t51 = t2 / p[2]
+    t51 = t28 * t51
+    t17 = t17 + t51
+    t39 = t18 * t39
+    t51 = t30 * t16
+    t39 = t39 + t51
+    t39 = t39 / t25
+    t51 = t39 * t40
+    t52 = t51 * yd[1]
+    t20 = t20 / t25
+    t53 = t20 * t32
+    t54 = t53 * yd[0]
+    t52 = t52 - t54
+    t24 = t18 * t24
+    t30 = t30 * t19
+    t24 = t24 + t30
+    t24 = t24 / t25
+    t30 = t24 * t48
+    t54 = t30 * yd[2]
+    t52 = t52 - t54
+    t0 = t0 / p[2]
+    t54 = t52 * t0
+    t17 = t17 + t54
+    t17 = t17 * yd[0]
+    t54 = t28 / p[2]
+    t2 = (-2.0) * t2
+    t2 = t2 / t36
+    t2 = yd[0] * t2
+    t2 = t54 - t2
+    t2 = t2 * t28
+    t2 = t17 + t2
+    t17 = t31 / t25
+    t31 = t17 * t32
+    t32 = t31 * yd[0]
+    t16 = t43 * t16
+    t42 = t18 * t42
+    t16 = t16 - t42
+    t16 = t16 / t25
+    t40 = t16 * t40
+    t42 = t40 * yd[1]
+    t32 = t32 - t42
+    t19 = t43 * t19
+    t18 = t18 * t35
+    t18 = t19 - t18
+    t18 = t18 / t25
+    t19 = t18 * t48
+    t25 = t19 * yd[2]
+    t25 = t32 + t25
+    t32 = t25 / p[2]
+    t35 = t32 * t25
+    t2 = t2 + t35
+    t0 = yd[0] * t0
+    t35 = t52 / p[2]
+    t0 = t0 + t35
+    t0 = t0 * t52
+    t0 = t2 + t0
+    t2 = t26 * t0
+    t26 = t4 + t4
+    t26 = t4 * t26
+    t12 = t34 * t12
+    t12 = t26 - t12
+    t26 = -t44
+    t26 = t26 + t26
+    t26 = t44 * t26
+    t13 = t15 * t13
+    t13 = t26 + t13
+    t15 = -t6
+    t15 = t15 + t15
+    t15 = t6 * t15
+    t22 = t23 * t22
+    t15 = t15 + t22
+    t13 = t13 + t15
+    t12 = t12 - t13
+    t12 = t12 / t36
+    t12 = yd[1] * t12
+    t13 = t44 / p[2]
+    t13 = t28 * t13
+    t12 = t12 + t13
+    t13 = t6 / p[2]
+    t13 = t25 * t13
+    t12 = t12 + t13
+    t4 = t4 / p[2]
+    t13 = t52 * t4
+    t12 = t12 + t13
+    t12 = t12 * yd[1]
+    t13 = (-2.0) * t44
+    t13 = t13 / t36
+    t13 = yd[1] * t13
+    t13 = t54 - t13
+    t13 = t13 * t28
+    t12 = t12 + t13
+    t6 = (-2.0) * t6
+    t6 = t6 / t36
+    t6 = yd[1] * t6
+    t6 = t32 - t6
+    t6 = t6 * t25
+    t6 = t12 + t6
+    t4 = yd[1] * t4
+    t4 = t4 + t35
+    t4 = t4 * t52
+    t4 = t6 + t4
+    t6 = t38 * t4
+    t2 = t2 - t6
+    t6 = t8 + t8
+    t6 = t8 * t6
+    t12 = t41 * t33
+    t6 = t6 - t12
+    t12 = -t49
+    t12 = t12 + t12
+    t12 = t49 * t12
+    t13 = t14 * t29
+    t12 = t12 + t13
+    t13 = -t10
+    t13 = t13 + t13
+    t13 = t10 * t13
+    t14 = t21 * t27
+    t13 = t13 + t14
+    t12 = t12 + t13
+    t6 = t6 - t12
+    t6 = t6 / t36
+    t6 = yd[2] * t6
+    t12 = t49 / p[2]
+    t12 = t28 * t12
+    t6 = t6 + t12
+    t12 = t10 / p[2]
+    t12 = t25 * t12
+    t6 = t6 + t12
+    t8 = t8 / p[2]
+    t12 = t52 * t8
+    t6 = t6 + t12
+    t6 = t6 * yd[2]
+    t12 = (-2.0) * t49
+    t12 = t12 / t36
+    t12 = yd[2] * t12
+    t12 = t54 - t12
+    t12 = t12 * t28
+    t6 = t6 + t12
+    t10 = (-2.0) * t10
+    t10 = t10 / t36
+    t10 = yd[2] * t10
+    t10 = t32 - t10
+    t10 = t10 * t25
+    t6 = t6 + t10
+    t8 = yd[2] * t8
+    t8 = t8 + t35
+    t8 = t8 * t52
+    t6 = t6 + t8
+    t8 = t47 * t6
+    t2 = t2 + t8
+    t2 = t46 - t2
+    t8 = t37 * t2
+    t10 = -t8
+    t12 = t45 * t2
+    t2 = t50 * t2
+    t13 = -t2
+    t14 = t31 * ydd[0]
+    t15 = t40 * ydd[1]
+    t14 = t14 - t15
+    t15 = t19 * ydd[2]
+    t14 = t14 + t15
+    t15 = t16 * t4
+    t16 = t17 * t0
+    t15 = t15 - t16
+    t16 = t18 * t6
+    t15 = t15 - t16
+    t14 = t14 - t15
+    t15 = t31 * t14
+    t8 = t15 - t8
+    t16 = t40 * t14
+    t17 = t12 - t16
+    t14 = t19 * t14
+    t2 = t14 - t2
+    t18 = t51 * ydd[1]
+    t21 = t53 * ydd[0]
+    t18 = t18 - t21
+    t21 = t30 * ydd[2]
+    t18 = t18 - t21
+    t0 = t20 * t0
+    t4 = t39 * t4
+    t0 = t0 - t4
+    t4 = t24 * t6
+    t0 = t0 + t4
+    t0 = t18 - t0
+    t4 = p[6] + t0
+    t6 = t53 * t4
+    t6 = t8 - t6
+    t18 = t51 * t4
+    t18 = t17 + t18
+    t4 = t30 * t4
+    t4 = t2 - t4
+    t20 = sign(yd[0])
+    t21 = sign(yd[1])
+    t22 = sign(yd[2])
+    t23 = t37 * t28
+    t23 = -t23
+    t24 = t45 * t28
+    t26 = t50 * t28
+    t26 = -t26
+    t27 = sign(t28)
+    t28 = t37 * t27
+    t28 = -t28
+    t29 = t45 * t27
+    t27 = t50 * t27
+    t27 = -t27
+    t16 = -t16
+    t32 = t31 * t25
+    t33 = t40 * t25
+    t33 = -t33
+    t34 = t19 * t25
+    t25 = sign(t25)
+    t31 = t31 * t25
+    t35 = t40 * t25
+    t35 = -t35
+    t19 = t19 * t25
+    t25 = t53 * t0
+    t25 = -t25
+    t36 = t51 * t0
+    t0 = t30 * t0
+    t0 = -t0
+    t37 = t53 * t52
+    t37 = -t37
+    t38 = t51 * t52
+    t39 = t30 * t52
+    t39 = -t39
+    t40 = sign(t52)
+    t41 = t53 * t40
+    t41 = -t41
+    t42 = t51 * t40
+    t30 = t30 * t40
+    t30 = -t30
+    _Y_y = (0.0, t1, 0.0, t3, 0.0, 0.0, ydd[0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t10, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t8, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t6, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[0], yd[0], t20, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t10, t23, t28, t15, t32, t31, t25, t37, t41,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t5, 0.0, t7, 0.0, 0.0, ydd[1], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t17, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t18, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[1], yd[1], t21, 0.0, 0.0, 0.0, t12, t24, t29, t16, t33, t35, t36, t38, t42,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t9, 0.0, t11, 0.0, 0.0, ydd[2], 0.0, 0.0, 0.0, t13, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[2], yd[2], t22, t13, t26, t27, t14, t34, t19, t0, t39, t30)
+    return np.array(_Y_y).reshape(3, 78)
+
+
+_regressor_y_constants = _constants(
+    -0.5000000000000002, 2.0, 0.8660254037844386, 0.8660254037844385, -0.8660254037844385, -2.0)
+
+
+_regressor_y_fixed = (
+    {0: 0.0, 2: 0.0, 4: 0.0, 5: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 0.0, 11: 0.0, 12: 0.0, 13: 0.0, 14: 0.0,
+     15: 0.0, 16: 0.0, 17: 0.0, 18: 0.0, 19: 0.0, 20: 0.0, 21: 0.0, 22: 0.0, 23: 0.0, 24: 0.0, 25: 0.0,
+     26: 0.0, 27: 0.0, 28: 0.0, 29: 0.0, 31: 0.0, 32: 0.0, 33: 0.0, 34: 0.0, 35: 0.0, 36: 0.0, 37: 0.0,
+     38: 0.0, 39: 0.0, 41: 0.0, 42: 0.0, 43: 0.0, 44: 0.0, 45: 0.0, 46: 0.0, 47: 0.0, 48: 0.0, 49: 0.0,
+     51: 0.0, 52: 0.0, 53: 0.0, 54: 0.0, 55: 0.0, 56: 0.0, 57: 0.0, 58: 0.0, 59: 0.0, 63: 0.0, 64: 0.0,
+     65: 0.0, 66: 0.0, 67: 0.0, 68: 0.0, 78: 0.0, 79: 0.0, 80: 0.0, 81: 0.0, 82: 0.0, 83: 0.0, 84: 0.0,
+     85: 0.0, 86: 0.0, 87: 0.0, 88: 0.0, 90: 0.0, 92: 0.0, 93: 0.0, 95: 0.0, 96: 0.0, 97: 0.0, 98: 0.0,
+     99: 0.0, 100: 0.0, 101: 0.0, 102: 0.0, 103: 0.0, 104: 0.0, 105: 0.0, 106: 0.0, 107: 0.0, 109: 0.0,
+     110: 0.0, 111: 0.0, 112: 0.0, 113: 0.0, 114: 0.0, 115: 0.0, 116: 0.0, 117: 0.0, 119: 0.0, 120: 0.0,
+     121: 0.0, 122: 0.0, 123: 0.0, 124: 0.0, 125: 0.0, 126: 0.0, 127: 0.0, 129: 0.0, 130: 0.0, 131: 0.0,
+     132: 0.0, 133: 0.0, 134: 0.0, 135: 0.0, 136: 0.0, 137: 0.0, 138: 0.0, 139: 0.0, 140: 0.0, 144: 0.0,
+     145: 0.0, 146: 0.0, 156: 0.0, 157: 0.0, 158: 0.0, 159: 0.0, 160: 0.0, 161: 0.0, 162: 0.0, 163: 0.0,
+     164: 0.0, 165: 0.0, 166: 0.0, 167: 0.0, 168: 0.0, 169: 0.0, 170: 0.0, 171: 0.0, 172: 0.0, 173: 0.0,
+     174: 0.0, 175: 0.0, 176: 0.0, 178: 0.0, 180: 0.0, 181: 0.0, 183: 0.0, 184: 0.0, 185: 0.0, 187: 0.0,
+     188: 0.0, 189: 0.0, 190: 0.0, 191: 0.0, 192: 0.0, 193: 0.0, 194: 0.0, 195: 0.0, 197: 0.0, 198: 0.0,
+     199: 0.0, 200: 0.0, 201: 0.0, 202: 0.0, 203: 0.0, 204: 0.0, 205: 0.0, 207: 0.0, 208: 0.0, 209: 0.0,
+     210: 0.0, 211: 0.0, 212: 0.0, 213: 0.0, 214: 0.0, 215: 0.0, 216: 0.0, 217: 0.0, 218: 0.0, 219: 0.0,
+     220: 0.0, 221: 0.0},
+)
+"""regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_y_chunk(x, t, s, y):
+    """regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, y_1, y_2, yd_0, yd_1, yd_2, ydd_0, ydd_1, ydd_2, p_0, p_1, p_2, p_3, p_4, p_5, p_6 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47) = t
+    s0, s1, s2, s3 = s
+    (Y_y_1, Y_y_3, Y_y_6, Y_y_30, Y_y_40, Y_y_50, Y_y_60, Y_y_61, Y_y_62, Y_y_69, Y_y_70, Y_y_71, Y_y_72,
+     Y_y_73, Y_y_74, Y_y_75, Y_y_76, Y_y_77, Y_y_89, Y_y_91, Y_y_94, Y_y_108, Y_y_118, Y_y_128, Y_y_141,
+     Y_y_142, Y_y_143, Y_y_147, Y_y_148, Y_y_149, Y_y_150, Y_y_151, Y_y_152, Y_y_153, Y_y_154, Y_y_155,
+     Y_y_177, Y_y_179, Y_y_182, Y_y_186, Y_y_196, Y_y_206, Y_y_222, Y_y_223, Y_y_224, Y_y_225, Y_y_226,
+     Y_y_227, Y_y_228, Y_y_229, Y_y_230, Y_y_231, Y_y_232, Y_y_233) = y
+    k0, k1, k2, k3, k4, k5 = _regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_6, t1)
+    negative(t1, Y_y_1)
+    sin(y_0, t1)
+    multiply(t1, p_6, t2)
+    negative(t2, Y_y_3)
+    cos(y_1, t2)
+    multiply(t2, p_6, t3)
+    negative(t3, Y_y_89)
+    sin(y_1, t3)
+    multiply(t3, p_6, t4)
+    negative(t4, Y_y_91)
+    cos(y_2, t4)
+    multiply(t4, p_6, t5)
+    negative(t5, Y_y_177)
+    sin(y_2, t5)
+    multiply(t5, p_6, t6)
+    negative(t6, Y_y_179)
+    multiply(t3, p_1, t6)
+    multiply(k0, t2, t7)
+    multiply(t7, p_1, t7)
+    divide(p_0, k1, s0)
+    subtract(t7, s0, t8)
+    divide(p_3, k1, s1)
+    add(t8, s1, t9)
+    multiply(t0, p_1, t0)
+    add(p_0, t0, t10)
+    subtract(t10, p_3, t11)
+    subtract(t9, t11, t9)
+    multiply(t9, t9, t12)
+    multiply(k2, p_0, s2)
+    multiply(k3, t2, t13)
+    multiply(t13, p_1, t13)
+    add(s2, t13, t14)
+    multiply(k2, p_3, s3)
+    subtract(t14, s3, t15)
+    multiply(t15, t15, t16)
+    add(t12, t16, t12)
+    multiply(t1, p_1, t1)
+    subtract(t1, t6, t16)
+    multiply(t16, t16, t17)
+    add(t12, t17, t12)
+    sqrt(t12, t17)
+    add(t17, t17, t18)
+    divide(t12, t18, t12)
+    divide(t16, t17, t16)
+    multiply(t12, t16, t18)
+    subtract(t18, t1, t18)
+    divide(t9, t17, t9)
+    multiply(k0, t4, t19)
+    multiply(t19, p_1, t19)
+    subtract(t19, s0, t20)
+    add(t20, s1, t21)
+    subtract(t21, t11, t21)
+    multiply(t9, t21, t22)
+    divide(t15, t17, t15)
+    multiply(k4, t4, t17)
+    multiply(t17, p_1, t17)
+    subtract(t17, s2, t23)
+    add(t23, s3, t24)
+    multiply(t15, t24, t25)
+    add(t22, t25, t22)
+    multiply(t5, p_1, t25)
+    subtract(t1, t25, t26)
+    multiply(t16, t26, t27)
+    add(t22, t27, t22)
+    multiply(t22, t22, t27)
+    multiply(t22, t9, t28)
+    subtract(t21, t28, t28)
+    multiply(t28, t28, t29)
+    multiply(t22, t15, t30)
+    subtract(t24, t30, t30)
+    multiply(t30, t30, t31)
+    add(t29, t31, t29)
+    multiply(t22, t16, t31)
+    subtract(t26, t31, t31)
+    multiply(t31, t31, t32)
+    add(t29, t32, t29)
+    sqrt(t29, t29)
+    divide(t28, t29, t28)
+    multiply(t28, t21, t21)
+    divide(t30, t29, t30)
+    multiply(t30, t24, t24)
+    add(t21, t24, t21)
+    divide(t31, t29, t31)
+    multiply(t31, t26, t26)
+    add(t21, t26, t21)
+    multiply(t21, t21, t24)
+    add(t27, t24, t27)
+    add(t22, t22, t22)
+    multiply(t22, t12, t22)
+    subtract(t27, t22, t27)
+    add(t21, t21, t21)
+    divide(t27, t21, t27)
+    multiply(t27, t31, t21)
+    add(t18, t21, t18)
+    multiply(p_2, p_2, s0)
+    multiply(t12, t12, t21)
+    subtract(s0, t21, t21)
+    multiply(t27, t27, t22)
+    subtract(t21, t22, t21)
+    sqrt(t21, t21)
+    multiply(t9, t30, t22)
+    multiply(t15, t28, t24)
+    subtract(t22, t24, t22)
+    multiply(t21, t22, t22)
+    subtract(t18, t22, t18)
+    add(t6, t18, t22)
+    divide(t22, p_2, t24)
+    multiply(t12, t15, t26)
+    multiply(t27, t30, t29)
+    add(t26, t29, t26)
+    multiply(t16, t28, t29)
+    multiply(t9, t31, t32)
+    subtract(t29, t32, t29)
+    multiply(t21, t29, t29)
+    subtract(t26, t29, t26)
+    subtract(t26, s3, t29)
+    subtract(t23, t29, t23)
+    divide(t23, p_2, t29)
+    multiply(t24, t29, t32)
+    add(t26, s3, t33)
+    subtract(t14, t33, t14)
+    divide(t14, p_2, t33)
+    add(t25, t18, t34)
+    divide(t34, p_2, t35)
+    multiply(t33, t35, t36)
+    subtract(t32, t36, t32)
+    add(t1, t18, t18)
+    divide(t18, p_2, t36)
+    multiply(t12, t9, t12)
+    add(t11, t12, t11)
+    multiply(t27, t28, t27)
+    add(t11, t27, t11)
+    multiply(t15, t31, t15)
+    multiply(t16, t30, t16)
+    subtract(t15, t16, t15)
+    multiply(t21, t15, t21)
+    subtract(t11, t21, t11)
+    subtract(t11, s1, t9)
+    subtract(t8, t9, t8)
+    divide(t8, p_2, t12)
+    multiply(t12, t29, t15)
+    subtract(t20, t9, t20)
+    divide(t20, p_2, t9)
+    multiply(t33, t9, t16)
+    subtract(t15, t16, t15)
+    multiply(t36, t15, t16)
+    add(t11, p_3, t11)
+    subtract(t10, t11, t10)
+    divide(t10, p_2, t11)
+    multiply(t11, t32, t21)
+    divide(t26, p_2, t26)
+    multiply(t24, t9, t27)
+    multiply(t12, t35, t28)
+    subtract(t27, t28, t27)
+    multiply(t26, t27, t28)
+    add(t21, t28, t21)
+    subtract(t16, t21, t16)
+    divide(t32, t16, t32)
+    add(t18, t18, t18)
+    multiply(t18, t0, t21)
+    add(t10, t10, t10)
+    multiply(t10, t1, t28)
+    subtract(t21, t28, t21)
+    add(p_2, p_2, s0)
+    divide(t21, s0, t21)
+    multiply(t32, t21, t28)
+    multiply(t26, t35, t30)
+    multiply(t36, t29, t31)
+    add(t30, t31, t30)
+    divide(t30, t16, t30)
+    add(t22, t22, t22)
+    multiply(p_1, t2, t2)
+    multiply(t22, t2, t31)
+    add(t8, t8, t8)
+    multiply(k0, t3, t37)
+    multiply(p_1, t37, t37)
+    multiply(t8, t37, t38)
+    add(t14, t14, t14)
+    multiply(k3, t3, t3)
+    multiply(p_1, t3, t3)
+    multiply(t14, t3, t39)
+    add(t38, t39, t38)
+    subtract(t31, t38, t31)
+    divide(t31, s0, t31)
+    multiply(t30, t31, t38)
+    multiply(t38, ydd_1, t39)
+    multiply(t28, ydd_0, t40)
+    subtract(t39, t40, t39)
+    multiply(t26, t24, t40)
+    multiply(t36, t33, t41)
+    add(t40, t41, t40)
+    divide(t40, t16, t40)
+    add(t34, t34, t34)
+    multiply(p_1, t4, t4)
+    multiply(t34, t4, t41)
+    add(t20, t20, t20)
+    multiply(k0, t5, t42)
+    multiply(p_1, t42, t42)
+    multiply(t20, t42, t43)
+    add(t23, t23, t23)
+    multiply(k4, t5, t5)
+    multiply(p_1, t5, t5)
+    multiply(t23, t5, t44)
+    add(t43, t44, t43)
+    subtract(t41, t43, t41)
+    divide(t41, s0, t41)
+    multiply(t40, t41, t43)
+    multiply(t43, ydd_2, t44)
+    subtract(t39, t44, t39)
+    add(t0, t0, t44)
+    multiply(t0, t44, t44)
+    multiply(t18, t1, t18)
+    subtract(t44, t18, t44)
+    negative(t1, t18)
+    add(t18, t18, t18)
+    multiply(t1, t18, t18)
+    multiply(t10, t0, t10)
+    add(t18, t10, t18)
+    subtract(t44, t18, t44)
+    divide(t44, s0, t44)
+    multiply(yd_0, t44, t44)
+    multiply(t38, yd_1, t10)
+    multiply(t28, yd_0, t18)
+    subtract(t10, t18, t10)
+    multiply(t43, yd_2, t18)
+    subtract(t10, t18, t10)
+    divide(t1, p_2, t18)
+    multiply(t10, t18, t18)
+    add(t44, t18, t44)
+    multiply(t11, t29, t29)
+    multiply(t26, t9, t18)
+    add(t29, t18, t29)
+    divide(t29, t16, t29)
+    multiply(t29, t31, t18)
+    multiply(t18, yd_1, t45)
+    divide(t15, t16, t15)
+    multiply(t15, t21, t46)
+    multiply(t46, yd_0, t47)
+    subtract(t45, t47, t45)
+    multiply(t11, t33, t33)
+    multiply(t26, t12, t26)
+    add(t33, t26, t33)
+    divide(t33, t16, t33)
+    multiply(t33, t41, t26)
+    multiply(t26, yd_2, t47)
+    subtract(t45, t47, t45)
+    divide(t0, p_2, t0)
+    multiply(t45, t0, t47)
+    add(t44, t47, t44)
+    multiply(t44, yd_0, t44)
+    divide(t10, p_2, t47)
+    multiply(k5, t1, t1)
+    divide(t1, s0, t1)
+    multiply(yd_0, t1, t1)
+    subtract(t47, t1, t1)
+    multiply(t1, t10, t1)
+    add(t44, t1, t44)
+    divide(t27, t16, t27)
+    multiply(t27, t21, t21)
+    multiply(t21, yd_0, t1)
+    multiply(t36, t9, t9)
+    multiply(t11, t35, t35)
+    subtract(t9, t35, t9)
+    divide(t9, t16, t9)
+    multiply(t9, t31, t31)
+    multiply(t31, yd_1, t35)
+    subtract(t1, t35, t1)
+    multiply(t36, t12, t36)
+    multiply(t11, t24, t11)
+    subtract(t36, t11, t36)
+    divide(t36, t16, t36)
+    multiply(t36, t41, t41)
+    multiply(t41, yd_2, t11)
+    add(t1, t11, t1)
+    divide(t1, p_2, t11)
+    multiply(t11, t1, t12)
+    add(t44, t12, t44)
+    multiply(yd_0, t0, t0)
+    divide(t45, p_2, t12)
+    add(t0, t12, t0)
+    multiply(t0, t45, t0)
+    add(t44, t0, t44)
+    multiply(t32, t44, t32)
+    add(t2, t2, t0)
+    multiply(t2, t0, t0)
+    multiply(t22, t6, t22)
+    subtract(t0, t22, t0)
+    negative(t37, t6)
+    add(t6, t6, t6)
+    multiply(t37, t6, t6)
+    multiply(t8, t7, t8)
+    add(t6, t8, t6)
+    negative(t3, t7)
+    add(t7, t7, t7)
+    multiply(t3, t7, t7)
+    multiply(t14, t13, t14)
+    add(t7, t14, t7)
+    add(t6, t7, t6)
+    subtract(t0, t6, t0)
+    divide(t0, s0, t0)
+    multiply(yd_1, t0, t0)
+    divide(t37, p_2, t6)
+    multiply(t10, t6, t6)
+    add(t0, t6, t0)
+    divide(t3, p_2, t6)
+    multiply(t1, t6, t6)
+    add(t0, t6, t0)
+    divide(t2, p_2, t2)
+    multiply(t45, t2, t6)
+    add(t0, t6, t0)
+    multiply(t0, yd_1, t0)
+    multiply(k5, t37, t37)
+    divide(t37, s0, t37)
+    multiply(yd_1, t37, t37)
+    subtract(t47, t37, t37)
+    multiply(t37, t10, t37)
+    add(t0, t37, t0)
+    multiply(k5, t3, t3)
+    divide(t3, s0, t3)
+    multiply(yd_1, t3, t3)
+    subtract(t11, t3, t3)
+    multiply(t3, t1, t3)
+    add(t0, t3, t0)
+    multiply(yd_1, t2, t2)
+    add(t2, t12, t2)
+    multiply(t2, t45, t2)
+    add(t0, t2, t0)
+    multiply(t30, t0, t30)
+    subtract(t32, t30, t32)
+    add(t4, t4, t2)
+    multiply(t4, t2, t2)
+    multiply(t34, t25, t34)
+    subtract(t2, t34, t2)
+    negative(t42, t3)
+    add(t3, t3, t3)
+    multiply(t42, t3, t3)
+    multiply(t20, t19, t20)
+    add(t3, t20, t3)
+    negative(t5, t6)
+    add(t6, t6, t6)
+    multiply(t5, t6, t6)
+    multiply(t23, t17, t23)
+    add(t6, t23, t6)
+    add(t3, t6, t3)
+    subtract(t2, t3, t2)
+    divide(t2, s0, t2)
+    multiply(yd_2, t2, t2)
+    divide(t42, p_2, t3)
+    multiply(t10, t3, t3)
+    add(t2, t3, t2)
+    divide(t5, p_2, t3)
+    multiply(t1, t3, t3)
+    add(t2, t3, t2)
+    divide(t4, p_2, t4)
+    multiply(t45, t4, t3)
+    add(t2, t3, t2)
+    multiply(t2, yd_2, t2)
+    multiply(k5, t42, t42)
+    divide(t42, s0, t42)
+    multiply(yd_2, t42, t42)
+    subtract(t47, t42, t47)
+    multiply(t47, t10, t47)
+    add(t2, t47, t2)
+    multiply(k5, t5, t5)
+    divide(t5, s0, t5)
+    multiply(yd_2, t5, t5)
+    subtract(t11, t5, t11)
+    multiply(t11, t1, t11)
+    add(t2, t11, t2)
+    multiply(yd_2, t4, t4)
+    add(t4, t12, t4)
+    multiply(t4, t45, t4)
+    add(t2, t4, t2)
+    multiply(t40, t2, t40)
+    add(t32, t40, t32)
+    subtract(t39, t32, t39)
+    multiply(t28, t39, t3)
+    negative(t3, Y_y_30)
+    multiply(t38, t39, Y_y_108)
+    multiply(t43, t39, t39)
+    negative(t39, Y_y_186)
+    multiply(t21, ydd_0, t4)
+    multiply(t31, ydd_1, t5)
+    subtract(t4, t5, t4)
+    multiply(t41, ydd_2, t5)
+    add(t4, t5, t4)
+    multiply(t9, t0, t9)
+    multiply(t27, t44, t27)
+    subtract(t9, t27, t9)
+    multiply(t36, t2, t36)
+    subtract(t9, t36, t9)
+    subtract(t4, t9, t4)
+    multiply(t21, t4, Y_y_72)
+    subtract(Y_y_72, t3, Y_y_40)
+    multiply(t31, t4, t3)
+    subtract(Y_y_108, t3, Y_y_118)
+    multiply(t41, t4, Y_y_228)
+    subtract(Y_y_228, t39, Y_y_196)
+    multiply(t18, ydd_1, t4)
+    multiply(t46, ydd_0, t5)
+    subtract(t4, t5, t4)
+    multiply(t26, ydd_2, t5)
+    subtract(t4, t5, t4)
+    multiply(t15, t44, t15)
+    multiply(t29, t0, t29)
+    subtract(t15, t29, t15)
+    multiply(t33, t2, t33)
+    add(t15, t33, t15)
+    subtract(t4, t15, t4)
+    add(p_6, t4, t0)
+    multiply(t46, t0, t2)
+    subtract(Y_y_40, t2, Y_y_50)
+    multiply(t18, t0, t2)
+    add(Y_y_118, t2, Y_y_128)
+    multiply(t26, t0, t0)
+    subtract(Y_y_196, t0, Y_y_206)
+    sign(yd_0, Y_y_62)
+    sign(yd_1, Y_y_143)
+    sign(yd_2, Y_y_224)
+    multiply(t28, t10, t0)
+    negative(t0, Y_y_70)
+    multiply(t38, t10, Y_y_148)
+    multiply(t43, t10, t0)
+    negative(t0, Y_y_226)
+    sign(t10, t10)
+    multiply(t28, t10, t28)
+    negative(t28, Y_y_71)
+    multiply(t38, t10, Y_y_149)
+    multiply(t43, t10, t43)
+    negative(t43, Y_y_227)
+    negative(t3, Y_y_150)
+    multiply(t21, t1, Y_y_73)
+    multiply(t31, t1, t0)
+    negative(t0, Y_y_151)
+    multiply(t41, t1, Y_y_229)
+    sign(t1, t1)
+    multiply(t21, t1, Y_y_74)
+    multiply(t31, t1, t31)
+    negative(t31, Y_y_152)
+    multiply(t41, t1, Y_y_230)
+    multiply(t46, t4, t0)
+    negative(t0, Y_y_75)
+    multiply(t18, t4, Y_y_153)
+    multiply(t26, t4, t4)
+    negative(t4, Y_y_231)
+    multiply(t46, t45, t0)
+    negative(t0, Y_y_76)
+    multiply(t18, t45, Y_y_154)
+    multiply(t26, t45, t0)
+    negative(t0, Y_y_232)
+    sign(t45, t45)
+    multiply(t46, t45, t46)
+    negative(t46, Y_y_77)
+    multiply(t18, t45, Y_y_155)
+    multiply(t26, t45, t26)
+    negative(t26, Y_y_233)
+    copyto(Y_y_6, ydd_0)
+    copyto(Y_y_60, ydd_0)
+    copyto(Y_y_61, yd_0)
+    copyto(Y_y_69, Y_y_30)
+    copyto(Y_y_94, ydd_1)
+    copyto(Y_y_141, ydd_1)
+    copyto(Y_y_142, yd_1)
+    copyto(Y_y_147, Y_y_108)
+    copyto(Y_y_182, ydd_2)
+    copyto(Y_y_222, ydd_2)
+    copyto(Y_y_223, yd_2)
+    copyto(Y_y_225, Y_y_186)
+
+
+def base_regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain base regressor Y_b(y, yd, ydd) (3x25, row-major): the 25 independent columns of regressor_y (the closed chain's base parameters, fewer than or as many as the tree's), so that inverse_dynamics_y = Y_b pi_b, pi_b = pi_1 + beta pi_2 (Gautier's QR on Y_y stacked at seeded closed states); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (7): parameters R, La, Lr, r, ma, mp, g.
+
+    in  y [3]
+    in  yd [3]
+    in  ydd [3]
+    in  p [7]
+    out Y_b [3x25]
+    457 ops: 213 mul, 179 add, 50 div, 6 trig, 9 other
+    """
+    y = _array(y, 3, "base_regressor_y", "y")
+    yd = _array(yd, 3, "base_regressor_y", "yd")
+    ydd = _array(ydd, 3, "base_regressor_y", "ydd")
+    p = _array(p, 7, "base_regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_y_chunk, (y, yd, ydd, p), 48, ((3, 25),), fixed=_base_regressor_y_fixed, pure=4)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    cos, sign, sin, sqrt = math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[6]
+    t1 = -t1
+    t2 = sin(y[0])
+    t3 = t2 * p[6]
+    t3 = -t3
+    t4 = cos(y[1])
+    t5 = t4 * p[6]
+    t5 = -t5
+    t6 = sin(y[1])
+    t7 = t6 * p[6]
+    t7 = -t7
+    t8 = cos(y[2])
+    t9 = t8 * p[6]
+    t9 = -t9
+    t10 = sin(y[2])
+    t11 = t10 * p[6]
+    t11 = -t11
+    t12 = t6 * p[1]
+    t13 = (-0.5000000000000002) * t4
+    t13 = t13 * p[1]
+    t14 = p[0] / 2.0
+    t15 = t13 - t14
+    t16 = p[3] / 2.0
+    t17 = t15 + t16
+    t0 = t0 * p[1]
+    t18 = p[0] + t0
+    t19 = t18 - p[3]
+    t17 = t17 - t19
+    t20 = t17 * t17
+    t21 = 0.8660254037844386 * p[0]
+    t22 = 0.8660254037844385 * t4
+    t22 = t22 * p[1]
+    t23 = t21 + t22
+    t24 = 0.8660254037844386 * p[3]
+    t25 = t23 - t24
+    t26 = t25 * t25
+    t20 = t20 + t26
+    t2 = t2 * p[1]
+    t26 = t2 - t12
+    t27 = t26 * t26
+    t20 = t20 + t27
+    t27 = sqrt(t20)
+    t28 = t27 + t27
+    t20 = t20 / t28
+    t26 = t26 / t27
+    t28 = t20 * t26
+    t28 = t28 - t2
+    t17 = t17 / t27
+    t29 = (-0.5000000000000002) * t8
+    t29 = t29 * p[1]
+    t14 = t29 - t14
+    t30 = t14 + t16
+    t30 = t30 - t19
+    t31 = t17 * t30
+    t25 = t25 / t27
+    t27 = (-0.8660254037844385) * t8
+    t27 = t27 * p[1]
+    t21 = t27 - t21
+    t32 = t21 + t24
+    t33 = t25 * t32
+    t31 = t31 + t33
+    t33 = t10 * p[1]
+    t34 = t2 - t33
+    t35 = t26 * t34
+    t31 = t31 + t35
+    t35 = t31 * t31
+    t36 = t31 * t17
+    t36 = t30 - t36
+    t37 = t36 * t36
+    t38 = t31 * t25
+    t38 = t32 - t38
+    t39 = t38 * t38
+    t37 = t37 + t39
+    t39 = t31 * t26
+    t39 = t34 - t39
+    t40 = t39 * t39
+    t37 = t37 + t40
+    t37 = sqrt(t37)
+    t36 = t36 / t37
+    t30 = t36 * t30
+    t38 = t38 / t37
+    t32 = t38 * t32
+    t30 = t30 + t32
+    t32 = t39 / t37
+    t34 = t32 * t34
+    t30 = t30 + t34
+    t34 = t30 * t30
+    t34 = t35 + t34
+    t31 = t31 + t31
+    t31 = t31 * t20
+    t31 = t34 - t31
+    t30 = t30 + t30
+    t30 = t31 / t30
+    t31 = t30 * t32
+    t28 = t28 + t31
+    t31 = p[2] * p[2]
+    t34 = t20 * t20
+    t31 = t31 - t34
+    t34 = t30 * t30
+    t31 = t31 - t34
+    t31 = sqrt(t31)
+    t34 = t17 * t38
+    t35 = t25 * t36
+    t34 = t34 - t35
+    t34 = t31 * t34
+    t28 = t28 - t34
+    t34 = t12 + t28
+    t35 = t34 / p[2]
+    t37 = t20 * t25
+    t39 = t30 * t38
+    t37 = t37 + t39
+    t39 = t26 * t36
+    t40 = t17 * t32
+    t39 = t39 - t40
+    t39 = t31 * t39
+    t37 = t37 - t39
+    t39 = t37 - t24
+    t21 = t21 - t39
+    t39 = t21 / p[2]
+    t40 = t35 * t39
+    t24 = t37 + t24
+    t23 = t23 - t24
+    t24 = t23 / p[2]
+    t41 = t33 + t28
+    t42 = t41 / p[2]
+    t43 = t24 * t42
+    t40 = t40 - t43
+    t28 = t2 + t28
+    t43 = t28 / p[2]
+    t17 = t20 * t17
+    t17 = t19 + t17
+    t19 = t30 * t36
+    t17 = t17 + t19
+    t19 = t25 * t32
+    t20 = t26 * t38
+    t19 = t19 - t20
+    t19 = t31 * t19
+    t17 = t17 - t19
+    t16 = t17 - t16
+    t15 = t15 - t16
+    t19 = t15 / p[2]
+    t20 = t19 * t39
+    t14 = t14 - t16
+    t16 = t14 / p[2]
+    t25 = t24 * t16
+    t20 = t20 - t25
+    t25 = t43 * t20
+    t17 = t17 + p[3]
+    t17 = t18 - t17
+    t18 = t17 / p[2]
+    t26 = t18 * t40
+    t30 = t37 / p[2]
+    t31 = t35 * t16
+    t32 = t19 * t42
+    t31 = t31 - t32
+    t32 = t30 * t31
+    t26 = t26 + t32
+    t25 = t25 - t26
+    t26 = t40 / t25
+    t28 = t28 + t28
+    t32 = t28 * t0
+    t17 = t17 + t17
+    t36 = t17 * t2
+    t32 = t32 - t36
+    t36 = p[2] + p[2]
+    t32 = t32 / t36
+    t37 = t26 * t32
+    t38 = t30 * t42
+    t40 = t43 * t39
+    t38 = t38 + t40
+    t38 = t38 / t25
+    t34 = t34 + t34
+    t4 = p[1] * t4
+    t40 = t34 * t4
+    t15 = t15 + t15
+    t44 = (-0.5000000000000002) * t6
+    t44 = p[1] * t44
+    t45 = t15 * t44
+    t23 = t23 + t23
+    t6 = 0.8660254037844385 * t6
+    t6 = p[1] * t6
+    t46 = t23 * t6
+    t45 = t45 + t46
+    t40 = t40 - t45
+    t40 = t40 / t36
+    t45 = t38 * t40
+    t46 = t45 * ydd[1]
+    t47 = t37 * ydd[0]
+    t46 = t46 - t47
+    t47 = t30 * t35
+    t48 = t43 * t24
+    t47 = t47 + t48
+    t47 = t47 / t25
+    t41 = t41 + t41
+    t8 = p[1] * t8
+    t48 = t41 * t8
+    t14 = t14 + t14
+    t49 = (-0.5000000000000002) * t10
+    t49 = p[1] * t49
+    t50 = t14 * t49
+    t21 = t21 + t21
+    t10 = (-0.8660254037844385) * t10
+    t10 = p[1] * t10
+    t51 = t21 * t10
+    t50 = t50 + t51
+    t48 = t48 - t50
+    t48 = t48 / t36
+    t50 = t47 * t48
+    t51 = t50 * ydd[2]
+    t46 = t46 - t51
+    t51 = t0 + t0
+    t51 = t0 * t51
+    t28 = t28 * t2
+    t28 = t51 - t28
+    t51 = -t2
+    t51 = t51 + t51
+    t51 = t2 * t51
+    t17 = t17 * t0
+    t17 = t51 + t17
+    t17 = t28 - t17
+    t17 = t17 / t36
+    t17 = yd[0] * t17
+    t28 = t45 * yd[1]
+    t51 = t37 * yd[0]
+    t28 = t28 - t51
+    t51 = t50 * yd[2]
+    t28 = t28 - t51
+    t51 = t2 / p[2]
+    t51 = t28 * t51
+    t17 = t17 + t51
+    t39 = t18 * t39
+    t51 = t30 * t16
+    t39 = t39 + t51
+    t39 = t39 / t25
+    t51 = t39 * t40
+    t52 = t51 * yd[1]
+    t20 = t20 / t25
+    t53 = t20 * t32
+    t54 = t53 * yd[0]
+    t52 = t52 - t54
+    t24 = t18 * t24
+    t30 = t30 * t19
+    t24 = t24 + t30
+    t24 = t24 / t25
+    t30 = t24 * t48
+    t54 = t30 * yd[2]
+    t52 = t52 - t54
+    t0 = t0 / p[2]
+    t54 = t52 * t0
+    t17 = t17 + t54
+    t17 = t17 * yd[0]
+    t54 = t28 / p[2]
+    t2 = (-2.0) * t2
+    t2 = t2 / t36
+    t2 = yd[0] * t2
+    t2 = t54 - t2
+    t2 = t2 * t28
+    t2 = t17 + t2
+    t17 = t31 / t25
+    t31 = t17 * t32
+    t32 = t31 * yd[0]
+    t16 = t43 * t16
+    t42 = t18 * t42
+    t16 = t16 - t42
+    t16 = t16 / t25
+    t40 = t16 * t40
+    t42 = t40 * yd[1]
+    t32 = t32 - t42
+    t19 = t43 * t19
+    t18 = t18 * t35
+    t18 = t19 - t18
+    t18 = t18 / t25
+    t19 = t18 * t48
+    t25 = t19 * yd[2]
+    t25 = t32 + t25
+    t32 = t25 / p[2]
+    t35 = t32 * t25
+    t2 = t2 + t35
+    t0 = yd[0] * t0
+    t35 = t52 / p[2]
+    t0 = t0 + t35
+    t0 = t0 * t52
+    t0 = t2 + t0
+    t2 = t26 * t0
+    t26 = t4 + t4
+    t26 = t4 * t26
+    t12 = t34 * t12
+    t12 = t26 - t12
+    t26 = -t44
+    t26 = t26 + t26
+    t26 = t44 * t26
+    t13 = t15 * t13
+    t13 = t26 + t13
+    t15 = -t6
+    t15 = t15 + t15
+    t15 = t6 * t15
+    t22 = t23 * t22
+    t15 = t15 + t22
+    t13 = t13 + t15
+    t12 = t12 - t13
+    t12 = t12 / t36
+    t12 = yd[1] * t12
+    t13 = t44 / p[2]
+    t13 = t28 * t13
+    t12 = t12 + t13
+    t13 = t6 / p[2]
+    t13 = t25 * t13
+    t12 = t12 + t13
+    t4 = t4 / p[2]
+    t13 = t52 * t4
+    t12 = t12 + t13
+    t12 = t12 * yd[1]
+    t13 = (-2.0) * t44
+    t13 = t13 / t36
+    t13 = yd[1] * t13
+    t13 = t54 - t13
+    t13 = t13 * t28
+    t12 = t12 + t13
+    t6 = (-2.0) * t6
+    t6 = t6 / t36
+    t6 = yd[1] * t6
+    t6 = t32 - t6
+    t6 = t6 * t25
+    t6 = t12 + t6
+    t4 = yd[1] * t4
+    t4 = t4 + t35
+    t4 = t4 * t52
+    t4 = t6 + t4
+    t6 = t38 * t4
+    t2 = t2 - t6
+    t6 = t8 + t8
+    t6 = t8 * t6
+    t12 = t41 * t33
+    t6 = t6 - t12
+    t12 = -t49
+    t12 = t12 + t12
+    t12 = t49 * t12
+    t13 = t14 * t29
+    t12 = t12 + t13
+    t13 = -t10
+    t13 = t13 + t13
+    t13 = t10 * t13
+    t14 = t21 * t27
+    t13 = t13 + t14
+    t12 = t12 + t13
+    t6 = t6 - t12
+    t6 = t6 / t36
+    t6 = yd[2] * t6
+    t12 = t49 / p[2]
+    t12 = t28 * t12
+    t6 = t6 + t12
+    t12 = t10 / p[2]
+    t12 = t25 * t12
+    t6 = t6 + t12
+    t8 = t8 / p[2]
+    t12 = t52 * t8
+    t6 = t6 + t12
+    t6 = t6 * yd[2]
+    t12 = (-2.0) * t49
+    t12 = t12 / t36
+    t12 = yd[2] * t12
+    t12 = t54 - t12
+    t12 = t12 * t28
+    t6 = t6 + t12
+    t10 = (-2.0) * t10
+    t10 = t10 / t36
+    t10 = yd[2] * t10
+    t10 = t32 - t10
+    t10 = t10 * t25
+    t6 = t6 + t10
+    t8 = yd[2] * t8
+    t8 = t8 + t35
+    t8 = t8 * t52
+    t6 = t6 + t8
+    t8 = t47 * t6
+    t2 = t2 + t8
+    t2 = t46 - t2
+    t8 = t37 * t2
+    t10 = -t8
+    t12 = t45 * t2
+    t2 = t50 * t2
+    t13 = -t2
+    t14 = t31 * ydd[0]
+    t15 = t40 * ydd[1]
+    t14 = t14 - t15
+    t15 = t19 * ydd[2]
+    t14 = t14 + t15
+    t15 = t16 * t4
+    t16 = t17 * t0
+    t15 = t15 - t16
+    t16 = t18 * t6
+    t15 = t15 - t16
+    t14 = t14 - t15
+    t15 = t31 * t14
+    t8 = t15 - t8
+    t15 = t40 * t14
+    t15 = t12 - t15
+    t14 = t19 * t14
+    t2 = t14 - t2
+    t14 = t51 * ydd[1]
+    t16 = t53 * ydd[0]
+    t14 = t14 - t16
+    t16 = t30 * ydd[2]
+    t14 = t14 - t16
+    t0 = t20 * t0
+    t4 = t39 * t4
+    t0 = t0 - t4
+    t4 = t24 * t6
+    t0 = t0 + t4
+    t0 = t14 - t0
+    t4 = p[6] + t0
+    t6 = t53 * t4
+    t6 = t8 - t6
+    t14 = t51 * t4
+    t14 = t15 + t14
+    t4 = t30 * t4
+    t4 = t2 - t4
+    t16 = sign(yd[0])
+    t17 = sign(yd[1])
+    t18 = sign(yd[2])
+    t20 = t37 * t28
+    t20 = -t20
+    t21 = t45 * t28
+    t22 = t50 * t28
+    t22 = -t22
+    t23 = sign(t28)
+    t24 = t37 * t23
+    t24 = -t24
+    t26 = t45 * t23
+    t23 = t50 * t23
+    t23 = -t23
+    t27 = t31 * t25
+    t28 = t40 * t25
+    t28 = -t28
+    t29 = t19 * t25
+    t25 = sign(t25)
+    t31 = t31 * t25
+    t32 = t40 * t25
+    t32 = -t32
+    t19 = t19 * t25
+    t25 = t53 * t0
+    t25 = -t25
+    t33 = t51 * t0
+    t0 = t30 * t0
+    t0 = -t0
+    t34 = t53 * t52
+    t34 = -t34
+    t35 = t51 * t52
+    t36 = t30 * t52
+    t36 = -t36
+    t37 = sign(t52)
+    t38 = t53 * t37
+    t38 = -t38
+    t39 = t51 * t37
+    t30 = t30 * t37
+    t30 = -t30
+    _Y_b = (t1, t3, ydd[0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t10, t8, t6, yd[0], t16, 0.0, 0.0, 0.0, 0.0, t20, t24, t27, t31, t25, t34, t38,
+            0.0, 0.0, 0.0, t5, t7, ydd[1], 0.0, 0.0, 0.0, t12, t15, t14, 0.0, 0.0, yd[1], t17, 0.0, 0.0, t21, t26, t28, t32, t33, t35, t39,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t9, t11, ydd[2], t13, t2, t4, 0.0, 0.0, 0.0, 0.0, yd[2], t18, t22, t23, t29, t19, t0, t36, t30)
+    return np.array(_Y_b).reshape(3, 25)
+
+
+_base_regressor_y_constants = _constants(
+    -0.5000000000000002, 2.0, 0.8660254037844386, 0.8660254037844385, -0.8660254037844385, -2.0)
+
+
+_base_regressor_y_fixed = (
+    {3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 14: 0.0, 15: 0.0, 16: 0.0, 17: 0.0, 25: 0.0, 26: 0.0,
+     27: 0.0, 31: 0.0, 32: 0.0, 33: 0.0, 37: 0.0, 38: 0.0, 41: 0.0, 42: 0.0, 50: 0.0, 51: 0.0, 52: 0.0,
+     53: 0.0, 54: 0.0, 55: 0.0, 62: 0.0, 63: 0.0, 64: 0.0, 65: 0.0},
+)
+"""base_regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _base_regressor_y_chunk(x, t, s, y):
+    """base_regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, y_1, y_2, yd_0, yd_1, yd_2, ydd_0, ydd_1, ydd_2, p_0, p_1, p_2, p_3, p_4, p_5, p_6 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46, t47) = t
+    s0, s1, s2, s3 = s
+    (Y_b_0, Y_b_1, Y_b_2, Y_b_9, Y_b_10, Y_b_11, Y_b_12, Y_b_13, Y_b_18, Y_b_19, Y_b_20, Y_b_21, Y_b_22,
+     Y_b_23, Y_b_24, Y_b_28, Y_b_29, Y_b_30, Y_b_34, Y_b_35, Y_b_36, Y_b_39, Y_b_40, Y_b_43, Y_b_44,
+     Y_b_45, Y_b_46, Y_b_47, Y_b_48, Y_b_49, Y_b_56, Y_b_57, Y_b_58, Y_b_59, Y_b_60, Y_b_61, Y_b_66,
+     Y_b_67, Y_b_68, Y_b_69, Y_b_70, Y_b_71, Y_b_72, Y_b_73, Y_b_74) = y
+    k0, k1, k2, k3, k4, k5 = _base_regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_6, t1)
+    negative(t1, Y_b_0)
+    sin(y_0, t1)
+    multiply(t1, p_6, t2)
+    negative(t2, Y_b_1)
+    cos(y_1, t2)
+    multiply(t2, p_6, t3)
+    negative(t3, Y_b_28)
+    sin(y_1, t3)
+    multiply(t3, p_6, t4)
+    negative(t4, Y_b_29)
+    cos(y_2, t4)
+    multiply(t4, p_6, t5)
+    negative(t5, Y_b_56)
+    sin(y_2, t5)
+    multiply(t5, p_6, t6)
+    negative(t6, Y_b_57)
+    multiply(t3, p_1, t6)
+    multiply(k0, t2, t7)
+    multiply(t7, p_1, t7)
+    divide(p_0, k1, s0)
+    subtract(t7, s0, t8)
+    divide(p_3, k1, s1)
+    add(t8, s1, t9)
+    multiply(t0, p_1, t0)
+    add(p_0, t0, t10)
+    subtract(t10, p_3, t11)
+    subtract(t9, t11, t9)
+    multiply(t9, t9, t12)
+    multiply(k2, p_0, s2)
+    multiply(k3, t2, t13)
+    multiply(t13, p_1, t13)
+    add(s2, t13, t14)
+    multiply(k2, p_3, s3)
+    subtract(t14, s3, t15)
+    multiply(t15, t15, t16)
+    add(t12, t16, t12)
+    multiply(t1, p_1, t1)
+    subtract(t1, t6, t16)
+    multiply(t16, t16, t17)
+    add(t12, t17, t12)
+    sqrt(t12, t17)
+    add(t17, t17, t18)
+    divide(t12, t18, t12)
+    divide(t16, t17, t16)
+    multiply(t12, t16, t18)
+    subtract(t18, t1, t18)
+    divide(t9, t17, t9)
+    multiply(k0, t4, t19)
+    multiply(t19, p_1, t19)
+    subtract(t19, s0, t20)
+    add(t20, s1, t21)
+    subtract(t21, t11, t21)
+    multiply(t9, t21, t22)
+    divide(t15, t17, t15)
+    multiply(k4, t4, t17)
+    multiply(t17, p_1, t17)
+    subtract(t17, s2, t23)
+    add(t23, s3, t24)
+    multiply(t15, t24, t25)
+    add(t22, t25, t22)
+    multiply(t5, p_1, t25)
+    subtract(t1, t25, t26)
+    multiply(t16, t26, t27)
+    add(t22, t27, t22)
+    multiply(t22, t22, t27)
+    multiply(t22, t9, t28)
+    subtract(t21, t28, t28)
+    multiply(t28, t28, t29)
+    multiply(t22, t15, t30)
+    subtract(t24, t30, t30)
+    multiply(t30, t30, t31)
+    add(t29, t31, t29)
+    multiply(t22, t16, t31)
+    subtract(t26, t31, t31)
+    multiply(t31, t31, t32)
+    add(t29, t32, t29)
+    sqrt(t29, t29)
+    divide(t28, t29, t28)
+    multiply(t28, t21, t21)
+    divide(t30, t29, t30)
+    multiply(t30, t24, t24)
+    add(t21, t24, t21)
+    divide(t31, t29, t31)
+    multiply(t31, t26, t26)
+    add(t21, t26, t21)
+    multiply(t21, t21, t24)
+    add(t27, t24, t27)
+    add(t22, t22, t22)
+    multiply(t22, t12, t22)
+    subtract(t27, t22, t27)
+    add(t21, t21, t21)
+    divide(t27, t21, t27)
+    multiply(t27, t31, t21)
+    add(t18, t21, t18)
+    multiply(p_2, p_2, s0)
+    multiply(t12, t12, t21)
+    subtract(s0, t21, t21)
+    multiply(t27, t27, t22)
+    subtract(t21, t22, t21)
+    sqrt(t21, t21)
+    multiply(t9, t30, t22)
+    multiply(t15, t28, t24)
+    subtract(t22, t24, t22)
+    multiply(t21, t22, t22)
+    subtract(t18, t22, t18)
+    add(t6, t18, t22)
+    divide(t22, p_2, t24)
+    multiply(t12, t15, t26)
+    multiply(t27, t30, t29)
+    add(t26, t29, t26)
+    multiply(t16, t28, t29)
+    multiply(t9, t31, t32)
+    subtract(t29, t32, t29)
+    multiply(t21, t29, t29)
+    subtract(t26, t29, t26)
+    subtract(t26, s3, t29)
+    subtract(t23, t29, t23)
+    divide(t23, p_2, t29)
+    multiply(t24, t29, t32)
+    add(t26, s3, t33)
+    subtract(t14, t33, t14)
+    divide(t14, p_2, t33)
+    add(t25, t18, t34)
+    divide(t34, p_2, t35)
+    multiply(t33, t35, t36)
+    subtract(t32, t36, t32)
+    add(t1, t18, t18)
+    divide(t18, p_2, t36)
+    multiply(t12, t9, t12)
+    add(t11, t12, t11)
+    multiply(t27, t28, t27)
+    add(t11, t27, t11)
+    multiply(t15, t31, t15)
+    multiply(t16, t30, t16)
+    subtract(t15, t16, t15)
+    multiply(t21, t15, t21)
+    subtract(t11, t21, t11)
+    subtract(t11, s1, t9)
+    subtract(t8, t9, t8)
+    divide(t8, p_2, t12)
+    multiply(t12, t29, t15)
+    subtract(t20, t9, t20)
+    divide(t20, p_2, t9)
+    multiply(t33, t9, t16)
+    subtract(t15, t16, t15)
+    multiply(t36, t15, t16)
+    add(t11, p_3, t11)
+    subtract(t10, t11, t10)
+    divide(t10, p_2, t11)
+    multiply(t11, t32, t21)
+    divide(t26, p_2, t26)
+    multiply(t24, t9, t27)
+    multiply(t12, t35, t28)
+    subtract(t27, t28, t27)
+    multiply(t26, t27, t28)
+    add(t21, t28, t21)
+    subtract(t16, t21, t16)
+    divide(t32, t16, t32)
+    add(t18, t18, t18)
+    multiply(t18, t0, t21)
+    add(t10, t10, t10)
+    multiply(t10, t1, t28)
+    subtract(t21, t28, t21)
+    add(p_2, p_2, s0)
+    divide(t21, s0, t21)
+    multiply(t32, t21, t28)
+    multiply(t26, t35, t30)
+    multiply(t36, t29, t31)
+    add(t30, t31, t30)
+    divide(t30, t16, t30)
+    add(t22, t22, t22)
+    multiply(p_1, t2, t2)
+    multiply(t22, t2, t31)
+    add(t8, t8, t8)
+    multiply(k0, t3, t37)
+    multiply(p_1, t37, t37)
+    multiply(t8, t37, t38)
+    add(t14, t14, t14)
+    multiply(k3, t3, t3)
+    multiply(p_1, t3, t3)
+    multiply(t14, t3, t39)
+    add(t38, t39, t38)
+    subtract(t31, t38, t31)
+    divide(t31, s0, t31)
+    multiply(t30, t31, t38)
+    multiply(t38, ydd_1, t39)
+    multiply(t28, ydd_0, t40)
+    subtract(t39, t40, t39)
+    multiply(t26, t24, t40)
+    multiply(t36, t33, t41)
+    add(t40, t41, t40)
+    divide(t40, t16, t40)
+    add(t34, t34, t34)
+    multiply(p_1, t4, t4)
+    multiply(t34, t4, t41)
+    add(t20, t20, t20)
+    multiply(k0, t5, t42)
+    multiply(p_1, t42, t42)
+    multiply(t20, t42, t43)
+    add(t23, t23, t23)
+    multiply(k4, t5, t5)
+    multiply(p_1, t5, t5)
+    multiply(t23, t5, t44)
+    add(t43, t44, t43)
+    subtract(t41, t43, t41)
+    divide(t41, s0, t41)
+    multiply(t40, t41, t43)
+    multiply(t43, ydd_2, t44)
+    subtract(t39, t44, t39)
+    add(t0, t0, t44)
+    multiply(t0, t44, t44)
+    multiply(t18, t1, t18)
+    subtract(t44, t18, t44)
+    negative(t1, t18)
+    add(t18, t18, t18)
+    multiply(t1, t18, t18)
+    multiply(t10, t0, t10)
+    add(t18, t10, t18)
+    subtract(t44, t18, t44)
+    divide(t44, s0, t44)
+    multiply(yd_0, t44, t44)
+    multiply(t38, yd_1, t10)
+    multiply(t28, yd_0, t18)
+    subtract(t10, t18, t10)
+    multiply(t43, yd_2, t18)
+    subtract(t10, t18, t10)
+    divide(t1, p_2, t18)
+    multiply(t10, t18, t18)
+    add(t44, t18, t44)
+    multiply(t11, t29, t29)
+    multiply(t26, t9, t18)
+    add(t29, t18, t29)
+    divide(t29, t16, t29)
+    multiply(t29, t31, t18)
+    multiply(t18, yd_1, t45)
+    divide(t15, t16, t15)
+    multiply(t15, t21, t46)
+    multiply(t46, yd_0, t47)
+    subtract(t45, t47, t45)
+    multiply(t11, t33, t33)
+    multiply(t26, t12, t26)
+    add(t33, t26, t33)
+    divide(t33, t16, t33)
+    multiply(t33, t41, t26)
+    multiply(t26, yd_2, t47)
+    subtract(t45, t47, t45)
+    divide(t0, p_2, t0)
+    multiply(t45, t0, t47)
+    add(t44, t47, t44)
+    multiply(t44, yd_0, t44)
+    divide(t10, p_2, t47)
+    multiply(k5, t1, t1)
+    divide(t1, s0, t1)
+    multiply(yd_0, t1, t1)
+    subtract(t47, t1, t1)
+    multiply(t1, t10, t1)
+    add(t44, t1, t44)
+    divide(t27, t16, t27)
+    multiply(t27, t21, t21)
+    multiply(t21, yd_0, t1)
+    multiply(t36, t9, t9)
+    multiply(t11, t35, t35)
+    subtract(t9, t35, t9)
+    divide(t9, t16, t9)
+    multiply(t9, t31, t31)
+    multiply(t31, yd_1, t35)
+    subtract(t1, t35, t1)
+    multiply(t36, t12, t36)
+    multiply(t11, t24, t11)
+    subtract(t36, t11, t36)
+    divide(t36, t16, t36)
+    multiply(t36, t41, t41)
+    multiply(t41, yd_2, t11)
+    add(t1, t11, t1)
+    divide(t1, p_2, t11)
+    multiply(t11, t1, t12)
+    add(t44, t12, t44)
+    multiply(yd_0, t0, t0)
+    divide(t45, p_2, t12)
+    add(t0, t12, t0)
+    multiply(t0, t45, t0)
+    add(t44, t0, t44)
+    multiply(t32, t44, t32)
+    add(t2, t2, t0)
+    multiply(t2, t0, t0)
+    multiply(t22, t6, t22)
+    subtract(t0, t22, t0)
+    negative(t37, t6)
+    add(t6, t6, t6)
+    multiply(t37, t6, t6)
+    multiply(t8, t7, t8)
+    add(t6, t8, t6)
+    negative(t3, t7)
+    add(t7, t7, t7)
+    multiply(t3, t7, t7)
+    multiply(t14, t13, t14)
+    add(t7, t14, t7)
+    add(t6, t7, t6)
+    subtract(t0, t6, t0)
+    divide(t0, s0, t0)
+    multiply(yd_1, t0, t0)
+    divide(t37, p_2, t6)
+    multiply(t10, t6, t6)
+    add(t0, t6, t0)
+    divide(t3, p_2, t6)
+    multiply(t1, t6, t6)
+    add(t0, t6, t0)
+    divide(t2, p_2, t2)
+    multiply(t45, t2, t6)
+    add(t0, t6, t0)
+    multiply(t0, yd_1, t0)
+    multiply(k5, t37, t37)
+    divide(t37, s0, t37)
+    multiply(yd_1, t37, t37)
+    subtract(t47, t37, t37)
+    multiply(t37, t10, t37)
+    add(t0, t37, t0)
+    multiply(k5, t3, t3)
+    divide(t3, s0, t3)
+    multiply(yd_1, t3, t3)
+    subtract(t11, t3, t3)
+    multiply(t3, t1, t3)
+    add(t0, t3, t0)
+    multiply(yd_1, t2, t2)
+    add(t2, t12, t2)
+    multiply(t2, t45, t2)
+    add(t0, t2, t0)
+    multiply(t30, t0, t30)
+    subtract(t32, t30, t32)
+    add(t4, t4, t2)
+    multiply(t4, t2, t2)
+    multiply(t34, t25, t34)
+    subtract(t2, t34, t2)
+    negative(t42, t3)
+    add(t3, t3, t3)
+    multiply(t42, t3, t3)
+    multiply(t20, t19, t20)
+    add(t3, t20, t3)
+    negative(t5, t6)
+    add(t6, t6, t6)
+    multiply(t5, t6, t6)
+    multiply(t23, t17, t23)
+    add(t6, t23, t6)
+    add(t3, t6, t3)
+    subtract(t2, t3, t2)
+    divide(t2, s0, t2)
+    multiply(yd_2, t2, t2)
+    divide(t42, p_2, t3)
+    multiply(t10, t3, t3)
+    add(t2, t3, t2)
+    divide(t5, p_2, t3)
+    multiply(t1, t3, t3)
+    add(t2, t3, t2)
+    divide(t4, p_2, t4)
+    multiply(t45, t4, t3)
+    add(t2, t3, t2)
+    multiply(t2, yd_2, t2)
+    multiply(k5, t42, t42)
+    divide(t42, s0, t42)
+    multiply(yd_2, t42, t42)
+    subtract(t47, t42, t47)
+    multiply(t47, t10, t47)
+    add(t2, t47, t2)
+    multiply(k5, t5, t5)
+    divide(t5, s0, t5)
+    multiply(yd_2, t5, t5)
+    subtract(t11, t5, t11)
+    multiply(t11, t1, t11)
+    add(t2, t11, t2)
+    multiply(yd_2, t4, t4)
+    add(t4, t12, t4)
+    multiply(t4, t45, t4)
+    add(t2, t4, t2)
+    multiply(t40, t2, t40)
+    add(t32, t40, t32)
+    subtract(t39, t32, t39)
+    multiply(t28, t39, t3)
+    negative(t3, Y_b_9)
+    multiply(t38, t39, Y_b_34)
+    multiply(t43, t39, t39)
+    negative(t39, Y_b_59)
+    multiply(t21, ydd_0, t4)
+    multiply(t31, ydd_1, t5)
+    subtract(t4, t5, t4)
+    multiply(t41, ydd_2, t5)
+    add(t4, t5, t4)
+    multiply(t9, t0, t9)
+    multiply(t27, t44, t27)
+    subtract(t9, t27, t9)
+    multiply(t36, t2, t36)
+    subtract(t9, t36, t9)
+    subtract(t4, t9, t4)
+    multiply(t21, t4, t5)
+    subtract(t5, t3, Y_b_10)
+    multiply(t31, t4, t3)
+    subtract(Y_b_34, t3, Y_b_35)
+    multiply(t41, t4, t4)
+    subtract(t4, t39, Y_b_60)
+    multiply(t18, ydd_1, t3)
+    multiply(t46, ydd_0, t4)
+    subtract(t3, t4, t3)
+    multiply(t26, ydd_2, t4)
+    subtract(t3, t4, t3)
+    multiply(t15, t44, t15)
+    multiply(t29, t0, t29)
+    subtract(t15, t29, t15)
+    multiply(t33, t2, t33)
+    add(t15, t33, t15)
+    subtract(t3, t15, t3)
+    add(p_6, t3, t0)
+    multiply(t46, t0, t2)
+    subtract(Y_b_10, t2, Y_b_11)
+    multiply(t18, t0, t2)
+    add(Y_b_35, t2, Y_b_36)
+    multiply(t26, t0, t0)
+    subtract(Y_b_60, t0, Y_b_61)
+    sign(yd_0, Y_b_13)
+    sign(yd_1, Y_b_40)
+    sign(yd_2, Y_b_67)
+    multiply(t28, t10, t0)
+    negative(t0, Y_b_18)
+    multiply(t38, t10, Y_b_43)
+    multiply(t43, t10, t0)
+    negative(t0, Y_b_68)
+    sign(t10, t10)
+    multiply(t28, t10, t28)
+    negative(t28, Y_b_19)
+    multiply(t38, t10, Y_b_44)
+    multiply(t43, t10, t43)
+    negative(t43, Y_b_69)
+    multiply(t21, t1, Y_b_20)
+    multiply(t31, t1, t0)
+    negative(t0, Y_b_45)
+    multiply(t41, t1, Y_b_70)
+    sign(t1, t1)
+    multiply(t21, t1, Y_b_21)
+    multiply(t31, t1, t31)
+    negative(t31, Y_b_46)
+    multiply(t41, t1, Y_b_71)
+    multiply(t46, t3, t0)
+    negative(t0, Y_b_22)
+    multiply(t18, t3, Y_b_47)
+    multiply(t26, t3, t3)
+    negative(t3, Y_b_72)
+    multiply(t46, t45, t0)
+    negative(t0, Y_b_23)
+    multiply(t18, t45, Y_b_48)
+    multiply(t26, t45, t0)
+    negative(t0, Y_b_73)
+    sign(t45, t45)
+    multiply(t46, t45, t46)
+    negative(t46, Y_b_24)
+    multiply(t18, t45, Y_b_49)
+    multiply(t26, t45, t26)
+    negative(t26, Y_b_74)
+    copyto(Y_b_2, ydd_0)
+    copyto(Y_b_12, yd_0)
+    copyto(Y_b_30, ydd_1)
+    copyto(Y_b_39, yd_1)
+    copyto(Y_b_58, ydd_2)
+    copyto(Y_b_66, yd_2)
+
+
 def rk4_step(x, u, dt, p=DEFAULT_P):
     """One classical Runge-Kutta step of the closed chain's x' = f(x, u), x = [y; yd], u = tau_y held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs (q = gamma(y) inside each: the loops stay closed, nothing drifts).
 

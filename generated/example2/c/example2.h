@@ -45,6 +45,8 @@
 #include "example2_ode_rhs.h"
 #include "example2_ode_jac_x.h"
 #include "example2_ode_jac_u.h"
+#include "example2_regressor_y.h"
+#include "example2_base_regressor_y.h"
 #include "example2_rk4_step.h"
 
 #endif /* EXAMPLE2_DERIVE_H */

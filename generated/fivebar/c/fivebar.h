@@ -40,6 +40,8 @@
 #include "fivebar_ode_rhs.h"
 #include "fivebar_ode_jac_x.h"
 #include "fivebar_ode_jac_u.h"
+#include "fivebar_regressor_y.h"
+#include "fivebar_base_regressor_y.h"
 #include "fivebar_rk4_step.h"
 
 #endif /* FIVEBAR_DERIVE_H */

@@ -11006,6 +11006,1602 @@ def _ode_jac_u_chunk(x, t, s, y):
     copyto(B_6, B_5)
 
 
+def regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain regressor Y_y(y, yd, ydd) = G^T Y(q, G yd, G ydd + Gdot yd) (2x52, row-major): inverse_dynamics_y = Y_y pi, pi the tree's standard parameters (per body (proximal1, distal1, proximal2, distal2) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the body origin, body axes; then per coordinate [armature, viscous, coulomb]); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
+
+    in  y [2]
+    in  yd [2]
+    in  ydd [2]
+    in  p [4]
+    out Y_y [2x52]
+    378 ops: 181 mul, 174 add, 7 div, 10 trig, 6 other
+    """
+    y = _array(y, 2, "regressor_y", "y")
+    yd = _array(yd, 2, "regressor_y", "yd")
+    ydd = _array(ydd, 2, "regressor_y", "ydd")
+    p = _array(p, 4, "regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_y_chunk, (y, yd, ydd, p), 45, ((2, 52),), fixed=_regressor_y_fixed)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    atan2, cos, sign, sin, sqrt = math.atan2, math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[3]
+    t2 = sin(y[0])
+    t3 = t2 * p[3]
+    t4 = -t3
+    t5 = t0 * p[2]
+    t6 = 0.9944925627484974 * t5
+    t7 = t2 * p[2]
+    t8 = (-0.10480716882888248) * t7
+    t6 = t6 - t8
+    t8 = t2 * p[1]
+    t9 = t5 * t5
+    t10 = t7 * t7
+    t9 = t9 + t10
+    t10 = cos(y[1])
+    t11 = t10 * p[2]
+    t12 = t11 * t11
+    t13 = sin(y[1])
+    t14 = t13 * p[2]
+    t15 = t14 * t14
+    t12 = t12 + t15
+    t12 = t9 - t12
+    t15 = t10 * p[1]
+    t16 = p[0] + t15
+    t17 = t0 * p[1]
+    t18 = t17 - p[0]
+    t19 = t16 - t18
+    t20 = t19 * t19
+    t21 = t13 * p[1]
+    t22 = t21 - t8
+    t23 = t22 * t22
+    t20 = t20 + t23
+    t12 = t12 + t20
+    t20 = sqrt(t20)
+    t23 = t20 + t20
+    t12 = t12 / t23
+    t22 = t22 / t20
+    t23 = t12 * t22
+    t23 = t8 + t23
+    t24 = t12 * t12
+    t9 = t9 - t24
+    t9 = sqrt(t9)
+    t19 = t19 / t20
+    t20 = t9 * t19
+    t20 = t23 - t20
+    t23 = t20 - t8
+    t24 = t6 * t23
+    t5 = (-0.10480716882888248) * t5
+    t7 = 0.9944925627484974 * t7
+    t5 = t5 + t7
+    t7 = t12 * t19
+    t7 = t18 + t7
+    t9 = t9 * t22
+    t7 = t7 + t9
+    t9 = t7 - t18
+    t12 = t5 * t9
+    t12 = t24 - t12
+    t6 = t6 * t9
+    t5 = t5 * t23
+    t5 = t6 + t5
+    t5 = atan2(t12, t5)
+    t5 = (-0.105) + t5
+    t6 = sin(t5)
+    t9 = t6 * p[1]
+    t5 = cos(t5)
+    t12 = yd[0] * p[1]
+    t12 = yd[0] * t12
+    t3 = t3 - t12
+    t12 = t5 * t3
+    t19 = ydd[0] * p[1]
+    t19 = t1 + t19
+    t22 = t6 * t19
+    t12 = t12 + t22
+    t22 = t9 * t12
+    t23 = t5 * p[1]
+    t19 = t5 * t19
+    t3 = t6 * t3
+    t3 = t19 - t3
+    t19 = t23 * t3
+    t19 = t22 + t19
+    t22 = t0 * t5
+    t24 = t2 * t6
+    t22 = t22 - t24
+    t24 = 0.9841997840095373 * t11
+    t25 = (-0.17706152929301175) * t14
+    t24 = t24 - t25
+    t20 = t20 - t21
+    t25 = t24 * t20
+    t11 = (-0.17706152929301175) * t11
+    t14 = 0.9841997840095373 * t14
+    t11 = t11 + t14
+    t7 = t7 - t16
+    t14 = t11 * t7
+    t14 = t25 - t14
+    t7 = t24 * t7
+    t11 = t11 * t20
+    t7 = t7 + t11
+    t7 = atan2(t14, t7)
+    t7 = (-0.178) + t7
+    t11 = cos(t7)
+    t14 = t10 * t11
+    t7 = sin(t7)
+    t20 = t13 * t7
+    t14 = t14 - t20
+    t14 = p[2] * t14
+    t20 = t22 * t14
+    t0 = t0 * t6
+    t2 = t2 * t5
+    t0 = t0 + t2
+    t2 = t10 * t7
+    t5 = t13 * t11
+    t2 = t2 + t5
+    t2 = p[2] * t2
+    t5 = t0 * t2
+    t5 = t20 + t5
+    t6 = t0 * p[2]
+    t8 = t8 + t6
+    t20 = t21 + t2
+    t21 = t8 - t20
+    t24 = t21 * t22
+    t25 = p[2] * t22
+    t26 = t0 * t25
+    t27 = t24 + t26
+    t18 = t18 + t25
+    t16 = t16 + t14
+    t16 = t18 - t16
+    t18 = t16 * t0
+    t28 = t22 * t6
+    t29 = t18 + t28
+    t30 = t27 - t29
+    t31 = t30 * t5
+    t2 = t22 * t2
+    t32 = t0 * t14
+    t33 = t2 - t32
+    t34 = t22 * t25
+    t21 = t21 * t0
+    t35 = t34 - t21
+    t16 = t16 * t22
+    t6 = t0 * t6
+    t36 = t16 - t6
+    t37 = t35 - t36
+    t38 = t33 * t37
+    t31 = t31 + t38
+    t38 = t5 / t31
+    t17 = t17 + t25
+    t25 = t0 * t17
+    t24 = t24 + t25
+    t39 = t22 * t8
+    t18 = t18 + t39
+    t40 = t24 - t18
+    t41 = t38 * t40
+    t42 = t33 / t31
+    t17 = t22 * t17
+    t21 = t17 - t21
+    t8 = t0 * t8
+    t16 = t16 - t8
+    t43 = t21 - t16
+    t44 = t42 * t43
+    t41 = t41 + t44
+    t44 = t41 * ydd[0]
+    t45 = t22 * t20
+    t14 = t15 + t14
+    t15 = t0 * t14
+    t46 = t45 - t15
+    t47 = t38 * t46
+    t14 = t22 * t14
+    t0 = t0 * t20
+    t0 = t14 + t0
+    t14 = t42 * t0
+    t14 = t47 - t14
+    t20 = t14 * ydd[1]
+    t20 = t44 + t20
+    t22 = t17 - t8
+    t44 = t21 + t22
+    t22 = t16 + t22
+    t22 = t44 - t22
+    t22 = yd[0] * t22
+    t44 = t41 * yd[0]
+    t47 = t14 * yd[1]
+    t44 = t44 + t47
+    t47 = t34 - t6
+    t21 = t21 + t47
+    t16 = t16 + t47
+    t16 = t21 - t16
+    t16 = t44 * t16
+    t16 = t22 - t16
+    t21 = yd[1] * t0
+    t16 = t16 - t21
+    t22 = t37 / t31
+    t37 = t22 * t40
+    t30 = t30 / t31
+    t31 = t30 * t43
+    t31 = t37 - t31
+    t37 = t31 * yd[0]
+    t40 = t22 * t46
+    t43 = t30 * t0
+    t40 = t40 + t43
+    t43 = t40 * yd[1]
+    t37 = t37 + t43
+    t43 = t37 * t5
+    t16 = t16 + t43
+    t16 = t16 * yd[0]
+    t6 = t17 - t6
+    t6 = t35 + t6
+    t8 = t34 - t8
+    t8 = t36 + t8
+    t6 = t6 - t8
+    t6 = yd[0] * t6
+    t8 = t35 + t47
+    t17 = t36 + t47
+    t8 = t8 - t17
+    t8 = t44 * t8
+    t6 = t6 - t8
+    t6 = t6 - t21
+    t6 = t6 + t43
+    t6 = t6 * t44
+    t6 = t16 - t6
+    t8 = yd[0] * t0
+    t0 = t44 * t0
+    t0 = t8 - t0
+    t0 = t21 - t0
+    t0 = t0 - t43
+    t0 = t0 * yd[1]
+    t0 = t6 + t0
+    t6 = yd[1] * t5
+    t8 = yd[0] * t5
+    t5 = t44 * t5
+    t5 = t8 - t5
+    t5 = t6 - t5
+    t5 = t5 - t43
+    t5 = t5 * t37
+    t0 = t0 - t5
+    t5 = t38 * t0
+    t6 = t39 + t25
+    t8 = t18 + t6
+    t6 = t6 + t24
+    t6 = t8 - t6
+    t6 = yd[0] * t6
+    t8 = t28 + t26
+    t16 = t18 + t8
+    t17 = t8 + t24
+    t16 = t16 - t17
+    t16 = t44 * t16
+    t6 = t6 - t16
+    t16 = yd[1] * t46
+    t6 = t6 - t16
+    t17 = t37 * t33
+    t6 = t6 + t17
+    t6 = t6 * yd[0]
+    t18 = t39 + t26
+    t18 = t29 + t18
+    t21 = t25 + t28
+    t21 = t21 + t27
+    t18 = t18 - t21
+    t18 = yd[0] * t18
+    t21 = t29 + t8
+    t8 = t8 + t27
+    t8 = t21 - t8
+    t8 = t44 * t8
+    t8 = t18 - t8
+    t8 = t8 - t16
+    t8 = t8 + t17
+    t8 = t8 * t44
+    t6 = t6 - t8
+    t8 = t15 - t45
+    t15 = yd[0] * t8
+    t16 = t44 * t8
+    t15 = t15 - t16
+    t8 = yd[1] * t8
+    t8 = t15 - t8
+    t2 = t32 - t2
+    t15 = t37 * t2
+    t8 = t8 + t15
+    t8 = t8 * yd[1]
+    t6 = t6 + t8
+    t8 = yd[0] * t2
+    t16 = t44 * t2
+    t8 = t8 - t16
+    t2 = yd[1] * t2
+    t2 = t8 - t2
+    t2 = t2 + t15
+    t2 = t2 * t37
+    t2 = t6 - t2
+    t6 = t42 * t2
+    t5 = t5 + t6
+    t5 = t20 + t5
+    t6 = ydd[0] - t5
+    t8 = t23 * t6
+    t15 = yd[0] - t44
+    t15 = t15 * t15
+    t16 = t9 * t15
+    t8 = t8 - t16
+    t8 = t3 + t8
+    t16 = t41 * t3
+    t8 = t8 - t16
+    t3 = t14 * t3
+    t3 = -t3
+    t16 = t41 * t12
+    t9 = t9 * t6
+    t15 = t23 * t15
+    t9 = t9 + t15
+    t9 = t12 + t9
+    t9 = t16 - t9
+    t12 = t14 * t12
+    t15 = t41 * t6
+    t15 = t6 - t15
+    t6 = t14 * t6
+    t6 = -t6
+    t10 = t10 * p[3]
+    t13 = t13 * p[3]
+    t16 = -t13
+    t17 = t7 * p[1]
+    t18 = yd[1] * p[1]
+    t18 = yd[1] * t18
+    t13 = t13 - t18
+    t18 = t11 * t13
+    t20 = ydd[1] * p[1]
+    t20 = t10 + t20
+    t21 = t7 * t20
+    t18 = t18 + t21
+    t21 = t17 * t18
+    t23 = t11 * p[1]
+    t11 = t11 * t20
+    t7 = t7 * t13
+    t7 = t11 - t7
+    t11 = t23 * t7
+    t11 = t21 + t11
+    t13 = t31 * t7
+    t13 = -t13
+    t20 = t31 * ydd[0]
+    t21 = t40 * ydd[1]
+    t20 = t20 + t21
+    t0 = t22 * t0
+    t2 = t30 * t2
+    t0 = t0 - t2
+    t0 = t20 + t0
+    t2 = ydd[1] - t0
+    t20 = t23 * t2
+    t21 = yd[1] - t37
+    t21 = t21 * t21
+    t22 = t17 * t21
+    t20 = t20 - t22
+    t20 = t7 + t20
+    t7 = t40 * t7
+    t7 = t20 - t7
+    t20 = t31 * t18
+    t22 = t40 * t18
+    t17 = t17 * t2
+    t21 = t23 * t21
+    t17 = t17 + t21
+    t17 = t18 + t17
+    t17 = t22 - t17
+    t18 = t31 * t2
+    t18 = -t18
+    t21 = t40 * t2
+    t2 = t2 - t21
+    t21 = sign(yd[0])
+    t22 = t41 * t5
+    t5 = t14 * t5
+    t23 = t41 * t44
+    t24 = t14 * t44
+    t25 = -t44
+    t25 = sign(t25)
+    t26 = t41 * t25
+    t26 = -t26
+    t14 = t14 * t25
+    t14 = -t14
+    t25 = sign(yd[1])
+    t27 = t31 * t0
+    t0 = t40 * t0
+    t28 = t31 * t37
+    t29 = t40 * t37
+    t30 = -t37
+    t30 = sign(t30)
+    t31 = t31 * t30
+    t31 = -t31
+    t30 = t40 * t30
+    t30 = -t30
+    _Y_y = (0.0, t1, t4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[0], t19, t8, t9, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t15, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t13, t20, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t18, ydd[0], yd[0], t21, t22, t23, t26, 0.0, 0.0, 0.0, t27, t28, t31,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t3, t12, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t6, 0.0, t10, t16, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[1], t11, t7, t17, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t2, 0.0, 0.0, 0.0, t5, t24, t14, ydd[1], yd[1], t25, t0, t29, t30)
+    return np.array(_Y_y).reshape(2, 52)
+
+
+_regressor_y_constants = _constants(
+    0.9944925627484974, -0.10480716882888248, -0.105, 0.9841997840095373, -0.17706152929301175, -0.178)
+
+
+_regressor_y_fixed = (
+    {0: 0.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 13: 0.0, 14: 0.0, 15: 0.0, 16: 0.0, 17: 0.0,
+     18: 0.0, 20: 0.0, 21: 0.0, 22: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 0.0, 27: 0.0, 28: 0.0, 29: 0.0,
+     30: 0.0, 33: 0.0, 34: 0.0, 35: 0.0, 36: 0.0, 37: 0.0, 38: 0.0, 46: 0.0, 47: 0.0, 48: 0.0, 52: 0.0,
+     53: 0.0, 54: 0.0, 55: 0.0, 56: 0.0, 57: 0.0, 58: 0.0, 59: 0.0, 60: 0.0, 61: 0.0, 62: 0.0, 65: 0.0,
+     66: 0.0, 67: 0.0, 68: 0.0, 69: 0.0, 70: 0.0, 72: 0.0, 75: 0.0, 76: 0.0, 77: 0.0, 78: 0.0, 79: 0.0,
+     80: 0.0, 85: 0.0, 86: 0.0, 87: 0.0, 88: 0.0, 89: 0.0, 90: 0.0, 92: 0.0, 93: 0.0, 94: 0.0},
+)
+"""regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_y_chunk(x, t, s, y):
+    """regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, y_1, yd_0, yd_1, ydd_0, ydd_1, p_0, p_1, p_2, p_3 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44) = t
+    (Y_y_1, Y_y_2, Y_y_9, Y_y_10, Y_y_11, Y_y_12, Y_y_19, Y_y_31, Y_y_32, Y_y_39, Y_y_40, Y_y_41, Y_y_42,
+     Y_y_43, Y_y_44, Y_y_45, Y_y_49, Y_y_50, Y_y_51, Y_y_63, Y_y_64, Y_y_71, Y_y_73, Y_y_74, Y_y_81,
+     Y_y_82, Y_y_83, Y_y_84, Y_y_91, Y_y_95, Y_y_96, Y_y_97, Y_y_98, Y_y_99, Y_y_100, Y_y_101, Y_y_102,
+     Y_y_103) = y
+    k0, k1, k2, k3, k4, k5 = _regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_3, Y_y_1)
+    sin(y_0, t1)
+    multiply(t1, p_3, t2)
+    negative(t2, Y_y_2)
+    multiply(t0, p_2, t3)
+    multiply(k0, t3, t4)
+    multiply(t1, p_2, t5)
+    multiply(k1, t5, t6)
+    subtract(t4, t6, t4)
+    multiply(t1, p_1, t6)
+    multiply(t3, t3, t7)
+    multiply(t5, t5, t8)
+    add(t7, t8, t7)
+    cos(y_1, t8)
+    multiply(t8, p_2, t9)
+    multiply(t9, t9, t10)
+    sin(y_1, t11)
+    multiply(t11, p_2, t12)
+    multiply(t12, t12, t13)
+    add(t10, t13, t10)
+    subtract(t7, t10, t10)
+    multiply(t8, p_1, t13)
+    add(p_0, t13, t14)
+    multiply(t0, p_1, t15)
+    subtract(t15, p_0, t16)
+    subtract(t14, t16, t17)
+    multiply(t17, t17, t18)
+    multiply(t11, p_1, t19)
+    subtract(t19, t6, t20)
+    multiply(t20, t20, t21)
+    add(t18, t21, t18)
+    add(t10, t18, t10)
+    sqrt(t18, t18)
+    add(t18, t18, t21)
+    divide(t10, t21, t10)
+    divide(t20, t18, t20)
+    multiply(t10, t20, t21)
+    add(t6, t21, t21)
+    multiply(t10, t10, t22)
+    subtract(t7, t22, t7)
+    sqrt(t7, t7)
+    divide(t17, t18, t17)
+    multiply(t7, t17, t18)
+    subtract(t21, t18, t21)
+    subtract(t21, t6, t18)
+    multiply(t4, t18, t22)
+    multiply(k1, t3, t3)
+    multiply(k0, t5, t5)
+    add(t3, t5, t3)
+    multiply(t10, t17, t10)
+    add(t16, t10, t10)
+    multiply(t7, t20, t7)
+    add(t10, t7, t10)
+    subtract(t10, t16, t5)
+    multiply(t3, t5, t7)
+    subtract(t22, t7, t22)
+    multiply(t4, t5, t4)
+    multiply(t3, t18, t3)
+    add(t4, t3, t4)
+    _batch_atan2(t22, t4, t22)
+    add(k2, t22, t22)
+    sin(t22, t3)
+    multiply(t3, p_1, t4)
+    cos(t22, t22)
+    multiply(yd_0, p_1, t5)
+    multiply(yd_0, t5, t5)
+    subtract(t2, t5, t2)
+    multiply(t22, t2, t5)
+    multiply(ydd_0, p_1, t7)
+    add(Y_y_1, t7, t7)
+    multiply(t3, t7, t17)
+    add(t5, t17, t5)
+    multiply(t4, t5, t17)
+    multiply(t22, p_1, t18)
+    multiply(t22, t7, t7)
+    multiply(t3, t2, t2)
+    subtract(t7, t2, t7)
+    multiply(t18, t7, t2)
+    add(t17, t2, Y_y_10)
+    multiply(t0, t22, t2)
+    multiply(t1, t3, t17)
+    subtract(t2, t17, t2)
+    multiply(k3, t9, t17)
+    multiply(k4, t12, t20)
+    subtract(t17, t20, t17)
+    subtract(t21, t19, t21)
+    multiply(t17, t21, t20)
+    multiply(k4, t9, t9)
+    multiply(k3, t12, t12)
+    add(t9, t12, t9)
+    subtract(t10, t14, t10)
+    multiply(t9, t10, t12)
+    subtract(t20, t12, t20)
+    multiply(t17, t10, t17)
+    multiply(t9, t21, t9)
+    add(t17, t9, t17)
+    _batch_atan2(t20, t17, t20)
+    add(k5, t20, t20)
+    cos(t20, t9)
+    multiply(t8, t9, t10)
+    sin(t20, t20)
+    multiply(t11, t20, t12)
+    subtract(t10, t12, t10)
+    multiply(p_2, t10, t10)
+    multiply(t2, t10, t12)
+    multiply(t0, t3, t0)
+    multiply(t1, t22, t1)
+    add(t0, t1, t0)
+    multiply(t8, t20, t1)
+    multiply(t11, t9, t3)
+    add(t1, t3, t1)
+    multiply(p_2, t1, t1)
+    multiply(t0, t1, t3)
+    add(t12, t3, t12)
+    multiply(t0, p_2, t3)
+    add(t6, t3, t6)
+    add(t19, t1, t19)
+    subtract(t6, t19, t17)
+    multiply(t17, t2, t21)
+    multiply(p_2, t2, t22)
+    multiply(t0, t22, t23)
+    add(t21, t23, t24)
+    add(t16, t22, t16)
+    add(t14, t10, t14)
+    subtract(t16, t14, t16)
+    multiply(t16, t0, t14)
+    multiply(t2, t3, t25)
+    add(t14, t25, t26)
+    subtract(t24, t26, t27)
+    multiply(t27, t12, t28)
+    multiply(t2, t1, t1)
+    multiply(t0, t10, t29)
+    subtract(t1, t29, t30)
+    multiply(t2, t22, t31)
+    multiply(t17, t0, t17)
+    subtract(t31, t17, t32)
+    multiply(t16, t2, t16)
+    multiply(t0, t3, t3)
+    subtract(t16, t3, t33)
+    subtract(t32, t33, t34)
+    multiply(t30, t34, t35)
+    add(t28, t35, t28)
+    divide(t12, t28, t35)
+    add(t15, t22, t15)
+    multiply(t0, t15, t22)
+    add(t21, t22, t21)
+    multiply(t2, t6, t36)
+    add(t14, t36, t14)
+    subtract(t21, t14, t37)
+    multiply(t35, t37, t38)
+    divide(t30, t28, t39)
+    multiply(t2, t15, t15)
+    subtract(t15, t17, t17)
+    multiply(t0, t6, t6)
+    subtract(t16, t6, t16)
+    subtract(t17, t16, t40)
+    multiply(t39, t40, t41)
+    add(t38, t41, t38)
+    multiply(t38, ydd_0, t41)
+    multiply(t2, t19, t42)
+    add(t13, t10, t13)
+    multiply(t0, t13, t10)
+    subtract(t42, t10, t43)
+    multiply(t35, t43, t44)
+    multiply(t2, t13, t2)
+    multiply(t0, t19, t0)
+    add(t2, t0, t2)
+    multiply(t39, t2, t0)
+    subtract(t44, t0, t44)
+    multiply(t44, ydd_1, t0)
+    add(t41, t0, t41)
+    subtract(t15, t6, t0)
+    add(t17, t0, t13)
+    add(t16, t0, t0)
+    subtract(t13, t0, t13)
+    multiply(yd_0, t13, t13)
+    multiply(t38, yd_0, t0)
+    multiply(t44, yd_1, t19)
+    add(t0, t19, t0)
+    subtract(t31, t3, t19)
+    add(t17, t19, t17)
+    add(t16, t19, t16)
+    subtract(t17, t16, t17)
+    multiply(t0, t17, t17)
+    subtract(t13, t17, t13)
+    multiply(yd_1, t2, t16)
+    subtract(t13, t16, t13)
+    divide(t34, t28, t34)
+    multiply(t34, t37, t37)
+    divide(t27, t28, t27)
+    multiply(t27, t40, t40)
+    subtract(t37, t40, t37)
+    multiply(t37, yd_0, t17)
+    multiply(t34, t43, t28)
+    multiply(t27, t2, t40)
+    add(t28, t40, t28)
+    multiply(t28, yd_1, t40)
+    add(t17, t40, t17)
+    multiply(t17, t12, t40)
+    add(t13, t40, t13)
+    multiply(t13, yd_0, t13)
+    subtract(t15, t3, t15)
+    add(t32, t15, t15)
+    subtract(t31, t6, t31)
+    add(t33, t31, t31)
+    subtract(t15, t31, t15)
+    multiply(yd_0, t15, t15)
+    add(t32, t19, t32)
+    add(t33, t19, t33)
+    subtract(t32, t33, t32)
+    multiply(t0, t32, t32)
+    subtract(t15, t32, t15)
+    subtract(t15, t16, t15)
+    add(t15, t40, t15)
+    multiply(t15, t0, t15)
+    subtract(t13, t15, t13)
+    multiply(yd_0, t2, t3)
+    multiply(t0, t2, t2)
+    subtract(t3, t2, t3)
+    subtract(t16, t3, t16)
+    subtract(t16, t40, t16)
+    multiply(t16, yd_1, t16)
+    add(t13, t16, t13)
+    multiply(yd_1, t12, t2)
+    multiply(yd_0, t12, t3)
+    multiply(t0, t12, t12)
+    subtract(t3, t12, t3)
+    subtract(t2, t3, t2)
+    subtract(t2, t40, t2)
+    multiply(t2, t17, t2)
+    subtract(t13, t2, t13)
+    multiply(t35, t13, t35)
+    add(t36, t22, t2)
+    add(t14, t2, t3)
+    add(t2, t21, t2)
+    subtract(t3, t2, t3)
+    multiply(yd_0, t3, t3)
+    add(t25, t23, t2)
+    add(t14, t2, t14)
+    add(t2, t21, t21)
+    subtract(t14, t21, t14)
+    multiply(t0, t14, t14)
+    subtract(t3, t14, t3)
+    multiply(yd_1, t43, t43)
+    subtract(t3, t43, t3)
+    multiply(t17, t30, t30)
+    add(t3, t30, t3)
+    multiply(t3, yd_0, t3)
+    add(t36, t23, t36)
+    add(t26, t36, t36)
+    add(t22, t25, t22)
+    add(t22, t24, t22)
+    subtract(t36, t22, t36)
+    multiply(yd_0, t36, t36)
+    add(t26, t2, t26)
+    add(t2, t24, t2)
+    subtract(t26, t2, t26)
+    multiply(t0, t26, t26)
+    subtract(t36, t26, t36)
+    subtract(t36, t43, t36)
+    add(t36, t30, t36)
+    multiply(t36, t0, t36)
+    subtract(t3, t36, t3)
+    subtract(t10, t42, t10)
+    multiply(yd_0, t10, t2)
+    multiply(t0, t10, t6)
+    subtract(t2, t6, t2)
+    multiply(yd_1, t10, t10)
+    subtract(t2, t10, t2)
+    subtract(t29, t1, t29)
+    multiply(t17, t29, t1)
+    add(t2, t1, t2)
+    multiply(t2, yd_1, t2)
+    add(t3, t2, t3)
+    multiply(yd_0, t29, t2)
+    multiply(t0, t29, t6)
+    subtract(t2, t6, t2)
+    multiply(yd_1, t29, t29)
+    subtract(t2, t29, t2)
+    add(t2, t1, t2)
+    multiply(t2, t17, t2)
+    subtract(t3, t2, t3)
+    multiply(t39, t3, t39)
+    add(t35, t39, t35)
+    add(t41, t35, t41)
+    subtract(ydd_0, t41, t1)
+    multiply(t18, t1, t2)
+    subtract(yd_0, t0, t6)
+    multiply(t6, t6, t6)
+    multiply(t4, t6, t10)
+    subtract(t2, t10, t2)
+    add(t7, t2, t2)
+    multiply(t38, t7, t10)
+    subtract(t2, t10, Y_y_11)
+    multiply(t44, t7, t7)
+    negative(t7, Y_y_63)
+    multiply(t38, t5, t2)
+    multiply(t4, t1, t4)
+    multiply(t18, t6, t18)
+    add(t4, t18, t4)
+    add(t5, t4, t4)
+    subtract(t2, t4, Y_y_12)
+    multiply(t44, t5, Y_y_64)
+    multiply(t38, t1, t2)
+    subtract(t1, t2, Y_y_19)
+    multiply(t44, t1, t1)
+    negative(t1, Y_y_71)
+    multiply(t8, p_3, Y_y_73)
+    multiply(t11, p_3, t11)
+    negative(t11, Y_y_74)
+    multiply(t20, p_1, t1)
+    multiply(yd_1, p_1, t2)
+    multiply(yd_1, t2, t2)
+    subtract(t11, t2, t11)
+    multiply(t9, t11, t2)
+    multiply(ydd_1, p_1, t4)
+    add(Y_y_73, t4, t4)
+    multiply(t20, t4, t5)
+    add(t2, t5, t2)
+    multiply(t1, t2, t5)
+    multiply(t9, p_1, t6)
+    multiply(t9, t4, t9)
+    multiply(t20, t11, t20)
+    subtract(t9, t20, t9)
+    multiply(t6, t9, t4)
+    add(t5, t4, Y_y_82)
+    multiply(t37, t9, t4)
+    negative(t4, Y_y_31)
+    multiply(t37, ydd_0, t4)
+    multiply(t28, ydd_1, t5)
+    add(t4, t5, t4)
+    multiply(t34, t13, t34)
+    multiply(t27, t3, t27)
+    subtract(t34, t27, t34)
+    add(t4, t34, t4)
+    subtract(ydd_1, t4, t3)
+    multiply(t6, t3, t5)
+    subtract(yd_1, t17, t7)
+    multiply(t7, t7, t7)
+    multiply(t1, t7, t8)
+    subtract(t5, t8, t5)
+    add(t9, t5, t5)
+    multiply(t28, t9, t9)
+    subtract(t5, t9, Y_y_83)
+    multiply(t37, t2, Y_y_32)
+    multiply(t28, t2, t5)
+    multiply(t1, t3, t1)
+    multiply(t6, t7, t6)
+    add(t1, t6, t1)
+    add(t2, t1, t2)
+    subtract(t5, t2, Y_y_84)
+    multiply(t37, t3, t1)
+    negative(t1, Y_y_39)
+    multiply(t28, t3, t1)
+    subtract(t3, t1, Y_y_91)
+    sign(yd_0, Y_y_42)
+    multiply(t38, t41, Y_y_43)
+    multiply(t44, t41, Y_y_95)
+    multiply(t38, t0, Y_y_44)
+    multiply(t44, t0, Y_y_96)
+    negative(t0, t0)
+    sign(t0, t0)
+    multiply(t38, t0, t38)
+    negative(t38, Y_y_45)
+    multiply(t44, t0, t44)
+    negative(t44, Y_y_97)
+    sign(yd_1, Y_y_100)
+    multiply(t37, t4, Y_y_49)
+    multiply(t28, t4, Y_y_101)
+    multiply(t37, t17, Y_y_50)
+    multiply(t28, t17, Y_y_102)
+    negative(t17, t17)
+    sign(t17, t17)
+    multiply(t37, t17, t37)
+    negative(t37, Y_y_51)
+    multiply(t28, t17, t28)
+    negative(t28, Y_y_103)
+    copyto(Y_y_9, ydd_0)
+    copyto(Y_y_40, ydd_0)
+    copyto(Y_y_41, yd_0)
+    copyto(Y_y_81, ydd_1)
+    copyto(Y_y_98, ydd_1)
+    copyto(Y_y_99, yd_1)
+
+
+def base_regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain base regressor Y_b(y, yd, ydd) (2x21, row-major): the 21 independent columns of regressor_y (the closed chain's base parameters, fewer than or as many as the tree's), so that inverse_dynamics_y = Y_b pi_b, pi_b = pi_1 + beta pi_2 (Gautier's QR on Y_y stacked at seeded closed states); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (4): parameters e, lp, ls, g.
+
+    in  y [2]
+    in  yd [2]
+    in  ydd [2]
+    in  p [4]
+    out Y_b [2x21]
+    361 ops: 171 mul, 167 add, 7 div, 10 trig, 6 other
+    """
+    y = _array(y, 2, "base_regressor_y", "y")
+    yd = _array(yd, 2, "base_regressor_y", "yd")
+    ydd = _array(ydd, 2, "base_regressor_y", "ydd")
+    p = _array(p, 4, "base_regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_y_chunk, (y, yd, ydd, p), 47, ((2, 21),), fixed=_base_regressor_y_fixed)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    atan2, cos, sign, sin, sqrt = math.atan2, math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[3]
+    t2 = sin(y[0])
+    t3 = t2 * p[3]
+    t4 = -t3
+    t5 = t0 * p[2]
+    t6 = 0.9944925627484974 * t5
+    t7 = t2 * p[2]
+    t8 = (-0.10480716882888248) * t7
+    t6 = t6 - t8
+    t8 = t2 * p[1]
+    t9 = t5 * t5
+    t10 = t7 * t7
+    t9 = t9 + t10
+    t10 = cos(y[1])
+    t11 = t10 * p[2]
+    t12 = t11 * t11
+    t13 = sin(y[1])
+    t14 = t13 * p[2]
+    t15 = t14 * t14
+    t12 = t12 + t15
+    t12 = t9 - t12
+    t15 = t10 * p[1]
+    t16 = p[0] + t15
+    t17 = t0 * p[1]
+    t18 = t17 - p[0]
+    t19 = t16 - t18
+    t20 = t19 * t19
+    t21 = t13 * p[1]
+    t22 = t21 - t8
+    t23 = t22 * t22
+    t20 = t20 + t23
+    t12 = t12 + t20
+    t20 = sqrt(t20)
+    t23 = t20 + t20
+    t12 = t12 / t23
+    t22 = t22 / t20
+    t23 = t12 * t22
+    t23 = t8 + t23
+    t24 = t12 * t12
+    t9 = t9 - t24
+    t9 = sqrt(t9)
+    t19 = t19 / t20
+    t20 = t9 * t19
+    t20 = t23 - t20
+    t23 = t20 - t8
+    t24 = t6 * t23
+    t5 = (-0.10480716882888248) * t5
+    t7 = 0.9944925627484974 * t7
+    t5 = t5 + t7
+    t7 = t12 * t19
+    t7 = t18 + t7
+    t9 = t9 * t22
+    t7 = t7 + t9
+    t9 = t7 - t18
+    t12 = t5 * t9
+    t12 = t24 - t12
+    t6 = t6 * t9
+    t5 = t5 * t23
+    t5 = t6 + t5
+    t5 = atan2(t12, t5)
+    t5 = (-0.105) + t5
+    t6 = cos(t5)
+    t9 = ydd[0] * p[1]
+    t9 = t1 + t9
+    t12 = t6 * t9
+    t5 = sin(t5)
+    t19 = yd[0] * p[1]
+    t19 = yd[0] * t19
+    t3 = t3 - t19
+    t19 = t5 * t3
+    t12 = t12 - t19
+    t19 = t6 * p[1]
+    t22 = t0 * t6
+    t23 = t2 * t5
+    t22 = t22 - t23
+    t23 = 0.9841997840095373 * t11
+    t24 = (-0.17706152929301175) * t14
+    t23 = t23 - t24
+    t20 = t20 - t21
+    t24 = t23 * t20
+    t11 = (-0.17706152929301175) * t11
+    t14 = 0.9841997840095373 * t14
+    t11 = t11 + t14
+    t7 = t7 - t16
+    t14 = t11 * t7
+    t14 = t24 - t14
+    t7 = t23 * t7
+    t11 = t11 * t20
+    t7 = t7 + t11
+    t7 = atan2(t14, t7)
+    t7 = (-0.178) + t7
+    t11 = cos(t7)
+    t14 = t10 * t11
+    t7 = sin(t7)
+    t20 = t13 * t7
+    t14 = t14 - t20
+    t14 = p[2] * t14
+    t20 = t22 * t14
+    t0 = t0 * t5
+    t2 = t2 * t6
+    t0 = t0 + t2
+    t2 = t10 * t7
+    t23 = t13 * t11
+    t2 = t2 + t23
+    t2 = p[2] * t2
+    t23 = t0 * t2
+    t20 = t20 + t23
+    t23 = t0 * p[2]
+    t8 = t8 + t23
+    t21 = t21 + t2
+    t24 = t8 - t21
+    t25 = t24 * t22
+    t26 = p[2] * t22
+    t27 = t0 * t26
+    t28 = t25 + t27
+    t18 = t18 + t26
+    t16 = t16 + t14
+    t16 = t18 - t16
+    t18 = t16 * t0
+    t29 = t22 * t23
+    t30 = t18 + t29
+    t31 = t28 - t30
+    t32 = t31 * t20
+    t2 = t22 * t2
+    t33 = t0 * t14
+    t34 = t2 - t33
+    t35 = t22 * t26
+    t24 = t24 * t0
+    t36 = t35 - t24
+    t16 = t16 * t22
+    t23 = t0 * t23
+    t37 = t16 - t23
+    t38 = t36 - t37
+    t39 = t34 * t38
+    t32 = t32 + t39
+    t39 = t20 / t32
+    t17 = t17 + t26
+    t26 = t0 * t17
+    t25 = t25 + t26
+    t40 = t22 * t8
+    t18 = t18 + t40
+    t41 = t25 - t18
+    t42 = t39 * t41
+    t43 = t34 / t32
+    t17 = t22 * t17
+    t24 = t17 - t24
+    t8 = t0 * t8
+    t16 = t16 - t8
+    t44 = t24 - t16
+    t45 = t43 * t44
+    t42 = t42 + t45
+    t45 = t42 * ydd[0]
+    t46 = t22 * t21
+    t14 = t15 + t14
+    t15 = t0 * t14
+    t47 = t46 - t15
+    t48 = t39 * t47
+    t14 = t22 * t14
+    t0 = t0 * t21
+    t0 = t14 + t0
+    t14 = t43 * t0
+    t14 = t48 - t14
+    t21 = t14 * ydd[1]
+    t21 = t45 + t21
+    t22 = t17 - t8
+    t45 = t24 + t22
+    t22 = t16 + t22
+    t22 = t45 - t22
+    t22 = yd[0] * t22
+    t45 = t42 * yd[0]
+    t48 = t14 * yd[1]
+    t45 = t45 + t48
+    t48 = t35 - t23
+    t24 = t24 + t48
+    t16 = t16 + t48
+    t16 = t24 - t16
+    t16 = t45 * t16
+    t16 = t22 - t16
+    t22 = yd[1] * t0
+    t16 = t16 - t22
+    t24 = t38 / t32
+    t38 = t24 * t41
+    t31 = t31 / t32
+    t32 = t31 * t44
+    t32 = t38 - t32
+    t38 = t32 * yd[0]
+    t41 = t24 * t47
+    t44 = t31 * t0
+    t41 = t41 + t44
+    t44 = t41 * yd[1]
+    t38 = t38 + t44
+    t44 = t38 * t20
+    t16 = t16 + t44
+    t16 = t16 * yd[0]
+    t17 = t17 - t23
+    t17 = t36 + t17
+    t8 = t35 - t8
+    t8 = t37 + t8
+    t8 = t17 - t8
+    t8 = yd[0] * t8
+    t17 = t36 + t48
+    t23 = t37 + t48
+    t17 = t17 - t23
+    t17 = t45 * t17
+    t8 = t8 - t17
+    t8 = t8 - t22
+    t8 = t8 + t44
+    t8 = t8 * t45
+    t8 = t16 - t8
+    t16 = yd[0] * t0
+    t0 = t45 * t0
+    t0 = t16 - t0
+    t0 = t22 - t0
+    t0 = t0 - t44
+    t0 = t0 * yd[1]
+    t0 = t8 + t0
+    t8 = yd[1] * t20
+    t16 = yd[0] * t20
+    t17 = t45 * t20
+    t16 = t16 - t17
+    t8 = t8 - t16
+    t8 = t8 - t44
+    t8 = t8 * t38
+    t0 = t0 - t8
+    t8 = t39 * t0
+    t16 = t40 + t26
+    t17 = t18 + t16
+    t16 = t16 + t25
+    t16 = t17 - t16
+    t16 = yd[0] * t16
+    t17 = t29 + t27
+    t18 = t18 + t17
+    t20 = t17 + t25
+    t18 = t18 - t20
+    t18 = t45 * t18
+    t16 = t16 - t18
+    t18 = yd[1] * t47
+    t16 = t16 - t18
+    t20 = t38 * t34
+    t16 = t16 + t20
+    t16 = t16 * yd[0]
+    t22 = t40 + t27
+    t22 = t30 + t22
+    t23 = t26 + t29
+    t23 = t23 + t28
+    t22 = t22 - t23
+    t22 = yd[0] * t22
+    t23 = t30 + t17
+    t17 = t17 + t28
+    t17 = t23 - t17
+    t17 = t45 * t17
+    t17 = t22 - t17
+    t17 = t17 - t18
+    t17 = t17 + t20
+    t17 = t17 * t45
+    t16 = t16 - t17
+    t15 = t15 - t46
+    t17 = yd[0] * t15
+    t18 = t45 * t15
+    t17 = t17 - t18
+    t15 = yd[1] * t15
+    t15 = t17 - t15
+    t2 = t33 - t2
+    t17 = t38 * t2
+    t15 = t15 + t17
+    t15 = t15 * yd[1]
+    t15 = t16 + t15
+    t16 = yd[0] * t2
+    t18 = t45 * t2
+    t16 = t16 - t18
+    t2 = yd[1] * t2
+    t2 = t16 - t2
+    t2 = t2 + t17
+    t2 = t2 * t38
+    t2 = t15 - t2
+    t15 = t43 * t2
+    t8 = t8 + t15
+    t8 = t21 + t8
+    t15 = ydd[0] - t8
+    t16 = t19 * t15
+    t17 = t5 * p[1]
+    t18 = yd[0] - t45
+    t18 = t18 * t18
+    t20 = t17 * t18
+    t16 = t16 - t20
+    t16 = t12 + t16
+    t20 = t42 * t12
+    t16 = t16 - t20
+    t12 = t14 * t12
+    t12 = -t12
+    t3 = t6 * t3
+    t5 = t5 * t9
+    t3 = t3 + t5
+    t5 = t42 * t3
+    t6 = t17 * t15
+    t9 = t19 * t18
+    t6 = t6 + t9
+    t6 = t3 + t6
+    t5 = t5 - t6
+    t3 = t14 * t3
+    t6 = t42 * t15
+    t6 = t15 - t6
+    t9 = t14 * t15
+    t9 = -t9
+    t10 = t10 * p[3]
+    t13 = t13 * p[3]
+    t15 = -t13
+    t17 = yd[1] * p[1]
+    t17 = yd[1] * t17
+    t13 = t13 - t17
+    t13 = t11 * t13
+    t17 = ydd[1] * p[1]
+    t17 = t10 + t17
+    t17 = t7 * t17
+    t13 = t13 + t17
+    t17 = t32 * t13
+    t18 = t41 * t13
+    t7 = t7 * p[1]
+    t19 = t32 * ydd[0]
+    t20 = t41 * ydd[1]
+    t19 = t19 + t20
+    t0 = t24 * t0
+    t2 = t31 * t2
+    t0 = t0 - t2
+    t0 = t19 + t0
+    t2 = ydd[1] - t0
+    t7 = t7 * t2
+    t11 = t11 * p[1]
+    t19 = yd[1] - t38
+    t19 = t19 * t19
+    t11 = t11 * t19
+    t7 = t7 + t11
+    t7 = t13 + t7
+    t7 = t18 - t7
+    t11 = t32 * t2
+    t11 = -t11
+    t13 = t41 * t2
+    t2 = t2 - t13
+    t13 = sign(yd[0])
+    t18 = t42 * t8
+    t8 = t14 * t8
+    t19 = t42 * t45
+    t20 = t14 * t45
+    t21 = -t45
+    t21 = sign(t21)
+    t22 = t42 * t21
+    t22 = -t22
+    t14 = t14 * t21
+    t14 = -t14
+    t21 = sign(yd[1])
+    t23 = t32 * t0
+    t0 = t41 * t0
+    t24 = t32 * t38
+    t25 = t41 * t38
+    t26 = -t38
+    t26 = sign(t26)
+    t27 = t32 * t26
+    t27 = -t27
+    t26 = t41 * t26
+    t26 = -t26
+    _Y_b = (t1, t4, ydd[0], t16, t5, t6, 0.0, 0.0, 0.0, t17, t11, yd[0], t13, t18, t19, t22, 0.0, 0.0, t23, t24, t27,
+            0.0, 0.0, 0.0, t12, t3, t9, t10, t15, ydd[1], t7, t2, 0.0, 0.0, t8, t20, t14, yd[1], t21, t0, t25, t26)
+    return np.array(_Y_b).reshape(2, 21)
+
+
+_base_regressor_y_constants = _constants(
+    0.9944925627484974, -0.10480716882888248, -0.105, 0.9841997840095373, -0.17706152929301175, -0.178)
+
+
+_base_regressor_y_fixed = (
+    {6: 0.0, 7: 0.0, 8: 0.0, 16: 0.0, 17: 0.0, 21: 0.0, 22: 0.0, 23: 0.0, 32: 0.0, 33: 0.0},
+)
+"""base_regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _base_regressor_y_chunk(x, t, s, y):
+    """base_regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, y_1, yd_0, yd_1, ydd_0, ydd_1, p_0, p_1, p_2, p_3 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41,
+     t42, t43, t44, t45, t46) = t
+    (Y_b_0, Y_b_1, Y_b_2, Y_b_3, Y_b_4, Y_b_5, Y_b_9, Y_b_10, Y_b_11, Y_b_12, Y_b_13, Y_b_14, Y_b_15,
+     Y_b_18, Y_b_19, Y_b_20, Y_b_24, Y_b_25, Y_b_26, Y_b_27, Y_b_28, Y_b_29, Y_b_30, Y_b_31, Y_b_34,
+     Y_b_35, Y_b_36, Y_b_37, Y_b_38, Y_b_39, Y_b_40, Y_b_41) = y
+    k0, k1, k2, k3, k4, k5 = _base_regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_3, Y_b_0)
+    sin(y_0, t1)
+    multiply(t1, p_3, t2)
+    negative(t2, Y_b_1)
+    multiply(t0, p_2, t3)
+    multiply(k0, t3, t4)
+    multiply(t1, p_2, t5)
+    multiply(k1, t5, t6)
+    subtract(t4, t6, t4)
+    multiply(t1, p_1, t6)
+    multiply(t3, t3, t7)
+    multiply(t5, t5, t8)
+    add(t7, t8, t7)
+    cos(y_1, t8)
+    multiply(t8, p_2, t9)
+    multiply(t9, t9, t10)
+    sin(y_1, t11)
+    multiply(t11, p_2, t12)
+    multiply(t12, t12, t13)
+    add(t10, t13, t10)
+    subtract(t7, t10, t10)
+    multiply(t8, p_1, t13)
+    add(p_0, t13, t14)
+    multiply(t0, p_1, t15)
+    subtract(t15, p_0, t16)
+    subtract(t14, t16, t17)
+    multiply(t17, t17, t18)
+    multiply(t11, p_1, t19)
+    subtract(t19, t6, t20)
+    multiply(t20, t20, t21)
+    add(t18, t21, t18)
+    add(t10, t18, t10)
+    sqrt(t18, t18)
+    add(t18, t18, t21)
+    divide(t10, t21, t10)
+    divide(t20, t18, t20)
+    multiply(t10, t20, t21)
+    add(t6, t21, t21)
+    multiply(t10, t10, t22)
+    subtract(t7, t22, t7)
+    sqrt(t7, t7)
+    divide(t17, t18, t17)
+    multiply(t7, t17, t18)
+    subtract(t21, t18, t21)
+    subtract(t21, t6, t18)
+    multiply(t4, t18, t22)
+    multiply(k1, t3, t3)
+    multiply(k0, t5, t5)
+    add(t3, t5, t3)
+    multiply(t10, t17, t10)
+    add(t16, t10, t10)
+    multiply(t7, t20, t7)
+    add(t10, t7, t10)
+    subtract(t10, t16, t5)
+    multiply(t3, t5, t7)
+    subtract(t22, t7, t22)
+    multiply(t4, t5, t4)
+    multiply(t3, t18, t3)
+    add(t4, t3, t4)
+    _batch_atan2(t22, t4, t22)
+    add(k2, t22, t22)
+    cos(t22, t3)
+    multiply(ydd_0, p_1, t4)
+    add(Y_b_0, t4, t4)
+    multiply(t3, t4, t5)
+    sin(t22, t22)
+    multiply(yd_0, p_1, t7)
+    multiply(yd_0, t7, t7)
+    subtract(t2, t7, t2)
+    multiply(t22, t2, t7)
+    subtract(t5, t7, t5)
+    multiply(t3, p_1, t7)
+    multiply(t0, t3, t17)
+    multiply(t1, t22, t18)
+    subtract(t17, t18, t17)
+    multiply(k3, t9, t18)
+    multiply(k4, t12, t20)
+    subtract(t18, t20, t18)
+    subtract(t21, t19, t21)
+    multiply(t18, t21, t20)
+    multiply(k4, t9, t9)
+    multiply(k3, t12, t12)
+    add(t9, t12, t9)
+    subtract(t10, t14, t10)
+    multiply(t9, t10, t12)
+    subtract(t20, t12, t20)
+    multiply(t18, t10, t18)
+    multiply(t9, t21, t9)
+    add(t18, t9, t18)
+    _batch_atan2(t20, t18, t20)
+    add(k5, t20, t20)
+    cos(t20, t9)
+    multiply(t8, t9, t10)
+    sin(t20, t20)
+    multiply(t11, t20, t12)
+    subtract(t10, t12, t10)
+    multiply(p_2, t10, t10)
+    multiply(t17, t10, t12)
+    multiply(t0, t22, t0)
+    multiply(t1, t3, t1)
+    add(t0, t1, t0)
+    multiply(t8, t20, t1)
+    multiply(t11, t9, t18)
+    add(t1, t18, t1)
+    multiply(p_2, t1, t1)
+    multiply(t0, t1, t18)
+    add(t12, t18, t12)
+    multiply(t0, p_2, t18)
+    add(t6, t18, t6)
+    add(t19, t1, t19)
+    subtract(t6, t19, t21)
+    multiply(t21, t17, t23)
+    multiply(p_2, t17, t24)
+    multiply(t0, t24, t25)
+    add(t23, t25, t26)
+    add(t16, t24, t16)
+    add(t14, t10, t14)
+    subtract(t16, t14, t16)
+    multiply(t16, t0, t14)
+    multiply(t17, t18, t27)
+    add(t14, t27, t28)
+    subtract(t26, t28, t29)
+    multiply(t29, t12, t30)
+    multiply(t17, t1, t1)
+    multiply(t0, t10, t31)
+    subtract(t1, t31, t32)
+    multiply(t17, t24, t33)
+    multiply(t21, t0, t21)
+    subtract(t33, t21, t34)
+    multiply(t16, t17, t16)
+    multiply(t0, t18, t18)
+    subtract(t16, t18, t35)
+    subtract(t34, t35, t36)
+    multiply(t32, t36, t37)
+    add(t30, t37, t30)
+    divide(t12, t30, t37)
+    add(t15, t24, t15)
+    multiply(t0, t15, t24)
+    add(t23, t24, t23)
+    multiply(t17, t6, t38)
+    add(t14, t38, t14)
+    subtract(t23, t14, t39)
+    multiply(t37, t39, t40)
+    divide(t32, t30, t41)
+    multiply(t17, t15, t15)
+    subtract(t15, t21, t21)
+    multiply(t0, t6, t6)
+    subtract(t16, t6, t16)
+    subtract(t21, t16, t42)
+    multiply(t41, t42, t43)
+    add(t40, t43, t40)
+    multiply(t40, ydd_0, t43)
+    multiply(t17, t19, t44)
+    add(t13, t10, t13)
+    multiply(t0, t13, t10)
+    subtract(t44, t10, t45)
+    multiply(t37, t45, t46)
+    multiply(t17, t13, t17)
+    multiply(t0, t19, t0)
+    add(t17, t0, t17)
+    multiply(t41, t17, t0)
+    subtract(t46, t0, t46)
+    multiply(t46, ydd_1, t0)
+    add(t43, t0, t43)
+    subtract(t15, t6, t0)
+    add(t21, t0, t13)
+    add(t16, t0, t0)
+    subtract(t13, t0, t13)
+    multiply(yd_0, t13, t13)
+    multiply(t40, yd_0, t0)
+    multiply(t46, yd_1, t19)
+    add(t0, t19, t0)
+    subtract(t33, t18, t19)
+    add(t21, t19, t21)
+    add(t16, t19, t16)
+    subtract(t21, t16, t21)
+    multiply(t0, t21, t21)
+    subtract(t13, t21, t13)
+    multiply(yd_1, t17, t16)
+    subtract(t13, t16, t13)
+    divide(t36, t30, t36)
+    multiply(t36, t39, t39)
+    divide(t29, t30, t29)
+    multiply(t29, t42, t42)
+    subtract(t39, t42, t39)
+    multiply(t39, yd_0, t21)
+    multiply(t36, t45, t30)
+    multiply(t29, t17, t42)
+    add(t30, t42, t30)
+    multiply(t30, yd_1, t42)
+    add(t21, t42, t21)
+    multiply(t21, t12, t42)
+    add(t13, t42, t13)
+    multiply(t13, yd_0, t13)
+    subtract(t15, t18, t15)
+    add(t34, t15, t15)
+    subtract(t33, t6, t33)
+    add(t35, t33, t33)
+    subtract(t15, t33, t15)
+    multiply(yd_0, t15, t15)
+    add(t34, t19, t34)
+    add(t35, t19, t35)
+    subtract(t34, t35, t34)
+    multiply(t0, t34, t34)
+    subtract(t15, t34, t15)
+    subtract(t15, t16, t15)
+    add(t15, t42, t15)
+    multiply(t15, t0, t15)
+    subtract(t13, t15, t13)
+    multiply(yd_0, t17, t6)
+    multiply(t0, t17, t17)
+    subtract(t6, t17, t6)
+    subtract(t16, t6, t16)
+    subtract(t16, t42, t16)
+    multiply(t16, yd_1, t16)
+    add(t13, t16, t13)
+    multiply(yd_1, t12, t6)
+    multiply(yd_0, t12, t15)
+    multiply(t0, t12, t12)
+    subtract(t15, t12, t15)
+    subtract(t6, t15, t6)
+    subtract(t6, t42, t6)
+    multiply(t6, t21, t6)
+    subtract(t13, t6, t13)
+    multiply(t37, t13, t37)
+    add(t38, t24, t6)
+    add(t14, t6, t12)
+    add(t6, t23, t6)
+    subtract(t12, t6, t12)
+    multiply(yd_0, t12, t12)
+    add(t27, t25, t6)
+    add(t14, t6, t14)
+    add(t6, t23, t23)
+    subtract(t14, t23, t14)
+    multiply(t0, t14, t14)
+    subtract(t12, t14, t12)
+    multiply(yd_1, t45, t45)
+    subtract(t12, t45, t12)
+    multiply(t21, t32, t32)
+    add(t12, t32, t12)
+    multiply(t12, yd_0, t12)
+    add(t38, t25, t38)
+    add(t28, t38, t38)
+    add(t24, t27, t24)
+    add(t24, t26, t24)
+    subtract(t38, t24, t38)
+    multiply(yd_0, t38, t38)
+    add(t28, t6, t28)
+    add(t6, t26, t6)
+    subtract(t28, t6, t28)
+    multiply(t0, t28, t28)
+    subtract(t38, t28, t38)
+    subtract(t38, t45, t38)
+    add(t38, t32, t38)
+    multiply(t38, t0, t38)
+    subtract(t12, t38, t12)
+    subtract(t10, t44, t10)
+    multiply(yd_0, t10, t6)
+    multiply(t0, t10, t14)
+    subtract(t6, t14, t6)
+    multiply(yd_1, t10, t10)
+    subtract(t6, t10, t6)
+    subtract(t31, t1, t31)
+    multiply(t21, t31, t1)
+    add(t6, t1, t6)
+    multiply(t6, yd_1, t6)
+    add(t12, t6, t12)
+    multiply(yd_0, t31, t6)
+    multiply(t0, t31, t10)
+    subtract(t6, t10, t6)
+    multiply(yd_1, t31, t31)
+    subtract(t6, t31, t6)
+    add(t6, t1, t6)
+    multiply(t6, t21, t6)
+    subtract(t12, t6, t12)
+    multiply(t41, t12, t41)
+    add(t37, t41, t37)
+    add(t43, t37, t43)
+    subtract(ydd_0, t43, t1)
+    multiply(t7, t1, t6)
+    multiply(t22, p_1, t10)
+    subtract(yd_0, t0, t14)
+    multiply(t14, t14, t14)
+    multiply(t10, t14, t15)
+    subtract(t6, t15, t6)
+    add(t5, t6, t6)
+    multiply(t40, t5, t15)
+    subtract(t6, t15, Y_b_3)
+    multiply(t46, t5, t5)
+    negative(t5, Y_b_24)
+    multiply(t3, t2, t3)
+    multiply(t22, t4, t22)
+    add(t3, t22, t3)
+    multiply(t40, t3, t2)
+    multiply(t10, t1, t10)
+    multiply(t7, t14, t7)
+    add(t10, t7, t10)
+    add(t3, t10, t10)
+    subtract(t2, t10, Y_b_4)
+    multiply(t46, t3, Y_b_25)
+    multiply(t40, t1, t2)
+    subtract(t1, t2, Y_b_5)
+    multiply(t46, t1, t1)
+    negative(t1, Y_b_26)
+    multiply(t8, p_3, Y_b_27)
+    multiply(t11, p_3, t11)
+    negative(t11, Y_b_28)
+    multiply(yd_1, p_1, t1)
+    multiply(yd_1, t1, t1)
+    subtract(t11, t1, t11)
+    multiply(t9, t11, t11)
+    multiply(ydd_1, p_1, t1)
+    add(Y_b_27, t1, t1)
+    multiply(t20, t1, t1)
+    add(t11, t1, t11)
+    multiply(t39, t11, Y_b_9)
+    multiply(t30, t11, t1)
+    multiply(t20, p_1, t20)
+    multiply(t39, ydd_0, t2)
+    multiply(t30, ydd_1, t3)
+    add(t2, t3, t2)
+    multiply(t36, t13, t36)
+    multiply(t29, t12, t29)
+    subtract(t36, t29, t36)
+    add(t2, t36, t2)
+    subtract(ydd_1, t2, t3)
+    multiply(t20, t3, t20)
+    multiply(t9, p_1, t9)
+    subtract(yd_1, t21, t4)
+    multiply(t4, t4, t4)
+    multiply(t9, t4, t9)
+    add(t20, t9, t20)
+    add(t11, t20, t11)
+    subtract(t1, t11, Y_b_30)
+    multiply(t39, t3, t1)
+    negative(t1, Y_b_10)
+    multiply(t30, t3, t1)
+    subtract(t3, t1, Y_b_31)
+    sign(yd_0, Y_b_12)
+    multiply(t40, t43, Y_b_13)
+    multiply(t46, t43, Y_b_34)
+    multiply(t40, t0, Y_b_14)
+    multiply(t46, t0, Y_b_35)
+    negative(t0, t0)
+    sign(t0, t0)
+    multiply(t40, t0, t40)
+    negative(t40, Y_b_15)
+    multiply(t46, t0, t46)
+    negative(t46, Y_b_36)
+    sign(yd_1, Y_b_38)
+    multiply(t39, t2, Y_b_18)
+    multiply(t30, t2, Y_b_39)
+    multiply(t39, t21, Y_b_19)
+    multiply(t30, t21, Y_b_40)
+    negative(t21, t21)
+    sign(t21, t21)
+    multiply(t39, t21, t39)
+    negative(t39, Y_b_20)
+    multiply(t30, t21, t30)
+    negative(t30, Y_b_41)
+    copyto(Y_b_2, ydd_0)
+    copyto(Y_b_11, yd_0)
+    copyto(Y_b_29, ydd_1)
+    copyto(Y_b_37, yd_1)
+
+
 def rk4_step(x, u, dt, p=DEFAULT_P):
     """One classical Runge-Kutta step of the closed chain's x' = f(x, u), x = [y; yd], u = tau_y held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs (q = gamma(y) inside each: the loops stay closed, nothing drifts).
 

@@ -41,6 +41,8 @@
 #include "fourbar_ode_rhs.h"
 #include "fourbar_ode_jac_x.h"
 #include "fourbar_ode_jac_u.h"
+#include "fourbar_regressor_y.h"
+#include "fourbar_base_regressor_y.h"
 #include "fourbar_rk4_step.h"
 
 #endif /* FOURBAR_DERIVE_H */

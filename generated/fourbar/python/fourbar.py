@@ -7326,6 +7326,1121 @@ def _ode_jac_u_chunk(x, t, s, y):
     divide(k11, t2, B_1)
 
 
+def regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain regressor Y_y(y, yd, ydd) = G^T Y(q, G yd, G ydd + Gdot yd) (1x39, row-major): inverse_dynamics_y = Y_y pi, pi the tree's standard parameters (per body (crank, coupler, rocker) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the body origin, body axes; then per coordinate [armature, viscous, coulomb]); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (5): parameters a, b, c, d, g.
+
+    in  y [1]
+    in  yd [1]
+    in  ydd [1]
+    in  p [5]
+    out Y_y [1x39]
+    257 ops: 118 mul, 119 add, 7 div, 8 trig, 5 other
+    """
+    y = _array(y, 1, "regressor_y", "y")
+    yd = _array(yd, 1, "regressor_y", "yd")
+    ydd = _array(ydd, 1, "regressor_y", "ydd")
+    p = _array(p, 5, "regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_y_chunk, (y, yd, ydd, p), 38, ((1, 39),), fixed=_regressor_y_fixed, pure=2)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    atan2, cos, sign, sin, sqrt = math.atan2, math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[4]
+    t2 = sin(y[0])
+    t3 = t2 * p[4]
+    t4 = -t3
+    t5 = t0 * p[1]
+    t6 = 0.4175945039583582 * t5
+    t7 = t2 * p[1]
+    t8 = (-0.9086334961158832) * t7
+    t6 = t6 - t8
+    t8 = t2 * p[0]
+    t9 = t5 * t5
+    t10 = t7 * t7
+    t9 = t9 + t10
+    t10 = p[2] * p[2]
+    t10 = t9 - t10
+    t11 = t0 * p[0]
+    t12 = p[3] - t11
+    t13 = t12 * t12
+    t14 = t8 * t8
+    t13 = t13 + t14
+    t10 = t10 + t13
+    t13 = sqrt(t13)
+    t14 = t13 + t13
+    t10 = t10 / t14
+    t14 = t8 / t13
+    t15 = t10 * t14
+    t15 = t8 - t15
+    t16 = t10 * t10
+    t9 = t9 - t16
+    t9 = sqrt(t9)
+    t12 = t12 / t13
+    t13 = t9 * t12
+    t13 = t15 + t13
+    t15 = t13 - t8
+    t16 = t6 * t15
+    t5 = (-0.9086334961158832) * t5
+    t7 = 0.4175945039583582 * t7
+    t5 = t5 + t7
+    t7 = t10 * t12
+    t7 = t11 + t7
+    t9 = t9 * t14
+    t7 = t7 + t9
+    t9 = t7 - t11
+    t10 = t5 * t9
+    t10 = t16 - t10
+    t6 = t6 * t9
+    t5 = t5 * t15
+    t5 = t6 + t5
+    t5 = atan2(t10, t5)
+    t5 = (-1.14) + t5
+    t6 = sin(t5)
+    t9 = t6 * p[0]
+    t5 = cos(t5)
+    t10 = yd[0] * p[0]
+    t10 = yd[0] * t10
+    t3 = t3 - t10
+    t10 = t5 * t3
+    t12 = ydd[0] * p[0]
+    t12 = t1 + t12
+    t14 = t6 * t12
+    t10 = t10 + t14
+    t14 = t9 * t10
+    t15 = t5 * p[0]
+    t12 = t5 * t12
+    t3 = t6 * t3
+    t3 = t12 - t3
+    t12 = t15 * t3
+    t12 = t14 + t12
+    t14 = t0 * t5
+    t16 = t2 * t6
+    t14 = t14 - t16
+    t16 = (-0.2601752249999921) * p[2]
+    t17 = t16 * t13
+    t18 = 0.965561418189544 * p[2]
+    t7 = t7 - p[3]
+    t19 = t18 * t7
+    t17 = t17 - t19
+    t7 = t16 * t7
+    t13 = t18 * t13
+    t7 = t7 + t13
+    t7 = atan2(t17, t7)
+    t7 = 1.834 + t7
+    t13 = cos(t7)
+    t16 = p[2] * t13
+    t17 = t14 * t16
+    t0 = t0 * t6
+    t2 = t2 * t5
+    t0 = t0 + t2
+    t2 = sin(t7)
+    t5 = p[2] * t2
+    t6 = t0 * t5
+    t6 = t17 + t6
+    t7 = t0 * p[1]
+    t8 = t8 + t7
+    t17 = t8 - t5
+    t18 = t17 * t14
+    t19 = p[1] * t14
+    t20 = t0 * t19
+    t21 = t18 + t20
+    t11 = t11 + t19
+    t22 = p[3] + t16
+    t22 = t11 - t22
+    t23 = t22 * t0
+    t24 = t14 * t7
+    t25 = t23 + t24
+    t26 = t21 - t25
+    t27 = t26 * t6
+    t5 = t14 * t5
+    t16 = t0 * t16
+    t28 = t5 - t16
+    t19 = t14 * t19
+    t17 = t17 * t0
+    t29 = t19 - t17
+    t22 = t22 * t14
+    t7 = t0 * t7
+    t30 = t22 - t7
+    t31 = t29 - t30
+    t32 = t28 * t31
+    t27 = t27 + t32
+    t32 = t6 / t27
+    t33 = t0 * t11
+    t18 = t18 + t33
+    t34 = t14 * t8
+    t23 = t23 + t34
+    t35 = t18 - t23
+    t36 = t32 * t35
+    t37 = t28 / t27
+    t11 = t14 * t11
+    t14 = t11 - t17
+    t0 = t0 * t8
+    t8 = t22 - t0
+    t17 = t14 - t8
+    t22 = t37 * t17
+    t22 = t36 + t22
+    t36 = t22 * ydd[0]
+    t38 = t11 - t0
+    t39 = t14 + t38
+    t38 = t8 + t38
+    t38 = t39 - t38
+    t38 = yd[0] * t38
+    t39 = t22 * yd[0]
+    t40 = t19 - t7
+    t14 = t14 + t40
+    t8 = t8 + t40
+    t8 = t14 - t8
+    t8 = t39 * t8
+    t8 = t38 - t8
+    t14 = t31 / t27
+    t31 = t14 * t35
+    t26 = t26 / t27
+    t17 = t26 * t17
+    t17 = t31 - t17
+    t27 = t17 * yd[0]
+    t31 = t27 * t6
+    t8 = t8 + t31
+    t8 = t8 * yd[0]
+    t7 = t11 - t7
+    t7 = t29 + t7
+    t0 = t19 - t0
+    t0 = t30 + t0
+    t0 = t7 - t0
+    t0 = yd[0] * t0
+    t7 = t29 + t40
+    t11 = t30 + t40
+    t7 = t7 - t11
+    t7 = t39 * t7
+    t0 = t0 - t7
+    t0 = t0 + t31
+    t0 = t0 * t39
+    t0 = t8 - t0
+    t7 = yd[0] * t6
+    t6 = t39 * t6
+    t6 = t7 - t6
+    t6 = t31 + t6
+    t6 = t6 * t27
+    t0 = t0 + t6
+    t6 = t32 * t0
+    t7 = t34 + t33
+    t8 = t23 + t7
+    t7 = t7 + t18
+    t7 = t8 - t7
+    t7 = yd[0] * t7
+    t8 = t24 + t20
+    t11 = t23 + t8
+    t18 = t8 + t18
+    t11 = t11 - t18
+    t11 = t39 * t11
+    t7 = t7 - t11
+    t11 = t27 * t28
+    t7 = t7 + t11
+    t7 = t7 * yd[0]
+    t18 = t34 + t20
+    t18 = t25 + t18
+    t19 = t33 + t24
+    t19 = t19 + t21
+    t18 = t18 - t19
+    t18 = yd[0] * t18
+    t19 = t25 + t8
+    t8 = t8 + t21
+    t8 = t19 - t8
+    t8 = t39 * t8
+    t8 = t18 - t8
+    t8 = t8 + t11
+    t8 = t8 * t39
+    t7 = t7 - t8
+    t5 = t16 - t5
+    t8 = yd[0] * t5
+    t11 = t39 * t5
+    t8 = t8 - t11
+    t5 = t27 * t5
+    t5 = t8 + t5
+    t5 = t5 * t27
+    t5 = t7 - t5
+    t7 = t37 * t5
+    t6 = t6 + t7
+    t6 = t36 + t6
+    t7 = ydd[0] - t6
+    t8 = t15 * t7
+    t11 = yd[0] - t39
+    t11 = t11 * t11
+    t16 = t9 * t11
+    t8 = t8 - t16
+    t8 = t3 + t8
+    t3 = t22 * t3
+    t3 = t8 - t3
+    t8 = t22 * t10
+    t9 = t9 * t7
+    t11 = t15 * t11
+    t9 = t9 + t11
+    t9 = t10 + t9
+    t8 = t8 - t9
+    t9 = t22 * t7
+    t7 = t7 - t9
+    t9 = t13 * p[4]
+    t9 = t17 * t9
+    t9 = -t9
+    t2 = t2 * p[4]
+    t2 = t17 * t2
+    t10 = t17 * ydd[0]
+    t0 = t14 * t0
+    t5 = t26 * t5
+    t0 = t0 - t5
+    t0 = t10 + t0
+    t0 = t17 * t0
+    t5 = sign(yd[0])
+    t6 = t22 * t6
+    t10 = t22 * t39
+    t11 = -t39
+    t11 = sign(t11)
+    t11 = t22 * t11
+    t11 = -t11
+    t13 = t17 * t27
+    t14 = -t27
+    t14 = sign(t14)
+    t14 = t17 * t14
+    t14 = -t14
+    _Y_y = (0.0, t1, t4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[0], t12, t3, t8, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t7, 0.0, t9, t2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t0, ydd[0], yd[0], t5, t6, t10, t11, t0, t13, t14)
+    return np.array(_Y_y).reshape(1, 39)
+
+
+_regressor_y_constants = _constants(
+    0.4175945039583582, -0.9086334961158832, -1.14, -0.2601752249999921, 0.965561418189544, 1.834)
+
+
+_regressor_y_fixed = (
+    {0: 0.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 13: 0.0, 14: 0.0, 15: 0.0, 16: 0.0, 17: 0.0,
+     18: 0.0, 20: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 0.0, 27: 0.0, 28: 0.0},
+)
+"""regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_y_chunk(x, t, s, y):
+    """regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, yd_0, ydd_0, p_0, p_1, p_2, p_3, p_4 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37) = t
+    s0, s1 = s
+    (Y_y_1, Y_y_2, Y_y_9, Y_y_10, Y_y_11, Y_y_12, Y_y_19, Y_y_21, Y_y_22, Y_y_29, Y_y_30, Y_y_31, Y_y_32,
+     Y_y_33, Y_y_34, Y_y_35, Y_y_36, Y_y_37, Y_y_38) = y
+    k0, k1, k2, k3, k4, k5 = _regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_4, Y_y_1)
+    sin(y_0, t1)
+    multiply(t1, p_4, t2)
+    negative(t2, Y_y_2)
+    multiply(t0, p_1, t3)
+    multiply(k0, t3, t4)
+    multiply(t1, p_1, t5)
+    multiply(k1, t5, t6)
+    subtract(t4, t6, t4)
+    multiply(t1, p_0, t6)
+    multiply(t3, t3, t7)
+    multiply(t5, t5, t8)
+    add(t7, t8, t7)
+    multiply(p_2, p_2, s0)
+    subtract(t7, s0, t8)
+    multiply(t0, p_0, t9)
+    subtract(p_3, t9, t10)
+    multiply(t10, t10, t11)
+    multiply(t6, t6, t12)
+    add(t11, t12, t11)
+    add(t8, t11, t8)
+    sqrt(t11, t11)
+    add(t11, t11, t12)
+    divide(t8, t12, t8)
+    divide(t6, t11, t12)
+    multiply(t8, t12, t13)
+    subtract(t6, t13, t13)
+    multiply(t8, t8, t14)
+    subtract(t7, t14, t7)
+    sqrt(t7, t7)
+    divide(t10, t11, t10)
+    multiply(t7, t10, t11)
+    add(t13, t11, t13)
+    subtract(t13, t6, t11)
+    multiply(t4, t11, t14)
+    multiply(k1, t3, t3)
+    multiply(k0, t5, t5)
+    add(t3, t5, t3)
+    multiply(t8, t10, t8)
+    add(t9, t8, t8)
+    multiply(t7, t12, t7)
+    add(t8, t7, t8)
+    subtract(t8, t9, t5)
+    multiply(t3, t5, t7)
+    subtract(t14, t7, t14)
+    multiply(t4, t5, t4)
+    multiply(t3, t11, t3)
+    add(t4, t3, t4)
+    _batch_atan2(t14, t4, t14)
+    add(k2, t14, t14)
+    sin(t14, t3)
+    multiply(t3, p_0, t4)
+    cos(t14, t14)
+    multiply(yd_0, p_0, t5)
+    multiply(yd_0, t5, t5)
+    subtract(t2, t5, t2)
+    multiply(t14, t2, t5)
+    multiply(ydd_0, p_0, t7)
+    add(Y_y_1, t7, t7)
+    multiply(t3, t7, t10)
+    add(t5, t10, t5)
+    multiply(t4, t5, t10)
+    multiply(t14, p_0, t11)
+    multiply(t14, t7, t7)
+    multiply(t3, t2, t2)
+    subtract(t7, t2, t7)
+    multiply(t11, t7, t2)
+    add(t10, t2, Y_y_10)
+    multiply(t0, t14, t2)
+    multiply(t1, t3, t10)
+    subtract(t2, t10, t2)
+    multiply(k3, p_2, s0)
+    multiply(s0, t13, t10)
+    multiply(k4, p_2, s1)
+    subtract(t8, p_3, t8)
+    multiply(s1, t8, t12)
+    subtract(t10, t12, t10)
+    multiply(s0, t8, t8)
+    multiply(s1, t13, t13)
+    add(t8, t13, t8)
+    _batch_atan2(t10, t8, t10)
+    add(k5, t10, t10)
+    cos(t10, t8)
+    multiply(p_2, t8, t12)
+    multiply(t2, t12, t13)
+    multiply(t0, t3, t0)
+    multiply(t1, t14, t1)
+    add(t0, t1, t0)
+    sin(t10, t10)
+    multiply(p_2, t10, t1)
+    multiply(t0, t1, t3)
+    add(t13, t3, t13)
+    multiply(t0, p_1, t3)
+    add(t6, t3, t6)
+    subtract(t6, t1, t14)
+    multiply(t14, t2, t15)
+    multiply(p_1, t2, t16)
+    multiply(t0, t16, t17)
+    add(t15, t17, t18)
+    add(t9, t16, t9)
+    add(p_3, t12, t19)
+    subtract(t9, t19, t19)
+    multiply(t19, t0, t20)
+    multiply(t2, t3, t21)
+    add(t20, t21, t22)
+    subtract(t18, t22, t23)
+    multiply(t23, t13, t24)
+    multiply(t2, t1, t1)
+    multiply(t0, t12, t12)
+    subtract(t1, t12, t25)
+    multiply(t2, t16, t16)
+    multiply(t14, t0, t14)
+    subtract(t16, t14, t26)
+    multiply(t19, t2, t19)
+    multiply(t0, t3, t3)
+    subtract(t19, t3, t27)
+    subtract(t26, t27, t28)
+    multiply(t25, t28, t29)
+    add(t24, t29, t24)
+    divide(t13, t24, t29)
+    multiply(t0, t9, t30)
+    add(t15, t30, t15)
+    multiply(t2, t6, t31)
+    add(t20, t31, t20)
+    subtract(t15, t20, t32)
+    multiply(t29, t32, t33)
+    divide(t25, t24, t34)
+    multiply(t2, t9, t2)
+    subtract(t2, t14, t14)
+    multiply(t0, t6, t0)
+    subtract(t19, t0, t19)
+    subtract(t14, t19, t6)
+    multiply(t34, t6, t9)
+    add(t33, t9, t33)
+    multiply(t33, ydd_0, t9)
+    subtract(t2, t0, t35)
+    add(t14, t35, t36)
+    add(t19, t35, t35)
+    subtract(t36, t35, t36)
+    multiply(yd_0, t36, t36)
+    multiply(t33, yd_0, t35)
+    subtract(t16, t3, t37)
+    add(t14, t37, t14)
+    add(t19, t37, t19)
+    subtract(t14, t19, t14)
+    multiply(t35, t14, t14)
+    subtract(t36, t14, t36)
+    divide(t28, t24, t28)
+    multiply(t28, t32, t32)
+    divide(t23, t24, t23)
+    multiply(t23, t6, t6)
+    subtract(t32, t6, t32)
+    multiply(t32, yd_0, t6)
+    multiply(t6, t13, t14)
+    add(t36, t14, t36)
+    multiply(t36, yd_0, t36)
+    subtract(t2, t3, t2)
+    add(t26, t2, t2)
+    subtract(t16, t0, t16)
+    add(t27, t16, t16)
+    subtract(t2, t16, t2)
+    multiply(yd_0, t2, t2)
+    add(t26, t37, t26)
+    add(t27, t37, t27)
+    subtract(t26, t27, t26)
+    multiply(t35, t26, t26)
+    subtract(t2, t26, t2)
+    add(t2, t14, t2)
+    multiply(t2, t35, t2)
+    subtract(t36, t2, t36)
+    multiply(yd_0, t13, t0)
+    multiply(t35, t13, t13)
+    subtract(t0, t13, t0)
+    add(t14, t0, t14)
+    multiply(t14, t6, t14)
+    add(t36, t14, t36)
+    multiply(t29, t36, t29)
+    add(t31, t30, t0)
+    add(t20, t0, t2)
+    add(t0, t15, t0)
+    subtract(t2, t0, t2)
+    multiply(yd_0, t2, t2)
+    add(t21, t17, t0)
+    add(t20, t0, t20)
+    add(t0, t15, t15)
+    subtract(t20, t15, t20)
+    multiply(t35, t20, t20)
+    subtract(t2, t20, t2)
+    multiply(t6, t25, t25)
+    add(t2, t25, t2)
+    multiply(t2, yd_0, t2)
+    add(t31, t17, t31)
+    add(t22, t31, t31)
+    add(t30, t21, t30)
+    add(t30, t18, t30)
+    subtract(t31, t30, t31)
+    multiply(yd_0, t31, t31)
+    add(t22, t0, t22)
+    add(t0, t18, t0)
+    subtract(t22, t0, t22)
+    multiply(t35, t22, t22)
+    subtract(t31, t22, t31)
+    add(t31, t25, t31)
+    multiply(t31, t35, t31)
+    subtract(t2, t31, t2)
+    subtract(t12, t1, t12)
+    multiply(yd_0, t12, t0)
+    multiply(t35, t12, t1)
+    subtract(t0, t1, t0)
+    multiply(t6, t12, t12)
+    add(t0, t12, t0)
+    multiply(t0, t6, t0)
+    subtract(t2, t0, t2)
+    multiply(t34, t2, t34)
+    add(t29, t34, t29)
+    add(t9, t29, t9)
+    subtract(ydd_0, t9, t0)
+    multiply(t11, t0, t1)
+    subtract(yd_0, t35, t3)
+    multiply(t3, t3, t3)
+    multiply(t4, t3, t12)
+    subtract(t1, t12, t1)
+    add(t7, t1, t1)
+    multiply(t33, t7, t7)
+    subtract(t1, t7, Y_y_11)
+    multiply(t33, t5, t1)
+    multiply(t4, t0, t4)
+    multiply(t11, t3, t11)
+    add(t4, t11, t4)
+    add(t5, t4, t5)
+    subtract(t1, t5, Y_y_12)
+    multiply(t33, t0, t1)
+    subtract(t0, t1, Y_y_19)
+    multiply(t8, p_4, t8)
+    multiply(t32, t8, t8)
+    negative(t8, Y_y_21)
+    multiply(t10, p_4, t10)
+    multiply(t32, t10, Y_y_22)
+    multiply(t32, ydd_0, t0)
+    multiply(t28, t36, t28)
+    multiply(t23, t2, t23)
+    subtract(t28, t23, t28)
+    add(t0, t28, t0)
+    multiply(t32, t0, Y_y_29)
+    sign(yd_0, Y_y_32)
+    multiply(t33, t9, Y_y_33)
+    multiply(t33, t35, Y_y_34)
+    negative(t35, t35)
+    sign(t35, t35)
+    multiply(t33, t35, t33)
+    negative(t33, Y_y_35)
+    multiply(t32, t6, Y_y_37)
+    negative(t6, t6)
+    sign(t6, t6)
+    multiply(t32, t6, t32)
+    negative(t32, Y_y_38)
+    copyto(Y_y_9, ydd_0)
+    copyto(Y_y_30, ydd_0)
+    copyto(Y_y_31, yd_0)
+    copyto(Y_y_36, Y_y_29)
+
+
+def base_regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain base regressor Y_b(y, yd, ydd) (1x15, row-major): the 15 independent columns of regressor_y (the closed chain's base parameters, fewer than or as many as the tree's), so that inverse_dynamics_y = Y_b pi_b, pi_b = pi_1 + beta pi_2 (Gautier's QR on Y_y stacked at seeded closed states); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (5): parameters a, b, c, d, g.
+
+    in  y [1]
+    in  yd [1]
+    in  ydd [1]
+    in  p [5]
+    out Y_b [1x15]
+    251 ops: 114 mul, 117 add, 7 div, 8 trig, 5 other
+    """
+    y = _array(y, 1, "base_regressor_y", "y")
+    yd = _array(yd, 1, "base_regressor_y", "yd")
+    ydd = _array(ydd, 1, "base_regressor_y", "ydd")
+    p = _array(p, 5, "base_regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_y_chunk, (y, yd, ydd, p), 39, ((1, 15),), pure=2)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    atan2, cos, sign, sin, sqrt = math.atan2, math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[4]
+    t2 = sin(y[0])
+    t3 = t2 * p[4]
+    t4 = -t3
+    t5 = t0 * p[1]
+    t6 = 0.4175945039583582 * t5
+    t7 = t2 * p[1]
+    t8 = (-0.9086334961158832) * t7
+    t6 = t6 - t8
+    t8 = t2 * p[0]
+    t9 = t5 * t5
+    t10 = t7 * t7
+    t9 = t9 + t10
+    t10 = p[2] * p[2]
+    t10 = t9 - t10
+    t11 = t0 * p[0]
+    t12 = p[3] - t11
+    t13 = t12 * t12
+    t14 = t8 * t8
+    t13 = t13 + t14
+    t10 = t10 + t13
+    t13 = sqrt(t13)
+    t14 = t13 + t13
+    t10 = t10 / t14
+    t14 = t8 / t13
+    t15 = t10 * t14
+    t15 = t8 - t15
+    t16 = t10 * t10
+    t9 = t9 - t16
+    t9 = sqrt(t9)
+    t12 = t12 / t13
+    t13 = t9 * t12
+    t13 = t15 + t13
+    t15 = t13 - t8
+    t16 = t6 * t15
+    t5 = (-0.9086334961158832) * t5
+    t7 = 0.4175945039583582 * t7
+    t5 = t5 + t7
+    t7 = t10 * t12
+    t7 = t11 + t7
+    t9 = t9 * t14
+    t7 = t7 + t9
+    t9 = t7 - t11
+    t10 = t5 * t9
+    t10 = t16 - t10
+    t6 = t6 * t9
+    t5 = t5 * t15
+    t5 = t6 + t5
+    t5 = atan2(t10, t5)
+    t5 = (-1.14) + t5
+    t6 = cos(t5)
+    t9 = ydd[0] * p[0]
+    t9 = t1 + t9
+    t10 = t6 * t9
+    t5 = sin(t5)
+    t12 = yd[0] * p[0]
+    t12 = yd[0] * t12
+    t3 = t3 - t12
+    t12 = t5 * t3
+    t10 = t10 - t12
+    t12 = t6 * p[0]
+    t14 = t0 * t6
+    t15 = t2 * t5
+    t14 = t14 - t15
+    t15 = (-0.2601752249999921) * p[2]
+    t16 = t15 * t13
+    t17 = 0.965561418189544 * p[2]
+    t7 = t7 - p[3]
+    t18 = t17 * t7
+    t16 = t16 - t18
+    t7 = t15 * t7
+    t13 = t17 * t13
+    t7 = t7 + t13
+    t7 = atan2(t16, t7)
+    t7 = 1.834 + t7
+    t13 = cos(t7)
+    t13 = p[2] * t13
+    t15 = t14 * t13
+    t0 = t0 * t5
+    t2 = t2 * t6
+    t0 = t0 + t2
+    t2 = sin(t7)
+    t7 = p[2] * t2
+    t16 = t0 * t7
+    t15 = t15 + t16
+    t16 = t0 * p[1]
+    t8 = t8 + t16
+    t17 = t8 - t7
+    t18 = t17 * t14
+    t19 = p[1] * t14
+    t20 = t0 * t19
+    t21 = t18 + t20
+    t11 = t11 + t19
+    t22 = p[3] + t13
+    t22 = t11 - t22
+    t23 = t22 * t0
+    t24 = t14 * t16
+    t25 = t23 + t24
+    t26 = t21 - t25
+    t27 = t26 * t15
+    t7 = t14 * t7
+    t13 = t0 * t13
+    t28 = t7 - t13
+    t19 = t14 * t19
+    t17 = t17 * t0
+    t29 = t19 - t17
+    t22 = t22 * t14
+    t16 = t0 * t16
+    t30 = t22 - t16
+    t31 = t29 - t30
+    t32 = t28 * t31
+    t27 = t27 + t32
+    t32 = t15 / t27
+    t33 = t0 * t11
+    t18 = t18 + t33
+    t34 = t14 * t8
+    t23 = t23 + t34
+    t35 = t18 - t23
+    t36 = t32 * t35
+    t37 = t28 / t27
+    t11 = t14 * t11
+    t14 = t11 - t17
+    t0 = t0 * t8
+    t8 = t22 - t0
+    t17 = t14 - t8
+    t22 = t37 * t17
+    t22 = t36 + t22
+    t36 = t22 * ydd[0]
+    t38 = t11 - t0
+    t39 = t14 + t38
+    t38 = t8 + t38
+    t38 = t39 - t38
+    t38 = yd[0] * t38
+    t39 = t22 * yd[0]
+    t40 = t19 - t16
+    t14 = t14 + t40
+    t8 = t8 + t40
+    t8 = t14 - t8
+    t8 = t39 * t8
+    t8 = t38 - t8
+    t14 = t31 / t27
+    t31 = t14 * t35
+    t26 = t26 / t27
+    t17 = t26 * t17
+    t17 = t31 - t17
+    t27 = t17 * yd[0]
+    t31 = t27 * t15
+    t8 = t8 + t31
+    t8 = t8 * yd[0]
+    t11 = t11 - t16
+    t11 = t29 + t11
+    t0 = t19 - t0
+    t0 = t30 + t0
+    t0 = t11 - t0
+    t0 = yd[0] * t0
+    t11 = t29 + t40
+    t16 = t30 + t40
+    t11 = t11 - t16
+    t11 = t39 * t11
+    t0 = t0 - t11
+    t0 = t0 + t31
+    t0 = t0 * t39
+    t0 = t8 - t0
+    t8 = yd[0] * t15
+    t11 = t39 * t15
+    t8 = t8 - t11
+    t8 = t31 + t8
+    t8 = t8 * t27
+    t0 = t0 + t8
+    t8 = t32 * t0
+    t11 = t34 + t33
+    t15 = t23 + t11
+    t11 = t11 + t18
+    t11 = t15 - t11
+    t11 = yd[0] * t11
+    t15 = t24 + t20
+    t16 = t23 + t15
+    t18 = t15 + t18
+    t16 = t16 - t18
+    t16 = t39 * t16
+    t11 = t11 - t16
+    t16 = t27 * t28
+    t11 = t11 + t16
+    t11 = t11 * yd[0]
+    t18 = t34 + t20
+    t18 = t25 + t18
+    t19 = t33 + t24
+    t19 = t19 + t21
+    t18 = t18 - t19
+    t18 = yd[0] * t18
+    t19 = t25 + t15
+    t15 = t15 + t21
+    t15 = t19 - t15
+    t15 = t39 * t15
+    t15 = t18 - t15
+    t15 = t15 + t16
+    t15 = t15 * t39
+    t11 = t11 - t15
+    t7 = t13 - t7
+    t13 = yd[0] * t7
+    t15 = t39 * t7
+    t13 = t13 - t15
+    t7 = t27 * t7
+    t7 = t13 + t7
+    t7 = t7 * t27
+    t7 = t11 - t7
+    t11 = t37 * t7
+    t8 = t8 + t11
+    t8 = t36 + t8
+    t11 = ydd[0] - t8
+    t13 = t12 * t11
+    t15 = t5 * p[0]
+    t16 = yd[0] - t39
+    t16 = t16 * t16
+    t18 = t15 * t16
+    t13 = t13 - t18
+    t13 = t10 + t13
+    t10 = t22 * t10
+    t10 = t13 - t10
+    t3 = t6 * t3
+    t5 = t5 * t9
+    t3 = t3 + t5
+    t5 = t22 * t3
+    t6 = t15 * t11
+    t9 = t12 * t16
+    t6 = t6 + t9
+    t3 = t3 + t6
+    t3 = t5 - t3
+    t5 = t22 * t11
+    t5 = t11 - t5
+    t2 = t2 * p[4]
+    t2 = t17 * t2
+    t6 = t17 * ydd[0]
+    t0 = t14 * t0
+    t7 = t26 * t7
+    t0 = t0 - t7
+    t0 = t6 + t0
+    t0 = t17 * t0
+    t6 = sign(yd[0])
+    t7 = t22 * t8
+    t8 = t22 * t39
+    t9 = -t39
+    t9 = sign(t9)
+    t9 = t22 * t9
+    t9 = -t9
+    t11 = t17 * t27
+    t12 = -t27
+    t12 = sign(t12)
+    t12 = t17 * t12
+    t12 = -t12
+    _Y_b = (t1, t4, ydd[0], t10, t3, t5, t2, t0, yd[0], t6, t7, t8, t9, t11, t12)
+    return np.array(_Y_b).reshape(1, 15)
+
+
+_base_regressor_y_constants = _constants(
+    0.4175945039583582, -0.9086334961158832, -1.14, -0.2601752249999921, 0.965561418189544, 1.834)
+
+
+def _base_regressor_y_chunk(x, t, s, y):
+    """base_regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, yd_0, ydd_0, p_0, p_1, p_2, p_3, p_4 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38) = t
+    s0, s1 = s
+    (Y_b_0, Y_b_1, Y_b_2, Y_b_3, Y_b_4, Y_b_5, Y_b_6, Y_b_7, Y_b_8, Y_b_9, Y_b_10, Y_b_11, Y_b_12, Y_b_13,
+     Y_b_14) = y
+    k0, k1, k2, k3, k4, k5 = _base_regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_4, Y_b_0)
+    sin(y_0, t1)
+    multiply(t1, p_4, t2)
+    negative(t2, Y_b_1)
+    multiply(t0, p_1, t3)
+    multiply(k0, t3, t4)
+    multiply(t1, p_1, t5)
+    multiply(k1, t5, t6)
+    subtract(t4, t6, t4)
+    multiply(t1, p_0, t6)
+    multiply(t3, t3, t7)
+    multiply(t5, t5, t8)
+    add(t7, t8, t7)
+    multiply(p_2, p_2, s0)
+    subtract(t7, s0, t8)
+    multiply(t0, p_0, t9)
+    subtract(p_3, t9, t10)
+    multiply(t10, t10, t11)
+    multiply(t6, t6, t12)
+    add(t11, t12, t11)
+    add(t8, t11, t8)
+    sqrt(t11, t11)
+    add(t11, t11, t12)
+    divide(t8, t12, t8)
+    divide(t6, t11, t12)
+    multiply(t8, t12, t13)
+    subtract(t6, t13, t13)
+    multiply(t8, t8, t14)
+    subtract(t7, t14, t7)
+    sqrt(t7, t7)
+    divide(t10, t11, t10)
+    multiply(t7, t10, t11)
+    add(t13, t11, t13)
+    subtract(t13, t6, t11)
+    multiply(t4, t11, t14)
+    multiply(k1, t3, t3)
+    multiply(k0, t5, t5)
+    add(t3, t5, t3)
+    multiply(t8, t10, t8)
+    add(t9, t8, t8)
+    multiply(t7, t12, t7)
+    add(t8, t7, t8)
+    subtract(t8, t9, t5)
+    multiply(t3, t5, t7)
+    subtract(t14, t7, t14)
+    multiply(t4, t5, t4)
+    multiply(t3, t11, t3)
+    add(t4, t3, t4)
+    _batch_atan2(t14, t4, t14)
+    add(k2, t14, t14)
+    cos(t14, t3)
+    multiply(ydd_0, p_0, t4)
+    add(Y_b_0, t4, t4)
+    multiply(t3, t4, t5)
+    sin(t14, t14)
+    multiply(yd_0, p_0, t7)
+    multiply(yd_0, t7, t7)
+    subtract(t2, t7, t2)
+    multiply(t14, t2, t7)
+    subtract(t5, t7, t5)
+    multiply(t3, p_0, t7)
+    multiply(t0, t3, t10)
+    multiply(t1, t14, t11)
+    subtract(t10, t11, t10)
+    multiply(k3, p_2, s0)
+    multiply(s0, t13, t11)
+    multiply(k4, p_2, s1)
+    subtract(t8, p_3, t8)
+    multiply(s1, t8, t12)
+    subtract(t11, t12, t11)
+    multiply(s0, t8, t8)
+    multiply(s1, t13, t13)
+    add(t8, t13, t8)
+    _batch_atan2(t11, t8, t11)
+    add(k5, t11, t11)
+    cos(t11, t8)
+    multiply(p_2, t8, t8)
+    multiply(t10, t8, t12)
+    multiply(t0, t14, t0)
+    multiply(t1, t3, t1)
+    add(t0, t1, t0)
+    sin(t11, t11)
+    multiply(p_2, t11, t1)
+    multiply(t0, t1, t13)
+    add(t12, t13, t12)
+    multiply(t0, p_1, t13)
+    add(t6, t13, t6)
+    subtract(t6, t1, t15)
+    multiply(t15, t10, t16)
+    multiply(p_1, t10, t17)
+    multiply(t0, t17, t18)
+    add(t16, t18, t19)
+    add(t9, t17, t9)
+    add(p_3, t8, t20)
+    subtract(t9, t20, t20)
+    multiply(t20, t0, t21)
+    multiply(t10, t13, t22)
+    add(t21, t22, t23)
+    subtract(t19, t23, t24)
+    multiply(t24, t12, t25)
+    multiply(t10, t1, t1)
+    multiply(t0, t8, t8)
+    subtract(t1, t8, t26)
+    multiply(t10, t17, t17)
+    multiply(t15, t0, t15)
+    subtract(t17, t15, t27)
+    multiply(t20, t10, t20)
+    multiply(t0, t13, t13)
+    subtract(t20, t13, t28)
+    subtract(t27, t28, t29)
+    multiply(t26, t29, t30)
+    add(t25, t30, t25)
+    divide(t12, t25, t30)
+    multiply(t0, t9, t31)
+    add(t16, t31, t16)
+    multiply(t10, t6, t32)
+    add(t21, t32, t21)
+    subtract(t16, t21, t33)
+    multiply(t30, t33, t34)
+    divide(t26, t25, t35)
+    multiply(t10, t9, t10)
+    subtract(t10, t15, t15)
+    multiply(t0, t6, t0)
+    subtract(t20, t0, t20)
+    subtract(t15, t20, t6)
+    multiply(t35, t6, t9)
+    add(t34, t9, t34)
+    multiply(t34, ydd_0, t9)
+    subtract(t10, t0, t36)
+    add(t15, t36, t37)
+    add(t20, t36, t36)
+    subtract(t37, t36, t37)
+    multiply(yd_0, t37, t37)
+    multiply(t34, yd_0, t36)
+    subtract(t17, t13, t38)
+    add(t15, t38, t15)
+    add(t20, t38, t20)
+    subtract(t15, t20, t15)
+    multiply(t36, t15, t15)
+    subtract(t37, t15, t37)
+    divide(t29, t25, t29)
+    multiply(t29, t33, t33)
+    divide(t24, t25, t24)
+    multiply(t24, t6, t6)
+    subtract(t33, t6, t33)
+    multiply(t33, yd_0, t6)
+    multiply(t6, t12, t15)
+    add(t37, t15, t37)
+    multiply(t37, yd_0, t37)
+    subtract(t10, t13, t10)
+    add(t27, t10, t10)
+    subtract(t17, t0, t17)
+    add(t28, t17, t17)
+    subtract(t10, t17, t10)
+    multiply(yd_0, t10, t10)
+    add(t27, t38, t27)
+    add(t28, t38, t28)
+    subtract(t27, t28, t27)
+    multiply(t36, t27, t27)
+    subtract(t10, t27, t10)
+    add(t10, t15, t10)
+    multiply(t10, t36, t10)
+    subtract(t37, t10, t37)
+    multiply(yd_0, t12, t0)
+    multiply(t36, t12, t12)
+    subtract(t0, t12, t0)
+    add(t15, t0, t15)
+    multiply(t15, t6, t15)
+    add(t37, t15, t37)
+    multiply(t30, t37, t30)
+    add(t32, t31, t0)
+    add(t21, t0, t10)
+    add(t0, t16, t0)
+    subtract(t10, t0, t10)
+    multiply(yd_0, t10, t10)
+    add(t22, t18, t0)
+    add(t21, t0, t21)
+    add(t0, t16, t16)
+    subtract(t21, t16, t21)
+    multiply(t36, t21, t21)
+    subtract(t10, t21, t10)
+    multiply(t6, t26, t26)
+    add(t10, t26, t10)
+    multiply(t10, yd_0, t10)
+    add(t32, t18, t32)
+    add(t23, t32, t32)
+    add(t31, t22, t31)
+    add(t31, t19, t31)
+    subtract(t32, t31, t32)
+    multiply(yd_0, t32, t32)
+    add(t23, t0, t23)
+    add(t0, t19, t0)
+    subtract(t23, t0, t23)
+    multiply(t36, t23, t23)
+    subtract(t32, t23, t32)
+    add(t32, t26, t32)
+    multiply(t32, t36, t32)
+    subtract(t10, t32, t10)
+    subtract(t8, t1, t8)
+    multiply(yd_0, t8, t0)
+    multiply(t36, t8, t1)
+    subtract(t0, t1, t0)
+    multiply(t6, t8, t8)
+    add(t0, t8, t0)
+    multiply(t0, t6, t0)
+    subtract(t10, t0, t10)
+    multiply(t35, t10, t35)
+    add(t30, t35, t30)
+    add(t9, t30, t9)
+    subtract(ydd_0, t9, t0)
+    multiply(t7, t0, t1)
+    multiply(t14, p_0, t8)
+    subtract(yd_0, t36, t12)
+    multiply(t12, t12, t12)
+    multiply(t8, t12, t13)
+    subtract(t1, t13, t1)
+    add(t5, t1, t1)
+    multiply(t34, t5, t5)
+    subtract(t1, t5, Y_b_3)
+    multiply(t3, t2, t3)
+    multiply(t14, t4, t14)
+    add(t3, t14, t3)
+    multiply(t34, t3, t1)
+    multiply(t8, t0, t8)
+    multiply(t7, t12, t7)
+    add(t8, t7, t8)
+    add(t3, t8, t3)
+    subtract(t1, t3, Y_b_4)
+    multiply(t34, t0, t1)
+    subtract(t0, t1, Y_b_5)
+    multiply(t11, p_4, t11)
+    multiply(t33, t11, Y_b_6)
+    multiply(t33, ydd_0, t0)
+    multiply(t29, t37, t29)
+    multiply(t24, t10, t24)
+    subtract(t29, t24, t29)
+    add(t0, t29, t0)
+    multiply(t33, t0, Y_b_7)
+    sign(yd_0, Y_b_9)
+    multiply(t34, t9, Y_b_10)
+    multiply(t34, t36, Y_b_11)
+    negative(t36, t36)
+    sign(t36, t36)
+    multiply(t34, t36, t34)
+    negative(t34, Y_b_12)
+    multiply(t33, t6, Y_b_13)
+    negative(t6, t6)
+    sign(t6, t6)
+    multiply(t33, t6, t33)
+    negative(t33, Y_b_14)
+    copyto(Y_b_2, ydd_0)
+    copyto(Y_b_8, yd_0)
+
+
 def rk4_step(x, u, dt, p=DEFAULT_P):
     """One classical Runge-Kutta step of the closed chain's x' = f(x, u), x = [y; yd], u = tau_y held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs (q = gamma(y) inside each: the loops stay closed, nothing drifts).
 

@@ -48,6 +48,8 @@
 #include "parallel_ankle_ode_rhs.h"
 #include "parallel_ankle_ode_jac_x.h"
 #include "parallel_ankle_ode_jac_u.h"
+#include "parallel_ankle_regressor_y.h"
+#include "parallel_ankle_base_regressor_y.h"
 #include "parallel_ankle_rk4_step.h"
 
 #endif /* PARALLEL_ANKLE_DERIVE_H */

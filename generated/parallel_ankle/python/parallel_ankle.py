@@ -28008,6 +28008,4376 @@ def _ode_jac_u_chunk(x, t, s, y):
     copyto(B_6, B_5)
 
 
+def regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain regressor Y_y(y, yd, ydd) = G^T Y(q, G yd, G ydd + Gdot yd) (2x52, row-major): inverse_dynamics_y = Y_y pi, pi the tree's standard parameters (per body (crank_l, crank_r, cross, foot) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the body origin, body axes; then per coordinate [armature, viscous, coulomb]); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults); q = gamma(y) inside by 8 Newton steps from the reference configuration (call closure for the status). p (4): parameters c, w, b, g.
+
+    in  y [2]
+    in  yd [2]
+    in  ydd [2]
+    in  p [4]
+    out Y_y [2x52]
+    1068 ops: 530 mul, 446 add, 52 div, 36 trig, 4 other
+    """
+    y = _array(y, 2, "regressor_y", "y")
+    yd = _array(yd, 2, "regressor_y", "yd")
+    ydd = _array(ydd, 2, "regressor_y", "ydd")
+    p = _array(p, 4, "regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_y_chunk, (y, yd, ydd, p), 42, ((2, 52),), fixed=_regressor_y_fixed, pure=10)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
+    t0 = cos(y[0])
+    t1 = t0 * p[3]
+    t1 = -t1
+    t2 = sin(y[0])
+    t3 = t2 * p[3]
+    t3 = -t3
+    t4 = cos(y[1])
+    t5 = t4 * p[3]
+    t5 = -t5
+    t6 = sin(y[1])
+    t7 = t6 * p[3]
+    t7 = -t7
+    t4 = t4 * p[0]
+    t8 = (-0.02) - t4
+    t9 = 0.9870674715819652 * p[1]
+    t10 = p[1] - t9
+    t11 = t10 + t10
+    t12 = 0.16030535407398705 * p[1]
+    t11 = t11 * t12
+    t0 = t0 * p[0]
+    t13 = (-0.02) - t0
+    t14 = 0.027436770947998426 * p[1]
+    t15 = 0.9852444312681263 * p[2]
+    t16 = t14 - t15
+    t16 = t13 - t16
+    t17 = t16 + t16
+    t18 = 0.16893973557186973 * p[1]
+    t19 = t17 * t18
+    t11 = t11 - t19
+    t2 = t2 * p[0]
+    t19 = 0.22 + t2
+    t20 = 0.171153178922117 * p[2]
+    t21 = 0.157939957403861 * p[1]
+    t22 = t20 + t21
+    t23 = t19 - t22
+    t24 = t23 + t23
+    t25 = 0.9725027296620408 * p[1]
+    t26 = t24 * t25
+    t11 = t11 - t26
+    t11 = 2.272727272727273 * t11
+    t17 = t17 * t22
+    t22 = t15 - t14
+    t22 = t24 * t22
+    t17 = t17 + t22
+    t17 = 2.272727272727273 * t17
+    t14 = t15 + t14
+    t15 = t8 + t14
+    t22 = t15 + t15
+    t18 = t22 * t18
+    t9 = t9 - p[1]
+    t24 = t9 + t9
+    t12 = t24 * t12
+    t12 = t18 - t12
+    t6 = t6 * p[0]
+    t18 = 0.22 + t6
+    t24 = t20 - t21
+    t24 = t18 - t24
+    t26 = t24 + t24
+    t25 = t26 * t25
+    t12 = t12 + t25
+    t12 = 2.272727272727273 * t12
+    t25 = t17 * t12
+    t20 = t21 - t20
+    t20 = t22 * t20
+    t14 = t26 * t14
+    t14 = t20 - t14
+    t14 = 2.272727272727273 * t14
+    t20 = t11 * t14
+    t20 = t25 + t20
+    t11 = t11 / t20
+    t15 = t15 * t15
+    t9 = t9 * t9
+    t9 = t15 + t9
+    t15 = t24 * t24
+    t9 = t9 + t15
+    t9 = t9 - 0.0484
+    t9 = t9 / 0.44
+    t11 = t11 * t9
+    t12 = t12 / t20
+    t15 = t16 * t16
+    t10 = t10 * t10
+    t10 = t15 + t10
+    t15 = t23 * t23
+    t10 = t10 + t15
+    t10 = t10 - 0.0484
+    t10 = t10 / 0.44
+    t12 = t12 * t10
+    t11 = t11 - t12
+    t11 = 0.172 - t11
+    t12 = t14 / t20
+    t10 = t12 * t10
+    t12 = t17 / t20
+    t9 = t12 * t9
+    t9 = t10 + t9
+    t9 = 0.161 - t9
+    t10 = cos(t9)
+    t12 = t10 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t11)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t11)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t10
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t10 = t22 * t10
+    t10 = p[1] * t10
+    t22 = t29 * t10
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t10 = t27 * t10
+    t10 = t17 + t10
+    t10 = 2.272727272727273 * t10
+    t17 = t22 * t10
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t10 = t10 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t10 = t10 * t14
+    t10 = t15 - t10
+    t10 = t11 - t10
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = cos(t10)
+    t15 = t11 * p[2]
+    t10 = sin(t10)
+    t16 = t16 / t17
+    t14 = t16 * t14
+    t16 = t22 / t17
+    t12 = t16 * t12
+    t12 = t14 + t12
+    t9 = t9 - t12
+    t12 = sin(t9)
+    t14 = t10 * t12
+    t14 = t14 * p[1]
+    t16 = t15 + t14
+    t8 = t8 + t16
+    t8 = t8 + t8
+    t9 = cos(t9)
+    t17 = t10 * t9
+    t17 = p[1] * t17
+    t20 = t8 * t17
+    t21 = t9 * p[1]
+    t22 = t21 - p[1]
+    t22 = t22 + t22
+    t23 = p[1] * t12
+    t24 = t22 * t23
+    t20 = t20 - t24
+    t24 = t10 * p[2]
+    t25 = t11 * t12
+    t25 = t25 * p[1]
+    t26 = t24 - t25
+    t18 = t18 - t26
+    t18 = t18 + t18
+    t26 = t11 * t9
+    t26 = p[1] * t26
+    t27 = t18 * t26
+    t20 = t20 + t27
+    t20 = 2.272727272727273 * t20
+    t27 = t14 - t15
+    t13 = t13 - t27
+    t13 = t13 + t13
+    t27 = t25 + t24
+    t28 = t13 * t27
+    t19 = t19 - t27
+    t19 = t19 + t19
+    t15 = t15 - t14
+    t29 = t19 * t15
+    t28 = t28 + t29
+    t28 = 2.272727272727273 * t28
+    t29 = t28 * t20
+    t30 = p[1] - t21
+    t30 = t30 + t30
+    t31 = t30 * t23
+    t32 = t13 * t17
+    t31 = t31 - t32
+    t32 = t19 * t26
+    t31 = t31 - t32
+    t31 = 2.272727272727273 * t31
+    t24 = t25 - t24
+    t32 = t8 * t24
+    t33 = t18 * t16
+    t32 = t32 - t33
+    t32 = 2.272727272727273 * t32
+    t33 = t31 * t32
+    t29 = t29 + t33
+    t20 = t20 / t29
+    t33 = t13 * t2
+    t34 = t19 * t0
+    t33 = t33 + t34
+    t33 = 2.272727272727273 * t33
+    t34 = t20 * t33
+    t11 = t11 * p[3]
+    t35 = t34 * t11
+    t35 = -t35
+    t31 = t31 / t29
+    t36 = t8 * t6
+    t37 = t18 * t4
+    t36 = t36 + t37
+    t36 = 2.272727272727273 * t36
+    t37 = t31 * t36
+    t38 = t37 * t11
+    t10 = t10 * p[3]
+    t39 = t34 * t10
+    t39 = -t39
+    t40 = t37 * t10
+    t41 = t34 * ydd[0]
+    t42 = t37 * ydd[1]
+    t41 = t41 - t42
+    t42 = t6 + t6
+    t43 = t6 * t42
+    t44 = t8 * t4
+    t43 = t43 + t44
+    t44 = t4 + t4
+    t45 = t4 * t44
+    t46 = t18 * t6
+    t45 = t45 - t46
+    t43 = t43 + t45
+    t43 = 2.272727272727273 * t43
+    t43 = yd[1] * t43
+    t45 = t34 * yd[0]
+    t46 = t37 * yd[1]
+    t45 = t45 - t46
+    t46 = t24 * t42
+    t47 = t16 * t44
+    t46 = t46 - t47
+    t46 = 2.272727272727273 * t46
+    t46 = t45 * t46
+    t43 = t43 + t46
+    t32 = t32 / t29
+    t33 = t32 * t33
+    t46 = t33 * yd[0]
+    t28 = t28 / t29
+    t29 = t28 * t36
+    t36 = t29 * yd[1]
+    t36 = t46 + t36
+    t42 = t17 * t42
+    t44 = t26 * t44
+    t42 = t42 + t44
+    t42 = 2.272727272727273 * t42
+    t42 = t36 * t42
+    t42 = t43 - t42
+    t42 = t42 * yd[1]
+    t43 = t24 + t24
+    t44 = t6 * t43
+    t46 = -t16
+    t46 = t46 + t46
+    t47 = t4 * t46
+    t44 = t44 + t47
+    t44 = 2.272727272727273 * t44
+    t44 = yd[1] * t44
+    t47 = t24 * t43
+    t48 = t8 * t16
+    t47 = t47 - t48
+    t48 = t16 * t46
+    t49 = t18 * t24
+    t48 = t48 + t49
+    t47 = t47 - t48
+    t47 = 2.272727272727273 * t47
+    t47 = t45 * t47
+    t44 = t44 + t47
+    t43 = t17 * t43
+    t47 = t8 * t26
+    t43 = t43 + t47
+    t46 = t26 * t46
+    t48 = t18 * t17
+    t46 = t46 - t48
+    t43 = t43 + t46
+    t43 = 2.272727272727273 * t43
+    t43 = t36 * t43
+    t43 = t44 - t43
+    t43 = t43 * t45
+    t42 = t42 + t43
+    t43 = t17 + t17
+    t6 = t6 * t43
+    t44 = t26 + t26
+    t4 = t4 * t44
+    t4 = t6 + t4
+    t4 = 2.272727272727273 * t4
+    t4 = yd[1] * t4
+    t6 = t24 * t43
+    t6 = t6 + t47
+    t16 = t16 * t44
+    t16 = t16 + t48
+    t6 = t6 - t16
+    t6 = 2.272727272727273 * t6
+    t6 = t45 * t6
+    t4 = t4 + t6
+    t6 = t17 * t43
+    t8 = t8 * t14
+    t6 = t6 - t8
+    t8 = -t23
+    t8 = t8 + t8
+    t8 = t23 * t8
+    t16 = t22 * t21
+    t8 = t8 + t16
+    t6 = t6 - t8
+    t8 = t26 * t44
+    t16 = t18 * t25
+    t8 = t8 - t16
+    t6 = t6 + t8
+    t6 = 2.272727272727273 * t6
+    t6 = t36 * t6
+    t4 = t4 - t6
+    t4 = t4 * t36
+    t4 = t42 - t4
+    t6 = t31 * t4
+    t8 = t2 + t2
+    t16 = t2 * t8
+    t18 = t13 * t0
+    t16 = t16 + t18
+    t18 = t0 + t0
+    t22 = t0 * t18
+    t24 = t19 * t2
+    t22 = t22 - t24
+    t16 = t16 + t22
+    t16 = 2.272727272727273 * t16
+    t16 = yd[0] * t16
+    t22 = t27 * t8
+    t24 = t15 * t18
+    t22 = t22 + t24
+    t22 = 2.272727272727273 * t22
+    t22 = t45 * t22
+    t16 = t16 - t22
+    t8 = t17 * t8
+    t18 = t26 * t18
+    t8 = t8 + t18
+    t8 = 2.272727272727273 * t8
+    t8 = t36 * t8
+    t8 = t16 + t8
+    t8 = t8 * yd[0]
+    t16 = -t27
+    t16 = t16 + t16
+    t18 = t2 * t16
+    t22 = -t15
+    t22 = t22 + t22
+    t24 = t0 * t22
+    t18 = t18 + t24
+    t18 = 2.272727272727273 * t18
+    t18 = yd[0] * t18
+    t24 = t27 * t16
+    t31 = t13 * t15
+    t24 = t24 + t31
+    t31 = t15 * t22
+    t42 = t19 * t27
+    t31 = t31 - t42
+    t24 = t24 + t31
+    t24 = 2.272727272727273 * t24
+    t24 = t45 * t24
+    t18 = t18 - t24
+    t16 = t17 * t16
+    t24 = t13 * t26
+    t16 = t16 + t24
+    t22 = t26 * t22
+    t31 = t19 * t17
+    t22 = t22 - t31
+    t16 = t16 + t22
+    t16 = 2.272727272727273 * t16
+    t16 = t36 * t16
+    t16 = t18 + t16
+    t16 = t16 * t45
+    t8 = t8 + t16
+    t16 = -t17
+    t16 = t16 + t16
+    t2 = t2 * t16
+    t18 = -t26
+    t18 = t18 + t18
+    t0 = t0 * t18
+    t0 = t2 + t0
+    t0 = 2.272727272727273 * t0
+    t0 = yd[0] * t0
+    t2 = t27 * t16
+    t2 = t2 + t24
+    t15 = t15 * t18
+    t15 = t15 - t31
+    t2 = t2 + t15
+    t2 = 2.272727272727273 * t2
+    t2 = t45 * t2
+    t0 = t0 - t2
+    t2 = t23 + t23
+    t2 = t23 * t2
+    t15 = t30 * t21
+    t2 = t2 + t15
+    t15 = t17 * t16
+    t13 = t13 * t14
+    t13 = t15 - t13
+    t2 = t2 - t13
+    t13 = t26 * t18
+    t14 = t19 * t25
+    t13 = t13 - t14
+    t2 = t2 - t13
+    t2 = 2.272727272727273 * t2
+    t2 = t36 * t2
+    t0 = t0 - t2
+    t0 = t0 * t36
+    t0 = t8 - t0
+    t2 = t20 * t0
+    t2 = t6 - t2
+    t2 = t41 - t2
+    t6 = t34 * t2
+    t8 = t37 * t2
+    t8 = -t8
+    t13 = t9 * t11
+    t14 = t9 * t13
+    t11 = t12 * t11
+    t15 = t12 * t11
+    t14 = t14 + t15
+    t15 = t34 * t14
+    t15 = -t15
+    t14 = t37 * t14
+    t16 = t12 * t10
+    t17 = t34 * t16
+    t18 = t33 * t13
+    t17 = t17 + t18
+    t17 = -t17
+    t16 = t37 * t16
+    t13 = t29 * t13
+    t13 = t16 - t13
+    t16 = t33 * t11
+    t10 = t9 * t10
+    t18 = t34 * t10
+    t16 = t16 - t18
+    t10 = t37 * t10
+    t11 = t29 * t11
+    t10 = t10 + t11
+    t11 = t12 * t45
+    t18 = t11 * t36
+    t19 = t9 * t18
+    t20 = t9 * t45
+    t21 = t20 * t36
+    t22 = t12 * t21
+    t23 = t19 - t22
+    t24 = t34 * t23
+    t25 = t33 * ydd[0]
+    t26 = t29 * ydd[1]
+    t25 = t25 + t26
+    t0 = t32 * t0
+    t4 = t28 * t4
+    t0 = t0 + t4
+    t0 = t25 + t0
+    t4 = t33 * t0
+    t24 = t24 + t4
+    t25 = t29 * t0
+    t23 = t37 * t23
+    t23 = t25 - t23
+    t26 = t11 * t20
+    t27 = t0 + t26
+    t27 = t9 * t27
+    t28 = t36 * t36
+    t20 = t20 * t20
+    t30 = t28 - t20
+    t30 = t12 * t30
+    t27 = t27 + t30
+    t30 = t34 * t27
+    t31 = t9 * t2
+    t32 = t33 * t31
+    t30 = t30 + t32
+    t30 = -t30
+    t27 = t37 * t27
+    t32 = t29 * t31
+    t27 = t27 - t32
+    t31 = t31 + t18
+    t32 = t9 * t31
+    t22 = t32 + t22
+    t32 = t34 * t22
+    t41 = t33 * t26
+    t32 = t32 - t41
+    t22 = t37 * t22
+    t42 = t29 * t26
+    t22 = t22 + t42
+    t22 = -t22
+    t11 = t11 * t11
+    t28 = t11 - t28
+    t28 = t9 * t28
+    t0 = t26 - t0
+    t0 = t12 * t0
+    t0 = t28 - t0
+    t26 = t34 * t0
+    t2 = t12 * t2
+    t28 = t33 * t2
+    t26 = t26 + t28
+    t28 = t29 * t2
+    t0 = t37 * t0
+    t0 = t28 - t0
+    t2 = t2 - t21
+    t21 = t2 - t21
+    t9 = t9 * t21
+    t18 = t31 + t18
+    t18 = t12 * t18
+    t9 = t9 + t18
+    t18 = t34 * t9
+    t11 = t20 - t11
+    t20 = t33 * t11
+    t18 = t18 + t20
+    t18 = -t18
+    t9 = t37 * t9
+    t11 = t29 * t11
+    t9 = t9 - t11
+    t2 = t12 * t2
+    t2 = t2 - t19
+    t11 = t34 * t2
+    t11 = t11 + t41
+    t2 = t37 * t2
+    t2 = t42 - t2
+    t12 = sign(yd[0])
+    t19 = sign(yd[1])
+    t20 = t34 * t45
+    t21 = t37 * t45
+    t21 = -t21
+    t28 = sign(t45)
+    t31 = t34 * t28
+    t28 = t37 * t28
+    t28 = -t28
+    t34 = t33 * t36
+    t37 = t29 * t36
+    t36 = -t36
+    t36 = sign(t36)
+    t33 = t33 * t36
+    t33 = -t33
+    t29 = t29 * t36
+    t29 = -t29
+    _Y_y = (0.0, t1, 0.0, t3, 0.0, 0.0, ydd[0], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t35, 0.0, t39, 0.0, 0.0, t6, 0.0, 0.0, 0.0, 0.0, t15, t17, t16, t24, t30, t32, t26, t18, t11, ydd[0], yd[0], t12, 0.0, 0.0, 0.0, t6, t20, t31, t4, t34, t33,
+            0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t5, 0.0, t7, 0.0, 0.0, ydd[1], 0.0, 0.0, 0.0, 0.0, t38, 0.0, t40, 0.0, 0.0, t8, 0.0, 0.0, 0.0, 0.0, t14, t13, t10, t23, t27, t22, t0, t9, t2, 0.0, 0.0, 0.0, ydd[1], yd[1], t19, t8, t21, t28, t25, t37, t29)
+    return np.array(_Y_y).reshape(2, 52)
+
+
+_regressor_y_constants = _constants(
+    -0.02, 0.9870674715819652, 0.16030535407398705, 0.027436770947998426, 0.9852444312681263,
+    0.16893973557186973, 0.22, 0.171153178922117, 0.157939957403861, 0.9725027296620408,
+    2.272727272727273, 0.0484, 0.44, 0.172, 0.161)
+
+
+_regressor_y_fixed = (
+    {0: 0.0, 2: 0.0, 4: 0.0, 5: 0.0, 7: 0.0, 8: 0.0, 9: 0.0, 10: 0.0, 11: 0.0, 12: 0.0, 13: 0.0, 14: 0.0,
+     15: 0.0, 16: 0.0, 17: 0.0, 18: 0.0, 19: 0.0, 20: 0.0, 22: 0.0, 24: 0.0, 25: 0.0, 27: 0.0, 28: 0.0,
+     29: 0.0, 30: 0.0, 43: 0.0, 44: 0.0, 45: 0.0, 52: 0.0, 53: 0.0, 54: 0.0, 55: 0.0, 56: 0.0, 57: 0.0,
+     58: 0.0, 59: 0.0, 60: 0.0, 61: 0.0, 62: 0.0, 64: 0.0, 66: 0.0, 67: 0.0, 69: 0.0, 70: 0.0, 71: 0.0,
+     72: 0.0, 74: 0.0, 76: 0.0, 77: 0.0, 79: 0.0, 80: 0.0, 81: 0.0, 82: 0.0, 92: 0.0, 93: 0.0, 94: 0.0},
+)
+"""regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_y_chunk(x, t, s, y):
+    """regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.subtract
+    y_0, y_1, yd_0, yd_1, ydd_0, ydd_1, p_0, p_1, p_2, p_3 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41) = t
+    s0, s1, s2, s3, s4, s5, s6, s7, s8, s9 = s
+    (Y_y_1, Y_y_3, Y_y_6, Y_y_21, Y_y_23, Y_y_26, Y_y_31, Y_y_32, Y_y_33, Y_y_34, Y_y_35, Y_y_36, Y_y_37,
+     Y_y_38, Y_y_39, Y_y_40, Y_y_41, Y_y_42, Y_y_46, Y_y_47, Y_y_48, Y_y_49, Y_y_50, Y_y_51, Y_y_63,
+     Y_y_65, Y_y_68, Y_y_73, Y_y_75, Y_y_78, Y_y_83, Y_y_84, Y_y_85, Y_y_86, Y_y_87, Y_y_88, Y_y_89,
+     Y_y_90, Y_y_91, Y_y_95, Y_y_96, Y_y_97, Y_y_98, Y_y_99, Y_y_100, Y_y_101, Y_y_102, Y_y_103) = y
+    k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14 = _regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_3, t1)
+    negative(t1, Y_y_1)
+    sin(y_0, t1)
+    multiply(t1, p_3, t2)
+    negative(t2, Y_y_3)
+    cos(y_1, t2)
+    multiply(t2, p_3, t3)
+    negative(t3, Y_y_63)
+    sin(y_1, t3)
+    multiply(t3, p_3, t4)
+    negative(t4, Y_y_65)
+    multiply(t2, p_0, t2)
+    subtract(k0, t2, t4)
+    multiply(k1, p_1, s0)
+    subtract(p_1, s0, s1)
+    add(s1, s1, s2)
+    multiply(k2, p_1, s3)
+    multiply(s2, s3, s2)
+    multiply(t0, p_0, t0)
+    subtract(k0, t0, t5)
+    multiply(k3, p_1, s4)
+    multiply(k4, p_2, s5)
+    subtract(s4, s5, s6)
+    subtract(t5, s6, t6)
+    add(t6, t6, t7)
+    multiply(k5, p_1, s6)
+    multiply(t7, s6, t8)
+    subtract(s2, t8, t8)
+    multiply(t1, p_0, t1)
+    add(k6, t1, t9)
+    multiply(k7, p_2, s2)
+    multiply(k8, p_1, s7)
+    add(s2, s7, s8)
+    subtract(t9, s8, t10)
+    add(t10, t10, t11)
+    multiply(k9, p_1, s9)
+    multiply(t11, s9, t12)
+    subtract(t8, t12, t8)
+    multiply(k10, t8, t8)
+    multiply(t7, s8, t7)
+    subtract(s5, s4, s8)
+    multiply(t11, s8, t11)
+    add(t7, t11, t7)
+    multiply(k10, t7, t7)
+    add(s5, s4, s5)
+    add(t4, s5, t11)
+    add(t11, t11, t12)
+    multiply(t12, s6, t13)
+    subtract(s0, p_1, s0)
+    add(s0, s0, s4)
+    multiply(s4, s3, s4)
+    subtract(t13, s4, t13)
+    multiply(t3, p_0, t3)
+    add(k6, t3, t14)
+    subtract(s2, s7, s3)
+    subtract(t14, s3, t15)
+    add(t15, t15, t16)
+    multiply(t16, s9, t17)
+    add(t13, t17, t13)
+    multiply(k10, t13, t13)
+    multiply(t7, t13, t17)
+    subtract(s7, s2, s7)
+    multiply(t12, s7, t12)
+    multiply(t16, s5, t16)
+    subtract(t12, t16, t12)
+    multiply(k10, t12, t12)
+    multiply(t8, t12, t16)
+    add(t17, t16, t17)
+    divide(t8, t17, t8)
+    multiply(t11, t11, t11)
+    multiply(s0, s0, s0)
+    add(t11, s0, t11)
+    multiply(t15, t15, t15)
+    add(t11, t15, t11)
+    subtract(t11, k11, t11)
+    divide(t11, k12, t11)
+    multiply(t8, t11, t8)
+    divide(t13, t17, t13)
+    multiply(t6, t6, t6)
+    multiply(s1, s1, s1)
+    add(t6, s1, t6)
+    multiply(t10, t10, t10)
+    add(t6, t10, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t13, t6, t13)
+    subtract(t8, t13, t8)
+    subtract(k13, t8, t8)
+    divide(t12, t17, t12)
+    multiply(t12, t6, t12)
+    divide(t7, t17, t7)
+    multiply(t7, t11, t7)
+    add(t12, t7, t12)
+    subtract(k14, t12, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    cos(t8, t7)
+    multiply(t7, p_2, t10)
+    sin(t8, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    sin(t12, t6)
+    multiply(t8, t6, t11)
+    multiply(t11, p_1, t11)
+    add(t10, t11, t13)
+    add(t4, t13, t4)
+    add(t4, t4, t4)
+    cos(t12, t12)
+    multiply(t8, t12, t15)
+    multiply(p_1, t15, t15)
+    multiply(t4, t15, t16)
+    multiply(t12, p_1, t17)
+    subtract(t17, p_1, t18)
+    add(t18, t18, t18)
+    multiply(p_1, t6, t19)
+    multiply(t18, t19, t20)
+    subtract(t16, t20, t16)
+    multiply(t8, p_2, t20)
+    multiply(t7, t6, t21)
+    multiply(t21, p_1, t21)
+    subtract(t20, t21, t22)
+    subtract(t14, t22, t14)
+    add(t14, t14, t14)
+    multiply(t7, t12, t22)
+    multiply(p_1, t22, t22)
+    multiply(t14, t22, t23)
+    add(t16, t23, t16)
+    multiply(k10, t16, t16)
+    subtract(t11, t10, t23)
+    subtract(t5, t23, t5)
+    add(t5, t5, t5)
+    add(t21, t20, t23)
+    multiply(t5, t23, t24)
+    subtract(t9, t23, t9)
+    add(t9, t9, t9)
+    subtract(t10, t11, t10)
+    multiply(t9, t10, t25)
+    add(t24, t25, t24)
+    multiply(k10, t24, t24)
+    multiply(t24, t16, t25)
+    subtract(p_1, t17, t26)
+    add(t26, t26, t26)
+    multiply(t26, t19, t27)
+    multiply(t5, t15, t28)
+    subtract(t27, t28, t27)
+    multiply(t9, t22, t28)
+    subtract(t27, t28, t27)
+    multiply(k10, t27, t27)
+    subtract(t21, t20, t20)
+    multiply(t4, t20, t28)
+    multiply(t14, t13, t29)
+    subtract(t28, t29, t28)
+    multiply(k10, t28, t28)
+    multiply(t27, t28, t29)
+    add(t25, t29, t25)
+    divide(t16, t25, t16)
+    multiply(t5, t1, t29)
+    multiply(t9, t0, t30)
+    add(t29, t30, t29)
+    multiply(k10, t29, t29)
+    multiply(t16, t29, t30)
+    multiply(t7, p_3, t7)
+    multiply(t30, t7, t31)
+    negative(t31, Y_y_21)
+    divide(t27, t25, t27)
+    multiply(t4, t3, t31)
+    multiply(t14, t2, t32)
+    add(t31, t32, t31)
+    multiply(k10, t31, t31)
+    multiply(t27, t31, t32)
+    multiply(t32, t7, Y_y_73)
+    multiply(t8, p_3, t8)
+    multiply(t30, t8, t33)
+    negative(t33, Y_y_23)
+    multiply(t32, t8, Y_y_75)
+    multiply(t30, ydd_0, t33)
+    multiply(t32, ydd_1, t34)
+    subtract(t33, t34, t33)
+    add(t3, t3, t34)
+    multiply(t3, t34, t35)
+    multiply(t4, t2, t36)
+    add(t35, t36, t35)
+    add(t2, t2, t36)
+    multiply(t2, t36, t37)
+    multiply(t14, t3, t38)
+    subtract(t37, t38, t37)
+    add(t35, t37, t35)
+    multiply(k10, t35, t35)
+    multiply(yd_1, t35, t35)
+    multiply(t30, yd_0, t37)
+    multiply(t32, yd_1, t38)
+    subtract(t37, t38, t37)
+    multiply(t20, t34, t38)
+    multiply(t13, t36, t39)
+    subtract(t38, t39, t38)
+    multiply(k10, t38, t38)
+    multiply(t37, t38, t38)
+    add(t35, t38, t35)
+    divide(t28, t25, t28)
+    multiply(t28, t29, t29)
+    multiply(t29, yd_0, t38)
+    divide(t24, t25, t24)
+    multiply(t24, t31, t31)
+    multiply(t31, yd_1, t25)
+    add(t38, t25, t38)
+    multiply(t15, t34, t34)
+    multiply(t22, t36, t36)
+    add(t34, t36, t34)
+    multiply(k10, t34, t34)
+    multiply(t38, t34, t34)
+    subtract(t35, t34, t35)
+    multiply(t35, yd_1, t35)
+    add(t20, t20, t25)
+    multiply(t3, t25, t34)
+    negative(t13, t36)
+    add(t36, t36, t36)
+    multiply(t2, t36, t39)
+    add(t34, t39, t34)
+    multiply(k10, t34, t34)
+    multiply(yd_1, t34, t34)
+    multiply(t20, t25, t39)
+    multiply(t4, t13, t40)
+    subtract(t39, t40, t39)
+    multiply(t13, t36, t40)
+    multiply(t14, t20, t41)
+    add(t40, t41, t40)
+    subtract(t39, t40, t39)
+    multiply(k10, t39, t39)
+    multiply(t37, t39, t39)
+    add(t34, t39, t34)
+    multiply(t15, t25, t25)
+    multiply(t4, t22, t39)
+    add(t25, t39, t25)
+    multiply(t22, t36, t36)
+    multiply(t14, t15, t40)
+    subtract(t36, t40, t36)
+    add(t25, t36, t25)
+    multiply(k10, t25, t25)
+    multiply(t38, t25, t25)
+    subtract(t34, t25, t34)
+    multiply(t34, t37, t34)
+    add(t35, t34, t35)
+    add(t15, t15, t25)
+    multiply(t3, t25, t3)
+    add(t22, t22, t34)
+    multiply(t2, t34, t2)
+    add(t3, t2, t3)
+    multiply(k10, t3, t3)
+    multiply(yd_1, t3, t3)
+    multiply(t20, t25, t20)
+    add(t20, t39, t20)
+    multiply(t13, t34, t13)
+    add(t13, t40, t13)
+    subtract(t20, t13, t20)
+    multiply(k10, t20, t20)
+    multiply(t37, t20, t20)
+    add(t3, t20, t3)
+    multiply(t15, t25, t25)
+    multiply(t4, t11, t4)
+    subtract(t25, t4, t25)
+    negative(t19, t2)
+    add(t2, t2, t2)
+    multiply(t19, t2, t2)
+    multiply(t18, t17, t18)
+    add(t2, t18, t2)
+    subtract(t25, t2, t25)
+    multiply(t22, t34, t34)
+    multiply(t14, t21, t14)
+    subtract(t34, t14, t34)
+    add(t25, t34, t25)
+    multiply(k10, t25, t25)
+    multiply(t38, t25, t25)
+    subtract(t3, t25, t3)
+    multiply(t3, t38, t3)
+    subtract(t35, t3, t35)
+    multiply(t27, t35, t27)
+    add(t1, t1, t2)
+    multiply(t1, t2, t3)
+    multiply(t5, t0, t4)
+    add(t3, t4, t3)
+    add(t0, t0, t4)
+    multiply(t0, t4, t13)
+    multiply(t9, t1, t14)
+    subtract(t13, t14, t13)
+    add(t3, t13, t3)
+    multiply(k10, t3, t3)
+    multiply(yd_0, t3, t3)
+    multiply(t23, t2, t13)
+    multiply(t10, t4, t14)
+    add(t13, t14, t13)
+    multiply(k10, t13, t13)
+    multiply(t37, t13, t13)
+    subtract(t3, t13, t3)
+    multiply(t15, t2, t2)
+    multiply(t22, t4, t4)
+    add(t2, t4, t2)
+    multiply(k10, t2, t2)
+    multiply(t38, t2, t2)
+    add(t3, t2, t3)
+    multiply(t3, yd_0, t3)
+    negative(t23, t2)
+    add(t2, t2, t2)
+    multiply(t1, t2, t4)
+    negative(t10, t13)
+    add(t13, t13, t13)
+    multiply(t0, t13, t14)
+    add(t4, t14, t4)
+    multiply(k10, t4, t4)
+    multiply(yd_0, t4, t4)
+    multiply(t23, t2, t14)
+    multiply(t5, t10, t18)
+    add(t14, t18, t14)
+    multiply(t10, t13, t18)
+    multiply(t9, t23, t20)
+    subtract(t18, t20, t18)
+    add(t14, t18, t14)
+    multiply(k10, t14, t14)
+    multiply(t37, t14, t14)
+    subtract(t4, t14, t4)
+    multiply(t15, t2, t2)
+    multiply(t5, t22, t14)
+    add(t2, t14, t2)
+    multiply(t22, t13, t13)
+    multiply(t9, t15, t18)
+    subtract(t13, t18, t13)
+    add(t2, t13, t2)
+    multiply(k10, t2, t2)
+    multiply(t38, t2, t2)
+    add(t4, t2, t4)
+    multiply(t4, t37, t4)
+    add(t3, t4, t3)
+    negative(t15, t2)
+    add(t2, t2, t2)
+    multiply(t1, t2, t1)
+    negative(t22, t4)
+    add(t4, t4, t4)
+    multiply(t0, t4, t0)
+    add(t1, t0, t1)
+    multiply(k10, t1, t1)
+    multiply(yd_0, t1, t1)
+    multiply(t23, t2, t23)
+    add(t23, t14, t23)
+    multiply(t10, t4, t10)
+    subtract(t10, t18, t10)
+    add(t23, t10, t23)
+    multiply(k10, t23, t23)
+    multiply(t37, t23, t23)
+    subtract(t1, t23, t1)
+    add(t19, t19, t0)
+    multiply(t19, t0, t19)
+    multiply(t26, t17, t26)
+    add(t19, t26, t19)
+    multiply(t15, t2, t15)
+    multiply(t5, t11, t5)
+    subtract(t15, t5, t15)
+    subtract(t19, t15, t19)
+    multiply(t22, t4, t22)
+    multiply(t9, t21, t9)
+    subtract(t22, t9, t22)
+    subtract(t19, t22, t19)
+    multiply(k10, t19, t19)
+    multiply(t38, t19, t19)
+    subtract(t1, t19, t1)
+    multiply(t1, t38, t1)
+    subtract(t3, t1, t3)
+    multiply(t16, t3, t16)
+    subtract(t27, t16, t27)
+    subtract(t33, t27, t33)
+    multiply(t30, t33, Y_y_26)
+    multiply(t32, t33, t0)
+    negative(t0, Y_y_78)
+    multiply(t12, t7, t0)
+    multiply(t12, t0, t1)
+    multiply(t6, t7, t7)
+    multiply(t6, t7, t2)
+    add(t1, t2, t1)
+    multiply(t30, t1, t2)
+    negative(t2, Y_y_31)
+    multiply(t32, t1, Y_y_83)
+    multiply(t6, t8, t1)
+    multiply(t30, t1, t2)
+    multiply(t29, t0, t4)
+    add(t2, t4, t2)
+    negative(t2, Y_y_32)
+    multiply(t32, t1, t1)
+    multiply(t31, t0, t0)
+    subtract(t1, t0, Y_y_84)
+    multiply(t29, t7, t0)
+    multiply(t12, t8, t8)
+    multiply(t30, t8, t1)
+    subtract(t0, t1, Y_y_33)
+    multiply(t32, t8, t8)
+    multiply(t31, t7, t7)
+    add(t8, t7, Y_y_85)
+    multiply(t6, t37, t0)
+    multiply(t0, t38, t1)
+    multiply(t12, t1, t2)
+    multiply(t12, t37, t4)
+    multiply(t4, t38, t5)
+    multiply(t6, t5, t7)
+    subtract(t2, t7, t8)
+    multiply(t30, t8, t9)
+    multiply(t29, ydd_0, t10)
+    multiply(t31, ydd_1, t11)
+    add(t10, t11, t10)
+    multiply(t28, t3, t28)
+    multiply(t24, t35, t24)
+    add(t28, t24, t28)
+    add(t10, t28, t10)
+    multiply(t29, t10, Y_y_49)
+    add(t9, Y_y_49, Y_y_34)
+    multiply(t31, t10, Y_y_101)
+    multiply(t32, t8, t8)
+    subtract(Y_y_101, t8, Y_y_86)
+    multiply(t0, t4, t3)
+    add(t10, t3, t8)
+    multiply(t12, t8, t8)
+    multiply(t38, t38, t9)
+    multiply(t4, t4, t4)
+    subtract(t9, t4, t11)
+    multiply(t6, t11, t11)
+    add(t8, t11, t8)
+    multiply(t30, t8, t11)
+    multiply(t12, t33, t13)
+    multiply(t29, t13, t14)
+    add(t11, t14, t11)
+    negative(t11, Y_y_35)
+    multiply(t32, t8, t8)
+    multiply(t31, t13, t11)
+    subtract(t8, t11, Y_y_87)
+    add(t13, t1, t13)
+    multiply(t12, t13, t8)
+    add(t8, t7, t8)
+    multiply(t30, t8, t7)
+    multiply(t29, t3, t11)
+    subtract(t7, t11, Y_y_36)
+    multiply(t32, t8, t8)
+    multiply(t31, t3, t7)
+    add(t8, t7, t8)
+    negative(t8, Y_y_88)
+    multiply(t0, t0, t0)
+    subtract(t0, t9, t9)
+    multiply(t12, t9, t9)
+    subtract(t3, t10, t3)
+    multiply(t6, t3, t3)
+    subtract(t9, t3, t9)
+    multiply(t30, t9, t3)
+    multiply(t6, t33, t33)
+    multiply(t29, t33, t8)
+    add(t3, t8, Y_y_37)
+    multiply(t31, t33, t3)
+    multiply(t32, t9, t9)
+    subtract(t3, t9, Y_y_89)
+    subtract(t33, t5, t33)
+    subtract(t33, t5, t5)
+    multiply(t12, t5, t12)
+    add(t13, t1, t13)
+    multiply(t6, t13, t13)
+    add(t12, t13, t12)
+    multiply(t30, t12, t1)
+    subtract(t4, t0, t4)
+    multiply(t29, t4, t0)
+    add(t1, t0, t1)
+    negative(t1, Y_y_38)
+    multiply(t32, t12, t12)
+    multiply(t31, t4, t4)
+    subtract(t12, t4, Y_y_90)
+    multiply(t6, t33, t6)
+    subtract(t6, t2, t6)
+    multiply(t30, t6, t0)
+    add(t0, t11, Y_y_39)
+    multiply(t32, t6, t6)
+    subtract(t7, t6, Y_y_91)
+    sign(yd_0, Y_y_42)
+    sign(yd_1, Y_y_97)
+    multiply(t30, t37, Y_y_47)
+    multiply(t32, t37, t0)
+    negative(t0, Y_y_99)
+    sign(t37, t37)
+    multiply(t30, t37, Y_y_48)
+    multiply(t32, t37, t32)
+    negative(t32, Y_y_100)
+    multiply(t29, t38, Y_y_50)
+    multiply(t31, t38, Y_y_102)
+    negative(t38, t38)
+    sign(t38, t38)
+    multiply(t29, t38, t29)
+    negative(t29, Y_y_51)
+    multiply(t31, t38, t31)
+    negative(t31, Y_y_103)
+    copyto(Y_y_6, ydd_0)
+    copyto(Y_y_40, ydd_0)
+    copyto(Y_y_41, yd_0)
+    copyto(Y_y_46, Y_y_26)
+    copyto(Y_y_68, ydd_1)
+    copyto(Y_y_95, ydd_1)
+    copyto(Y_y_96, yd_1)
+    copyto(Y_y_98, Y_y_78)
+
+
+def base_regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain base regressor Y_b(y, yd, ydd) (2x24, row-major): the 24 independent columns of regressor_y (the closed chain's base parameters, fewer than or as many as the tree's), so that inverse_dynamics_y = Y_b pi_b, pi_b = pi_1 + beta pi_2 (Gautier's QR on Y_y stacked at seeded closed states); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults); q = gamma(y) inside by 8 Newton steps from the reference configuration (call closure for the status). p (4): parameters c, w, b, g.
+
+    in  y [2]
+    in  yd [2]
+    in  ydd [2]
+    in  p [4]
+    out Y_b [2x24]
+    1055 ops: 523 mul, 440 add, 52 div, 36 trig, 4 other
+    """
+    y = _array(y, 2, "base_regressor_y", "y")
+    yd = _array(yd, 2, "base_regressor_y", "yd")
+    ydd = _array(ydd, 2, "base_regressor_y", "ydd")
+    p = _array(p, 4, "base_regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_y_chunk, (y, yd, ydd, p), 42, ((2, 24),), fixed=_base_regressor_y_fixed, pure=10)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    cos, sign, sin = math.cos, _sign, math.sin
+    t0 = cos(y[0])
+    t1 = t0 * p[3]
+    t1 = -t1
+    t2 = sin(y[0])
+    t3 = t2 * p[3]
+    t3 = -t3
+    t4 = cos(y[1])
+    t5 = t4 * p[3]
+    t5 = -t5
+    t6 = sin(y[1])
+    t7 = t6 * p[3]
+    t7 = -t7
+    t4 = t4 * p[0]
+    t8 = (-0.02) - t4
+    t9 = 0.9870674715819652 * p[1]
+    t10 = p[1] - t9
+    t11 = t10 + t10
+    t12 = 0.16030535407398705 * p[1]
+    t11 = t11 * t12
+    t0 = t0 * p[0]
+    t13 = (-0.02) - t0
+    t14 = 0.027436770947998426 * p[1]
+    t15 = 0.9852444312681263 * p[2]
+    t16 = t14 - t15
+    t16 = t13 - t16
+    t17 = t16 + t16
+    t18 = 0.16893973557186973 * p[1]
+    t19 = t17 * t18
+    t11 = t11 - t19
+    t2 = t2 * p[0]
+    t19 = 0.22 + t2
+    t20 = 0.171153178922117 * p[2]
+    t21 = 0.157939957403861 * p[1]
+    t22 = t20 + t21
+    t23 = t19 - t22
+    t24 = t23 + t23
+    t25 = 0.9725027296620408 * p[1]
+    t26 = t24 * t25
+    t11 = t11 - t26
+    t11 = 2.272727272727273 * t11
+    t17 = t17 * t22
+    t22 = t15 - t14
+    t22 = t24 * t22
+    t17 = t17 + t22
+    t17 = 2.272727272727273 * t17
+    t14 = t15 + t14
+    t15 = t8 + t14
+    t22 = t15 + t15
+    t18 = t22 * t18
+    t9 = t9 - p[1]
+    t24 = t9 + t9
+    t12 = t24 * t12
+    t12 = t18 - t12
+    t6 = t6 * p[0]
+    t18 = 0.22 + t6
+    t24 = t20 - t21
+    t24 = t18 - t24
+    t26 = t24 + t24
+    t25 = t26 * t25
+    t12 = t12 + t25
+    t12 = 2.272727272727273 * t12
+    t25 = t17 * t12
+    t20 = t21 - t20
+    t20 = t22 * t20
+    t14 = t26 * t14
+    t14 = t20 - t14
+    t14 = 2.272727272727273 * t14
+    t20 = t11 * t14
+    t20 = t25 + t20
+    t11 = t11 / t20
+    t15 = t15 * t15
+    t9 = t9 * t9
+    t9 = t15 + t9
+    t15 = t24 * t24
+    t9 = t9 + t15
+    t9 = t9 - 0.0484
+    t9 = t9 / 0.44
+    t11 = t11 * t9
+    t12 = t12 / t20
+    t15 = t16 * t16
+    t10 = t10 * t10
+    t10 = t15 + t10
+    t15 = t23 * t23
+    t10 = t10 + t15
+    t10 = t10 - 0.0484
+    t10 = t10 / 0.44
+    t12 = t12 * t10
+    t11 = t11 - t12
+    t11 = 0.172 - t11
+    t12 = t14 / t20
+    t10 = t12 * t10
+    t12 = t17 / t20
+    t9 = t12 * t9
+    t9 = t10 + t9
+    t9 = 0.161 - t9
+    t10 = cos(t9)
+    t12 = t10 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t11)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t11)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t10
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t10 = t22 * t10
+    t10 = p[1] * t10
+    t22 = t29 * t10
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t10 = t27 * t10
+    t10 = t17 + t10
+    t10 = 2.272727272727273 * t10
+    t17 = t22 * t10
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t10 = t10 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t10 = t10 * t14
+    t10 = t15 - t10
+    t10 = t11 - t10
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = t16 / t17
+    t11 = t11 * t14
+    t14 = t22 / t17
+    t12 = t14 * t12
+    t11 = t11 + t12
+    t9 = t9 - t11
+    t11 = cos(t9)
+    t12 = t11 * p[1]
+    t14 = p[1] - t12
+    t15 = t14 + t14
+    t16 = sin(t9)
+    t17 = p[1] * t16
+    t15 = t15 * t17
+    t20 = sin(t10)
+    t21 = t20 * t16
+    t21 = t21 * p[1]
+    t22 = cos(t10)
+    t23 = t22 * p[2]
+    t24 = t21 - t23
+    t24 = t13 - t24
+    t25 = t24 + t24
+    t26 = t20 * t11
+    t26 = p[1] * t26
+    t27 = t25 * t26
+    t15 = t15 - t27
+    t20 = t20 * p[2]
+    t16 = t22 * t16
+    t16 = t16 * p[1]
+    t27 = t20 + t16
+    t28 = t19 - t27
+    t29 = t28 + t28
+    t11 = t22 * t11
+    t11 = p[1] * t11
+    t22 = t29 * t11
+    t15 = t15 - t22
+    t15 = 2.272727272727273 * t15
+    t22 = t25 * t27
+    t25 = t23 - t21
+    t25 = t29 * t25
+    t22 = t22 + t25
+    t22 = 2.272727272727273 * t22
+    t21 = t23 + t21
+    t23 = t8 + t21
+    t25 = t23 + t23
+    t26 = t25 * t26
+    t12 = t12 - p[1]
+    t27 = t12 + t12
+    t17 = t27 * t17
+    t17 = t26 - t17
+    t26 = t20 - t16
+    t26 = t18 - t26
+    t27 = t26 + t26
+    t11 = t27 * t11
+    t11 = t17 + t11
+    t11 = 2.272727272727273 * t11
+    t17 = t22 * t11
+    t16 = t16 - t20
+    t16 = t25 * t16
+    t20 = t27 * t21
+    t16 = t16 - t20
+    t16 = 2.272727272727273 * t16
+    t20 = t15 * t16
+    t17 = t17 + t20
+    t15 = t15 / t17
+    t20 = t23 * t23
+    t12 = t12 * t12
+    t12 = t20 + t12
+    t20 = t26 * t26
+    t12 = t12 + t20
+    t12 = t12 - 0.0484
+    t12 = t12 / 0.44
+    t15 = t15 * t12
+    t11 = t11 / t17
+    t20 = t24 * t24
+    t14 = t14 * t14
+    t14 = t20 + t14
+    t20 = t28 * t28
+    t14 = t14 + t20
+    t14 = t14 - 0.0484
+    t14 = t14 / 0.44
+    t11 = t11 * t14
+    t11 = t15 - t11
+    t10 = t10 - t11
+    t11 = cos(t10)
+    t15 = t11 * p[2]
+    t10 = sin(t10)
+    t16 = t16 / t17
+    t14 = t16 * t14
+    t16 = t22 / t17
+    t12 = t16 * t12
+    t12 = t14 + t12
+    t9 = t9 - t12
+    t12 = sin(t9)
+    t14 = t10 * t12
+    t14 = t14 * p[1]
+    t16 = t15 + t14
+    t8 = t8 + t16
+    t8 = t8 + t8
+    t9 = cos(t9)
+    t17 = t10 * t9
+    t17 = p[1] * t17
+    t20 = t8 * t17
+    t21 = t9 * p[1]
+    t22 = t21 - p[1]
+    t22 = t22 + t22
+    t23 = p[1] * t12
+    t24 = t22 * t23
+    t20 = t20 - t24
+    t24 = t10 * p[2]
+    t25 = t11 * t12
+    t25 = t25 * p[1]
+    t26 = t24 - t25
+    t18 = t18 - t26
+    t18 = t18 + t18
+    t26 = t11 * t9
+    t26 = p[1] * t26
+    t27 = t18 * t26
+    t20 = t20 + t27
+    t20 = 2.272727272727273 * t20
+    t27 = t14 - t15
+    t13 = t13 - t27
+    t13 = t13 + t13
+    t27 = t25 + t24
+    t28 = t13 * t27
+    t19 = t19 - t27
+    t19 = t19 + t19
+    t15 = t15 - t14
+    t29 = t19 * t15
+    t28 = t28 + t29
+    t28 = 2.272727272727273 * t28
+    t29 = t28 * t20
+    t30 = p[1] - t21
+    t30 = t30 + t30
+    t31 = t30 * t23
+    t32 = t13 * t17
+    t31 = t31 - t32
+    t32 = t19 * t26
+    t31 = t31 - t32
+    t31 = 2.272727272727273 * t31
+    t24 = t25 - t24
+    t32 = t8 * t24
+    t33 = t18 * t16
+    t32 = t32 - t33
+    t32 = 2.272727272727273 * t32
+    t33 = t31 * t32
+    t29 = t29 + t33
+    t20 = t20 / t29
+    t33 = t13 * t2
+    t34 = t19 * t0
+    t33 = t33 + t34
+    t33 = 2.272727272727273 * t33
+    t34 = t20 * t33
+    t11 = t11 * p[3]
+    t35 = t34 * t11
+    t35 = -t35
+    t31 = t31 / t29
+    t36 = t8 * t6
+    t37 = t18 * t4
+    t36 = t36 + t37
+    t36 = 2.272727272727273 * t36
+    t37 = t31 * t36
+    t38 = t37 * t11
+    t10 = t10 * p[3]
+    t39 = t34 * t10
+    t39 = -t39
+    t40 = t37 * t10
+    t41 = t34 * ydd[0]
+    t42 = t37 * ydd[1]
+    t41 = t41 - t42
+    t42 = t6 + t6
+    t43 = t6 * t42
+    t44 = t8 * t4
+    t43 = t43 + t44
+    t44 = t4 + t4
+    t45 = t4 * t44
+    t46 = t18 * t6
+    t45 = t45 - t46
+    t43 = t43 + t45
+    t43 = 2.272727272727273 * t43
+    t43 = yd[1] * t43
+    t45 = t34 * yd[0]
+    t46 = t37 * yd[1]
+    t45 = t45 - t46
+    t46 = t24 * t42
+    t47 = t16 * t44
+    t46 = t46 - t47
+    t46 = 2.272727272727273 * t46
+    t46 = t45 * t46
+    t43 = t43 + t46
+    t32 = t32 / t29
+    t33 = t32 * t33
+    t46 = t33 * yd[0]
+    t28 = t28 / t29
+    t29 = t28 * t36
+    t36 = t29 * yd[1]
+    t36 = t46 + t36
+    t42 = t17 * t42
+    t44 = t26 * t44
+    t42 = t42 + t44
+    t42 = 2.272727272727273 * t42
+    t42 = t36 * t42
+    t42 = t43 - t42
+    t42 = t42 * yd[1]
+    t43 = t24 + t24
+    t44 = t6 * t43
+    t46 = -t16
+    t46 = t46 + t46
+    t47 = t4 * t46
+    t44 = t44 + t47
+    t44 = 2.272727272727273 * t44
+    t44 = yd[1] * t44
+    t47 = t24 * t43
+    t48 = t8 * t16
+    t47 = t47 - t48
+    t48 = t16 * t46
+    t49 = t18 * t24
+    t48 = t48 + t49
+    t47 = t47 - t48
+    t47 = 2.272727272727273 * t47
+    t47 = t45 * t47
+    t44 = t44 + t47
+    t43 = t17 * t43
+    t47 = t8 * t26
+    t43 = t43 + t47
+    t46 = t26 * t46
+    t48 = t18 * t17
+    t46 = t46 - t48
+    t43 = t43 + t46
+    t43 = 2.272727272727273 * t43
+    t43 = t36 * t43
+    t43 = t44 - t43
+    t43 = t43 * t45
+    t42 = t42 + t43
+    t43 = t17 + t17
+    t6 = t6 * t43
+    t44 = t26 + t26
+    t4 = t4 * t44
+    t4 = t6 + t4
+    t4 = 2.272727272727273 * t4
+    t4 = yd[1] * t4
+    t6 = t24 * t43
+    t6 = t6 + t47
+    t16 = t16 * t44
+    t16 = t16 + t48
+    t6 = t6 - t16
+    t6 = 2.272727272727273 * t6
+    t6 = t45 * t6
+    t4 = t4 + t6
+    t6 = t17 * t43
+    t8 = t8 * t14
+    t6 = t6 - t8
+    t8 = -t23
+    t8 = t8 + t8
+    t8 = t23 * t8
+    t16 = t22 * t21
+    t8 = t8 + t16
+    t6 = t6 - t8
+    t8 = t26 * t44
+    t16 = t18 * t25
+    t8 = t8 - t16
+    t6 = t6 + t8
+    t6 = 2.272727272727273 * t6
+    t6 = t36 * t6
+    t4 = t4 - t6
+    t4 = t4 * t36
+    t4 = t42 - t4
+    t6 = t31 * t4
+    t8 = t2 + t2
+    t16 = t2 * t8
+    t18 = t13 * t0
+    t16 = t16 + t18
+    t18 = t0 + t0
+    t22 = t0 * t18
+    t24 = t19 * t2
+    t22 = t22 - t24
+    t16 = t16 + t22
+    t16 = 2.272727272727273 * t16
+    t16 = yd[0] * t16
+    t22 = t27 * t8
+    t24 = t15 * t18
+    t22 = t22 + t24
+    t22 = 2.272727272727273 * t22
+    t22 = t45 * t22
+    t16 = t16 - t22
+    t8 = t17 * t8
+    t18 = t26 * t18
+    t8 = t8 + t18
+    t8 = 2.272727272727273 * t8
+    t8 = t36 * t8
+    t8 = t16 + t8
+    t8 = t8 * yd[0]
+    t16 = -t27
+    t16 = t16 + t16
+    t18 = t2 * t16
+    t22 = -t15
+    t22 = t22 + t22
+    t24 = t0 * t22
+    t18 = t18 + t24
+    t18 = 2.272727272727273 * t18
+    t18 = yd[0] * t18
+    t24 = t27 * t16
+    t31 = t13 * t15
+    t24 = t24 + t31
+    t31 = t15 * t22
+    t42 = t19 * t27
+    t31 = t31 - t42
+    t24 = t24 + t31
+    t24 = 2.272727272727273 * t24
+    t24 = t45 * t24
+    t18 = t18 - t24
+    t16 = t17 * t16
+    t24 = t13 * t26
+    t16 = t16 + t24
+    t22 = t26 * t22
+    t31 = t19 * t17
+    t22 = t22 - t31
+    t16 = t16 + t22
+    t16 = 2.272727272727273 * t16
+    t16 = t36 * t16
+    t16 = t18 + t16
+    t16 = t16 * t45
+    t8 = t8 + t16
+    t16 = -t17
+    t16 = t16 + t16
+    t2 = t2 * t16
+    t18 = -t26
+    t18 = t18 + t18
+    t0 = t0 * t18
+    t0 = t2 + t0
+    t0 = 2.272727272727273 * t0
+    t0 = yd[0] * t0
+    t2 = t27 * t16
+    t2 = t2 + t24
+    t15 = t15 * t18
+    t15 = t15 - t31
+    t2 = t2 + t15
+    t2 = 2.272727272727273 * t2
+    t2 = t45 * t2
+    t0 = t0 - t2
+    t2 = t23 + t23
+    t2 = t23 * t2
+    t15 = t30 * t21
+    t2 = t2 + t15
+    t15 = t17 * t16
+    t13 = t13 * t14
+    t13 = t15 - t13
+    t2 = t2 - t13
+    t13 = t26 * t18
+    t14 = t19 * t25
+    t13 = t13 - t14
+    t2 = t2 - t13
+    t2 = 2.272727272727273 * t2
+    t2 = t36 * t2
+    t0 = t0 - t2
+    t0 = t0 * t36
+    t0 = t8 - t0
+    t2 = t20 * t0
+    t2 = t6 - t2
+    t2 = t41 - t2
+    t6 = t34 * t2
+    t8 = t37 * t2
+    t8 = -t8
+    t13 = t12 * t10
+    t14 = t34 * t13
+    t15 = t9 * t11
+    t16 = t33 * t15
+    t14 = t14 + t16
+    t14 = -t14
+    t13 = t37 * t13
+    t15 = t29 * t15
+    t13 = t13 - t15
+    t11 = t12 * t11
+    t15 = t33 * t11
+    t10 = t9 * t10
+    t16 = t34 * t10
+    t15 = t15 - t16
+    t10 = t37 * t10
+    t11 = t29 * t11
+    t10 = t10 + t11
+    t11 = t12 * t45
+    t16 = t11 * t36
+    t17 = t9 * t16
+    t18 = t9 * t45
+    t19 = t18 * t36
+    t20 = t12 * t19
+    t20 = t17 - t20
+    t21 = t34 * t20
+    t22 = t33 * ydd[0]
+    t23 = t29 * ydd[1]
+    t22 = t22 + t23
+    t0 = t32 * t0
+    t4 = t28 * t4
+    t0 = t0 + t4
+    t0 = t22 + t0
+    t4 = t33 * t0
+    t4 = t21 + t4
+    t21 = t29 * t0
+    t20 = t37 * t20
+    t20 = t21 - t20
+    t21 = t11 * t18
+    t22 = t0 + t21
+    t22 = t9 * t22
+    t23 = t36 * t36
+    t18 = t18 * t18
+    t24 = t23 - t18
+    t24 = t12 * t24
+    t22 = t22 + t24
+    t24 = t34 * t22
+    t25 = t9 * t2
+    t26 = t33 * t25
+    t24 = t24 + t26
+    t24 = -t24
+    t22 = t37 * t22
+    t26 = t29 * t25
+    t22 = t22 - t26
+    t11 = t11 * t11
+    t23 = t11 - t23
+    t23 = t9 * t23
+    t0 = t21 - t0
+    t0 = t12 * t0
+    t0 = t23 - t0
+    t23 = t34 * t0
+    t2 = t12 * t2
+    t26 = t33 * t2
+    t23 = t23 + t26
+    t26 = t29 * t2
+    t0 = t37 * t0
+    t0 = t26 - t0
+    t2 = t2 - t19
+    t19 = t2 - t19
+    t9 = t9 * t19
+    t19 = t25 + t16
+    t16 = t19 + t16
+    t16 = t12 * t16
+    t9 = t9 + t16
+    t16 = t34 * t9
+    t11 = t18 - t11
+    t18 = t33 * t11
+    t16 = t16 + t18
+    t16 = -t16
+    t9 = t37 * t9
+    t11 = t29 * t11
+    t9 = t9 - t11
+    t2 = t12 * t2
+    t2 = t2 - t17
+    t11 = t34 * t2
+    t12 = t33 * t21
+    t11 = t11 + t12
+    t12 = t29 * t21
+    t2 = t37 * t2
+    t2 = t12 - t2
+    t12 = sign(yd[0])
+    t17 = sign(yd[1])
+    t18 = t34 * t45
+    t19 = t37 * t45
+    t19 = -t19
+    t21 = sign(t45)
+    t25 = t34 * t21
+    t21 = t37 * t21
+    t21 = -t21
+    t26 = t33 * t36
+    t27 = t29 * t36
+    t28 = -t36
+    t28 = sign(t28)
+    t30 = t33 * t28
+    t30 = -t30
+    t28 = t29 * t28
+    t28 = -t28
+    _Y_b = (t1, t3, ydd[0], 0.0, 0.0, 0.0, t35, t39, t6, t14, t15, t4, t24, t23, t16, t11, yd[0], t12, 0.0, 0.0, t18, t25, t26, t30,
+            0.0, 0.0, 0.0, t5, t7, ydd[1], t38, t40, t8, t13, t10, t20, t22, t0, t9, t2, 0.0, 0.0, yd[1], t17, t19, t21, t27, t28)
+    return np.array(_Y_b).reshape(2, 24)
+
+
+_base_regressor_y_constants = _constants(
+    -0.02, 0.9870674715819652, 0.16030535407398705, 0.027436770947998426, 0.9852444312681263,
+    0.16893973557186973, 0.22, 0.171153178922117, 0.157939957403861, 0.9725027296620408,
+    2.272727272727273, 0.0484, 0.44, 0.172, 0.161)
+
+
+_base_regressor_y_fixed = (
+    {3: 0.0, 4: 0.0, 5: 0.0, 18: 0.0, 19: 0.0, 24: 0.0, 25: 0.0, 26: 0.0, 40: 0.0, 41: 0.0},
+)
+"""base_regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _base_regressor_y_chunk(x, t, s, y):
+    """base_regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.subtract
+    y_0, y_1, yd_0, yd_1, ydd_0, ydd_1, p_0, p_1, p_2, p_3 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32, t33, t34, t35, t36, t37, t38, t39, t40, t41) = t
+    s0, s1, s2, s3, s4, s5, s6, s7, s8, s9 = s
+    (Y_b_0, Y_b_1, Y_b_2, Y_b_6, Y_b_7, Y_b_8, Y_b_9, Y_b_10, Y_b_11, Y_b_12, Y_b_13, Y_b_14, Y_b_15,
+     Y_b_16, Y_b_17, Y_b_20, Y_b_21, Y_b_22, Y_b_23, Y_b_27, Y_b_28, Y_b_29, Y_b_30, Y_b_31, Y_b_32,
+     Y_b_33, Y_b_34, Y_b_35, Y_b_36, Y_b_37, Y_b_38, Y_b_39, Y_b_42, Y_b_43, Y_b_44, Y_b_45, Y_b_46,
+     Y_b_47) = y
+    k0, k1, k2, k3, k4, k5, k6, k7, k8, k9, k10, k11, k12, k13, k14 = _base_regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_3, t1)
+    negative(t1, Y_b_0)
+    sin(y_0, t1)
+    multiply(t1, p_3, t2)
+    negative(t2, Y_b_1)
+    cos(y_1, t2)
+    multiply(t2, p_3, t3)
+    negative(t3, Y_b_27)
+    sin(y_1, t3)
+    multiply(t3, p_3, t4)
+    negative(t4, Y_b_28)
+    multiply(t2, p_0, t2)
+    subtract(k0, t2, t4)
+    multiply(k1, p_1, s0)
+    subtract(p_1, s0, s1)
+    add(s1, s1, s2)
+    multiply(k2, p_1, s3)
+    multiply(s2, s3, s2)
+    multiply(t0, p_0, t0)
+    subtract(k0, t0, t5)
+    multiply(k3, p_1, s4)
+    multiply(k4, p_2, s5)
+    subtract(s4, s5, s6)
+    subtract(t5, s6, t6)
+    add(t6, t6, t7)
+    multiply(k5, p_1, s6)
+    multiply(t7, s6, t8)
+    subtract(s2, t8, t8)
+    multiply(t1, p_0, t1)
+    add(k6, t1, t9)
+    multiply(k7, p_2, s2)
+    multiply(k8, p_1, s7)
+    add(s2, s7, s8)
+    subtract(t9, s8, t10)
+    add(t10, t10, t11)
+    multiply(k9, p_1, s9)
+    multiply(t11, s9, t12)
+    subtract(t8, t12, t8)
+    multiply(k10, t8, t8)
+    multiply(t7, s8, t7)
+    subtract(s5, s4, s8)
+    multiply(t11, s8, t11)
+    add(t7, t11, t7)
+    multiply(k10, t7, t7)
+    add(s5, s4, s5)
+    add(t4, s5, t11)
+    add(t11, t11, t12)
+    multiply(t12, s6, t13)
+    subtract(s0, p_1, s0)
+    add(s0, s0, s4)
+    multiply(s4, s3, s4)
+    subtract(t13, s4, t13)
+    multiply(t3, p_0, t3)
+    add(k6, t3, t14)
+    subtract(s2, s7, s3)
+    subtract(t14, s3, t15)
+    add(t15, t15, t16)
+    multiply(t16, s9, t17)
+    add(t13, t17, t13)
+    multiply(k10, t13, t13)
+    multiply(t7, t13, t17)
+    subtract(s7, s2, s7)
+    multiply(t12, s7, t12)
+    multiply(t16, s5, t16)
+    subtract(t12, t16, t12)
+    multiply(k10, t12, t12)
+    multiply(t8, t12, t16)
+    add(t17, t16, t17)
+    divide(t8, t17, t8)
+    multiply(t11, t11, t11)
+    multiply(s0, s0, s0)
+    add(t11, s0, t11)
+    multiply(t15, t15, t15)
+    add(t11, t15, t11)
+    subtract(t11, k11, t11)
+    divide(t11, k12, t11)
+    multiply(t8, t11, t8)
+    divide(t13, t17, t13)
+    multiply(t6, t6, t6)
+    multiply(s1, s1, s1)
+    add(t6, s1, t6)
+    multiply(t10, t10, t10)
+    add(t6, t10, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t13, t6, t13)
+    subtract(t8, t13, t8)
+    subtract(k13, t8, t8)
+    divide(t12, t17, t12)
+    multiply(t12, t6, t12)
+    divide(t7, t17, t7)
+    multiply(t7, t11, t7)
+    add(t12, t7, t12)
+    subtract(k14, t12, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    cos(t12, t6)
+    multiply(t6, p_1, t7)
+    subtract(p_1, t7, t10)
+    add(t10, t10, t11)
+    sin(t12, t13)
+    multiply(p_1, t13, t15)
+    multiply(t11, t15, t11)
+    sin(t8, t16)
+    multiply(t16, t13, t17)
+    multiply(t17, p_1, t17)
+    cos(t8, t18)
+    multiply(t18, p_2, t19)
+    subtract(t17, t19, t20)
+    subtract(t5, t20, t20)
+    add(t20, t20, t21)
+    multiply(t16, t6, t22)
+    multiply(p_1, t22, t22)
+    multiply(t21, t22, t23)
+    subtract(t11, t23, t11)
+    multiply(t16, p_2, t16)
+    multiply(t18, t13, t13)
+    multiply(t13, p_1, t13)
+    add(t16, t13, t23)
+    subtract(t9, t23, t24)
+    add(t24, t24, t25)
+    multiply(t18, t6, t18)
+    multiply(p_1, t18, t18)
+    multiply(t25, t18, t6)
+    subtract(t11, t6, t11)
+    multiply(k10, t11, t11)
+    multiply(t21, t23, t21)
+    subtract(t19, t17, t6)
+    multiply(t25, t6, t25)
+    add(t21, t25, t21)
+    multiply(k10, t21, t21)
+    add(t19, t17, t19)
+    add(t4, t19, t6)
+    add(t6, t6, t17)
+    multiply(t17, t22, t22)
+    subtract(t7, p_1, t7)
+    add(t7, t7, t23)
+    multiply(t23, t15, t23)
+    subtract(t22, t23, t22)
+    subtract(t16, t13, t15)
+    subtract(t14, t15, t15)
+    add(t15, t15, t23)
+    multiply(t23, t18, t18)
+    add(t22, t18, t22)
+    multiply(k10, t22, t22)
+    multiply(t21, t22, t18)
+    subtract(t13, t16, t13)
+    multiply(t17, t13, t17)
+    multiply(t23, t19, t23)
+    subtract(t17, t23, t17)
+    multiply(k10, t17, t17)
+    multiply(t11, t17, t13)
+    add(t18, t13, t18)
+    divide(t11, t18, t11)
+    multiply(t6, t6, t6)
+    multiply(t7, t7, t7)
+    add(t6, t7, t6)
+    multiply(t15, t15, t15)
+    add(t6, t15, t6)
+    subtract(t6, k11, t6)
+    divide(t6, k12, t6)
+    multiply(t11, t6, t11)
+    divide(t22, t18, t22)
+    multiply(t20, t20, t20)
+    multiply(t10, t10, t10)
+    add(t20, t10, t20)
+    multiply(t24, t24, t24)
+    add(t20, t24, t20)
+    subtract(t20, k11, t20)
+    divide(t20, k12, t20)
+    multiply(t22, t20, t22)
+    subtract(t11, t22, t11)
+    subtract(t8, t11, t8)
+    cos(t8, t7)
+    multiply(t7, p_2, t10)
+    sin(t8, t8)
+    divide(t17, t18, t17)
+    multiply(t17, t20, t17)
+    divide(t21, t18, t21)
+    multiply(t21, t6, t21)
+    add(t17, t21, t17)
+    subtract(t12, t17, t12)
+    sin(t12, t6)
+    multiply(t8, t6, t11)
+    multiply(t11, p_1, t11)
+    add(t10, t11, t13)
+    add(t4, t13, t4)
+    add(t4, t4, t4)
+    cos(t12, t12)
+    multiply(t8, t12, t15)
+    multiply(p_1, t15, t15)
+    multiply(t4, t15, t16)
+    multiply(t12, p_1, t17)
+    subtract(t17, p_1, t18)
+    add(t18, t18, t18)
+    multiply(p_1, t6, t19)
+    multiply(t18, t19, t20)
+    subtract(t16, t20, t16)
+    multiply(t8, p_2, t20)
+    multiply(t7, t6, t21)
+    multiply(t21, p_1, t21)
+    subtract(t20, t21, t22)
+    subtract(t14, t22, t14)
+    add(t14, t14, t14)
+    multiply(t7, t12, t22)
+    multiply(p_1, t22, t22)
+    multiply(t14, t22, t23)
+    add(t16, t23, t16)
+    multiply(k10, t16, t16)
+    subtract(t11, t10, t23)
+    subtract(t5, t23, t5)
+    add(t5, t5, t5)
+    add(t21, t20, t23)
+    multiply(t5, t23, t24)
+    subtract(t9, t23, t9)
+    add(t9, t9, t9)
+    subtract(t10, t11, t10)
+    multiply(t9, t10, t25)
+    add(t24, t25, t24)
+    multiply(k10, t24, t24)
+    multiply(t24, t16, t25)
+    subtract(p_1, t17, t26)
+    add(t26, t26, t26)
+    multiply(t26, t19, t27)
+    multiply(t5, t15, t28)
+    subtract(t27, t28, t27)
+    multiply(t9, t22, t28)
+    subtract(t27, t28, t27)
+    multiply(k10, t27, t27)
+    subtract(t21, t20, t20)
+    multiply(t4, t20, t28)
+    multiply(t14, t13, t29)
+    subtract(t28, t29, t28)
+    multiply(k10, t28, t28)
+    multiply(t27, t28, t29)
+    add(t25, t29, t25)
+    divide(t16, t25, t16)
+    multiply(t5, t1, t29)
+    multiply(t9, t0, t30)
+    add(t29, t30, t29)
+    multiply(k10, t29, t29)
+    multiply(t16, t29, t30)
+    multiply(t7, p_3, t7)
+    multiply(t30, t7, t31)
+    negative(t31, Y_b_6)
+    divide(t27, t25, t27)
+    multiply(t4, t3, t31)
+    multiply(t14, t2, t32)
+    add(t31, t32, t31)
+    multiply(k10, t31, t31)
+    multiply(t27, t31, t32)
+    multiply(t32, t7, Y_b_30)
+    multiply(t8, p_3, t8)
+    multiply(t30, t8, t33)
+    negative(t33, Y_b_7)
+    multiply(t32, t8, Y_b_31)
+    multiply(t30, ydd_0, t33)
+    multiply(t32, ydd_1, t34)
+    subtract(t33, t34, t33)
+    add(t3, t3, t34)
+    multiply(t3, t34, t35)
+    multiply(t4, t2, t36)
+    add(t35, t36, t35)
+    add(t2, t2, t36)
+    multiply(t2, t36, t37)
+    multiply(t14, t3, t38)
+    subtract(t37, t38, t37)
+    add(t35, t37, t35)
+    multiply(k10, t35, t35)
+    multiply(yd_1, t35, t35)
+    multiply(t30, yd_0, t37)
+    multiply(t32, yd_1, t38)
+    subtract(t37, t38, t37)
+    multiply(t20, t34, t38)
+    multiply(t13, t36, t39)
+    subtract(t38, t39, t38)
+    multiply(k10, t38, t38)
+    multiply(t37, t38, t38)
+    add(t35, t38, t35)
+    divide(t28, t25, t28)
+    multiply(t28, t29, t29)
+    multiply(t29, yd_0, t38)
+    divide(t24, t25, t24)
+    multiply(t24, t31, t31)
+    multiply(t31, yd_1, t25)
+    add(t38, t25, t38)
+    multiply(t15, t34, t34)
+    multiply(t22, t36, t36)
+    add(t34, t36, t34)
+    multiply(k10, t34, t34)
+    multiply(t38, t34, t34)
+    subtract(t35, t34, t35)
+    multiply(t35, yd_1, t35)
+    add(t20, t20, t25)
+    multiply(t3, t25, t34)
+    negative(t13, t36)
+    add(t36, t36, t36)
+    multiply(t2, t36, t39)
+    add(t34, t39, t34)
+    multiply(k10, t34, t34)
+    multiply(yd_1, t34, t34)
+    multiply(t20, t25, t39)
+    multiply(t4, t13, t40)
+    subtract(t39, t40, t39)
+    multiply(t13, t36, t40)
+    multiply(t14, t20, t41)
+    add(t40, t41, t40)
+    subtract(t39, t40, t39)
+    multiply(k10, t39, t39)
+    multiply(t37, t39, t39)
+    add(t34, t39, t34)
+    multiply(t15, t25, t25)
+    multiply(t4, t22, t39)
+    add(t25, t39, t25)
+    multiply(t22, t36, t36)
+    multiply(t14, t15, t40)
+    subtract(t36, t40, t36)
+    add(t25, t36, t25)
+    multiply(k10, t25, t25)
+    multiply(t38, t25, t25)
+    subtract(t34, t25, t34)
+    multiply(t34, t37, t34)
+    add(t35, t34, t35)
+    add(t15, t15, t25)
+    multiply(t3, t25, t3)
+    add(t22, t22, t34)
+    multiply(t2, t34, t2)
+    add(t3, t2, t3)
+    multiply(k10, t3, t3)
+    multiply(yd_1, t3, t3)
+    multiply(t20, t25, t20)
+    add(t20, t39, t20)
+    multiply(t13, t34, t13)
+    add(t13, t40, t13)
+    subtract(t20, t13, t20)
+    multiply(k10, t20, t20)
+    multiply(t37, t20, t20)
+    add(t3, t20, t3)
+    multiply(t15, t25, t25)
+    multiply(t4, t11, t4)
+    subtract(t25, t4, t25)
+    negative(t19, t2)
+    add(t2, t2, t2)
+    multiply(t19, t2, t2)
+    multiply(t18, t17, t18)
+    add(t2, t18, t2)
+    subtract(t25, t2, t25)
+    multiply(t22, t34, t34)
+    multiply(t14, t21, t14)
+    subtract(t34, t14, t34)
+    add(t25, t34, t25)
+    multiply(k10, t25, t25)
+    multiply(t38, t25, t25)
+    subtract(t3, t25, t3)
+    multiply(t3, t38, t3)
+    subtract(t35, t3, t35)
+    multiply(t27, t35, t27)
+    add(t1, t1, t2)
+    multiply(t1, t2, t3)
+    multiply(t5, t0, t4)
+    add(t3, t4, t3)
+    add(t0, t0, t4)
+    multiply(t0, t4, t13)
+    multiply(t9, t1, t14)
+    subtract(t13, t14, t13)
+    add(t3, t13, t3)
+    multiply(k10, t3, t3)
+    multiply(yd_0, t3, t3)
+    multiply(t23, t2, t13)
+    multiply(t10, t4, t14)
+    add(t13, t14, t13)
+    multiply(k10, t13, t13)
+    multiply(t37, t13, t13)
+    subtract(t3, t13, t3)
+    multiply(t15, t2, t2)
+    multiply(t22, t4, t4)
+    add(t2, t4, t2)
+    multiply(k10, t2, t2)
+    multiply(t38, t2, t2)
+    add(t3, t2, t3)
+    multiply(t3, yd_0, t3)
+    negative(t23, t2)
+    add(t2, t2, t2)
+    multiply(t1, t2, t4)
+    negative(t10, t13)
+    add(t13, t13, t13)
+    multiply(t0, t13, t14)
+    add(t4, t14, t4)
+    multiply(k10, t4, t4)
+    multiply(yd_0, t4, t4)
+    multiply(t23, t2, t14)
+    multiply(t5, t10, t18)
+    add(t14, t18, t14)
+    multiply(t10, t13, t18)
+    multiply(t9, t23, t20)
+    subtract(t18, t20, t18)
+    add(t14, t18, t14)
+    multiply(k10, t14, t14)
+    multiply(t37, t14, t14)
+    subtract(t4, t14, t4)
+    multiply(t15, t2, t2)
+    multiply(t5, t22, t14)
+    add(t2, t14, t2)
+    multiply(t22, t13, t13)
+    multiply(t9, t15, t18)
+    subtract(t13, t18, t13)
+    add(t2, t13, t2)
+    multiply(k10, t2, t2)
+    multiply(t38, t2, t2)
+    add(t4, t2, t4)
+    multiply(t4, t37, t4)
+    add(t3, t4, t3)
+    negative(t15, t2)
+    add(t2, t2, t2)
+    multiply(t1, t2, t1)
+    negative(t22, t4)
+    add(t4, t4, t4)
+    multiply(t0, t4, t0)
+    add(t1, t0, t1)
+    multiply(k10, t1, t1)
+    multiply(yd_0, t1, t1)
+    multiply(t23, t2, t23)
+    add(t23, t14, t23)
+    multiply(t10, t4, t10)
+    subtract(t10, t18, t10)
+    add(t23, t10, t23)
+    multiply(k10, t23, t23)
+    multiply(t37, t23, t23)
+    subtract(t1, t23, t1)
+    add(t19, t19, t0)
+    multiply(t19, t0, t19)
+    multiply(t26, t17, t26)
+    add(t19, t26, t19)
+    multiply(t15, t2, t15)
+    multiply(t5, t11, t5)
+    subtract(t15, t5, t15)
+    subtract(t19, t15, t19)
+    multiply(t22, t4, t22)
+    multiply(t9, t21, t9)
+    subtract(t22, t9, t22)
+    subtract(t19, t22, t19)
+    multiply(k10, t19, t19)
+    multiply(t38, t19, t19)
+    subtract(t1, t19, t1)
+    multiply(t1, t38, t1)
+    subtract(t3, t1, t3)
+    multiply(t16, t3, t16)
+    subtract(t27, t16, t27)
+    subtract(t33, t27, t33)
+    multiply(t30, t33, Y_b_8)
+    multiply(t32, t33, t0)
+    negative(t0, Y_b_32)
+    multiply(t6, t8, t0)
+    multiply(t30, t0, t1)
+    multiply(t12, t7, t2)
+    multiply(t29, t2, t4)
+    add(t1, t4, t1)
+    negative(t1, Y_b_9)
+    multiply(t32, t0, t0)
+    multiply(t31, t2, t2)
+    subtract(t0, t2, Y_b_33)
+    multiply(t6, t7, t7)
+    multiply(t29, t7, t0)
+    multiply(t12, t8, t8)
+    multiply(t30, t8, t1)
+    subtract(t0, t1, Y_b_10)
+    multiply(t32, t8, t8)
+    multiply(t31, t7, t7)
+    add(t8, t7, Y_b_34)
+    multiply(t6, t37, t0)
+    multiply(t0, t38, t1)
+    multiply(t12, t1, t2)
+    multiply(t12, t37, t4)
+    multiply(t4, t38, t5)
+    multiply(t6, t5, t7)
+    subtract(t2, t7, t7)
+    multiply(t30, t7, t8)
+    multiply(t29, ydd_0, t9)
+    multiply(t31, ydd_1, t10)
+    add(t9, t10, t9)
+    multiply(t28, t3, t28)
+    multiply(t24, t35, t24)
+    add(t28, t24, t28)
+    add(t9, t28, t9)
+    multiply(t29, t9, t3)
+    add(t8, t3, Y_b_11)
+    multiply(t31, t9, t3)
+    multiply(t32, t7, t7)
+    subtract(t3, t7, Y_b_35)
+    multiply(t0, t4, t3)
+    add(t9, t3, t7)
+    multiply(t12, t7, t7)
+    multiply(t38, t38, t8)
+    multiply(t4, t4, t4)
+    subtract(t8, t4, t10)
+    multiply(t6, t10, t10)
+    add(t7, t10, t7)
+    multiply(t30, t7, t10)
+    multiply(t12, t33, t11)
+    multiply(t29, t11, t13)
+    add(t10, t13, t10)
+    negative(t10, Y_b_12)
+    multiply(t32, t7, t7)
+    multiply(t31, t11, t10)
+    subtract(t7, t10, Y_b_36)
+    multiply(t0, t0, t0)
+    subtract(t0, t8, t8)
+    multiply(t12, t8, t8)
+    subtract(t3, t9, t9)
+    multiply(t6, t9, t9)
+    subtract(t8, t9, t8)
+    multiply(t30, t8, t7)
+    multiply(t6, t33, t33)
+    multiply(t29, t33, t9)
+    add(t7, t9, Y_b_13)
+    multiply(t31, t33, t7)
+    multiply(t32, t8, t8)
+    subtract(t7, t8, Y_b_37)
+    subtract(t33, t5, t33)
+    subtract(t33, t5, t5)
+    multiply(t12, t5, t12)
+    add(t11, t1, t11)
+    add(t11, t1, t11)
+    multiply(t6, t11, t11)
+    add(t12, t11, t12)
+    multiply(t30, t12, t1)
+    subtract(t4, t0, t4)
+    multiply(t29, t4, t0)
+    add(t1, t0, t1)
+    negative(t1, Y_b_14)
+    multiply(t32, t12, t12)
+    multiply(t31, t4, t4)
+    subtract(t12, t4, Y_b_38)
+    multiply(t6, t33, t6)
+    subtract(t6, t2, t6)
+    multiply(t30, t6, t0)
+    multiply(t29, t3, t1)
+    add(t0, t1, Y_b_15)
+    multiply(t31, t3, t3)
+    multiply(t32, t6, t6)
+    subtract(t3, t6, Y_b_39)
+    sign(yd_0, Y_b_17)
+    sign(yd_1, Y_b_43)
+    multiply(t30, t37, Y_b_20)
+    multiply(t32, t37, t0)
+    negative(t0, Y_b_44)
+    sign(t37, t37)
+    multiply(t30, t37, Y_b_21)
+    multiply(t32, t37, t32)
+    negative(t32, Y_b_45)
+    multiply(t29, t38, Y_b_22)
+    multiply(t31, t38, Y_b_46)
+    negative(t38, t38)
+    sign(t38, t38)
+    multiply(t29, t38, t29)
+    negative(t29, Y_b_23)
+    multiply(t31, t38, t31)
+    negative(t31, Y_b_47)
+    copyto(Y_b_2, ydd_0)
+    copyto(Y_b_16, yd_0)
+    copyto(Y_b_29, ydd_1)
+    copyto(Y_b_42, yd_1)
+
+
 def rk4_step(x, u, dt, p=DEFAULT_P):
     """One classical Runge-Kutta step of the closed chain's x' = f(x, u), x = [y; yd], u = tau_y held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs (q = gamma(y) inside each: the loops stay closed, nothing drifts).
 

@@ -39,6 +39,8 @@
 #include "slider_crank_ode_rhs.h"
 #include "slider_crank_ode_jac_x.h"
 #include "slider_crank_ode_jac_u.h"
+#include "slider_crank_regressor_y.h"
+#include "slider_crank_base_regressor_y.h"
 #include "slider_crank_rk4_step.h"
 
 #endif /* SLIDER_CRANK_DERIVE_H */

@@ -5914,6 +5914,892 @@ def _ode_jac_u_chunk(x, t, s, y):
     divide(k8, t2, B_1)
 
 
+def regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain regressor Y_y(y, yd, ydd) = G^T Y(q, G yd, G ydd + Gdot yd) (1x39, row-major): inverse_dynamics_y = Y_y pi, pi the tree's standard parameters (per body (crank, rod, slider) [m, m c_x, m c_y, m c_z, I_xx, I_xy, I_yy, I_xz, I_yz, I_zz] about the body origin, body axes; then per coordinate [armature, viscous, coulomb]); pi's names and the model's values in manifest.json (regressor_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
+
+    in  y [1]
+    in  yd [1]
+    in  ydd [1]
+    in  p [3]
+    out Y_y [1x39]
+    202 ops: 93 mul, 96 add, 4 div, 5 trig, 4 other
+    """
+    y = _array(y, 1, "regressor_y", "y")
+    yd = _array(yd, 1, "regressor_y", "yd")
+    ydd = _array(ydd, 1, "regressor_y", "ydd")
+    p = _array(p, 3, "regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_regressor_y_chunk, (y, yd, ydd, p), 31, ((1, 39),), fixed=_regressor_y_fixed)
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    atan2, cos, sign, sin, sqrt = math.atan2, math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[2]
+    t2 = sin(y[0])
+    t3 = t2 * p[2]
+    t4 = -t3
+    t5 = t0 * p[1]
+    t6 = 0.5352437848398639 * t5
+    t7 = t2 * p[1]
+    t8 = 0.8446976327599702 * t7
+    t6 = t6 - t8
+    t8 = t2 * p[0]
+    t9 = t6 * t8
+    t10 = 0.8446976327599702 * t5
+    t11 = 0.5352437848398639 * t7
+    t10 = t10 + t11
+    t11 = t0 * p[0]
+    t12 = t11 * t11
+    t13 = t8 * t8
+    t13 = t12 + t13
+    t5 = t5 * t5
+    t7 = t7 * t7
+    t5 = t5 + t7
+    t5 = t13 - t5
+    t5 = t12 - t5
+    t5 = sqrt(t5)
+    t7 = t10 * t5
+    t7 = t9 + t7
+    t7 = -t7
+    t6 = t6 * t5
+    t9 = t10 * t8
+    t6 = t6 - t9
+    t6 = atan2(t7, t6)
+    t6 = 1.006 + t6
+    t7 = sin(t6)
+    t9 = t7 * p[0]
+    t6 = cos(t6)
+    t10 = yd[0] * p[0]
+    t10 = yd[0] * t10
+    t3 = t3 - t10
+    t10 = t6 * t3
+    t12 = ydd[0] * p[0]
+    t12 = t1 + t12
+    t13 = t7 * t12
+    t10 = t10 + t13
+    t13 = t9 * t10
+    t14 = t6 * p[0]
+    t12 = t6 * t12
+    t3 = t7 * t3
+    t3 = t12 - t3
+    t12 = t14 * t3
+    t12 = t13 + t12
+    t13 = t0 * t7
+    t15 = t2 * t6
+    t13 = t13 + t15
+    t15 = t13 * p[1]
+    t8 = t8 + t15
+    t0 = t0 * t6
+    t2 = t2 * t7
+    t0 = t0 - t2
+    t2 = t8 * t0
+    t6 = p[1] * t0
+    t7 = t13 * t6
+    t16 = t2 + t7
+    t17 = t11 + t6
+    t5 = t11 + t5
+    t5 = t17 - t5
+    t11 = t5 * t13
+    t18 = t0 * t15
+    t19 = t11 + t18
+    t20 = t16 - t19
+    t21 = t20 * t13
+    t6 = t0 * t6
+    t8 = t8 * t13
+    t22 = t6 - t8
+    t5 = t5 * t0
+    t15 = t13 * t15
+    t23 = t5 - t15
+    t24 = t22 - t23
+    t25 = t0 * t24
+    t21 = t21 + t25
+    t25 = t13 / t21
+    t26 = t13 * t17
+    t27 = t2 + t26
+    t2 = t11 + t2
+    t11 = t27 - t2
+    t28 = t25 * t11
+    t29 = t0 / t21
+    t17 = t0 * t17
+    t30 = t17 - t8
+    t5 = t5 - t8
+    t8 = t30 - t5
+    t31 = t29 * t8
+    t28 = t28 + t31
+    t31 = t28 * ydd[0]
+    t32 = t30 + t30
+    t33 = t5 + t30
+    t32 = t32 - t33
+    t32 = yd[0] * t32
+    t33 = t28 * yd[0]
+    t6 = t6 - t15
+    t30 = t30 + t6
+    t5 = t5 + t6
+    t5 = t30 - t5
+    t5 = t33 * t5
+    t5 = t32 - t5
+    t20 = t20 / t21
+    t8 = t20 * t8
+    t21 = t24 / t21
+    t11 = t21 * t11
+    t8 = t8 - t11
+    t11 = t8 * yd[0]
+    t24 = t11 * t13
+    t5 = t5 - t24
+    t5 = t5 * yd[0]
+    t15 = t17 - t15
+    t15 = t22 + t15
+    t17 = t23 + t22
+    t15 = t15 - t17
+    t15 = yd[0] * t15
+    t17 = t22 + t6
+    t6 = t23 + t6
+    t6 = t17 - t6
+    t6 = t33 * t6
+    t6 = t15 - t6
+    t6 = t6 - t24
+    t6 = t6 * t33
+    t5 = t5 - t6
+    t6 = yd[0] * t13
+    t13 = t33 * t13
+    t6 = t6 - t13
+    t6 = t6 * t11
+    t5 = t5 - t6
+    t6 = t25 * t5
+    t13 = t2 + t27
+    t15 = t27 + t27
+    t13 = t13 - t15
+    t13 = yd[0] * t13
+    t7 = t18 + t7
+    t2 = t2 + t7
+    t15 = t7 + t27
+    t2 = t2 - t15
+    t2 = t33 * t2
+    t2 = t13 - t2
+    t13 = t11 * t0
+    t2 = t2 - t13
+    t2 = t2 * yd[0]
+    t15 = t19 + t16
+    t17 = t26 + t18
+    t17 = t17 + t16
+    t15 = t15 - t17
+    t15 = yd[0] * t15
+    t17 = t19 + t7
+    t7 = t7 + t16
+    t7 = t17 - t7
+    t7 = t33 * t7
+    t7 = t15 - t7
+    t7 = t7 - t13
+    t7 = t7 * t33
+    t2 = t2 - t7
+    t7 = yd[0] * t0
+    t0 = t33 * t0
+    t0 = t7 - t0
+    t0 = t0 * t11
+    t0 = t2 - t0
+    t2 = t29 * t0
+    t2 = t6 + t2
+    t2 = t31 + t2
+    t6 = ydd[0] - t2
+    t7 = t14 * t6
+    t13 = yd[0] - t33
+    t13 = t13 * t13
+    t15 = t9 * t13
+    t7 = t7 - t15
+    t7 = t3 + t7
+    t3 = t28 * t3
+    t3 = t7 - t3
+    t7 = t28 * t10
+    t9 = t9 * t6
+    t13 = t14 * t13
+    t9 = t9 + t13
+    t9 = t10 + t9
+    t7 = t7 - t9
+    t9 = t28 * t6
+    t6 = t6 - t9
+    t9 = t8 * ydd[0]
+    t0 = t20 * t0
+    t5 = t21 * t5
+    t0 = t0 - t5
+    t0 = t9 + t0
+    t0 = t8 * t0
+    t5 = sign(yd[0])
+    t2 = t28 * t2
+    t9 = t28 * t33
+    t10 = -t33
+    t10 = sign(t10)
+    t10 = t28 * t10
+    t10 = -t10
+    t13 = t8 * t11
+    t11 = -t11
+    t11 = sign(t11)
+    t8 = t8 * t11
+    t8 = -t8
+    _Y_y = (0.0, t1, t4, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[0], t12, t3, t7, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, t6, t0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, ydd[0], yd[0], t5, t2, t9, t10, t0, t13, t8)
+    return np.array(_Y_y).reshape(1, 39)
+
+
+_regressor_y_constants = _constants(
+    0.5352437848398639, 0.8446976327599702, 1.006)
+
+
+_regressor_y_fixed = (
+    {0: 0.0, 3: 0.0, 4: 0.0, 5: 0.0, 6: 0.0, 7: 0.0, 8: 0.0, 13: 0.0, 14: 0.0, 15: 0.0, 16: 0.0, 17: 0.0,
+     18: 0.0, 21: 0.0, 22: 0.0, 23: 0.0, 24: 0.0, 25: 0.0, 26: 0.0, 27: 0.0, 28: 0.0, 29: 0.0},
+)
+"""regressor_y's constant output entries (per output, row-major index: value), written once per batch."""
+
+
+def _regressor_y_chunk(x, t, s, y):
+    """regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, yd_0, ydd_0, p_0, p_1, p_2 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30) = t
+    (Y_y_1, Y_y_2, Y_y_9, Y_y_10, Y_y_11, Y_y_12, Y_y_19, Y_y_20, Y_y_30, Y_y_31, Y_y_32, Y_y_33, Y_y_34,
+     Y_y_35, Y_y_36, Y_y_37, Y_y_38) = y
+    k0, k1, k2 = _regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_2, Y_y_1)
+    sin(y_0, t1)
+    multiply(t1, p_2, t2)
+    negative(t2, Y_y_2)
+    multiply(t0, p_1, t3)
+    multiply(k0, t3, t4)
+    multiply(t1, p_1, t5)
+    multiply(k1, t5, t6)
+    subtract(t4, t6, t4)
+    multiply(t1, p_0, t6)
+    multiply(t4, t6, t7)
+    multiply(k1, t3, t8)
+    multiply(k0, t5, t9)
+    add(t8, t9, t8)
+    multiply(t0, p_0, t9)
+    multiply(t9, t9, t10)
+    multiply(t6, t6, t11)
+    add(t10, t11, t11)
+    multiply(t3, t3, t3)
+    multiply(t5, t5, t5)
+    add(t3, t5, t3)
+    subtract(t11, t3, t11)
+    subtract(t10, t11, t10)
+    sqrt(t10, t10)
+    multiply(t8, t10, t3)
+    add(t7, t3, t7)
+    negative(t7, t7)
+    multiply(t4, t10, t4)
+    multiply(t8, t6, t8)
+    subtract(t4, t8, t4)
+    _batch_atan2(t7, t4, t7)
+    add(k2, t7, t7)
+    sin(t7, t3)
+    multiply(t3, p_0, t4)
+    cos(t7, t7)
+    multiply(yd_0, p_0, t5)
+    multiply(yd_0, t5, t5)
+    subtract(t2, t5, t2)
+    multiply(t7, t2, t5)
+    multiply(ydd_0, p_0, t8)
+    add(Y_y_1, t8, t8)
+    multiply(t3, t8, t11)
+    add(t5, t11, t5)
+    multiply(t4, t5, t11)
+    multiply(t7, p_0, t12)
+    multiply(t7, t8, t8)
+    multiply(t3, t2, t2)
+    subtract(t8, t2, t8)
+    multiply(t12, t8, t2)
+    add(t11, t2, Y_y_10)
+    multiply(t0, t3, t2)
+    multiply(t1, t7, t11)
+    add(t2, t11, t2)
+    multiply(t2, p_1, t11)
+    add(t6, t11, t6)
+    multiply(t0, t7, t0)
+    multiply(t1, t3, t1)
+    subtract(t0, t1, t0)
+    multiply(t6, t0, t1)
+    multiply(p_1, t0, t3)
+    multiply(t2, t3, t7)
+    add(t1, t7, t13)
+    add(t9, t3, t14)
+    add(t9, t10, t9)
+    subtract(t14, t9, t9)
+    multiply(t9, t2, t10)
+    multiply(t0, t11, t15)
+    add(t10, t15, t16)
+    subtract(t13, t16, t17)
+    multiply(t17, t2, t18)
+    multiply(t0, t3, t3)
+    multiply(t6, t2, t6)
+    subtract(t3, t6, t19)
+    multiply(t9, t0, t9)
+    multiply(t2, t11, t11)
+    subtract(t9, t11, t20)
+    subtract(t19, t20, t21)
+    multiply(t0, t21, t22)
+    add(t18, t22, t18)
+    divide(t2, t18, t22)
+    multiply(t2, t14, t23)
+    add(t1, t23, t24)
+    add(t10, t1, t10)
+    subtract(t24, t10, t1)
+    multiply(t22, t1, t25)
+    divide(t0, t18, t26)
+    multiply(t0, t14, t14)
+    subtract(t14, t6, t27)
+    subtract(t9, t6, t9)
+    subtract(t27, t9, t6)
+    multiply(t26, t6, t28)
+    add(t25, t28, t25)
+    multiply(t25, ydd_0, t28)
+    add(t27, t27, t29)
+    add(t9, t27, t30)
+    subtract(t29, t30, t29)
+    multiply(yd_0, t29, t29)
+    multiply(t25, yd_0, t30)
+    subtract(t3, t11, t3)
+    add(t27, t3, t27)
+    add(t9, t3, t9)
+    subtract(t27, t9, t27)
+    multiply(t30, t27, t27)
+    subtract(t29, t27, t29)
+    divide(t17, t18, t17)
+    multiply(t17, t6, t6)
+    divide(t21, t18, t21)
+    multiply(t21, t1, t1)
+    subtract(t6, t1, t6)
+    multiply(t6, yd_0, t1)
+    multiply(t1, t2, t9)
+    subtract(t29, t9, t29)
+    multiply(t29, yd_0, t29)
+    subtract(t14, t11, t14)
+    add(t19, t14, t14)
+    add(t20, t19, t11)
+    subtract(t14, t11, t14)
+    multiply(yd_0, t14, t14)
+    add(t19, t3, t19)
+    add(t20, t3, t20)
+    subtract(t19, t20, t19)
+    multiply(t30, t19, t19)
+    subtract(t14, t19, t14)
+    subtract(t14, t9, t14)
+    multiply(t14, t30, t14)
+    subtract(t29, t14, t29)
+    multiply(yd_0, t2, t3)
+    multiply(t30, t2, t2)
+    subtract(t3, t2, t3)
+    multiply(t3, t1, t3)
+    subtract(t29, t3, t29)
+    multiply(t22, t29, t22)
+    add(t10, t24, t2)
+    add(t24, t24, t3)
+    subtract(t2, t3, t2)
+    multiply(yd_0, t2, t2)
+    add(t15, t7, t7)
+    add(t10, t7, t10)
+    add(t7, t24, t24)
+    subtract(t10, t24, t10)
+    multiply(t30, t10, t10)
+    subtract(t2, t10, t2)
+    multiply(t1, t0, t3)
+    subtract(t2, t3, t2)
+    multiply(t2, yd_0, t2)
+    add(t16, t13, t9)
+    add(t23, t15, t23)
+    add(t23, t13, t23)
+    subtract(t9, t23, t9)
+    multiply(yd_0, t9, t9)
+    add(t16, t7, t16)
+    add(t7, t13, t7)
+    subtract(t16, t7, t16)
+    multiply(t30, t16, t16)
+    subtract(t9, t16, t9)
+    subtract(t9, t3, t9)
+    multiply(t9, t30, t9)
+    subtract(t2, t9, t2)
+    multiply(yd_0, t0, t3)
+    multiply(t30, t0, t0)
+    subtract(t3, t0, t3)
+    multiply(t3, t1, t3)
+    subtract(t2, t3, t2)
+    multiply(t26, t2, t26)
+    add(t22, t26, t22)
+    add(t28, t22, t28)
+    subtract(ydd_0, t28, t0)
+    multiply(t12, t0, t3)
+    subtract(yd_0, t30, t7)
+    multiply(t7, t7, t7)
+    multiply(t4, t7, t9)
+    subtract(t3, t9, t3)
+    add(t8, t3, t3)
+    multiply(t25, t8, t8)
+    subtract(t3, t8, Y_y_11)
+    multiply(t25, t5, t3)
+    multiply(t4, t0, t4)
+    multiply(t12, t7, t12)
+    add(t4, t12, t4)
+    add(t5, t4, t5)
+    subtract(t3, t5, Y_y_12)
+    multiply(t25, t0, t3)
+    subtract(t0, t3, Y_y_19)
+    multiply(t6, ydd_0, t0)
+    multiply(t17, t2, t17)
+    multiply(t21, t29, t21)
+    subtract(t17, t21, t17)
+    add(t0, t17, t0)
+    multiply(t6, t0, Y_y_20)
+    sign(yd_0, Y_y_32)
+    multiply(t25, t28, Y_y_33)
+    multiply(t25, t30, Y_y_34)
+    negative(t30, t30)
+    sign(t30, t30)
+    multiply(t25, t30, t25)
+    negative(t25, Y_y_35)
+    multiply(t6, t1, Y_y_37)
+    negative(t1, t1)
+    sign(t1, t1)
+    multiply(t6, t1, t6)
+    negative(t6, Y_y_38)
+    copyto(Y_y_9, ydd_0)
+    copyto(Y_y_30, ydd_0)
+    copyto(Y_y_31, yd_0)
+    copyto(Y_y_36, Y_y_20)
+
+
+def base_regressor_y(y, yd, ydd, p=DEFAULT_P):
+    """Closed-chain base regressor Y_b(y, yd, ydd) (1x13, row-major): the 13 independent columns of regressor_y (the closed chain's base parameters, fewer than or as many as the tree's), so that inverse_dynamics_y = Y_b pi_b, pi_b = pi_1 + beta pi_2 (Gautier's QR on Y_y stacked at seeded closed states); names, values, columns and combinations in manifest.json (base_parameters) (numbers at the parameters' defaults); q = gamma(y) by the closed form inside. p (3): parameters r, l, g.
+
+    in  y [1]
+    in  yd [1]
+    in  ydd [1]
+    in  p [3]
+    out Y_b [1x13]
+    193 ops: 87 mul, 93 add, 4 div, 5 trig, 4 other
+    """
+    y = _array(y, 1, "base_regressor_y", "y")
+    yd = _array(yd, 1, "base_regressor_y", "yd")
+    ydd = _array(ydd, 1, "base_regressor_y", "ydd")
+    p = _array(p, 3, "base_regressor_y", "p")
+    if y.ndim > 1 or yd.ndim > 1 or ydd.ndim > 1 or p.ndim > 1:  # a batch: numpy, chunk by chunk
+        return _batch(_base_regressor_y_chunk, (y, yd, ydd, p), 33, ((1, 13),))
+    # one state: Python floats
+    y = y.tolist()
+    yd = yd.tolist()
+    ydd = ydd.tolist()
+    p = p.tolist()
+    atan2, cos, sign, sin, sqrt = math.atan2, math.cos, _sign, math.sin, math.sqrt
+    t0 = cos(y[0])
+    t1 = t0 * p[2]
+    t2 = sin(y[0])
+    t3 = t2 * p[2]
+    t4 = -t3
+    t5 = t0 * p[1]
+    t6 = 0.5352437848398639 * t5
+    t7 = t2 * p[1]
+    t8 = 0.8446976327599702 * t7
+    t6 = t6 - t8
+    t8 = t2 * p[0]
+    t9 = t6 * t8
+    t10 = 0.8446976327599702 * t5
+    t11 = 0.5352437848398639 * t7
+    t10 = t10 + t11
+    t11 = t0 * p[0]
+    t12 = t11 * t11
+    t13 = t8 * t8
+    t13 = t12 + t13
+    t5 = t5 * t5
+    t7 = t7 * t7
+    t5 = t5 + t7
+    t5 = t13 - t5
+    t5 = t12 - t5
+    t5 = sqrt(t5)
+    t7 = t10 * t5
+    t7 = t9 + t7
+    t7 = -t7
+    t6 = t6 * t5
+    t9 = t10 * t8
+    t6 = t6 - t9
+    t6 = atan2(t7, t6)
+    t6 = 1.006 + t6
+    t7 = cos(t6)
+    t9 = ydd[0] * p[0]
+    t9 = t1 + t9
+    t10 = t7 * t9
+    t6 = sin(t6)
+    t12 = yd[0] * p[0]
+    t12 = yd[0] * t12
+    t3 = t3 - t12
+    t12 = t6 * t3
+    t10 = t10 - t12
+    t12 = t7 * p[0]
+    t13 = t0 * t6
+    t14 = t2 * t7
+    t13 = t13 + t14
+    t14 = t13 * p[1]
+    t8 = t8 + t14
+    t0 = t0 * t7
+    t2 = t2 * t6
+    t0 = t0 - t2
+    t2 = t8 * t0
+    t15 = p[1] * t0
+    t16 = t13 * t15
+    t17 = t2 + t16
+    t18 = t11 + t15
+    t5 = t11 + t5
+    t5 = t18 - t5
+    t11 = t5 * t13
+    t19 = t0 * t14
+    t20 = t11 + t19
+    t21 = t17 - t20
+    t22 = t21 * t13
+    t15 = t0 * t15
+    t8 = t8 * t13
+    t23 = t15 - t8
+    t5 = t5 * t0
+    t14 = t13 * t14
+    t24 = t5 - t14
+    t25 = t23 - t24
+    t26 = t0 * t25
+    t22 = t22 + t26
+    t26 = t13 / t22
+    t27 = t13 * t18
+    t28 = t2 + t27
+    t2 = t11 + t2
+    t11 = t28 - t2
+    t29 = t26 * t11
+    t30 = t0 / t22
+    t18 = t0 * t18
+    t31 = t18 - t8
+    t5 = t5 - t8
+    t8 = t31 - t5
+    t32 = t30 * t8
+    t29 = t29 + t32
+    t32 = t29 * ydd[0]
+    t33 = t31 + t31
+    t34 = t5 + t31
+    t33 = t33 - t34
+    t33 = yd[0] * t33
+    t34 = t29 * yd[0]
+    t15 = t15 - t14
+    t31 = t31 + t15
+    t5 = t5 + t15
+    t5 = t31 - t5
+    t5 = t34 * t5
+    t5 = t33 - t5
+    t21 = t21 / t22
+    t8 = t21 * t8
+    t21 = t25 / t22
+    t11 = t21 * t11
+    t8 = t8 - t11
+    t11 = t8 * yd[0]
+    t21 = t11 * t13
+    t5 = t5 - t21
+    t5 = t5 * yd[0]
+    t14 = t18 - t14
+    t14 = t23 + t14
+    t18 = t24 + t23
+    t14 = t14 - t18
+    t14 = yd[0] * t14
+    t18 = t23 + t15
+    t15 = t24 + t15
+    t15 = t18 - t15
+    t15 = t34 * t15
+    t14 = t14 - t15
+    t14 = t14 - t21
+    t14 = t14 * t34
+    t5 = t5 - t14
+    t14 = yd[0] * t13
+    t13 = t34 * t13
+    t13 = t14 - t13
+    t13 = t13 * t11
+    t5 = t5 - t13
+    t5 = t26 * t5
+    t13 = t2 + t28
+    t14 = t28 + t28
+    t13 = t13 - t14
+    t13 = yd[0] * t13
+    t14 = t19 + t16
+    t2 = t2 + t14
+    t15 = t14 + t28
+    t2 = t2 - t15
+    t2 = t34 * t2
+    t2 = t13 - t2
+    t13 = t11 * t0
+    t2 = t2 - t13
+    t2 = t2 * yd[0]
+    t15 = t20 + t17
+    t16 = t27 + t19
+    t16 = t16 + t17
+    t15 = t15 - t16
+    t15 = yd[0] * t15
+    t16 = t20 + t14
+    t14 = t14 + t17
+    t14 = t16 - t14
+    t14 = t34 * t14
+    t14 = t15 - t14
+    t13 = t14 - t13
+    t13 = t13 * t34
+    t2 = t2 - t13
+    t13 = yd[0] * t0
+    t0 = t34 * t0
+    t0 = t13 - t0
+    t0 = t0 * t11
+    t0 = t2 - t0
+    t0 = t30 * t0
+    t0 = t5 + t0
+    t0 = t32 + t0
+    t2 = ydd[0] - t0
+    t5 = t12 * t2
+    t13 = t6 * p[0]
+    t14 = yd[0] - t34
+    t14 = t14 * t14
+    t15 = t13 * t14
+    t5 = t5 - t15
+    t5 = t10 + t5
+    t10 = t29 * t10
+    t5 = t5 - t10
+    t3 = t7 * t3
+    t6 = t6 * t9
+    t3 = t3 + t6
+    t6 = t29 * t3
+    t7 = t13 * t2
+    t9 = t12 * t14
+    t7 = t7 + t9
+    t3 = t3 + t7
+    t3 = t6 - t3
+    t6 = t29 * t2
+    t2 = t2 - t6
+    t6 = sign(yd[0])
+    t0 = t29 * t0
+    t7 = t29 * t34
+    t9 = -t34
+    t9 = sign(t9)
+    t9 = t29 * t9
+    t9 = -t9
+    t10 = t8 * t11
+    t11 = -t11
+    t11 = sign(t11)
+    t8 = t8 * t11
+    t8 = -t8
+    _Y_b = (t1, t4, ydd[0], t5, t3, t2, yd[0], t6, t0, t7, t9, t10, t8)
+    return np.array(_Y_b).reshape(1, 13)
+
+
+_base_regressor_y_constants = _constants(
+    0.5352437848398639, 0.8446976327599702, 1.006)
+
+
+def _base_regressor_y_chunk(x, t, s, y):
+    """base_regressor_y on a chunk of states (see _batch): its one-state body's instructions, in the
+    same order, each a numpy call on rows (one float per state) writing into its last argument."""
+    add, copyto, cos, divide, multiply, negative, sign, sin, sqrt, subtract = np.add, np.copyto, np.cos, np.divide, np.multiply, np.negative, np.sign, np.sin, np.sqrt, np.subtract
+    y_0, yd_0, ydd_0, p_0, p_1, p_2 = x
+    (t0, t1, t2, t3, t4, t5, t6, t7, t8, t9, t10, t11, t12, t13, t14, t15, t16, t17, t18, t19, t20, t21,
+     t22, t23, t24, t25, t26, t27, t28, t29, t30, t31, t32) = t
+    Y_b_0, Y_b_1, Y_b_2, Y_b_3, Y_b_4, Y_b_5, Y_b_6, Y_b_7, Y_b_8, Y_b_9, Y_b_10, Y_b_11, Y_b_12 = y
+    k0, k1, k2 = _base_regressor_y_constants
+    cos(y_0, t0)
+    multiply(t0, p_2, Y_b_0)
+    sin(y_0, t1)
+    multiply(t1, p_2, t2)
+    negative(t2, Y_b_1)
+    multiply(t0, p_1, t3)
+    multiply(k0, t3, t4)
+    multiply(t1, p_1, t5)
+    multiply(k1, t5, t6)
+    subtract(t4, t6, t4)
+    multiply(t1, p_0, t6)
+    multiply(t4, t6, t7)
+    multiply(k1, t3, t8)
+    multiply(k0, t5, t9)
+    add(t8, t9, t8)
+    multiply(t0, p_0, t9)
+    multiply(t9, t9, t10)
+    multiply(t6, t6, t11)
+    add(t10, t11, t11)
+    multiply(t3, t3, t3)
+    multiply(t5, t5, t5)
+    add(t3, t5, t3)
+    subtract(t11, t3, t11)
+    subtract(t10, t11, t10)
+    sqrt(t10, t10)
+    multiply(t8, t10, t3)
+    add(t7, t3, t7)
+    negative(t7, t7)
+    multiply(t4, t10, t4)
+    multiply(t8, t6, t8)
+    subtract(t4, t8, t4)
+    _batch_atan2(t7, t4, t7)
+    add(k2, t7, t7)
+    cos(t7, t3)
+    multiply(ydd_0, p_0, t4)
+    add(Y_b_0, t4, t4)
+    multiply(t3, t4, t5)
+    sin(t7, t7)
+    multiply(yd_0, p_0, t8)
+    multiply(yd_0, t8, t8)
+    subtract(t2, t8, t2)
+    multiply(t7, t2, t8)
+    subtract(t5, t8, t5)
+    multiply(t3, p_0, t8)
+    multiply(t0, t7, t11)
+    multiply(t1, t3, t12)
+    add(t11, t12, t11)
+    multiply(t11, p_1, t12)
+    add(t6, t12, t6)
+    multiply(t0, t3, t0)
+    multiply(t1, t7, t1)
+    subtract(t0, t1, t0)
+    multiply(t6, t0, t1)
+    multiply(p_1, t0, t13)
+    multiply(t11, t13, t14)
+    add(t1, t14, t15)
+    add(t9, t13, t16)
+    add(t9, t10, t9)
+    subtract(t16, t9, t9)
+    multiply(t9, t11, t10)
+    multiply(t0, t12, t17)
+    add(t10, t17, t18)
+    subtract(t15, t18, t19)
+    multiply(t19, t11, t20)
+    multiply(t0, t13, t13)
+    multiply(t6, t11, t6)
+    subtract(t13, t6, t21)
+    multiply(t9, t0, t9)
+    multiply(t11, t12, t12)
+    subtract(t9, t12, t22)
+    subtract(t21, t22, t23)
+    multiply(t0, t23, t24)
+    add(t20, t24, t20)
+    divide(t11, t20, t24)
+    multiply(t11, t16, t25)
+    add(t1, t25, t26)
+    add(t10, t1, t10)
+    subtract(t26, t10, t1)
+    multiply(t24, t1, t27)
+    divide(t0, t20, t28)
+    multiply(t0, t16, t16)
+    subtract(t16, t6, t29)
+    subtract(t9, t6, t9)
+    subtract(t29, t9, t6)
+    multiply(t28, t6, t30)
+    add(t27, t30, t27)
+    multiply(t27, ydd_0, t30)
+    add(t29, t29, t31)
+    add(t9, t29, t32)
+    subtract(t31, t32, t31)
+    multiply(yd_0, t31, t31)
+    multiply(t27, yd_0, t32)
+    subtract(t13, t12, t13)
+    add(t29, t13, t29)
+    add(t9, t13, t9)
+    subtract(t29, t9, t29)
+    multiply(t32, t29, t29)
+    subtract(t31, t29, t31)
+    divide(t19, t20, t19)
+    multiply(t19, t6, t19)
+    divide(t23, t20, t23)
+    multiply(t23, t1, t23)
+    subtract(t19, t23, t19)
+    multiply(t19, yd_0, t1)
+    multiply(t1, t11, t6)
+    subtract(t31, t6, t31)
+    multiply(t31, yd_0, t31)
+    subtract(t16, t12, t16)
+    add(t21, t16, t16)
+    add(t22, t21, t9)
+    subtract(t16, t9, t16)
+    multiply(yd_0, t16, t16)
+    add(t21, t13, t21)
+    add(t22, t13, t22)
+    subtract(t21, t22, t21)
+    multiply(t32, t21, t21)
+    subtract(t16, t21, t16)
+    subtract(t16, t6, t16)
+    multiply(t16, t32, t16)
+    subtract(t31, t16, t31)
+    multiply(yd_0, t11, t6)
+    multiply(t32, t11, t11)
+    subtract(t6, t11, t6)
+    multiply(t6, t1, t6)
+    subtract(t31, t6, t31)
+    multiply(t24, t31, t24)
+    add(t10, t26, t6)
+    add(t26, t26, t9)
+    subtract(t6, t9, t6)
+    multiply(yd_0, t6, t6)
+    add(t17, t14, t14)
+    add(t10, t14, t10)
+    add(t14, t26, t26)
+    subtract(t10, t26, t10)
+    multiply(t32, t10, t10)
+    subtract(t6, t10, t6)
+    multiply(t1, t0, t9)
+    subtract(t6, t9, t6)
+    multiply(t6, yd_0, t6)
+    add(t18, t15, t10)
+    add(t25, t17, t25)
+    add(t25, t15, t25)
+    subtract(t10, t25, t10)
+    multiply(yd_0, t10, t10)
+    add(t18, t14, t18)
+    add(t14, t15, t14)
+    subtract(t18, t14, t18)
+    multiply(t32, t18, t18)
+    subtract(t10, t18, t10)
+    subtract(t10, t9, t10)
+    multiply(t10, t32, t10)
+    subtract(t6, t10, t6)
+    multiply(yd_0, t0, t9)
+    multiply(t32, t0, t0)
+    subtract(t9, t0, t9)
+    multiply(t9, t1, t9)
+    subtract(t6, t9, t6)
+    multiply(t28, t6, t28)
+    add(t24, t28, t24)
+    add(t30, t24, t30)
+    subtract(ydd_0, t30, t0)
+    multiply(t8, t0, t6)
+    multiply(t7, p_0, t9)
+    subtract(yd_0, t32, t10)
+    multiply(t10, t10, t10)
+    multiply(t9, t10, t11)
+    subtract(t6, t11, t6)
+    add(t5, t6, t6)
+    multiply(t27, t5, t5)
+    subtract(t6, t5, Y_b_3)
+    multiply(t3, t2, t3)
+    multiply(t7, t4, t7)
+    add(t3, t7, t3)
+    multiply(t27, t3, t2)
+    multiply(t9, t0, t9)
+    multiply(t8, t10, t8)
+    add(t9, t8, t9)
+    add(t3, t9, t3)
+    subtract(t2, t3, Y_b_4)
+    multiply(t27, t0, t2)
+    subtract(t0, t2, Y_b_5)
+    sign(yd_0, Y_b_7)
+    multiply(t27, t30, Y_b_8)
+    multiply(t27, t32, Y_b_9)
+    negative(t32, t32)
+    sign(t32, t32)
+    multiply(t27, t32, t27)
+    negative(t27, Y_b_10)
+    multiply(t19, t1, Y_b_11)
+    negative(t1, t1)
+    sign(t1, t1)
+    multiply(t19, t1, t19)
+    negative(t19, Y_b_12)
+    copyto(Y_b_2, ydd_0)
+    copyto(Y_b_6, yd_0)
+
+
 def rk4_step(x, u, dt, p=DEFAULT_P):
     """One classical Runge-Kutta step of the closed chain's x' = f(x, u), x = [y; yd], u = tau_y held constant over dt: x_next = x + dt/6 (k1 + 2 k2 + 2 k3 + k4), k_i from ode_rhs (q = gamma(y) inside each: the loops stay closed, nothing drifts).
 
