@@ -131,7 +131,7 @@ def reduced_equations(m) -> Reduced:
             closure_lines.append(Definition(zs, e, ""))
         closure = method.replace("closed form: ", "closed form (") + ")"
     else:
-        closure = "no closed form: Newton's method on psi = 0 from the reference configuration"
+        closure = r"no closed form: Newton's method on $\psi = 0$ from the reference configuration"
 
     # G, Delta
     K = psi.jacobian(q)
