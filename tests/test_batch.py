@@ -54,7 +54,7 @@ def random_inputs(robot: str, module, fn: dict, shape: tuple, rng: np.random.Gen
     closed = closed_inputs(r, rng, shape) if r.closed else {}  # y near the reference configuration
     for item in fn["inputs"]:
         name, n = item["name"], item["shape"][0]
-        if name in ("y", "x") and closed and fn.get("coordinates") == "y":
+        if name in ("y", "x") and closed and fn.get("coordinates") == "y" or name in ("o", "w0") and closed:
             a[name] = closed[name]
         elif name in ("q", "q0"):
             a[name] = rng.uniform(lo, hi, shape + (n,))

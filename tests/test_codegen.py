@@ -61,6 +61,10 @@ CLOSED = {"closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamic
 """The quantities of a closed chain in y; its ode_rhs, ode_jac_x, ode_jac_u and rk4_step are in x = [y; yd]."""
 
 
+RESIDUAL = ("closure", "motor_to_joint_position", "joint_to_motor_position")
+"""The functions returning a closure's residual max |phi| (rounding, compared with a bound)."""
+
+
 def closed_reference(ref: ClosedChainReference, fn: dict, a: dict):
     """A closed chain's function in y from the numpy reference (Newton closure from the reference
     configuration, K from the frame Jacobians, Kdot qd by complex step, Featherstone's RNEA and CRBA)."""
@@ -86,8 +90,24 @@ def closed_reference(ref: ClosedChainReference, fn: dict, a: dict):
         k3 = f(x + h / 2 * k2, u)
         k4 = f(x + h * k3, u)
         return x + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+    if fn.get("coordinates") == "outputs":  # joint -> motor: the loops closed with the joints o held, by Newton
+        q, residual = ref.closure_from_outputs(a["o"])
+        J = ref.output_jacobian(q)
+        if kind == "joint_to_motor_position":
+            return [q[ref.y], np.array([1.0]), np.array([residual])]
+        if kind == "joint_to_motor_velocity":
+            return np.linalg.solve(J, a["od"])
+        if kind == "joint_to_motor_torque":
+            return J.T @ a["tau_o"]
+        raise AssertionError(kind)
     q, residual = ref.closure(a["y"])
     yd, ydd, tau = a["yd"], a["ydd"], a["tau_y"]
+    if kind.startswith("motor_to_joint_"):  # J = d o / d y, G's rows of the outputs
+        J = ref.output_jacobian(q)
+        names = [c.name for c in ref.robot.coordinates]
+        if kind == "motor_to_joint_position":
+            return [q[[names.index(c) for c in ref.robot.outputs]], np.array([1.0]), np.array([residual])]
+        return J @ yd if kind == "motor_to_joint_velocity" else np.linalg.solve(J.T, tau)
     if kind == "closure":  # the residual is compared with 1e-12, not with the reference's own rounding
         return [q, np.array([1.0]), np.array([residual])]
     if kind == "velocity_map":
@@ -120,7 +140,7 @@ def richardson(g, x: np.ndarray, h: float = 2.5e-4) -> np.ndarray:
 
 
 def reference(ref: NumericRobot, fn: dict, a: dict) -> np.ndarray:
-    if fn.get("coordinates") == "y":
+    if fn.get("coordinates") in ("y", "outputs"):
         return closed_reference(a["closed"], fn, a)
     q, qd, qdd, tau = a["q"], a["qd"], a["qdd"], a["tau"]
     nq, nv = len(q), len(qd)
@@ -245,7 +265,7 @@ def test_generated_c_python_casadi_match_reference(robot, committed_library):
             got_float = outputs(c_float(fn, a))
             for k, o in enumerate(fn["outputs"]):
                 what = f"{fn['name']} output {o['name']} at q = {q}"
-                if fn["quantity"] == "closure" and o["name"] == "residual":  # max |phi|: rounding, not a value
+                if fn["quantity"] in RESIDUAL and o["name"] == "residual":  # max |phi|: rounding, not a value
                     assert got_c[k][0] <= 1e-12 and got_py[k][0] <= 1e-12 and got_ca[k][0] <= 1e-12, what
                     assert got_float[k][0] <= 1e-5, what
                     continue

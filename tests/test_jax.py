@@ -106,7 +106,7 @@ def check(got, want, fn: dict, what: str, rtol: float = RTOL) -> None:
     for k, (g, w) in enumerate(zip(got, want)):
         g, w = np.asarray(g), np.asarray(w)
         assert g.dtype == np.float64, f"{what}: dtype {g.dtype}"
-        if fn["quantity"] == "closure" and k == 2:  # the residual max |phi|: rounding (~1e-16), not a value
+        if fn["quantity"] in ("closure", "motor_to_joint_position", "joint_to_motor_position") and k == 2:  # max |phi|: rounding
             assert g.max() <= 1e-12 and w.max() <= 1e-12, f"{what}: residual {g.max():.3g}, numpy {w.max():.3g}"
         elif fn["quantity"] == "manipulability":
             for k in range(w.shape[-1]):

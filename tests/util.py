@@ -116,7 +116,9 @@ shipped mechanism assembles there, on the reference's branch (tests/test_closed_
 def closed_inputs(robot: Robot, rng: np.random.Generator, shape: tuple = ()) -> dict[str, np.ndarray]:
     """Seeded arguments of a closed chain's functions in y, of shape (*shape, n): y near the reference
     configuration, yd, ydd normal, tau_y and u 5 x normal, x = [y; yd]; z0 (a Newton closure's start)
-    the reference configuration's z."""
+    the reference configuration's z. With ``outputs`` (the motor <-> joint maps) also the joints o near
+    the reference configuration's, od normal, tau_o 5 x normal and w0 (a Newton solve's start, the
+    coordinates not in o) the reference's."""
     names = [c.name for c in robot.coordinates]
     y_ref = np.array([robot.reference_q[names.index(c)] for c in robot.independent])
     z_ref = np.array([robot.reference_q[names.index(c)] for c in robot.dependent])
@@ -124,8 +126,14 @@ def closed_inputs(robot: Robot, rng: np.random.Generator, shape: tuple = ()) -> 
     y = y_ref + rng.uniform(-Y_SPREAD, Y_SPREAD, shape + (ny,))
     yd = rng.normal(size=shape + (ny,))
     tau = 5 * rng.normal(size=shape + (ny,))
-    return {"y": y, "yd": yd, "ydd": rng.normal(size=shape + (ny,)), "tau_y": tau, "u": tau,
-            "x": np.concatenate([y, yd], axis=-1), "z0": np.broadcast_to(z_ref, shape + z_ref.shape).copy()}
+    out = {"y": y, "yd": yd, "ydd": rng.normal(size=shape + (ny,)), "tau_y": tau, "u": tau,
+           "x": np.concatenate([y, yd], axis=-1), "z0": np.broadcast_to(z_ref, shape + z_ref.shape).copy()}
+    if robot.outputs:
+        o_ref = np.array([robot.reference_q[names.index(c)] for c in robot.outputs])
+        w_ref = np.array([robot.reference_q[i] for i, c in enumerate(names) if c not in robot.outputs])
+        out |= {"o": o_ref + rng.uniform(-Y_SPREAD, Y_SPREAD, shape + (ny,)), "od": rng.normal(size=shape + (ny,)),
+                "tau_o": 5 * rng.normal(size=shape + (ny,)), "w0": np.broadcast_to(w_ref, shape + w_ref.shape).copy()}
+    return out
 
 
 def tree_robots() -> list[str]:

@@ -67,7 +67,7 @@ def cmd_latex(args) -> int:
     print(f"deriving {robot.name} ({args.method}) ...", file=sys.stderr, flush=True)
     m = load(args.robot_name, args.models, method=args.method)
     options = Options(short_trig=args.short_trig, cse=args.cse, width=args.width, fk=tuple(args.fk),
-                      jacobian=tuple(args.jacobian), energy=args.energy)
+                      jacobian=tuple(args.jacobian), energy=args.energy, tree=args.tree)
     context = document_context(m, options)
     text = render_tex(context)
     png = equations_png(context) if args.png else None  # drawn before anything is written
@@ -96,7 +96,8 @@ def add_parser(sub) -> None:
     e.add_argument("robot_name")
     e.set_defaults(func=cmd_eom)
 
-    p = sub.add_parser("latex", help="write a robot's M, C, g (and FK/Jacobian) as a LaTeX document")
+    p = sub.add_parser("latex", help="write a robot's M, C, g (and FK/Jacobian) as a LaTeX document; a closed "
+                                     "chain's reduced equations in y")
     p.add_argument("robot_name")
     p.add_argument("--out", type=path_arg, help="write the .tex here (default: print it)")
     p.add_argument("--png", type=png_path, help="also draw the equations to this .png file (matplotlib mathtext)")
@@ -109,6 +110,9 @@ def add_parser(sub) -> None:
     p.add_argument("--fk", action="append", default=[], metavar="FRAME", help="add world_T_FRAME (repeatable)")
     p.add_argument("--jacobian", action="append", default=[], metavar="FRAME", help="add FRAME's Jacobian (repeatable)")
     p.add_argument("--energy", action="store_true", help="add the kinetic and potential energies")
+    p.add_argument("--tree", action="store_true",
+                   help="a closed chain: the spanning tree's M, C, g in q (the loops not imposed) instead of the "
+                        "reduced equations in y")
     p.add_argument("--width", type=integer, default=64,
                    help=f"visible characters per line ({MIN_WIDTH} .. {MAX_WIDTH}, default 64)")
     p.set_defaults(func=cmd_latex)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import casadi as ca
 import numpy as np
 
-from derive.description.robot import FUNCTION_QUANTITIES, Robot
+from derive.description.robot import FUNCTION_QUANTITIES, MOTOR_MAP_QUANTITIES, Robot
 from derive.errors import DeriveError
 from derive.symbolic.base_parameters import base_parameters
 from derive.symbolic.ik import ATTEMPT, LAMBDA0, LAMBDA_MIN, LAMBDA_STALL, TOL_POSITION, TOL_ROTATION, joint_ranges
@@ -23,6 +23,7 @@ from derive.symbolic.ode import AD_MODES, inverse_dynamics_jacobian, ode_jacobia
 from derive.symbolic.regressor import Regressor, body_links
 from derive.symbolic.closure import ASSEMBLED_TOL, NEWTON_STEPS, ClosedChainModel
 from derive.symbolic.closed_regressor import ClosedRegressor, closed_base_parameters
+from derive.symbolic.motor_map import motor_joint_maps
 from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
@@ -206,6 +207,8 @@ def closed_chain_specs(model: SXModel, specs: list[FunctionSpec], need) -> None:
     add("constraint_forces", [y, yd, tau], [("lam", red.constraint_forces)],
         f"Loop forces lam = lambda ({nz}, one per kept row of phi) of M qdd + h = S^T tau_y + K^T lambda at the "
         f"forward dynamics' qdd (the tree's KKT multiplier); {at}.")
+    if robot.outputs and need(*MOTOR_MAP_QUANTITIES):
+        motor_map_specs(ccm, red, specs, need, closure_in, at)
     if need("ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step"):
         closed_ode_specs(ccm, red, add, at)
     if need("regressor_y", "base_regressor_y"):
@@ -251,6 +254,50 @@ def closed_regressor_specs(model: SXModel, ccm: ClosedChainModel, red, add, at: 
         "inverse_dynamics_y = Y_b pi_b, pi_b = pi_1 + beta pi_2 (Gautier's QR on Y_y stacked at seeded closed "
         f"states); names, values, columns and combinations in manifest.json (base_parameters){values}; {at}.",
         (("rank", base.rank), ("base_parameters", base.manifest(pi))))
+
+
+def motor_map_specs(ccm: ClosedChainModel, red, specs: list[FunctionSpec], need, closure_in: list, at: str) -> None:
+    """The motor <-> joint maps of a closed chain with ``outputs`` (:mod:`derive.symbolic.motor_map`): the
+    motors are y, the joints the outputs o; J = d o / d y = G's output rows."""
+    robot = ccm.robot
+    extra, pdoc = parameter_input(ccm.model)
+    mm = motor_joint_maps(ccm, red)
+    ys, os_ = ", ".join(robot.independent), ", ".join(robot.outputs)
+    y, yd, tau = ("y", red.y), ("yd", ccm.yd), ("tau_y", ccm.tau_y)
+    o, od, tau_o = ("o", mm.o), ("od", mm.od), ("tau_o", mm.tau_o)
+    ny = ccm.ny
+    o_at = ("q = gamma_o(o) by the closed form inside" if mm.w0 is None else
+            f"q = gamma_o(o) inside by {NEWTON_STEPS} Newton steps from the reference configuration")
+
+    def add(quantity, coordinates, inputs, outputs, doc):
+        if need(quantity):
+            how = red.method if coordinates == "y" else mm.method
+            specs.append(FunctionSpec(robot.name, quantity, None, tuple(inputs) + extra, tuple(outputs), doc + pdoc,
+                                      (("coordinates", coordinates), ("closure", how), ("motors", list(robot.independent)),
+                                       ("joints", list(robot.outputs)))))
+
+    add("motor_to_joint_position", "y", closure_in,
+        [("o", mm.joint_position), ("status", red.status), ("residual", red.residual)],
+        f"Motor -> joint position: the joints o = ({os_}) ({ny}) of the motors y = ({ys}), the closure's q at "
+        f"the joints' rows, with its status and residual (as closure's: status 1 where max |phi| <= {ASSEMBLED_TOL:g}).")
+    add("motor_to_joint_velocity", "y", [y, yd], [("od", mm.joint_velocity)],
+        f"Motor -> joint velocity: od = J yd ({ny}), J = d o / d y = G's rows of ({os_}); {at}.")
+    add("motor_to_joint_torque", "y", [y, tau], [("tau_o", mm.joint_torque)],
+        f"Motor -> joint torque: tau_o = J^-T tau_y ({ny}), the torques on the joints ({os_}) that the motor "
+        f"torques tau_y exert (the same power: tau_o . od = tau_y . yd); {at}.")
+    w0 = [] if mm.w0 is None else [("w0", mm.w0)]
+    start = ("" if mm.w0 is None else f", from w0 (the last values of the coordinates not in o, or the "
+             "reference configuration's)")
+    add("joint_to_motor_position", "outputs", [o, *w0],
+        [("y", mm.motor_position), ("status", mm.motor_status), ("residual", mm.motor_residual)],
+        f"Joint -> motor position: the motors y = ({ys}) ({ny}) that put the joints at o = ({os_}), by "
+        f"{mm.method}{start}; status 1 where max |phi(q)| <= {ASSEMBLED_TOL:g}, else 0 (out of reach: y is "
+        "NaN or off the loops); residual = max |phi(q)|.")
+    add("joint_to_motor_velocity", "outputs", [o, od], [("yd", mm.motor_velocity)],
+        f"Joint -> motor velocity: yd = J^-1 od ({ny}), J = d o / d y; {o_at}.")
+    add("joint_to_motor_torque", "outputs", [o, tau_o], [("tau_y", mm.motor_torque)],
+        f"Joint -> motor torque: tau_y = J^T tau_o ({ny}), the motor torques that exert the joint torques tau_o "
+        f"on ({os_}) (the same power; a wanted ankle torque to motor commands); {o_at}.")
 
 
 def ode_specs(model: SXModel, qdd_fd: ca.SX, add, extra: tuple, fd_how: tuple) -> None:

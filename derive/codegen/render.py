@@ -147,7 +147,7 @@ def closed_chain_entry(robot: Robot, functions: list[Function]) -> dict:
         if lp.kind == "distance":
             entry["length"] = lp.length if isinstance(lp.length, str) else float(lp.length)
         loops.append(entry)
-    return {"loops": loops, "closed_chain": {
+    out = {"loops": loops, "closed_chain": {
         "independent": list(robot.independent), "dependent": list(robot.dependent),
         "reference_y": [float(robot.reference_q[[c.name for c in robot.coordinates].index(c)]) for c in robot.independent],
         "independent_chosen": "by pivoting on K" if robot.independent_chosen else "models.yaml's independent",
@@ -158,6 +158,17 @@ def closed_chain_entry(robot: Robot, functions: list[Function]) -> dict:
         "left_out_reason": "the tree's forward dynamics, ODE and their derivatives ignore the loops; the tree's "
                            "regressors, IK, manipulability, centroidal map, external wrenches and control bundles "
                            "are not generated for a closed chain (its own versions are not available yet)"}}
+    if robot.outputs:  # models.yaml's outputs: the motor <-> joint maps
+        names = [c.name for c in robot.coordinates]
+        method = next((dict(fn.common["manifest"]).get("closure") for fn in functions
+                       if fn.common["quantity"] == "joint_to_motor_position"), None)
+        out["closed_chain"]["motor_joint_maps"] = {
+            "motors": list(robot.independent), "joints": list(robot.outputs),
+            "reference_joints": [float(robot.reference_q[names.index(c)]) for c in robot.outputs],
+            "joint_to_motor": method,
+            "coordinates": "motor_to_joint_* take y (the motors, coordinates 'y'); joint_to_motor_* take o (the "
+                           "joints, coordinates 'outputs'); J = d o / d y: od = J yd, tau_y = J^T tau_o"}
+    return out
 
 
 def function_aliases(robot: Robot, functions: list[tuple[str, str | None]]) -> tuple[tuple[str, str], ...]:

@@ -297,4 +297,5 @@ def closure_note(robot: Robot) -> str:
     kept = len(robot.loop_rows or ())
     return (f"{len(robot.loops)} loop(s), {rows} closure rows, rank {kept}"
             + (f" ({rows - kept} redundant)" if kept < rows else "")
-            + f"; independent y = ({y}) {how}; dependent z = ({', '.join(robot.dependent)})")
+            + f"; independent y = ({y}) {how}; dependent z = ({', '.join(robot.dependent)})"
+            + (f"; motor <-> joint maps to outputs ({', '.join(robot.outputs)})" if robot.outputs else ""))

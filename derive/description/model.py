@@ -471,7 +471,7 @@ class _Parser:
         if "all" in robot.function_frames:  # fk_<frame> would be fk_all, every link's pose
             raise self.error("generate.frames" if robot.generate_frames else "frames", "the frame name 'all' is reserved: "
                              "fk_all is the pose of every link; rename the frame or leave it out of generate.frames")
-        if "loops" in spec or "independent" in spec or "reference" in spec:
+        if "loops" in spec or "independent" in spec or "reference" in spec or "outputs" in spec:
             robot = self.loops(spec, robot)
         for i, bundle in enumerate(robot.bundles or ()):
             for k, quantity in enumerate(bundle.quantities):
@@ -523,7 +523,7 @@ class _Parser:
         raw = spec.get("loops")
         if not isinstance(raw, list) or not raw:
             raise self.error("loops", "expected a non-empty list of {frames: [a, b], kind: ...}"
-                             + ("" if "loops" in spec else " (independent and reference need loops)"))
+                             + ("" if "loops" in spec else " (independent, reference and outputs need loops)"))
         if robot.floating:
             raise self.error("loops", "closed chains need a fixed base here; this robot has a floating base")
         known = robot.frame_names + tuple(robot.frame_aliases)
@@ -587,9 +587,42 @@ class _Parser:
             i = closed.redundant
             raise self.error(f"loops[{i}]", f"redundant: it constrains nothing the other loops do not (rank K = "
                              f"{closed.rank} with or without it)")
-        return dataclasses.replace(robot, independent=closed.independent, independent_chosen=closed.chosen,
-                                   reference=tuple(reference.items()), loop_rows=closed.rows,
-                                   reference_q=closed.q)
+        robot = dataclasses.replace(robot, independent=closed.independent, independent_chosen=closed.chosen,
+                                    reference=tuple(reference.items()), loop_rows=closed.rows,
+                                    reference_q=closed.q)
+        if spec.get("outputs") is not None:
+            robot = dataclasses.replace(robot, outputs=self.outputs(spec["outputs"], robot))
+        return robot
+
+    def outputs(self, raw: Any, robot: Robot) -> tuple[str, ...]:
+        """``outputs:`` the joints the motors y drive (a parallel ankle's pitch and roll): as many coordinates
+        as y, forming a chart at the reference configuration (d outputs / dy = G's output rows invertible)."""
+        names = [c.name for c in robot.coordinates]
+        ny = len(robot.independent)
+        if not isinstance(raw, list) or not raw:
+            raise self.error("outputs", "expected a non-empty list of coordinate names")
+        for k, name in enumerate(raw):
+            if name not in names:
+                raise self.error(f"outputs[{k}]", f"unknown coordinate '{shown(name)}' (coordinates: {', '.join(names)})")
+        if len(set(raw)) != len(raw):
+            raise self.error("outputs", "a coordinate is listed twice")
+        if len(raw) != ny:
+            raise self.error("outputs", f"{len(raw)} coordinate(s) given, but the mechanism has {ny} degree(s) of "
+                             f"freedom (independent: {', '.join(robot.independent)})")
+        if list(raw) == list(robot.independent):
+            raise self.error("outputs", "the same as independent: the motor <-> joint maps would be the identity; "
+                             "leave outputs out")
+        # d(outputs)/dy = G's output rows is invertible where K_w (K's columns of the coordinates w not in
+        # outputs, kept rows) is: K_o od + K_w wd = 0 then gives wd, y among w, from od
+        K = Closure(robot).jacobian(np.array(robot.reference_q))[list(robot.loop_rows)]
+        w = [i for i, c in enumerate(names) if c not in raw]
+        s = np.linalg.svd(K[:, w], compute_uv=False)
+        sigma = float(s[-1] / max(np.linalg.norm(K, 2), 1e-300))
+        if sigma <= CHART_TOL:
+            raise self.error("outputs", f"({', '.join(raw)}) is not a valid chart at the reference configuration: "
+                             f"d(outputs)/dy is singular there (K's columns of the other coordinates: smallest "
+                             f"singular value / |K| = {sigma:.3g}); the motors cannot set these joints independently")
+        return tuple(raw)
 
     def resolve_mimics(self, robot: Robot) -> Robot:
         """``robot`` with every mimic of a mimic composed into one mimic of its chain's root

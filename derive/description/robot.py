@@ -294,11 +294,17 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext", "com", "com_jacobian",
                        "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor", "base_regressor", "bundle",
                        "rk4_step", "ik", "manipulability", "closure", "velocity_map", "mass_matrix_y", "bias_y",
-                       "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y")
+                       "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y",
+                       "motor_to_joint_position", "motor_to_joint_velocity", "motor_to_joint_torque",
+                       "joint_to_motor_position", "joint_to_motor_velocity", "joint_to_motor_torque")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
+MOTOR_MAP_QUANTITIES = ("motor_to_joint_position", "motor_to_joint_velocity", "motor_to_joint_torque",
+                        "joint_to_motor_position", "joint_to_motor_velocity", "joint_to_motor_torque")
+"""The motor <-> joint maps of a closed chain with ``outputs`` (its independent coordinates y are the motors,
+the outputs the joints it is used in: a parallel ankle's pitch and roll)."""
 CLOSED_CHAIN_QUANTITIES = ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y",
-                           "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y")
+                           "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y") + MOTOR_MAP_QUANTITIES
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with loops has (in its independent coordinates)."""
 
 BIG_FRAMES = 8
@@ -452,6 +458,7 @@ class Robot:
     reference: tuple[tuple[str, float], ...] = ()  # with loops: models.yaml's starting values of coordinates
     loop_rows: tuple[int, ...] | None = None  # with loops: the rows of the stacked phi kept (independent rows)
     reference_q: tuple[float, ...] | None = field(default=None, compare=False)  # the closed reference q (solved)
+    outputs: tuple[str, ...] | None = None  # with loops: the joints the motors y drive (motor <-> joint maps)
     file: str = field(default="", compare=False)  # the models file it was read from ("" if none): for messages only
 
     @property
@@ -697,7 +704,7 @@ def model_data(robot: Robot) -> dict:
             del data[key]
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities"):
+    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities", "outputs"):
         if data[key] is None:
             del data[key]
     for frame in data["frames"]:  # models without aliases keep the hash they had before aliases existed

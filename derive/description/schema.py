@@ -50,6 +50,9 @@ _SECTIONS = (
                        "constraint Jacobian, actuated joints first; `derive info` states the choice)",
         "reference": "with loops: mapping coordinate -> value, the start of the closure solve that fixes the "
                      "assembly (coordinates not listed start at 0)",
+        "outputs": "with loops: the joints the independent coordinates (the motors) drive, as many as they, "
+                   "e.g. a parallel ankle's [pitch, roll]: motor <-> joint maps for position, velocity and "
+                   "torque are generated",
     }),
     Section("link", "robots.<name>.links[i]", "A rigid body. Mass properties are about the centre of mass.", {
         "name": "C identifier, unique among links and frames (beyond letter case)",

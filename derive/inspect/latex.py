@@ -30,6 +30,7 @@ import sympy as sp
 from derive.codegen.generate import model_hash
 from derive.codegen.render import environment
 from derive.errors import DeriveError
+from derive.inspect.closed_latex import reduced_context, reduced_equations
 
 GREEK = {"alpha", "beta", "gamma", "delta", "epsilon", "zeta", "eta", "theta", "iota", "kappa", "lambda",
          "mu", "nu", "xi", "pi", "rho", "sigma", "tau", "upsilon", "phi", "chi", "psi", "omega",
@@ -48,6 +49,8 @@ class Options:
         width: characters of visible maths per line before an entry is broken.
         fk, jacobian: frames whose world_T_frame / geometric Jacobian are added.
         energy: add the kinetic and potential energies T and U.
+        tree: for a robot with loops, the spanning tree's M, C, g (in q, the loops not imposed) instead
+            of the closed chain's reduced equations in y (:mod:`derive.inspect.closed_latex`).
     """
 
     short_trig: bool = False
@@ -56,6 +59,7 @@ class Options:
     fk: tuple[str, ...] = ()
     jacobian: tuple[str, ...] = ()
     energy: bool = False
+    tree: bool = False
 
 
 # ---- symbol names ----
@@ -232,6 +236,8 @@ def _block(title: str, symbol: str, mat: sp.Matrix, pr: Printer, symmetric: bool
 def document_context(m, options: Options = Options()) -> dict:
     """Everything the template needs, as plain data (strings, lists, booleans)."""
     robot = m.robot
+    if robot.closed and not options.tree:
+        return reduced_document_context(m, options)
     for frame in options.fk + options.jacobian:
         if frame not in m.frames:
             raise DeriveError(f"robot '{robot.name}': no frame '{frame}' (known: {', '.join(m.frames)})")
@@ -293,6 +299,26 @@ def document_context(m, options: Options = Options()) -> dict:
     }
 
 
+def reduced_document_context(m, options: Options) -> dict:
+    """The reduced equations of a closed chain (:func:`derive.inspect.closed_latex.reduced_equations`)."""
+    robot = m.robot
+    if options.fk or options.jacobian or options.energy or options.short_trig or options.cse:
+        raise DeriveError(f"robot '{robot.name}': --fk, --jacobian, --energy, --short-trig and --cse are for the "
+                          "spanning tree's document of a closed chain (add --tree)")
+    red = reduced_equations(m)
+    names = symbol_names(m) | red.names
+    pr = Printer(names, set(), group=True, width=options.width)
+    q = ", ".join(names[s] for s in m.q)
+    return {
+        "robot": robot.name, "robot_text": escape_text(robot.name), "model_hash": model_hash(robot)[:16],
+        "description": escape_text(robot.description), "source": escape_text(robot.source),
+        "method": "recursive Newton-Euler" if m.method != "lagrange" else "Euler-Lagrange",
+        "coordinates": rf"q = \left({q}\right)", "parameters": ", ".join(names[p] for p in m.params),
+        "has_parameters": bool(len(m.params)), "eom": [], "has_eom": False, "blocks": [], "legend": [],
+        "has_legend": False, "temporaries": [], "has_temporaries": False,
+        **reduced_context(m, red, names, pr)}
+
+
 def _eom_rows(m, M: sp.Matrix, C: sp.Matrix, g: sp.Matrix, pr: Printer) -> list[dict]:
     """Row i of M qdd + C qd + g = tau as grouped terms: (M_ij) qdd_j ..., then C qd, then g."""
     rows = []
@@ -314,7 +340,8 @@ def latex_document(m, options: Options = Options()) -> str:
 
 def render_tex(context: dict) -> str:
     """The .tex text of a :func:`document_context` (templates/latex/document.tex.jinja)."""
-    return environment().get_template("latex/document.tex.jinja").render(context)
+    template = "latex/reduced.tex.jinja" if context.get("reduced") else "latex/document.tex.jinja"
+    return environment().get_template(template).render(context)
 
 
 def compile_pdf(tex: str | Path) -> Path:

@@ -18,6 +18,16 @@ PNG_MAX_LINES = 400  # beyond this the PNG is cut (the .tex holds everything)
 
 def mathtext_lines(context: dict) -> list[tuple[str, str]]:
     """The document as (kind, text) lines for mathtext: 'head', 'text' or 'math' (without $)."""
+    if context.get("reduced"):  # a closed chain's reduced equations: its sections' rows
+        out = [("head", f"{context['robot']}: reduced equations ({context['method']})"),
+               ("math", r"M_y(y)\,\ddot{y} + h_y(y, \dot{y}) = \tau_y"), ("math", context["coordinates"]),
+               ("math", context["closed_coordinates"])]
+        for sec in context["sections"]:
+            out.append(("head", sec["title"]))
+            for e in sec["rows"]:
+                out.append(("math", f"{e['lhs']} = {e['lines'][0]}"))
+                out.extend(("math", rf"\qquad {line}") for line in e["lines"][1:])
+        return out
     out: list[tuple[str, str]] = [("head", f"{context['robot']}: equations of motion ({context['method']})"),
                                   ("math", r"M(q)\,\ddot{q} + C(q, \dot{q})\,\dot{q} + g(q) = \tau"),
                                   ("math", context["coordinates"])]

@@ -123,6 +123,28 @@ class ClosedChainReference:
             q[self.z] -= np.linalg.solve(self.constraint_jacobian(q)[np.ix_(self.rows, self.z)], r)
         return q, float(np.max(np.abs(self.phi(q))))
 
+    def closure_from_outputs(self, o, w0=None) -> tuple[np.ndarray, float]:
+        """(q, max |phi|): the loops closed with models.yaml's ``outputs`` held at o, by Newton on the kept rows
+        over the other coordinates w from w0 (default the reference's): the joint -> motor position map."""
+        names = [c.name for c in self.robot.coordinates]
+        oi = [names.index(c) for c in self.robot.outputs]
+        w = [i for i in range(self.n) if i not in oi]
+        q = self.q_ref.copy()
+        if w0 is not None:
+            q[w] = w0
+        q[oi] = o
+        for _ in range(NEWTON_STEPS):
+            r = self.phi(q)[self.rows]
+            if np.max(np.abs(r)) <= 1e-15:
+                break
+            q[w] -= np.linalg.solve(self.constraint_jacobian(q)[np.ix_(self.rows, w)], r)
+        return q, float(np.max(np.abs(self.phi(q))))
+
+    def output_jacobian(self, q) -> np.ndarray:
+        """J = d o / d y (ny x ny): ``outputs``' rows of G, od = J yd."""
+        names = [c.name for c in self.robot.coordinates]
+        return self.projection(q)[[names.index(c) for c in self.robot.outputs]]
+
     def assemble(self, y, z) -> np.ndarray:
         q = np.zeros(self.n)
         q[self.y], q[self.z] = y, z

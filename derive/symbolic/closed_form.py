@@ -56,22 +56,27 @@ def _num(f: ca.Function, *args) -> np.ndarray:
     return np.array(f(*args), dtype=float)
 
 
-def closed_form_closure(model: SXModel, y: ca.SX) -> tuple[ca.SX, str] | None:
-    """(q = gamma(y) as an SX expression of y and p, a one-line description) or None (no closed form)."""
+def closed_form_closure(model: SXModel, y: ca.SX, given: tuple[str, ...] | None = None,
+                        centred: bool = True) -> tuple[ca.SX, str] | None:
+    """(q = gamma(y) as an SX expression of y and p, a one-line description) or None (no closed form).
+    ``given``: the coordinates y holds (default the robot's independent ones; the motor <-> joint maps
+    solve the other way, from the outputs). ``centred`` False: a planar dyad's angles within (-pi, pi]
+    (atan2 alone, no turn about the reference angle: the shorter form ``derive latex`` prints)."""
     robot: Robot = model.robot
+    given = robot.independent if given is None else given
     if robot.floating or not robot.loops or any(j.mimic is not None for j in robot.joints):
         return None
     s, kin = model.sym, model.kinematics
     names = list(s.joint_names)
     q_ref = np.array(robot.reference_q, dtype=float)
     p_def = np.array([p.default for p in robot.parameters], dtype=float)
-    y_ref = q_ref[[names.index(c) for c in robot.independent]]
+    y_ref = q_ref[[names.index(c) for c in given]]
 
     def at_ref(e: ca.SX, known: dict | None = None) -> np.ndarray:
         """e (in q, y and p) at the reference configuration."""
         return _num(ca.Function("f", [s.q, y, s.p], [e]), q_ref, y_ref, p_def)
 
-    known = {c: y[i] for i, c in enumerate(robot.independent)}  # coordinate -> expression in y, p
+    known = {c: y[i] for i, c in enumerate(given)}  # coordinate -> expression in y, p
     if all(lp.kind == "distance" for lp in robot.loops):
         out = _sphere_closure(model, known, at_ref, q_ref)
         if out is None:
@@ -104,7 +109,7 @@ def closed_form_closure(model: SXModel, y: ca.SX) -> tuple[ca.SX, str] | None:
     pending = list(loops)
     while pending:
         for entry in pending:
-            out = _solve_loop(model, entry, known, at_ref, q_ref)
+            out = _solve_loop(model, entry, known, at_ref, q_ref, centred)
             if out is not None:
                 break
         else:
@@ -120,7 +125,7 @@ def closed_form_closure(model: SXModel, y: ca.SX) -> tuple[ca.SX, str] | None:
     return q, "closed form: " + ", ".join(kinds)
 
 
-def _solve_loop(model: SXModel, entry, known: dict, at_ref, q_ref) -> tuple[str, dict] | None:
+def _solve_loop(model: SXModel, entry, known: dict, at_ref, q_ref, centred: bool = True) -> tuple[str, dict] | None:
     """One planar loop whose cycle has exactly two unknown coordinates: (its kind, {coordinate: expression})."""
     s, kin = model.sym, model.kinematics
     names = list(s.joint_names)
@@ -204,9 +209,9 @@ def _solve_loop(model: SXModel, entry, known: dict, at_ref, q_ref) -> tuple[str,
         w0 = sub(pin(target, here) - pin(k, here))  # at q_k = 0 (and later unknowns at 0)
         wt = position[target] - position[k]
         sgn = 1.0 if float(ref(kin.joint_axis[k]) @ n) > 0 else -1.0
-        centre = round(float(q_ref[names.index(k)]), 3)
+        centre = round(float(q_ref[names.index(k)]), 3) if centred else 0.0
         cs, sn = math.cos(sgn * centre), math.sin(sgn * centre)
-        w0r = ca.vertcat(cs * w0[0] - sn * w0[1], sn * w0[0] + cs * w0[1])
+        w0r = ca.vertcat(cs * w0[0] - sn * w0[1], sn * w0[0] + cs * w0[1]) if centred else w0
         solved[k] = centre + sgn * ca.atan2(w0r[0] * wt[1] - w0r[1] * wt[0], ca.dot(w0r, wt))
     return kind, solved
 
