@@ -270,12 +270,22 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext", "com", "com_jacobian",
                        "centroidal_map", "ode_rhs", "ode_jac_x", "ode_jac_u", "regressor", "base_regressor", "bundle",
                        "rk4_step", "ik", "manipulability", "closure", "velocity_map", "mass_matrix_y", "bias_y",
-                       "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces")
+                       "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces", "contact_dynamics",
+                       "contact_dynamics_derivatives", "impulse_dynamics", "impulse_dynamics_derivatives",
+                       "centroidal_map_dot_qd", "com_acceleration")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
 CLOSED_CHAIN_QUANTITIES = ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y",
                            "forward_dynamics_y", "constraint_forces")
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with loops has (in its independent coordinates)."""
+CONTACT_QUANTITIES = ("contact_dynamics", "contact_dynamics_derivatives", "impulse_dynamics",
+                      "impulse_dynamics_derivatives")
+"""Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (one function per contact set)."""
+CENTROIDAL_QUANTITIES = ("centroidal_map_dot_qd", "com_acceleration")
+"""Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (the centroidal terms of legged control)."""
+CONTACT_KINDS = {"point": 3, "surface": 6}
+"""Contact kind -> rows of its constraint: a point holds the frame origin's position (3), a surface the
+frame's whole pose (6)."""
 
 BIG_FRAMES = 8
 """A robot with more named frames than this is big (the committed arms have at most 5; a Gen3 with a
@@ -287,10 +297,11 @@ it also leaves out :data:`LEAN_LEFT_OUT`: with a floating base or mimic joints (
 no ABA) those are unrolled in O(nv^3) or worse and made 80 % of the Unitree H1-2's 1.4 million
 operations and 76 MB of Python (344 s to generate, 20 s to import)."""
 LEAN_LEFT_OUT = ("coriolis_matrix", "inverse_dynamics_derivatives", "ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step",
-                 "regressor", "base_regressor")
+                 "regressor", "base_regressor", "contact_dynamics_derivatives", "impulse_dynamics_derivatives")
 """What a robot of more than :data:`BIG_NV` velocities leaves out by default: C (the bias h = C qd + g
 stays), dID/dx, the ODE, its Jacobians and RK4 (forward dynamics stays: qdd = FD(q, qd, tau)) and the
-identification regressors. ``generate: {quantities: all}`` brings them back."""
+identification regressors (and a robot with contacts their derivatives). ``generate: {quantities: all}`` brings
+them back."""
 
 
 @dataclass(frozen=True)
@@ -300,6 +311,32 @@ class Bundle:
 
     name: str
     quantities: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact of models.yaml's ``contacts:``: a link or named frame held by the ground (or a wall).
+
+    ``kind`` "point" (:data:`CONTACT_KINDS`): the frame origin's classical acceleration is zero, the
+    force [fx, fy, fz] acts at the origin, world-aligned. "surface": the frame's spatial acceleration
+    (world-aligned, at the origin) is zero, the wrench [force; torque] acts at the origin, world-aligned
+    (Pinocchio's CONTACT_3D and CONTACT_6D, LOCAL_WORLD_ALIGNED)."""
+
+    frame: str
+    kind: str = "point"
+
+    @property
+    def rows(self) -> int:
+        return CONTACT_KINDS[self.kind]
+
+
+@dataclass(frozen=True)
+class ContactSet:
+    """A set of contacts active together (a stance): one generated function per set and quantity
+    (``<robot>_contact_dynamics_<name>``); its frames in the order of the force vector lambda."""
+
+    name: str
+    frames: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -420,6 +457,8 @@ class Robot:
     wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
     coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
     bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
+    contacts: tuple[Contact, ...] = ()  # frames that may touch the ground (models.yaml's contacts:)
+    contact_sets: tuple[ContactSet, ...] | None = None  # stances; None: one set "all" of every contact
     generate_frames: tuple[str, ...] | None = None  # frames given per-frame functions; None: the named frames
     generate_quantities: tuple[str, ...] | None = None  # quantities generated (and what they call); None: all
     loops: tuple[Loop, ...] = ()  # loop closures of the tree (a closed chain); () for a tree
@@ -470,6 +509,22 @@ class Robot:
         if self.wrenches is not None:
             return self.wrenches
         return ("tcp",) if any(f.name == "tcp" for f in self.frames) else ()
+
+    @property
+    def stances(self) -> tuple[ContactSet, ...]:
+        """The contact sets that get the contact functions: models.yaml's ``contact_sets``, by default one
+        set ``all`` of every contact (none without contacts)."""
+        if self.contact_sets is not None:
+            return self.contact_sets
+        return (ContactSet("all", tuple(c.frame for c in self.contacts)),) if self.contacts else ()
+
+    def contact(self, frame: str) -> Contact:
+        return next(c for c in self.contacts if c.frame == frame)
+
+    @property
+    def centroidal(self) -> bool:
+        """Whether the robot gets the centroidal terms (:data:`CENTROIDAL_QUANTITIES`): where it has contacts."""
+        return bool(self.contacts)
 
     @property
     def control_bundles(self) -> tuple[Bundle, ...]:
@@ -607,7 +662,7 @@ class Robot:
         """A big robot's frames with per-frame functions when models.yaml chooses none: the ``tcp``,
         the wrench (contact) frames, then the leaves of the tree, each once."""
         tcp = ("tcp",) if any(f.name == "tcp" for f in self.frames) else ()
-        return tuple(dict.fromkeys(tcp + self.wrench_frames + self.leaves))
+        return tuple(dict.fromkeys(tcp + self.wrench_frames + tuple(c.frame for c in self.contacts) + self.leaves))
 
     @property
     def function_frames(self) -> tuple[str, ...]:
@@ -644,7 +699,8 @@ class Robot:
             out["quantities"] = "generate.quantities, and what they call"
         elif self.nv > BIG_NV:
             out["quantities"] = (f"default for more than {BIG_NV} velocities ({self.nv}): all but "
-                                 f"{', '.join(LEAN_LEFT_OUT)}; generate: {{quantities: all}} gives them")
+                                 f"{', '.join(q for q in LEAN_LEFT_OUT if self.contacts or q not in CONTACT_QUANTITIES)}; "
+                                 "generate: {quantities: all} gives them")
         return out
 
     @property
@@ -671,9 +727,11 @@ def model_data(robot: Robot) -> dict:
             del data[key]
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities"):
+    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities", "contact_sets"):
         if data[key] is None:
             del data[key]
+    if not data["contacts"]:  # models without contacts keep the hash they had before contacts existed
+        del data["contacts"]
     for frame in data["frames"]:  # models without aliases keep the hash they had before aliases existed
         if not frame["aliases"]:
             del frame["aliases"]
