@@ -65,14 +65,14 @@ robots:
     frames:
       - {name: l_foot, link: l_shin, xyz: [0.02, 0, -0.3], rpy: [0.1, -0.2, 0.3], aliases: [left_sole]}
       - {name: r_foot, link: r_shin, xyz: [0.02, 0, -0.3]}
-      - {name: l_toe, link: l_shin, xyz: [0.1, 0, -0.3]}
+      - {name: l_point, link: l_shin, xyz: [0.02, 0, -0.3]}
     contacts:
       - {frame: left_sole, kind: surface}
       - {frame: r_foot}
-      - {frame: l_toe, kind: point}
+      - {frame: l_point, kind: point}
     contact_sets:
       both: [l_foot, r_foot]
-      redundant: [l_foot, l_toe]
+      redundant: [l_foot, l_point]
 """
 
 
@@ -115,8 +115,8 @@ def test_bad_contacts_give_one_line_naming_the_field(case):
 
 def test_contacts_parse_with_aliases_and_default_set():
     robot = parse_models(BIPED)["biped"]
-    assert robot.contacts == (Contact("l_foot", "surface"), Contact("r_foot", "point"), Contact("l_toe", "point"))
-    assert robot.stances == (ContactSet("both", ("l_foot", "r_foot")), ContactSet("redundant", ("l_foot", "l_toe")))
+    assert robot.contacts == (Contact("l_foot", "surface"), Contact("r_foot", "point"), Contact("l_point", "point"))
+    assert robot.stances == (ContactSet("both", ("l_foot", "r_foot")), ContactSet("redundant", ("l_foot", "l_point")))
     one = parse_models(arm("    contacts: [{frame: tip}]\n"))["arm"]
     assert one.stances == (ContactSet("all", ("tip",)),) and one.centroidal
     plain = load_models()["ur5"]
@@ -216,8 +216,9 @@ def test_biped_contact_functions_match_the_reference(biped):
 
 
 def test_biped_redundant_stance_reports_status_zero(biped):
-    """A surface and a point on the same shin: 9 rows of rank 6. status is 0 in every language, the numbers
-    finite (nothing divides by zero, nothing is regularised into a plausible answer)."""
+    """A surface and a point at the same origin: 9 rows of rank 6, pivots of S exactly zero or rounding. status
+    is 0 in every language, the numbers finite (no division by zero raises in Python, nothing is regularised
+    into a plausible answer with status 1)."""
     rng = np.random.default_rng(1)
     nr = NumericRobot(biped.robot)
     for _ in range(3):
