@@ -133,6 +133,23 @@ def test_bad_contacts_from_the_command_line(tmp_path, capsys):
     assert not (tmp_path / "out" / "arm").exists()
 
 
+def test_singular_mass_matrix_leaves_the_contact_functions_out_by_name(tmp_path):
+    """A coordinate that moves no mass (the ankle of a massless toe): M is singular, so the contact functions,
+    which solve with M^-1, are left out like forward dynamics and named in manifest.json's left_out."""
+    text = ("robots:\n  legm:\n    base: floating\n"
+            "    links: [{name: body, mass: 2.0, inertia: [0.1, 0.1, 0.1]}, {name: shin, mass: 0.5, inertia: [0.01, 0.01, 0.01]},"
+            " {name: toe}]\n"
+            "    joints: [{name: knee, type: revolute, parent: body, child: shin, axis: [0, 1, 0]},"
+            " {name: ankle, type: revolute, parent: shin, child: toe, axis: [1, 0, 0]}]\n"
+            "    frames: [{name: foot, link: toe, xyz: [0, 0, -0.3]}]\n"
+            "    contacts: [{frame: foot}]\n"
+            "    generate: {quantities: [contact_dynamics, com]}\n")
+    generate({"legm": parse_models(text)["legm"]}, tmp_path, log=lambda s: None, warn=lambda s: None)
+    manifest = json.loads((tmp_path / "legm" / "manifest.json").read_text())
+    assert [f["name"] for f in manifest["functions"]] == ["legm_com"]
+    assert "legm_contact_dynamics_all" in manifest["left_out"]["functions"]
+
+
 # ---------------------------------------------------------------------------------------------- generated code
 
 class Generated:
