@@ -119,6 +119,7 @@ def test_contacts_parse_with_aliases_and_default_set():
     assert robot.stances == (ContactSet("both", ("l_foot", "r_foot")), ContactSet("redundant", ("l_foot", "l_point")))
     one = parse_models(arm("    contacts: [{frame: tip}]\n"))["arm"]
     assert one.stances == (ContactSet("all", ("tip",)),) and one.centroidal
+    assert one.control_bundles[0].quantities == ("mass_matrix", "bias", "jacobian_tip", "jdot_qd_tip")  # the control tick
     plain = load_models()["ur5"]
     assert not plain.contacts and not plain.stances and "contacts" not in model_data(plain)  # the hash stays
 

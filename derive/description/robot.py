@@ -530,13 +530,14 @@ class Robot:
     def control_bundles(self) -> tuple[Bundle, ...]:
         """The model's ``bundles``, by default two: ``control`` = M, the bias h = C qd + g, and of the
         ``tcp`` frame (if any) its pose, Jacobian and J'qd, plus the Jacobian and J'qd of every other
-        wrench frame (the contacts); ``computed_torque`` (with a tcp) = tau for a given qdd, and the
+        wrench frame and every frame of ``contacts:``; ``computed_torque`` (with a tcp) = tau for a given qdd, and the
         tcp's pose, Jacobian and the acceleration that qdd gives it."""
         if self.bundles is not None:
             return self.bundles
         tcp = any(f.name == "tcp" for f in self.frames)
         control = ["mass_matrix", "bias"] + (["fk_tcp", "jacobian_tcp", "jdot_qd_tcp"] if tcp else [])
-        control += [f"{q}_{f}" for f in self.wrench_frames if f != "tcp" for q in ("jacobian", "jdot_qd")]
+        held = tuple(dict.fromkeys(self.wrench_frames + tuple(c.frame for c in self.contacts)))  # wrench and contact frames
+        control += [f"{q}_{f}" for f in held if f != "tcp" for q in ("jacobian", "jdot_qd")]
         out = [Bundle("control", tuple(control))]
         if tcp:
             out.append(Bundle("computed_torque", ("inverse_dynamics", "fk_tcp", "jacobian_tcp",
