@@ -332,6 +332,27 @@ def check_against_pinocchio(pm, q, v, tau, e, kinds, frames, outputs: dict, what
         assert_close(dimp[:, nq:], pd.dlambda_dv, TOL, f"{what}: dimpulse/dv-")
 
 
+def check_baumgarte(pm, q, v, tau, frames: list[str], anchor, gains, qdd, lam, what: str) -> None:
+    """derive's contact_dynamics_baumgarte against constraintDynamics with Baumgarte parameters (Kp, Kd) and each
+    point's joint2_placement (on the universe) at its anchor."""
+    pd = pm.createData()
+    models = []
+    for k, frame in enumerate(frames):
+        f = pm.frames[pm.getFrameId(frame)]
+        c = pin.RigidConstraintModel(pin.ContactType.CONTACT_3D, pm, f.parentJoint, f.placement, 0,
+                                     pin.SE3(np.eye(3), np.asarray(anchor[3 * k:3 * k + 3])), pin.LOCAL_WORLD_ALIGNED)
+        bp = c.m_baumgarte_parameters
+        bp.Kp, bp.Kd = gains
+        c.setBaumgarteCorrectorParameters(bp)
+        models.append(c)
+    models = pin.StdVec_RigidConstraintModel(models)
+    datas = pin.StdVec_RigidConstraintData([m.createData() for m in models])
+    pin.initConstraintDynamics(pm, pd, models, datas)
+    expected = pin.constraintDynamics(pm, pd, q, v, tau, models, datas, prox())
+    assert_close(qdd, expected, TOL, f"{what}: qdd vs constraintDynamics with Baumgarte")
+    assert_close(lam, pd.lambda_c, TOL, f"{what}: lambda vs constraintDynamics with Baumgarte")
+
+
 def test_fixed_base_contact_functions_against_pinocchio(tmp_path):
     """rrprr with its tcp held (3 rows of 5 velocities): every contact quantity generated (the parameters
     input p included), Python and C against Pinocchio at seeded states, and A_G' qd, the CoM acceleration."""
@@ -361,6 +382,10 @@ def test_fixed_base_contact_functions_against_pinocchio(tmp_path):
                 "qdd": qdd.ravel(), "lam": lam.ravel(), "dqdd": dqdd.reshape(shape), "dlam": dlam.reshape(3, shape[1]),
                 "v_plus": v_plus.ravel(), "impulse": imp.ravel(), "dv_plus": dv.reshape(pm.nv, 2 * pm.nv),
                 "dimpulse": dimp.reshape(3, 2 * pm.nv)}, f"rrprr ({lang})")
+            anchor, gains = rng.normal(size=3), rng.uniform(1, 10, 2)
+            qdd_b, lam_b, status_b = call("contact_dynamics_baumgarte_all", q, v, tau, anchor, gains, p)
+            assert status_b.item() == 1.0
+            check_baumgarte(pm, q, v, tau, ["tcp"], anchor, gains, qdd_b.ravel(), lam_b.ravel(), f"rrprr ({lang})")
             a = rng.normal(size=pm.nv)
             pd = pm.createData()
             pin.computeCentroidalMomentumTimeVariation(pm, pd, q, v, 0 * v)
@@ -393,10 +418,14 @@ def legged(key: str):
     model = SXModel(robot)
     s, e = model.sym, ca.SX.sym("e")
     functions = {}
+    anchor, gains = ca.SX.sym("anchor", 12), ca.SX.sym("gains", 2)
     for stance in robot.stances:
         cm = ContactModel(model, stance)
         functions[stance.name] = ca.Function(stance.name, [s.q, s.qd, s.tau, e], [
             *cm.forward, *cm.forward_derivatives, *cm.impulse(e), *cm.impulse_derivatives(e)])
+        if cm.points_only:
+            functions[stance.name + "_baumgarte"] = ca.Function("b", [s.q, s.qd, s.tau, anchor[:cm.rows], gains],
+                                                                list(cm.stabilised(anchor[:cm.rows], gains)))
     centroidal = ca.Function("centroidal", [s.q, s.qd, s.qdd], [centroidal_map_dot_qd(model), com_acceleration(model)])
     pm = pin.buildModelFromUrdf(erd(rel), pin.JointModelFreeFlyer())
     return robot, functions, centroidal, pm
@@ -410,7 +439,8 @@ def legged_robot(request):
 def test_legged_contact_dynamics_against_pinocchio(legged_robot):
     """The issue's Done-when on solo12 (four feet and a trot pair), anymal (four feet) and talos_reduced (both
     soles as surfaces): contact FD and its derivatives, impulse dynamics and its derivatives equal Pinocchio's
-    to 1e-9 at seeded states; FD and impulse also the numpy reference."""
+    to 1e-9 at seeded states (point stances: with Baumgarte stabilisation too); FD and impulse also the numpy
+    reference."""
     robot, functions, _, pm = legged_robot
     nr = NumericRobot(robot)
     rng = np.random.default_rng(4)
@@ -431,6 +461,10 @@ def test_legged_contact_dynamics_against_pinocchio(legged_robot):
             v_r, imp_r = ref.impulse_dynamics(nr, q, v, e, kinds)
             assert_close(v_plus.ravel(), v_r, TOL, "v+ vs the numpy reference")
             assert_close(imp.ravel(), imp_r, TOL, "impulse vs the numpy reference")
+            if stance.name + "_baumgarte" in functions:
+                anchor, gains = rng.normal(size=3 * len(kinds)), rng.uniform(1, 10, 2)
+                qdd_b, lam_b, _ = (np.asarray(x).ravel() for x in functions[stance.name + "_baumgarte"](q, v, tau, anchor, gains))
+                check_baumgarte(pm, q, v, tau, list(stance.frames), anchor, gains, qdd_b, lam_b, f"{robot.name} {stance.name}")
 
 
 def test_legged_centroidal_terms_against_pinocchio(legged_robot):

@@ -195,6 +195,15 @@ def contact_specs(model: SXModel, add, need, forward: bool) -> None:
                 "contacts held (a point's classical acceleration zero, a surface's spatial one); lam world-aligned at "
                 "each frame origin, [f] per point, [f; torque] per surface (Pinocchio's constraintDynamics, "
                 f"LOCAL_WORLD_ALIGNED). LTDL of M, then LDL^T of J M^-1 J^T, no KKT inverse; {status_doc}", facts)
+        if need("contact_dynamics_baumgarte") and cm.points_only:
+            anchor, gains = ca.SX.sym("anchor", m), ca.SX.sym("gains", 2)
+            qdd_b, lam_b, status_b = cm.stabilised(anchor, gains)
+            add("contact_dynamics_baumgarte", stance.name, [q, qd, tau, ("anchor", anchor), ("gains", gains)],
+                [("qdd", qdd_b), ("lam", lam_b), ("status", status_b)],
+                f"contact_dynamics_{stance.name} with Baumgarte stabilisation: the contacts' constraint is "
+                "J qdd + J' qd = -kp (p - anchor) - kd J qd, p the contact points (world, 3 each), anchor "
+                f"({m}) where they are held, gains = [kp, kd] (Pinocchio's BaumgarteCorrectorParameters with "
+                f"joint2_placement at the anchor); {status_doc}", facts)
         if need("contact_dynamics_derivatives"):
             dqdd, dlam = cm.forward_derivatives
             add("contact_dynamics_derivatives", stance.name, [q, qd, tau], [("dqdd", dqdd), ("dlam", dlam)],

@@ -286,7 +286,8 @@ def left_out_entry(robot: Robot, unmoved: list[str]) -> dict | None:
         return None
     names = [q for q in NEEDS_INVERSE_MASS if q != "forward_dynamics_fext" or robot.wrench_frames]
     need = wanted(robot)  # the contact functions solve with M^-1 as well (catalogue.contact_specs)
-    names += [f"{q}_{stance.name}" for stance in robot.stances for q in CONTACT_QUANTITIES if need(q)]
+    names += [f"{q}_{stance.name}" for stance in robot.stances for q in CONTACT_QUANTITIES if need(q) and (
+        q != "contact_dynamics_baumgarte" or all(robot.contact(f).kind == "point" for f in stance.frames))]
     return {"functions": [f"{robot.name}_{q}" for q in names], "coordinates": list(unmoved),
             "reason": unmoved_reason(unmoved)}
 

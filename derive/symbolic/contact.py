@@ -178,6 +178,24 @@ class ContactModel:
         qdd, lam = k.solve(self.sym.tau - self.ne.bias, -self.drift())
         return qdd, lam, k.status
 
+    @property
+    def points_only(self) -> bool:
+        """Whether every contact of the set is a point (what :meth:`stabilised` handles)."""
+        return all(self.robot.contact(f).kind == "point" for f in self.stance.frames)
+
+    def stabilised(self, anchor: ca.SX, gains: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(qdd, lambda, status) with Baumgarte stabilisation of a set of point contacts: the constraint
+        J qdd + a0 = -kp (p - anchor) - kd J qd, p the contact points stacked (world), ``anchor`` where they
+        are held (3 per point), ``gains`` = [kp, kd] (Pinocchio's BaumgarteCorrectorParameters Kp, Kd with
+        joint2_placement at the anchor)."""
+        if not self.points_only:
+            raise ValueError("Baumgarte stabilisation of surface contacts is not derived (it needs log6)")
+        s, k = self.sym, self.kkt
+        p = ca.vertcat(*(self.model.fk(f)[0:3, 3] for f in self.stance.frames))
+        a0 = self.drift() + gains[0] * (p - anchor) + gains[1] * (self.jacobian @ s.qd)
+        qdd, lam = k.solve(s.tau - self.ne.bias, -a0)
+        return qdd, lam, k.status
+
     @cached_property
     def forward_derivatives(self) -> tuple[ca.SX, ca.SX]:
         """(dqdd, dlambda), each with columns [d/dq (nq), d/dqd (nv), d/dtau (nv)]: by the implicit-function
