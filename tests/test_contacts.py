@@ -36,7 +36,7 @@ from derive.description.robot import (CENTROIDAL_QUANTITIES, CONTACT_QUANTITIES,
 from derive.description.urdf import example_robot_data_dir, import_urdf_named
 from derive.reference import NumericRobot
 from derive.reference import contact as ref
-from derive.symbolic.contact import ContactModel, centroidal_map_dot_qd, com_acceleration
+from derive.symbolic.contact import ContactModel, centroidal_inertia, centroidal_map_dot_qd, com_acceleration
 from derive.symbolic.model import SXModel
 from util import assert_close, build_library
 
@@ -393,6 +393,8 @@ def test_fixed_base_contact_functions_against_pinocchio(tmp_path):
                          f"A_G' qd ({lang})")
             pin.centerOfMass(pm, pd, q, v, a)
             assert_close(call("com_acceleration", q, v, a, p)[0].ravel(), pd.acom[0], 1e-12, f"CoM acceleration ({lang})")
+            pin.ccrba(pm, pd, q, v)
+            assert_close(call("centroidal_inertia", q, p)[0].reshape(3, 3), pd.Ig.inertia, 1e-12, f"I_G ({lang})")
 
 
 LEGGED = {  # example-robot-data file, contacts (frame, kind), stances (None: one set of all)
@@ -426,7 +428,8 @@ def legged(key: str):
         if cm.points_only:
             functions[stance.name + "_baumgarte"] = ca.Function("b", [s.q, s.qd, s.tau, anchor[:cm.rows], gains],
                                                                 list(cm.stabilised(anchor[:cm.rows], gains)))
-    centroidal = ca.Function("centroidal", [s.q, s.qd, s.qdd], [centroidal_map_dot_qd(model), com_acceleration(model)])
+    centroidal = ca.Function("centroidal", [s.q, s.qd, s.qdd], [centroidal_map_dot_qd(model), com_acceleration(model),
+                                                               centroidal_inertia(model)])
     pm = pin.buildModelFromUrdf(erd(rel), pin.JointModelFreeFlyer())
     return robot, functions, centroidal, pm
 
@@ -469,7 +472,8 @@ def test_legged_contact_dynamics_against_pinocchio(legged_robot):
 
 def test_legged_centroidal_terms_against_pinocchio(legged_robot):
     """A_G' qd equals computeCentroidalMomentumTimeVariation's dhg at a = 0 to 1e-12, the CoM acceleration
-    centerOfMass(q, v, a)'s acom, and both the numpy reference's RNEA momentum rate."""
+    centerOfMass(q, v, a)'s acom, both the numpy reference's RNEA momentum rate, and the composite inertia
+    about the CoM ccrba's Ig."""
     robot, _, centroidal, pm = legged_robot
     pd = pm.createData()
     nr = NumericRobot(robot)
@@ -477,7 +481,10 @@ def test_legged_centroidal_terms_against_pinocchio(legged_robot):
     for _ in range(5):
         q = pin.randomConfiguration(pm, -np.ones(pm.nq), np.ones(pm.nq))
         v, a = rng.normal(size=(2, pm.nv))
-        dh, acc = (np.asarray(x).ravel() for x in centroidal(q, v, a))
+        dh, acc, inertia = (np.asarray(x) for x in centroidal(q, v, a))
+        dh, acc = dh.ravel(), acc.ravel()
+        pin.ccrba(pm, pd, q, v)
+        assert_close(inertia, pd.Ig.inertia, 1e-12, "I_G vs ccrba's Ig")
         pin.computeCentroidalMomentumTimeVariation(pm, pd, q, v, 0 * v)
         assert_close(dh, np.r_[pd.dhg.linear, pd.dhg.angular], 1e-12, "A_G' qd vs Pinocchio")
         pin.centerOfMass(pm, pd, q, v, a)

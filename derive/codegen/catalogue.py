@@ -172,6 +172,11 @@ def contact_specs(model: SXModel, add, need, forward: bool) -> None:
         add("com_acceleration", None, [q, qd, qdd], [("a", contact.com_acceleration(model))],
             "Acceleration of the centre of mass (3), world coordinates: (A_G qdd + A_G' qd)[0:3] / m "
             "(Pinocchio's centerOfMass(q, v, a), its acom).")
+    if need("centroidal_inertia"):
+        add("centroidal_inertia", None, [q], [("I", contact.centroidal_inertia(model))],
+            "Composite rotational inertia I_G(q) (3x3, row-major) of the robot locked at q, about the centre of mass, "
+            "world axes: with the total mass, the single-rigid-body model at this posture (Pinocchio's ccrba, the "
+            "rotational block of data.Ig).")
     if not forward:
         return
     e = ca.SX.sym("e")

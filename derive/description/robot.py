@@ -273,7 +273,7 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces", "contact_dynamics",
                        "contact_dynamics_baumgarte", "contact_dynamics_derivatives", "impulse_dynamics",
                        "impulse_dynamics_derivatives",
-                       "centroidal_map_dot_qd", "com_acceleration")
+                       "centroidal_map_dot_qd", "com_acceleration", "centroidal_inertia")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
 CLOSED_CHAIN_QUANTITIES = ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y",
@@ -283,7 +283,7 @@ CONTACT_QUANTITIES = ("contact_dynamics", "contact_dynamics_baumgarte", "contact
                       "impulse_dynamics_derivatives")
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (one function per contact set;
 ``contact_dynamics_baumgarte`` per set of point contacts only)."""
-CENTROIDAL_QUANTITIES = ("centroidal_map_dot_qd", "com_acceleration")
+CENTROIDAL_QUANTITIES = ("centroidal_map_dot_qd", "com_acceleration", "centroidal_inertia")
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (the centroidal terms of legged control)."""
 CONTACT_KINDS = {"point": 3, "surface": 6}
 """Contact kind -> rows of its constraint: a point holds the frame origin's position (3), a surface the

@@ -43,6 +43,7 @@ import casadi as ca
 
 from derive.description.robot import ContactSet
 from derive.symbolic.ode import ltdl_factor
+from derive.symbolic.spatial import skew
 
 PIVOT_TOL = 1e-10
 """status = 0 where a pivot of the Schur complement's LDL^T is at most this times its diagonal entry: the
@@ -268,3 +269,18 @@ def centroidal_map_dot_qd(model) -> ca.SX:
 def com_acceleration(model) -> ca.SX:
     """c'' (3): the centre of mass's acceleration, world coordinates: the linear momentum's rate over the mass."""
     return momentum_rate(model, model.sym.qdd)[0:3] / model.whole_body.mass
+
+
+def centroidal_inertia(model) -> ca.SX:
+    """I_G(q) (3x3): the composite rotational inertia of the robot locked at q, about the centre of mass c, world
+    axes: the single-rigid-body model's inertia (with the total mass; Pinocchio's ccrba, data.Ig's rotational
+    block). Per body (mass m, first moment h, inertia I_o about its origin p, rotation R), moved from p to c
+    with d = p - c and h_w = R h: R I_o R^T - [h_w]x [d]x - [d]x [h_w]x - m [d]x [d]x."""
+    wb, kin = model.whole_body, model.kinematics
+    c = wb.com
+    total = ca.SX.zeros(3, 3)
+    for frame, m, h, I_o in wb.bodies:
+        pose = kin.pose(frame)
+        d, h_w = skew(pose.p - c), skew(pose.R @ h)
+        total += pose.R @ I_o @ pose.R.T - h_w @ d - d @ h_w - m * (d @ d)
+    return total
