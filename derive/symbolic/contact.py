@@ -33,6 +33,10 @@ lambda solve nothing; an exactly zero pivot is divided as 1 so that no backend r
 The derivatives follow from the implicit-function theorem on the residual
 F(q, v, tau; qdd, lambda) = [ID(q, v, qdd) - J^T lambda - tau; J qdd + a0]: d(qdd, lambda)/dx solves the
 same block system with the right-hand side -dF/dx at fixed (qdd, lambda), by the same factors.
+
+Also here: Baumgarte stabilisation of point contacts (:meth:`ContactModel.stabilised`) and the centroidal
+terms of legged control, A_G' qd, the CoM acceleration (:func:`momentum_rate`) and the composite inertia
+about the CoM (:func:`centroidal_inertia`).
 """
 
 from __future__ import annotations
