@@ -43,6 +43,15 @@ DH = {"robots": {"dh_arm": {"dh": {"convention": "standard", "rows": [
 # a closed chain: the shipped four-bar
 LOOP = {"robots": {"fourbar": yaml.safe_load((ROOT / "models.yaml").read_text())["robots"]["fourbar"]}}
 
+# a floating body with a leg and a foot contact
+LEGGED = {"robots": {"legged": {
+    "base": "floating",
+    "links": [{"name": "body", "mass": 2.0, "inertia": [0.1, 0.1, 0.1]}, {"name": "leg", "mass": 0.5}],
+    "joints": [{"name": "hip", "type": "revolute", "parent": "body", "child": "leg", "axis": [0, 1, 0]}],
+    "frames": [{"name": "foot", "link": "leg", "xyz": [0, 0, -0.3]}],
+    "contacts": [{"frame": "foot", "kind": "point"}],
+}}}
+
 # where each section's mapping sits in the models above
 PLACES = {
     "file": (ARM, ()), "robot": (ARM, ("robots", "arm")), "link": (ARM, ("robots", "arm", "links", 1)),
@@ -52,6 +61,7 @@ PLACES = {
     "frame": (ARM, ("robots", "arm", "frames", 0)), "bundle": (ARM, ("robots", "arm", "bundles", 0)),
     "generate": (ARM, ("robots", "arm", "generate")), "parameter": (ARM, ("robots", "arm", "links", 1, "mass")),
     "loop": (LOOP, ("robots", "fourbar", "loops", 0)), "visual": (ARM, ("robots", "arm", "links", 2, "visual", 0)),
+    "contact": (LEGGED, ("robots", "legged", "contacts", 0)),
     "dh": (DH, ("robots", "dh_arm", "dh")), "dh_row": (DH, ("robots", "dh_arm", "dh", "rows", 0)),
 }
 

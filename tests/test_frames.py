@@ -264,11 +264,13 @@ def test_a_frame_called_all_is_refused(arm):
 
 
 def test_generate_quantities_keeps_those_and_what_they_call(arm, tmp_path):
-    from derive.description.robot import CLOSED_CHAIN_QUANTITIES, FUNCTION_QUANTITIES
+    from derive.description.robot import (CENTROIDAL_QUANTITIES, CLOSED_CHAIN_QUANTITIES, CONTACT_QUANTITIES,
+                                          FUNCTION_QUANTITIES)
     models, robot, full = arm
     every = json.loads((full / "arm" / "manifest.json").read_text())["functions"]
-    # the list is the catalogue's: a tree robot has all but the closed chains' own
-    assert {f["quantity"] for f in every} == set(FUNCTION_QUANTITIES) - set(CLOSED_CHAIN_QUANTITIES)
+    # the list is the catalogue's: a tree robot without contacts has all but the closed chains' and the contacts' own
+    assert {f["quantity"] for f in every} == (set(FUNCTION_QUANTITIES) - set(CLOSED_CHAIN_QUANTITIES)
+                                              - set(CONTACT_QUANTITIES) - set(CENTROIDAL_QUANTITIES))
     data = yaml.safe_load(models.read_text())
     data["robots"]["arm"]["generate"] = {"frames": ["upper", "tcp"], "quantities": ["fk_all", "jacobian", "ik", "rk4_step"]}
     mine = tmp_path / "models.yaml"

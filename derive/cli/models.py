@@ -153,6 +153,9 @@ def cmd_info(args) -> int:
             print(f"  generated quantities: {', '.join(r.function_quantities)} ({selection['quantities']})")
         if r.wrench_frames:
             print(f"  wrench frames (the *_fext functions): {', '.join(r.wrench_frames)}")
+        if r.contacts:
+            print(f"  contacts: {', '.join(f'{c.frame} ({c.kind})' for c in r.contacts)}; stances (contact_dynamics_<name>, "
+                  f"...): {'; '.join(f'{s.name}: ' + ', '.join(s.frames) for s in r.stances)}")
         if r.parameters:
             print(f"  parameters: {', '.join(f'{p.name} = {p.default:g}' for p in r.parameters)}")
         if r.source:

@@ -24,6 +24,7 @@ from derive.symbolic.regressor import Regressor, body_links
 from derive.symbolic.closure import ASSEMBLED_TOL, NEWTON_STEPS, ClosedChainModel
 from derive.symbolic.closed_regressor import ClosedRegressor, closed_base_parameters
 from derive.symbolic.motor_map import motor_joint_maps
+from derive.symbolic import contact
 from derive.codegen.checks import NEEDS_INVERSE_MASS
 from derive.codegen.program import build_program
 from derive.codegen.spec import FunctionSpec, TemplateFunction
@@ -147,6 +148,8 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     add("centroidal_map", None, [q], [("A", wb.centroidal_map)],
         f"Centroidal momentum matrix A_G (6x{n}, row-major): A_G qd = [linear; angular] momentum about the centre "
         "of mass, world axes (Pinocchio's computeCentroidalMap).")
+    if robot.contacts:
+        contact_specs(model, add, need, forward)
     if forward and need("ode_rhs", "ode_jac_x", "ode_jac_u"):
         ode_specs(model, qdd_fd, add, extra, fd_how)
     if need("regressor", "base_regressor"):
@@ -154,6 +157,81 @@ def function_specs(model: SXModel, forward: bool = True) -> list[FunctionSpec]:
     if need("bundle"):
         bundle_specs(model, specs, add)
     return specs
+
+
+def contact_specs(model: SXModel, add, need, forward: bool) -> None:
+    """The centroidal terms, then per contact set (:attr:`Robot.stances`) the contact and impulse dynamics and
+    their derivatives (:mod:`derive.symbolic.contact`); those that need M^-1 only where M(q) is regular."""
+    robot, s = model.robot, model.sym
+    n, nq = robot.nv, robot.nq
+    q, qd, qdd, tau = ("q", s.q), ("qd", s.qd), ("qdd", s.qdd), ("tau", s.tau)
+    if need("centroidal_map_dot_qd"):
+        add("centroidal_map_dot_qd", None, [q, qd], [("dh", contact.centroidal_map_dot_qd(model))],
+            "A_G'(q, qd) qd (6): the rate of the centroidal momentum [linear; angular] about the centre of mass, world "
+            "axes, at qdd = 0, so that dh_G/dt = A_G qdd + A_G' qd (Pinocchio's computeCentroidalMomentumTimeVariation "
+            "at a = 0, its dhg).")
+    if need("com_acceleration"):
+        add("com_acceleration", None, [q, qd, qdd], [("a", contact.com_acceleration(model))],
+            "Acceleration of the centre of mass (3), world coordinates: (A_G qdd + A_G' qd)[0:3] / m "
+            "(Pinocchio's centerOfMass(q, v, a), its acom).")
+    if need("centroidal_inertia"):
+        add("centroidal_inertia", None, [q], [("I", contact.centroidal_inertia(model))],
+            "Composite rotational inertia I_G(q) (3x3, row-major) of the robot locked at q, about the centre of mass, "
+            "world axes: with the total mass, the single-rigid-body model at this posture (Pinocchio's ccrba, the "
+            "rotational block of data.Ig).")
+    if not forward:
+        return
+    e = ca.SX.sym("e")
+    quaternion = ", the base quaternion's four included" if robot.floating else ""
+    wrt = f"columns [d/dq ({nq}{quaternion}), d/dqd ({n})"
+    for stance in robot.stances:
+        cm = contact.ContactModel(model, stance)
+        m = cm.rows
+        listed = ", ".join(f"{f} ({robot.contact(f).kind}, {robot.contact(f).rows})" for f in stance.frames)
+        facts = (("contacts", [{"frame": f, "kind": robot.contact(f).kind, "rows": robot.contact(f).rows}
+                               for f in stance.frames]),
+                 ("algorithm", "LTDL of M along the tree, LDL^T of the Schur complement J M^-1 J^T"))
+        status_doc = (f"status 1 where the contact rows are independent (every pivot of the Schur complement's LDL^T "
+                      f"above {contact.PIVOT_TOL:g} times its diagonal), else 0: redundant contacts, nothing is "
+                      "regularised and the other outputs solve nothing.")
+        if need("contact_dynamics"):
+            qdd_c, lam, status = cm.forward
+            add("contact_dynamics", stance.name, [q, qd, tau], [("qdd", qdd_c), ("lam", lam), ("status", status)],
+                f"Contact forward dynamics of the stance '{stance.name}' ({listed}): qdd ({n}) and the contact forces "
+                f"lam ({m}) of [M J^T; J 0] [qdd; -lam] = [tau - h; -J' qd], i.e. M qdd + h = tau + J^T lam with the "
+                "contacts held (a point's classical acceleration zero, a surface's spatial one); lam world-aligned at "
+                "each frame origin, [f] per point, [f; torque] per surface (Pinocchio's constraintDynamics, "
+                f"LOCAL_WORLD_ALIGNED). LTDL of M, then LDL^T of J M^-1 J^T, no KKT inverse; {status_doc}", facts)
+        if need("contact_dynamics_baumgarte") and cm.points_only:
+            anchor, gains = ca.SX.sym("anchor", m), ca.SX.sym("gains", 2)
+            qdd_b, lam_b, status_b = cm.stabilised(anchor, gains)
+            add("contact_dynamics_baumgarte", stance.name, [q, qd, tau, ("anchor", anchor), ("gains", gains)],
+                [("qdd", qdd_b), ("lam", lam_b), ("status", status_b)],
+                f"contact_dynamics_{stance.name} with Baumgarte stabilisation: the contacts' constraint is "
+                "J qdd + J' qd = -kp (p - anchor) - kd J qd, p the contact points (world, 3 each), anchor "
+                f"({m}) where they are held, gains = [kp, kd] (Pinocchio's BaumgarteCorrectorParameters with "
+                f"joint2_placement at the anchor); {status_doc}", facts)
+        if need("contact_dynamics_derivatives"):
+            dqdd, dlam = cm.forward_derivatives
+            add("contact_dynamics_derivatives", stance.name, [q, qd, tau], [("dqdd", dqdd), ("dlam", dlam)],
+                f"Partial derivatives of contact_dynamics_{stance.name}: dqdd ({n}x{nq + 2 * n}) and dlam "
+                f"({m}x{nq + 2 * n}), row-major, {wrt}, d/dtau ({n})] (Pinocchio's computeConstraintDynamicsDerivatives "
+                "after multiplying d/dq by dq/d(tangent)); the implicit-function theorem on the KKT residual, "
+                "solved by the same factors.", facts)
+        if need("impulse_dynamics"):
+            v_plus, imp, status = cm.impulse(e)
+            add("impulse_dynamics", stance.name, [q, qd, ("e", e)],
+                [("v_plus", v_plus), ("impulse", imp), ("status", status)],
+                f"Impulse dynamics at touchdown of the stance '{stance.name}' ({listed}): the velocity after impact "
+                f"v_plus ({n}) and the contact impulse ({m}) of [M J^T; J 0] [v_plus; -impulse] = [M qd; -e J qd] for "
+                "the velocity before impact qd and the restitution coefficient e (0: plastic; Pinocchio's "
+                f"impulseDynamics, LOCAL_WORLD_ALIGNED); {status_doc}", facts)
+        if need("impulse_dynamics_derivatives"):
+            dv, dimp = cm.impulse_derivatives(e)
+            add("impulse_dynamics_derivatives", stance.name, [q, qd, ("e", e)], [("dv_plus", dv), ("dimpulse", dimp)],
+                f"Partial derivatives of impulse_dynamics_{stance.name}: dv_plus ({n}x{nq + n}) and dimpulse "
+                f"({m}x{nq + n}), row-major, {wrt}] (Pinocchio's computeImpulseDynamicsDerivatives: its ddq_dv is "
+                "d v_plus/d qd - I).", facts)
 
 
 CLOSED_LEFT_OUT = ("inverse_dynamics_derivatives", "forward_dynamics", "inverse_dynamics_fext", "forward_dynamics_fext",

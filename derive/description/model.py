@@ -25,7 +25,7 @@ from derive.description.files import load_yaml, read_text
 from derive.description.inertia import inertia_problem
 from derive.description.joints import JOINT_TYPES
 from derive.description.numbers import axis_component_problem, decimal, magnitude_problem, unit_vector
-from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, FUNCTION_QUANTITIES, Actuator, Bundle, robot_name, Frame, Joint, Limits, Link, LOOP_KINDS, Loop, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3, VISUAL_SHAPES, Visual,
+from derive.description.robot import (BASES, BUNDLE_FRAME_QUANTITIES, BUNDLE_QUANTITIES, CONTACT_KINDS, FUNCTION_QUANTITIES, Actuator, Bundle, Contact, ContactSet, robot_name, Frame, Joint, Limits, Link, LOOP_KINDS, Loop, Mimic, MimicCycle, ModelError, Origin, Parameter, Robot, Value, Vec3, VISUAL_SHAPES, Visual,
                                       compose_mimics, identifier, import_command, shown)
 from derive.description.schema import keys
 from derive.resources import EXAMPLE_MODELS
@@ -473,6 +473,8 @@ class _Parser:
                              "fk_all is the pose of every link; rename the frame or leave it out of generate.frames")
         if "loops" in spec or "independent" in spec or "reference" in spec or "outputs" in spec:
             robot = self.loops(spec, robot)
+        if "contacts" in spec or "contact_sets" in spec:
+            robot = self.contacts(spec, robot, known)
         for i, bundle in enumerate(robot.bundles or ()):
             for k, quantity in enumerate(bundle.quantities):
                 self.check_bundle_quantity(f"bundles[{i}].quantities[{k}]", quantity, known)
@@ -480,6 +482,66 @@ class _Parser:
                     raise self.error(f"bundles[{i}].quantities[{k}]", f"'{quantity}' needs frames taking external "
                                      "wrenches: list them in wrenches: (by default the frame tcp, where there is one)")
         return robot
+
+    # ---- contacts ----
+    def contacts(self, spec: Mapping, robot: Robot, known: tuple[str, ...]) -> Robot:
+        """``contacts:`` (a list of {frame, kind}) and ``contact_sets:`` (a mapping name -> list of those
+        frames); an alias stands for its frame."""
+        raw = spec.get("contacts")
+        if not isinstance(raw, list) or not raw:
+            raise self.error("contacts", "expected a non-empty list of {frame, kind}" if "contacts" in spec else
+                             "missing: contact_sets name frames of contacts: list them in contacts:")
+        if robot.closed:
+            raise self.error("contacts", "contacts on a robot with loops are not supported (a tree only)")
+        contacts: list[Contact] = []
+        for i, entry in enumerate(raw):
+            where = f"contacts[{i}]"
+            self.check_keys(where + ".", entry, keys("contact"))
+            if "frame" not in entry:
+                raise self.error(where + ".frame", "missing")
+            frame = entry["frame"]
+            if frame not in known:
+                raise self.error(where + ".frame", f"unknown frame '{shown(frame)}' (links and frames: {', '.join(known)})")
+            kind = entry.get("kind", "point")
+            if kind not in CONTACT_KINDS:
+                raise self.error(where + ".kind", f"unknown contact kind '{shown(kind)}' (known: {', '.join(CONTACT_KINDS)})")
+            frame = robot.frame_name(frame)
+            if any(c.frame == frame for c in contacts):
+                raise self.error(where + ".frame", f"'{frame}' is listed twice (by its name or an alias)")
+            if frame == robot.root and not robot.floating:
+                raise self.error(where + ".frame", f"'{frame}' is the fixed base: it cannot move, so it takes no contact")
+            contacts.append(Contact(frame, kind))
+        names = [c.frame for c in contacts]
+        sets_raw = spec.get("contact_sets")
+        sets = None
+        if sets_raw is not None:
+            if not isinstance(sets_raw, Mapping) or not sets_raw:
+                raise self.error("contact_sets", "expected a mapping name -> list of contact frames")
+            sets = []
+            for name, frames in sets_raw.items():
+                where = f"contact_sets.{name}"
+                identifier(self.name, where, name)
+                if not isinstance(frames, list) or not frames:
+                    raise self.error(where, "expected a non-empty list of contact frames")
+                chosen: list[str] = []
+                for k, frame in enumerate(frames):
+                    resolved = robot.frame_name(frame) if isinstance(frame, str) else frame
+                    if resolved not in names:
+                        raise self.error(f"{where}[{k}]", f"'{shown(frame)}' is not a contact (contacts: {', '.join(names)})")
+                    if resolved in chosen:
+                        raise self.error(f"{where}[{k}]", f"'{frame}' is listed twice (by its name or an alias)")
+                    chosen.append(resolved)
+                rows = sum(c.rows for c in contacts if c.frame in chosen)
+                if rows > robot.nv:
+                    raise self.error(where, f"{rows} constraint rows for {robot.nv} velocities: the contacts are redundant")
+                sets.append(ContactSet(str(name), tuple(chosen)))
+            sets = tuple(sets)
+        else:
+            rows = sum(c.rows for c in contacts)
+            if rows > robot.nv:
+                raise self.error("contacts", f"{rows} constraint rows for {robot.nv} velocities: the contacts are "
+                                 "redundant together; name the stances in contact_sets")
+        return dataclasses.replace(robot, contacts=tuple(contacts), contact_sets=sets)
 
     # ---- loop closures ----
     def loop(self, where: str, raw: Any, known: tuple[str, ...]) -> Loop:

@@ -296,7 +296,10 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "rk4_step", "ik", "manipulability", "closure", "velocity_map", "mass_matrix_y", "bias_y",
                        "inverse_dynamics_y", "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y",
                        "motor_to_joint_position", "motor_to_joint_velocity", "motor_to_joint_torque",
-                       "joint_to_motor_position", "joint_to_motor_velocity", "joint_to_motor_torque")
+                       "joint_to_motor_position", "joint_to_motor_velocity", "joint_to_motor_torque",
+                       "contact_dynamics", "contact_dynamics_baumgarte", "contact_dynamics_derivatives",
+                       "impulse_dynamics", "impulse_dynamics_derivatives", "centroidal_map_dot_qd", "com_acceleration",
+                       "centroidal_inertia")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
 MOTOR_MAP_QUANTITIES = ("motor_to_joint_position", "motor_to_joint_velocity", "motor_to_joint_torque",
@@ -306,6 +309,15 @@ the outputs the joints it is used in: a parallel ankle's pitch and roll)."""
 CLOSED_CHAIN_QUANTITIES = ("closure", "velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y",
                            "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y") + MOTOR_MAP_QUANTITIES
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with loops has (in its independent coordinates)."""
+CONTACT_QUANTITIES = ("contact_dynamics", "contact_dynamics_baumgarte", "contact_dynamics_derivatives", "impulse_dynamics",
+                      "impulse_dynamics_derivatives")
+"""Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (one function per contact set;
+``contact_dynamics_baumgarte`` per set of point contacts only)."""
+CENTROIDAL_QUANTITIES = ("centroidal_map_dot_qd", "com_acceleration", "centroidal_inertia")
+"""Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (the centroidal terms of legged control)."""
+CONTACT_KINDS = {"point": 3, "surface": 6}
+"""Contact kind -> rows of its constraint: a point holds the frame origin's position (3), a surface the
+frame's whole pose (6)."""
 
 BIG_FRAMES = 8
 """A robot with more named frames than this is big (the committed arms have at most 5; a Gen3 with a
@@ -317,10 +329,11 @@ it also leaves out :data:`LEAN_LEFT_OUT`: with a floating base or mimic joints (
 no ABA) those are unrolled in O(nv^3) or worse and made 80 % of the Unitree H1-2's 1.4 million
 operations and 76 MB of Python (344 s to generate, 20 s to import)."""
 LEAN_LEFT_OUT = ("coriolis_matrix", "inverse_dynamics_derivatives", "ode_rhs", "ode_jac_x", "ode_jac_u", "rk4_step",
-                 "regressor", "base_regressor")
+                 "regressor", "base_regressor", "contact_dynamics_derivatives", "impulse_dynamics_derivatives")
 """What a robot of more than :data:`BIG_NV` velocities leaves out by default: C (the bias h = C qd + g
 stays), dID/dx, the ODE, its Jacobians and RK4 (forward dynamics stays: qdd = FD(q, qd, tau)) and the
-identification regressors. ``generate: {quantities: all}`` brings them back."""
+identification regressors (and a robot with contacts their derivatives). ``generate: {quantities: all}`` brings
+them back."""
 
 
 @dataclass(frozen=True)
@@ -330,6 +343,32 @@ class Bundle:
 
     name: str
     quantities: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact of models.yaml's ``contacts:``: a link or named frame held by the ground (or a wall).
+
+    ``kind`` "point" (:data:`CONTACT_KINDS`): the frame origin's classical acceleration is zero, the
+    force [fx, fy, fz] acts at the origin, world-aligned. "surface": the frame's spatial acceleration
+    (world-aligned, at the origin) is zero, the wrench [force; torque] acts at the origin, world-aligned
+    (Pinocchio's CONTACT_3D and CONTACT_6D, LOCAL_WORLD_ALIGNED)."""
+
+    frame: str
+    kind: str = "point"
+
+    @property
+    def rows(self) -> int:
+        return CONTACT_KINDS[self.kind]
+
+
+@dataclass(frozen=True)
+class ContactSet:
+    """A set of contacts active together (a stance): one generated function per set and quantity
+    (``<robot>_contact_dynamics_<name>``); its frames in the order of the force vector lambda."""
+
+    name: str
+    frames: tuple[str, ...]
 
 
 @dataclass(frozen=True)
@@ -450,6 +489,8 @@ class Robot:
     wrenches: tuple[str, ...] | None = None  # frames taking external wrenches; None: "tcp" if there is one
     coulomb_smoothing: float | None = None  # eps of tanh(qd / eps) in the ODE's Coulomb friction; None: SMOOTHING
     bundles: tuple[Bundle, ...] | None = None  # control-tick functions; None: the defaults (control_bundles)
+    contacts: tuple[Contact, ...] = ()  # frames that may touch the ground (models.yaml's contacts:)
+    contact_sets: tuple[ContactSet, ...] | None = None  # stances; None: one set "all" of every contact
     generate_frames: tuple[str, ...] | None = None  # frames given per-frame functions; None: the named frames
     generate_quantities: tuple[str, ...] | None = None  # quantities generated (and what they call); None: all
     loops: tuple[Loop, ...] = ()  # loop closures of the tree (a closed chain); () for a tree
@@ -503,16 +544,33 @@ class Robot:
         return ("tcp",) if any(f.name == "tcp" for f in self.frames) else ()
 
     @property
+    def stances(self) -> tuple[ContactSet, ...]:
+        """The contact sets that get the contact functions: models.yaml's ``contact_sets``, by default one
+        set ``all`` of every contact (none without contacts)."""
+        if self.contact_sets is not None:
+            return self.contact_sets
+        return (ContactSet("all", tuple(c.frame for c in self.contacts)),) if self.contacts else ()
+
+    def contact(self, frame: str) -> Contact:
+        return next(c for c in self.contacts if c.frame == frame)
+
+    @property
+    def centroidal(self) -> bool:
+        """Whether the robot gets the centroidal terms (:data:`CENTROIDAL_QUANTITIES`): where it has contacts."""
+        return bool(self.contacts)
+
+    @property
     def control_bundles(self) -> tuple[Bundle, ...]:
         """The model's ``bundles``, by default two: ``control`` = M, the bias h = C qd + g, and of the
         ``tcp`` frame (if any) its pose, Jacobian and J'qd, plus the Jacobian and J'qd of every other
-        wrench frame (the contacts); ``computed_torque`` (with a tcp) = tau for a given qdd, and the
+        wrench frame and every frame of ``contacts:``; ``computed_torque`` (with a tcp) = tau for a given qdd, and the
         tcp's pose, Jacobian and the acceleration that qdd gives it."""
         if self.bundles is not None:
             return self.bundles
         tcp = any(f.name == "tcp" for f in self.frames)
         control = ["mass_matrix", "bias"] + (["fk_tcp", "jacobian_tcp", "jdot_qd_tcp"] if tcp else [])
-        control += [f"{q}_{f}" for f in self.wrench_frames if f != "tcp" for q in ("jacobian", "jdot_qd")]
+        held = tuple(dict.fromkeys(self.wrench_frames + tuple(c.frame for c in self.contacts)))  # wrench and contact frames
+        control += [f"{q}_{f}" for f in held if f != "tcp" for q in ("jacobian", "jdot_qd")]
         out = [Bundle("control", tuple(control))]
         if tcp:
             out.append(Bundle("computed_torque", ("inverse_dynamics", "fk_tcp", "jacobian_tcp",
@@ -638,7 +696,7 @@ class Robot:
         """A big robot's frames with per-frame functions when models.yaml chooses none: the ``tcp``,
         the wrench (contact) frames, then the leaves of the tree, each once."""
         tcp = ("tcp",) if any(f.name == "tcp" for f in self.frames) else ()
-        return tuple(dict.fromkeys(tcp + self.wrench_frames + self.leaves))
+        return tuple(dict.fromkeys(tcp + self.wrench_frames + tuple(c.frame for c in self.contacts) + self.leaves))
 
     @property
     def function_frames(self) -> tuple[str, ...]:
@@ -675,7 +733,8 @@ class Robot:
             out["quantities"] = "generate.quantities, and what they call"
         elif self.nv > BIG_NV:
             out["quantities"] = (f"default for more than {BIG_NV} velocities ({self.nv}): all but "
-                                 f"{', '.join(LEAN_LEFT_OUT)}; generate: {{quantities: all}} gives them")
+                                 f"{', '.join(q for q in LEAN_LEFT_OUT if self.contacts or q not in CONTACT_QUANTITIES)}; "
+                                 "generate: {quantities: all} gives them")
         return out
 
     @property
@@ -704,9 +763,11 @@ def model_data(robot: Robot) -> dict:
             del data[key]
     if data["base"] == "fixed":  # fixed-base models keep the hash they had before floating bases existed
         del data["base"]
-    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities", "outputs"):
+    for key in ("wrenches", "coulomb_smoothing", "bundles", "generate_frames", "generate_quantities", "outputs", "contact_sets"):
         if data[key] is None:
             del data[key]
+    if not data["contacts"]:  # models without contacts keep the hash they had before contacts existed
+        del data["contacts"]
     for frame in data["frames"]:  # models without aliases keep the hash they had before aliases existed
         if not frame["aliases"]:
             del frame["aliases"]

@@ -53,6 +53,10 @@ _SECTIONS = (
         "outputs": "with loops: the joints the independent coordinates (the motors) drive, as many as they, "
                    "e.g. a parallel ankle's [pitch, roll]: motor <-> joint maps for position, velocity and "
                    "torque are generated",
+        "contacts": "links or frames that may touch the ground (see contact): each contact set gets the contact and "
+                    "impulse dynamics, the robot the centroidal terms (see the contacts guide)",
+        "contact_sets": "mapping stance name -> list of contact frames active together (default: one set `all` of "
+                        "every contact); one generated function per set",
     }),
     Section("link", "robots.<name>.links[i]", "A rigid body. Mass properties are about the centre of mass.", {
         "name": "C identifier, unique among links and frames (beyond letter case)",
@@ -139,6 +143,12 @@ _SECTIONS = (
                 "normal": "planar: the plane's normal, in frame a's axes",
                 "length": "distance: the rod's length (m)",
                 "rotation": "planar: true also closes the rotation within the plane (default false)",
+            }),
+    Section("contact", "robots.<name>.contacts[i]", "A contact: the frame is held by the environment while in "
+            "contact (Pinocchio's rigid contact models, LOCAL_WORLD_ALIGNED).", {
+                "frame": "a link or named frame (its origin is the contact point)",
+                "kind": "`point` (default; 3 rows: the origin does not accelerate, force [fx, fy, fz]) or `surface` "
+                        "(6 rows: the frame does not move, wrench [force; torque]), world-aligned at the origin",
             }),
     Section("generate", "robots.<name>.generate", "Optional; without it every function is generated.", {
         "frames": "links and frames that get the per-frame functions, or `all` (default: the named frames; "

@@ -57,6 +57,12 @@ class WholeBody:
                 out.append((b.name, b.m, b.h, b.I_o))
         return out
 
+    @property
+    def bodies(self) -> list[tuple[str, ca.SX, ca.SX, ca.SX]]:
+        """(frame, m, h, I_o) of every body with mass (the floating root included): first moment and inertia
+        about its origin, in its frame's axes."""
+        return self._bodies
+
     @cached_property
     def mass(self) -> ca.SX:
         """Total mass of the moving bodies."""

@@ -1,0 +1,290 @@
+"""Rigid contacts: KKT forward dynamics, impulses at touchdown, their derivatives, centroidal terms.
+
+For a contact set with stacked constraint Jacobian J (m x nv) and drift a0(q, v) (m), the contact
+forward dynamics solve the KKT system
+
+    [M  J^T] [ qdd  ]   [ tau - h ]
+    [J   0 ] [-lambda] = [  -a0    ],     i.e.  M qdd + h = tau + J^T lambda,  J qdd + a0 = 0,
+
+and the impulse dynamics at touchdown, for a restitution coefficient e,
+
+    [M  J^T] [ v+ ]       [  M v-  ]
+    [J   0 ] [-Lambda]  = [ -e J v- ],    i.e.  M (v+ - v-) = J^T Lambda,  J v+ = -e J v-.
+
+Conventions are Pinocchio's ``RigidConstraintModel`` with LOCAL_WORLD_ALIGNED, so results compare one
+to one with ``constraintDynamics`` and ``impulseDynamics``: a ``point`` contact (CONTACT_3D) holds the
+classical acceleration of the frame origin at zero (J: the linear rows of the frame's world-aligned
+Jacobian, a0 = those of J'(q, v) v), its force [fx, fy, fz] in world axes; a ``surface`` contact
+(CONTACT_6D) holds the frame's spatial acceleration at zero (J: all six rows, a0 = J' v with the
+linear part minus w x v, the derivative of the frame's body velocity in world axes), its wrench
+[force; torque] at the origin in world axes. lambda is what the ground exerts on the robot.
+
+The KKT matrix is never formed or inverted. M = L^T D L along the tree (LTDL, no fill-in;
+:func:`derive.symbolic.ode.ltdl_factor`), W = L^-T J^T, the Schur complement S = W^T D^-1 W = J M^-1 J^T
+(m x m, symmetric positive definite when the contact rows are independent), S = L_S D_S L_S^T, and
+with u = L^-T (tau - h)
+
+    lambda = -S^-1 (a0 + W^T D^-1 u),   qdd = L^-1 D^-1 (u + W lambda)   (= M^-1 (tau - h + J^T lambda)).
+
+A redundant contact set (dependent rows of J: S singular) is reported, never regularised: ``status``
+is 1 where every pivot of D_S exceeds :data:`PIVOT_TOL` times S's diagonal entry, else 0 (then qdd and
+lambda solve nothing; an exactly zero pivot is divided as 1 so that no backend raises).
+
+The derivatives follow from the implicit-function theorem on the residual
+F(q, v, tau; qdd, lambda) = [ID(q, v, qdd) - J^T lambda - tau; J qdd + a0]: d(qdd, lambda)/dx solves the
+same block system with the right-hand side -dF/dx at fixed (qdd, lambda), by the same factors.
+
+Also here: Baumgarte stabilisation of point contacts (:meth:`ContactModel.stabilised`) and the centroidal
+terms of legged control, A_G' qd, the CoM acceleration (:func:`momentum_rate`) and the composite inertia
+about the CoM (:func:`centroidal_inertia`).
+"""
+
+from __future__ import annotations
+
+from functools import cached_property
+
+import casadi as ca
+
+from derive.description.robot import ContactSet
+from derive.symbolic.ode import ltdl_factor
+from derive.symbolic.spatial import skew
+
+PIVOT_TOL = 1e-10
+"""status = 0 where a pivot of the Schur complement's LDL^T is at most this times its diagonal entry: the
+contact rows are dependent to about 1e-5 rad (sin^2 of the angle between a row and the others' span)."""
+
+
+class KKT:
+    """The factored KKT system of one contact set at the symbolic state.
+
+    M = L^T D L along the tree (:func:`~derive.symbolic.ode.ltdl_factor`; a chain or mimic joints: every
+    earlier coordinate an ancestor), W = L^-T J^T (m half solves, each filling only the contact's branch
+    and its ancestors), S = W^T D^-1 W = J M^-1 J^T, S = L_S D_S L_S^T (:func:`guarded_ldlt`).
+    :meth:`solve` returns (a, l) with M a - J^T l = r1, J a = r2 for any number of columns:
+    u = L^-T r1, l = S^-1 (r2 - W^T D^-1 u), a = L^-1 D^-1 (u + W l): two half solves per column."""
+
+    def __init__(self, M: ca.SX, J: ca.SX, parents: tuple[int, ...]):
+        self.parents = parents
+        self.H = ltdl_factor(M, parents)
+        self.n = M.shape[0]
+        self.inverse = [1 / self.H[k, k] for k in range(self.n)]  # D^-1: one division per pivot, not per column
+        self.W = self.lower_solve(J.T)
+        S = self.W.T @ self.scaled(self.W)
+        self.L, self.D, self.status = guarded_ldlt(S)
+        self.D_inverse = [1 / d for d in self.D]
+
+    def scaled(self, b: ca.SX) -> ca.SX:
+        """D^-1 b."""
+        return ca.vertcat(*(b[k, :] * self.inverse[k] for k in range(self.n)))
+
+    def ancestors(self, k: int) -> list[int]:
+        out, i = [], self.parents[k]
+        while i != -1:
+            out.append(i)
+            i = self.parents[i]
+        return out
+
+    def lower_solve(self, b: ca.SX) -> ca.SX:
+        """L^-T b (L^T y = b, leaves first), row by row for all columns."""
+        y = [b[k, :] for k in range(self.n)]
+        for k in reversed(range(self.n)):
+            for i in self.ancestors(k):
+                y[i] = y[i] - self.H[k, i] * y[k]
+        return ca.vertcat(*y)
+
+    def upper_solve(self, z: ca.SX) -> ca.SX:
+        """L^-1 D^-1 z (L x = D^-1 z, root first)."""
+        x = [z[k, :] * self.inverse[k] for k in range(self.n)]
+        for k in range(self.n):
+            for i in self.ancestors(k):
+                x[k] = x[k] - self.H[k, i] * x[i]
+        return ca.vertcat(*x)
+
+    def schur_solve(self, b: ca.SX) -> ca.SX:
+        """S^-1 b by S's LDL^T (row by row for all columns)."""
+        n = len(self.D)
+        L, D = self.L, self.D
+        y = [None] * n
+        for i in range(n):
+            y[i] = b[i, :] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
+        z = [y[i] * self.D_inverse[i] for i in range(n)]
+        x = [None] * n
+        for i in reversed(range(n)):
+            x[i] = z[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), ca.SX(0))
+        return ca.vertcat(*x)
+
+    def solve(self, r1: ca.SX, r2: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """(a, l) of [M J^T; J 0] [a; -l] = [r1; r2]."""
+        u = self.lower_solve(r1)
+        l = self.schur_solve(r2 - self.W.T @ self.scaled(u))
+        return self.upper_solve(u + self.W @ l), l
+
+
+def guarded_ldlt(S: ca.SX) -> tuple[list, list, ca.SX]:
+    """S = L D L^T with each exactly zero pivot replaced by 1 (so that no backend divides by zero) and
+    the status: 1 where every pivot exceeds :data:`PIVOT_TOL` S_kk, else 0 (fmax of indicators in
+    pivot order: the first failing pivot is finite, those after it may not be)."""
+    n = S.shape[0]
+    L = [[None] * n for _ in range(n)]
+    D = [None] * n
+    failed = ca.SX(0)
+    for j in range(n):
+        d = S[j, j] - sum((L[j][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))
+        failed = ca.fmax(failed, 0.5 * (1 + ca.sign(PIVOT_TOL * S[j, j] - d)))
+        D[j] = d + (1 - ca.sign(ca.fabs(d)))  # d itself unless exactly 0 (then 1): no division by zero
+        inv = 1 / D[j]
+        for i in range(j + 1, n):
+            L[i][j] = (S[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))) * inv
+    return L, D, 1 - failed
+
+
+class ContactModel:
+    """The contact functions of one robot (:class:`~derive.symbolic.model.SXModel`) for one contact set."""
+
+    def __init__(self, model, stance: ContactSet):
+        self.model, self.stance = model, stance
+        self.robot, self.sym = model.robot, model.sym
+        self.ne, self.wb = model.newton_euler, model.whole_body
+
+    @property
+    def rows(self) -> int:
+        return sum(self.robot.contact(f).rows for f in self.stance.frames)
+
+    def _rows(self, frame: str) -> slice:
+        return slice(0, self.robot.contact(frame).rows)
+
+    @cached_property
+    def jacobian(self) -> ca.SX:
+        """J (m x nv): the contacts' rows of their frames' world-aligned Jacobians, in the set's order."""
+        return ca.vertcat(*(self.model.jacobian(f)[self._rows(f), :] for f in self.stance.frames))
+
+    def drift(self, v: ca.SX | None = None) -> ca.SX:
+        """a0 = J'(q, v) v (m): a point's classical acceleration at qdd = 0, a surface's spatial one
+        ([classical linear - w x v; angular]), world-aligned. ``v``: the velocity (default the symbol qd)."""
+        parts = []
+        for f in self.stance.frames:
+            a = self.wb.jdot_qd(f)
+            if self.robot.contact(f).kind == "surface":
+                twist = self.model.jacobian(f) @ self.sym.qd
+                a = ca.vertcat(a[0:3] - ca.cross(twist[3:6], twist[0:3]), a[3:6])
+            parts.append(a[self._rows(f)])
+        out = ca.vertcat(*parts)
+        return out if v is None else ca.substitute(out, self.sym.qd, v)
+
+    @cached_property
+    def kkt(self) -> KKT:
+        n = self.sym.nv
+        return KKT(self.ne.mass_matrix, self.jacobian, self.ne.dof_parents or tuple(range(-1, n - 1)))
+
+    @cached_property
+    def forward(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(qdd, lambda, status) at (q, qd, tau)."""
+        k = self.kkt
+        qdd, lam = k.solve(self.sym.tau - self.ne.bias, -self.drift())
+        return qdd, lam, k.status
+
+    @property
+    def points_only(self) -> bool:
+        """Whether every contact of the set is a point (what :meth:`stabilised` handles)."""
+        return all(self.robot.contact(f).kind == "point" for f in self.stance.frames)
+
+    def stabilised(self, anchor: ca.SX, gains: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(qdd, lambda, status) with Baumgarte stabilisation of a set of point contacts: the constraint
+        J qdd + a0 = -kp (p - anchor) - kd J qd, p the contact points stacked (world), ``anchor`` where they
+        are held (3 per point), ``gains`` = [kp, kd] (Pinocchio's BaumgarteCorrectorParameters Kp, Kd with
+        joint2_placement at the anchor)."""
+        if not self.points_only:
+            raise ValueError("Baumgarte stabilisation of surface contacts is not derived (it needs log6)")
+        s, k = self.sym, self.kkt
+        p = ca.vertcat(*(self.model.fk(f)[0:3, 3] for f in self.stance.frames))
+        a0 = self.drift() + gains[0] * (p - anchor) + gains[1] * (self.jacobian @ s.qd)
+        qdd, lam = k.solve(s.tau - self.ne.bias, -a0)
+        return qdd, lam, k.status
+
+    @cached_property
+    def forward_derivatives(self) -> tuple[ca.SX, ca.SX]:
+        """(dqdd, dlambda), each with columns [d/dq (nq), d/dqd (nv), d/dtau (nv)]: by the implicit-function
+        theorem on F = [ID(q, qd, a) - J^T l - tau; J a + a0] at (a, l) = the solution."""
+        s, k = self.sym, self.kkt
+        qdd, lam, _ = self.forward
+        a = ca.SX.sym("a", s.nv)
+        l = ca.SX.sym("l", self.rows)
+        x = ca.vertcat(s.q, s.qd)
+        F1 = ca.substitute(self.ne.inverse_dynamics(smooth=True), s.qdd, a) - self.jacobian.T @ l
+        F2 = self.jacobian @ a + self.drift()
+        dF = ca.substitute(ca.vertcat(ca.jacobian(F1, x), ca.jacobian(F2, x)), ca.vertcat(a, l), ca.vertcat(qdd, lam))
+        n = s.nv
+        da, dl = k.solve(ca.horzcat(-dF[:n, :], ca.SX.eye(n)), ca.horzcat(-dF[n:, :], ca.SX.zeros(self.rows, n)))
+        return da, dl
+
+    def impulse(self, e: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(v+, Lambda, status) for the velocity before impact qd and restitution e:
+        Lambda = -(1 + e) S^-1 J qd, v+ = qd + M^-1 J^T Lambda."""
+        k, s = self.kkt, self.sym
+        v_plus, imp = k.solve(ca.SX.zeros(s.nv, 1), -(1 + e) * (self.jacobian @ s.qd))
+        return s.qd + v_plus, imp, k.status
+
+    def impulse_derivatives(self, e: ca.SX) -> tuple[ca.SX, ca.SX]:
+        """(dv+, dLambda), columns [d/dq (nq), d/d(v-) (nv)]: the implicit-function theorem on
+        F = [M (w - v-) - J^T l; J (w + e v-)] at (w, l) = (v+, Lambda)."""
+        s, k = self.sym, self.kkt
+        v_plus, imp, _ = self.impulse(e)
+        w = ca.SX.sym("w", s.nv)
+        l = ca.SX.sym("l", self.rows)
+        x = ca.vertcat(s.q, s.qd)
+        F1 = self.ne.mass_matrix @ (w - s.qd) - self.jacobian.T @ l
+        F2 = self.jacobian @ (w + e * s.qd)
+        dF = ca.substitute(ca.vertcat(ca.jacobian(F1, x), ca.jacobian(F2, x)), ca.vertcat(w, l), ca.vertcat(v_plus, imp))
+        n = s.nv
+        return k.solve(-dF[:n, :], -dF[n:, :])
+
+
+def momentum_rate(model, qdd: ca.SX) -> ca.SX:
+    """dh_G/dt = A_G qdd + A_G' qd (6): the rate of the centroidal momentum [linear; angular about the centre
+    of mass c], world axes, from the RNEA's forward pass without gravity (body i: angular velocity w,
+    angular acceleration dw, classical acceleration a of its origin p, body axes, rotation R): per body
+    with mass m, first moment h and inertia I_o about its origin,
+
+        f_i = m a + dw x h + w x (w x h),   n_i = h x a + I_o dw + w x (I_o w)   (about its origin),
+        dh_G/dt = sum_i [R f_i; R n_i + (p - c) x R f_i],
+
+    O(n) where differentiating A_G(q) qd along dq/dt costs several times the operations."""
+    wb, ne, kin = model.whole_body, model.newton_euler, model.kinematics
+    w, dw, a = ne.forward(model.sym.qd, qdd, gravity=False)
+    c = wb.com
+    linear, angular = ca.SX.zeros(3, 1), ca.SX.zeros(3, 1)
+    for frame, m, h, I_o in wb.bodies:
+        body = ne.where[frame][0]
+        pose = kin.pose(frame)
+        wi, dwi, ai = w[body], dw[body], a[body]
+        f = pose.R @ (m * ai + ca.cross(dwi, h) + ca.cross(wi, ca.cross(wi, h)))
+        n = pose.R @ (ca.cross(h, ai) + I_o @ dwi + ca.cross(wi, I_o @ wi))
+        linear += f
+        angular += n + ca.cross(pose.p - c, f)
+    return ca.vertcat(linear, angular)
+
+
+def centroidal_map_dot_qd(model) -> ca.SX:
+    """A_G'(q, qd) qd (6): the centroidal momentum's rate at qdd = 0 (Pinocchio's
+    computeCentroidalMomentumTimeVariation's dhg at a = 0), by :func:`momentum_rate`."""
+    return momentum_rate(model, ca.SX.zeros(model.sym.nv, 1))
+
+
+def com_acceleration(model) -> ca.SX:
+    """c'' (3): the centre of mass's acceleration, world coordinates: the linear momentum's rate over the mass."""
+    return momentum_rate(model, model.sym.qdd)[0:3] / model.whole_body.mass
+
+
+def centroidal_inertia(model) -> ca.SX:
+    """I_G(q) (3x3): the composite rotational inertia of the robot locked at q, about the centre of mass c, world
+    axes: the single-rigid-body model's inertia (with the total mass; Pinocchio's ccrba, data.Ig's rotational
+    block). Per body (mass m, first moment h, inertia I_o about its origin p, rotation R), moved from p to c
+    with d = p - c and h_w = R h: R I_o R^T - [h_w]x [d]x - [d]x [h_w]x - m [d]x [d]x."""
+    wb, kin = model.whole_body, model.kinematics
+    c = wb.com
+    total = ca.SX.zeros(3, 3)
+    for frame, m, h, I_o in wb.bodies:
+        pose = kin.pose(frame)
+        d, h_w = skew(pose.p - c), skew(pose.R @ h)
+        total += pose.R @ I_o @ pose.R.T - h_w @ d - d @ h_w - m * (d @ d)
+    return total
