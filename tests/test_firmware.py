@@ -119,6 +119,24 @@ def test_recorded_figures_match_a_fresh_measurement(measured):
                     assert recorded[target][precision] == values, (robot, name, target, precision)
 
 
+def test_every_committed_function_has_clean_cortex_m_builds():
+    """Every function of every committed robot has recorded figures for all eight builds (M4F and M7,
+    double and float, -O2 and -O0, each under -Werror -pedantic: `derive firmware-check` records
+    figures only of clean builds) of its translation unit as committed. tests/conftest.py's host
+    builds lean on this: their straight-line files build at -O0 only."""
+    for robot in robots():
+        manifest = json.loads((GENERATED / robot / "manifest.json").read_text())
+        section = manifest.get("firmware") or {"functions": {}}
+        hashes = source_hashes(robot_files(GENERATED / robot))
+        for fn in manifest["functions"]:
+            recorded = section["functions"].get(fn["name"])
+            assert recorded is not None, f"{fn['name']}: no firmware figures; run `derive firmware-check --record {robot}`"
+            assert recorded["source_sha256"] == hashes[fn["name"]], fn["name"]
+            for build in BUILDS:  # a stack figure per level (0 for a leaf that needs none at -O2), text at -O2
+                figures = recorded[build.target][build.precision]
+                assert figures[f"stack_{build.level}"] >= 0 and figures["text_O2"] > 0, (fn["name"], build)
+
+
 def test_a_warning_fails_the_check_in_one_line(tmp_path, monkeypatch, capsys):
     need("arm-none-eabi-gcc")
     out = tmp_path / "generated"

@@ -83,13 +83,15 @@ def run_at_once(commands: list[list[str]], **kwargs) -> list[subprocess.Complete
         return list(pool.map(lambda argv: subprocess.run(argv, **kwargs), commands))
 
 
-def compile_objects(argv: list[str], sources, out: Path) -> list[Path]:
+def compile_objects(argv: list[str], sources, out: Path, extra: dict | None = None) -> list[Path]:
     """``argv -c source -o object`` for every source, one compiler process per source, CPUs at once: what
-    one ``argv sources...`` call compiles one source after the other. The objects (in ``out``) in source
-    order; CalledProcessError (stdout and stderr captured) of the first source that fails."""
+    one ``argv sources...`` call compiles one source after the other; ``extra`` {source: flags} adds
+    flags after argv's for some sources. The objects (in ``out``) in source order; CalledProcessError
+    (stdout and stderr captured) of the first source that fails."""
     sources = [Path(s) for s in sources]
+    extra = {Path(s): flags for s, flags in (extra or {}).items()}
     objects = [Path(out) / f"{k:03d}_{s.stem}.o" for k, s in enumerate(sources)]
-    for result in run_at_once([[*argv, "-c", str(s), "-o", str(o)] for s, o in zip(sources, objects)],
+    for result in run_at_once([[*argv, *extra.get(s, ()), "-c", str(s), "-o", str(o)] for s, o in zip(sources, objects)],
                               capture_output=True, text=True):
         if result.returncode:
             sys.stderr.write(result.stdout + result.stderr)  # the compiler's messages, in the test's report
@@ -97,13 +99,14 @@ def compile_objects(argv: list[str], sources, out: Path) -> list[Path]:
     return objects
 
 
-def build_library(argv: list[str], sources, lib: Path) -> Path:
+def build_library(argv: list[str], sources, lib: Path, extra: dict | None = None) -> Path:
     """The shared library ``lib`` of ``sources``: ``argv -shared -o lib sources... -lm``, its sources
-    compiled by compile_objects (argv carries -fPIC and the rest of the flags) next to ``lib``."""
+    compiled by compile_objects (argv carries -fPIC and the rest of the flags; ``extra`` {source: flags}
+    more for some) next to ``lib``."""
     lib = Path(lib)
     folder = lib.parent / f"{lib.stem}.objects"
     folder.mkdir(parents=True, exist_ok=True)
-    objects = compile_objects(argv, sources, folder)
+    objects = compile_objects(argv, sources, folder, extra)
     subprocess.run([*argv, "-shared", "-o", str(lib), *map(str, objects), "-lm"], check=True, capture_output=True, text=True)
     return lib
 
