@@ -25,7 +25,8 @@ ROOT = CHECKOUT
 BENCH_MODULES: list[str] = ["derive.bench.codegen", "derive.bench.ik", "derive.bench.trajopt", "derive.bench.simulate",
                             "derive.bench.python", "derive.bench.jax_speed", "derive.bench.zoo", "derive.bench.identification",
                             "derive.bench.bundles", "derive.bench.firmware", "derive.bench.large",
-                            "derive.bench.pinocchio_cpp", "derive.bench.lanes", "derive.bench.cuda", "derive.bench.view"]
+                            "derive.bench.pinocchio_cpp", "derive.bench.contacts", "derive.bench.lanes", "derive.bench.throughput",
+                            "derive.bench.cuda", "derive.bench.view"]
 """The modules contributing benchmarks, in the order they run and appear in the results."""
 
 

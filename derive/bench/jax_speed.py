@@ -5,12 +5,19 @@ here, as a user does), against the NumPy module called on the same batch in the 
 µs (best of interleaved repeats, the machines are shared and noisy), the ratio JAX / NumPy (the
 target: <= 1.0), the seconds jit takes to lower and compile, and the kernels XLA makes (fusions in
 the compiled HLO), for inverse_dynamics, mass_matrix, forward_dynamics and ode_jac_x.
+
+Per core: the measurement runs in a child process pinned to one CPU, so XLA's threads share it as
+NumPy's one thread has it (unpinned on a 2-core machine, XLA ran independent kernels on both cores
+and looked up to 2x faster than it is per core; on a loaded one, slower).
 """
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
+import os
+import subprocess
+import sys
 import time
 
 import numpy as np
@@ -38,11 +45,28 @@ def _jax_module():
     return jax, mod
 
 
+def pinned() -> None:
+    """In a child before it runs: one CPU, the last this process may use (its threads inherit it)."""
+    os.sched_setaffinity(0, {max(os.sched_getaffinity(0))})
+
+
 def bench_jax(args) -> str:
+    code = "import sys; from derive.bench.jax_speed import measure; print(measure(sys.argv[1] == 'quick'))"
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(CHECKOUT), os.environ.get("PYTHONPATH", "")])}
+    try:
+        return subprocess.run([sys.executable, "-c", code, "quick" if args.quick else "full"], check=True,
+                              capture_output=True, text=True, preexec_fn=pinned, env=env).stdout
+    except subprocess.CalledProcessError as e:
+        lines = e.stderr.strip().splitlines()
+        raise DeriveError(f"bench jax: {lines[-1] if lines else f'exit code {e.returncode}'}") from None
+
+
+def measure(quick: bool) -> str:
+    """The section, measured in this process (bench_jax runs it pinned to one CPU)."""
     jax, jx = _jax_module()
     py = load_generated(ROBOT, CHECKOUT / "generated")
-    n = 1000 if args.quick else 10_000
-    repeats = 5 if args.quick else 15
+    n = 1000 if quick else 10_000
+    repeats = 5 if quick else 15
     rng = np.random.default_rng(0)
     lo, hi = load_robot(ROBOT, CHECKOUT / "models.yaml").joint_box()
     Q = rng.uniform(lo, hi, (n, 7))
@@ -73,7 +97,8 @@ def bench_jax(args) -> str:
     return "\n".join([
         "## JAX flavour on the CPU against the NumPy batch (Panda)", "",
         f"Target: {TARGET}. jaxlib {importlib.import_module('jaxlib').__version__}; batch of {n} states, "
-        f"same process and states, best of {repeats} interleaved repeats.", "",
+        f"same process and states, best of {repeats} interleaved repeats, the process pinned to one CPU (per core: "
+        "XLA's threads share it).", "",
         "| function | JAX jit(vmap) µs/state | NumPy batch µs/state | JAX / NumPy | jit lower+compile s | "
         "XLA kernels | max rel. diff |",
         "|---|---|---|---|---|---|---|", *rows])

@@ -100,7 +100,7 @@ int main(void) {
 """
 
 
-def _widths() -> list[tuple[str, int, bool, list[str]]]:
+def lane_widths() -> list[tuple[str, int, bool, list[str]]]:
     """(label, lanes, float, flags) of each lane build this CPU runs: AVX2 and AVX-512F."""
     cpu = build._cpu_flags()
     out = []
@@ -213,7 +213,7 @@ def bench_lanes(args) -> str:
     generated = CHECKOUT / "generated"
     n = 4096 if args.quick else 16384
     repeats = 3 if args.quick else 11
-    widths = _widths()
+    widths = lane_widths()
     if not widths:
         raise DeriveError("bench lanes: measures AVX2 or AVX-512F lanes, which this CPU has not")
     rng = np.random.default_rng(0)

@@ -25,7 +25,7 @@ from derive.errors import DeriveError
 COMMANDS: dict[str, str] = {
     "generate": "derive.cli.generate", "init": "derive.cli.generate",
     "import-urdf": "derive.cli.models", "import-mjcf": "derive.cli.models", "info": "derive.cli.models",
-    "export": "derive.cli.export",
+    "export": "derive.cli.export", "export-casadi": "derive.cli.casadi_export",
     "eom": "derive.cli.inspect", "latex": "derive.cli.inspect",
     "dof": "derive.cli.analysis", "fk": "derive.cli.analysis", "workspace": "derive.cli.analysis",
     "singularities": "derive.cli.analysis", "manipulability": "derive.cli.analysis", "plan": "derive.cli.analysis",

@@ -179,6 +179,24 @@ def contact_specs(model: SXModel, add, need, forward: bool) -> None:
             "Composite rotational inertia I_G(q) (3x3, row-major) of the robot locked at q, about the centre of mass, "
             "world axes: with the total mass, the single-rigid-body model at this posture (Pinocchio's ccrba, the "
             "rotational block of data.Ig).")
+    for stance in robot.stances:  # RNEA and a 6 x 6 solve: no M^-1, so also where M(q) is singular
+        cm = contact.ContactModel(model, stance)
+        if need("contact_inverse_dynamics") and cm.base_determined:
+            m = cm.rows
+            tau_c, lam, status = cm.inverse
+            listed = ", ".join(f"{f} ({robot.contact(f).kind}, {robot.contact(f).rows})" for f in stance.frames)
+            add("contact_inverse_dynamics", stance.name, [q, qd, qdd], [("tau", tau_c), ("lam", lam), ("status", status)],
+                f"Contact-consistent inverse dynamics of the stance '{stance.name}' ({listed}) for the desired qdd: "
+                f"tau ({n}, its six base entries 0) and lam ({m}) with M qdd + h = tau + J^T lam, lam the minimum-norm "
+                "solution of the base rows J_b^T lam = ID(q, qd, qdd)[0:6] (J_b = J[:, 0:6]; lam = J_b (J_b^T J_b)^-1 "
+                "ID[0:6], numpy's lstsq), tau = ID - J^T lam on the joints; lam world-aligned at each frame origin as "
+                "in contact_dynamics. status 1 where J_b has rank 6 (every pivot of J_b^T J_b's LDL^T above "
+                f"{contact.PIVOT_TOL:g} times its diagonal), else 0: the stance cannot hold the base, the other "
+                "outputs solve nothing. The contacts' acceleration J qdd + J' qd is not imposed: where it is 0, "
+                "contact_dynamics at tau gives back qdd.",
+                (("contacts", [{"frame": f, "kind": robot.contact(f).kind, "rows": robot.contact(f).rows}
+                               for f in stance.frames]),
+                 ("algorithm", "RNEA, minimum-norm lambda of the base rows by LDL^T of J_b^T J_b")))
     if not forward:
         return
     e = ca.SX.sym("e")

@@ -54,7 +54,7 @@ from derive.errors import DeriveError
 from derive.description.files import InputFileError, read_text
 from derive.description.model import default_models_path
 from derive.filesystem import forget, register, write_atomically
-from derive.description.robot import CONTACT_QUANTITIES, Robot, model_data
+from derive.description.robot import CONTACT_NEEDS_INVERSE_MASS, Robot, model_data
 from derive.resources import PACKAGE, TEMPLATES
 from derive.symbolic.model import SXModel
 
@@ -286,7 +286,7 @@ def left_out_entry(robot: Robot, unmoved: list[str]) -> dict | None:
         return None
     names = [q for q in NEEDS_INVERSE_MASS if q != "forward_dynamics_fext" or robot.wrench_frames]
     need = wanted(robot)  # the contact functions solve with M^-1 as well (catalogue.contact_specs)
-    names += [f"{q}_{stance.name}" for stance in robot.stances for q in CONTACT_QUANTITIES if need(q) and (
+    names += [f"{q}_{stance.name}" for stance in robot.stances for q in CONTACT_NEEDS_INVERSE_MASS if need(q) and (
         q != "contact_dynamics_baumgarte" or all(robot.contact(f).kind == "point" for f in stance.frames))]
     return {"functions": [f"{robot.name}_{q}" for q in names], "coordinates": list(unmoved),
             "reason": unmoved_reason(unmoved)}

@@ -298,8 +298,8 @@ FUNCTION_QUANTITIES = ("fk", "jacobian", "jdot_qd", "frame_acceleration", "fk_ja
                        "motor_to_joint_position", "motor_to_joint_velocity", "motor_to_joint_torque",
                        "joint_to_motor_position", "joint_to_motor_velocity", "joint_to_motor_torque",
                        "contact_dynamics", "contact_dynamics_baumgarte", "contact_dynamics_derivatives",
-                       "impulse_dynamics", "impulse_dynamics_derivatives", "centroidal_map_dot_qd", "com_acceleration",
-                       "centroidal_inertia")
+                       "impulse_dynamics", "impulse_dynamics_derivatives", "contact_inverse_dynamics",
+                       "centroidal_map_dot_qd", "com_acceleration", "centroidal_inertia")
 """The quantities of the generated functions (``<robot>_<quantity>[_<frame>]``), what models.yaml's
 ``generate: {quantities: [...]}`` may choose from."""
 MOTOR_MAP_QUANTITIES = ("motor_to_joint_position", "motor_to_joint_velocity", "motor_to_joint_torque",
@@ -310,9 +310,12 @@ CLOSED_CHAIN_QUANTITIES = ("closure", "velocity_map", "mass_matrix_y", "bias_y",
                            "forward_dynamics_y", "constraint_forces", "regressor_y", "base_regressor_y") + MOTOR_MAP_QUANTITIES
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with loops has (in its independent coordinates)."""
 CONTACT_QUANTITIES = ("contact_dynamics", "contact_dynamics_baumgarte", "contact_dynamics_derivatives", "impulse_dynamics",
-                      "impulse_dynamics_derivatives")
+                      "impulse_dynamics_derivatives", "contact_inverse_dynamics")
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (one function per contact set;
-``contact_dynamics_baumgarte`` per set of point contacts only)."""
+``contact_dynamics_baumgarte`` per set of point contacts only, ``contact_inverse_dynamics`` per set of at least
+6 rows on a floating base)."""
+CONTACT_NEEDS_INVERSE_MASS = CONTACT_QUANTITIES[:5]
+"""Those of :data:`CONTACT_QUANTITIES` that solve with M^-1 (left out where M(q) is singular)."""
 CENTROIDAL_QUANTITIES = ("centroidal_map_dot_qd", "com_acceleration", "centroidal_inertia")
 """Those of :data:`FUNCTION_QUANTITIES` that only a robot with ``contacts:`` has (the centroidal terms of legged control)."""
 CONTACT_KINDS = {"point": 3, "surface": 6}

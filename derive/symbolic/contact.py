@@ -34,6 +34,10 @@ The derivatives follow from the implicit-function theorem on the residual
 F(q, v, tau; qdd, lambda) = [ID(q, v, qdd) - J^T lambda - tau; J qdd + a0]: d(qdd, lambda)/dx solves the
 same block system with the right-hand side -dF/dx at fixed (qdd, lambda), by the same factors.
 
+The contact-consistent inverse dynamics of a floating base (:attr:`ContactModel.inverse`): for a desired qdd,
+the joint torques and the minimum-norm contact forces that the base's six unactuated rows admit,
+lambda = J_b (J_b^T J_b)^-1 (ID(q, qd, qdd))_base, tau = ID - J^T lambda on the joints.
+
 Also here: Baumgarte stabilisation of point contacts (:meth:`ContactModel.stabilised`) and the centroidal
 terms of legged control, A_G' qd, the CoM acceleration (:func:`momentum_rate`) and the composite inertia
 about the CoM (:func:`centroidal_inertia`).
@@ -48,6 +52,9 @@ import casadi as ca
 from derive.description.robot import ContactSet
 from derive.symbolic.ode import ltdl_factor
 from derive.symbolic.spatial import skew
+
+BASE_ROWS = 6
+"""A floating base's velocities, the first six of v: the rows of M qdd + h = S^T tau + J^T lambda without torque."""
 
 PIVOT_TOL = 1e-10
 """status = 0 where a pivot of the Schur complement's LDL^T is at most this times its diagonal entry: the
@@ -102,22 +109,26 @@ class KKT:
 
     def schur_solve(self, b: ca.SX) -> ca.SX:
         """S^-1 b by S's LDL^T (row by row for all columns)."""
-        n = len(self.D)
-        L, D = self.L, self.D
-        y = [None] * n
-        for i in range(n):
-            y[i] = b[i, :] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
-        z = [y[i] * self.D_inverse[i] for i in range(n)]
-        x = [None] * n
-        for i in reversed(range(n)):
-            x[i] = z[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), ca.SX(0))
-        return ca.vertcat(*x)
+        return ldlt_solve(self.L, self.D_inverse, b)
 
     def solve(self, r1: ca.SX, r2: ca.SX) -> tuple[ca.SX, ca.SX]:
         """(a, l) of [M J^T; J 0] [a; -l] = [r1; r2]."""
         u = self.lower_solve(r1)
         l = self.schur_solve(r2 - self.W.T @ self.scaled(u))
         return self.upper_solve(u + self.W @ l), l
+
+
+def ldlt_solve(L: list, D_inverse: list, b: ca.SX) -> ca.SX:
+    """A^-1 b for A = L D L^T (:func:`guarded_ldlt`'s L, the reciprocals of its D), row by row for all columns."""
+    n = len(D_inverse)
+    y = [None] * n
+    for i in range(n):
+        y[i] = b[i, :] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
+    z = [y[i] * D_inverse[i] for i in range(n)]
+    x = [None] * n
+    for i in reversed(range(n)):
+        x[i] = z[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), ca.SX(0))
+    return ca.vertcat(*x)
 
 
 def guarded_ldlt(S: ca.SX) -> tuple[list, list, ca.SX]:
@@ -216,6 +227,29 @@ class ContactModel:
         n = s.nv
         da, dl = k.solve(ca.horzcat(-dF[:n, :], ca.SX.eye(n)), ca.horzcat(-dF[n:, :], ca.SX.zeros(self.rows, n)))
         return da, dl
+
+    @property
+    def base_determined(self) -> bool:
+        """Whether the set has the contact-consistent inverse dynamics (:attr:`inverse`): a floating base and
+        at least 6 contact rows (with fewer, J_b^T lambda = the base rows cannot hold for a general qdd)."""
+        return self.robot.floating and self.rows >= BASE_ROWS
+
+    @cached_property
+    def inverse(self) -> tuple[ca.SX, ca.SX, ca.SX]:
+        """(tau, lambda, status) at (q, qd, qdd) for a floating base: M qdd + h = S^T tau + J^T lambda with
+        S^T tau zero on the base's six rows. With r = ID(q, qd, qdd) (RNEA) and J_b = J[:, :6] (m x 6) the base
+        rows ask J_b^T lambda = r_b (6 equations, m >= 6 unknowns); lambda is their minimum-norm solution
+        lambda = J_b (J_b^T J_b)^-1 r_b (numpy's lstsq), the 6 x 6 normal matrix by :func:`guarded_ldlt` (status
+        0 where J_b has rank < 6: the stance cannot push the base in some direction), and
+        tau = r - J^T lambda with its six base entries exactly 0 (they are 0 up to rounding)."""
+        if not self.base_determined:
+            raise ValueError("contact-consistent inverse dynamics needs a floating base and at least 6 contact rows")
+        r = self.ne.inverse_dynamics(smooth=True)  # with the friction contact_dynamics' bias h has
+        Jb = self.jacobian[:, :BASE_ROWS]
+        L, D, status = guarded_ldlt(Jb.T @ Jb)
+        lam = Jb @ ldlt_solve(L, [1 / d for d in D], r[:BASE_ROWS])
+        tau = r - self.jacobian.T @ lam
+        return ca.vertcat(ca.SX.zeros(BASE_ROWS, 1), tau[BASE_ROWS:]), lam, status
 
     def impulse(self, e: ca.SX) -> tuple[ca.SX, ca.SX, ca.SX]:
         """(v+, Lambda, status) for the velocity before impact qd and restitution e:

@@ -49,6 +49,13 @@ def _keep(t, one):
     return t / one
 
 
+def _rows(rows, kept, one):
+    """The rows of an input (n, ...), those at the indices kept each computed once (_keep): under
+    jax.vmap a row is a strided column of the caller's (batch, n) array, which every kernel reading
+    it would gather again; kept, it is gathered once into a contiguous array."""
+    return [_keep(r, one) if i in kept else r for i, r in enumerate(rows)]
+
+
 def _stack(entries, batch):
     """entries (arrays broadcastable to the batch shape, floats) as one array (*batch, len(entries)):
     stacked along a new first axis (each entry a contiguous row), then that axis moved last."""
@@ -326,6 +333,7 @@ def inverse_dynamics(q, qd, qdd):
     qd_ = jnp.moveaxis(qd, -1, 0)
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qdd_ = _rows(qdd_, (0,), one)
     t0 = _keep(jnp.cos(q_[1]), one)
     t1 = t0 * qdd_[0]
     t2 = _keep(jnp.sin(q_[1]), one)
@@ -369,6 +377,7 @@ def inverse_dynamics_derivatives(q, qd, qdd):
     qd_ = jnp.moveaxis(qd, -1, 0)
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qd_ = _rows(qd_, (1,), one)
     t0 = _keep(jnp.sin(q_[1]), one)
     t1 = t0 * qdd_[0]
     t2 = _keep(jnp.cos(q_[1]), one)
@@ -427,7 +436,7 @@ def forward_dynamics(q, qd, tau):
     t7 = 0.9810000000000001 * t0
     t8 = t1 * t7
     t9 = t6 - t8
-    t10 = tau_[0] - t9
+    t10 = _keep(tau_[0] - t9, one)
     t11 = t10 / 1.1
     t12 = (-0.045454545454545456) * t1
     t13 = (-0.49050000000000005) * t0
@@ -464,6 +473,7 @@ def inverse_dynamics_fext(q, qd, qdd, w):
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     w_ = jnp.moveaxis(w, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qdd_ = _rows(qdd_, (0,), one)
     t0 = _keep(jnp.cos(q_[1]), one)
     t1 = t0 * qdd_[0]
     t2 = _keep(jnp.sin(q_[1]), one)
@@ -529,7 +539,7 @@ def forward_dynamics_fext(q, qd, tau, w):
     t8 = 0.9810000000000001 * t1
     t9 = t2 * t8
     t10 = t7 - t9
-    t11 = t0 - t10
+    t11 = _keep(t0 - t10, one)
     t12 = t11 / 1.1
     t13 = (-0.045454545454545456) * t2
     t14 = t2 * w_[0]
@@ -610,6 +620,7 @@ def centroidal_map(q):
     batch = _batch(q)
     q_ = jnp.moveaxis(q, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    q_ = _rows(q_, (0,), one)
     t0 = jnp.cos(q_[1])
     t1 = _keep((-0.05) * t0, one)
     t2 = t1 / 1.1
@@ -646,6 +657,7 @@ def ode_rhs(x, u):
     x_ = jnp.moveaxis(x, -1, 0)
     u_ = jnp.moveaxis(u, -1, 0)
     one = x_[0] * 0.0 + 1.0
+    x_ = _rows(x_, (3,), one)
     t0 = _keep(jnp.sin(x_[1]), one)
     t1 = _keep(jnp.cos(x_[1]), one)
     t2 = 0.9810000000000001 * t1
@@ -656,7 +668,7 @@ def ode_rhs(x, u):
     t7 = 0.9810000000000001 * t0
     t8 = t1 * t7
     t9 = t6 - t8
-    t10 = u_[0] - t9
+    t10 = _keep(u_[0] - t9, one)
     t11 = t10 / 1.1
     t12 = (-0.045454545454545456) * t1
     t13 = (-0.49050000000000005) * t0
@@ -687,6 +699,7 @@ def ode_jac_x(x, u):
     x_ = jnp.moveaxis(x, -1, 0)
     u_ = jnp.moveaxis(u, -1, 0)
     one = x_[0] * 0.0 + 1.0
+    x_ = _rows(x_, (3,), one)
     t0 = _keep(jnp.sin(x_[1]), one)
     t1 = _keep(jnp.cos(x_[1]), one)
     t2 = 0.9810000000000001 * t1
@@ -697,7 +710,7 @@ def ode_jac_x(x, u):
     t7 = 0.9810000000000001 * t0
     t8 = t1 * t7
     t9 = t6 - t8
-    t10 = u_[0] - t9
+    t10 = _keep(u_[0] - t9, one)
     t11 = t10 / 1.1
     t12 = (-0.045454545454545456) * t1
     t13 = (-0.49050000000000005) * t0
@@ -706,7 +719,7 @@ def ode_jac_x(x, u):
     t16 = t14 - t15
     t17 = t12 * t12
     t18 = 1.1 * t17
-    t19 = 0.03333333333333333 - t18
+    t19 = _keep(0.03333333333333333 - t18, one)
     t20 = t16 / t19
     t21 = t12 * t20
     t22 = t11 - t21
@@ -793,6 +806,8 @@ def regressor(q, qd, qdd):
     qd_ = jnp.moveaxis(qd, -1, 0)
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qd_ = _rows(qd_, (1,), one)
+    qdd_ = _rows(qdd_, (0, 1), one)
     t0 = _keep(jnp.cos(q_[1]), one)
     t1 = t0 * qdd_[0]
     t2 = _keep(jnp.sin(q_[1]), one)
@@ -836,6 +851,8 @@ def base_regressor(q, qd, qdd):
     qd_ = jnp.moveaxis(qd, -1, 0)
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qd_ = _rows(qd_, (1,), one)
+    qdd_ = _rows(qdd_, (0, 1), one)
     t0 = _keep(jnp.cos(q_[1]), one)
     t1 = qd_[1] * qd_[1]
     t2 = t0 * t1
@@ -877,6 +894,7 @@ def bundle_control(q, qd):
     q_ = jnp.moveaxis(q, -1, 0)
     qd_ = jnp.moveaxis(qd, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qd_ = _rows(qd_, (1,), one)
     t0 = _keep(jnp.cos(q_[1]), one)
     t1 = (-0.05) * t0
     t2 = _keep(jnp.sin(q_[1]), one)
@@ -926,6 +944,8 @@ def bundle_computed_torque(q, qd, qdd):
     qd_ = jnp.moveaxis(qd, -1, 0)
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qd_ = _rows(qd_, (1,), one)
+    qdd_ = _rows(qdd_, (0, 1), one)
     t0 = _keep(jnp.cos(q_[1]), one)
     t1 = t0 * qdd_[0]
     t2 = _keep(jnp.sin(q_[1]), one)

@@ -49,6 +49,13 @@ def _keep(t, one):
     return t / one
 
 
+def _rows(rows, kept, one):
+    """The rows of an input (n, ...), those at the indices kept each computed once (_keep): under
+    jax.vmap a row is a strided column of the caller's (batch, n) array, which every kernel reading
+    it would gather again; kept, it is gathered once into a contiguous array."""
+    return [_keep(r, one) if i in kept else r for i, r in enumerate(rows)]
+
+
 def _stack(entries, batch):
     """entries (arrays broadcastable to the batch shape, floats) as one array (*batch, len(entries)):
     stacked along a new first axis (each entry a contiguous row), then that axis moved last."""
@@ -339,6 +346,7 @@ def inverse_dynamics(q, qd, qdd, p=DEFAULT_P):
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (4,), one)
     t0 = p_[4] / 2.0
     t1 = t0 * t0
     t2 = p_[0] * t1
@@ -410,6 +418,7 @@ def forward_dynamics(q, qd, tau, p=DEFAULT_P):
     tau_ = jnp.moveaxis(tau, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (4,), one)
     t0 = p_[4] / 2.0
     t1 = p_[0] * t0
     t2 = p_[1] * p_[4]
@@ -453,6 +462,7 @@ def inverse_dynamics_fext(q, qd, qdd, w, p=DEFAULT_P):
     w_ = jnp.moveaxis(w, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (4,), one)
     t0 = p_[4] / 2.0
     t1 = t0 * t0
     t2 = p_[0] * t1
@@ -504,6 +514,7 @@ def forward_dynamics_fext(q, qd, tau, w, p=DEFAULT_P):
     w_ = jnp.moveaxis(w, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (4,), one)
     t0 = _keep(jnp.sin(q_[0]), one)
     t1 = t0 * p_[4]
     t2 = t1 * w_[2]
@@ -607,6 +618,7 @@ def centroidal_map(q, p=DEFAULT_P):
     q_ = jnp.moveaxis(q, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (0, 1, 4), one)
     t0 = jnp.cos(q_[0])
     t1 = p_[4] / 2.0
     t2 = p_[0] * t1
@@ -651,6 +663,7 @@ def ode_rhs(x, u, p=DEFAULT_P):
     u_ = jnp.moveaxis(u, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = x_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (4,), one)
     t0 = p_[4] / 2.0
     t1 = p_[0] * t0
     t2 = p_[1] * p_[4]
@@ -688,6 +701,7 @@ def ode_jac_x(x, u, p=DEFAULT_P):
     u_ = jnp.moveaxis(u, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = x_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (4,), one)
     t0 = jnp.cos(x_[0])
     t1 = p_[4] / 2.0
     t2 = p_[0] * t1
@@ -821,6 +835,7 @@ def bundle_control(q, qd, p=DEFAULT_P):
     qd_ = jnp.moveaxis(qd, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    p_ = _rows(p_, (4,), one)
     t0 = p_[4] / 2.0
     t1 = t0 * t0
     t2 = p_[0] * t1
@@ -876,6 +891,8 @@ def bundle_computed_torque(q, qd, qdd, p=DEFAULT_P):
     qdd_ = jnp.moveaxis(qdd, -1, 0)
     p_ = jnp.moveaxis(p, -1, 0)
     one = q_[0] * 0.0 + 1.0
+    qdd_ = _rows(qdd_, (0,), one)
+    p_ = _rows(p_, (4,), one)
     t0 = p_[4] / 2.0
     t1 = t0 * t0
     t2 = p_[0] * t1

@@ -5,8 +5,8 @@ The functions are those of the Python backend, with the same short names and arg
 shape: an input of n elements is an array (..., n), an output of shape s comes back as
 (..., *s), the batch shapes of the inputs broadcast, and one 1-D state returns exactly the shapes
 of the numpy module. Every body is straight-line jnp code on rows (element ``q_[i]`` of the input
-moved to the batch-last layout, jnp ufuncs, one ``jnp.stack`` per output; shared temporaries whose
-inlined tree is large marked computed-once, see :mod:`.printer`), so ``jax.jit``, ``jax.vmap`` and
+moved to the batch-last layout, jnp ufuncs, one ``jnp.stack`` per output; shared temporaries that
+XLA would recompute, and input elements read often, marked computed-once, see :mod:`.printer`), so ``jax.jit``, ``jax.vmap`` and
 ``jax.grad`` apply to them. Importing the module changes no JAX setting: the functions compute in
 JAX's default float type, float64 where the user has turned on ``jax_enable_x64`` (a jit call
 converts float64 arguments to float32 on entry otherwise, so a float64 scope inside the
@@ -57,6 +57,7 @@ class JaxBackend(Backend):
         return {**fn.common, "jax_provided": True, "jax_template": None, "jax_args": _args(spec),
                 "jax_inputs": [(n, x.shape[0] * x.shape[1]) for n, x in spec.inputs if x.numel() > 0],
                 "jax_body": printer.body(prog), "jax_outputs": outputs,
+                "jax_kept_inputs": [(n, repr(kept)) for n, kept in printer.kept_inputs(prog).items()],
                 "jax_returns": returns([(n, e.shape) for n, e in spec.outputs])}
 
     def template_context(self, fn: Function) -> dict:

@@ -10,18 +10,31 @@ every consumer, recomputing a shared subexpression once per use (and per operand
 concatenate), which on the generated DAGs multiplies the arithmetic 10-300x (panda
 inverse_dynamics 170 us per state through one stack). A divide is "expensive" to XLA, which never
 duplicates it: a kept temporary is computed once, stored, and read by its users. Keeping every
-shared temporary makes one kernel per temporary (kernel overhead); only those whose inlined tree
-(up to already-kept values) has at least ``KEEP_COST`` operations are kept, the rest XLA inlines.
+shared temporary makes one kernel per temporary (kernel overhead, and each kernel reads its
+operands from memory); a temporary is kept where the arithmetic XLA would repeat, (uses - 1) x its
+inlined tree (up to already-kept values), reaches ``KEEP_WASTE`` operations.
+
+Input elements are kept the same way where at least ``KEEP_INPUT_USES`` operations read them: under
+``jax.vmap`` an element ``x_[i]`` is a strided column of the (batch, n) input, which every kernel
+using it would read again, one cache line per state; kept, it is read once into a contiguous row.
 """
 
 from __future__ import annotations
 
 from derive.codegen.backends.base import ExpressionPrinter, float_literal
 
-KEEP_COST = 16
-"""A shared temporary whose inlined tree has at least this many operations is kept (computed once):
-panda, jit(vmap) on the CPU at 10 000 states, one run: ode_jac_x 9.4 us per state at 16, 12.6 at 10,
-22.6 at 24 (NumPy batch 7.4); at 48 mass_matrix and forward_dynamics are 5x slower than at 16."""
+KEEP_WASTE = 8
+"""A shared temporary is kept (computed once) where (uses - 1) x its inlined tree's operations reaches
+this. Panda, jit(vmap) per state on one CPU core at 10 000 states against the NumPy batch, same
+process, interleaved (a loaded shared machine, so +-15 %): the former rule (kept at >= 2 uses and a
+tree of >= 16 operations) and this one (with the kept input elements) gave inverse_dynamics 0.83-1.04x
+-> 0.48-0.64x, mass_matrix 0.73-0.79x -> 0.69-0.72x, forward_dynamics 0.78-0.86x -> 0.71-0.81x, and
+ode_jac_x about the same (1.0-1.3x either way; the arithmetic XLA runs went from 22 500 to 14 500
+operations per state, its kernels from 789 to 945). KEEP_WASTE 4 kept more for no gain, 16 and 32 less
+and were slower."""
+KEEP_INPUT_USES = 3
+"""An input element read by at least this many operations is kept (see the module docstring); with
+2 (mass_matrix: each q_i read by one sin and one cos, both kept) it was 20 % slower."""
 
 STORED = ("div", "inv")
 """The ops XLA computes once (a divide is expensive to it, never copied into its users). The others
@@ -44,7 +57,7 @@ class JaxPrinter(ExpressionPrinter):
 
     def kept(self, prog) -> set[int]:
         """The temporaries to compute once (see the module docstring): those used at least twice
-        (outputs included) whose inlined tree reaches KEEP_COST operations."""
+        (outputs included) whose repeated arithmetic, (uses - 1) x inlined tree, reaches KEEP_WASTE."""
         uses = [0] * len(prog.body)
         for ins in prog.body:
             for a in ins.args:
@@ -59,10 +72,23 @@ class JaxPrinter(ExpressionPrinter):
                 continue  # XLA computes it once; its users see a stored value (cost 0)
             own = TRANSCENDENTAL_COST if ins.op in self.FUNCS or ins.op in self.BINFUNCS else 1
             cost[k] = own + sum(cost[a[1]] for a in ins.args if a[0] == "t")
-            if uses[k] >= 2 and cost[k] >= KEEP_COST:
+            if uses[k] >= 2 and (uses[k] - 1) * cost[k] >= KEEP_WASTE:
                 keep.add(k)
                 cost[k] = 0
         return keep
+
+    def kept_inputs(self, prog) -> dict[str, tuple[int, ...]]:
+        """Input name -> its elements read by at least KEEP_INPUT_USES operations (outputs included), to
+        be read once into contiguous rows (see the module docstring); inputs with none are left out."""
+        uses: dict[tuple[int, int], int] = {}
+        for a in [a for ins in prog.body for a in ins.args] + [a for _, _, a in prog.results]:
+            if a[0] == "in":
+                uses[a[1], a[2]] = uses.get((a[1], a[2]), 0) + 1
+        out: dict[str, tuple[int, ...]] = {}
+        for (i, j), count in sorted(uses.items()):
+            if count >= KEEP_INPUT_USES:
+                out[self.input_names[i]] = out.get(self.input_names[i], ()) + (j,)
+        return out
 
     def body(self, prog) -> list[tuple[str, str]]:
         keep = self.kept(prog)
