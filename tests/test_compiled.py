@@ -24,6 +24,8 @@ import derive
 from derive.errors import DeriveError
 from derive.runtime import build, loader
 
+from util import robots
+
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
 ROBOTS = sorted(json.loads((GENERATED / "MANIFEST.json").read_text())["robots"])
@@ -43,6 +45,10 @@ def python_module(robot: str):
 
 def manifest(robot: str) -> dict:
     return json.loads((GENERATED / robot / "manifest.json").read_text())
+
+
+def manifest_function(robot: str, quantity: str) -> dict:
+    return next(f for f in manifest(robot)["functions"] if f["quantity"] == quantity)
 
 
 def function_ids():
@@ -89,6 +95,14 @@ def state_inputs(sig, py, fn_name: str, shape: tuple, rng) -> list:
             ref = np.array(manifest(py.ROBOT)["closed_chain"]["reference_y"])
             y = ref + rng.uniform(-0.1, 0.1, shape + ref.shape)
             out.append(y if a.name == "y" else np.concatenate([y, rng.uniform(-1.0, 1.0, y.shape)], axis=-1))
+        elif a.name == "o" and "closed_chain" in manifest(py.ROBOT):  # reachable joints: those of y near the reference
+            ref = np.array(manifest(py.ROBOT)["closed_chain"]["reference_y"])
+            y = ref + rng.uniform(-0.1, 0.1, shape + ref.shape)
+            r = robots()[py.ROBOT]
+            z0 = np.array([r.reference_q[[c.name for c in r.coordinates].index(z)] for z in r.dependent])
+            to_joints = manifest_function(py.ROBOT, "motor_to_joint_position")
+            given = {"y": y, "z0": np.broadcast_to(z0, shape + z0.shape), "p": p}
+            out.append(np.asarray(py.motor_to_joint_position(*[given[i["name"]] for i in to_joints["inputs"]])[0]))
         elif a.name == "T":
             fk = getattr(py, "fk_" + fn_name.removeprefix("ik_"))
             joints = manifest(py.ROBOT)["joints"]  # q within the limits (and [-1, 1]): a reachable target
