@@ -31,6 +31,10 @@ N_STATES = 50
 CLOSED_STATES = 10
 """States per closed chain: its reference solves the closure by Newton and ode_jac_x by 4 ODE calls per
 column; 10 states cost a pendulum's 50."""
+CLOSED_JAC_STATES = 2
+"""Of those, the states where a closed chain's ode_jac_x is also checked against the reference (Richardson
+differences, 8 ny closures each: example2's took 10 s of 10 states); at the others C, Python, CasADi and
+float C are checked against each other."""
 
 
 def load_python(robot: str):
@@ -239,7 +243,7 @@ def test_generated_c_python_casadi_match_reference(robot, committed_library):
     p = params(r)
     rng = np.random.default_rng(1)
     closed = ClosedChainReference(r) if r.closed else None
-    for q, qd, qdd in states(r, n=CLOSED_STATES if r.closed else N_STATES):
+    for index, (q, qd, qdd) in enumerate(states(r, n=CLOSED_STATES if r.closed else N_STATES)):
         tau = rng.normal(size=r.nv) * 5
         a = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "x": np.concatenate([q, qd]), "u": tau, "p": p,
              "dt": np.array([0.01]), "w": rng.normal(size=6 * len(r.wrench_frames)) * 5,
@@ -257,8 +261,9 @@ def test_generated_c_python_casadi_match_reference(robot, committed_library):
                 value = value if isinstance(value, (list, tuple)) else [value]
                 return [np.asarray(v, dtype=float).reshape(shp) for v, shp in zip(value, shapes, strict=True)]
 
-            expected = outputs(reference(ref, fn, a))
             got_c = outputs(c_double(fn, a))
+            against_reference = not (closed and fn["quantity"] == "ode_jac_x" and index >= CLOSED_JAC_STATES)
+            expected = outputs(reference(ref, fn, a)) if against_reference else got_c
             got_py = outputs(getattr(py, fn["python"]["function"])(*args))
             # template-bodied functions (loops, calls) have no single expression graph to evaluate
             got_ca = outputs(casadi_fns[fn["name"]](*args)) if fn["name"] in casadi_fns else None
