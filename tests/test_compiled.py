@@ -169,21 +169,23 @@ def test_batches_equal_single_states(cache_env, robot, name):
     for shape in BATCHES:
         args = state_inputs(sig, py, name, shape, rng)
         got = values(fn(*args))
-        for idx in np.ndindex(shape):
-            one = values(fn(*[a[idx] for a in args]))
-            for g, o in zip(got, one):
-                np.testing.assert_array_equal(g[idx], o)  # the same C on the same numbers: bit-identical
+        # the same C on the same numbers: bit-identical
+        assert_rows_equal(got, [values(fn(*[a[idx] for a in args])) for idx in np.ndindex(shape)], name)
         for g, ret in zip(got, manifest_returns(robot, name)):
             assert g.shape == shape + tuple(ret["shape"])
         # one value of an input for the whole batch (stride 0): p, dt, or any other
         shared = [a[(0,) * len(shape)] for a in args]
         for k in range(len(args) if len(args) > 1 and len(shape) == 2 else 0):
             mixed = args[:k] + [shared[k]] + args[k + 1:]
-            got = values(fn(*mixed))
-            for idx in np.ndindex(shape):
-                one = values(fn(*[a if j == k else a[idx] for j, a in enumerate(mixed)]))
-                for g, o in zip(got, one):
-                    np.testing.assert_array_equal(g[idx], o)
+            assert_rows_equal(values(fn(*mixed)), [values(fn(*[a if j == k else a[idx] for j, a in enumerate(mixed)]))
+                                                   for idx in np.ndindex(shape)], f"{name}, input {k} shared")
+
+
+def assert_rows_equal(got: list, rows: list, what: str) -> None:
+    """Each batched result equals, bit for bit, the one-state results stacked in np.ndindex order."""
+    for k, g in enumerate(got):
+        want = np.reshape(np.stack([np.asarray(row[k]) for row in rows]), np.shape(g))
+        np.testing.assert_array_equal(g, want, err_msg=f"{what}: result {k}")
 
 
 def test_defaults_lists_floats_and_views_agree(cache_env):

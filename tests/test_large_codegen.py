@@ -86,7 +86,7 @@ def test_large_robot_forms_match_the_reference(shape, tmp_path):
     pin = PinRobot(robot, {"m5": float(P[0])})
     rng = np.random.default_rng(3)
     batch = {"x": [], "u": []}
-    for q, qd, qdd in states(robot, n=2):
+    for index, (q, qd, qdd) in enumerate(states(robot, n=2)):
         tau = rng.normal(size=N) * 5
         a = {"q": q, "qd": qd, "qdd": qdd, "tau": tau, "x": np.concatenate([q, qd]), "u": tau, "p": P,
              "wrench_frames": []}
@@ -97,7 +97,7 @@ def test_large_robot_forms_match_the_reference(shape, tmp_path):
             assert_close(got_c, want, what=f"C {fn['name']}")
             assert_close(np.asarray(getattr(py, fn["python"]["function"])(*args)).reshape(got_c.shape), got_c, rtol=1e-12,
                          what=f"Python vs C {fn['name']}")
-            if jx is not None:
+            if jx is not None and index == 0:  # JAX op by op (its LTDL loops: a compile per indexing): one state
                 assert_close(np.asarray(getattr(jx, fn["jax"]["function"])(*args)).reshape(got_c.shape), got_c,
                              rtol=1e-12, what=f"JAX vs C {fn['name']}")
         # and Pinocchio: computeRNEADerivatives, and computeABADerivatives' dqdd/dx and M^-1

@@ -167,3 +167,35 @@ def test_what_needs_forward_dynamics_says_why_in_one_line(generated, capsys):
     with pytest.raises(DeriveError) as info:
         TrajectoryOptimizer(ROBOT)
     assert f"derive: error: {info.value}" == needs.format("trajopt")
+
+
+FLOATING_TIP = """\
+robots:
+  hopper:
+    base: floating
+    links:
+      - {name: body, mass: 3.0, com: [0.01, 0.0, 0.02], inertia: [0.05, 0.06, 0.07]}
+      - {name: leg, mass: 0.5, com: [0.0, 0.0, -0.2], inertia: [0.01, 0.01, 0.002]}
+      - {name: pointer}
+    joints:
+      - {name: hip, type: revolute, parent: body, child: leg, axis: [0, 1, 0], origin: {xyz: [0, 0, -0.1]}}
+      - {name: wrist, type: revolute, parent: leg, child: pointer, axis: [0, 0, 1], origin: {xyz: [0, 0, -0.4]}}
+"""
+
+
+def test_a_floating_base_names_its_massless_joint_not_a_base_velocity(tmp_path):
+    """M's rows are v's entries (the base's 6 velocities, then the joints'), not q's 7 entries: the
+    massless `wrist` on a floating base is named as itself, in the refusal and in the manifest."""
+    from derive.description.model import parse_models
+    from derive.symbolic.model import SXModel
+    from derive.codegen.checks import check_mass_matrix
+
+    robot = parse_models(FLOATING_TIP)["hopper"]
+    assert robot.floating and robot.nq == robot.nv + 1
+    model = SXModel(robot)
+    assert check_mass_matrix(model, strict=False) == ["wrist"]
+    with pytest.raises(DeriveError, match=r"joints \(wrist\): coordinate 'wrist' moves no mass or inertia"):
+        check_mass_matrix(model)
+    generate({"hopper": robot}, tmp_path, log=lambda line: None, warn=lambda line: None)
+    manifest = json.loads((tmp_path / "hopper" / "manifest.json").read_text())
+    assert manifest["left_out"]["coordinates"] == ["wrist"]

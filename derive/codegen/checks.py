@@ -55,17 +55,20 @@ def check_mass_matrix(model: SXModel, samples: int = 3, strict: bool = True) -> 
     scale = max(float(np.max(np.abs(diag), initial=0.0)), 1e-300)
     where = f"{robot.file}: robot '{robot.name}'" if robot.file else f"robot '{robot.name}'"  # the models file
     unmoved = []
-    for c, d in zip(robot.coordinates, diag):
+    # the entries of v, M's rows (a floating base's 6 velocities before the joints', not q's 7 entries)
+    velocities = [(name, FREE_FLYER) for name in robot.velocity_names[:6]] if robot.floating else []
+    velocities += [(c.name, c.joint) for c in robot.joint_coordinates]
+    for (name, joint), d in zip(velocities, diag, strict=True):
         if not np.isfinite(d):
-            raise DeriveError(f"{where}: joints ({c.joint}): M(q) is not finite at the default "
+            raise DeriveError(f"{where}: joints ({joint}): M(q) is not finite at the default "
                               "parameters (overflowing masses, inertias or lengths?)")
         if d <= 1e-12 * scale:
             if not strict:
-                unmoved.append(c.name)
+                unmoved.append(name)
                 continue
-            relock = relock_command(robot.source, [c.joint]) if c.joint != FREE_FLYER else None
+            relock = relock_command(robot.source, [joint]) if joint != FREE_FLYER else None
             fix = f", or import it with the joint locked: {relock}" if relock else ""
-            raise DeriveError(f"{where}: joints ({c.joint}): coordinate '{c.name}' moves no mass or "
+            raise DeriveError(f"{where}: joints ({joint}): coordinate '{name}' moves no mass or "
                               "inertia, so M(q) is singular and forward dynamics do not exist; give the links it "
                               f"moves a mass (links[i].mass) or inertia about its axis{fix}")
     if unmoved:  # M is singular for that alone; the eigenvectors below would only name them again

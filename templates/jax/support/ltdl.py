@@ -14,12 +14,18 @@ def _ltdl_up(parents):
 
 def _ltdl_factor(H, parents):
     """The factor of H (..., n, n), symmetric positive definite: L_ki at [..., k, i] for i an
-    ancestor of k, D_k at [..., k, k] (only those entries are read or written)."""
+    ancestor of k, D_k at [..., k, k] (only those entries are read; the others are left as they are).
+    Row i is updated whole, its other entries times 0 (same shapes at every step: eager JAX compiles
+    an indexing once per shape, and row i's ancestors as a list index compiled one per row)."""
     up = _ltdl_up(parents)
-    for k in reversed(range(len(parents))):
+    n = len(parents)
+    ancestors = np.zeros((n, n))
+    for i in range(n):
+        ancestors[i, up[i]] = 1.0
+    for k in reversed(range(n)):
         for i in up[k][1:]:
             a = H[..., k, i] / H[..., k, k]
-            H = H.at[..., i, up[i]].add(-(a[..., None] * H[..., k, up[i]]))
+            H = H.at[..., i, :].add(-(a[..., None] * H[..., k, :]) * ancestors[i])
             H = H.at[..., k, i].set(a)
     return H
 
