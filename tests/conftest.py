@@ -6,11 +6,10 @@ first worker that asks, in a folder that every worker of the run shares (shared_
 file lock; the other workers wait for it and use it (made_once). A plain ``pytest`` run (no
 ``-n``) makes them in its own temporary folder as before.
 
-fresh_generated: the shipped robots generated once per run into a temporary folder, without
-the cache (what ``generate(load_models(), out, use_cache=False)`` writes into an empty folder), for
-the modules that test freshly generated code rather than the committed generated/. Each module
-takes its own copy (fresh_copy), so nothing one module writes there (a build, a __pycache__) is
-seen by another; the shared folder itself is only read.
+generated_copy: a module's own copy of the committed generated/, for the modules that build or
+import there, so that nothing one module writes (a build, a __pycache__) is seen by another.
+test_codegen.py's test_regeneration_is_byte_identical checks in the same run that the committed
+folder is what derive writes now without the cache.
 
 committed_library: the committed generated/<robot>/c built once per run into a shared library
 (strict C99, -Wall -Wextra -Werror -pedantic at -O0; the double build's template functions at -O1), double or float: tests/test_codegen.py and
@@ -46,8 +45,7 @@ from typing import Callable, TypeVar
 
 import pytest
 
-from derive.codegen.generate import generate
-from util import build_library, robots
+from util import build_library
 
 # pytest-xdist's workers ignore SIGINT, and an ignored signal is inherited by every process a test
 # starts (derive then keeps it ignored, as a background job must): give the tests' processes Python's
@@ -164,20 +162,14 @@ def begin_once(pool: ThreadPoolExecutor, folder: Path, make: Callable[[Path], ob
 
 
 @pytest.fixture(scope="session")
-def fresh_generated(tmp_path_factory) -> Path:
-    """generated/ as derive writes it now: every shipped robot, derived without the cache. Read only."""
-    fresh = made_once(shared_folder(tmp_path_factory) / "fresh",
-                      lambda folder: generate(robots(), folder / "generated", use_cache=False, log=lambda s: None))
-    return fresh / "generated"
-
-
-@pytest.fixture(scope="session")
-def fresh_copy(fresh_generated, tmp_path_factory):
-    """fresh_copy(name) -> a new folder <tmp>/<name>/generated holding a copy of fresh_generated."""
+def generated_copy(tmp_path_factory):
+    """generated_copy(name) -> a new folder <tmp>/<name>/generated holding a copy of the committed
+    generated/ (without Python's byte-code caches): what derive writes now, as
+    tests/test_codegen.py's test_regeneration_is_byte_identical checks, byte for byte, in the same run."""
 
     def copy(name: str) -> Path:
         out = tmp_path_factory.mktemp(name) / "generated"
-        shutil.copytree(fresh_generated, out)
+        shutil.copytree(GENERATED, out, ignore=shutil.ignore_patterns("__pycache__"))
         return out
 
     return copy

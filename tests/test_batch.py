@@ -35,8 +35,8 @@ def load_module(path: Path, name: str):
 
 
 @pytest.fixture(scope="module")
-def generated(fresh_copy) -> Path:
-    return fresh_copy("batch")  # all robots generated without the cache (conftest.py), this module's copy
+def generated(generated_copy) -> Path:
+    return generated_copy("batch")  # the committed generated/ (conftest.py), this module's copy
 
 
 def load(generated: Path, robot: str):

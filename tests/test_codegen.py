@@ -377,10 +377,11 @@ def test_generated_c_runs_clean_under_sanitizers(tmp_path):
     assert "runtime error" not in run.stderr
 
 
-def test_regeneration_is_byte_identical(fresh_generated):
-    """Regenerate into a temporary folder without the cache and compare with generated/: the session's
-    regeneration (conftest.py), which tests/test_batch.py, test_ik.py, test_jax.py, test_trajopt.py use."""
-    out = fresh_generated
+def test_regeneration_is_byte_identical(tmp_path):
+    """Regenerate into a temporary folder without the cache and compare with generated/, which
+    tests/test_batch.py, test_ik.py, test_jax.py and test_trajopt.py copy (conftest.py's generated_copy)."""
+    out = tmp_path / "generated"
+    generate(robots(), out, use_cache=False, log=lambda s: None)
     fresh = {p.relative_to(out).as_posix(): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     # not Python's byte-code cache, which importing a generated module writes beside it
     committed = {p.relative_to(GENERATED).as_posix(): p.read_bytes() for p in GENERATED.rglob("*")

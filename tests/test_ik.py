@@ -151,8 +151,8 @@ def test_cli_prints_q_and_residuals(capsys):
 # ---- generated C and Python ----
 
 @pytest.fixture(scope="module")
-def generated(fresh_copy):
-    return fresh_copy("ik")  # all robots generated without the cache (conftest.py): panda, ur5, pendulum used here
+def generated(generated_copy):
+    return generated_copy("ik")  # the committed generated/ (conftest.py): panda, ur5, pendulum used here
 
 
 def python_module(generated, robot: str):

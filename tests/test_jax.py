@@ -44,23 +44,23 @@ RTOL = 1e-12  # the issue's target: the same arithmetic, so agreement to roundin
 # the others: each unbatched call of panda's functions costs what a batch does); values at more states: the batches
 N_STATES_SMALL, N_STATES = 2, 1
 BATCH = 16
-# jit compiles each function once per shape: every function of planar_2r (it has every quantity of an
-# open chain, cartpole's and pendulum's among them); of the others (ode_jac_x, rk4_step of panda: 20-50 s
-# on a small CPU) these. The same functions take a batch shape (2, B/2) in test_batches_match_numpy
-# (the shape handling is the same few lines of every function)
+# jit compiles each function once per shape (ode_jac_x, rk4_step of panda: 20-50 s on a small CPU): these
+# on the robots of JIT_ROBOTS, every function of some. These, and every function of planar_2r (it has
+# every quantity of an open chain), take a batch shape (2, B/2) in test_batches_match_numpy (the shape
+# handling is the same few lines of every function)
 JIT_ALWAYS = ("fk_jacobian", "mass_matrix", "inverse_dynamics", "forward_dynamics", "closure", "forward_dynamics_y")
 JIT_ALL = "planar_2r"
 SMALL = ("cartpole", "pendulum", "planar_2r")
 
 
 def every_check(robot: str, fn: dict) -> bool:
-    """Whether fn gets the jit, vmap and batch-shape checks: every function of JIT_ALL, JIT_ALWAYS of the others."""
+    """Whether fn gets the batch-shape checks: every function of JIT_ALL, JIT_ALWAYS of the others."""
     return robot == JIT_ALL or fn["quantity"] in JIT_ALWAYS
 
 
 @pytest.fixture(scope="module")
-def generated(fresh_copy) -> Path:
-    return fresh_copy("jax")  # all robots generated without the cache (conftest.py), this module's copy
+def generated(generated_copy) -> Path:
+    return generated_copy("jax")  # the committed generated/ (conftest.py), this module's copy
 
 
 def load_module(path: Path, name: str):
@@ -197,17 +197,28 @@ def test_batches_match_numpy(robot, generated):
               f"{fn['name']} on a batch of shape (2, {BATCH // 2})")
 
 
-@pytest.mark.parametrize("robot", ROBOTS)
+JIT_ROBOTS = {"planar_2r": None, "parallel_ankle": ("motor_to_joint_position", "joint_to_motor_torque"),
+              "fourbar": ("velocity_map", "mass_matrix_y", "bias_y", "inverse_dynamics_y", "constraint_forces",
+                          "ode_jac_x", "base_regressor_y"), "delta": (), "panda": ()}
+"""The robots of test_jit_and_vmap_give_the_same and what they add to JIT_ALWAYS (None: every function). jit
+compiles and vmap traces op by op, both a matter of the operations used, not of size: every open chain's
+quantity is among planar_2r's; a closed chain's own, but for its ODE's compositions of FD_y (ode_rhs,
+rk4_step) and the regressor that base_regressor_y multiplies, among fourbar's, the motor maps parallel_ankle's;
+delta's closure is spatial (ball joints), panda's graphs are the largest. Every function of every robot
+is compared with numpy, one state and batched, in the tests above."""
+
+
+@pytest.mark.parametrize("robot", sorted(JIT_ROBOTS))
 def test_jit_and_vmap_give_the_same(robot, generated):
     """jax.jit(f) on a batch equals numpy to 1e-12; jax.vmap(f) over the batch equals f on the batch:
-    every function of planar_2r, JIT_ALWAYS of the others (every open chain's quantity is among
-    planar_2r's; jit compiles and vmap traces op by op, both a matter of the operations used, not of size)."""
+    the functions JIT_ROBOTS names."""
     jx, py, manifest = modules(generated, robot)
     rng = np.random.default_rng(13)
     a = inputs(robot, rng, (BATCH,))
     jitted = 0
+    extra = JIT_ROBOTS[robot]
     for fn in provided(manifest):
-        if not every_check(robot, fn):
+        if extra is not None and fn["quantity"] not in JIT_ALWAYS + extra:
             continue  # its batches: test_batches_match_numpy
         f = getattr(jx, fn["jax"]["function"])
         args = call_args(fn, a)

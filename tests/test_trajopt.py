@@ -27,8 +27,8 @@ ROBOTS = ("cartpole", "pendulum", "planar_2r", "panda")
 
 
 @pytest.fixture(scope="module")
-def gen(fresh_copy):
-    return fresh_copy("trajopt")  # all robots generated without the cache (conftest.py): ROBOTS used here
+def gen(generated_copy):
+    return generated_copy("trajopt")  # the committed generated/ (conftest.py): ROBOTS used here
 
 
 @pytest.fixture(scope="module")
