@@ -45,7 +45,7 @@ from typing import Callable, TypeVar
 
 import pytest
 
-from util import JOBS, build_library
+from util import build_library
 
 # pytest-xdist's workers ignore SIGINT, and an ignored signal is inherited by every process a test
 # starts (derive then keeps it ignored, as a background job must): give the tests' processes Python's
@@ -193,20 +193,10 @@ def committed_library(tmp_path_factory):
         manifest = json.loads((GENERATED / robot / "manifest.json").read_text())
         loops = set() if extra else {(GENERATED / robot / fn["c"]["source"]).name
                                      for fn in manifest["functions"] if fn["c"]["form"] == "template"}
-        # the straight-line files as one translation unit per CPU (as derive.compiled builds them: each
-        # header read once per unit, 40 % less CPU); each file alone is a Cortex-M build's unit
-        template = [s for s in sources if s.name in loops]
-
-        def make(lib: Path) -> Path:
-            lib.mkdir(parents=True, exist_ok=True)
-            straight = [s for s in sources if s.name not in loops]
-            units = [lib / f"unit_{k}.c" for k in range(min(JOBS, len(straight)))]  # none empty (ISO C)
-            for k, unit in enumerate(units):
-                unit.write_text("".join(f'#include "{s}"\n' for s in straight[k::len(units)]))
-            return build_library(["cc", *STRICT, "-O0", "-fPIC", *extra], units + template, lib / f"{name}.so",
-                                 extra={s: ["-O1"] for s in template})
-
-        return made_once(folder / name, make) / f"{name}.so"
+        made = made_once(folder / name, lambda lib: build_library(
+            ["cc", *STRICT, "-O0", "-fPIC", *extra], sources, lib / f"{name}.so",
+            extra={s: ["-O1"] for s in sources if s.name in loops}))
+        return made / f"{name}.so"
 
     return get
 
