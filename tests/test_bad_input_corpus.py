@@ -102,8 +102,10 @@ def check_works(robot_name: str, text: str, out: Path) -> None:
     """Accepted input: the C compiles clean, the Python imports and matches the reference."""
     c_dir = out / robot_name / "c"
     cc = shutil.which("cc") or shutil.which("gcc")
-    sources = sorted(str(p) for p in c_dir.glob("*.c"))
-    subprocess.run([cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fsyntax-only", f"-I{c_dir}", *sources],
+    # one translation unit including every file: a process per file took 0.7 s of CPU, this 0.04
+    unit = out.parent / f"{robot_name}_unit.c"
+    unit.write_text("".join(f'#include "{p}"\n' for p in sorted(c_dir.glob("*.c"))))
+    subprocess.run([cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fsyntax-only", f"-I{c_dir}", str(unit)],
                    check=True, capture_output=True)
     spec = importlib.util.spec_from_file_location(f"corpus_{robot_name}", out / robot_name / "python" / f"{robot_name}.py")
     mod = importlib.util.module_from_spec(spec)
