@@ -8,6 +8,7 @@ The committed generated/ folder is the input (read only); the cache lives under 
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import json
 import os
@@ -43,7 +44,9 @@ def python_module(robot: str):
     return module
 
 
+@functools.cache
 def manifest(robot: str) -> dict:
+    """generated/<robot>/manifest.json, read once (Panda's, with its firmware figures, is large). Read only."""
     return json.loads((GENERATED / robot / "manifest.json").read_text())
 
 
@@ -118,8 +121,13 @@ def state_inputs(sig, py, fn_name: str, shape: tuple, rng) -> list:
     return out
 
 
+@functools.cache
+def signatures(robot: str) -> dict:
+    return {s.name: s for s in build.signatures(manifest(robot))}
+
+
 def signature(robot: str, name: str):
-    return next(s for s in build.signatures(manifest(robot)) if s.name == name)
+    return signatures(robot)[name]
 
 
 def values(result) -> list:
