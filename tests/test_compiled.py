@@ -287,6 +287,30 @@ def test_changed_source_rebuilds_and_compile_errors_are_one_line(cache_env, tmp_
     assert leftovers == []
 
 
+def test_edited_files_that_cannot_share_a_unit_are_built_one_by_one(cache_env, tmp_path):
+    """derive.compiled builds a robot's files as one translation unit per CPU; files edited so that they
+    could not share one (the same static name in two of them, a #define) are built one by one, and
+    give the same numbers."""
+    gen = tmp_path / "gen"
+    shutil.copytree(GENERATED / "pendulum", gen / "pendulum")
+    twin = "\nstatic double edited_twin(double a) { return a; }\n"
+    for name in ("pendulum_gravity.c", "pendulum_mass_matrix.c"):
+        source = gen / "pendulum" / "c" / name
+        source.write_text(source.read_text() + twin)
+    (gen / "pendulum" / "c" / "pendulum_bias.c").write_text(
+        (gen / "pendulum" / "c" / "pendulum_bias.c").read_text() + "\n#define EDITED_MACRO 1\n")
+    m = derive.compiled("pendulum", gen)
+    committed = modules("pendulum")[0]
+    for q in ([0.3], [-1.2]):
+        np.testing.assert_array_equal(m.gravity(q), committed.gravity(q))
+        np.testing.assert_array_equal(m.mass_matrix(q), committed.mass_matrix(q))
+    sources = {p: p.read_bytes() for p in sorted((GENERATED / "pendulum" / "c").glob("*.c"))}
+    assert len(build._units(sources, tmp_path)) == min(len(sources), os.cpu_count() or 1)  # unedited: units
+    sources[next(iter(sources))] += twin.encode()
+    sources[list(sources)[1]] += twin.encode()
+    assert build._units(sources, tmp_path) == list(sources)
+
+
 def test_concurrent_builds_share_one_library(tmp_path, monkeypatch):
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
     monkeypatch.delenv("CC", raising=False)

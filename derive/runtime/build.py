@@ -823,7 +823,7 @@ def _compile(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: li
         (copy / fname).write_bytes(data)
     src = tmp / f"{robot}_runtime.c"
     src.write_text(wrapper)
-    sources = _units([copy / fname for fname, _ in snap.sources if fname.endswith(".c")], tmp) + [src]
+    sources = _units({copy / fname: data for fname, data in snap.sources if fname.endswith(".c")}, tmp) + [src]
     jobs = [cc + cflags + [f"-I{copy}", "-c", str(s)] for s in sources]
     for fname, text in sorted((units or {}).items()):  # the lane variants: only these get the ISA's flags
         (tmp / fname).write_text(text)
@@ -840,26 +840,34 @@ def _compile(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: li
     return built
 
 
-def _units(sources: list[Path], tmp: Path) -> list[Path]:
-    """``sources`` as one translation unit per CPU (``tmp/unit_<k>.c``, each including its share of the
-    files, balanced by size, in their order): the compiler then reads the robot's headers once per
-    unit, not once per file, at the same parallelism (a Panda's 48 files at -O0: 2.1 s of CPU, not 3.7).
-    The generated files make this safe: their file-scope statics carry the function's name, the
-    headers have include guards (not so the lane variants, each of which renames its function by a
-    #define). The sources themselves where there are no more of them than CPUs."""
+_STATIC = re.compile(rb"^static\b[^;{(=]*?\b(\w+)\s*[(\[=;]", re.MULTILINE)
+_MACRO = re.compile(rb"^\s*#\s*(define|undef)\b", re.MULTILINE)
+
+
+def _units(sources: dict[Path, bytes], tmp: Path) -> list[Path]:
+    """``sources`` ({path: its bytes}) as one translation unit per CPU (``tmp/unit_<k>.c``, each
+    including its share of the files, balanced by size, in their order): the compiler then reads the
+    robot's headers once per unit, not once per file, at the same parallelism (a Panda's 48 files at
+    -O0: 2.1 s of CPU, not 3.7). Safe for what derive writes: a file-scope static carries its
+    function's name, the headers have include guards, no .c file defines a macro. A set of files that
+    breaks that (an edited file: a #define, or a static name in two files) is compiled file by file,
+    as are the lane variants (each renames its function by a #define) and as many files as CPUs."""
+    paths = list(sources)
     parts = max(1, os.cpu_count() or 1)
-    if len(sources) <= parts:
-        return sources
-    sizes = [s.stat().st_size for s in sources]
+    statics = [name for data in sources.values() for name in set(_STATIC.findall(data))]
+    if (len(paths) <= parts or len(statics) != len(set(statics))
+            or any(_MACRO.search(data) for data in sources.values())):
+        return paths
+    sizes = [len(sources[p]) for p in paths]
     load, shares = [0] * parts, [[] for _ in range(parts)]
-    for k in sorted(range(len(sources)), key=lambda k: (-sizes[k], k)):  # largest first, to the lightest unit
+    for k in sorted(range(len(paths)), key=lambda k: (-sizes[k], k)):  # largest first, to the lightest unit
         j = min(range(parts), key=lambda j: (load[j], j))
         load[j] += sizes[k]
         shares[j].append(k)
     units = []
     for j, share in enumerate(shares):
         unit = tmp / f"unit_{j}.c"
-        unit.write_text("".join(f'#include "{sources[k]}"\n' for k in sorted(share)))
+        unit.write_text("".join(f'#include "{paths[k]}"\n' for k in sorted(share)))
         units.append(unit)
     return units
 
