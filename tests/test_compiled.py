@@ -305,10 +305,10 @@ def test_edited_files_that_cannot_share_a_unit_are_built_one_by_one(cache_env, t
         np.testing.assert_array_equal(m.gravity(q), committed.gravity(q))
         np.testing.assert_array_equal(m.mass_matrix(q), committed.mass_matrix(q))
     sources = {p: p.read_bytes() for p in sorted((GENERATED / "pendulum" / "c").glob("*.c"))}
-    assert len(build._units(sources, tmp_path)) == min(len(sources), os.cpu_count() or 1)  # unedited: units
+    assert len(build.translation_units(sources, tmp_path)) == min(len(sources), os.cpu_count() or 1)  # unedited: units
     sources[next(iter(sources))] += twin.encode()
     sources[list(sources)[1]] += twin.encode()
-    assert build._units(sources, tmp_path) == list(sources)
+    assert build.translation_units(sources, tmp_path) == list(sources)
 
 
 def test_concurrent_builds_share_one_library(tmp_path, monkeypatch):

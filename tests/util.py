@@ -13,6 +13,7 @@ from pathlib import Path
 import casadi as ca
 import numpy as np
 
+from derive.runtime.build import translation_units
 from derive.symbolic.model import SXModel
 from derive.description.model import load_models
 from derive.description.robot import Robot
@@ -103,20 +104,16 @@ def build_library(argv: list[str], sources, lib: Path, extra: dict | None = None
     """The shared library ``lib`` of ``sources``: ``argv -shared -o lib sources... -lm``, its sources
     compiled by compile_objects (argv carries -fPIC and the rest of the flags; ``extra`` {source: flags}
     more for some) next to ``lib``. The sources without extra flags are compiled as one translation
-    unit per CPU, each including its share of them, as derive.compiled builds a robot (each header read
-    once per unit: 40 % less CPU than a process per file; each generated file alone is a unit of the
-    Cortex-M builds, tests/test_firmware.py)."""
+    unit per CPU, as derive.compiled builds a robot (derive.runtime.build.translation_units: 40 % less
+    CPU than a process per file; each generated file alone is a unit of the Cortex-M builds,
+    tests/test_firmware.py)."""
     lib = Path(lib)
     folder = lib.parent / f"{lib.stem}.objects"
     folder.mkdir(parents=True, exist_ok=True)
     sources = [Path(s) for s in sources]
     extra = {Path(s): flags for s, flags in (extra or {}).items()}
-    plain = [s for s in sources if s not in extra]
-    if len(plain) > JOBS:
-        units = [folder / f"unit_{k}.c" for k in range(JOBS)]
-        for k, unit in enumerate(units):
-            unit.write_text("".join(f'#include "{s.resolve()}"\n' for s in plain[k::JOBS]))
-        sources = units + [s for s in sources if s in extra]
+    plain = {s.resolve(): s.read_bytes() for s in sources if s not in extra}
+    sources = translation_units(plain, folder, JOBS) + [s for s in sources if s in extra]
     objects = compile_objects(argv, sources, folder, extra)
     subprocess.run([*argv, "-shared", "-o", str(lib), *map(str, objects), "-lm"], check=True, capture_output=True, text=True)
     return lib

@@ -823,7 +823,8 @@ def _compile(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: li
         (copy / fname).write_bytes(data)
     src = tmp / f"{robot}_runtime.c"
     src.write_text(wrapper)
-    sources = _units({copy / fname: data for fname, data in snap.sources if fname.endswith(".c")}, tmp) + [src]
+    files = {copy / fname: data for fname, data in snap.sources if fname.endswith(".c")}
+    sources = translation_units(files, tmp) + [src]
     jobs = [cc + cflags + [f"-I{copy}", "-c", str(s)] for s in sources]
     for fname, text in sorted((units or {}).items()):  # the lane variants: only these get the ISA's flags
         (tmp / fname).write_text(text)
@@ -844,16 +845,16 @@ _STATIC = re.compile(rb"^static\b[^;{(=]*?\b(\w+)\s*[(\[=;]", re.MULTILINE)
 _MACRO = re.compile(rb"^\s*#\s*(define|undef)\b", re.MULTILINE)
 
 
-def _units(sources: dict[Path, bytes], tmp: Path) -> list[Path]:
-    """``sources`` ({path: its bytes}) as one translation unit per CPU (``tmp/unit_<k>.c``, each
+def translation_units(sources: dict[Path, bytes], tmp: Path, parts: int | None = None) -> list[Path]:
+    """``sources`` ({path: its bytes}) as ``parts`` translation units, one per CPU by default (``tmp/unit_<k>.c``, each
     including its share of the files, balanced by size, in their order): the compiler then reads the
     robot's headers once per unit, not once per file, at the same parallelism (a Panda's 48 files at
     -O0: 2.1 s of CPU, not 3.7). Safe for what derive writes: a file-scope static carries its
     function's name, the headers have include guards, no .c file defines a macro. A set of files that
     breaks that (an edited file: a #define, or a static name in two files) is compiled file by file,
-    as are the lane variants (each renames its function by a #define) and as many files as CPUs."""
+    as are the lane variants (each renames its function by a #define) and no more files than parts."""
     paths = list(sources)
-    parts = max(1, os.cpu_count() or 1)
+    parts = max(1, parts or os.cpu_count() or 1)
     statics = [name for data in sources.values() for name in set(_STATIC.findall(data))]
     if (len(paths) <= parts or len(statics) != len(set(statics))
             or any(_MACRO.search(data) for data in sources.values())):
