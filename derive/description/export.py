@@ -49,12 +49,17 @@ MJCF (MuJoCo loads it; its mj_fullM and mj_rne match derive's M and ID):
   ``weld`` -> ``<weld site1 site2>``; a ``planar`` loop -> ``<connect>`` (``<weld>`` with
   ``rotation``), the same constraint while the mechanism moves in its plane (refused where the two
   frames are apart along the normal, or turned, at the reference configuration); a ``distance``
-  loop of length L (a massless rod with ball joints) -> a two-site spatial ``<tendon>`` ``loop<i>``
-  from frame a to frame b and ``<equality><tendon polycoef="L - L0 0 0 0 0">`` (MuJoCo holds the
-  tendon's length minus L0, its length at qpos0, at polycoef[0]); a ``hinge`` loop is refused
-  (MuJoCo has no hinge equality). MuJoCo's soft rows keep their default solref/solimp. The closed
-  reference configuration is the ``<key name="reference">`` (derive import-mjcf closes the loops
-  there);
+  loop of length L (a massless rod with ball joints) -> the rod as a body ``<b>_rod`` on a ball
+  joint at frame b (in b's link; its x axis towards frame a as the tree stands at q = 0), MuJoCo's
+  least mass and moments (the floor below) all at the ball, one site ``<b>_rod_end`` at (L, 0, 0),
+  and ``<connect site1="<b>_rod_end" site2="a">``: MuJoCo's connect rows carry the velocity product
+  Jdot qvel (a tendon equality's do not), so MuJoCo's ydd is derive's in motion too
+  (tests/test_closed_chain_mujoco.py), and the rod body's translation-only inverse weight is 5.3
+  / kg for the parallel ankle where a two-site tendon's is 60 (MuJoCo's regularisation is
+  proportional to it); a ``hinge`` loop is refused (MuJoCo has no hinge equality). MuJoCo's soft
+  rows keep their default solref/solimp. The closed reference configuration is the ``<key
+  name="reference">`` (derive import-mjcf closes the loops there; a rod's ball is turned onto frame
+  a there);
 - gravity -> ``<option gravity>``. MuJoCo refuses a moving body (one with a joint) whose mass or a
   principal moment is below mjMINVAL (1e-15); such a mass or moment (a thin rod's zero moment, a
   massless link between joints) is raised to 1e-12 of the robot's largest (at least 1e-14), and a
@@ -390,26 +395,43 @@ def _principal(inertia: np.ndarray, rpy) -> tuple[tuple[float, float, float], tu
 
 @dataclass
 class _MjcfLoops:
-    """What a robot's loops add to its MJCF: sites per link, tendons, equality lines, notes."""
+    """What a robot's loops add to its MJCF: sites and rod bodies per link, equality lines, notes."""
 
     sites: dict[str, list[str]]  # link -> <site .../> (no indent)
-    tendons: list[str]
+    rods: dict[str, list[tuple[str, tuple]]]  # link -> (a rod's <body> line, its ball's qpos at the reference)
     equalities: list[str]
     notes: list[str]
 
 
-def _mjcf_loops(robot: Robot, m: "_Model") -> _MjcfLoops:
-    """The loops as MuJoCo equalities between sites (module docstring), checked at the reference configuration."""
-    out = _MjcfLoops({}, [], [], [])
+def _quat_between(u: np.ndarray, v: np.ndarray) -> tuple[float, float, float, float]:
+    """(w, x, y, z) of the least rotation taking the unit vector u to the unit vector v (a half turn about an
+    axis normal to u where v = -u)."""
+    w = 1.0 + float(u @ v)
+    if w < 1e-12:
+        axis = np.cross(u, [1.0, 0.0, 0.0] if abs(u[0]) < 0.9 else [0.0, 1.0, 0.0])
+        return (0.0, *(float(x) for x in axis / np.linalg.norm(axis)))
+    q = np.array([w, *np.cross(u, v)])
+    return tuple(float(x) for x in q / np.linalg.norm(q))
+
+
+def _quat_matrix(q) -> np.ndarray:
+    """The rotation matrix of the unit quaternion (w, x, y, z)."""
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def _mjcf_loops(robot: Robot, m: "_Model", rod_mass: float, rod_moment: float) -> _MjcfLoops:
+    """The loops as MuJoCo equalities between sites (module docstring), checked at the reference configuration;
+    a distance rod's body gets mass ``rod_mass`` and the moment ``rod_moment`` about every axis."""
+    out = _MjcfLoops({}, {}, [], [])
     if not robot.loops:
         return out
     poses = Poses(robot)(np.array(robot.reference_q, dtype=float))
     zero = Poses(robot)(np.zeros(robot.nq))
-    tendons: set[str] = set()
-    if any(lp.kind == "distance" for lp in robot.loops) and any(j.mimic and j.mimic.offset for j in robot.joints):
-        raise ModelError(robot.name, "loops", "a distance loop's tendon length is MuJoCo's at qpos0, where a mimic "
-                         "joint's offset is not applied: a robot with both cannot be written as MJCF", robot.file or None)
     links = {lk.name for lk in robot.links}
+    link_of = {f.name: f.link for f in robot.frames} | {a: f.link for f in robot.frames for a in f.aliases}
     bodies, joints = set(m.link_names), set(m.joint_names)
     sites = {f.name for f in robot.frames}
     link_site: dict[str, str] = {}
@@ -433,14 +455,33 @@ def _mjcf_loops(robot: Robot, m: "_Model") -> _MjcfLoops:
             raise ModelError(robot.name, where(i), "MuJoCo has no hinge equality: a hinge loop cannot be written as MJCF "
                              "(two point loops on the axis can)", robot.file or None)
         if lp.kind == "distance":
+            # the rod: a body on a ball joint at frame b, in b's link, its end site at the length from the ball
+            # (towards frame a as the tree stands at q = 0; the keyframe turns the ball to the reference)
             length = m.num(lp.length)
-            tendon = m.unique(tendons, f"loop{i}")
-            # MuJoCo's tendon equality holds length - length0 = polycoef[0], length0 the length at qpos0 (q = 0)
-            length0 = float(np.linalg.norm(zero[lp.a][1] - zero[lp.b][1]))
-            out.tendons.append(f'<spatial name="{tendon}"><site site="{site(lp.a)}"/><site site="{site(lp.b)}"/></spatial>')
-            out.equalities.append(f'<tendon name="{tendon}" tendon1="{tendon}" polycoef="{_num(length - length0)} 0 0 0 0"/>')
-            out.notes.append(f"{where(i)} (distance {length!r} m) is the spatial tendon '{tendon}' from {lp.a} to {lp.b} "
-                             f"held at that length (<equality><tendon>: its length at q = 0, {length0!r} m, plus polycoef[0])")
+            pivot = site(lp.b)
+            link = lp.b if lp.b in links else link_of[lp.b]
+            (R0, p0), Rr = zero[link], poses[link][0]
+            at = R0.T @ (zero[lp.b][1] - p0)  # the ball in the link frame
+            toward = R0.T @ (zero[lp.a][1] - zero[lp.b][1])
+            u0 = toward / np.linalg.norm(toward) if np.linalg.norm(toward) > 1e-12 else np.array([1.0, 0.0, 0.0])
+            turn = _quat_between(np.array([1.0, 0.0, 0.0]), u0)  # the rod's frame: its x axis along u0
+            u = _quat_matrix(turn).T @ Rr.T @ (poses[lp.a][1] - poses[lp.b][1])
+            rod = m.unique(sites | bodies, f"{pivot}_rod")
+            end = m.unique(sites | bodies | {rod}, f"{rod}_end")
+            bodies.add(rod)
+            sites.add(end)
+            joint = m.unique(joints, rod)
+            moment = _num(rod_moment)
+            out.rods.setdefault(link, []).append((
+                f'<body name="{rod}" pos="{_vec(at)}"' + (f' quat="{_vec(turn)}"' if turn != (1.0, 0.0, 0.0, 0.0) else "")
+                + f'><joint name="{joint}" type="ball"/>'
+                f'<inertial pos="0 0 0" mass="{_num(rod_mass)}" diaginertia="{moment} {moment} {moment}"/>'
+                f'<site name="{end}" pos="{_num(length)} 0 0"/></body>',
+                _quat_between(np.array([1.0, 0.0, 0.0]), u / np.linalg.norm(u))))
+            out.equalities.append(f'<connect name="loop{i}" site1="{end}" site2="{site(lp.a)}"/>')
+            out.notes.append(f"{where(i)} (distance {length!r} m) is the rod body '{rod}' on a ball joint at {lp.b} "
+                             f"(mass {rod_mass:.3g} kg, moments {rod_moment:.3g} kg m^2, all at the ball: derive's rod is "
+                             f"massless), its end '{end}' {length!r} m from the ball held at {lp.a} by <connect>")
             continue
         if lp.kind == "planar":
             n = Ra @ np.asarray(lp.axis, dtype=float)
@@ -471,7 +512,7 @@ def export_mjcf(robot: Robot) -> Exported:
     moments = [float(np.abs(np.linalg.eigvalsh(m.inertia(lk))).max()) for lk in robot.links]
     floor_mass = max(FLOOR * max(masses, default=0.0), 10 * MJ_MINVAL)
     floor_moment = max(FLOOR * max(moments, default=0.0), 10 * MJ_MINVAL)
-    closed = _mjcf_loops(robot, m)
+    closed = _mjcf_loops(robot, m, floor_mass, floor_moment)
     reference = dict(zip((c.name for c in robot.coordinates), robot.reference_q)) if robot.loops else {}
     key_qpos: list[str] = []  # the reference configuration in MuJoCo's qpos order
     raised: list[str] = []
@@ -505,6 +546,9 @@ def export_mjcf(robot: Robot) -> Exported:
             quat = f' quat="{_vec(rpy_quaternion(rpy))}"' if any(rpy) else ""
             out.append(f'{ind * depth}<site name="{f.name}" pos="{_vec(m.vec(f.origin.xyz))}"{quat}/>')
         out += [f"{ind * depth}{x}" for x in closed.sites.get(link, [])]
+        for line, quat in closed.rods.get(link, []):  # a rod's ball: its qpos after its link's joints (MuJoCo's order)
+            out.append(f"{ind * depth}{line}")
+            key_qpos.extend(_num(x) for x in quat)
         return out
 
     def joint_lines(j: Joint, depth: int) -> list[str]:
@@ -597,8 +641,6 @@ def export_mjcf(robot: Robot) -> Exported:
         lines += [f"{ind}<equality>", *equalities, f"{ind}</equality>"]
     if motors:
         lines += [f"{ind}<actuator>", *motors, f"{ind}</actuator>"]
-    if closed.tendons:
-        lines += [f"{ind}<tendon>", *(f"{ind * 2}{t}" for t in closed.tendons), f"{ind}</tendon>"]
     if key_qpos:
         lines += [f"{ind}<keyframe>", f'{ind * 2}<key name="reference" qpos="{" ".join(key_qpos)}"/>', f"{ind}</keyframe>"]
     lines.append("</mujoco>")

@@ -59,7 +59,11 @@ Conventions (what the entry is, against MuJoCo's qpos and qvel):
   R2); with sites, the two sites. torquescale 0 (no rotation held) is refused: write a connect.
   tendon (a spatial tendon through exactly two sites, no tendon2, polycoef (c0, 0, 0, 0, 0)) ->
   ``distance`` between the two sites, length = MuJoCo's tendon_length0 + c0 (a massless rod with
-  ball joints); other tendon couplings are refused.
+  ball joints); other tendon couplings are refused. derive export's rod (a body ``<site>_rod`` on
+  one ball joint at its origin, where its parent has the site ``<site>``, with one site, its end,
+  held by a site connect at another site; no child bodies) -> ``distance`` between that other site
+  and ``<site>``, length = the end's distance from the ball; the rod body (its mass and moments
+  MuJoCo's least) and its ball are left out.
   ``solref``, ``solimp`` and ``torquescale`` weigh MuJoCo's soft rows; derive's closure is exact, so
   they are not kept. An inactive one (``active="false"``) is left out with a warning.
   ``reference:`` is the qpos of the keyframe ``keyframe=`` (``--keyframe``; by default the one named
@@ -308,6 +312,7 @@ class _Importer:
         for e in range(m.neq):
             self.check_equality(e)
         mimic = self.mimics()
+        self.rods = self.find_rods()
 
         link_of: dict[int, str] = {root: self.body_name(root)}
         at: dict[int, np.ndarray] = {root: np.eye(4)}
@@ -318,8 +323,9 @@ class _Importer:
 
         for b in range(1, m.nbody):
             parent = int(m.body_parentid[b])
-            if b == root or parent not in link_of:
-                continue  # the floating root is placed; what hangs off the world is dropped with a floating base
+            if b == root or parent not in link_of or b in self.rods:
+                continue  # the floating root is placed; what hangs off the world is dropped with a floating base;
+                # a distance rod's body is its loop (self.loops)
             pose = at[parent] @ _h(quat_matrix(m.body_quat[b]), m.body_pos[b])
             body = self.body_name(b)
             moving = [j for j in self.body_joints(b) if int(m.jnt_type[j]) != self.FREE]
@@ -335,7 +341,7 @@ class _Importer:
                 frames.append({"name": body, "link": link, **_origin(pose)})
         for s in range(m.nsite):
             b = int(m.site_bodyid[s])
-            if not m.site(s).name or b not in link_of:
+            if not m.site(s).name or b not in link_of or b in self.rods:
                 continue
             pose = at[b] @ _h(quat_matrix(m.site_quat[s]), m.site_pos[s])
             frames.append({"name": c_identifier(m.site(s).name), "link": link_of[b], **_origin(pose)})
@@ -475,6 +481,15 @@ class _Importer:
             data = np.array(m.eq_data[e], dtype=float)
             o1, o2 = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
             loop: dict[str, Any] = {"kind": {connect: "point", weld: "weld", tendon: "distance"}[kind]}
+            rod = next((r for r in self.rods.values() if r[1] == e), None)
+            if rod is not None:  # a distance rod's body: the loop joins the other site and the ball's
+                pivot, _, end = rod
+                if int(m.site_bodyid[o2]) not in link_of or int(m.body_parentid[m.site_bodyid[o1]]) not in link_of:
+                    raise self.error(where, "joins a body which is not on the floating base's tree (closed chains need "
+                                            "a fixed base: --fixed)")
+                out.append({"frames": [c_identifier(m.site(o2).name), pivot], "kind": "distance",
+                            "length": float(np.linalg.norm(m.site_pos[end]))})
+                continue
             if kind == tendon:
                 ends = self.tendon_sites(where, o1, o2, data)
                 loop["length"] = float(m.tendon_length0[o1] + data[0])
@@ -510,6 +525,33 @@ class _Importer:
             out.append({"frames": names, **loop})
         return out
 
+    def find_rods(self) -> dict[int, tuple[str, int, int]]:
+        """The distance rods as derive export writes them: body -> (the ball's site name, the connect, the end site).
+
+        A rod is a body named ``<site>_rod`` (underscores may follow) with one ball joint at its origin, no child
+        bodies and one site, its end, which a site ``<connect>`` (site1) holds at a named site (site2); its parent
+        has the site ``<site>`` at the rod's origin, the ball. It stands for a massless rod: its mass and
+        moments (MuJoCo's least) are left out, and the loop is ``distance`` between site2 and ``<site>``, the
+        length the end's distance from the ball."""
+        m, mj = self.m, self.mj
+        out: dict[int, tuple[str, int, int]] = {}
+        for e in range(m.neq):
+            if int(m.eq_type[e]) != int(mj.mjtEq.mjEQ_CONNECT) or int(m.eq_objtype[e]) != int(mj.mjtObj.mjOBJ_SITE):
+                continue
+            end, other = int(m.eq_obj1id[e]), int(m.eq_obj2id[e])
+            b = int(m.site_bodyid[end])
+            name = m.body(b).name.rstrip("_")
+            joints = self.body_joints(b)
+            if (b in out or not name.endswith("_rod") or not m.site(other).name or len(joints) != 1
+                    or int(m.jnt_type[joints[0]]) != self.BALL or np.any(m.jnt_pos[joints[0]])
+                    or int(np.sum(m.site_bodyid == b)) != 1 or any(int(m.body_parentid[c]) == b for c in range(m.nbody))):
+                continue
+            pivot, parent = name[:-len("_rod")], int(m.body_parentid[b])
+            ball = [s for s in range(m.nsite) if m.site(s).name == pivot and int(m.site_bodyid[s]) == parent]
+            if ball and np.allclose(m.site_pos[ball[0]], m.body_pos[b], rtol=0, atol=1e-12):
+                out[b] = (c_identifier(pivot), e, end)
+        return out
+
     def tendon_sites(self, where: str, t1: int, t2: int, data: np.ndarray) -> list[int]:
         """The two sites of a tendon equality that is a distance loop: a spatial tendon through exactly two sites
         held at a constant length (no tendon2, polycoef c1..c4 = 0); anything else is refused in one line."""
@@ -540,6 +582,8 @@ class _Importer:
         mimics = {x["name"] for x in joints if "mimic" in x}
         reference = {}
         for j in range(m.njnt):
+            if int(m.jnt_bodyid[j]) in self.rods:
+                continue  # a distance rod's ball
             kind, a, name = int(m.jnt_type[j]), int(m.jnt_qposadr[j]), self.joint_name(j)
             if kind in (self.HINGE, self.SLIDE) and name not in mimics:
                 values = {name: float(qpos[a])}
