@@ -278,6 +278,45 @@ def test_grad_of_inverse_dynamics_matches_the_ode_jacobian(robot, generated):
         assert_close(gq, fd, rtol=1e-6, what=f"{robot} grad_q vs central difference")
 
 
+def test_blocks_match_the_function_as_written(generated):
+    """The blocks of @_blocks (on the CPU, a batch of more than `block` states evaluated in blocks) give
+    the function as written to 1e-12: planar_2r's inverse_dynamics in blocks of 4 states on a batch of 15
+    (the last block padded), a batch shape (3, 5) with one p, jax.jit(jax.vmap) with p not mapped, nested
+    vmap, derivatives through the blocks (jax.grad of a weighted sum over the batch) and under vmap
+    (jax.jacrev, jax.jacfwd). Which functions are blocked, in blocks of BLOCK, is the printer's rule
+    (test_jax_printer.py): rrprr's ode_jac_x is, its mass_matrix not."""
+    from derive.codegen.backends.jax.printer import BLOCK
+
+    jx, py, manifest = modules(generated, "planar_2r")
+    fn = next(f for f in provided(manifest) if f["quantity"] == "inverse_dynamics")
+    written = jx.inverse_dynamics
+    blocked = jx._blocks(4, tuple((i["name"], i["shape"][0] * i["shape"][1]) for i in fn["inputs"]))(written)
+    assert blocked.block == 4 and blocked.__wrapped__ is written
+    rng = np.random.default_rng(16)
+    a = inputs("planar_2r", rng, (15,))
+    a["p"] = np.asarray(py.DEFAULT_P) * (1.0 + 0.1 * rng.uniform(-1.0, 1.0, size=(15, len(py.DEFAULT_P))))
+    args = call_args(fn, a, True)
+    check(blocked(*args), numpy_batch(py, fn, a, 15), fn, "in blocks of 4")
+    check(blocked(*args), written(*args), fn, "in blocks of 4 vs as written")
+    shaped = [np.reshape(v, (3, 5, -1)) for v in args]
+    check(blocked(*shaped[:-1], args[-1][0]), written(*shaped[:-1], args[-1][0]), fn, "batch shape (3, 5), one p")
+    check(jax.jit(jax.vmap(blocked, in_axes=(0, 0, 0, None)))(*args[:-1], args[-1][0]), written(*args[:-1], args[-1][0]),
+          fn, "jit(vmap)")
+    check(jax.vmap(jax.vmap(blocked))(*shaped), written(*shaped), fn, "vmap(vmap)")
+    w = rng.normal(size=(15, 2))
+
+    def weighted(f):  # jit: one compile instead of eager op-by-op dispatch (seconds); blocks on the CPU all the same
+        return jax.jit(jax.grad(lambda *xs: jax.numpy.sum(w * f(*xs)), argnums=(0, 1, 2, 3)))(*args)
+
+    for k, (got, want) in enumerate(zip(weighted(blocked), weighted(written))):
+        assert_close(got, want, rtol=RTOL, what=f"grad through the blocks, argument {k}")
+    for derivative in (jax.jacrev, jax.jacfwd):
+        got = jax.jit(jax.vmap(derivative(blocked)))(*args)
+        assert_close(got, jax.jit(jax.vmap(derivative(written)))(*args), rtol=RTOL, what=f"vmap({derivative.__name__})")
+    rrprr = modules(generated, "rrprr")[0]
+    assert rrprr.ode_jac_x.block == BLOCK and not hasattr(rrprr.mass_matrix, "block")
+
+
 ONE_JOINT = """\
 robots:
   slider:

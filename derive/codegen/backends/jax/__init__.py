@@ -7,10 +7,12 @@ shape: an input of n elements is an array (..., n), an output of shape s comes b
 of the numpy module. Every body is straight-line jnp code on rows (element ``q_[i]`` of the input
 moved to the batch-last layout, jnp ufuncs, one ``jnp.stack`` per output; shared temporaries that
 XLA would recompute, and input elements read often, marked computed-once, see :mod:`.printer`), so ``jax.jit``, ``jax.vmap`` and
-``jax.grad`` apply to them. Importing the module changes no JAX setting: the functions compute in
-JAX's default float type, float64 where the user has turned on ``jax_enable_x64`` (a jit call
-converts float64 arguments to float32 on entry otherwise, so a float64 scope inside the
-function could not keep the caller's precision).
+``jax.grad`` apply to them. Large ones are decorated ``@_blocks(block, sizes)``: on the CPU a batch of
+more than ``block`` states is evaluated in blocks (``jax.lax.map``), under ``jax.vmap`` too.
+Importing the module changes no JAX setting: the functions compute in JAX's default float type,
+float64 where the user has turned on ``jax_enable_x64`` (a jit call converts float64 arguments to
+float32 on entry otherwise, so a float64 scope inside the function could not keep the caller's
+precision).
 
 Template-bodied functions are provided where ``templates/jax/<template>.py.jinja`` exists
 (``rk4_step``, ``manipulability_<frame>``, the ODE Jacobians of large robots). IK is not: its Levenberg-Marquardt is a data-dependent
@@ -54,8 +56,10 @@ class JaxBackend(Backend):
             r, c = e.shape
             outputs.append({"name": n, "entries": printer.entries(prog, k, r * c),
                             "shape": f"({r}, {c})" if c > 1 else None})
+        inputs = [(n, x.shape[0] * x.shape[1]) for n, x in spec.inputs if x.numel() > 0]
+        block = printer.block(prog) if len(inputs) == len(spec.inputs) else None  # every argument an input row
         return {**fn.common, "jax_provided": True, "jax_template": None, "jax_args": _args(spec),
-                "jax_inputs": [(n, x.shape[0] * x.shape[1]) for n, x in spec.inputs if x.numel() > 0],
+                "jax_inputs": inputs, "jax_block": block,
                 "jax_body": printer.body(prog), "jax_outputs": outputs,
                 "jax_kept_inputs": [(n, repr(kept)) for n, kept in printer.kept_inputs(prog).items()],
                 "jax_returns": returns([(n, e.shape) for n, e in spec.outputs])}
@@ -66,7 +70,7 @@ class JaxBackend(Backend):
         provided = self.has_template(template) and all(a in SUPPORT for a in t.support) and not t.status
         context = self.literals(t.context, float_literal, float_literal)
         return {**fn.common, **context, **dict(t.calls), "jax_provided": provided,
-                "jax_template": self.template(template) if provided else None, "jax_args": _args(t),
+                "jax_template": self.template(template) if provided else None, "jax_block": None, "jax_args": _args(t),
                 "jax_support": [s for algorithm in t.support for s in SUPPORT.get(algorithm, ())] if provided else [],
                 "jax_returns": returns(t.outputs),
                 "p_arg": ", p" if "p" in [n for n, _ in t.inputs] else ""}
