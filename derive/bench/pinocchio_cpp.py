@@ -317,7 +317,9 @@ def pinocchio_flags() -> list[str]:
     if prefix is None or not (eigen / "Eigen" / "Core").is_file():
         raise DeriveError("bench pinocchio-cpp: needs Pinocchio's C++ headers and libpinocchio_default.so (the pin wheel's "
                           "cmeel.prefix) and Eigen's headers (casadi/include/eigen3); not found beside the installed packages")
-    return ["-O2", "-std=c++17", *CXX_DEFINES,
+    # -Wno-deprecated-declarations: Pinocchio 4 marks RigidConstraintModel and constraintDynamics, which the
+    # contacts harness calls, deprecated; each use printed a page of template warnings into `make bench`
+    return ["-O2", "-std=c++17", "-Wno-deprecated-declarations", *CXX_DEFINES,
             *(["-DPINOCCHIO_ENABLE_TEMPLATE_INSTANTIATION"] if PINOCCHIO_INSTANTIATED else []),
             f"-I{prefix / 'include'}", f"-I{eigen}", f"-L{prefix / 'lib'}", f"-Wl,-rpath,{prefix / 'lib'}"]
 
