@@ -16,6 +16,8 @@ The program prints both sides' qdd and lambda at one state, which must agree (a 
 
 from __future__ import annotations
 
+import re
+import shutil
 import subprocess
 import tempfile
 import time
@@ -106,8 +108,8 @@ static void print(const char *name, const double *x, int n) {
 
 int main(int argc, char **argv) {
   const int nq = ${nq}, nv = ${nv}, m = ${m}, nx = nq + nv, stride = nq + 3 * nv;  /* a state: q, v, tau, qdd */
-  if (argc != 4) return 2;
-  const int n = atoi(argv[1]), repeats = atoi(argv[2]);
+  if (argc != 4 && argc != 5) return 2;
+  const int n = atoi(argv[1]), repeats = atoi(argv[2]);  /* with argv[4]: repeats passes of one side, untimed */
   std::vector<double> states((size_t)n * stride);
   FILE *f = fopen(argv[3], "rb");
   if (!f || fread(states.data(), sizeof(double), states.size(), f) != states.size()) return 3;
@@ -141,6 +143,21 @@ int main(int argc, char **argv) {
   print("pin_qdd", data.ddq.data(), nv);
   print("pin_lambda", data.lambda_c.data(), m);
   fflush(stdout);
+  if (argc == 5) {  /* for callgrind: each state's derivatives, ours or Pinocchio's, repeats times over */
+    const bool ours = argv[4][0] == 'o';
+    for (int r = 0; r < repeats; r++)
+      for (int i = 0; i < n; i++) {
+        const double *s = S + (size_t)i * stride;
+        if (ours) {
+          ${robot}_contact_dynamics_derivatives_stance(s, s + nq, s + nx, o, o + nv * (nq + 2 * nv));
+        } else {
+          constraintDynamics(model, data, q[i], v[i], tau[i], contacts, datas, prox);
+          computeConstraintDynamicsDerivatives(model, data, contacts, datas, prox, ddq_dq, ddq_dv, ddq_dtau, dl_dq,
+                                               dl_dv, dl_dtau);
+        }
+      }
+    return 0;
+  }
 
   double best[5];
   int passes[5] = {0};
@@ -178,13 +195,12 @@ BREAKDOWN = ("Where the derivatives' operations go (solo12, four feet, measured 
              "solution itself (the forward dynamics) 8.3k, the KKT residual's Jacobian dF/d(q, v) (the RNEA's by AD, "
              "with J^T lambda's and the drift's) 28.7k, and the solve of its nq + 2 nv = 55 right-hand sides by the "
              "shared factors the remaining ~48k, about 870 operations a column (two tree half-solves, W^T D^-1 u, the "
-             "12 x 12 Schur solve, W lambda). Per instruction it is well under Pinocchio's: callgrind (repeatable, "
-             "measured once) counts 150.6k instructions a call against 418k for constraintDynamics (103k) plus "
-             "computeConstraintDynamicsDerivatives (315k), 0.36x; the time ratio is higher because the 85k operations "
-             "are 924 KB of straight-line x86-64 code, fetched from L2 and L3 on every call, where Pinocchio's loops "
-             "stay in the instruction cache. Tried, not kept: the solve as C loops around a straight-line helper (M, J "
-             "and dF at the solution, 35.6k operations) ran slower at -O2 (46-66 us against 39-43 us in the same runs: "
-             "the loops cannot skip the zeros the straight-line code never computes). Ways to cut it, not done: the "
+             "12 x 12 Schur solve, W lambda). In instructions it is far below Pinocchio (the callgrind line above); "
+             "the time ratio is higher because the 85k operations are 924 KB of straight-line x86-64 code, "
+             "fetched from L2 and L3 on every call, where Pinocchio's loops stay in the instruction cache. "
+             "Tried, not kept: the solve as C loops around a straight-line helper (M, J and dF at the solution, "
+             "35.6k operations) ran slower at -O2 (46-66 us against 39-43 us in the same runs: the loops cannot "
+             "skip the zeros the straight-line code never computes). Ways to cut it, not done: the "
              "four quaternion columns of dF cost 11k (J and the drift written as R_base times their base-frame forms "
              "would make them almost free, but changes d/dq along the quaternion itself: tangent-space columns, 54 "
              "instead of 55, as Pinocchio's, an interface change), the d/dtau block is the KKT inverse's symmetric "
@@ -206,6 +222,25 @@ def contacts_cpp(model) -> str:
         lines.append(f"contacts.push_back(RigidConstraintModel(CONTACT_3D, model, {frame.parentJoint}, "
                      f"se3({{{_num(at.rotation)}}}, {{{_num(at.translation)}}}), LOCAL_WORLD_ALIGNED));")
     return "\n  ".join(lines)
+
+
+def instructions(c_dir: Path, n: int, side: str) -> float | None:
+    """Instructions per call of one side's derivatives ("ours" or "pinocchio": constraintDynamics then
+    computeConstraintDynamicsDerivatives) under callgrind, which counts the same on a loaded machine: the
+    harness's count mode run with 1 and with 3 passes over its n states, the difference over 2 n calls (what
+    the program does besides, loading the model and the states, cancels). None without valgrind."""
+    if shutil.which("valgrind") is None:
+        return None
+    counts = []
+    for passes in (1, 3):
+        res = subprocess.run(["valgrind", "--tool=callgrind", "--callgrind-out-file=/dev/null", "./harness", str(n),
+                              str(passes), "states.bin", side], cwd=c_dir, capture_output=True, text=True)
+        found = re.search(r"Collected : (\d+)", res.stderr)
+        if res.returncode != 0 or found is None:
+            raise DeriveError(f"bench contacts: callgrind of the harness ({side}, {passes} passes) failed: "
+                              f"{(res.stderr.strip().splitlines() or ['no output'])[-1]}")
+        counts.append(int(found.group(1)))
+    return (counts[1] - counts[0]) / (2 * n)
 
 
 def measure(repeats: int, flags: list[str], log=print) -> dict:
@@ -244,6 +279,7 @@ def measure(repeats: int, flags: list[str], log=print) -> dict:
         log(f"[contacts] harness compiled in {time.perf_counter() - t0:.1f} s")
         out = subprocess.run(["./harness", str(len(xs)), str(repeats), "states.bin"], cwd=c_dir, check=True,
                              capture_output=True, text=True).stdout
+        counted = {side: instructions(c_dir, len(xs), side) for side in ("ours", "pinocchio")}
     values = {w[1]: np.array(w[2:], dtype=float) for w in map(str.split, out.splitlines()) if w[0] == "check"}
     times = {w[1]: [float(x) for x in w[2:]] for w in map(str.split, out.splitlines()) if w[0] == "time"}
     error = max(float(np.abs(values[f"derive_{k}"] - values[f"pin_{k}"]).max() / max(1.0, np.abs(values[f"pin_{k}"]).max()))
@@ -252,7 +288,10 @@ def measure(repeats: int, flags: list[str], log=print) -> dict:
         raise DeriveError(f"bench contacts: ours is {error:.1e} from Pinocchio's C++ constraintDynamics (a harness bug)")
     log(f"[contacts] forward {times['forward'][0]:.0f}/{times['forward'][1]:.0f} ns, derivatives "
         f"{times['derivatives'][0]:.0f}/{times['derivatives'][1]:.0f} ns (values {error:.1e})")
-    return {"times": times, "ops": ops, "error": error, "generated": generated, "compiled": compiled, "nv": robot.nv}
+    if counted["ours"] is not None:
+        log(f"[contacts] derivatives: {counted['ours']:.0f} / {counted['pinocchio']:.0f} instructions a call (callgrind)")
+    return {"times": times, "ops": ops, "error": error, "generated": generated, "compiled": compiled, "nv": robot.nv,
+            "instructions": counted}
 
 
 def _pin_version() -> str:
@@ -284,9 +323,19 @@ def section(r: dict, repeats: int, seconds: float) -> str:
         "`computeConstraintDynamicsDerivatives` (which reuses the former's factorisation), since ours computes its "
         f"own solution; `computeConstraintDynamicsDerivatives` alone takes {der[2]:.0f} ns.", "",
         *table, "",
+        _instructions_line(r["instructions"]), "",
         BREAKDOWN, "",
         f"Measured on a shared 2-core VM: times are indicative, the ratios come from the same run; bench time "
         f"{seconds:.0f} s."])
+
+
+def _instructions_line(counted: dict) -> str:
+    ours, theirs = counted["ours"], counted["pinocchio"]
+    if ours is None:
+        return "Instructions per call (callgrind): not measured, valgrind is not installed."
+    return (f"Instructions per call of the derivatives, counted by callgrind (the same on a loaded machine, where the "
+            f"times are not): derive {ours / 1e3:.1f}k, Pinocchio's constraintDynamics + "
+            f"computeConstraintDynamicsDerivatives {theirs / 1e3:.1f}k, {ours / theirs:.2f}x.")
 
 
 def bench_contacts(args) -> str:
