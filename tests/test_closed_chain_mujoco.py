@@ -17,7 +17,7 @@ import yaml
 
 from derive.cli import main
 from derive.description.closure import Poses
-from derive.description.export import FLOOR, _quat_between, export_mjcf
+from derive.description.export import FLOOR, quat_between, export_mjcf
 from derive.description.mjcf import import_mjcf
 from derive.description.model import load_models, parse_robot
 from derive.reference.closure import ClosedChainReference
@@ -76,7 +76,7 @@ def close_rods(mujoco, m, d) -> None:
         length = float(np.linalg.norm(m.site_pos[end]))
         u = (d.site_xpos[other] - d.xpos[b]) / length
         R = d.xmat[b].reshape(3, 3)
-        d.qpos[qa:qa + 4] = _quat_between(m.site_pos[end] / length, R.T @ u)
+        d.qpos[qa:qa + 4] = quat_between(m.site_pos[end] / length, R.T @ u)
         v_other, v_ball = np.zeros(6), np.zeros(6)
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_SITE, other, v_other, 0)
         mujoco.mj_objectVelocity(m, d, mujoco.mjtObj.mjOBJ_BODY, b, v_ball, 0)  # [w; v] of the parent at the ball

@@ -76,6 +76,7 @@ import numpy as np
 
 from derive.description import expr
 from derive.description.closure import Poses
+from derive.description.mjcf import quat_matrix
 from derive.description.robot import FREE_FLYER, IDEAL, Actuator, Frame, Joint, Limits, ModelError, Origin, Robot
 
 URDF_GRAVITY = (0.0, 0.0, -9.81)
@@ -403,7 +404,7 @@ class _MjcfLoops:
     notes: list[str]
 
 
-def _quat_between(u: np.ndarray, v: np.ndarray) -> tuple[float, float, float, float]:
+def quat_between(u: np.ndarray, v: np.ndarray) -> tuple[float, float, float, float]:
     """(w, x, y, z) of the least rotation taking the unit vector u to the unit vector v (a half turn about an
     axis normal to u where v = -u)."""
     w = 1.0 + float(u @ v)
@@ -412,14 +413,6 @@ def _quat_between(u: np.ndarray, v: np.ndarray) -> tuple[float, float, float, fl
         return (0.0, *(float(x) for x in axis / np.linalg.norm(axis)))
     q = np.array([w, *np.cross(u, v)])
     return tuple(float(x) for x in q / np.linalg.norm(q))
-
-
-def _quat_matrix(q) -> np.ndarray:
-    """The rotation matrix of the unit quaternion (w, x, y, z)."""
-    w, x, y, z = q
-    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
 
 
 def _mjcf_loops(robot: Robot, m: "_Model", rod_mass: float, rod_moment: float) -> _MjcfLoops:
@@ -464,8 +457,8 @@ def _mjcf_loops(robot: Robot, m: "_Model", rod_mass: float, rod_moment: float) -
             at = R0.T @ (zero[lp.b][1] - p0)  # the ball in the link frame
             toward = R0.T @ (zero[lp.a][1] - zero[lp.b][1])
             u0 = toward / np.linalg.norm(toward) if np.linalg.norm(toward) > 1e-12 else np.array([1.0, 0.0, 0.0])
-            turn = _quat_between(np.array([1.0, 0.0, 0.0]), u0)  # the rod's frame: its x axis along u0
-            u = _quat_matrix(turn).T @ Rr.T @ (poses[lp.a][1] - poses[lp.b][1])
+            turn = quat_between(np.array([1.0, 0.0, 0.0]), u0)  # the rod's frame: its x axis along u0
+            u = quat_matrix(turn).T @ Rr.T @ (poses[lp.a][1] - poses[lp.b][1])
             rod = m.unique(sites | bodies, f"{pivot}_rod")
             end = m.unique(sites | bodies | {rod}, f"{rod}_end")
             bodies.add(rod)
@@ -477,7 +470,7 @@ def _mjcf_loops(robot: Robot, m: "_Model", rod_mass: float, rod_moment: float) -
                 + f'><joint name="{joint}" type="ball"/>'
                 f'<inertial pos="0 0 0" mass="{_num(rod_mass)}" diaginertia="{moment} {moment} {moment}"/>'
                 f'<site name="{end}" pos="{_num(length)} 0 0"/></body>',
-                _quat_between(np.array([1.0, 0.0, 0.0]), u / np.linalg.norm(u))))
+                quat_between(np.array([1.0, 0.0, 0.0]), u / np.linalg.norm(u))))
             out.equalities.append(f'<connect name="loop{i}" site1="{end}" site2="{site(lp.a)}"/>')
             out.notes.append(f"{where(i)} (distance {length!r} m) is the rod body '{rod}' on a ball joint at {lp.b} "
                              f"(mass {rod_mass:.3g} kg, moments {rod_moment:.3g} kg m^2, all at the ball: derive's rod is "
