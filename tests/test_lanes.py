@@ -57,10 +57,16 @@ def mods(small, tmp_path_factory):
         mp.setenv("CFLAGS", "-O0")
         mp.delenv("CC", raising=False)
         out = {}
-        for mode in ("auto", "off") + (("sse2",) if X86 else ()):
+        avx2 = ("avx2",) if "avx2" in build._cpu_flags() and build.host_lanes().isa != "avx2" else ()
+        for mode in ("auto", "off") + (("sse2",) if X86 else ()) + avx2:
             mp.setenv("DERIVE_LANES", mode)
             out[mode] = loader.compiled("planar_2r", small)
         mp.delenv("DERIVE_LANES")
+        # every whole block through the large-batch path (non-temporal stores), whatever the batch size
+        mp.setenv("CFLAGS", "-O0 -DDERIVE_RT_STREAM_BYTES=0")
+        out["stream"] = loader.compiled("planar_2r", small)
+        mp.setattr(build, "STACK_VECTORS", 0)  # the vectors and the block's outputs on the heap (a large robot's)
+        out["heap"] = loader.compiled("planar_2r", small)
         out["host"] = build.host_lanes()
         yield out
 
@@ -95,14 +101,35 @@ def test_lanes_equal_scalar_to_1e13(mods, name):
     """11 states: two blocks of 4 lanes and a tail of 3 (padded with the last state); each state's
     results also equal its results alone (the one-state path runs the lanes too)."""
     args = batch(name, 11, seed=len(name))
-    lanes, scalar = values(getattr(mods["auto"], name)(*args)), values(getattr(mods["off"], name)(*args))
-    for got, want in zip(lanes, scalar):
-        flat_l, flat_s = got.reshape(11, -1), want.reshape(11, -1)
-        scale = np.max(np.abs(flat_s), axis=1)
-        assert np.all(scale > 0) and np.all(np.max(np.abs(flat_l - flat_s), axis=1) <= 1e-13 * scale)
+    scalar = values(getattr(mods["off"], name)(*args))
+    for mode in ("auto", "avx2"):  # avx2 as well where the host's own mode is wider
+        if mode not in mods:
+            continue
+        lanes = values(getattr(mods[mode], name)(*args))
+        for got, want in zip(lanes, scalar):
+            flat_l, flat_s = got.reshape(11, -1), want.reshape(11, -1)
+            scale = np.max(np.abs(flat_s), axis=1)
+            assert np.all(scale > 0) and np.all(np.max(np.abs(flat_l - flat_s), axis=1) <= 1e-13 * scale), mode
+    lanes = values(getattr(mods["auto"], name)(*args))
     for k in (0, 5, 8, 10):  # a first lane, a middle one, the tail's first and last
         for got, alone in zip(lanes, values(getattr(mods["auto"], name)(*[a[k] for a in args]))):
             np.testing.assert_array_equal(alone, got[k])
+
+
+@pytest.mark.parametrize("name", LANE_WISE)
+def test_large_batch_stores_equal_the_small_batch_ones(mods, name):
+    """A batch whose outputs pass DERIVE_RT_STREAM_BYTES writes each block's outputs by whole cache
+    lines (non-temporal stores) and the partial first and last lines by plain stores: the same
+    numbers as the plain stores, bit for bit, in outputs at every offset from a cache line (37
+    states: blocks starting at 8-byte offsets that cycle through the line, and a tail)."""
+    assert mods["stream"].LANES == mods["heap"].LANES == mods["host"].count
+    args = batch(name, 37, seed=3)
+    big = [np.repeat(a, 4, axis=0)[:-3] for a in args]  # 145 states, in a fresh (differently aligned) output
+    for given in (args, big):
+        plain = values(getattr(mods["auto"], name)(*given))
+        for mode in ("stream", "heap"):  # heap: the same path with its buffers on the heap
+            for got, want in zip(values(getattr(mods[mode], name)(*given)), plain):
+                np.testing.assert_array_equal(got, want)
 
 
 @pytest.mark.skipif(not X86, reason="sse2 lanes are x86-64's")

@@ -18,7 +18,8 @@
   per function the manifest marks lane-wise (``c.lanes``): its generated .c compiled a second time
   with derive_lanes.h (DERIVE_REAL a vector, one state per lane; only these units get the ISA's
   flag) and ``<robot>_<fn>_lanes_batch``, which gathers blocks of states into lane vectors, calls
-  it and scatters the results, all in C. The batch loop and the one-state path of such a function
+  it and puts the results back state by state (in-register transposes; a large batch by
+  non-temporal stores, see :data:`STREAM_SOURCE`), all in C. The batch loop and the one-state path of such a function
   both go through it, so a state's results do not depend on the batch around it.
 - :func:`library` returns ``$XDG_CACHE_HOME/derive/compiled/<hash>/lib<robot>.so`` (default
   ~/.cache/derive/compiled/), the hash being the sha256 of the snapshot's source bytes, the
@@ -337,19 +338,110 @@ STACK_VECTORS = 512
 of AVX2 vectors: the Panda's ode_jac_x needs 217); more (a large robot's regressor) on the heap."""
 
 
+STREAM_SOURCE = r"""
+/* A batch whose outputs reach DERIVE_RT_STREAM_BYTES is written with non-temporal stores: they
+   go to memory by whole cache lines without first reading each line into the caches (a plain
+   store reads it: twice the memory traffic), and leave the caches to the inputs. Smaller batches
+   keep plain stores, so their results stay in the caches for the caller. */
+#ifndef DERIVE_RT_STREAM_BYTES
+#define DERIVE_RT_STREAM_BYTES (2L << 20)
+#endif
+#include <string.h>
+/* the lanes of two vectors picked by constant indices (0..L-1: a's, L..2L-1: b's) */
+#if defined(__clang__)
+#define DERIVE_RT_SHUFFLE(a, b, ...) __builtin_shufflevector(a, b, __VA_ARGS__)
+#else
+typedef long long derive_rt_index __attribute__((vector_size(sizeof(DERIVE_REAL))));
+#define DERIVE_RT_SHUFFLE(a, b, ...) __builtin_shuffle(a, b, (derive_rt_index){__VA_ARGS__})
+#endif
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
+/* out[0, count) = st[0, count), st 64-byte aligned; with stream, the whole 64-byte lines of out
+   by non-temporal stores, the partial first and last lines (shared with the neighbouring block)
+   by plain ones */
+static void derive_rt_put(double *out, const double *st, long count, int stream)
+{
+    long k = 0, head = (long)((64 - (uintptr_t)out % 64) % 64 / 8), end;
+    if (!stream || (uintptr_t)out % 8 || head > count) {
+        memcpy(out, st, (size_t)count * sizeof(double));
+        return;
+    }
+    for (; k < head; ++k)
+        out[k] = st[k];
+    end = head + (count - head) / 8 * 8;
+    for (; k < end; k += 8) {
+#if defined(__AVX512F__)
+        _mm512_stream_pd(out + k, _mm512_loadu_pd(st + k));
+#elif defined(__AVX__)
+        _mm256_stream_pd(out + k, _mm256_loadu_pd(st + k));
+        _mm256_stream_pd(out + k + 4, _mm256_loadu_pd(st + k + 4));
+#elif defined(__SSE2__)
+        _mm_stream_pd(out + k, _mm_loadu_pd(st + k));
+        _mm_stream_pd(out + k + 2, _mm_loadu_pd(st + k + 2));
+        _mm_stream_pd(out + k + 4, _mm_loadu_pd(st + k + 4));
+        _mm_stream_pd(out + k + 6, _mm_loadu_pd(st + k + 6));
+#else
+        int c;
+        for (c = 0; c < 8; ++c)
+            out[k + c] = st[k + c];
+#endif
+    }
+    for (; k < count; ++k)
+        out[k] = st[k];
+}
+
+/* the non-temporal stores ordered before the stores that follow (another thread reading the results) */
+static void derive_rt_stream_end(void)
+{
+#if defined(__SSE2__)
+    _mm_sfence();
+#endif
+}
+""".strip("\n").split("\n")
+
+
+def _transpose(count: int, src: str, dst: str, stride: int) -> list[str]:
+    """C lines: the count vectors ``src.format(e)`` (vector e: element e, lane k: state k) transposed in
+    registers, row k (state k's count elements) stored to dst + k * stride. log2(count) rounds of
+    lane shuffles: round g pairs rows r and r + g (r & g == 0) and swaps their g-lane blocks."""
+    rows = [f"t{e}" for e in range(count)]
+    out = [f"                const DERIVE_REAL {', '.join(f'{r} = {src.format(e)}' for e, r in enumerate(rows))};"]
+    g, step = 1, 0
+    while g < count:
+        new = list(rows)
+        decl = []
+        for r in range(count):
+            if r & g:
+                continue
+            lo = [p if not p & g else count + p - g for p in range(count)]   # a[p], or b[p - g] where p & g
+            hi = [p + g if not p & g else count + p for p in range(count)]    # a[p + g], or b[p] where p & g
+            new[r], new[r + g] = f"s{step}_{r}", f"s{step}_{r + g}"
+            decl += [f"{new[r]} = DERIVE_RT_SHUFFLE({rows[r]}, {rows[r + g]}, {', '.join(map(str, lo))})",
+                     f"{new[r + g]} = DERIVE_RT_SHUFFLE({rows[r]}, {rows[r + g]}, {', '.join(map(str, hi))})"]
+        out += [f"                const DERIVE_REAL {d};" for d in decl]
+        rows, g, step = new, g * 2, step + 1
+    out += [f"                memcpy({dst} + {k * stride}, &{r}, sizeof {r});" for k, r in enumerate(rows)]
+    return out
+
+
 def lane_source(robot: str, s: Signature, lanes: Lanes) -> str:
     """The translation unit of ``s``'s lane variant: its generated .c compiled with DERIVE_REAL a
     vector of ``lanes.count`` reals, renamed ``<fn>_lanes`` (its callees too), and
     ``<fn>_lanes_batch``: n states in blocks of count, each input element gathered into a vector
     (lane k: state i + k; the last block's missing lanes repeat the last state), one call, the
-    outputs scattered back. So a state's results do not depend on where in a batch it is, or
-    whether it is alone (n = 1: the one-state path). Returns n, or 0 without memory for the vectors
-    (the caller then loops over the scalar function)."""
+    outputs transposed back (:func:`_transpose`) and copied out (``derive_rt_put``). So a
+    state's results do not depend on where in a batch it is, or whether it is alone (n = 1: the
+    one-state path). Returns n, or 0 without memory for the vectors (the caller then loops over
+    the scalar function)."""
     ins = [f"const double *a_{a.name}, long s_{a.name}" for a in s.inputs]
     outs = [f"double *r_{a.name}" for a in s.outputs]
     total = sum(a.length for a in s.inputs + s.outputs)
     count = lanes.count
     on_stack = total <= STACK_VECTORS
+    out_total = sum(a.length for a in s.outputs)
+    widest = max(a.length for a in s.outputs)
     lines = [f"/* Built by derive.runtime for robot '{robot}': {s.cname} in lane mode ({lanes.isa}, {count} states a call). */",
              "#include <stdint.h>",
              "#include <stdlib.h>",
@@ -358,19 +450,25 @@ def lane_source(robot: str, s: Signature, lanes: Lanes) -> str:
              *[f"#define {c} {c}_lanes" for c in (s.cname, *s.calls)],
              f'#include "{s.cname}.c"',
              "",
+             *STREAM_SOURCE,
+             "",
              f"long {s.cname}_lanes_batch(long n, {', '.join(ins + outs)})",
              "{",
              "    long i;",
-             "    int j, k;"]
+             "    int j, k;",
+             f"    const int stream = (double)n * {out_total * 8} >= DERIVE_RT_STREAM_BYTES;"]
     if on_stack:
-        lines += [f"    DERIVE_REAL v[{total}];"]
+        lines += [f"    DERIVE_REAL v[{total}];",
+                  f"    double st[{count * widest}] __attribute__((aligned(64)));  /* one output of a block, state by state */"]
     else:
-        lines += [f"    /* {total} vectors, aligned: on the heap (they would not fit the stack) */",
-                  f"    unsigned char *raw = malloc({total} * sizeof(DERIVE_REAL) + sizeof(DERIVE_REAL));",
+        lines += [f"    /* {total} vectors, aligned, and one output of a block state by state: on the heap (they would not fit the stack) */",
+                  f"    unsigned char *raw = malloc({total} * sizeof(DERIVE_REAL) + sizeof(DERIVE_REAL) + {count * widest} * sizeof(double));",
                   "    DERIVE_REAL *v;",
+                  "    double *st;",
                   "    if (!raw)",
                   "        return 0;",
-                  "    v = (DERIVE_REAL *)(raw + sizeof(DERIVE_REAL) - (uintptr_t)raw % sizeof(DERIVE_REAL));"]
+                  "    v = (DERIVE_REAL *)(raw + sizeof(DERIVE_REAL) - (uintptr_t)raw % sizeof(DERIVE_REAL));",
+                  f"    st = (double *)(v + {total});"]
     # the states of the block (the last block's missing lanes repeat the last state); each input
     # vector built from its lanes in registers: lane stores into a vector in memory and then one
     # vector load would stall the store forwarding
@@ -387,18 +485,26 @@ def lane_source(robot: str, s: Signature, lanes: Lanes) -> str:
         lines += [f"        for (j = 0; j < {a.length}; ++j)",
                   f"            v[{offsets[a.name]} + j] = (DERIVE_REAL){{{lanes_of}}};"]
     lines.append(f"        {s.cname}_lanes({', '.join(f'v + {offsets[a.name]}' for a in s.inputs + s.outputs)});")
-    lines.append(f"        if (i + {count} <= n) {{  /* a whole block: each output vector read once */")
+    # a whole block: each output's count * length doubles (contiguous in r_) put together state by
+    # state in st (in the L1 cache), then copied out in order (the lanes scattered straight to r_
+    # take twice as long); a large batch by cache lines that bypass the caches
+    lines.append(f"        if (i + {count} <= n) {{")
     for a in s.outputs:
-        lines += [f"            for (j = 0; j < {a.length}; ++j) {{",
+        lines += [f"            for (j = 0; j + {count} <= {a.length}; j += {count}) {{",
+                  *_transpose(count, f"v[{offsets[a.name]} + j + {{}}]", "st + j", a.length),
+                  "            }",
+                  f"            for (; j < {a.length}; ++j) {{",
                   f"                const DERIVE_REAL t = v[{offsets[a.name]} + j];",
-                  *[f"                r_{a.name}[(i + {k}) * {a.length} + j] = t[{k}];" for k in range(count)],
-                  "            }"]
+                  *[f"                st[{k * a.length} + j] = t[{k}];" for k in range(count)],
+                  "            }",
+                  f"            derive_rt_put(r_{a.name} + i * {a.length}, st, {count * a.length}, stream);"]
     lines.append("        } else {")
     for a in s.outputs:
         lines += [f"            for (k = 0; i + k < n; ++k)",
                   f"                for (j = 0; j < {a.length}; ++j)",
                   f"                    r_{a.name}[(i + k) * {a.length} + j] = v[{offsets[a.name]} + j][k];"]
-    lines += ["        }", "    }", *([] if on_stack else ["    free(raw);"]), "    return n;", "}"]
+    lines += ["        }", "    }", "    if (stream)", "        derive_rt_stream_end();",
+              *([] if on_stack else ["    free(raw);"]), "    return n;", "}"]
     return "\n".join(lines) + "\n"
 
 
