@@ -233,6 +233,30 @@ def test_biped_contact_functions_match_the_reference(biped):
         assert_close(J @ qdd, -a0, TOL, "the contacts are held")
 
 
+def test_the_residual_forms_equal_the_reference():
+    """What the derivatives differentiate, against the numpy reference: the RNEA with the contact forces as
+    external wrenches (each rotated into its body, carried by the backward pass) equals ID - J^T lam, and the
+    contacts' acceleration from the forward pass equals J qdd + a0; the surface foot's six rows, the point
+    foot's three, at seeded states."""
+    robot = parse_models(BIPED)["biped"]
+    model, nr = SXModel(robot), NumericRobot(robot)
+    s = model.sym
+    stance = next(c for c in robot.stances if c.name == "both")
+    cm = ContactModel(model, stance)
+    lam = ca.SX.sym("lam", cm.rows)
+    f = ca.Function("f", [s.q, s.qd, s.qdd, lam],
+                    [model.newton_euler.rnea(s.qd, s.qdd, external=cm.wrenches(lam)), cm.acceleration(s.qdd)])
+    contacts = [(c.frame, c.kind) for c in robot.contacts if c.frame in ("l_foot", "r_foot")]
+    rng = np.random.default_rng(5)
+    for _ in range(3):
+        q, v, _ = unit_quaternion_state(rng, nr)
+        a, l = rng.normal(size=nr.nv), rng.normal(size=cm.rows)
+        tau, acc = (np.asarray(x).ravel() for x in f(q, v, a, l))
+        J, a0 = ref.contact_rows(nr, q, v, contacts)
+        assert_close(tau, nr.rnea(q, v, a) - J.T @ l, TOL, "RNEA with the contact wrenches")
+        assert_close(acc, J @ a + a0, TOL, "the contacts' acceleration")
+
+
 def test_biped_redundant_stance_reports_status_zero(biped):
     """A surface and a point at the same origin: 9 rows of rank 6, pivots of S exactly zero or rounding. status
     is 0 in every language, the numbers finite (no division by zero raises in Python, nothing is regularised

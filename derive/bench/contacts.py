@@ -192,21 +192,22 @@ int main(int argc, char **argv) {
 
 
 BREAKDOWN = ("Where the derivatives' operations go (solo12, four feet, measured once by building the parts alone): the "
-             "solution itself (the forward dynamics) 8.3k, the KKT residual's Jacobian dF/d(q, v) (the RNEA's by AD, "
-             "with J^T lambda's and the drift's) 28.7k, and the solve of its nq + 2 nv = 55 right-hand sides by the "
-             "shared factors the remaining ~48k, about 870 operations a column (two tree half-solves, W^T D^-1 u, the "
-             "12 x 12 Schur solve, W lambda). In instructions it is far below Pinocchio (the callgrind line above); "
-             "the time ratio is higher because the 85k operations are 924 KB of straight-line x86-64 code, "
-             "fetched from L2 and L3 on every call, where Pinocchio's loops stay in the instruction cache. "
-             "Tried, not kept: the solve as C loops around a straight-line helper (M, J and dF at the solution, "
-             "35.6k operations) ran slower at -O2 (46-66 us against 39-43 us in the same runs: the loops cannot "
-             "skip the zeros the straight-line code never computes). Ways to cut it, not done: the "
-             "four quaternion columns of dF cost 11k (J and the drift written as R_base times their base-frame forms "
-             "would make them almost free, but changes d/dq along the quaternion itself: tangent-space columns, 54 "
-             "instead of 55, as Pinocchio's, an interface change), the d/dtau block is the KKT inverse's symmetric "
-             "top-left block (20.7k for its 18 columns, about 13k in the symmetric form), and Pinocchio's analytic RNEA "
-             "derivatives for dF instead of AD. Pinocchio's figures vary by up to 1.6x between runs on this shared "
-             "machine (53-87 us for the derivatives; one --quick run gave 0.98x, forward 0.19x).")
+             "solution itself (the forward dynamics) 8.3k, the KKT residual's Jacobian dF/d(q, v) 17.9k (one RNEA "
+             "by AD: the contact forces carried by its backward pass as external wrenches, J a + a0 from its forward "
+             "pass), the solve of its nq + nv = 37 right-hand sides by the shared factors 33.4k, about 900 "
+             "operations a column (two tree half-solves, W^T z, the 12 x 12 Schur solve, D^-1 W lambda), and the "
+             "d/dtau block, the KKT inverse's symmetric top-left block and the one below it, 13.6k (counted with "
+             "casadi's cse; the generated code has 71.7k in all, 85.1k before these forms). In instructions it is far "
+             "below Pinocchio (the callgrind line above); the time ratio is higher because the operations are 806 "
+             "KB of straight-line x86-64 code (924 KB before), fetched from L2 on every call, where Pinocchio's "
+             "loops stay in the instruction cache. Tried, not kept: the solve as C loops around a straight-line "
+             "helper (M, J and dF at the solution) ran slower at -O2 (the loops cannot skip the zeros the "
+             "straight-line code never computes). A way to cut it further, not done: the four quaternion columns "
+             "of dF (J and the drift written as R_base times their base-frame forms would make them almost free, "
+             "but changes d/dq along the quaternion itself: tangent-space columns, 54 instead of 55, as "
+             "Pinocchio's, an interface change), and Pinocchio's analytic RNEA derivatives for dF instead of AD. "
+             "Pinocchio's figures vary by up to 1.6x between runs on this shared machine (53-87 us for the "
+             "derivatives).")
 
 
 def _num(values) -> str:

@@ -68,7 +68,7 @@ class KKT:
     earlier coordinate an ancestor), W = L^-T J^T (m half solves, each filling only the contact's branch
     and its ancestors), S = W^T D^-1 W = J M^-1 J^T, S = L_S D_S L_S^T (:func:`guarded_ldlt`).
     :meth:`solve` returns (a, l) with M a - J^T l = r1, J a = r2 for any number of columns:
-    u = L^-T r1, l = S^-1 (r2 - W^T D^-1 u), a = L^-1 D^-1 (u + W l): two half solves per column."""
+    z = D^-1 L^-T r1, l = S^-1 (r2 - W^T z), a = L^-1 (z + D^-1 W l): two half solves per column."""
 
     def __init__(self, M: ca.SX, J: ca.SX, parents: tuple[int, ...]):
         self.parents = parents
@@ -76,7 +76,8 @@ class KKT:
         self.n = M.shape[0]
         self.inverse = [1 / self.H[k, k] for k in range(self.n)]  # D^-1: one division per pivot, not per column
         self.W = self.lower_solve(J.T)
-        S = self.W.T @ self.scaled(self.W)
+        self.DW = self.scaled(self.W)  # D^-1 W
+        S = self.W.T @ self.DW
         self.L, self.D, self.status = guarded_ldlt(S)
         self.D_inverse = [1 / d for d in self.D]
 
@@ -101,7 +102,11 @@ class KKT:
 
     def upper_solve(self, z: ca.SX) -> ca.SX:
         """L^-1 D^-1 z (L x = D^-1 z, root first)."""
-        x = [z[k, :] * self.inverse[k] for k in range(self.n)]
+        return self.unit_upper_solve(self.scaled(z))
+
+    def unit_upper_solve(self, z: ca.SX) -> ca.SX:
+        """L^-1 z (L x = z, root first)."""
+        x = [z[k, :] for k in range(self.n)]
         for k in range(self.n):
             for i in self.ancestors(k):
                 x[k] = x[k] - self.H[k, i] * x[i]
@@ -113,22 +118,67 @@ class KKT:
 
     def solve(self, r1: ca.SX, r2: ca.SX) -> tuple[ca.SX, ca.SX]:
         """(a, l) of [M J^T; J 0] [a; -l] = [r1; r2]."""
-        u = self.lower_solve(r1)
-        l = self.schur_solve(r2 - self.W.T @ self.scaled(u))
-        return self.upper_solve(u + self.W @ l), l
+        z = self.scaled(self.lower_solve(r1))  # D^-1 L^-T r1
+        l = self.schur_solve(r2 - self.W.T @ z)
+        return self.unit_upper_solve(z + self.DW @ l), l
+
+    def mass_inverse(self) -> list[list]:
+        """M^-1 = L^-1 D^-1 L^-T entry by entry (n x n, symmetric: each pair once): with V = L^-1 (row k
+        nonzero only at k and its ancestors), M^-1[i, j] = sum over the common ancestors-or-selves c of
+        V[i, c] V[j, c] / D[c]."""
+        n, H = self.n, self.H
+        V: list[dict] = []
+        for k in range(n):  # L V = I, root first: V[k, c] = -sum_i H[k, i] V[i, c] over k's ancestors i
+            acc: dict = {}
+            for i in self.ancestors(k):
+                for c, v in V[i].items():  # c: i or an ancestor of i, never k
+                    acc[c] = acc[c] + H[k, i] * v if c in acc else H[k, i] * v
+            V.append({k: ca.SX(1), **{c: -t for c, t in acc.items()}})
+        out = [[None] * n for _ in range(n)]
+        for i in range(n):
+            for j in range(i, n):
+                common = sorted(set(V[i]) & set(V[j]))
+                out[i][j] = out[j][i] = sum((V[i][c] * (V[j][c] * self.inverse[c]) for c in common), ca.SX(0))
+        return out
+
+    def tau_columns(self) -> tuple[ca.SX, ca.SX]:
+        """(a, l) of :meth:`solve` for r1 = I (n columns), r2 = 0: the KKT inverse's top-left block
+        P = M^-1 - G S^-1 G^T (symmetric, G = M^-1 J^T = L^-1 D^-1 W: each pair of entries computed once)
+        and its bottom-left one, -S^-1 G^T. With S = L_S D_S L_S^T and E = L_S^-1 G^T, F = D_S^-1 E:
+        P = M^-1 - E^T F and -S^-1 G^T = -L_S^-T F. About half the operations of n columns of :meth:`solve`."""
+        n = self.n
+        G = self.unit_upper_solve(self.DW)
+        E = ldlt_forward(self.L, G.T)
+        F = ca.vertcat(*(E[i, :] * self.D_inverse[i] for i in range(E.shape[0])))
+        Minv = self.mass_inverse()
+        P = [[None] * n for _ in range(n)]
+        for a in range(n):
+            for b in range(a, n):
+                P[a][b] = P[b][a] = Minv[a][b] - ca.dot(E[:, a], F[:, b])
+        return ca.vertcat(*(ca.horzcat(*row) for row in P)), -ldlt_back(self.L, F)
+
+
+def ldlt_forward(L: list, b: ca.SX) -> ca.SX:
+    """L^-1 b for :func:`guarded_ldlt`'s unit lower L, row by row for all columns."""
+    y = [None] * len(L)
+    for i in range(len(L)):
+        y[i] = b[i, :] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
+    return ca.vertcat(*y)
+
+
+def ldlt_back(L: list, z: ca.SX) -> ca.SX:
+    """L^-T z for :func:`guarded_ldlt`'s unit lower L, row by row for all columns."""
+    n = len(L)
+    x = [None] * n
+    for i in reversed(range(n)):
+        x[i] = z[i, :] - sum((L[k][i] * x[k] for k in range(i + 1, n)), ca.SX(0))
+    return ca.vertcat(*x)
 
 
 def ldlt_solve(L: list, D_inverse: list, b: ca.SX) -> ca.SX:
     """A^-1 b for A = L D L^T (:func:`guarded_ldlt`'s L, the reciprocals of its D), row by row for all columns."""
-    n = len(D_inverse)
-    y = [None] * n
-    for i in range(n):
-        y[i] = b[i, :] - sum((L[i][k] * y[k] for k in range(i)), ca.SX(0))
-    z = [y[i] * D_inverse[i] for i in range(n)]
-    x = [None] * n
-    for i in reversed(range(n)):
-        x[i] = z[i] - sum((L[k][i] * x[k] for k in range(i + 1, n)), ca.SX(0))
-    return ca.vertcat(*x)
+    y = ldlt_forward(L, b)
+    return ldlt_back(L, ca.vertcat(*(y[i, :] * D_inverse[i] for i in range(len(D_inverse)))))
 
 
 def guarded_ldlt(S: ca.SX) -> tuple[list, list, ca.SX]:
@@ -172,15 +222,36 @@ class ContactModel:
     def drift(self, v: ca.SX | None = None) -> ca.SX:
         """a0 = J'(q, v) v (m): a point's classical acceleration at qdd = 0, a surface's spatial one
         ([classical linear - w x v; angular]), world-aligned. ``v``: the velocity (default the symbol qd)."""
+        out = self.acceleration()
+        return out if v is None else ca.substitute(out, self.sym.qd, v)
+
+    def wrenches(self, l: ca.SX) -> list:
+        """The contact forces ``l`` (m, world-aligned: [f] per point, [f; torque] per surface, at each
+        frame's origin) as the RNEA's external wrenches: (body, force, torque about its origin), body
+        coordinates; ID with them is ID - J^T l."""
+        out, at = [], 0
+        for f in self.stance.frames:
+            rows = self.robot.contact(f).rows
+            body, _, r = self.wb.placement_in_body(f)
+            force = self.ne.world_to_body(body, l[at:at + 3])
+            torque = ca.cross(r, force)
+            if rows == 6:
+                torque = torque + self.ne.world_to_body(body, l[at + 3:at + 6])
+            out.append((body, force, torque))
+            at += rows
+        return out
+
+    def acceleration(self, qdd: ca.SX | None = None) -> ca.SX:
+        """J qdd + a0 (m): the contacts' accelerations as :meth:`drift` has them, at the accelerations
+        ``qdd`` (default zero: the drift), from the RNEA's forward pass without gravity."""
         parts = []
         for f in self.stance.frames:
-            a = self.wb.jdot_qd(f)
+            a = self.wb.jdot_qd(f) if qdd is None else self.wb.frame_acceleration(f, qdd)
             if self.robot.contact(f).kind == "surface":
                 twist = self.model.jacobian(f) @ self.sym.qd
                 a = ca.vertcat(a[0:3] - ca.cross(twist[3:6], twist[0:3]), a[3:6])
             parts.append(a[self._rows(f)])
-        out = ca.vertcat(*parts)
-        return out if v is None else ca.substitute(out, self.sym.qd, v)
+        return ca.vertcat(*parts)
 
     @cached_property
     def kkt(self) -> KKT:
@@ -188,10 +259,16 @@ class ContactModel:
         return KKT(self.ne.mass_matrix, self.jacobian, self.ne.dof_parents or tuple(range(-1, n - 1)))
 
     @cached_property
+    def bias(self) -> ca.SX:
+        """h = C qd + g plus the smooth friction (the model's bias) by the RNEA whose forward pass runs without
+        gravity (split), the pass :meth:`drift` takes its accelerations from: one pass for both."""
+        return self.ne.inverse_dynamics(ca.SX.zeros(self.sym.nv, 1), smooth=True, split=True)
+
+    @cached_property
     def forward(self) -> tuple[ca.SX, ca.SX, ca.SX]:
         """(qdd, lambda, status) at (q, qd, tau)."""
         k = self.kkt
-        qdd, lam = k.solve(self.sym.tau - self.ne.bias, -self.drift())
+        qdd, lam = k.solve(self.sym.tau - self.bias, -self.drift())
         return qdd, lam, k.status
 
     @property
@@ -209,7 +286,7 @@ class ContactModel:
         s, k = self.sym, self.kkt
         p = ca.vertcat(*(self.model.fk(f)[0:3, 3] for f in self.stance.frames))
         a0 = self.drift() + gains[0] * (p - anchor) + gains[1] * (self.jacobian @ s.qd)
-        qdd, lam = k.solve(s.tau - self.ne.bias, -a0)
+        qdd, lam = k.solve(s.tau - self.bias, -a0)
         return qdd, lam, k.status
 
     @cached_property
@@ -221,12 +298,16 @@ class ContactModel:
         a = ca.SX.sym("a", s.nv)
         l = ca.SX.sym("l", self.rows)
         x = ca.vertcat(s.q, s.qd)
-        F1 = ca.substitute(self.ne.inverse_dynamics(smooth=True), s.qdd, a) - self.jacobian.T @ l
-        F2 = self.jacobian @ a + self.drift()
-        dF = ca.substitute(ca.vertcat(ca.jacobian(F1, x), ca.jacobian(F2, x)), ca.vertcat(a, l), ca.vertcat(qdd, lam))
+        # F1 = ID(q, qd, a) - J^T l with the contact forces carried by the RNEA's backward pass, and
+        # F2 = J a + a0 as the contacts' accelerations at a from its forward pass (split: without
+        # gravity); one Jacobian of both, so that their derivatives share the passes
+        F1 = self.ne.inverse_dynamics(a, smooth=True, split=True, external=self.wrenches(l))
+        F2 = self.acceleration(a)
+        dF = ca.substitute(ca.jacobian(ca.vertcat(F1, F2), x), ca.vertcat(a, l), ca.vertcat(qdd, lam))
         n = s.nv
-        da, dl = k.solve(ca.horzcat(-dF[:n, :], ca.SX.eye(n)), ca.horzcat(-dF[n:, :], ca.SX.zeros(self.rows, n)))
-        return da, dl
+        da, dl = k.solve(-dF[:n, :], -dF[n:, :])
+        da_tau, dl_tau = k.tau_columns()  # d/dtau: the KKT inverse's left blocks, the symmetric one once per pair
+        return ca.horzcat(da, da_tau), ca.horzcat(dl, dl_tau)
 
     @property
     def base_determined(self) -> bool:

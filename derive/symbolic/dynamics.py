@@ -300,10 +300,19 @@ class NewtonEuler:
             g[i] = self.to_child(i, g[b.parent])
         return g
 
-    def rnea(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True, split: bool = False) -> ca.SX:
+    def world_to_body(self, i: int, v: ca.SX) -> ca.SX:
+        """The world-aligned vector ``v`` in body i's coordinates (i = -1: the root's)."""
+        if i == -1:
+            return self.base_rotation.T @ v if self.floating else v
+        return self.to_child(i, self.world_to_body(self.bodies[i].parent, v))
+
+    def rnea(self, qd: ca.SX, qdd: ca.SX, gravity: bool = True, split: bool = False,
+             external: list | None = None) -> ca.SX:
         """tau = RNEA(q, qd, qdd): M qdd + C qd + g (g only if ``gravity``). With ``split`` the forward
         pass runs without gravity and -g is added per body (:attr:`gravity_accelerations`): a few more
-        operations, but the pass is then the one frame accelerations use (bundles share it)."""
+        operations, but the pass is then the one frame accelerations use (bundles share it).
+        ``external``: (body, force, torque) wrenches on bodies (-1 the root), body coordinates, the torque
+        about the body's origin: tau is then M qdd + C qd + g - sum J^T w, the backward pass carrying them."""
         n, nb = len(self.bodies), self.nb
         if split and gravity:
             w, dw, a = self.forward(qd, qdd, gravity=False)
@@ -316,10 +325,16 @@ class NewtonEuler:
             f[i] = b.m * a[i] + ca.cross(dw[i], b.h) + ca.cross(w[i], ca.cross(w[i], b.h))
             t[i] = b.I_o @ dw[i] + ca.cross(w[i], b.I_o @ w[i]) + ca.cross(b.h, a[i])
         tau = ca.SX.zeros(self.sym.nv, 1)
+        f_0 = t_0 = ca.SX.zeros(3, 1)
         if self.floating:
             m, h, I = self.root_mass
             f_0 = m * a_0 + ca.cross(dw_0, h) + ca.cross(w_0, ca.cross(w_0, h))
             t_0 = I @ dw_0 + ca.cross(w_0, I @ w_0) + ca.cross(h, a_0)
+        for i, force, torque in external or ():
+            if i >= 0:
+                f[i], t[i] = f[i] - force, t[i] - torque
+            else:  # on the root: moves nothing unless it floats
+                f_0, t_0 = f_0 - force, t_0 - torque
         for i in reversed(range(n)):
             b = self.bodies[i]
             s_w, s_v = self.motion_axes(i)
@@ -439,11 +454,13 @@ class NewtonEuler:
         C, self.coriolis_algorithm = min(reversed(candidates), key=lambda c: graph_cost(c[0], q, qd))
         return C
 
-    def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False, split: bool = False) -> ca.SX:
+    def inverse_dynamics(self, qdd: ca.SX | None = None, smooth: bool = False, split: bool = False,
+                         external: list | None = None) -> ca.SX:
         """RNEA plus the actuators' armature and friction (Coulomb as sign(qd), tanh(qd / eps) if ``smooth``);
-        ``split``: gravity added per body after a gravity-free forward pass (see :meth:`rnea`)."""
+        ``split``: gravity added per body after a gravity-free forward pass; ``external``: wrenches on
+        bodies (see :meth:`rnea`)."""
         qdd = self.sym.qdd if qdd is None else qdd
-        tau = self.rnea(self.sym.qd, qdd, split=split)
+        tau = self.rnea(self.sym.qd, qdd, split=split, external=external)
         drive = self.drive.torque(self.sym.qd, qdd, smooth)
         return tau if drive is None else tau + drive
 

@@ -105,17 +105,21 @@ class WholeBody:
             linear += P
         return ca.vertcat(linear, angular)
 
-    def _classical_acceleration(self, frame: str, qdd: ca.SX) -> ca.SX:
-        """[linear; angular] classical acceleration (6x1) of the frame's origin, world-aligned, without
-        gravity, from the RNEA's forward pass without gravity (that of ``rnea(split=True)``, which
-        bundles share): its body's a + dw x r + w x (w x r), rotated into the world."""
+    def placement_in_body(self, frame: str) -> tuple[int, ca.SX, ca.SX]:
+        """(body, R_bf, r): the RNEA body the frame moves with (-1 the root), the frame's rotation and
+        origin in that body's coordinates."""
         if frame in self._named_frames:  # a named frame on a link
             f = self._named_frames[frame]
             body, R_bl, p_bl = self.ne.where[f.link]
             R_bf = R_bl @ rpy(*(self.sym.value(v) for v in f.origin.rpy))
-            r = p_bl + R_bl @ ca.vertcat(*(self.sym.value(v) for v in f.origin.xyz))
-        else:  # a link
-            body, R_bf, r = self.ne.where[frame]
+            return body, R_bf, p_bl + R_bl @ ca.vertcat(*(self.sym.value(v) for v in f.origin.xyz))
+        return self.ne.where[frame]
+
+    def _classical_acceleration(self, frame: str, qdd: ca.SX) -> ca.SX:
+        """[linear; angular] classical acceleration (6x1) of the frame's origin, world-aligned, without
+        gravity, from the RNEA's forward pass without gravity (that of ``rnea(split=True)``, which
+        bundles share): its body's a + dw x r + w x (w x r), rotated into the world."""
+        body, R_bf, r = self.placement_in_body(frame)
         w, dw, a = (x[body] for x in self.ne.forward(self.sym.qd, qdd, gravity=False))
         R_wb = self.kin.pose(frame).R @ R_bf.T
         linear = R_wb @ (a + ca.cross(dw, r) + ca.cross(w, ca.cross(w, r)))
@@ -127,9 +131,10 @@ class WholeBody:
             self._jdot[frame] = self._classical_acceleration(frame, ca.SX.zeros(self.sym.nv, 1))
         return self._jdot[frame]
 
-    def frame_acceleration(self, frame: str) -> ca.SX:
-        """[classical linear; angular] acceleration (6x1) of the frame for (q, qd, qdd), world-aligned."""
-        return self._classical_acceleration(frame, self.sym.qdd)
+    def frame_acceleration(self, frame: str, qdd: ca.SX | None = None) -> ca.SX:
+        """[classical linear; angular] acceleration (6x1) of the frame for (q, qd, qdd), world-aligned;
+        ``qdd``: the accelerations (default the symbol qdd)."""
+        return self._classical_acceleration(frame, self.sym.qdd if qdd is None else qdd)
 
     def wrench_torques(self, wrenches: ca.SX) -> ca.SX:
         """sum_f J_f^T w_f (nv x 1) for ``wrenches`` stacked [w_f; ...] in :attr:`Robot.wrench_frames` order."""
