@@ -19,8 +19,9 @@
   with derive_lanes.h (DERIVE_REAL a vector, one state per lane; only these units get the ISA's
   flag) and ``<robot>_<fn>_lanes_batch``, which gathers blocks of states into lane vectors, calls
   it and puts the results back state by state (in-register transposes; a large batch by
-  non-temporal stores, see :data:`STREAM_SOURCE`), all in C. The batch loop and the one-state path of such a function
-  both go through it, so a state's results do not depend on the batch around it.
+  non-temporal stores, see :data:`STREAM_SOURCE`), all in C. The batch loop and the one-state
+  path of such a function both go through it, so a state's results do not depend on the batch
+  around it.
 - :func:`library` returns ``$XDG_CACHE_HOME/derive/compiled/<hash>/lib<robot>.so`` (default
   ~/.cache/derive/compiled/), the hash being the sha256 of the snapshot's source bytes, the
   wrapper, the compiler (its path and ``--version``), the flags and the lane units with their

@@ -145,7 +145,8 @@ class KKT:
         """(a, l) of :meth:`solve` for r1 = I (n columns), r2 = 0: the KKT inverse's top-left block
         P = M^-1 - G S^-1 G^T (symmetric, G = M^-1 J^T = L^-1 D^-1 W: each pair of entries computed once)
         and its bottom-left one, -S^-1 G^T. With S = L_S D_S L_S^T and E = L_S^-1 G^T, F = D_S^-1 E:
-        P = M^-1 - E^T F and -S^-1 G^T = -L_S^-T F. About half the operations of n columns of :meth:`solve`."""
+        P = M^-1 - E^T F and -S^-1 G^T = -L_S^-T F (solo12's 18 columns: about 1.2k operations fewer than by
+        :meth:`solve`; with S^-1 the blocks also serve the sparse columns of the derivatives)."""
         n = self.n
         G = self.unit_upper_solve(self.DW)
         E = ldlt_forward(self.L, G.T)
