@@ -61,6 +61,13 @@ PIVOT_TOL = 1e-10
 contact rows are dependent to about 1e-5 rad (sin^2 of the angle between a row and the others' span)."""
 
 
+def reciprocal(y: ca.SX) -> ca.SX:
+    """1 / y as one division whose uses stay products: casadi rewrites x * (1 / y) as x / y, a division
+    at every use (969 of solo12's contact derivatives' operations were such divisions). (2 / y) * 0.5 is
+    the same number exactly (a power of two) and casadi leaves products of it alone."""
+    return (2 / y) * 0.5
+
+
 class KKT:
     """The factored KKT system of one contact set at the symbolic state.
 
@@ -74,12 +81,12 @@ class KKT:
         self.parents = parents
         self.H = ltdl_factor(M, parents)
         self.n = M.shape[0]
-        self.inverse = [1 / self.H[k, k] for k in range(self.n)]  # D^-1: one division per pivot, not per column
+        self.inverse = [reciprocal(self.H[k, k]) for k in range(self.n)]  # D^-1: one division per pivot, not per use
         self.W = self.lower_solve(J.T)
         self.DW = self.scaled(self.W)  # D^-1 W
         S = self.W.T @ self.DW
         self.L, self.D, self.status = guarded_ldlt(S)
-        self.D_inverse = [1 / d for d in self.D]
+        self.D_inverse = [reciprocal(d) for d in self.D]
 
     def scaled(self, b: ca.SX) -> ca.SX:
         """D^-1 b."""
@@ -194,7 +201,7 @@ def guarded_ldlt(S: ca.SX) -> tuple[list, list, ca.SX]:
         d = S[j, j] - sum((L[j][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))
         failed = ca.fmax(failed, 0.5 * (1 + ca.sign(PIVOT_TOL * S[j, j] - d)))
         D[j] = d + (1 - ca.sign(ca.fabs(d)))  # d itself unless exactly 0 (then 1): no division by zero
-        inv = 1 / D[j]
+        inv = reciprocal(D[j])
         for i in range(j + 1, n):
             L[i][j] = (S[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))) * inv
     return L, D, 1 - failed
@@ -343,7 +350,7 @@ class ContactModel:
         r = self.ne.inverse_dynamics(smooth=True)  # with the friction contact_dynamics' bias h has
         Jb = self.jacobian[:, :BASE_ROWS]
         L, D, status = guarded_ldlt(Jb.T @ Jb)
-        lam = Jb @ ldlt_solve(L, [1 / d for d in D], r[:BASE_ROWS])
+        lam = Jb @ ldlt_solve(L, [reciprocal(d) for d in D], r[:BASE_ROWS])
         tau = r - self.jacobian.T @ lam
         return ca.vertcat(ca.SX.zeros(BASE_ROWS, 1), tau[BASE_ROWS:]), lam, status
 
