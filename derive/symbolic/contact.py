@@ -90,7 +90,7 @@ class KKT:
 
     def scaled(self, b: ca.SX) -> ca.SX:
         """D^-1 b."""
-        return ca.vertcat(*(b[k, :] * self.inverse[k] for k in range(self.n)))
+        return scale_rows(b, self.inverse)
 
     def ancestors(self, k: int) -> list[int]:
         out, i = [], self.parents[k]
@@ -106,10 +106,6 @@ class KKT:
             for i in self.ancestors(k):
                 y[i] = y[i] - self.H[k, i] * y[k]
         return ca.vertcat(*y)
-
-    def upper_solve(self, z: ca.SX) -> ca.SX:
-        """L^-1 D^-1 z (L x = D^-1 z, root first)."""
-        return self.unit_upper_solve(self.scaled(z))
 
     def unit_upper_solve(self, z: ca.SX) -> ca.SX:
         """L^-1 z (L x = z, root first)."""
@@ -157,13 +153,18 @@ class KKT:
         n = self.n
         G = self.unit_upper_solve(self.DW)
         E = ldlt_forward(self.L, G.T)
-        F = ca.vertcat(*(E[i, :] * self.D_inverse[i] for i in range(E.shape[0])))
+        F = scale_rows(E, self.D_inverse)
         Minv = self.mass_inverse()
         P = [[None] * n for _ in range(n)]
         for a in range(n):
             for b in range(a, n):
                 P[a][b] = P[b][a] = Minv[a][b] - ca.dot(E[:, a], F[:, b])
         return ca.vertcat(*(ca.horzcat(*row) for row in P)), -ldlt_back(self.L, F)
+
+
+def scale_rows(b: ca.SX, factors: list) -> ca.SX:
+    """Row k of ``b`` times ``factors[k]``: a diagonal matrix's product, for all columns."""
+    return ca.vertcat(*(b[k, :] * f for k, f in enumerate(factors)))
 
 
 def ldlt_forward(L: list, b: ca.SX) -> ca.SX:
@@ -185,8 +186,7 @@ def ldlt_back(L: list, z: ca.SX) -> ca.SX:
 
 def ldlt_solve(L: list, D_inverse: list, b: ca.SX) -> ca.SX:
     """A^-1 b for A = L D L^T (:func:`guarded_ldlt`'s L, the reciprocals of its D), row by row for all columns."""
-    y = ldlt_forward(L, b)
-    return ldlt_back(L, ca.vertcat(*(y[i, :] * D_inverse[i] for i in range(len(D_inverse)))))
+    return ldlt_back(L, scale_rows(ldlt_forward(L, b), D_inverse))
 
 
 def guarded_ldlt(S: ca.SX) -> tuple[list, list, ca.SX]:
