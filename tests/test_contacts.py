@@ -257,6 +257,51 @@ def test_the_residual_forms_equal_the_reference():
         assert_close(acc, J @ a + a0, TOL, "the contacts' acceleration")
 
 
+def test_quaternion_columns_are_the_rotations():
+    """The derivatives' quaternion columns in closed form (gravity and the contact forces rotated, the KKT
+    inverse's blocks at the base's linear rows) against the Jacobian of the residual by AD, on the tangent
+    space (times T = d quat / d theta) and zero along the quaternion; the biped's surface and point feet (its
+    stance 'both'), contact and impulse derivatives, at seeded unit quaternions."""
+    robot = parse_models(BIPED)["biped"]
+    model, nr = SXModel(robot), NumericRobot(robot)
+    s, e = model.sym, ca.SX.sym("e")
+    rng = np.random.default_rng(8)
+    for stance in [c for c in robot.stances if c.name == "both"]:
+        cm = ContactModel(model, stance)
+        k, n = cm.kkt, s.nv
+        qdd, lam, _ = cm.forward
+        v_plus, imp, _ = cm.impulse(e)
+        a, l = ca.SX.sym("a", n), ca.SX.sym("l", cm.rows)
+        quat = s.q[3:7]
+        F = ca.vertcat(model.newton_euler.inverse_dynamics(a, smooth=True, split=True, external=cm.wrenches(l)),
+                       cm.acceleration(a))
+        dF = ca.substitute(ca.jacobian(F, quat), ca.vertcat(a, l), ca.vertcat(qdd, lam))
+        by_ad = k.solve(-dF[:n, :], -dF[n:, :])
+        G = ca.vertcat(model.newton_euler.mass_matrix @ (a - s.qd) - cm.jacobian.T @ l, cm.jacobian @ (a + e * s.qd))
+        dG = ca.substitute(ca.jacobian(G, quat), ca.vertcat(a, l), ca.vertcat(v_plus, imp))
+        by_ad_impulse = k.solve(-dG[:n, :], -dG[n:, :])
+        da, dl = cm.forward_derivatives
+        dv, di = cm.impulse_derivatives(e)
+        f = ca.Function("f", [s.q, s.qd, s.tau, e], [da, dl, dv, di, *by_ad, *by_ad_impulse])
+        names = ("dqdd", "dlam", "dv_plus", "dimpulse")
+        for _ in range(3):
+            q, v, tau = unit_quaternion_state(rng, nr)
+            out = [np.asarray(x) for x in f(q, v, tau, rng.uniform(0, 1))]
+            T = np.column_stack([0.5 * quaternion_product(q[3:7], np.r_[np.eye(3)[j], 0.0]) for j in range(3)])
+            for name, whole, ad in zip(names, out[:4], out[4:]):
+                # relative to the whole derivative: dv_plus's quaternion columns are 0 (AD: rounding, 1e-14)
+                err = np.abs(whole[:, 3:7] @ T - ad @ T).max()
+                assert err <= 1e-12 * np.abs(whole).max(), f"{name} on the tangent space: {err:.2e}"
+            along_quaternion(q, nr.nq, n, list(zip(names, out[:4])), stance.name)
+
+
+def quaternion_product(a, b) -> np.ndarray:
+    """a (x) b, both [x, y, z, w]."""
+    (ax, ay, az, aw), (bx, by, bz, bw) = a, b
+    return np.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
+                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
+
+
 def test_biped_redundant_stance_reports_status_zero(biped):
     """A surface and a point at the same origin: 9 rows of rank 6, pivots of S exactly zero or rounding. status
     is 0 in every language, the numbers finite (no division by zero raises in Python, nothing is regularised
@@ -344,6 +389,7 @@ def check_against_pinocchio(pm, q, v, tau, e, kinds, frames, outputs: dict, what
                                    ("ddq_dtau", dqdd[:, nq + nv:], d[2]), ("dlambda_dq", dlam[:, :nq] @ T, d[3]),
                                    ("dlambda_dv", dlam[:, nq:nq + nv], d[4]), ("dlambda_dtau", dlam[:, nq + nv:], d[5])):
             assert_close(mine, theirs, TOL, f"{what}: {name}")
+        along_quaternion(q, nq, nv, [("dqdd", dqdd), ("dlam", dlam)], what)
     v_plus = pin.impulseDynamics(pm, pd, q, v, models, datas, e, prox())
     assert_close(outputs["v_plus"], v_plus, TOL, f"{what}: v+ vs impulseDynamics")
     assert_close(outputs["impulse"], pd.impulse_c, TOL, f"{what}: impulse vs impulseDynamics")
@@ -354,6 +400,16 @@ def check_against_pinocchio(pm, q, v, tau, e, kinds, frames, outputs: dict, what
         assert_close(dv[:, nq:], pd.ddq_dv + np.eye(nv), TOL, f"{what}: dv+/dv- (Pinocchio's ddq_dv is the jump's)")
         assert_close(dimp[:, :nq] @ T, pd.dlambda_dq, TOL, f"{what}: dimpulse/dq")
         assert_close(dimp[:, nq:], pd.dlambda_dv, TOL, f"{what}: dimpulse/dv-")
+        along_quaternion(q, nq, nv, [("dv_plus", dv), ("dimpulse", dimp)], what)
+
+
+def along_quaternion(q, nq: int, nv: int, named: list, what: str) -> None:
+    """A floating base's quaternion columns are the rotation's: zero along the (unit) quaternion itself."""
+    if nq == nv:
+        return
+    for name, d in named:
+        d = np.asarray(d)
+        assert np.abs(d[:, 3:7] @ q[3:7]).max() <= 1e-12 * np.abs(d).max(), f"{what}: {name} along the quaternion"
 
 
 def check_baumgarte(pm, q, v, tau, frames: list[str], anchor, gains, qdd, lam, what: str) -> None:

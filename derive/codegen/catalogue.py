@@ -200,7 +200,8 @@ def contact_specs(model: SXModel, add, need, forward: bool) -> None:
     if not forward:
         return
     e = ca.SX.sym("e")
-    quaternion = ", the base quaternion's four included" if robot.floating else ""
+    quaternion = (", the base quaternion's four included: those of the rotation it stands for, zero along the "
+                  "quaternion itself" if robot.floating else "")
     wrt = f"columns [d/dq ({nq}{quaternion}), d/dqd ({n})"
     for stance in robot.stances:
         cm = contact.ContactModel(model, stance)

@@ -219,6 +219,15 @@ class ContactModel:
     def rows(self) -> int:
         return sum(self.robot.contact(f).rows for f in self.stance.frames)
 
+    @property
+    def _starts(self) -> list[int]:
+        """Each contact's first row in the set's rows."""
+        out, at = [], 0
+        for f in self.stance.frames:
+            out.append(at)
+            at += self.robot.contact(f).rows
+        return out
+
     def _rows(self, frame: str) -> slice:
         return slice(0, self.robot.contact(frame).rows)
 
@@ -300,12 +309,13 @@ class ContactModel:
     @cached_property
     def forward_derivatives(self) -> tuple[ca.SX, ca.SX]:
         """(dqdd, dlambda), each with columns [d/dq (nq), d/dqd (nv), d/dtau (nv)]: by the implicit-function
-        theorem on F = [ID(q, qd, a) - J^T l - tau; J a + a0] at (a, l) = the solution."""
+        theorem on F = [ID(q, qd, a) - J^T l - tau; J a + a0] at (a, l) = the solution; a floating base's
+        quaternion columns in closed form (:meth:`_quaternion_terms`)."""
         s, k = self.sym, self.kkt
         qdd, lam, _ = self.forward
         a = ca.SX.sym("a", s.nv)
         l = ca.SX.sym("l", self.rows)
-        x = ca.vertcat(s.q, s.qd)
+        x = self._differentiated
         # F1 = ID(q, qd, a) - J^T l with the contact forces carried by the RNEA's backward pass, and
         # F2 = J a + a0 as the contacts' accelerations at a from its forward pass (split: without
         # gravity); one Jacobian of both, so that their derivatives share the passes
@@ -329,7 +339,52 @@ class ContactModel:
                 a_c, l_c = k.solve(r1, r2)
                 da.append(a_c)
                 dl.append(l_c)
+        if self.robot.floating:
+            # M (a + [u; 0]) - J^T (l - w) = M a - J^T l + dF1 and J (a + [u; 0]) = J a + J[:, :3] u: the column
+            # of d/dq_k is (a, l) = (-[u; 0], -w) plus the KKT inverse's blocks on [0; J[:, :3] u]. J[:, :3] (the
+            # base's own velocity, in its frame) is R on each contact's three linear rows and 0 on a surface's
+            # angular ones, so those blocks' columns at the linear rows are summed over the contacts first
+            D1 = sum((dl_tau[at:at + 3, :] for at in self._starts), ca.SX.zeros(3, n))
+            D2 = sum((S_inverse[:, at:at + 3] for at in self._starts), ca.SX.zeros(m, 3))
+            zeros = ca.SX.zeros(n - 3, 1)
+            R = self.ne.base_rotation
+            for j, (u, w) in zip(range(3, 7), self._quaternion_terms(lam)):
+                r2 = R @ u
+                da.insert(j, -ca.vertcat(u, zeros) - D1.T @ r2)
+                dl.insert(j, D2 @ r2 - w)
         return ca.horzcat(*da, P), ca.horzcat(*dl, dl_tau)
+
+    @property
+    def _differentiated(self) -> ca.SX:
+        """The entries of (q, qd) whose columns the derivatives take by AD: all but a floating base's quaternion."""
+        s = self.sym
+        return ca.vertcat(s.q[0:3], s.q[7:], s.qd) if self.robot.floating else ca.vertcat(s.q, s.qd)
+
+    def _quaternion_terms(self, l: ca.SX) -> list[tuple[ca.SX, ca.SX]]:
+        """Per entry q_k of a floating base's quaternion (k = 3..6), what it changes in the residual at the
+        solution with contact forces ``l``, as (u, w): dF1/dq_k = M[:, :3] u - J^T w, dF2/dq_k = 0.
+
+        The columns are those of the functions of the rotation the quaternion stands for, R(quat / |quat|), at
+        a unit quaternion: dR_k = dR/dq_k - q_k sum_j q_j dR/dq_j, zero along the quaternion itself (where
+        R(quat)'s own formula would give something else: it is a rotation only on the unit sphere), so that
+        d/dq T is the tangent-space derivative (Pinocchio's) for T = d(q (+) dv)/d dv. Each dR_k = B R with
+        B skew, a rotation of the whole robot, which the RNEA, M and the body-frame Jacobians do not see (the
+        base's velocity is in its own frame). It rotates gravity into the base, R^T g, which enters as the
+        base's acceleration -R^T g: u = -dR_k^T g. It rotates each world-aligned contact force into its
+        body, R^T l_c: w = R dR_k^T l_c per three rows (J^T = J_b^T R^T). It rotates the contacts' world-aligned
+        accelerations and velocities, which the solution holds at zero: dF2 = B F2 = 0."""
+        s, ne = self.sym, self.ne
+        R, quat = ne.base_rotation, s.q[3:7]
+        dR = [ca.reshape(ca.jacobian(ca.vec(R), s.q[k]), 3, 3) for k in range(3, 7)]
+        radial = sum((quat[j] * dR[j] for j in range(4)), ca.SX.zeros(3, 3))
+        out = []
+        for j in range(4):
+            dR_j = dR[j] - quat[j] * radial
+            A = R @ dR_j.T
+            w = [A @ l[at + o:at + o + 3] for f, at in zip(self.stance.frames, self._starts)
+                 for o in range(0, self.robot.contact(f).rows, 3)]
+            out.append((-dR_j.T @ ne.gravity, ca.vertcat(*w)))
+        return out
 
     @property
     def base_determined(self) -> bool:
@@ -368,12 +423,19 @@ class ContactModel:
         v_plus, imp, _ = self.impulse(e)
         w = ca.SX.sym("w", s.nv)
         l = ca.SX.sym("l", self.rows)
-        x = ca.vertcat(s.q, s.qd)
+        x = self._differentiated
         F1 = self.ne.mass_matrix @ (w - s.qd) - self.jacobian.T @ l
         F2 = self.jacobian @ (w + e * s.qd)
         dF = ca.substitute(ca.vertcat(ca.jacobian(F1, x), ca.jacobian(F2, x)), ca.vertcat(w, l), ca.vertcat(v_plus, imp))
         n = s.nv
-        return k.solve(-dF[:n, :], -dF[n:, :])
+        dv, dl = k.solve(-dF[:n, :], -dF[n:, :])
+        if not self.robot.floating:
+            return dv, dl
+        # M is the base frame's and dF2 = 0 at the solution (:meth:`_quaternion_terms`): with dF1 = -J^T w_k the
+        # column of d/dq_k is (0, -w_k)
+        terms = self._quaternion_terms(imp)
+        return (ca.horzcat(dv[:, 0:3], ca.SX.zeros(n, 4), dv[:, 3:]),
+                ca.horzcat(dl[:, 0:3], *(-w for _, w in terms), dl[:, 3:]))
 
 
 def momentum_rate(model, qdd: ca.SX) -> ca.SX:
