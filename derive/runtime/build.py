@@ -355,8 +355,26 @@ STREAM_SOURCE = r"""
 typedef long long derive_rt_index __attribute__((vector_size(sizeof(DERIVE_REAL))));
 #define DERIVE_RT_SHUFFLE(a, b, ...) __builtin_shuffle(a, b, (derive_rt_index){__VA_ARGS__})
 #endif
-#if defined(__SSE2__)
-#include <immintrin.h>
+/* the non-temporal stores by the compilers' builtins, not <immintrin.h> (a third of a second of
+   parsing in each lane unit): a line of 8 doubles as one AVX-512 vector, two AVX or four SSE2 ones */
+#if defined(__AVX512F__)
+#define DERIVE_RT_NT 8
+#elif defined(__AVX__)
+#define DERIVE_RT_NT 4
+#elif defined(__SSE2__)
+#define DERIVE_RT_NT 2
+#endif
+#ifdef DERIVE_RT_NT
+typedef double derive_rt_line __attribute__((vector_size(DERIVE_RT_NT * 8)));
+#if defined(__clang__)
+#define DERIVE_RT_STREAM(p, v) __builtin_nontemporal_store(v, (derive_rt_line *)(p))
+#elif DERIVE_RT_NT == 8
+#define DERIVE_RT_STREAM(p, v) __builtin_ia32_movntpd512(p, v)
+#elif DERIVE_RT_NT == 4
+#define DERIVE_RT_STREAM(p, v) __builtin_ia32_movntpd256(p, v)
+#else
+#define DERIVE_RT_STREAM(p, v) __builtin_ia32_movntpd(p, v)
+#endif
 #endif
 
 /* out[0, count) = st[0, count), st 64-byte aligned; with stream, the whole 64-byte lines of out
@@ -373,20 +391,15 @@ static void derive_rt_put(double *out, const double *st, long count, int stream)
         out[k] = st[k];
     end = head + (count - head) / 8 * 8;
     for (; k < end; k += 8) {
-#if defined(__AVX512F__)
-        _mm512_stream_pd(out + k, _mm512_loadu_pd(st + k));
-#elif defined(__AVX__)
-        _mm256_stream_pd(out + k, _mm256_loadu_pd(st + k));
-        _mm256_stream_pd(out + k + 4, _mm256_loadu_pd(st + k + 4));
-#elif defined(__SSE2__)
-        _mm_stream_pd(out + k, _mm_loadu_pd(st + k));
-        _mm_stream_pd(out + k + 2, _mm_loadu_pd(st + k + 2));
-        _mm_stream_pd(out + k + 4, _mm_loadu_pd(st + k + 4));
-        _mm_stream_pd(out + k + 6, _mm_loadu_pd(st + k + 6));
-#else
+#ifdef DERIVE_RT_NT
         int c;
-        for (c = 0; c < 8; ++c)
-            out[k + c] = st[k + c];
+        for (c = 0; c < 8; c += DERIVE_RT_NT) {
+            derive_rt_line line;
+            memcpy(&line, st + k + c, sizeof line);
+            DERIVE_RT_STREAM(out + k + c, line);
+        }
+#else
+        memcpy(out + k, st + k, 8 * sizeof(double));
 #endif
     }
     for (; k < count; ++k)
@@ -396,8 +409,8 @@ static void derive_rt_put(double *out, const double *st, long count, int stream)
 /* the non-temporal stores ordered before the stores that follow (another thread reading the results) */
 static void derive_rt_stream_end(void)
 {
-#if defined(__SSE2__)
-    _mm_sfence();
+#ifdef DERIVE_RT_NT
+    __builtin_ia32_sfence();
 #endif
 }
 """.strip("\n").split("\n")
