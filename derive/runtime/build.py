@@ -14,10 +14,11 @@
   the sources), as const data behind ``<robot>_rt_record()``, and an ``#error`` unless the
   sources' ``<ROBOT>_NQ`` and ``<ROBOT>_NV`` are the manifest's.
 - :func:`lane_sources` writes, for the host's lane mode (:func:`host_lanes`: AVX-512F 8 doubles,
-  AVX2 4, SSE2 or NEON 2, ``$DERIVE_LANES`` to choose, ``off`` for none), one more translation unit
-  per function the manifest marks lane-wise (``c.lanes``): its generated .c compiled a second time
-  with derive_lanes.h (DERIVE_REAL a vector, one state per lane; only these units get the ISA's
-  flag) and ``<robot>_<fn>_lanes_batch``, which gathers blocks of states into lane vectors, calls
+  AVX2 4, SSE2 or NEON 2, ``$DERIVE_LANES`` to choose, ``off`` for none), one more source file
+  per function the manifest marks lane-wise (``c.lanes``; compiled in as many shared translation
+  units as the generated files allow, :func:`translation_units`): its generated .c compiled a
+  second time with derive_lanes.h (DERIVE_REAL a vector, one state per lane; only these units get
+  the ISA's flag) and ``<robot>_<fn>_lanes_batch``, which gathers blocks of states into lane vectors, calls
   it and puts the results back state by state (in-register transposes; a large batch by
   non-temporal stores, see :data:`STREAM_SOURCE`), all in C. The batch loop and the one-state
   path of such a function both go through it, so a state's results do not depend on the batch
@@ -340,6 +341,8 @@ of AVX2 vectors: the Panda's ode_jac_x needs 217); more (a large robot's regress
 
 
 STREAM_SOURCE = r"""
+#ifndef DERIVE_RT_STREAM_SOURCE
+#define DERIVE_RT_STREAM_SOURCE
 /* A batch whose outputs reach DERIVE_RT_STREAM_BYTES is written with non-temporal stores: they
    go to memory by whole cache lines without first reading each line into the caches (a plain
    store reads it: twice the memory traffic), and leave the caches to the inputs. Smaller batches
@@ -413,6 +416,7 @@ static void derive_rt_stream_end(void)
     __builtin_ia32_sfence();
 #endif
 }
+#endif
 """.strip("\n").split("\n")
 
 
@@ -946,10 +950,15 @@ def _compile(robot: str, snap: Snapshot, wrapper: str, cc: list[str], cflags: li
     files = {copy / fname: data for fname, data in snap.sources if fname.endswith(".c")}
     sources = translation_units(files, tmp) + [src]
     jobs = [cc + cflags + [f"-I{copy}", "-c", str(s)] for s in sources]
+    lane_files = {}
     for fname, text in sorted((units or {}).items()):  # the lane variants: only these get the ISA's flags
         (tmp / fname).write_text(text)
-        sources.append(tmp / fname)
-        jobs.append(cc + cflags + list(lanes.flags) + [f"-I{copy}", "-c", str(tmp / fname)])
+        lane_files[tmp / fname] = text.encode()
+    # a lane unit renames its function (and callees) to <fn>_lanes by #define, for the rest of its
+    # translation unit: harmless to the lane units after it, which rename the same way
+    for unit in translation_units(lane_files, tmp, name="lanes_unit", judge=files):
+        sources.append(unit)
+        jobs.append(cc + cflags + list(lanes.flags) + [f"-I{copy}", "-c", str(unit)])
     objects = [tmp / f"{k:03d}_{s.stem}.o" for k, s in enumerate(sources)]
     jobs = [job + ["-o", str(o)] for job, o in zip(jobs, objects)]
     run_parallel(jobs, robot, copy, cdir)
@@ -965,19 +974,22 @@ _STATIC = re.compile(rb"^static\b[^;{(=]*?\b(\w+)\s*[(\[=;]", re.MULTILINE)
 _MACRO = re.compile(rb"^\s*#\s*(define|undef)\b", re.MULTILINE)
 
 
-def translation_units(sources: dict[Path, bytes], tmp: Path, parts: int | None = None) -> list[Path]:
-    """``sources`` ({path: its bytes}) as ``parts`` translation units, one per CPU by default (``tmp/unit_<k>.c``, each
+def translation_units(sources: dict[Path, bytes], tmp: Path, parts: int | None = None, name: str = "unit",
+                      judge: dict[Path, bytes] | None = None) -> list[Path]:
+    """``sources`` ({path: its bytes}) as ``parts`` translation units, one per CPU by default (``tmp/<name>_<k>.c``, each
     including its share of the files, balanced by size, in their order): the compiler then reads the
     robot's headers once per unit, not once per file, at the same parallelism (a Panda's 48 files at
-    -O0: 2.1 s of CPU, not 3.7). Safe for what derive writes: a file-scope static carries its
-    function's name, the headers have include guards, no .c file defines a macro. A set of files that
-    breaks that (an edited file: a #define, or a static name in two files) is compiled file by file,
-    as are the lane variants (each renames its function by a #define) and no more files than parts."""
+    -O0: 2.1 s of CPU, not 3.7; the whole library with its 40 lane variants 8.0 s, not 10.3). Safe
+    for what derive writes: a file-scope static carries its function's name, the headers have include
+    guards, no .c file defines a macro. A set of files that breaks that (an edited file: a #define, or a static name in two files)
+    is compiled file by file, as are no more files than parts. ``judge``: the files whose statics and
+    macros decide, if not ``sources`` themselves (the lane variants: the generated files they include)."""
     paths = list(sources)
     parts = max(1, parts or os.cpu_count() or 1)
-    statics = [name for data in sources.values() for name in set(_STATIC.findall(data))]
+    judge = sources if judge is None else judge
+    statics = [static for data in judge.values() for static in set(_STATIC.findall(data))]
     if (len(paths) <= parts or len(statics) != len(set(statics))
-            or any(_MACRO.search(data) for data in sources.values())):
+            or any(_MACRO.search(data) for data in judge.values())):
         return paths
     sizes = [len(sources[p]) for p in paths]
     load, shares = [0] * parts, [[] for _ in range(parts)]
@@ -987,7 +999,7 @@ def translation_units(sources: dict[Path, bytes], tmp: Path, parts: int | None =
         shares[j].append(k)
     units = []
     for j, share in enumerate(shares):
-        unit = tmp / f"unit_{j}.c"
+        unit = tmp / f"{name}_{j}.c"
         unit.write_text("".join(f'#include "{paths[k]}"\n' for k in sorted(share)))
         units.append(unit)
     return units
