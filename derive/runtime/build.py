@@ -981,9 +981,10 @@ def translation_units(sources: dict[Path, bytes], tmp: Path, parts: int | None =
     robot's headers once per unit, not once per file, at the same parallelism (a Panda's 48 files at
     -O0: 2.1 s of CPU, not 3.7; the whole library with its 40 lane variants 8.0 s, not 10.3). Safe
     for what derive writes: a file-scope static carries its function's name, the headers have include
-    guards, no .c file defines a macro. A set of files that breaks that (an edited file: a #define, or a static name in two files)
-    is compiled file by file, as are no more files than parts. ``judge``: the files whose statics and
-    macros decide, if not ``sources`` themselves (the lane variants: the generated files they include)."""
+    guards, no .c file defines a macro. A set of files that breaks that (an edited file: a #define, or
+    a static name in two files) is compiled file by file, as are no more files than parts. ``judge``:
+    the files whose statics and macros decide, if not ``sources`` themselves (the lane variants: the
+    generated files they include)."""
     paths = list(sources)
     parts = max(1, parts or os.cpu_count() or 1)
     judge = sources if judge is None else judge

@@ -85,8 +85,7 @@ class KKT:
         self.W = self.lower_solve(J.T)
         self.DW = self.scaled(self.W)  # D^-1 W
         S = self.W.T @ self.DW
-        self.L, self.D, self.status = guarded_ldlt(S)
-        self.D_inverse = [reciprocal(d) for d in self.D]
+        self.L, self.D_inverse, self.status = guarded_ldlt(S)
 
     def scaled(self, b: ca.SX) -> ca.SX:
         """D^-1 b."""
@@ -190,21 +189,21 @@ def ldlt_solve(L: list, D_inverse: list, b: ca.SX) -> ca.SX:
 
 
 def guarded_ldlt(S: ca.SX) -> tuple[list, list, ca.SX]:
-    """S = L D L^T with each exactly zero pivot replaced by 1 (so that no backend divides by zero) and
-    the status: 1 where every pivot exceeds :data:`PIVOT_TOL` S_kk, else 0 (fmax of indicators in
-    pivot order: the first failing pivot is finite, those after it may not be)."""
+    """S = L D L^T as (L, the reciprocals of D, status), each exactly zero pivot replaced by 1 (so that no
+    backend divides by zero); status 1 where every pivot exceeds :data:`PIVOT_TOL` S_kk, else 0 (fmax of
+    indicators in pivot order: the first failing pivot is finite, those after it may not be)."""
     n = S.shape[0]
     L = [[None] * n for _ in range(n)]
-    D = [None] * n
+    D, D_inverse = [None] * n, [None] * n
     failed = ca.SX(0)
     for j in range(n):
         d = S[j, j] - sum((L[j][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))
         failed = ca.fmax(failed, 0.5 * (1 + ca.sign(PIVOT_TOL * S[j, j] - d)))
         D[j] = d + (1 - ca.sign(ca.fabs(d)))  # d itself unless exactly 0 (then 1): no division by zero
-        inv = reciprocal(D[j])
+        D_inverse[j] = reciprocal(D[j])
         for i in range(j + 1, n):
-            L[i][j] = (S[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))) * inv
-    return L, D, 1 - failed
+            L[i][j] = (S[i, j] - sum((L[i][k] * L[j][k] * D[k] for k in range(j)), ca.SX(0))) * D_inverse[j]
+    return L, D_inverse, 1 - failed
 
 
 class ContactModel:
@@ -219,7 +218,7 @@ class ContactModel:
     def rows(self) -> int:
         return sum(self.robot.contact(f).rows for f in self.stance.frames)
 
-    @property
+    @cached_property
     def _starts(self) -> list[int]:
         """Each contact's first row in the set's rows."""
         out, at = [], 0
@@ -246,16 +245,14 @@ class ContactModel:
         """The contact forces ``l`` (m, world-aligned: [f] per point, [f; torque] per surface, at each
         frame's origin) as the RNEA's external wrenches: (body, force, torque about its origin), body
         coordinates; ID with them is ID - J^T l."""
-        out, at = [], 0
-        for f in self.stance.frames:
-            rows = self.robot.contact(f).rows
+        out = []
+        for f, at in zip(self.stance.frames, self._starts):
             body, _, r = self.wb.placement_in_body(f)
             force = self.ne.world_to_body(body, l[at:at + 3])
             torque = ca.cross(r, force)
-            if rows == 6:
+            if self.robot.contact(f).rows == 6:
                 torque = torque + self.ne.world_to_body(body, l[at + 3:at + 6])
             out.append((body, force, torque))
-            at += rows
         return out
 
     def acceleration(self, qdd: ca.SX | None = None) -> ca.SX:
@@ -404,8 +401,8 @@ class ContactModel:
             raise ValueError("contact-consistent inverse dynamics needs a floating base and at least 6 contact rows")
         r = self.ne.inverse_dynamics(smooth=True)  # with the friction contact_dynamics' bias h has
         Jb = self.jacobian[:, :BASE_ROWS]
-        L, D, status = guarded_ldlt(Jb.T @ Jb)
-        lam = Jb @ ldlt_solve(L, [reciprocal(d) for d in D], r[:BASE_ROWS])
+        L, D_inverse, status = guarded_ldlt(Jb.T @ Jb)
+        lam = Jb @ ldlt_solve(L, D_inverse, r[:BASE_ROWS])
         tau = r - self.jacobian.T @ lam
         return ca.vertcat(ca.SX.zeros(BASE_ROWS, 1), tau[BASE_ROWS:]), lam, status
 
