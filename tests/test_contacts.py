@@ -287,19 +287,12 @@ def test_quaternion_columns_are_the_rotations():
         for _ in range(3):
             q, v, tau = unit_quaternion_state(rng, nr)
             out = [np.asarray(x) for x in f(q, v, tau, rng.uniform(0, 1))]
-            T = np.column_stack([0.5 * quaternion_product(q[3:7], np.r_[np.eye(3)[j], 0.0]) for j in range(3)])
+            T = quaternion_tangent(q[3:7])
             for name, whole, ad in zip(names, out[:4], out[4:]):
                 # relative to the whole derivative: dv_plus's quaternion columns are 0 (AD: rounding, 1e-14)
                 err = np.abs(whole[:, 3:7] @ T - ad @ T).max()
                 assert err <= 1e-12 * np.abs(whole).max(), f"{name} on the tangent space: {err:.2e}"
             along_quaternion(q, nr.nq, n, list(zip(names, out[:4])), stance.name)
-
-
-def quaternion_product(a, b) -> np.ndarray:
-    """a (x) b, both [x, y, z, w]."""
-    (ax, ay, az, aw), (bx, by, bz, bw) = a, b
-    return np.array([aw * bx + ax * bw + ay * bz - az * by, aw * by - ax * bz + ay * bw + az * bx,
-                     aw * bz + ax * by - ay * bx + az * bw, aw * bw - ax * bx - ay * by - az * bz])
 
 
 def test_biped_redundant_stance_reports_status_zero(biped):
@@ -364,12 +357,16 @@ def tangent(pm, q) -> np.ndarray:
     T = np.zeros((pm.nq, pm.nv))
     if pm.nq == pm.nv:
         return np.eye(pm.nv)
-    quat = pin.Quaternion(q[6], *q[3:6])
-    T[:3, :3] = quat.matrix()
-    for k in range(3):
-        T[3:7, 3 + k] = 0.5 * (quat * pin.Quaternion(0.0, *np.eye(3)[k])).coeffs()
+    T[:3, :3] = pin.Quaternion(q[6], *q[3:6]).matrix()
+    T[3:7, 3:6] = quaternion_tangent(q[3:7])
     T[7:, 6:] = np.eye(pm.nv - 6)
     return T
+
+
+def quaternion_tangent(quat) -> np.ndarray:
+    """d quat / d theta (4 x 3) for quat = [x, y, z, w] turned by exp(theta) in its own frame: 1/2 quat (x) (e_k, 0)."""
+    q = pin.Quaternion(quat[3], *quat[:3])
+    return np.column_stack([0.5 * (q * pin.Quaternion(0.0, *np.eye(3)[k])).coeffs() for k in range(3)])
 
 
 def check_against_pinocchio(pm, q, v, tau, e, kinds, frames, outputs: dict, what: str) -> None:
