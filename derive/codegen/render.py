@@ -11,6 +11,7 @@ the calls.
 
 from __future__ import annotations
 
+import functools
 import json
 
 import jinja2
@@ -29,12 +30,20 @@ SHARED_TEMPLATES = ("manifest", "latex")
 
 
 def environment(backends: list[Backend] | None = None) -> jinja2.Environment:
-    """The one jinja2 environment: templates are named ``<folder>/<file>`` (``c/function.c.jinja``)."""
-    loaders = {name: jinja2.FileSystemLoader(str(TEMPLATES / name)) for name in SHARED_TEMPLATES}
+    """The one jinja2 environment: templates are named ``<folder>/<file>`` (``c/function.c.jinja``).
+    One per set of template folders, kept for the process: jinja2 compiles each template once in an
+    environment (and recompiles one whose file changed), and a robot's templates took a fifth of
+    rendering it when each robot had its own."""
+    folders = {name: str(TEMPLATES / name) for name in SHARED_TEMPLATES}
     for b in registered_backends() if backends is None else backends:
-        loaders[b.name] = jinja2.FileSystemLoader(str(b.templates))
+        folders[b.name] = str(b.templates)
+    return _environment(tuple(folders.items()))
+
+
+@functools.lru_cache(maxsize=16)
+def _environment(folders: tuple[tuple[str, str], ...]) -> jinja2.Environment:
     return jinja2.Environment(
-        loader=jinja2.PrefixLoader(loaders, delimiter="/"),
+        loader=jinja2.PrefixLoader({name: jinja2.FileSystemLoader(path) for name, path in folders}, delimiter="/"),
         undefined=jinja2.StrictUndefined,
         trim_blocks=True,
         lstrip_blocks=True,

@@ -963,4 +963,34 @@ def check_values(robot: Robot) -> None:
 
 
 def parse_robot(name: str, spec: Any) -> Robot:
-    return _Parser(name, spec).robot()
+    """The validated Robot of one entry of a models file (``spec``: its parsed YAML). The same entry
+    parsed again in a process is the same (immutable) Robot, not derived again: a closed chain's
+    assembly, solved here, is most of the parse, and tools, notebooks and tests read one models file
+    many times. A refusal is raised every time."""
+    try:
+        key = (name, _canonical(spec))
+    except RecursionError:  # nested deeper than any robot: the parser says what is wrong with it
+        return _Parser(name, spec).robot()
+    robot = _PARSED.get(key)
+    if robot is None:
+        robot = _Parser(name, spec).robot()
+        if len(_PARSED) >= _PARSED_MAX:
+            _PARSED.pop(next(iter(_PARSED)))
+        _PARSED[key] = robot
+    return robot
+
+
+_PARSED: dict = {}
+_PARSED_MAX = 256
+
+
+def _canonical(value: Any):
+    """A hashable image of parsed YAML that tells apart whatever the parser may: types (1, 1.0, True and
+    "1"), the sign of a zero, and the order of a mapping's keys (a robot's parameters keep theirs)."""
+    if isinstance(value, Mapping):
+        return ("map", tuple((_canonical(k), _canonical(v)) for k, v in value.items()))
+    if isinstance(value, (list, tuple)):
+        return (type(value).__name__, tuple(_canonical(v) for v in value))
+    if isinstance(value, float):
+        return ("float", repr(value))
+    return (type(value).__name__, value if isinstance(value, (str, int, type(None))) else repr(value))
