@@ -6,6 +6,8 @@ first worker that asks, in a folder that every worker of the run shares (shared_
 file lock; the other workers wait for it and use it (made_once). A plain ``pytest`` run (no
 ``-n``) makes them in its own temporary folder as before.
 
+code_cache: generated Python modules (tests/util.py's load_module) compiled once for the whole run.
+
 generated_copy: a module's own copy of the committed generated/, for the modules that build or
 import there, so that nothing one module writes (a build, a __pycache__) is seen by another.
 test_codegen.py's test_regeneration_is_byte_identical checks in the same run that the committed
@@ -45,13 +47,23 @@ from typing import Callable, TypeVar
 
 import pytest
 
-from util import build_library
+from util import CODE_CACHE, build_library
 
 # pytest-xdist's workers ignore SIGINT, and an ignored signal is inherited by every process a test
 # starts (derive then keeps it ignored, as a background job must): give the tests' processes Python's
 # ordinary Ctrl-C back.
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+# XLA:CPU for the tests (before jax makes its first backend, which reads XLA_FLAGS; every worker
+# imports this first): they check values, not speed. LLVM at -O0 compiles about 3x faster (Panda's
+# forward_dynamics 2.5 s instead of 7 s), and the loop emitters instead of the fusion emitters halve
+# the compile of each operation that eager (un-jitted) calls compile one by one (test_jax.py: 1,048 of
+# them; 55 to 27 ms each). Neither turns on fast-math: the numbers are checked to the same 1e-12. A flag
+# that the caller's XLA_FLAGS sets is left as it is.
+for _flag in ("--xla_backend_optimization_level=0", "--xla_cpu_use_fusion_emitters=false"):
+    if _flag.partition("=")[0] not in os.environ.get("XLA_FLAGS", ""):
+        os.environ["XLA_FLAGS"] = f"{os.environ.get('XLA_FLAGS', '')} {_flag}".strip()
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
@@ -159,6 +171,15 @@ def begin_once(pool: ThreadPoolExecutor, folder: Path, make: Callable[[Path], ob
             lock.close()
 
     return pool.submit(work).result
+
+
+@pytest.fixture(scope="session", autouse=True)
+def code_cache(tmp_path_factory):
+    """util.load_module's compiled modules, shared by every worker of the run (a generated module is
+    compiled once, whichever test module or copy of generated/ loads it)."""
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setenv(CODE_CACHE, str(shared_folder(tmp_path_factory) / "code"))
+        yield
 
 
 @pytest.fixture(scope="session")

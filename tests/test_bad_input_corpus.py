@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import copy
 import hashlib
-import importlib.util
 import math
 import shutil
 import subprocess
@@ -26,6 +25,8 @@ from derive.description.model import parse_models
 from derive.reference import NumericRobot
 from derive.resources import EXAMPLE_MODELS
 from derive.runtime.build import translation_units
+
+from util import load_module
 
 ROBOTS = ("pendulum", "planar_2r", "cartpole")
 MUTATIONS = {
@@ -107,9 +108,7 @@ def check_works(robot_name: str, text: str, out: Path) -> None:
     units = translation_units({p: p.read_bytes() for p in sorted(c_dir.glob("*.c"))}, out.parent, parts=1)
     subprocess.run([cc, "-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-fsyntax-only", f"-I{c_dir}",
                     *map(str, units)], check=True, capture_output=True)
-    spec = importlib.util.spec_from_file_location(f"corpus_{robot_name}", out / robot_name / "python" / f"{robot_name}.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_module(out / robot_name / "python" / f"{robot_name}.py", f"corpus_{robot_name}")
     robot = parse_models(text)[robot_name]
     ref = NumericRobot(robot)
     rng = np.random.default_rng(1)
@@ -180,7 +179,6 @@ def urdf_cases():
             out.append((f"duplicate {el.tag}[{k}]", ET.tostring(r, encoding="unicode")))
     out += [("truncated", URDF[:200]), ("binary", "\x00\x01"), ("empty", ""), ("not-robot", "<sdf/>")]
     return out
-
 
 
 @pytest.mark.parametrize("text", [pytest.param(t, id=i) for i, t in urdf_cases()])

@@ -8,7 +8,6 @@ state after the other (the documented exception), so its batches stay small.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import warnings
 from pathlib import Path
@@ -20,18 +19,11 @@ import pytest
 from derive.codegen.backends.python import BACKEND
 from derive.codegen.render import render_robot
 from derive.codegen.spec import FunctionSpec
-from util import closed_inputs, params, robots
+from util import closed_inputs, load_module, params, robots
 
 ROBOTS = sorted(robots())
 BATCHES = [(7,), (3, 4), (10000,)]
 IK_BATCHES = [(7,), (3, 4)]  # a Python loop of solves: 10000 of them would take minutes
-
-
-def load_module(path: Path, name: str):
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")

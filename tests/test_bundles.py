@@ -9,7 +9,6 @@ bundles (a link's quantities too) and refuses bad ones in one line.
 from __future__ import annotations
 
 import ctypes
-import importlib.util
 import json
 import subprocess
 from pathlib import Path
@@ -25,7 +24,7 @@ from derive.description.robot import ModelError
 from derive.description.urdf import example_robot_data_dir, import_urdf_named
 from derive.resources import CHECKOUT
 from derive.symbolic.model import SXModel
-from util import assert_close, params, random_q, robots, tree_robots
+from util import assert_close, load_module, params, random_q, robots, tree_robots
 
 GENERATED = CHECKOUT / "generated"
 ROBOTS = tree_robots()  # a closed chain has no control bundles
@@ -33,11 +32,8 @@ TOL = 1e-14
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-shared", "-fPIC"]
 
 
-def load_module(folder: Path, robot: str):
-    spec = importlib.util.spec_from_file_location(f"bundles_{robot}_{abs(hash(folder))}", folder / "python" / f"{robot}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+def python_module(folder: Path, robot: str):
+    return load_module(folder / "python" / f"{robot}.py", f"bundles_{robot}_{abs(hash(folder))}")
 
 
 def c_library(folder: Path, manifest: dict, names: list[str], out: Path) -> ctypes.CDLL:
@@ -67,7 +63,7 @@ def check_bundles(folder: Path, robot, tmp: Path, n_states: int = 5) -> int:
     assert bundles, f"{robot.name}: no bundle generated"
     names = sorted({b["name"] for b in bundles} | {f"{robot.name}_{p['output']}" for b in bundles for p in b["bundle"]})
     lib = c_library(folder, manifest, names, tmp)
-    py = load_module(folder, robot.name)
+    py = python_module(folder, robot.name)
     rng = np.random.default_rng(7)
     checked = 0
     for _ in range(n_states):
@@ -165,7 +161,7 @@ def test_custom_bundles_from_models_yaml(tmp_path):
     assert [i["name"] for i in ct["inputs"]] == ["q", "qd", "qdd"]
     # links have no separate fk/jdot functions: compare those outputs with the graphs of the model
     model = SXModel(robot)
-    py = load_module(folder, "arm")
+    py = python_module(folder, "arm")
     rng = np.random.default_rng(5)
     for _ in range(3):
         q, qd = rng.normal(size=2), rng.normal(size=2)

@@ -12,7 +12,6 @@ MPC load), read back with casadi.Function.load and compared with the generated P
 from __future__ import annotations
 
 import dataclasses
-import importlib.util
 import json
 import subprocess
 import sys
@@ -27,16 +26,14 @@ from derive.codegen.generate import generate
 from derive.description.model import load_models, parse_models
 from derive.reference import NumericRobot
 from test_contacts import BIPED
-from util import assert_close
+from util import assert_close, load_module
 
 ROOT = Path(__file__).resolve().parent.parent
 TOL = 1e-12
 
 
 def load(path: Path, name: str):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_module(path, name)
     return mod
 
 

@@ -7,7 +7,6 @@ quantity in every C form, SANITIZED); generated/ is byte-identical to a fresh re
 from __future__ import annotations
 
 import ctypes
-import importlib.util
 import json
 import shutil
 import subprocess
@@ -21,7 +20,7 @@ from derive.codegen.generate import check, generate
 from derive.reference import NumericRobot
 from derive.reference.closure import ClosedChainReference
 from derive.codegen.catalogue import function_specs
-from util import assert_close, closed_inputs, compile_objects, params, random_q, robots, states, sx_model
+from util import assert_close, closed_inputs, compile_objects, load_module, params, random_q, robots, states, sx_model
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
@@ -40,9 +39,7 @@ float C are checked against each other."""
 
 def load_python(robot: str):
     path = GENERATED / robot / "python" / f"{robot}.py"
-    spec = importlib.util.spec_from_file_location(f"generated_{robot}", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_module(path, f"generated_{robot}")
     return module
 
 

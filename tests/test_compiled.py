@@ -9,7 +9,6 @@ The committed generated/ folder is the input (read only); the cache lives under 
 from __future__ import annotations
 
 import functools
-import importlib.util
 import json
 import os
 import shutil
@@ -25,7 +24,7 @@ import derive
 from derive.errors import DeriveError
 from derive.runtime import build, loader
 
-from util import robots
+from util import load_module, robots
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
@@ -34,14 +33,7 @@ BATCHES = [(5,), (2, 3), (1000,)]
 
 
 def python_module(robot: str):
-    spec = importlib.util.spec_from_file_location(f"test_compiled_{robot}", GENERATED / robot / "python" / f"{robot}.py")
-    module = importlib.util.module_from_spec(spec)
-    dont_write, sys.dont_write_bytecode = sys.dont_write_bytecode, True  # no __pycache__ in generated/
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.dont_write_bytecode = dont_write
-    return module
+    return load_module(GENERATED / robot / "python" / f"{robot}.py", f"test_compiled_{robot}")
 
 
 @functools.cache

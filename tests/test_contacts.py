@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
-import importlib.util
 import json
 from pathlib import Path
 
@@ -38,7 +37,7 @@ from derive.reference import NumericRobot
 from derive.reference import contact as ref
 from derive.symbolic.contact import ContactModel, centroidal_inertia, centroidal_map_dot_qd, com_acceleration
 from derive.symbolic.model import SXModel
-from util import assert_close, build_library
+from util import assert_close, build_library, load_module
 
 TOL = 1e-9
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O0", "-fPIC"]
@@ -194,9 +193,7 @@ class Generated:
 
 
 def load(path: Path, name: str):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_module(path, name)
     return mod
 
 

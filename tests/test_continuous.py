@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import csv
 import ctypes
-import importlib.util
 import json
 import math
 
@@ -33,7 +32,7 @@ from derive.solvers.ik import solve_ik
 from derive.solvers.simulate import simulate, write_csv
 from derive.symbolic.model import SXModel
 from pin_model import PinRobot
-from util import assert_close, build_library
+from util import assert_close, build_library, load_module
 
 MODELS = """
 robots:
@@ -69,9 +68,7 @@ def gen(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def py(gen):
-    spec = importlib.util.spec_from_file_location("generated_spinner", gen / "spinner" / "python" / "spinner.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_module(gen / "spinner" / "python" / "spinner.py", "generated_spinner")
     return module
 
 

@@ -5,7 +5,6 @@ and derive.compiled; one set of generated functions, the alias spelled as refere
 from __future__ import annotations
 
 import json
-import importlib.util
 from pathlib import Path
 
 import casadi as ca
@@ -18,6 +17,8 @@ from derive.description.model import parse_models
 from derive.description.urdf import import_urdf
 from derive.reference import NumericRobot
 from derive.symbolic.model import SXModel
+
+from util import load_module
 
 # base -(shoulder)- upper -(elbow)- fore -(fixed)- tool_frame; upper is a moving link with no fixed child
 ARM_URDF = """\
@@ -53,13 +54,6 @@ def arm(tmp_path_factory):
     out = folder / "generated"
     assert main(["--models", str(models), "generate", "--out", str(out)]) == 0
     return models, robot, out
-
-
-def load_module(path, name):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_urdf_tip_keeps_its_name_as_an_alias_of_tcp(arm):

@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import hashlib
-import importlib.util
 import json
 import shutil
 import subprocess
@@ -20,7 +19,7 @@ from derive.description.model import load_models, parse_models
 from derive.description.robot import model_data
 from derive.resources import EXAMPLE_MODELS
 
-from util import compile_objects, robots
+from util import compile_objects, load_module, robots
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -47,13 +46,6 @@ def digests(folder: Path) -> dict[str, str]:
     """sha256 of every file, but Python's byte-code cache (importing a generated module writes it)."""
     return {p.relative_to(folder).as_posix(): hashlib.sha256(p.read_bytes()).hexdigest()
             for p in sorted(folder.rglob("*")) if p.is_file() and "__pycache__" not in p.parts}
-
-
-def load_module(path: Path, name: str):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_generate_leaves_robots_of_other_models_files_untouched(tmp_path, capsys):

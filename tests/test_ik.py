@@ -7,7 +7,6 @@ Python agree with the API's notion of success.
 from __future__ import annotations
 
 import ctypes
-import importlib.util
 
 import casadi as ca
 import numpy as np
@@ -20,7 +19,7 @@ from derive.solvers.ik import solve_ik
 from derive.symbolic.ik import TOL_POSITION, TOL_ROTATION, joint_ranges
 from derive.reference import NumericRobot
 from derive.symbolic.spatial import exp_so3, log_so3
-from util import build_library, robots
+from util import build_library, load_module, robots
 
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic"]
 N_TARGETS = 150
@@ -156,9 +155,7 @@ def generated(generated_copy):
 
 
 def python_module(generated, robot: str):
-    spec = importlib.util.spec_from_file_location(f"generated_{robot}", generated / robot / "python" / f"{robot}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_module(generated / robot / "python" / f"{robot}.py", f"generated_{robot}")
     return module
 
 

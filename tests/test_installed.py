@@ -24,7 +24,7 @@ from derive.description.model import parse_models
 from derive.reference import NumericRobot
 
 from test_generate import MY_MODELS
-from util import compile_objects
+from util import compile_objects, load_module
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -76,9 +76,7 @@ def test_own_robot_from_any_folder(installed, tmp_path):
     cc = shutil.which("cc") or shutil.which("gcc")
     compile_objects([cc, "-std=c99", "-O1", "-Wall", "-Wextra", "-Werror", "-pedantic", f"-I{c_dir}"],
                     sorted(c_dir.glob("*.c")), tmp_path)  # one source per process, CPUs at once
-    spec = importlib.util.spec_from_file_location("my_arm", user / "generated" / "my_arm" / "python" / "my_arm.py")
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_module(user / "generated" / "my_arm" / "python" / "my_arm.py", "my_arm")
     ref = NumericRobot(parse_models(MY_MODELS)["my_arm"])
     rng = np.random.default_rng(0)
     for _ in range(10):

@@ -9,7 +9,6 @@ flavour leaves out; generating needs no jax.
 from __future__ import annotations
 
 import functools
-import importlib.util
 import json
 import os
 import subprocess
@@ -19,13 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-# XLA:CPU's LLVM at -O0 (before jax makes its first backend, which reads XLA_FLAGS): these tests check
-# values, not speed, and jit compiles about 3x faster (panda forward_dynamics 2.5 s instead of 7 s).
-# LLVM's optimisation levels keep IEEE semantics (XLA turns on no fast-math), so the numbers jit
-# returns are checked to the same 1e-12; an XLA_FLAGS that sets the level itself is left as it is.
-if "xla_backend_optimization_level" not in os.environ.get("XLA_FLAGS", ""):
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_backend_optimization_level=0").strip()
-
+# XLA_FLAGS for these tests' compiles (LLVM at -O0, the loop emitters): tests/conftest.py
 jax = pytest.importorskip("jax", reason="the jax extra is not installed (pip install derive-robotics[jax])")
 # float64, as a user of the modules turns it on (importing one changes no JAX setting:
 # test_import_changes_no_jax_setting, in a fresh process)
@@ -34,7 +27,7 @@ jax.config.update("jax_enable_x64", True)
 from derive.codegen.generate import generate  # noqa: E402
 from derive.description.model import load_models, parse_models  # noqa: E402
 
-from util import assert_close, closed_inputs  # noqa: E402
+from util import assert_close, closed_inputs, load_module  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 MODELS = load_models()
@@ -61,13 +54,6 @@ def every_check(robot: str, fn: dict) -> bool:
 @pytest.fixture(scope="module")
 def generated(generated_copy) -> Path:
     return generated_copy("jax")  # the committed generated/ (conftest.py), this module's copy
-
-
-def load_module(path: Path, name: str):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 @functools.cache

@@ -14,7 +14,6 @@ generated C and Python.
 from __future__ import annotations
 
 import ctypes
-import importlib.util
 import json
 from pathlib import Path
 
@@ -32,7 +31,7 @@ from derive.description.joints import JOINT_TYPES, MOVES_AS
 from derive.description.robot import ModelError
 from derive.reference import NumericRobot
 from derive.reference.rnea import rpy_matrix
-from util import assert_close, build_library
+from util import assert_close, build_library, load_module
 
 TABLE_1 = {"revolute": (1, 5), "prismatic": (1, 5), "helical": (1, 5), "cylindrical": (2, 4), "universal": (2, 4),
            "spherical": (3, 3), "fixed": (0, 6)}
@@ -420,9 +419,7 @@ def test_generated_c_and_python_match_reference(tmp_path):
     generate({"zoo": robot}, out, use_cache=False, log=lambda s: None)
     manifest = json.loads((out / "zoo" / "manifest.json").read_text())
     assert [j["name"] for j in manifest["joints"]] == [c.name for c in robot.coordinates]
-    spec = importlib.util.spec_from_file_location("generated_zoo", out / "zoo" / "python" / "zoo.py")
-    py = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(py)
+    py = load_module(out / "zoo" / "python" / "zoo.py", "generated_zoo")
     assert py.JOINTS == tuple(c.name for c in robot.coordinates)
     names = ["zoo_mass_matrix", "zoo_inverse_dynamics", "zoo_forward_dynamics", "zoo_jacobian_tcp"]
     sources = [out / "zoo" / "c" / f"{n}.c" for n in names]

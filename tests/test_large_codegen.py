@@ -27,7 +27,7 @@ from derive.reference import NumericRobot
 from derive.symbolic.model import SXModel
 from pin_model import PinRobot
 from test_codegen import CFLAGS, CFunctions, reference
-from util import assert_close, compile_objects, states
+from util import assert_close, compile_objects, load_module, states
 
 N = 13  # the fewest joints that take the large-robot forms (above 12)
 SHOWN = ("inverse_dynamics", "inverse_dynamics_derivatives", "mass_matrix", "coriolis_matrix", "forward_dynamics",
@@ -78,9 +78,7 @@ def test_large_robot_forms_match_the_reference(shape, tmp_path):
     lib = tmp_path / "libchain.so"
     subprocess.run(["cc", "-shared", "-o", str(lib), *map(str, objects), "-lm"], check=True, capture_output=True, text=True)
     c = CFunctions(lib, manifest, ctypes.c_double)
-    spec = importlib.util.spec_from_file_location("large_chain", Path(tmp_path / "python" / f"chain{N}.py"))
-    py = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(py)
+    py = load_module(Path(tmp_path / "python" / f"chain{N}.py"), "large_chain")
     jx = _load_jax(tmp_path)
     ref = NumericRobot(robot, {"m5": float(P[0])})
     pin = PinRobot(robot, {"m5": float(P[0])})
@@ -133,7 +131,5 @@ def _load_jax(folder: Path):
         return None
     import jax
     jax.config.update("jax_enable_x64", True)  # the module computes in JAX's default float type
-    spec = importlib.util.spec_from_file_location("large_chain_jax", Path(folder / "jax" / f"chain{N}.py"))
-    jx = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(jx)
+    jx = load_module(Path(folder / "jax" / f"chain{N}.py"), "large_chain_jax")
     return jx

@@ -9,10 +9,8 @@ its committed module, which defines everything eagerly."""
 
 from __future__ import annotations
 
-import importlib.util
 import inspect
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -20,17 +18,10 @@ import pytest
 from derive.codegen.backends import python as python_backend
 from derive.codegen.generate import generate
 from derive.resources import data_path
-from util import params, robots
+from util import load_module, params, robots
 
 ROBOT = "planar_2r"
 WHOLE, BUDGET = 1000, 550
-
-
-def load_module(path: Path, name: str):
-    spec = importlib.util.spec_from_file_location(name, path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 def expected_lazy(manifest: dict, whole: int, budget: int) -> list[str]:

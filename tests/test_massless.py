@@ -13,7 +13,6 @@ in one line.
 from __future__ import annotations
 
 import ctypes
-import importlib.util
 import json
 from pathlib import Path
 
@@ -28,7 +27,7 @@ from derive.reference import NumericRobot
 from derive.runtime import compiled
 from derive.solvers.trajopt import TrajectoryOptimizer
 from pin_model import PinRobot
-from util import assert_close, build_library
+from util import assert_close, build_library, load_module
 
 MODELS = Path(__file__).resolve().parent.parent / "examples" / "irb140_dh.yaml"
 ROBOT = load_models(MODELS)["irb140"]
@@ -100,9 +99,7 @@ def test_generated_c_and_python_match_pinocchio_and_the_reference(generated, tmp
     names = ("fk_tcp", "jacobian_tcp", "mass_matrix", "gravity", "inverse_dynamics", "inverse_dynamics_derivatives")
     sources = [folder / "c" / f"irb140_{name}.c" for name in names]
     lib = ctypes.CDLL(str(build_library(["cc", *STRICT, f"-I{folder / 'c'}"], sources, tmp_path / "libirb140.so")))
-    spec = importlib.util.spec_from_file_location("irb140_massless", folder / "python" / "irb140.py")
-    py = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(py)
+    py = load_module(folder / "python" / "irb140.py", "irb140_massless")
     c = {name: _c_function(lib, name, k) for name, k in (("fk_tcp", 1), ("jacobian_tcp", 1), ("mass_matrix", 1),
                                                         ("gravity", 1), ("inverse_dynamics", 3),
                                                         ("inverse_dynamics_derivatives", 3))}

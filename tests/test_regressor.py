@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
-import importlib.util
 import json
 import re
 from pathlib import Path
@@ -34,7 +33,7 @@ from derive.symbolic.base_parameters import base_parameters, clean
 from derive.symbolic.model import SXModel
 from derive.symbolic.regressor import Regressor, body_links, parameter_names, parameter_values
 from test_joint_types import ZOO
-from util import robots, tree_robots
+from util import load_module, robots, tree_robots
 
 ROOT = Path(__file__).resolve().parent.parent
 GENERATED = ROOT / "generated"
@@ -277,9 +276,7 @@ def test_base_regressor_at_other_parameters():
 
 
 def load_python(robot: str):
-    spec = importlib.util.spec_from_file_location(f"regressor_{robot}", GENERATED / robot / "python" / f"{robot}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
+    module = load_module(GENERATED / robot / "python" / f"{robot}.py", f"regressor_{robot}")
     return module
 
 

@@ -19,7 +19,6 @@ build compiles a handful of files.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import os
 import re
@@ -38,7 +37,7 @@ import derive
 from derive.codegen.generate import generate
 from derive.errors import DeriveError
 from derive.runtime import build, loader
-from util import robots
+from util import load_module, robots
 
 ROOT = Path(__file__).resolve().parent.parent
 SMALL = ("mass_matrix", "gravity")
@@ -67,14 +66,7 @@ def fresh(tmp_path_factory) -> Path:
 
 
 def python_module(fresh: Path, robot: str):
-    spec = importlib.util.spec_from_file_location(f"reliability_{robot}", fresh / robot / "python" / f"{robot}.py")
-    module = importlib.util.module_from_spec(spec)
-    dont_write, sys.dont_write_bytecode = sys.dont_write_bytecode, True
-    try:
-        spec.loader.exec_module(module)
-    finally:
-        sys.dont_write_bytecode = dont_write
-    return module
+    return load_module(fresh / robot / "python" / f"{robot}.py", f"reliability_{robot}")
 
 
 def version(fresh: Path, src: str, folder: Path, keep=SMALL) -> Path:

@@ -9,7 +9,6 @@ zeros (the regressors) then have their zeros written by a loop, every other entr
 from __future__ import annotations
 
 import ctypes
-import importlib.util
 import json
 import math
 import re
@@ -22,7 +21,7 @@ import derive.codegen.backends.c as c_backend
 from derive.codegen.backends.c import printer as c_printer
 from derive.codegen.generate import generate
 from derive.resources import CHECKOUT
-from util import assert_close, random_q, robots
+from util import assert_close, load_module, random_q, robots
 
 CFLAGS = ["-std=c99", "-Wall", "-Wextra", "-Werror", "-pedantic", "-O1", "-shared", "-fPIC"]
 
@@ -77,9 +76,7 @@ def test_split_functions_compile_clean_and_equal_python(split_ur5, tmp_path):
         lib = tmp_path / f"libsplit{len(flags)}.so"
         subprocess.run(["cc", *CFLAGS, *flags, f"-I{split_ur5 / 'c'}", "-o", str(lib), *sources, "-lm"], check=True)
     cdll = ctypes.CDLL(str(tmp_path / "libsplit0.so"))
-    spec = importlib.util.spec_from_file_location("split_ur5", split_ur5 / "python" / "ur5.py")
-    py = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(py)
+    py = load_module(split_ur5 / "python" / "ur5.py", "split_ur5")
     r = robots()["ur5"]
     rng = np.random.default_rng(11)
     ptr = ctypes.POINTER(ctypes.c_double)

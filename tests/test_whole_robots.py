@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import ctypes
 import dataclasses
-import importlib.util
 import json
 from pathlib import Path
 
@@ -29,7 +28,7 @@ from derive.codegen.program import build_program
 from derive.symbolic.model import SXModel
 from derive.description.model import load_models, parse_models, parse_robot
 from derive.description.urdf import example_robot_data_dir, import_urdf_named
-from util import assert_close, build_library
+from util import assert_close, build_library, load_module
 
 pin = pytest.importorskip("pinocchio")
 
@@ -100,9 +99,7 @@ class Case:
         generate({robot.name: robot}, out, log=lambda s: None)
         folder = out / robot.name
         self.manifest = json.loads((folder / "manifest.json").read_text())
-        spec = importlib.util.spec_from_file_location(f"whole_{robot.name}", folder / "python" / f"{robot.name}.py")
-        self.py = importlib.util.module_from_spec(spec)
-        spec.loader.exec_module(self.py)
+        self.py = load_module(folder / "python" / f"{robot.name}.py", f"whole_{robot.name}")
         self.lib = None
         if compile_c:
             lib = build_library(["cc", *CFLAGS], sorted((folder / "c").glob("*.c")), out / f"lib{robot.name}.so")

@@ -1,11 +1,16 @@
 """Shared test helpers: seeded states, numeric evaluation of SX, relative comparison, C builds one
-source per compiler process, as many at once as there are CPUs."""
+source per compiler process, as many at once as there are CPUs, generated Python modules loaded
+with their byte code compiled once per run."""
 
 from __future__ import annotations
 
+import hashlib
+import importlib.util
+import marshal
 import os
 import subprocess
 import sys
+import types
 from concurrent.futures import ThreadPoolExecutor
 from functools import lru_cache
 from pathlib import Path
@@ -70,6 +75,49 @@ def assert_close(actual, expected, rtol: float = RTOL, what: str = "") -> None:
     scale = max(np.abs(e).max(initial=0.0), 1e-12)
     err = np.abs(a - e).max(initial=0.0)
     assert err <= rtol * scale, f"{what}: max error {err:.3e} > {rtol:g} * {scale:.3e}"
+
+
+CODE_CACHE = "DERIVE_TEST_CODE_CACHE"
+"""The environment variable naming load_module's folder of compiled modules (tests/conftest.py sets it
+to a folder of the run that every worker shares); unset, each load compiles."""
+
+
+def load_module(path, name: str) -> types.ModuleType:
+    """The Python module at ``path`` (a generated module, say), loaded under ``name`` as importlib loads
+    a file, without writing byte code beside it. Its code is compiled once per run for every copy of the
+    same text (the test modules' copies of generated/ among them): Panda's numpy module alone takes a
+    second to compile, and a dozen test modules in two workers load every robot's."""
+    path = Path(path)
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    exec(_code(path.read_bytes(), str(path)), module.__dict__)
+    return module
+
+
+def _code(source: bytes, filename: str) -> types.CodeType:
+    folder = os.environ.get(CODE_CACHE)
+    if not folder:
+        return compile(source, filename, "exec", dont_inherit=True)
+    key = hashlib.sha256(source + sys.version.encode()).hexdigest()
+    cached = Path(folder) / f"{key}.code"
+    try:
+        code = marshal.loads(cached.read_bytes())
+    except (OSError, EOFError, ValueError, TypeError):
+        code = compile(source, filename, "exec", dont_inherit=True)
+        Path(folder).mkdir(parents=True, exist_ok=True)
+        partial = cached.with_name(f".{key}.{os.getpid()}")
+        partial.write_bytes(marshal.dumps(code))
+        os.replace(partial, cached)  # whole or not at all, whichever worker writes it
+        return code
+    return _renamed(code, filename)
+
+
+def _renamed(code: types.CodeType, filename: str) -> types.CodeType:
+    """code with its file name (and that of every function in it) ``filename``: what tracebacks show."""
+    if code.co_filename == filename:
+        return code
+    consts = tuple(_renamed(c, filename) if isinstance(c, types.CodeType) else c for c in code.co_consts)
+    return code.replace(co_filename=filename, co_consts=consts)
 
 
 JOBS = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
