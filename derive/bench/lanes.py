@@ -6,13 +6,13 @@ one run, best of several interleaved repeats (the machines are shared and noisy)
 - the scalar C's ns per call (a plain C loop, cc -O2);
 - the lane C's ns per state: the same .c files compiled with -DDERIVE_LANES, inputs laid out as
   one vector of lanes per element, for each width this CPU has (AVX2: 4 doubles and 8 floats;
-  AVX-512F: 8 doubles and 16 floats), libmvec for sin and cos;
+  AVX-512F: 8 doubles and 16 floats), derive_lanes.h's inline sin and cos for doubles;
 - derive.compiled's batch per state without lanes (DERIVE_LANES=off: the scalar function in a
   C loop) and with each double width the CPU has (DERIVE_LANES=avx2, avx512f: gathering into
   lanes and putting the results back in C), and the generated NumPy vectorised over the batch;
 - the accuracy: the lane results against the scalar C's (largest difference over the largest
-  entry of the output, per state) and the worst ulp of libmvec's sin and cos against glibc's
-  scalar ones over 1e6 arguments in [-4, 4].
+  entry of the output, per state) and the worst ulp of the lanes' sin and cos against glibc's
+  scalar ones over 1e6 arguments in [-4, 4] and in [-1e5, 1e5], per double width.
 """
 
 from __future__ import annotations
@@ -73,28 +73,30 @@ int main(int argc, char **argv) {
 """
 
 ULP = r"""
-#define _GNU_SOURCE
-#include <math.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <string.h>
-typedef double v4d __attribute__((vector_size(32)));
-v4d _ZGVdN4v_sin(v4d);
-v4d _ZGVdN4v_cos(v4d);
+/* derive_lanes.h's sin and cos (DERIVE_LANES, -include derive_lanes.h) against <math.h>'s, per range */
 static long ulps(double a, double b) { int64_t x, y; memcpy(&x, &a, 8); memcpy(&y, &b, 8); return x > y ? x - y : y - x; }
 int main(void) {
-    long i, worst_sin = 0, worst_cos = 0; int k;
-    for (i = 0; i < 250000; i++) {
-        v4d a, s, c;
-        for (k = 0; k < 4; k++) a[k] = -4.0 + 8.0 * (4 * i + k) / 1e6;
-        s = _ZGVdN4v_sin(a); c = _ZGVdN4v_cos(a);
-        for (k = 0; k < 4; k++) {
-            long us = ulps(s[k], sin(a[k])), uc = ulps(c[k], cos(a[k]));
-            if (us > worst_sin) worst_sin = us;
-            if (uc > worst_cos) worst_cos = uc;
+    static const double bound[] = {4.0, 1.0e5};
+    long i, n = 1000000 / DERIVE_LANES;
+    int k, b;
+    for (b = 0; b < 2; b++) {
+        long worst_sin = 0, worst_cos = 0;
+        for (i = 0; i < n; i++) {
+            DERIVE_REAL a, s, c;
+            for (k = 0; k < DERIVE_LANES; k++) a[k] = bound[b] * (-1.0 + 2.0 * (DERIVE_LANES * i + k) / 1e6);
+            s = DERIVE_SIN(a); c = DERIVE_COS(a);
+            for (k = 0; k < DERIVE_LANES; k++) {
+                long us = ulps(s[k], sin(a[k])), uc = ulps(c[k], cos(a[k]));
+                if (us > worst_sin) worst_sin = us;
+                if (uc > worst_cos) worst_cos = uc;
+            }
         }
+        printf("%ld %ld ", worst_sin, worst_cos);
     }
-    printf("%ld %ld\n", worst_sin, worst_cos);
+    printf("%d\n", DERIVE_LANES_LIBMVEC);
     return 0;
 }
 """
@@ -178,12 +180,15 @@ def _run_c(generated: Path, states, n: int, repeats: int, widths) -> dict[str, f
         for line in out.splitlines():
             what, name, value = line.split()
             figures[(what, name)] = float(value)
-        ulp = None
-        if widths:
-            (tmp / "ulp.c").write_text(ULP)
-            subprocess.run(["cc", "-std=c99", "-O2", "-mavx2", str(tmp / "ulp.c"), "-lm", "-o", str(tmp / "ulp")], check=True)
-            ulp = tuple(int(v) for v in subprocess.run([str(tmp / "ulp")], check=True, capture_output=True,
-                                                       text=True).stdout.split())
+        ulp = {}
+        (tmp / "ulp.c").write_text(ULP)
+        for label, lanes, single, flags in widths:
+            if single:
+                continue
+            subprocess.run(["cc", "-std=c99", "-O2", *flags, f"-DDERIVE_LANES={lanes}", f"-I{c_dir}", "-include",
+                            "derive_lanes.h", str(tmp / "ulp.c"), "-lm", "-o", str(tmp / "ulp")], check=True)
+            ulp[label] = tuple(int(v) for v in subprocess.run([str(tmp / "ulp")], check=True, capture_output=True,
+                                                              text=True).stdout.split())
     return figures, ulp
 
 
@@ -275,8 +280,11 @@ def bench_lanes(args) -> str:
         "as the lane columns.", "",
         header, "|" + "---|" * (header.count("|") - 1), *rows, "",
         f"Target missed: {', '.join(missed)}." if missed else "Target met for every function and width.", "",
-        f"libmvec's sin and cos against glibc's scalar ones, 1e6 arguments in [-4, 4]: worst {ulp[0]} and {ulp[1]} ulp. "
-        f"The largest lane-vs-scalar difference over all four functions and both widths: {worst:.1e} of the output's "
+        " ".join(f"The {label} lanes' sin and cos against glibc's scalar ones, 1e6 arguments in [-4, 4]: worst "
+                 f"{u[0]} and {u[1]} ulp; in [-1e5, 1e5]: {u[2]} and {u[3]} ulp ("
+                 f"{'derive_lanes.h: its inline kernel' if u[4] else '<math.h> per lane'}; libmvec for the other "
+                 "functions)." for label, u in ulp.items()) +
+        f" The largest lane-vs-scalar difference over all four functions and both widths: {worst:.1e} of the output's "
         "largest entry (derive.compiled with lanes vs without). Float lanes are timed only (single precision). "
         "No AVX-512 figures where the CPU has none."])
 

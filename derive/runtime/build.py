@@ -294,8 +294,9 @@ class Lanes:
 
 LANE_MODES = {"avx512f": Lanes(8, "avx512f", ("-mavx512f",)), "avx2": Lanes(4, "avx2", ("-mavx2",)),
               "sse2": Lanes(2, "sse2", ()), "neon": Lanes(2, "neon", ()), "off": Lanes(0, "", ())}
-"""The lane modes by name (``DERIVE_LANES=<name>`` chooses one). avx512f and avx2 call glibc's
-libmvec for sin, cos and the other elementary functions (within a few ulp of <math.h>); sse2 and
+"""The lane modes by name (``DERIVE_LANES=<name>`` chooses one). avx512f and avx2 compute sin and
+cos by derive_lanes.h's inline kernel and call glibc's libmvec for the other elementary functions
+(within a few ulp of <math.h>); sse2 and
 neon call <math.h> once per lane, so their results are the scalar function's bit for bit."""
 
 

@@ -12,7 +12,7 @@ the loop over the states runs in C.
 Batches (and single states) of the functions the manifest marks lane-wise run through their SIMD
 lane variant where the host has one (``mod.LANES`` states per call, ``mod.LANE_FUNCTIONS``; see
 :mod:`derive.runtime.build` and docs/code/lanes.md): equal to the scalar C to about 1e-14 relative
-(libmvec's sin and cos are within a few ulp), bit for bit between a batch and its single states.
+(the lanes' sin and cos are within a few ulp), bit for bit between a batch and its single states.
 
 Why ctypes: it is in the standard library, so this adds no dependency and needs neither Python's
 headers nor a build step at install time (cffi, Cython, pybind11 or an extension module each need

@@ -3,7 +3,7 @@
  * second time in lane mode (derive_lanes.h: DERIVE_REAL a vector of 4 doubles, one state per lane),
  * under another name, beside the scalar build.
  *
- * Build (any robot and function: replace the names; -mavx2 for libmvec's AVX2 sin and cos):
+ * Build (any robot and function: replace the names; -mavx2 for the vector sin and cos):
  *   cc -std=c99 -O2 -mavx2 -DDERIVE_LANES=4 -include derive_lanes.h \
  *      -Dpanda_inverse_dynamics=panda_inverse_dynamics_x4 -Igenerated/panda/c \
  *      -c generated/panda/c/panda_inverse_dynamics.c -o inverse_dynamics_x4.o
@@ -11,7 +11,7 @@
  *      generated/panda/c/panda_inverse_dynamics.c inverse_dynamics_x4.o -lm -o inverse_dynamics_lanes
  *   ./inverse_dynamics_lanes
  * It prints tau of 4 states from one lane call, and the largest difference from 4 scalar calls
- * (libmvec's sin and cos are within a few ulp of <math.h>'s; -DDERIVE_LANES_EXACT calls <math.h>
+ * (the lanes' sin and cos are within 2 ulp of <math.h>'s; -DDERIVE_LANES_EXACT calls <math.h>
  * per lane: no difference, and slower).
  */
 #include <math.h>

@@ -12,9 +12,10 @@
  * element"). The .c files are unchanged: literals broadcast to every lane, + - * / work lane by
  * lane, and the maths macros become vector functions:
  *   - glibc's libmvec where present (x86-64: AVX2 for 32-byte vectors, AVX-512F for 64-byte):
- *     sin, cos, exp, log, pow (glibc >= 2.22) and tan, asin, acos, atan, tanh, atan2 (>= 2.35).
- *     libmvec is not correctly rounded (within 4 ulp by glibc's manual), so such a lane differs
- *     from the scalar call in the last bits;
+ *     exp, log, pow (glibc >= 2.22) and tan, asin, acos, atan, tanh, atan2 (>= 2.35), and sin
+ *     and cos of float lanes; sin and cos of double lanes there by the inline kernel below.
+ *     Neither is correctly rounded (libmvec within 4 ulp by glibc's manual, the kernel within
+ *     2), so such a lane differs from the scalar call in the last bits;
  *   - else, or with -DDERIVE_LANES_EXACT, a loop calling <math.h> per lane: bit for bit the
  *     scalar function's results;
  *   - sqrt by the vector instruction (x86 SSE2, AVX), else per lane, and fabs, fmin, fmax and
@@ -121,9 +122,18 @@ typedef __typeof__((derive_lanes_t){0} < (derive_lanes_t){0}) derive_lanes_mask;
     derive_lanes_t DERIVE_LANES_VV(f)(derive_lanes_t, derive_lanes_t);                     \
     static inline derive_lanes_t name(derive_lanes_t x, derive_lanes_t y) { return DERIVE_LANES_VV(f)(x, y); }
 
+/* with libmvec's double lanes, sin and cos are derive's own inline kernel (below): libmvec's are
+   calls, which spill every live vector, and cannot share one argument's work between its sin and
+   cos as the scalar build's sincos does */
+#if defined(DERIVE_LANES_ABI) && !defined(DERIVE_FLOAT)
+#define DERIVE_LANES_TRIG_KERNEL 1
+#endif
+
 #ifdef DERIVE_LANES_ABI
+#ifndef DERIVE_LANES_TRIG_KERNEL
 DERIVE_LANES_MVEC1(derive_lanes_sin, sin)
 DERIVE_LANES_MVEC1(derive_lanes_cos, cos)
+#endif
 DERIVE_LANES_MVEC1(derive_lanes_exp, exp)
 DERIVE_LANES_MVEC1(derive_lanes_log, log)
 DERIVE_LANES_MVEC2(derive_lanes_pow, pow)
@@ -196,6 +206,71 @@ static inline derive_lanes_t derive_lanes_fmax(derive_lanes_t a, derive_lanes_t 
 {
     return derive_lanes_select((a > b) | (b != b), a, b);
 }
+
+#ifdef DERIVE_LANES_TRIG_KERNEL
+/*
+ * sin and cos of double lanes, inline, so that the compiler merges the work of sin(a) and cos(a)
+ * (the same reduction and polynomials) and keeps every other vector in registers:
+ *   k = x * 2/pi rounded to an integer (adding and subtracting 1.5 * 2^52; k mod 4 is then in the
+ *   low bits of the sum), r = x - k * pi/2 with pi/2 split in three (P1 and P2 of 32 significant
+ *   bits, so k * P1 and k * P2 are exact for |k| < 2^20), |r| <= pi/4;
+ *   sin r = r + r z S(z) and cos r = 1 - z/2 + z^2 C(z), z = r^2, S and C of degree 5 (fitted
+ *   for relative error on [0, (pi/4)^2]: under 1 ulp before rounding);
+ *   by k mod 4 (k + 1 for cos): sin r, cos r, -sin r, -cos r; sin r takes the sign of r (sin(-0) = -0).
+ * Lanes with |x| > 1e5 or infinite take <math.h>'s sin and cos (a cold call); NaN stays NaN.
+ * Within 2 ulp of <math.h> (derive bench lanes measures it), as libmvec (4 ulp) is.
+ */
+static __attribute__((noinline, cold)) derive_lanes_t derive_lanes_trig_wide(derive_lanes_t x, derive_lanes_t v,
+                                                                             int shift)
+{
+    int k;
+    for (k = 0; k < DERIVE_LANES; ++k)
+        if (!(x[k] >= -1.0e5 && x[k] <= 1.0e5))
+            v[k] = shift ? cos(x[k]) : sin(x[k]);
+    return v;
+}
+
+static inline derive_lanes_t derive_lanes_trig(derive_lanes_t x, int shift)
+{
+    const derive_lanes_t round = DERIVE_LIT(6755399441055744.0); /* 1.5 * 2^52 */
+    derive_lanes_t sum = x * DERIVE_LIT(0.6366197723675814) + round;
+    derive_lanes_mask quadrant = (derive_lanes_mask)sum + shift;
+    derive_lanes_t k = sum - round;
+    derive_lanes_t r = ((x - k * DERIVE_LIT(1.5707963267341256)) - k * DERIVE_LIT(6.077100506303966e-11))
+                       - k * DERIVE_LIT(2.0222662487959506e-21);
+    derive_lanes_t z = r * r;
+    derive_lanes_t s = DERIVE_LIT(1.5895943103357368e-10);
+    derive_lanes_t c = DERIVE_LIT(-1.1358093609276402e-11);
+    s = DERIVE_LIT(-2.505074222357712e-08) + z * s;
+    s = DERIVE_LIT(2.755731358095979e-06) + z * s;
+    s = DERIVE_LIT(-0.00019841269829452244) + z * s;
+    s = DERIVE_LIT(0.008333333333321907) + z * s;
+    s = DERIVE_LIT(-0.1666666666666663) + z * s;
+    s = r + r * z * s;
+    c = DERIVE_LIT(2.0875691483269687e-09) + z * c;
+    c = DERIVE_LIT(-2.755731410296429e-07) + z * c;
+    c = DERIVE_LIT(2.480158728855358e-05) + z * c;
+    c = DERIVE_LIT(-0.0013888888888872505) + z * c;
+    c = DERIVE_LIT(0.04166666666666659) + z * c;
+    c = DERIVE_LIT(1.0) - DERIVE_LIT(0.5) * z + z * z * c;
+    derive_lanes_mask sign = (derive_lanes_mask)DERIVE_LIT(-0.0);
+    derive_lanes_t v;
+    s = (derive_lanes_t)(((derive_lanes_mask)s & ~sign) | ((derive_lanes_mask)r & sign)); /* sin(-0) = -0 */
+    v = derive_lanes_select((quadrant & 1) != 0, c, s);
+    derive_lanes_mask wide = derive_lanes_fabs(x) > DERIVE_LIT(1.0e5);
+    __typeof__(wide[0]) any = wide[0];
+    int j;
+    v = (derive_lanes_t)((derive_lanes_mask)v ^ (((quadrant & 2) != 0) & sign));
+    for (j = 1; j < DERIVE_LANES; ++j)
+        any |= wide[j];
+    if (__builtin_expect(any != 0, 0))
+        v = derive_lanes_trig_wide(x, v, shift);
+    return v;
+}
+
+static inline derive_lanes_t derive_lanes_sin(derive_lanes_t x) { return derive_lanes_trig(x, 0); }
+static inline derive_lanes_t derive_lanes_cos(derive_lanes_t x) { return derive_lanes_trig(x, 1); }
+#endif
 
 /* sign(x): -1, 0 or 1 as the scalar DERIVE_SIGN ((x > 0) - (x < 0)); a true lane compares as -1 */
 static inline derive_lanes_t derive_lanes_sign(derive_lanes_t x)
