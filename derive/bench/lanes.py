@@ -242,8 +242,8 @@ def bench_lanes(args) -> str:
                  **{mode: getattr(lib, name) for mode, lib in built.items()}}
         times = dict.fromkeys(calls, float("inf"))
         for _ in range(repeats):  # interleaved: a burst of load hits all alike
-            for key, fn in calls.items():
-                times[key] = min(times[key], _best(lambda: fn(*many), 1))
+            for key, fn in calls.items():  # each the best of 3 calls in a row: its own caches warm, as the C loop's are
+                times[key] = min(times[key], _best(lambda: fn(*many), 3))
         a = calls["before"](*many)
         axes = tuple(range(1, a.ndim))
         for mode in built:
@@ -270,7 +270,7 @@ def bench_lanes(args) -> str:
               + " | NumPy batch ns/state | lane vs scalar (max diff / max entry) |")
     return "\n".join([
         "## SIMD lanes (Panda)", "",
-        f"Target: {TARGET}. One run, {n} seeded states, best of {repeats} interleaved repeats; the CPU has {has or 'none of avx2, avx512f'} "
+        f"Target: {TARGET}. One run, {n} seeded states, best of {repeats} interleaved repeats (derive.compiled and NumPy: each the best of 3 calls in a row within a repeat); the CPU has {has or 'none of avx2, avx512f'} "
         f"(derive.compiled picks {host.isa}, {host.count} states a call, by default; each double width is built here with "
         "`DERIVE_LANES=<mode>`). The lane C is the same .c files compiled with "
         "`-DDERIVE_LANES=<n> -include derive_lanes.h` (cc -O2 and the ISA's flag), inputs one vector of lanes per element; "

@@ -230,7 +230,7 @@ static __attribute__((noinline, cold)) derive_lanes_t derive_lanes_trig_wide(der
     return v;
 }
 
-static inline derive_lanes_t derive_lanes_trig(derive_lanes_t x, int shift)
+static inline __attribute__((always_inline)) derive_lanes_t derive_lanes_trig(derive_lanes_t x, int shift)
 {
     const derive_lanes_t round = DERIVE_LIT(6755399441055744.0); /* 1.5 * 2^52 */
     derive_lanes_t sum = x * DERIVE_LIT(0.6366197723675814) + round;
@@ -268,8 +268,8 @@ static inline derive_lanes_t derive_lanes_trig(derive_lanes_t x, int shift)
     return v;
 }
 
-static inline derive_lanes_t derive_lanes_sin(derive_lanes_t x) { return derive_lanes_trig(x, 0); }
-static inline derive_lanes_t derive_lanes_cos(derive_lanes_t x) { return derive_lanes_trig(x, 1); }
+static inline __attribute__((always_inline)) derive_lanes_t derive_lanes_sin(derive_lanes_t x) { return derive_lanes_trig(x, 0); }
+static inline __attribute__((always_inline)) derive_lanes_t derive_lanes_cos(derive_lanes_t x) { return derive_lanes_trig(x, 1); }
 #endif
 
 /* sign(x): -1, 0 or 1 as the scalar DERIVE_SIGN ((x > 0) - (x < 0)); a true lane compares as -1 */
