@@ -109,12 +109,17 @@ def test_second_call_is_the_cached_library(small, cache):
 
 
 def test_kernel_source_gathers_and_scatters_by_two_strides(small):
-    """The unit's kernel reads element j of state i at a[i*s + j*e] and IK's nullable inputs as NULL."""
+    """The unit's kernel reads element j of state i at a[i*s + j*e] and IK's nullable inputs as NULL;
+    a states-major output goes through the warp's shared memory."""
     units = sorted(small.LIBRARY.parent.glob("planar_2r_cuda_f64*.cu"))  # one per group of functions (CPUs)
     text = "".join(u.read_text() for u in units)
     assert units and "#define DERIVE_FN __device__" in text and "DERIVE_FLOAT" not in text
     assert "li_q[j] = a_q[i * s_q + j * e_q];" in text
     assert "r_tau[i * rs_tau + j * re_tau] = lo_tau[j];" in text
+    # states-major outputs staged per warp in shared memory, written as one run (blocks of 64)
+    assert "__shared__ DERIVE_REAL derive_cu_stage[2][1568];" in text and "if (rs_tau == 2 && re_tau == 1) {" in text
+    assert "stage[(lane - r0) * 2 + j] = lo_tau[j];" in text and "__syncwarp(active);" in text
+    assert "const int block = 64;" in text
     assert "st_status[i * st_stride] = planar_2r_ik_tcp(" in text and "a_w ? li_w : 0" in text
     assert all("#define DERIVE_FLOAT" in u.read_text() for u in small.LIBRARY.parent.glob("planar_2r_cuda_f32*.cu"))
 
@@ -294,6 +299,8 @@ FAKE_CUDA = r"""
 #define __global__
 #define __device__
 #define __host__
+#define __shared__ static
+static void __syncwarp(unsigned = 0xffffffffu) {}
 struct fake_dim3 { unsigned x, y, z; };
 static const fake_dim3 blockIdx = {0, 0, 0}, threadIdx = {0, 0, 0}, blockDim = {1, 1, 1}, gridDim = {1, 1, 1};
 typedef int cudaError_t;
