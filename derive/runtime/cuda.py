@@ -266,7 +266,7 @@ def unit_source(robot: str, chosen: list[Signature], files: list[str], suffix: s
             # rounds of S states through shared memory, it is written by neighbouring threads
             per = min(32, STAGE // a.length)
             body += [f"        if (rs_{a.name} == {a.length} && re_{a.name} == 1) {{",
-                     "            for (int r0 = 0; r0 < count; r0 += " + str(per) + ") {",
+                     f"            for (int r0 = 0; r0 < count; r0 += {per}) {{",
                      f"                if (lane >= r0 && lane < r0 + {per})",
                      f"                    for (int j = 0; j < {a.length}; ++j)",
                      f"                        stage[(lane - r0) * {a.length} + j] = lo_{a.name}[j];",

@@ -221,11 +221,11 @@ static inline derive_lanes_t derive_lanes_fmax(derive_lanes_t a, derive_lanes_t 
  * Within 2 ulp of <math.h> (derive bench lanes measures it), as libmvec (4 ulp) is.
  */
 static __attribute__((noinline, cold)) derive_lanes_t derive_lanes_trig_wide(derive_lanes_t x, derive_lanes_t v,
-                                                                             int shift)
+                                                                             derive_lanes_mask wide, int shift)
 {
     int k;
     for (k = 0; k < DERIVE_LANES; ++k)
-        if (!(x[k] >= -1.0e5 && x[k] <= 1.0e5))
+        if (wide[k])
             v[k] = shift ? cos(x[k]) : sin(x[k]);
     return v;
 }
@@ -257,14 +257,14 @@ static inline __attribute__((always_inline)) derive_lanes_t derive_lanes_trig(de
     derive_lanes_t v;
     s = (derive_lanes_t)(((derive_lanes_mask)s & ~sign) | ((derive_lanes_mask)r & sign)); /* sin(-0) = -0 */
     v = derive_lanes_select((quadrant & 1) != 0, c, s);
-    derive_lanes_mask wide = derive_lanes_fabs(x) > DERIVE_LIT(1.0e5);
+    derive_lanes_mask wide = derive_lanes_fabs(x) > DERIVE_LIT(1.0e5); /* infinities too, not NaN */
     __typeof__(wide[0]) any = wide[0];
     int j;
     v = (derive_lanes_t)((derive_lanes_mask)v ^ (((quadrant & 2) != 0) & sign));
     for (j = 1; j < DERIVE_LANES; ++j)
         any |= wide[j];
     if (__builtin_expect(any != 0, 0))
-        v = derive_lanes_trig_wide(x, v, shift);
+        v = derive_lanes_trig_wide(x, v, wide, shift);
     return v;
 }
 
